@@ -1,0 +1,1 @@
+//! kinloop-client (work in progress).

@@ -1,0 +1,1 @@
+//! kinloop-protocol (work in progress).

@@ -1,0 +1,1 @@
+//! kinloop-server (work in progress).
