@@ -1,1 +1,16 @@
-//! kinloop-protocol (work in progress).
+//! kinloop-protocol: what travels between the VE server and haptic clients, and how.
+//!
+//! - [`messages`]: the wire types (control messages and datagrams);
+//! - [`codec`]: bytes ⇄ messages with size limits and validation (the only place that knows bincode);
+//! - [`quic`]: QUIC endpoints, certificates and trust, the handshake, control framing and datagrams;
+//! - [`emulator`]: a seeded, sans-IO link emulator (delay, jitter, loss, bursts, reordering, duplication,
+//!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
+//! - [`bench`]: measurements the `kinloop bench` command reports.
+
+pub mod codec;
+pub mod emulator;
+pub mod messages;
+mod shape;
+
+pub use messages::*;
+pub use shape::{triangle_len, SceneKind, SessionShape};

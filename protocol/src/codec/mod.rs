@@ -1,0 +1,127 @@
+//! Bytes ⇄ messages. The only module that names bincode, so swapping the format touches one file.
+//!
+//! Format: bincode 2 `config::standard()` (little-endian, varint integers and lengths, enums as a varint
+//! variant index, `Option` as a 0/1 byte, `f64` as 8 raw bytes), no framing of its own. Every decode:
+//! 1. refuses buffers longer than the message class allows, and runs bincode with the same limit, so a length
+//!    field claiming gigabytes is refused instead of allocated (sequences additionally rely on serde's cautious
+//!    pre-allocation, capped at 1 MiB, and fail as soon as the buffer runs out);
+//! 2. refuses trailing bytes (bincode would silently ignore them);
+//! 3. validates the result ([`validate`]): finite numbers, session dimensions, sane magnitudes.
+
+mod error;
+pub mod validate;
+
+use bincode::config::{self, Config};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+pub use error::{DecodeError, ElementSuffix, EncodeError, Field};
+
+use crate::messages::{Control, Datagram};
+use crate::shape::SessionShape;
+
+/// Size and magnitude limits the codec enforces. Magnitudes are far beyond anything a real linkage or haptic
+/// device produces; hitting one means a broken or hostile peer.
+pub mod limits {
+    /// Largest control frame body (bytes).
+    pub const MAX_CONTROL_FRAME_BYTES: usize = 64 * 1024;
+    /// Largest datagram message (bytes), whether it travels as a QUIC datagram or on an oversize stream.
+    pub const MAX_DATAGRAM_MESSAGE_BYTES: usize = 64 * 1024;
+    /// Longest string (names, tokens, messages), bytes.
+    pub const MAX_STRING_BYTES: usize = 256;
+    /// Most entries of a list (contacts, other users, available operational points).
+    pub const MAX_LIST_ENTRIES: usize = 64;
+    /// Most device degrees of freedom.
+    pub const MAX_DEVICE_DOF: usize = 16;
+    /// Most operational axes a device may describe.
+    pub const MAX_OP_DIM: usize = 6;
+    /// Most generalized coordinates of a scene.
+    pub const MAX_COORDINATES: usize = 1024;
+    /// Most loop-closure rows of a scene.
+    pub const MAX_CLOSURE_ROWS: usize = 1024;
+    /// Largest position or angle component (m, rad).
+    pub const MAX_POSITION: f64 = 1e3;
+    /// Largest velocity component (m/s, rad/s).
+    pub const MAX_SPEED: f64 = 1e3;
+    /// Largest acceleration component (m/s², rad/s²).
+    pub const MAX_ACCEL: f64 = 1e6;
+    /// Largest force or torque component (N, N·m).
+    pub const MAX_WRENCH: f64 = 1e4;
+    /// Largest stiffness or damping gain.
+    pub const MAX_GAIN: f64 = 1e9;
+    /// Largest entry of an inertia-like matrix or Jacobian.
+    pub const MAX_MATRIX_ENTRY: f64 = 1e9;
+    /// Largest entry of an orthonormal matrix, allowing for rounding.
+    pub const MAX_ORTHONORMAL_ENTRY: f64 = 1.0 + UNIT_TOLERANCE;
+    /// How far a unit vector's or quaternion's norm may stray from 1.
+    pub const UNIT_TOLERANCE: f64 = 1e-6;
+    /// Largest clock reading or age (s): about 31 years.
+    pub const MAX_TIME_S: f64 = 1e9;
+    /// Lowest loop or device rate (Hz).
+    pub const MIN_RATE_HZ: f64 = 1.0;
+    /// Highest loop or device rate (Hz).
+    pub const MAX_RATE_HZ: f64 = 100_000.0;
+}
+
+use limits::{MAX_CONTROL_FRAME_BYTES, MAX_DATAGRAM_MESSAGE_BYTES};
+
+/// Encodes a control message (frame body, without the length prefix).
+pub fn encode_control(msg: &Control) -> Result<Vec<u8>, EncodeError> {
+    let mut buf = Vec::new();
+    encode_limited::<_, MAX_CONTROL_FRAME_BYTES>(msg, &mut buf)?;
+    Ok(buf)
+}
+
+/// Decodes and validates a control frame body.
+pub fn decode_control(bytes: &[u8]) -> Result<Control, DecodeError> {
+    let msg = decode_limited::<Control, MAX_CONTROL_FRAME_BYTES>(bytes)?;
+    validate::control(&msg)?;
+    Ok(msg)
+}
+
+/// Encodes a datagram message into a fresh buffer.
+pub fn encode_datagram(msg: &Datagram) -> Result<Vec<u8>, EncodeError> {
+    let mut buf = Vec::new();
+    encode_datagram_into(msg, &mut buf)?;
+    Ok(buf)
+}
+
+/// Encodes a datagram message into `buf` (cleared first), reusing its allocation in hot loops.
+pub fn encode_datagram_into(msg: &Datagram, buf: &mut Vec<u8>) -> Result<(), EncodeError> {
+    encode_limited::<_, MAX_DATAGRAM_MESSAGE_BYTES>(msg, buf)
+}
+
+/// Decodes a datagram message and validates it against the session's dimensions.
+pub fn decode_datagram(bytes: &[u8], shape: &SessionShape) -> Result<Datagram, DecodeError> {
+    let msg = decode_limited::<Datagram, MAX_DATAGRAM_MESSAGE_BYTES>(bytes)?;
+    validate::datagram(&msg, shape)?;
+    Ok(msg)
+}
+
+fn encode_limited<T: Serialize, const LIMIT: usize>(msg: &T, buf: &mut Vec<u8>) -> Result<(), EncodeError> {
+    buf.clear();
+    bincode::serde::encode_into_std_write(msg, buf, config::standard())
+        .map_err(|e| EncodeError::Serializer(e.to_string()))?;
+    if buf.len() > LIMIT {
+        return Err(EncodeError::TooLarge { len: buf.len(), limit: LIMIT });
+    }
+    Ok(())
+}
+
+fn decode_limited<T: DeserializeOwned, const LIMIT: usize>(bytes: &[u8]) -> Result<T, DecodeError> {
+    if bytes.len() > LIMIT {
+        return Err(DecodeError::TooLarge { limit: LIMIT });
+    }
+    let (msg, read) = bincode::serde::decode_from_slice(bytes, limited_config::<LIMIT>()).map_err(|e| match e {
+        bincode::error::DecodeError::LimitExceeded => DecodeError::TooLarge { limit: LIMIT },
+        other => DecodeError::Malformed(other.to_string()),
+    })?;
+    if read != bytes.len() {
+        return Err(DecodeError::Trailing { extra: bytes.len() - read });
+    }
+    Ok(msg)
+}
+
+fn limited_config<const LIMIT: usize>() -> impl Config {
+    config::standard().with_limit::<LIMIT>()
+}

@@ -1,0 +1,270 @@
+//! Rules a decoded message must satisfy before anyone acts on it: finite numbers, lengths that match the
+//! session, magnitudes no real linkage or device produces only when something is broken or hostile.
+
+use super::error::{DecodeError, Field};
+use super::limits::*;
+use crate::messages::{
+    uplink_flags, ConfigTerms, ContactTerm, Control, Datagram, DeviceCaps, Hello, OtherUser, RecommendedGains,
+    Refused, RefusalReason, SceneSummary, Snapshot, Uplink, Welcome,
+};
+use crate::shape::{triangle_len, SceneKind, SessionShape};
+
+/// Checks a control message; control messages carry their own dimensions, so no session shape is needed.
+pub fn control(msg: &Control) -> Result<(), DecodeError> {
+    match msg {
+        Control::Hello(hello) => self::hello(hello),
+        Control::Welcome(welcome) => self::welcome(welcome),
+        Control::Refused(refused) => self::refused(refused),
+        Control::Leave { reason } => text(Field::at("leave.reason"), reason),
+        Control::Error { message, .. } => text(Field::at("error.message"), message),
+        Control::Ping { t_s, .. } => scalar(Field::at("ping.t_s"), *t_s, 0.0, MAX_TIME_S),
+        Control::Pong { t_s, .. } => scalar(Field::at("pong.t_s"), *t_s, 0.0, MAX_TIME_S),
+    }
+}
+
+/// Checks a datagram against the session it arrived on.
+pub fn datagram(msg: &Datagram, shape: &SessionShape) -> Result<(), DecodeError> {
+    match msg {
+        Datagram::Snapshot(s) => snapshot(s, shape),
+        Datagram::Uplink(u) => uplink(u, shape),
+    }
+}
+
+/// Checks a hello. Any version passes, so that the server can answer an old client with a polite refusal.
+pub fn hello(h: &Hello) -> Result<(), DecodeError> {
+    text(Field::at("hello.token"), &h.token)?;
+    text(Field::at("hello.client_name"), &h.client_name)?;
+    text(Field::at("hello.op"), &h.op)?;
+    device(&h.device)
+}
+
+fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
+    text(Field::at("hello.device.name"), &d.name)?;
+    if usize::from(d.dof) > MAX_DEVICE_DOF {
+        return Err(DecodeError::TooMany { field: Field::at("hello.device.dof"), got: d.dof.into(), max: MAX_DEVICE_DOF });
+    }
+    let min_field = Field::at("hello.device.workspace_min");
+    count(min_field, d.workspace_min.len(), MAX_OP_DIM)?;
+    vector(min_field, &d.workspace_min, d.workspace_min.len(), MAX_POSITION)?;
+    vector(Field::at("hello.device.workspace_max"), &d.workspace_max, d.workspace_min.len(), MAX_POSITION)?;
+    if d.workspace_min.iter().zip(&d.workspace_max).any(|(lo, hi)| lo > hi) {
+        return Err(DecodeError::Inconsistent { field: min_field, what: "workspace_min exceeds workspace_max" });
+    }
+    scalar(Field::at("hello.device.max_force_n"), d.max_force_n, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("hello.device.max_torque_nm"), d.max_torque_nm, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("hello.device.max_stiffness_n_per_m"), d.max_stiffness_n_per_m, 0.0, MAX_GAIN)?;
+    scalar(Field::at("hello.device.max_damping_ns_per_m"), d.max_damping_ns_per_m, 0.0, MAX_GAIN)?;
+    scalar(Field::at("hello.device.native_rate_hz"), d.native_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)
+}
+
+/// Checks a welcome; its scene summary becomes the session shape, so it must be self-consistent.
+pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
+    scene(&w.scene)?;
+    scalar(Field::at("welcome.ve_rate_hz"), w.ve_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)?;
+    scalar(Field::at("welcome.snapshot_rate_hz"), w.snapshot_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)?;
+    gains(&w.gains, w.scene.kind.op_dim())
+}
+
+fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
+    text(Field::at("welcome.scene.name"), &s.name)?;
+    text(Field::at("welcome.scene.op_name"), &s.op_name)?;
+    count(Field::at("welcome.scene.n"), s.n as usize, MAX_COORDINATES)?;
+    count(Field::at("welcome.scene.m"), s.m as usize, MAX_CLOSURE_ROWS)?;
+    if usize::from(s.op_dim) != s.kind.op_dim() {
+        return Err(DecodeError::Inconsistent {
+            field: Field::at("welcome.scene.op_dim"),
+            what: "op_dim must be 3 for planar scenes and 6 for spatial ones",
+        });
+    }
+    Ok(())
+}
+
+fn gains(g: &RecommendedGains, k: usize) -> Result<(), DecodeError> {
+    scalar(Field::at("welcome.gains.k_j"), g.k_j, 0.0, MAX_GAIN)?;
+    scalar(Field::at("welcome.gains.b_j"), g.b_j, 0.0, MAX_GAIN)?;
+    non_negative_vector(Field::at("welcome.gains.k_pc"), &g.k_pc, k, MAX_GAIN)?;
+    non_negative_vector(Field::at("welcome.gains.b_pc"), &g.b_pc, k, MAX_GAIN)
+}
+
+fn refused(r: &Refused) -> Result<(), DecodeError> {
+    text(Field::at("refused.message"), &r.message)?;
+    match &r.reason {
+        RefusalReason::UnknownOp { requested, available } => {
+            text(Field::at("refused.reason.requested"), requested)?;
+            count(Field::at("refused.reason.available"), available.len(), MAX_LIST_ENTRIES)?;
+            for (i, name) in available.iter().enumerate() {
+                text(Field::in_item("refused.reason.available", i, "name"), name)?;
+            }
+            Ok(())
+        }
+        RefusalReason::Malformed { what } => text(Field::at("refused.reason.what"), what),
+        RefusalReason::UnsupportedVersion { .. }
+        | RefusalReason::BadToken
+        | RefusalReason::ServerFull { .. }
+        | RefusalReason::RoleNotAllowed => Ok(()),
+    }
+}
+
+/// Checks a snapshot against the session shape.
+pub fn snapshot(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
+    let k = shape.op_dim();
+    scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
+    pose(Field::at("snapshot.op_pose"), &s.op_pose, shape)?;
+    vector(Field::at("snapshot.op_twist"), &s.op_twist, k, MAX_SPEED)?;
+    vector(Field::at("snapshot.inverse_inertia"), &s.inverse_inertia, shape.op_triangle_len(), MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.bias_accel"), &s.bias_accel, k, MAX_ACCEL)?;
+    vector(Field::at("snapshot.directions"), &s.directions, k * k, MAX_ORTHONORMAL_ENTRY)?;
+    singular_values(&s.singular_values, k)?;
+    if usize::from(s.constraint_count) > k {
+        return Err(DecodeError::TooMany {
+            field: Field::at("snapshot.constraint_count"),
+            got: s.constraint_count.into(),
+            max: k,
+        });
+    }
+    count(Field::at("snapshot.contacts"), s.contacts.len(), MAX_LIST_ENTRIES)?;
+    for (i, c) in s.contacts.iter().enumerate() {
+        contact(i, c, shape)?;
+    }
+    count(Field::at("snapshot.others"), s.others.len(), MAX_LIST_ENTRIES)?;
+    for (i, o) in s.others.iter().enumerate() {
+        other_user(i, o, shape)?;
+    }
+    match &s.config {
+        Some(config) => config_terms(config, shape),
+        None => Ok(()),
+    }
+}
+
+fn singular_values(values: &[f64], k: usize) -> Result<(), DecodeError> {
+    let field = Field::at("snapshot.singular_values");
+    non_negative_vector(field, values, k, MAX_MATRIX_ENTRY)?;
+    if values.windows(2).any(|pair| pair[0] < pair[1]) {
+        return Err(DecodeError::Inconsistent { field, what: "singular values must not increase" });
+    }
+    Ok(())
+}
+
+fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), DecodeError> {
+    const LIST: &str = "snapshot.contacts";
+    let d = shape.point_dim();
+    vector(Field::in_item(LIST, i, "point"), &c.point, d, MAX_POSITION)?;
+    unit_vector(Field::in_item(LIST, i, "normal"), &c.normal, d)?;
+    scalar(Field::in_item(LIST, i, "depth"), c.depth, -MAX_POSITION, MAX_POSITION)?;
+    scalar(Field::in_item(LIST, i, "normal_velocity"), c.normal_velocity, -MAX_SPEED, MAX_SPEED)?;
+    vector(Field::in_item(LIST, i, "op_coupling"), &c.op_coupling, shape.op_dim(), MAX_MATRIX_ENTRY)?;
+    scalar(Field::in_item(LIST, i, "mobility"), c.mobility, 0.0, MAX_MATRIX_ENTRY)?;
+    scalar(Field::in_item(LIST, i, "bias_accel"), c.bias_accel, -MAX_ACCEL, MAX_ACCEL)?;
+    scalar(Field::in_item(LIST, i, "stiffness"), c.stiffness, 0.0, MAX_GAIN)?;
+    scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_GAIN)
+}
+
+fn other_user(i: usize, o: &OtherUser, shape: &SessionShape) -> Result<(), DecodeError> {
+    const LIST: &str = "snapshot.others";
+    vector(Field::in_item(LIST, i, "op_position"), &o.op_position, shape.point_dim(), MAX_POSITION)?;
+    vector(Field::in_item(LIST, i, "wrench"), &o.wrench, shape.op_dim(), MAX_WRENCH)
+}
+
+fn config_terms(c: &ConfigTerms, shape: &SessionShape) -> Result<(), DecodeError> {
+    let (n, m, k) = (shape.n, shape.m, shape.op_dim());
+    vector(Field::at("snapshot.config.q"), &c.q, n, MAX_POSITION)?;
+    vector(Field::at("snapshot.config.qd"), &c.qd, n, MAX_SPEED)?;
+    vector(Field::at("snapshot.config.mass_matrix"), &c.mass_matrix, triangle_len(n), MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.closure_jacobian"), &c.closure_jacobian, m * n, MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.closure_bias_stab"), &c.closure_bias_stab, m, MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.generalized_bias"), &c.generalized_bias, n, MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.op_jacobian"), &c.op_jacobian, k * n, MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.op_bias"), &c.op_bias, k, MAX_MATRIX_ENTRY)
+}
+
+/// Checks an uplink against the session shape.
+pub fn uplink(u: &Uplink, shape: &SessionShape) -> Result<(), DecodeError> {
+    let k = shape.op_dim();
+    scalar(Field::at("uplink.client_time_s"), u.client_time_s, 0.0, MAX_TIME_S)?;
+    scalar(Field::at("uplink.last_snapshot_age_s"), u.last_snapshot_age_s, 0.0, MAX_TIME_S)?;
+    vector(Field::at("uplink.hand_wrench"), &u.hand_wrench, k, MAX_WRENCH)?;
+    pose(Field::at("uplink.device_pose"), &u.device_pose, shape)?;
+    vector(Field::at("uplink.device_twist"), &u.device_twist, k, MAX_SPEED)?;
+    pose(Field::at("uplink.model_pose"), &u.model_pose, shape)?;
+    vector(Field::at("uplink.model_twist"), &u.model_twist, k, MAX_SPEED)?;
+    let unknown = u.flags & !uplink_flags::KNOWN;
+    if unknown != 0 {
+        return Err(DecodeError::UnknownFlags { bits: unknown });
+    }
+    Ok(())
+}
+
+/// A pose: bounded position (and planar angle); spatial poses end in a unit quaternion.
+fn pose(field: Field, p: &[f64], shape: &SessionShape) -> Result<(), DecodeError> {
+    vector(field, p, shape.pose_dim(), MAX_POSITION)?;
+    if shape.kind == SceneKind::Spatial {
+        let norm = p[3..].iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > UNIT_TOLERANCE {
+            return Err(DecodeError::NotUnit { field, norm });
+        }
+    }
+    Ok(())
+}
+
+fn unit_vector(field: Field, v: &[f64], len: usize) -> Result<(), DecodeError> {
+    vector(field, v, len, 1.0 + UNIT_TOLERANCE)?;
+    let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if (norm - 1.0).abs() > UNIT_TOLERANCE {
+        return Err(DecodeError::NotUnit { field, norm });
+    }
+    Ok(())
+}
+
+/// Exact length, every element finite and within `±bound`.
+fn vector(field: Field, v: &[f64], expected: usize, bound: f64) -> Result<(), DecodeError> {
+    length(field, v.len(), expected)?;
+    elements(field, v, -bound, bound)
+}
+
+/// Exact length, every element finite and within `[0, bound]`.
+fn non_negative_vector(field: Field, v: &[f64], expected: usize, bound: f64) -> Result<(), DecodeError> {
+    length(field, v.len(), expected)?;
+    elements(field, v, 0.0, bound)
+}
+
+fn length(field: Field, got: usize, expected: usize) -> Result<(), DecodeError> {
+    if got != expected {
+        return Err(DecodeError::WrongLength { field, got, expected });
+    }
+    Ok(())
+}
+
+fn elements(field: Field, v: &[f64], min: f64, max: f64) -> Result<(), DecodeError> {
+    for (i, &value) in v.iter().enumerate() {
+        in_range(field, Some(i), value, min, max)?;
+    }
+    Ok(())
+}
+
+fn scalar(field: Field, value: f64, min: f64, max: f64) -> Result<(), DecodeError> {
+    in_range(field, None, value, min, max)
+}
+
+fn in_range(field: Field, index: Option<usize>, value: f64, min: f64, max: f64) -> Result<(), DecodeError> {
+    if !value.is_finite() {
+        return Err(DecodeError::NonFinite { field, index });
+    }
+    if value < min || value > max {
+        return Err(DecodeError::OutOfRange { field, index, value, min, max });
+    }
+    Ok(())
+}
+
+fn count(field: Field, got: usize, max: usize) -> Result<(), DecodeError> {
+    if got > max {
+        return Err(DecodeError::TooMany { field, got, max });
+    }
+    Ok(())
+}
+
+fn text(field: Field, s: &str) -> Result<(), DecodeError> {
+    if s.len() > MAX_STRING_BYTES {
+        return Err(DecodeError::TooLong { field, bytes: s.len(), max: MAX_STRING_BYTES });
+    }
+    Ok(())
+}

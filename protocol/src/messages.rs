@@ -1,0 +1,421 @@
+//! Every message kinloop puts on the wire.
+//!
+//! Two classes travel differently:
+//! - [`Control`] messages go on one reliable bidirectional QUIC stream per session, as length-prefixed frames
+//!   (handshake, leave, errors, ping/pong);
+//! - [`Datagram`]s ([`Snapshot`] server → client, [`Uplink`] client → server) go as unreliable QUIC datagrams,
+//!   latest wins; an oversize snapshot travels on a unidirectional stream instead (see `quic::datagrams`).
+//!
+//! Conventions (see `shared/design.md`): SI units; operational-space vectors are linear part first, planar
+//! `(x, y, θ)` and spatial `(v, ω)`; poses are `[x, y, θ]` planar and `[x, y, z, qw, qx, qy, qz]` spatial;
+//! matrices are column-major unless a field says otherwise; symmetric matrices send their upper triangle
+//! row-major. Lengths are carried by `Vec`s and checked against the session's [`SessionShape`] by the codec,
+//! so one set of types serves planar and spatial scenes.
+//!
+//! Wire stability: the field order of these types *is* the format (bincode, no field names). Adding, removing
+//! or reordering a field needs a new [`PROTOCOL_VERSION`]; the golden byte tests fail loudly if that happens by
+//! accident.
+//!
+//! [`SessionShape`]: crate::SessionShape
+
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+use crate::shape::SceneKind;
+
+/// Version carried in [`Hello::version`]; bumped whenever the wire format changes.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// TLS application protocol name both sides offer; a peer offering anything else fails the QUIC handshake.
+pub const ALPN: &[u8] = b"kinloop/1";
+
+/// What a client does in the VE.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Role {
+    /// Holds an operational point and pushes on the linkage.
+    Manipulator,
+    /// Receives snapshots, applies no wrench.
+    Observer,
+}
+
+/// Capabilities of the client's haptic device, in the spirit of the IEEE 1918.1.1 handshake: the server uses
+/// them to recommend gains the device can render.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeviceCaps {
+    /// Human-readable device model.
+    pub name: String,
+    /// Actuated degrees of freedom.
+    pub dof: u8,
+    /// Lower workspace bound per operational axis (m, rad).
+    pub workspace_min: Vec<f64>,
+    /// Upper workspace bound per operational axis (m, rad).
+    pub workspace_max: Vec<f64>,
+    /// Peak force the device can render (N).
+    pub max_force_n: f64,
+    /// Peak torque the device can render (N·m).
+    pub max_torque_nm: f64,
+    /// Highest stable rendering stiffness (N/m).
+    pub max_stiffness_n_per_m: f64,
+    /// Highest stable rendering damping (N·s/m).
+    pub max_damping_ns_per_m: f64,
+    /// The device's own servo rate (Hz).
+    pub native_rate_hz: f64,
+}
+
+/// Which local model the client wants in its snapshots.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum LocalModelForm {
+    /// Reduced operational-space terms only (Λ̂⁻¹, Û, Σ̂, biases): small, the default.
+    OpSpace,
+    /// Also the configuration-space terms of the paper's eq 11 ([`ConfigTerms`]).
+    ConfigSpace,
+}
+
+/// First control message, client → server.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Hello {
+    /// The client's [`PROTOCOL_VERSION`]. First field, so a server can refuse other versions politely.
+    pub version: u16,
+    /// Shared secret the server was started with.
+    pub token: String,
+    /// Free-form client name for logs.
+    pub client_name: String,
+    /// Manipulator or observer.
+    pub role: Role,
+    /// Name of the operational point the client wants to hold.
+    pub op: String,
+    /// Device capabilities.
+    pub device: DeviceCaps,
+    /// Which local model to send.
+    pub form: LocalModelForm,
+}
+
+/// What the client needs to know about the scene to size its local model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneSummary {
+    /// Scene name.
+    pub name: String,
+    /// Planar or spatial.
+    pub kind: SceneKind,
+    /// Generalized coordinates of the tree.
+    pub n: u32,
+    /// Loop-closure rows.
+    pub m: u32,
+    /// Operational-space dimension `k` (must equal `kind.op_dim()`).
+    pub op_dim: u8,
+    /// Name of the operational point granted to this client.
+    pub op_name: String,
+}
+
+/// Controller gains the server recommends for this scene and device.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecommendedGains {
+    /// Joint-constraint stiffness along constrained directions (N/m).
+    pub k_j: f64,
+    /// Joint-constraint damping along constrained directions (N·s/m).
+    pub b_j: f64,
+    /// Position-channel stiffness per operational axis, length `k`.
+    pub k_pc: Vec<f64>,
+    /// Position-channel damping per operational axis, length `k`.
+    pub b_pc: Vec<f64>,
+}
+
+/// Successful handshake reply, server → client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Welcome {
+    /// Random id of this session (for logs and reconnects).
+    pub session_id: u64,
+    /// The client's user id in the VE; snapshots and other users refer to it.
+    pub user_id: u32,
+    /// Scene dimensions.
+    pub scene: SceneSummary,
+    /// Rate of the VE loop (Hz).
+    pub ve_rate_hz: f64,
+    /// Rate at which snapshots are sent (Hz).
+    pub snapshot_rate_hz: f64,
+    /// Recommended controller gains.
+    pub gains: RecommendedGains,
+}
+
+/// Why a server refused a client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum RefusalReason {
+    /// The client speaks another protocol version.
+    UnsupportedVersion {
+        /// Version the server speaks.
+        server: u16,
+        /// Version the client sent.
+        client: u16,
+    },
+    /// The token did not match.
+    BadToken,
+    /// No room for another user.
+    ServerFull {
+        /// How many users the server admits.
+        max_users: u32,
+    },
+    /// The requested operational point does not exist or is taken.
+    UnknownOp {
+        /// What the client asked for.
+        requested: String,
+        /// What it could have asked for.
+        available: Vec<String>,
+    },
+    /// The requested role is not allowed on this server.
+    RoleNotAllowed,
+    /// The hello made no sense.
+    Malformed {
+        /// What was wrong with it.
+        what: String,
+    },
+}
+
+impl fmt::Display for RefusalReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RefusalReason::UnsupportedVersion { server, client } => {
+                write!(f, "protocol version {client} is not supported (the server speaks version {server})")
+            }
+            RefusalReason::BadToken => f.write_str("the access token was not accepted"),
+            RefusalReason::ServerFull { max_users } => write!(f, "the server is full ({max_users} users)"),
+            RefusalReason::UnknownOp { requested, available } => {
+                write!(f, "the scene has no free operational point {requested:?}")?;
+                if available.is_empty() {
+                    f.write_str(" (none is free)")
+                } else {
+                    write!(f, " (free: {})", available.join(", "))
+                }
+            }
+            RefusalReason::RoleNotAllowed => f.write_str("that role is not allowed on this server"),
+            RefusalReason::Malformed { what } => write!(f, "the hello was malformed: {what}"),
+        }
+    }
+}
+
+/// Refusal reply, server → client; the server closes the connection after sending it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Refused {
+    /// Machine-readable reason.
+    pub reason: RefusalReason,
+    /// Optional extra words from the server operator (may be empty).
+    pub message: String,
+}
+
+impl fmt::Display for Refused {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "refused: {}", self.reason)?;
+        if !self.message.is_empty() {
+            write!(f, " — {}", self.message)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Refused {}
+
+/// Category of a [`Control::Error`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ErrorCode {
+    /// The peer broke the protocol (wrong message at the wrong time).
+    Protocol,
+    /// The peer sent bytes that did not decode or validate.
+    Decode,
+    /// Something failed inside the sender.
+    Internal,
+    /// The sender is shutting down.
+    ShuttingDown,
+    /// The sender cannot keep up.
+    Overloaded,
+}
+
+impl fmt::Display for ErrorCode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            ErrorCode::Protocol => "protocol violation",
+            ErrorCode::Decode => "undecodable message",
+            ErrorCode::Internal => "internal error",
+            ErrorCode::ShuttingDown => "shutting down",
+            ErrorCode::Overloaded => "overloaded",
+        })
+    }
+}
+
+/// Reliable messages on the session's control stream.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Control {
+    /// Client → server, first frame.
+    Hello(Hello),
+    /// Server → client, admits the client.
+    Welcome(Welcome),
+    /// Server → client, refuses the client.
+    Refused(Refused),
+    /// Either side is leaving.
+    Leave {
+        /// Why, for logs.
+        reason: String,
+    },
+    /// Either side reports a problem.
+    Error {
+        /// Category.
+        code: ErrorCode,
+        /// Details for humans.
+        message: String,
+    },
+    /// Asks the peer to echo `nonce`.
+    Ping {
+        /// Echoed back in the pong.
+        nonce: u64,
+        /// Sender's clock when sent (s).
+        t_s: f64,
+    },
+    /// Echo of a ping.
+    Pong {
+        /// The ping's nonce.
+        nonce: u64,
+        /// The ping's `t_s`, echoed so the pinger needs no state.
+        t_s: f64,
+    },
+}
+
+/// A contact near the user's operational point, as the local model needs it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactTerm {
+    /// Contact point in world (m), point dimension.
+    pub point: Vec<f64>,
+    /// Unit contact normal in world, point dimension.
+    pub normal: Vec<f64>,
+    /// Penetration depth (m); negative is a gap.
+    pub depth: f64,
+    /// Normal relative velocity (m/s), positive separating.
+    pub normal_velocity: f64,
+    /// How an operational-space acceleration maps to normal acceleration (row of J_c Λ̂-weighted), length `k`.
+    pub op_coupling: Vec<f64>,
+    /// Inverse effective mass along the normal (1/kg).
+    pub mobility: f64,
+    /// Normal acceleration with zero operational force (m/s²).
+    pub bias_accel: f64,
+    /// Contact stiffness the VE uses (N/m).
+    pub stiffness: f64,
+    /// Contact damping the VE uses (N·s/m).
+    pub damping: f64,
+}
+
+/// Another user's operational point and wrench, so a client can feel who else pushes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OtherUser {
+    /// That user's id.
+    pub user_id: u32,
+    /// Position of that user's operational point in world (m), point dimension.
+    pub op_position: Vec<f64>,
+    /// Wrench that user applies, length `k`, linear first.
+    pub wrench: Vec<f64>,
+}
+
+/// Configuration-space local-model terms (paper eq 11), sent only when the client asked for
+/// [`LocalModelForm::ConfigSpace`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConfigTerms {
+    /// Generalized coordinates, length `n`.
+    pub q: Vec<f64>,
+    /// Generalized velocities, length `n`.
+    pub qd: Vec<f64>,
+    /// Mass matrix, upper triangle row-major, length `n(n+1)/2`.
+    pub mass_matrix: Vec<f64>,
+    /// Closure Jacobian `W`, `m x n` column-major.
+    pub closure_jacobian: Vec<f64>,
+    /// Closure bias with Baumgarte stabilization, length `m`.
+    pub closure_bias_stab: Vec<f64>,
+    /// Generalized bias (Coriolis, gravity, springs), length `n`.
+    pub generalized_bias: Vec<f64>,
+    /// Operational-point Jacobian, `k x n` column-major.
+    pub op_jacobian: Vec<f64>,
+    /// Operational-point bias acceleration `J̇ q̇`, length `k`.
+    pub op_bias: Vec<f64>,
+}
+
+/// The local model of interaction for one user (paper Fig 3), server → client at up to the VE rate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Snapshot {
+    /// Per-user snapshot counter; a receiver drops anything not newer than what it has (latest wins).
+    pub seq: u64,
+    /// Server clock when the VE state was taken (s).
+    pub server_time_s: f64,
+    /// VE step counter.
+    pub ve_step: u64,
+    /// The user this snapshot is for.
+    pub user_id: u32,
+    /// Operational-point pose, pose dimension.
+    pub op_pose: Vec<f64>,
+    /// Operational-point twist, length `k`, linear first.
+    pub op_twist: Vec<f64>,
+    /// Λ̂⁻¹ (eq 9), upper triangle row-major, length `k(k+1)/2`.
+    pub inverse_inertia: Vec<f64>,
+    /// Operational-space bias acceleration, length `k`.
+    pub bias_accel: Vec<f64>,
+    /// Û (eq 10/12), `k x k` column-major, orthonormal columns.
+    pub directions: Vec<f64>,
+    /// Σ̂, length `k`, non-increasing.
+    pub singular_values: Vec<f64>,
+    /// How many of the leading directions are constrained (≤ `k`).
+    pub constraint_count: u8,
+    /// Contacts near the operational point.
+    pub contacts: Vec<ContactTerm>,
+    /// The other users.
+    pub others: Vec<OtherUser>,
+    /// Configuration-space terms, present only for [`LocalModelForm::ConfigSpace`].
+    pub config: Option<ConfigTerms>,
+}
+
+/// Bits of [`Uplink::flags`].
+pub mod uplink_flags {
+    /// The client is fading its output because snapshots stopped arriving.
+    pub const FADING: u32 = 1 << 0;
+    /// The commanded wrench exceeded the device's capabilities and was clamped.
+    pub const CLAMPED: u32 = 1 << 1;
+    /// The newest snapshot is older than the client's staleness threshold.
+    pub const STALE_SNAPSHOT: u32 = 1 << 2;
+    /// Joint-constraint control runs in acceleration-zeroing ("impedance") mode instead of stiffness mode.
+    pub const IMPEDANCE_MODE: u32 = 1 << 3;
+    /// One or more uplinks before this one were not sent because they fell inside the perceptual deadband.
+    pub const DEADBAND_SKIPPED: u32 = 1 << 4;
+    /// A safety check disabled the device output.
+    pub const SAFETY_STOP: u32 = 1 << 5;
+    /// Every bit version 1 defines; the codec refuses others.
+    pub const KNOWN: u32 = FADING | CLAMPED | STALE_SNAPSHOT | IMPEDANCE_MODE | DEADBAND_SKIPPED | SAFETY_STOP;
+}
+
+/// What a client reports each haptic tick, client → server.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Uplink {
+    /// Per-client uplink counter.
+    pub seq: u64,
+    /// Client clock when sent (s).
+    pub client_time_s: f64,
+    /// Newest snapshot seq the client has applied (0 before the first).
+    pub last_snapshot_seq: u64,
+    /// How long that snapshot had been held when this uplink left (s); with the snapshot's send time this gives
+    /// the server an RTT estimate without synchronized clocks.
+    pub last_snapshot_age_s: f64,
+    /// Wrench the user's hand applies, F_h, length `k`.
+    pub hand_wrench: Vec<f64>,
+    /// Device pose, pose dimension.
+    pub device_pose: Vec<f64>,
+    /// Device twist, length `k`.
+    pub device_twist: Vec<f64>,
+    /// Local-model operational-point pose, pose dimension.
+    pub model_pose: Vec<f64>,
+    /// Local-model operational-point twist, length `k`.
+    pub model_twist: Vec<f64>,
+    /// Status bits, see [`uplink_flags`].
+    pub flags: u32,
+}
+
+/// Unreliable messages, one per QUIC datagram (or per unidirectional stream when too large for a datagram).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Datagram {
+    /// Server → client.
+    Snapshot(Snapshot),
+    /// Client → server.
+    Uplink(Uplink),
+}

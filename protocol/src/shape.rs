@@ -1,0 +1,83 @@
+//! The dimensions a session agrees on in its handshake, which every datagram must then match.
+
+use serde::{Deserialize, Serialize};
+
+pub use scene_kind::SceneKind;
+
+/// Stand-in for `kinloop_linkage::SceneKind` while the linkage crate does not export it yet; same
+/// serde form (`"planar"`, `"spatial"`) and same methods, so switching is a one-line change.
+mod scene_kind {
+    use serde::{Deserialize, Serialize};
+
+    /// Which kind of space a scene lives in.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+    #[serde(rename_all = "lowercase")]
+    pub enum SceneKind {
+        /// Motion in the x-y plane: operational space (x, y, θ).
+        Planar,
+        /// Motion in 3-D: operational space (v, ω).
+        Spatial,
+    }
+
+    impl SceneKind {
+        /// Dimension of the operational space: 3 planar, 6 spatial.
+        pub fn op_dim(self) -> usize {
+            match self {
+                SceneKind::Planar => 3,
+                SceneKind::Spatial => 6,
+            }
+        }
+        /// Dimension of positions: 2 planar, 3 spatial.
+        pub fn point_dim(self) -> usize {
+            match self {
+                SceneKind::Planar => 2,
+                SceneKind::Spatial => 3,
+            }
+        }
+        /// Dimension of angular quantities: 1 planar, 3 spatial.
+        pub fn angular_dim(self) -> usize {
+            match self {
+                SceneKind::Planar => 1,
+                SceneKind::Spatial => 3,
+            }
+        }
+    }
+}
+
+/// Dimensions of one session: fixed by the `Welcome`, checked on every snapshot and uplink.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct SessionShape {
+    /// Planar or spatial.
+    pub kind: SceneKind,
+    /// Number of generalized coordinates of the scene's tree.
+    pub n: usize,
+    /// Number of loop-closure rows.
+    pub m: usize,
+}
+
+impl SessionShape {
+    /// Operational-space dimension `k` (twists, wrenches): 3 planar, 6 spatial.
+    pub fn op_dim(&self) -> usize {
+        self.kind.op_dim()
+    }
+    /// Length of a pose: 3 planar `[x, y, θ]`, 7 spatial `[x, y, z, qw, qx, qy, qz]`.
+    pub fn pose_dim(&self) -> usize {
+        match self.kind {
+            SceneKind::Planar => 3,
+            SceneKind::Spatial => 7,
+        }
+    }
+    /// Length of a position: 2 planar, 3 spatial.
+    pub fn point_dim(&self) -> usize {
+        self.kind.point_dim()
+    }
+    /// Length of a packed upper triangle of a `k x k` symmetric matrix.
+    pub fn op_triangle_len(&self) -> usize {
+        triangle_len(self.op_dim())
+    }
+}
+
+/// Length of the packed upper triangle (row-major, diagonal included) of a `dim x dim` symmetric matrix.
+pub fn triangle_len(dim: usize) -> usize {
+    dim * (dim + 1) / 2
+}
