@@ -10,6 +10,7 @@
 pub mod codec;
 pub mod emulator;
 pub mod messages;
+pub mod quic;
 mod shape;
 
 pub use messages::*;

@@ -278,6 +278,21 @@ pub enum Control {
     },
 }
 
+impl Control {
+    /// The variant's name, for errors and logs that must not print a whole message.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Control::Hello(_) => "Hello",
+            Control::Welcome(_) => "Welcome",
+            Control::Refused(_) => "Refused",
+            Control::Leave { .. } => "Leave",
+            Control::Error { .. } => "Error",
+            Control::Ping { .. } => "Ping",
+            Control::Pong { .. } => "Pong",
+        }
+    }
+}
+
 /// A contact near the user's operational point, as the local model needs it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ContactTerm {
@@ -412,6 +427,8 @@ pub struct Uplink {
 }
 
 /// Unreliable messages, one per QUIC datagram (or per unidirectional stream when too large for a datagram).
+// Messages are built and sent one at a time, so the size gap costs nothing; boxing would cost an allocation.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Datagram {
     /// Server → client.

@@ -98,6 +98,17 @@ pub fn decode_datagram(bytes: &[u8], shape: &SessionShape) -> Result<Datagram, D
     Ok(msg)
 }
 
+/// Variant index of `Control::Hello` on the wire (first variant; frozen by the golden tests).
+const HELLO_VARIANT: u32 = 0;
+
+/// The version in a control frame that starts like a `Hello`, even when the rest is not this version's
+/// `Hello`: lets a server refuse another version with that precise reason instead of "malformed".
+pub fn peek_hello_version(body: &[u8]) -> Option<u16> {
+    let config = limited_config::<MAX_CONTROL_FRAME_BYTES>();
+    let ((variant, version), _read): ((u32, u16), usize) = bincode::serde::decode_from_slice(body, config).ok()?;
+    (variant == HELLO_VARIANT).then_some(version)
+}
+
 fn encode_limited<T: Serialize, const LIMIT: usize>(msg: &T, buf: &mut Vec<u8>) -> Result<(), EncodeError> {
     buf.clear();
     bincode::serde::encode_into_std_write(msg, buf, config::standard())

@@ -1,0 +1,158 @@
+//! QUIC endpoints for the server and clients, with one shared transport tuning and optional link emulation.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use quinn::crypto::rustls::{QuicClientConfig, QuicServerConfig};
+use quinn::{AsyncUdpSocket, Endpoint, EndpointConfig, IdleTimeout, Runtime, TokioRuntime, TransportConfig};
+
+use super::emulated_socket::{EmulatedSocket, EmulatedSocketStatsHandle};
+use super::identity::ServerIdentity;
+use super::trust::{crypto_provider, Trust, TrustError};
+use crate::emulator::{LinkConfig, LinkConfigError};
+use crate::messages::ALPN;
+
+/// Transport settings shared by server and client endpoints.
+#[derive(Clone, Debug)]
+pub struct EndpointOptions {
+    /// A connection silent this long is dead (both sides must agree within reason).
+    pub idle_timeout: Duration,
+    /// Ping interval that keeps an idle session alive; well under `idle_timeout`.
+    pub keep_alive: Duration,
+    /// Received datagrams waiting for the application, in bytes; oldest are dropped beyond it (latest wins).
+    pub datagram_receive_buffer: usize,
+    /// Datagrams waiting to be sent, in bytes; oldest are dropped beyond it, so nothing stale queues up.
+    pub datagram_send_buffer: usize,
+    /// Impairments applied to every packet this endpoint sends; `None` (or a transparent link) for none.
+    pub link: Option<LinkConfig>,
+    /// Application protocols offered in TLS; [`ALPN`] unless testing a mismatch.
+    pub alpn_protocols: Vec<Vec<u8>>,
+    /// Local address a client endpoint binds (the server binds its `listen` address).
+    pub client_bind: SocketAddr,
+}
+
+impl Default for EndpointOptions {
+    fn default() -> Self {
+        EndpointOptions {
+            idle_timeout: Duration::from_secs(5),
+            keep_alive: Duration::from_secs(1),
+            datagram_receive_buffer: 16 * 1024,
+            datagram_send_buffer: 8 * 1024,
+            link: None,
+            alpn_protocols: vec![ALPN.to_vec()],
+            client_bind: SocketAddr::from(([0, 0, 0, 0], 0)),
+        }
+    }
+}
+
+/// Why an endpoint could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum EndpointError {
+    /// The UDP socket could not be bound or wrapped.
+    #[error("cannot use UDP socket {addr}: {source}")]
+    Socket {
+        /// The address.
+        addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The client's trust settings are unusable.
+    #[error(transparent)]
+    Trust(#[from] TrustError),
+    /// rustls refused the server's certificate or key.
+    #[error("TLS configuration: {0}")]
+    Tls(#[from] rustls::Error),
+    /// quinn refused the TLS configuration.
+    #[error("QUIC crypto configuration: {0}")]
+    QuicCrypto(String),
+    /// The idle timeout does not fit QUIC's encoding.
+    #[error("idle timeout {0:?} is too long")]
+    IdleTimeout(Duration),
+    /// The link emulation settings contradict themselves.
+    #[error("link emulation: {0}")]
+    Link(#[from] LinkConfigError),
+}
+
+/// The transport tuning both sides use.
+pub fn transport_config(opts: &EndpointOptions) -> Result<TransportConfig, EndpointError> {
+    let idle = IdleTimeout::try_from(opts.idle_timeout).map_err(|_| EndpointError::IdleTimeout(opts.idle_timeout))?;
+    let mut transport = TransportConfig::default();
+    transport
+        .max_idle_timeout(Some(idle))
+        .keep_alive_interval(Some(opts.keep_alive))
+        .datagram_receive_buffer_size(Some(opts.datagram_receive_buffer))
+        .datagram_send_buffer_size(opts.datagram_send_buffer);
+    Ok(transport)
+}
+
+/// A server endpoint listening on `listen` with `identity`. Must run inside a tokio runtime.
+pub fn server_endpoint(
+    listen: SocketAddr,
+    identity: &ServerIdentity,
+    opts: &EndpointOptions,
+) -> Result<Endpoint, EndpointError> {
+    server_endpoint_with_link_stats(listen, identity, opts).map(|(endpoint, _)| endpoint)
+}
+
+/// [`server_endpoint`], also returning the emulated link's counters when `opts.link` emulates one.
+pub fn server_endpoint_with_link_stats(
+    listen: SocketAddr,
+    identity: &ServerIdentity,
+    opts: &EndpointOptions,
+) -> Result<(Endpoint, Option<EmulatedSocketStatsHandle>), EndpointError> {
+    let mut tls = rustls::ServerConfig::builder_with_provider(crypto_provider())
+        .with_protocol_versions(&[&rustls::version::TLS13])?
+        .with_no_client_auth()
+        .with_single_cert(identity.cert_chain.clone(), identity.key.clone_key())?;
+    tls.alpn_protocols = opts.alpn_protocols.clone();
+    let crypto = QuicServerConfig::try_from(tls).map_err(|e| EndpointError::QuicCrypto(e.to_string()))?;
+    let mut config = quinn::ServerConfig::with_crypto(Arc::new(crypto));
+    config.transport_config(Arc::new(transport_config(opts)?));
+    let (socket, stats) = bind(listen, opts)?;
+    let endpoint = Endpoint::new_with_abstract_socket(EndpointConfig::default(), Some(config), socket, runtime())
+        .map_err(|source| EndpointError::Socket { addr: listen, source })?;
+    Ok((endpoint, stats))
+}
+
+/// A client endpoint that trusts servers as `trust` says. Must run inside a tokio runtime.
+pub fn client_endpoint(trust: &Trust, opts: &EndpointOptions) -> Result<Endpoint, EndpointError> {
+    client_endpoint_with_link_stats(trust, opts).map(|(endpoint, _)| endpoint)
+}
+
+/// [`client_endpoint`], also returning the emulated link's counters when `opts.link` emulates one.
+pub fn client_endpoint_with_link_stats(
+    trust: &Trust,
+    opts: &EndpointOptions,
+) -> Result<(Endpoint, Option<EmulatedSocketStatsHandle>), EndpointError> {
+    let tls = trust.client_crypto(&opts.alpn_protocols)?;
+    let crypto = QuicClientConfig::try_from(tls).map_err(|e| EndpointError::QuicCrypto(e.to_string()))?;
+    let mut config = quinn::ClientConfig::new(Arc::new(crypto));
+    config.transport_config(Arc::new(transport_config(opts)?));
+    let (socket, stats) = bind(opts.client_bind, opts)?;
+    let mut endpoint = Endpoint::new_with_abstract_socket(EndpointConfig::default(), None, socket, runtime())
+        .map_err(|source| EndpointError::Socket { addr: opts.client_bind, source })?;
+    endpoint.set_default_client_config(config);
+    Ok((endpoint, stats))
+}
+
+fn runtime() -> Arc<dyn Runtime> {
+    Arc::new(TokioRuntime)
+}
+
+/// Binds a UDP socket, behind the link emulator when `opts.link` impairs anything.
+fn bind(
+    addr: SocketAddr,
+    opts: &EndpointOptions,
+) -> Result<(Arc<dyn AsyncUdpSocket>, Option<EmulatedSocketStatsHandle>), EndpointError> {
+    let socket_error = |source| EndpointError::Socket { addr, source };
+    let std_socket = std::net::UdpSocket::bind(addr).map_err(socket_error)?;
+    let socket = TokioRuntime.wrap_udp_socket(std_socket).map_err(socket_error)?;
+    match &opts.link {
+        Some(link) if !link.is_transparent() => {
+            let (emulated, stats) = EmulatedSocket::wrap(socket, link.clone())?;
+            Ok((emulated, Some(stats)))
+        }
+        _ => Ok((socket, None)),
+    }
+}

@@ -1,0 +1,258 @@
+//! Session set-up on top of QUIC: the client sends `Hello` on a new bidirectional stream (which stays the
+//! session's control stream), the server answers `Welcome` or `Refused`.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use quinn::{Connection, ConnectionError, Endpoint, Incoming, RecvStream, SendStream, TransportErrorCode};
+
+use super::framing::{recv_control, recv_frame, send_control, ControlStreamError};
+use super::trust::FingerprintMismatch;
+use crate::codec::{self, validate, DecodeError};
+use crate::messages::{Control, ErrorCode, Hello, RefusalReason, Refused, Welcome, PROTOCOL_VERSION};
+
+/// Longest a handshake (QUIC and Hello/Welcome) may take on either side.
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long a refusing server waits for the client to read the refusal and close, before closing itself.
+const REFUSAL_LINGER: Duration = Duration::from_secs(2);
+
+/// Application close codes kinloop uses.
+pub mod close_codes {
+    use quinn::VarInt;
+
+    /// Orderly end of a session.
+    pub const NORMAL: VarInt = VarInt::from_u32(0);
+    /// The server refused the client (the `Refused` message says why).
+    pub const REFUSED: VarInt = VarInt::from_u32(1);
+    /// The peer broke the protocol.
+    pub const PROTOCOL: VarInt = VarInt::from_u32(2);
+}
+
+/// TLS alerts (RFC 8446 §6) a client sees when it does not trust the server's certificate.
+const CERTIFICATE_ALERTS: [u8; 7] = [42, 43, 44, 45, 46, 48, 49];
+/// TLS alert `no_application_protocol`.
+const NO_APPLICATION_PROTOCOL: u8 = 120;
+
+/// A client session the server welcomed.
+#[derive(Debug)]
+pub struct ConnectedSession {
+    /// The QUIC connection (datagrams go here).
+    pub connection: Connection,
+    /// Sending half of the control stream.
+    pub send: SendStream,
+    /// Receiving half of the control stream.
+    pub recv: RecvStream,
+    /// What the server granted.
+    pub welcome: Welcome,
+}
+
+/// Why a client could not start a session. Each cause a user can fix has its own variant.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    /// Client and server share no application protocol (not a kinloop server, or another major version).
+    #[error("the server does not speak {} (no common application protocol)", String::from_utf8_lossy(crate::ALPN))]
+    Alpn,
+    /// The server's certificate is not the one trusted.
+    #[error("untrusted server certificate: expected {expected}, got {got}")]
+    UntrustedCertificate {
+        /// What the client trusts.
+        expected: String,
+        /// What the server presented, or why it failed verification.
+        got: String,
+    },
+    /// The server refused the hello.
+    #[error("the server {0}")]
+    Refused(Refused),
+    /// No answer within [`HANDSHAKE_TIMEOUT`] or the idle timeout.
+    #[error("the server did not answer in time")]
+    Timeout,
+    /// The connection could not even be attempted (bad server name, endpoint closed...).
+    #[error("cannot connect: {0}")]
+    Endpoint(#[from] quinn::ConnectError),
+    /// The connection failed for another reason.
+    #[error("connection failed: {0}")]
+    Connection(ConnectionError),
+    /// The control stream failed.
+    #[error(transparent)]
+    Control(#[from] ControlStreamError),
+    /// The server answered the hello with something else than `Welcome` or `Refused`.
+    #[error("the server answered the hello with {got}")]
+    UnexpectedReply {
+        /// Which message.
+        got: &'static str,
+    },
+}
+
+impl From<ConnectionError> for ConnectError {
+    /// Sorts a failed connection into the causes a user can act on.
+    fn from(error: ConnectionError) -> Self {
+        let alert = |code: TransportErrorCode| {
+            let code = u64::from(code);
+            (code & !0xff == 0x100).then_some((code & 0xff) as u8)
+        };
+        match &error {
+            ConnectionError::TimedOut => ConnectError::Timeout,
+            ConnectionError::TransportError(local) if alert(local.code) == Some(NO_APPLICATION_PROTOCOL) => {
+                ConnectError::Alpn
+            }
+            ConnectionError::ConnectionClosed(remote) if alert(remote.error_code) == Some(NO_APPLICATION_PROTOCOL) => {
+                ConnectError::Alpn
+            }
+            ConnectionError::TransportError(local)
+                if alert(local.code).is_some_and(|a| CERTIFICATE_ALERTS.contains(&a)) =>
+            {
+                match FingerprintMismatch::find_in(&local.reason) {
+                    Some(FingerprintMismatch { expected, got }) => ConnectError::UntrustedCertificate { expected, got },
+                    None => ConnectError::UntrustedCertificate {
+                        expected: "a certificate issued by a trusted CA for this server name".into(),
+                        got: local.reason.clone(),
+                    },
+                }
+            }
+            _ => ConnectError::Connection(error),
+        }
+    }
+}
+
+/// Connects to a kinloop server and performs the Hello/Welcome handshake.
+pub async fn connect(
+    endpoint: &Endpoint,
+    addr: SocketAddr,
+    server_name: &str,
+    hello: &Hello,
+) -> Result<ConnectedSession, ConnectError> {
+    let attempt = async {
+        let connection = endpoint.connect(addr, server_name)?.await?;
+        let (mut send, mut recv) = connection.open_bi().await?;
+        let reply = async {
+            send_control(&mut send, &Control::Hello(hello.clone())).await?;
+            recv_control(&mut recv).await
+        };
+        // A control-stream failure is usually the connection failing: report the connection's reason.
+        let reply = reply.await.map_err(|e| connection.close_reason().map_or(e.into(), ConnectError::from))?;
+        match reply {
+            Control::Welcome(welcome) => Ok(ConnectedSession { connection, send, recv, welcome }),
+            Control::Refused(refused) => {
+                connection.close(close_codes::REFUSED, b"refused");
+                Err(ConnectError::Refused(refused))
+            }
+            other => {
+                connection.close(close_codes::PROTOCOL, b"expected Welcome or Refused");
+                Err(ConnectError::UnexpectedReply { got: other.kind_name() })
+            }
+        }
+    };
+    tokio::time::timeout(HANDSHAKE_TIMEOUT, attempt).await.unwrap_or(Err(ConnectError::Timeout))
+}
+
+/// A server session after a successful handshake.
+#[derive(Debug)]
+pub struct AcceptedSession {
+    /// The QUIC connection (datagrams go here).
+    pub connection: Connection,
+    /// Sending half of the control stream.
+    pub send: SendStream,
+    /// Receiving half of the control stream.
+    pub recv: RecvStream,
+    /// What the client asked for.
+    pub hello: Hello,
+    /// What the server granted.
+    pub welcome: Welcome,
+}
+
+/// Why a server did not start a session with an incoming client.
+#[derive(Debug, thiserror::Error)]
+pub enum AcceptError {
+    /// The QUIC handshake or the connection failed (wrong ALPN, untrusted certificate on the client...).
+    #[error("connection failed: {0}")]
+    Connection(#[from] ConnectionError),
+    /// No hello within [`HANDSHAKE_TIMEOUT`].
+    #[error("the client did not complete the handshake in time")]
+    Timeout,
+    /// The control stream failed.
+    #[error(transparent)]
+    Control(#[from] ControlStreamError),
+    /// The client opened with something else than `Hello`.
+    #[error("the client opened with {got} instead of Hello")]
+    UnexpectedMessage {
+        /// Which message.
+        got: &'static str,
+    },
+    /// The client was refused (and told why).
+    #[error("refused the client: {0}")]
+    Refused(Refused),
+    /// The validator produced a welcome the client would reject (a server bug).
+    #[error("the server's own welcome is invalid: {0}")]
+    InvalidWelcome(DecodeError),
+}
+
+/// Accepts an incoming connection and runs the handshake. The protocol version is checked here; everything
+/// else (token, role, operational point, capacity) is `validate`'s decision.
+pub async fn accept(
+    incoming: Incoming,
+    validate: impl FnOnce(&Hello) -> Result<Welcome, Refused>,
+) -> Result<AcceptedSession, AcceptError> {
+    let handshake = async {
+        let connection = incoming.await?;
+        let (mut send, mut recv) = connection.accept_bi().await?;
+        let hello = match read_hello(&mut recv).await {
+            Ok(hello) => hello,
+            Err(HelloProblem::Refuse(refused)) => return Err(refuse(&connection, send, refused).await),
+            Err(HelloProblem::Fail(error)) => {
+                connection.close(close_codes::PROTOCOL, b"expected Hello");
+                return Err(error);
+            }
+        };
+        let welcome = match validate(&hello) {
+            Ok(welcome) => welcome,
+            Err(refused) => return Err(refuse(&connection, send, refused).await),
+        };
+        if let Err(error) = validate::welcome(&welcome) {
+            let internal = Control::Error { code: ErrorCode::Internal, message: "the server failed to welcome you".into() };
+            // Best effort: the session is being abandoned either way.
+            let _ = send_control(&mut send, &internal).await;
+            connection.close(close_codes::PROTOCOL, b"internal error");
+            return Err(AcceptError::InvalidWelcome(error));
+        }
+        send_control(&mut send, &Control::Welcome(welcome.clone())).await?;
+        Ok(AcceptedSession { connection, send, recv, hello, welcome })
+    };
+    tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await.unwrap_or(Err(AcceptError::Timeout))
+}
+
+enum HelloProblem {
+    /// Tell the client why and close.
+    Refuse(Refused),
+    /// Not worth an answer.
+    Fail(AcceptError),
+}
+
+/// Reads the first frame: a hello of this version, or a reason to refuse.
+async fn read_hello(recv: &mut RecvStream) -> Result<Hello, HelloProblem> {
+    let body = recv_frame(recv).await.map_err(|e| HelloProblem::Fail(e.into()))?;
+    // Checked before decoding: another version's Hello may not decode as ours, and deserves a precise answer.
+    if let Some(client) = codec::peek_hello_version(&body).filter(|v| *v != PROTOCOL_VERSION) {
+        let reason = RefusalReason::UnsupportedVersion { server: PROTOCOL_VERSION, client };
+        return Err(HelloProblem::Refuse(Refused { reason, message: String::new() }));
+    }
+    match codec::decode_control(&body) {
+        Ok(Control::Hello(hello)) => Ok(hello),
+        Ok(other) => Err(HelloProblem::Fail(AcceptError::UnexpectedMessage { got: other.kind_name() })),
+        Err(error) => {
+            let reason = RefusalReason::Malformed { what: error.to_string() };
+            Err(HelloProblem::Refuse(Refused { reason, message: String::new() }))
+        }
+    }
+}
+
+/// Sends the refusal, gives the client a moment to read it and close, then closes.
+async fn refuse(connection: &Connection, mut send: SendStream, refused: Refused) -> AcceptError {
+    if send_control(&mut send, &Control::Refused(refused.clone())).await.is_ok() {
+        // Closing at once could discard the refusal before it is delivered; the client closes on reading it.
+        let _ = send.finish();
+        let _ = tokio::time::timeout(REFUSAL_LINGER, connection.closed()).await;
+    }
+    connection.close(close_codes::REFUSED, b"refused");
+    AcceptError::Refused(refused)
+}
