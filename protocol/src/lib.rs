@@ -7,6 +7,7 @@
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
 //! - [`bench`]: measurements the `kinloop bench` command reports.
 
+pub mod bench;
 pub mod codec;
 pub mod emulator;
 pub mod messages;

@@ -1,0 +1,237 @@
+//! Golden byte vectors freeze the wire format of protocol version 1.
+//!
+//! The bytes below were written by hand from the format (bincode 2 standard config: varint integers and
+//! lengths, `u64` ≥ 251 as `fb` + u16 LE, enum variants as varint indices, `Option` as 0/1, `f64` as 8 LE
+//! bytes), not produced by the code under test. If one of these tests fails, the wire format changed: bump
+//! `PROTOCOL_VERSION` and write new vectors, or undo the change.
+
+use kinloop_protocol::codec::{decode_control, decode_datagram, encode_control, encode_datagram};
+use kinloop_protocol::*;
+
+fn unhex(parts: &[&str]) -> Vec<u8> {
+    let digits: String = parts.concat().chars().filter(|c| !c.is_whitespace()).collect();
+    (0..digits.len()).step_by(2).map(|i| u8::from_str_radix(&digits[i..i + 2], 16).expect("hex")).collect()
+}
+
+const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
+
+fn hello() -> Control {
+    Control::Hello(Hello {
+        version: 1,
+        token: "tok".into(),
+        client_name: "c1".into(),
+        role: Role::Manipulator,
+        op: "ee".into(),
+        device: DeviceCaps {
+            name: "sim".into(),
+            dof: 3,
+            workspace_min: vec![-0.5, -0.5, -2.0],
+            workspace_max: vec![0.5, 0.5, 2.0],
+            max_force_n: 8.0,
+            max_torque_nm: 0.5,
+            max_stiffness_n_per_m: 2048.0,
+            max_damping_ns_per_m: 16.0,
+            native_rate_hz: 1024.0,
+        },
+        form: LocalModelForm::OpSpace,
+    })
+}
+
+const HELLO_BYTES: &[&str] = &[
+    "00",                       // Control::Hello
+    "01",                       // version 1
+    "03 746f6b",                // token "tok"
+    "02 6331",                  // client_name "c1"
+    "00",                       // role Manipulator
+    "02 6565",                  // op "ee"
+    "03 73696d",                // device.name "sim"
+    "03",                       // device.dof 3
+    "03",                       // workspace_min: 3 values
+    "000000000000e0bf",         // -0.5
+    "000000000000e0bf",         // -0.5
+    "00000000000000c0",         // -2.0
+    "03",                       // workspace_max: 3 values
+    "000000000000e03f",         // 0.5
+    "000000000000e03f",         // 0.5
+    "0000000000000040",         // 2.0
+    "0000000000002040",         // max_force_n 8.0
+    "000000000000e03f",         // max_torque_nm 0.5
+    "000000000000a040",         // max_stiffness_n_per_m 2048.0
+    "0000000000003040",         // max_damping_ns_per_m 16.0
+    "0000000000009040",         // native_rate_hz 1024.0
+    "00",                       // form OpSpace
+];
+
+fn welcome() -> Control {
+    Control::Welcome(Welcome {
+        session_id: 300,
+        user_id: 7,
+        scene: SceneSummary {
+            name: "tb".into(),
+            kind: SceneKind::Planar,
+            n: 4,
+            m: 2,
+            op_dim: 3,
+            op_name: "ee".into(),
+        },
+        ve_rate_hz: 1000.0,
+        snapshot_rate_hz: 500.0,
+        gains: RecommendedGains { k_j: 2048.0, b_j: 16.0, k_pc: vec![512.0, 512.0, 4.0], b_pc: vec![2.0, 2.0, 0.25] },
+    })
+}
+
+const WELCOME_BYTES: &[&str] = &[
+    "01",                       // Control::Welcome
+    "fb 2c01",                  // session_id 300
+    "07",                       // user_id 7
+    "02 7462",                  // scene.name "tb"
+    "00",                       // scene.kind Planar
+    "04",                       // scene.n 4
+    "02",                       // scene.m 2
+    "03",                       // scene.op_dim 3
+    "02 6565",                  // scene.op_name "ee"
+    "0000000000408f40",         // ve_rate_hz 1000.0
+    "0000000000407f40",         // snapshot_rate_hz 500.0
+    "000000000000a040",         // gains.k_j 2048.0
+    "0000000000003040",         // gains.b_j 16.0
+    "03",                       // k_pc: 3 values
+    "0000000000008040",         // 512.0
+    "0000000000008040",         // 512.0
+    "0000000000001040",         // 4.0
+    "03",                       // b_pc: 3 values
+    "0000000000000040",         // 2.0
+    "0000000000000040",         // 2.0
+    "000000000000d03f",         // 0.25
+];
+
+fn snapshot() -> Datagram {
+    Datagram::Snapshot(Snapshot {
+        seq: 1000,
+        server_time_s: 1.5,
+        ve_step: 2000,
+        user_id: 1,
+        op_pose: vec![0.25, 0.5, 1.0],
+        op_twist: vec![0.5, -0.25, 0.0],
+        inverse_inertia: vec![2.0, 0.5, 0.0, 4.0, 0.0, 16.0],
+        bias_accel: vec![0.0, -8.0, 0.0],
+        directions: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        singular_values: vec![16.0, 4.0, 0.0],
+        constraint_count: 1,
+        contacts: vec![],
+        others: vec![],
+        config: None,
+    })
+}
+
+const SNAPSHOT_BYTES: &[&str] = &[
+    "00",                       // Datagram::Snapshot
+    "fb e803",                  // seq 1000
+    "000000000000f83f",         // server_time_s 1.5
+    "fb d007",                  // ve_step 2000
+    "01",                       // user_id 1
+    "03",                       // op_pose: 3 values
+    "000000000000d03f",         // x 0.25
+    "000000000000e03f",         // y 0.5
+    "000000000000f03f",         // θ 1.0
+    "03",                       // op_twist: 3 values
+    "000000000000e03f",         // 0.5
+    "000000000000d0bf",         // -0.25
+    "0000000000000000",         // 0.0
+    "06",                       // inverse_inertia: 6 values (upper triangle)
+    "0000000000000040",         // (0,0) 2.0
+    "000000000000e03f",         // (0,1) 0.5
+    "0000000000000000",         // (0,2) 0.0
+    "0000000000001040",         // (1,1) 4.0
+    "0000000000000000",         // (1,2) 0.0
+    "0000000000003040",         // (2,2) 16.0
+    "03",                       // bias_accel: 3 values
+    "0000000000000000",         // 0.0
+    "00000000000020c0",         // -8.0
+    "0000000000000000",         // 0.0
+    "09",                       // directions: 9 values, identity column-major
+    "000000000000f03f 0000000000000000 0000000000000000",
+    "0000000000000000 000000000000f03f 0000000000000000",
+    "0000000000000000 0000000000000000 000000000000f03f",
+    "03",                       // singular_values: 3 values
+    "0000000000003040",         // 16.0
+    "0000000000001040",         // 4.0
+    "0000000000000000",         // 0.0
+    "01",                       // constraint_count 1
+    "00",                       // contacts: none
+    "00",                       // others: none
+    "00",                       // config: None
+];
+
+fn uplink() -> Datagram {
+    Datagram::Uplink(Uplink {
+        seq: 42,
+        client_time_s: 2.0,
+        last_snapshot_seq: 1000,
+        last_snapshot_age_s: 0.25,
+        hand_wrench: vec![1.0, -2.0, 0.0],
+        device_pose: vec![0.25, 0.5, 1.0],
+        device_twist: vec![0.0, 0.0, 0.0],
+        model_pose: vec![0.25, 0.5, 1.0],
+        model_twist: vec![0.0, 0.0, 0.0],
+        flags: uplink_flags::CLAMPED | uplink_flags::IMPEDANCE_MODE,
+    })
+}
+
+const UPLINK_BYTES: &[&str] = &[
+    "01",                       // Datagram::Uplink
+    "2a",                       // seq 42
+    "0000000000000040",         // client_time_s 2.0
+    "fb e803",                  // last_snapshot_seq 1000
+    "000000000000d03f",         // last_snapshot_age_s 0.25
+    "03",                       // hand_wrench: 3 values
+    "000000000000f03f",         // 1.0
+    "00000000000000c0",         // -2.0
+    "0000000000000000",         // 0.0
+    "03",                       // device_pose
+    "000000000000d03f 000000000000e03f 000000000000f03f",
+    "03",                       // device_twist
+    "0000000000000000 0000000000000000 0000000000000000",
+    "03",                       // model_pose
+    "000000000000d03f 000000000000e03f 000000000000f03f",
+    "03",                       // model_twist
+    "0000000000000000 0000000000000000 0000000000000000",
+    "0a",                       // flags CLAMPED | IMPEDANCE_MODE
+];
+
+#[test]
+fn hello_matches_golden_bytes() {
+    let golden = unhex(HELLO_BYTES);
+    assert_eq!(encode_control(&hello()).unwrap(), golden);
+    assert_eq!(decode_control(&golden).unwrap(), hello());
+}
+
+#[test]
+fn welcome_matches_golden_bytes() {
+    let golden = unhex(WELCOME_BYTES);
+    assert_eq!(encode_control(&welcome()).unwrap(), golden);
+    assert_eq!(decode_control(&golden).unwrap(), welcome());
+}
+
+#[test]
+fn planar_testbed_snapshot_matches_golden_bytes() {
+    let golden = unhex(SNAPSHOT_BYTES);
+    assert_eq!(golden.len(), 242, "a planar snapshot without contacts is 27 doubles plus small headers");
+    assert_eq!(encode_datagram(&snapshot()).unwrap(), golden);
+    assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), snapshot());
+}
+
+#[test]
+fn uplink_matches_golden_bytes() {
+    let golden = unhex(UPLINK_BYTES);
+    assert_eq!(encode_datagram(&uplink()).unwrap(), golden);
+    assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), uplink());
+}
+
+#[test]
+fn hello_variant_and_version_lead_the_frame_so_other_versions_can_be_refused() {
+    let mut future = unhex(HELLO_BYTES);
+    future[1] = 0x02; // version 2; the rest may be anything a future version sends
+    future.truncate(5);
+    assert_eq!(codec::peek_hello_version(&future), Some(2));
+    assert_eq!(codec::peek_hello_version(&unhex(WELCOME_BYTES)), None);
+}

@@ -1,0 +1,304 @@
+//! Random valid messages for property tests, and representative fixed ones.
+#![allow(dead_code)] // each test binary uses its own part of this module
+
+use kinloop_protocol::*;
+use proptest::collection::vec;
+use proptest::prelude::*;
+
+/// Any session shape with small n and m.
+pub fn shape() -> impl Strategy<Value = SessionShape> {
+    (prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], 0usize..8, 0usize..6)
+        .prop_map(|(kind, n, m)| SessionShape { kind, n, m })
+}
+
+fn within(bound: f64) -> impl Strategy<Value = f64> {
+    -bound..=bound
+}
+
+fn values(len: usize, bound: f64) -> impl Strategy<Value = Vec<f64>> {
+    vec(within(bound), len)
+}
+
+fn unit(len: usize) -> impl Strategy<Value = Vec<f64>> {
+    vec(-1.0..=1.0f64, len).prop_filter_map("too short to normalize", |v| {
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        (norm > 0.1).then(|| v.iter().map(|x| x / norm).collect())
+    })
+}
+
+fn pose(shape: SessionShape) -> BoxedStrategy<Vec<f64>> {
+    match shape.kind {
+        SceneKind::Planar => values(3, 100.0).boxed(),
+        SceneKind::Spatial => (values(3, 100.0), unit(4)).prop_map(|(p, q)| [p, q].concat()).boxed(),
+    }
+}
+
+fn name() -> impl Strategy<Value = String> {
+    "[a-z0-9 _-]{0,24}"
+}
+
+fn contact(shape: SessionShape) -> impl Strategy<Value = ContactTerm> {
+    let d = shape.point_dim();
+    (values(d, 100.0), unit(d), within(0.1), within(10.0), values(shape.op_dim(), 1e3), 0.0..1e3, within(1e3))
+        .prop_flat_map(|(point, normal, depth, normal_velocity, op_coupling, mobility, bias_accel)| {
+            (0.0..1e6, 0.0..1e3).prop_map(move |(stiffness, damping)| ContactTerm {
+                point: point.clone(),
+                normal: normal.clone(),
+                depth,
+                normal_velocity,
+                op_coupling: op_coupling.clone(),
+                mobility,
+                bias_accel,
+                stiffness,
+                damping,
+            })
+        })
+}
+
+fn other_user(shape: SessionShape) -> impl Strategy<Value = OtherUser> {
+    (any::<u32>(), values(shape.point_dim(), 100.0), values(shape.op_dim(), 1e3))
+        .prop_map(|(user_id, op_position, wrench)| OtherUser { user_id, op_position, wrench })
+}
+
+fn config_terms(shape: SessionShape) -> impl Strategy<Value = ConfigTerms> {
+    let (n, m, k) = (shape.n, shape.m, shape.op_dim());
+    (
+        values(n, 10.0),
+        values(n, 10.0),
+        values(triangle_len(n), 1e3),
+        values(m * n, 10.0),
+        values(m, 10.0),
+        values(n, 1e3),
+        values(k * n, 10.0),
+        values(k, 10.0),
+    )
+        .prop_map(
+            |(q, qd, mass_matrix, closure_jacobian, closure_bias_stab, generalized_bias, op_jacobian, op_bias)| {
+                ConfigTerms {
+                    q,
+                    qd,
+                    mass_matrix,
+                    closure_jacobian,
+                    closure_bias_stab,
+                    generalized_bias,
+                    op_jacobian,
+                    op_bias,
+                }
+            },
+        )
+}
+
+fn decreasing(len: usize) -> impl Strategy<Value = Vec<f64>> {
+    vec(0.0..1e3f64, len).prop_map(|mut v| {
+        v.sort_by(|a, b| b.total_cmp(a));
+        v
+    })
+}
+
+/// A valid snapshot for `shape`.
+pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
+    let k = shape.op_dim();
+    let header = (any::<u64>(), 0.0..1e6, any::<u64>(), any::<u32>());
+    let local_model = (
+        pose(shape),
+        values(k, 100.0),
+        values(shape.op_triangle_len(), 1e3),
+        values(k, 1e3),
+        values(k * k, 1.0),
+        decreasing(k),
+        0..=k as u8,
+    );
+    let surroundings = (
+        vec(contact(shape), 0..4),
+        vec(other_user(shape), 0..4),
+        proptest::option::of(config_terms(shape)),
+    );
+    (header, local_model, surroundings).prop_map(
+        |(
+            (seq, server_time_s, ve_step, user_id),
+            (op_pose, op_twist, inverse_inertia, bias_accel, directions, singular_values, constraint_count),
+            (contacts, others, config),
+        )| Snapshot {
+            seq,
+            server_time_s,
+            ve_step,
+            user_id,
+            op_pose,
+            op_twist,
+            inverse_inertia,
+            bias_accel,
+            directions,
+            singular_values,
+            constraint_count,
+            contacts,
+            others,
+            config,
+        },
+    )
+}
+
+/// A valid uplink for `shape`.
+pub fn uplink(shape: SessionShape) -> impl Strategy<Value = Uplink> {
+    let k = shape.op_dim();
+    (
+        (any::<u64>(), 0.0..1e6, any::<u64>(), 0.0..10.0),
+        (values(k, 1e3), pose(shape), values(k, 100.0), pose(shape), values(k, 100.0)),
+        any::<u32>().prop_map(|bits| bits & uplink_flags::KNOWN),
+    )
+        .prop_map(
+            |(
+                (seq, client_time_s, last_snapshot_seq, last_snapshot_age_s),
+                (hand_wrench, device_pose, device_twist, model_pose, model_twist),
+                flags,
+            )| Uplink {
+                seq,
+                client_time_s,
+                last_snapshot_seq,
+                last_snapshot_age_s,
+                hand_wrench,
+                device_pose,
+                device_twist,
+                model_pose,
+                model_twist,
+                flags,
+            },
+        )
+}
+
+/// A shape and a valid datagram for it.
+pub fn shape_and_datagram() -> impl Strategy<Value = (SessionShape, Datagram)> {
+    shape().prop_flat_map(|shape| {
+        let datagram = prop_oneof![snapshot(shape).prop_map(Datagram::Snapshot), uplink(shape).prop_map(Datagram::Uplink)];
+        (Just(shape), datagram)
+    })
+}
+
+fn device() -> impl Strategy<Value = DeviceCaps> {
+    (name(), 0u8..=16, vec(within(1.0), 0..=6), 0.0..1e3, 0.0..1e2, 0.0..1e5, 0.0..1e3, 1.0..1e4)
+        .prop_map(|(name, dof, half_extent, max_force_n, max_torque_nm, stiffness, damping, native_rate_hz)| {
+            DeviceCaps {
+                name,
+                dof,
+                workspace_min: half_extent.iter().map(|h| -h.abs()).collect(),
+                workspace_max: half_extent.iter().map(|h| h.abs()).collect(),
+                max_force_n,
+                max_torque_nm,
+                max_stiffness_n_per_m: stiffness,
+                max_damping_ns_per_m: damping,
+                native_rate_hz,
+            }
+        })
+}
+
+fn hello() -> impl Strategy<Value = Hello> {
+    (
+        any::<u16>(),
+        name(),
+        name(),
+        prop_oneof![Just(Role::Manipulator), Just(Role::Observer)],
+        name(),
+        device(),
+        prop_oneof![Just(LocalModelForm::OpSpace), Just(LocalModelForm::ConfigSpace)],
+    )
+        .prop_map(|(version, token, client_name, role, op, device, form)| Hello {
+            version,
+            token,
+            client_name,
+            role,
+            op,
+            device,
+            form,
+        })
+}
+
+fn welcome() -> impl Strategy<Value = Welcome> {
+    let scene = (name(), prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], 0u32..64, 0u32..64, name());
+    (any::<u64>(), any::<u32>(), scene, 1.0..1e4, 1.0..1e4, 0.0..1e5, 0.0..1e3).prop_flat_map(
+        |(session_id, user_id, (name, kind, n, m, op_name), ve_rate_hz, snapshot_rate_hz, k_j, b_j)| {
+            let k = kind.op_dim();
+            (vec(0.0..1e4, k), vec(0.0..1e2, k)).prop_map(move |(k_pc, b_pc)| Welcome {
+                session_id,
+                user_id,
+                scene: SceneSummary { name: name.clone(), kind, n, m, op_dim: k as u8, op_name: op_name.clone() },
+                ve_rate_hz,
+                snapshot_rate_hz,
+                gains: RecommendedGains { k_j, b_j, k_pc, b_pc },
+            })
+        },
+    )
+}
+
+fn refusal() -> impl Strategy<Value = RefusalReason> {
+    prop_oneof![
+        (any::<u16>(), any::<u16>()).prop_map(|(server, client)| RefusalReason::UnsupportedVersion { server, client }),
+        Just(RefusalReason::BadToken),
+        any::<u32>().prop_map(|max_users| RefusalReason::ServerFull { max_users }),
+        (name(), vec(name(), 0..5)).prop_map(|(requested, available)| RefusalReason::UnknownOp { requested, available }),
+        Just(RefusalReason::RoleNotAllowed),
+        name().prop_map(|what| RefusalReason::Malformed { what }),
+    ]
+}
+
+fn error_code() -> impl Strategy<Value = ErrorCode> {
+    prop_oneof![
+        Just(ErrorCode::Protocol),
+        Just(ErrorCode::Decode),
+        Just(ErrorCode::Internal),
+        Just(ErrorCode::ShuttingDown),
+        Just(ErrorCode::Overloaded),
+    ]
+}
+
+/// Any valid control message.
+pub fn control() -> impl Strategy<Value = Control> {
+    prop_oneof![
+        hello().prop_map(Control::Hello),
+        welcome().prop_map(Control::Welcome),
+        (refusal(), name()).prop_map(|(reason, message)| Control::Refused(Refused { reason, message })),
+        name().prop_map(|reason| Control::Leave { reason }),
+        (error_code(), name()).prop_map(|(code, message)| Control::Error { code, message }),
+        (any::<u64>(), 0.0..1e6).prop_map(|(nonce, t_s)| Control::Ping { nonce, t_s }),
+        (any::<u64>(), 0.0..1e6).prop_map(|(nonce, t_s)| Control::Pong { nonce, t_s }),
+    ]
+}
+
+/// A spatial snapshot with a contact, another user and configuration terms: every optional part present.
+pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
+    let shape = SessionShape { kind: SceneKind::Spatial, n: 3, m: 1 };
+    let snapshot = Snapshot {
+        seq: 9,
+        server_time_s: 0.5,
+        ve_step: 500,
+        user_id: 2,
+        op_pose: vec![0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0],
+        op_twist: vec![0.0; 6],
+        inverse_inertia: vec![1.0; 21],
+        bias_accel: vec![0.0; 6],
+        directions: (0..36).map(|i| if i % 7 == 0 { 1.0 } else { 0.0 }).collect(),
+        singular_values: vec![6.0, 5.0, 4.0, 3.0, 2.0, 1.0],
+        constraint_count: 2,
+        contacts: vec![ContactTerm {
+            point: vec![0.1, 0.2, 0.0],
+            normal: vec![0.0, 0.0, 1.0],
+            depth: 0.001,
+            normal_velocity: -0.01,
+            op_coupling: vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            mobility: 2.0,
+            bias_accel: -9.81,
+            stiffness: 1e4,
+            damping: 10.0,
+        }],
+        others: vec![OtherUser { user_id: 3, op_position: vec![0.5, 0.0, 0.2], wrench: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1] }],
+        config: Some(ConfigTerms {
+            q: vec![0.1, 0.2, 0.3],
+            qd: vec![0.0; 3],
+            mass_matrix: vec![1.0, 0.1, 0.0, 1.0, 0.1, 1.0],
+            closure_jacobian: vec![1.0, 0.0, -1.0],
+            closure_bias_stab: vec![0.0],
+            generalized_bias: vec![0.0, 9.81, 0.0],
+            op_jacobian: vec![0.5; 18],
+            op_bias: vec![0.0; 6],
+        }),
+    };
+    (shape, snapshot)
+}

@@ -1,0 +1,171 @@
+//! The codec refuses what a broken or hostile peer may send, and says what and where.
+
+mod support;
+
+use kinloop_protocol::bench::{testbed_shape, testbed_snapshot};
+use kinloop_protocol::codec::limits::{MAX_DATAGRAM_MESSAGE_BYTES, MAX_LIST_ENTRIES, MAX_STRING_BYTES};
+use kinloop_protocol::codec::{decode_control, decode_datagram, encode_control, encode_datagram, DecodeError};
+use kinloop_protocol::*;
+
+fn decode_snapshot(snapshot: Snapshot) -> Result<Datagram, DecodeError> {
+    decode_datagram(&encode_datagram(&Datagram::Snapshot(snapshot)).unwrap(), &testbed_shape())
+}
+
+fn field_of(error: &DecodeError) -> String {
+    match error {
+        DecodeError::WrongLength { field, .. }
+        | DecodeError::TooMany { field, .. }
+        | DecodeError::TooLong { field, .. }
+        | DecodeError::NonFinite { field, .. }
+        | DecodeError::OutOfRange { field, .. }
+        | DecodeError::NotUnit { field, .. }
+        | DecodeError::Inconsistent { field, .. } => field.to_string(),
+        other => panic!("no field in {other:?}"),
+    }
+}
+
+#[test]
+fn wrong_matrix_length_names_the_field_and_both_lengths() {
+    let mut s = testbed_snapshot();
+    s.inverse_inertia.pop();
+    let error = decode_snapshot(s).unwrap_err();
+    assert!(matches!(error, DecodeError::WrongLength { got: 5, expected: 6, .. }), "{error:?}");
+    assert_eq!(error.to_string(), "snapshot.inverse_inertia has 5 values, expected 6");
+}
+
+#[test]
+fn nan_is_refused_with_its_index() {
+    let mut s = testbed_snapshot();
+    s.bias_accel[2] = f64::NAN;
+    let error = decode_snapshot(s).unwrap_err();
+    assert!(matches!(error, DecodeError::NonFinite { index: Some(2), .. }), "{error:?}");
+    assert_eq!(error.to_string(), "snapshot.bias_accel[2] is not finite");
+}
+
+#[test]
+fn absurd_wrench_is_out_of_range() {
+    let mut s = testbed_snapshot();
+    s.others.push(OtherUser { user_id: 2, op_position: vec![0.0, 0.0], wrench: vec![0.0, 2e4, 0.0] });
+    let error = decode_snapshot(s).unwrap_err();
+    assert!(matches!(error, DecodeError::OutOfRange { value, .. } if value == 2e4), "{error:?}");
+    assert_eq!(field_of(&error), "snapshot.others[0].wrench");
+}
+
+#[test]
+fn snapshot_for_a_spatial_session_is_refused_on_a_planar_one() {
+    let (_, spatial) = support::full_spatial_snapshot();
+    let error = decode_snapshot(spatial).unwrap_err();
+    assert_eq!(field_of(&error), "snapshot.op_pose");
+}
+
+#[test]
+fn spatial_pose_needs_a_unit_quaternion() {
+    let (shape, mut s) = support::full_spatial_snapshot();
+    s.op_pose[3] = 0.9;
+    let bytes = encode_datagram(&Datagram::Snapshot(s)).unwrap();
+    let error = decode_datagram(&bytes, &shape).unwrap_err();
+    assert!(matches!(error, DecodeError::NotUnit { norm, .. } if (norm - 0.9).abs() < 1e-12), "{error:?}");
+}
+
+#[test]
+fn increasing_singular_values_and_excess_constraints_are_inconsistent() {
+    let mut s = testbed_snapshot();
+    s.singular_values = vec![1.0, 2.0, 0.0];
+    assert!(matches!(decode_snapshot(s).unwrap_err(), DecodeError::Inconsistent { .. }));
+    let mut s = testbed_snapshot();
+    s.constraint_count = 4;
+    assert!(matches!(decode_snapshot(s).unwrap_err(), DecodeError::TooMany { got: 4, max: 3, .. }));
+}
+
+#[test]
+fn too_many_contacts_are_refused() {
+    let (_, full) = support::full_spatial_snapshot();
+    let mut contact = full.contacts[0].clone();
+    contact.point.pop();
+    contact.normal = vec![0.0, 1.0];
+    contact.op_coupling.truncate(3);
+    let mut s = testbed_snapshot();
+    s.contacts = vec![contact; MAX_LIST_ENTRIES + 1];
+    let error = decode_snapshot(s).unwrap_err();
+    assert_eq!(error, DecodeError::TooMany { field: codec::Field::at("snapshot.contacts"), got: 65, max: 64 });
+}
+
+#[test]
+fn unknown_uplink_flags_are_refused() {
+    let uplink = Uplink {
+        seq: 1,
+        client_time_s: 1.0,
+        last_snapshot_seq: 0,
+        last_snapshot_age_s: 0.0,
+        hand_wrench: vec![0.0; 3],
+        device_pose: vec![0.0; 3],
+        device_twist: vec![0.0; 3],
+        model_pose: vec![0.0; 3],
+        model_twist: vec![0.0; 3],
+        flags: 1 << 31,
+    };
+    let bytes = encode_datagram(&Datagram::Uplink(uplink)).unwrap();
+    assert_eq!(decode_datagram(&bytes, &testbed_shape()).unwrap_err(), DecodeError::UnknownFlags { bits: 1 << 31 });
+}
+
+#[test]
+fn trailing_bytes_are_refused() {
+    let mut bytes = encode_datagram(&Datagram::Snapshot(testbed_snapshot())).unwrap();
+    bytes.extend_from_slice(&[0, 0, 0]);
+    assert_eq!(decode_datagram(&bytes, &testbed_shape()).unwrap_err(), DecodeError::Trailing { extra: 3 });
+}
+
+#[test]
+fn truncated_message_is_malformed() {
+    let bytes = encode_datagram(&Datagram::Snapshot(testbed_snapshot())).unwrap();
+    let error = decode_datagram(&bytes[..bytes.len() - 1], &testbed_shape()).unwrap_err();
+    assert!(matches!(error, DecodeError::Malformed(_)), "{error:?}");
+}
+
+#[test]
+fn oversize_buffer_is_refused_before_decoding() {
+    let bytes = vec![0u8; MAX_DATAGRAM_MESSAGE_BYTES + 1];
+    assert_eq!(
+        decode_datagram(&bytes, &testbed_shape()).unwrap_err(),
+        DecodeError::TooLarge { limit: MAX_DATAGRAM_MESSAGE_BYTES }
+    );
+}
+
+#[test]
+fn long_strings_are_refused() {
+    let message = Control::Leave { reason: "x".repeat(MAX_STRING_BYTES + 1) };
+    let error = decode_control(&encode_control(&message).unwrap()).unwrap_err();
+    assert!(matches!(error, DecodeError::TooLong { bytes: 257, max: 256, .. }), "{error:?}");
+    assert_eq!(field_of(&error), "leave.reason");
+}
+
+#[test]
+fn welcome_with_a_wrong_op_dimension_is_refused() {
+    let welcome = Welcome {
+        session_id: 1,
+        user_id: 1,
+        scene: SceneSummary { name: "s".into(), kind: SceneKind::Spatial, n: 6, m: 0, op_dim: 3, op_name: "ee".into() },
+        ve_rate_hz: 1000.0,
+        snapshot_rate_hz: 1000.0,
+        gains: RecommendedGains { k_j: 1.0, b_j: 1.0, k_pc: vec![1.0; 6], b_pc: vec![1.0; 6] },
+    };
+    let error = decode_control(&encode_control(&Control::Welcome(welcome)).unwrap()).unwrap_err();
+    assert_eq!(field_of(&error), "welcome.scene.op_dim");
+}
+
+#[test]
+fn refusals_read_well() {
+    let refused = Refused {
+        reason: RefusalReason::UnknownOp { requested: "hand".into(), available: vec!["ee".into(), "knee".into()] },
+        message: String::new(),
+    };
+    assert_eq!(refused.to_string(), "refused: the scene has no free operational point \"hand\" (free: ee, knee)");
+    let refused = Refused {
+        reason: RefusalReason::UnsupportedVersion { server: 1, client: 2 },
+        message: "please upgrade".into(),
+    };
+    assert_eq!(
+        refused.to_string(),
+        "refused: protocol version 2 is not supported (the server speaks version 1) — please upgrade"
+    );
+}
