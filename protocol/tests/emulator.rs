@@ -94,11 +94,7 @@ fn gilbert_elliott_burst_length_and_loss_rate_match() {
     for d in &deliveries {
         lost[d.seq as usize] = false;
     }
-    let bursts: Vec<usize> = lost
-        .split(|is_lost| !is_lost)
-        .map(<[bool]>::len)
-        .filter(|len| *len > 0)
-        .collect();
+    let bursts: Vec<usize> = lost.split(|is_lost| !is_lost).map(<[bool]>::len).filter(|len| *len > 0).collect();
     let mean_burst = bursts.iter().sum::<usize>() as f64 / bursts.len() as f64;
     let loss_rate = lost.iter().filter(|l| **l).count() as f64 / count as f64;
     // ≈ 9600 bursts, geometric with mean 4 (std 3.5): standard error ≈ 0.035.
@@ -165,9 +161,8 @@ fn same_seed_gives_the_same_link_and_another_seed_does_not() {
         seed,
         ..LinkConfig::default()
     };
-    let timeline = |seed| -> Vec<(u64, Duration)> {
-        run(config(seed), 5000, MS).0.iter().map(|d| (d.seq, d.delivered)).collect()
-    };
+    let timeline =
+        |seed| -> Vec<(u64, Duration)> { run(config(seed), 5000, MS).0.iter().map(|d| (d.seq, d.delivered)).collect() };
     assert_eq!(timeline(42), timeline(42));
     assert_ne!(timeline(42), timeline(43));
 }

@@ -128,7 +128,7 @@ fn a_million_random_and_mutated_datagrams_neither_panic_nor_allocate_much() {
     const INPUTS: usize = 1_000_000;
     let corpus = corpus();
     assert!(corpus.iter().all(|c| !c.is_empty()));
-    let mut rng = ChaCha8Rng::seed_from_u64(0x6b69_6e6c_6f6f_70);
+    let mut rng = ChaCha8Rng::seed_from_u64(0x006b_696e_6c6f_6f70);
     let (mut accepted, mut refused) = (0usize, 0usize);
     for i in 0..INPUTS {
         let bytes = mutate(&mut rng, &corpus);

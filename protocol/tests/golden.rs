@@ -38,42 +38,35 @@ fn hello() -> Control {
 }
 
 const HELLO_BYTES: &[&str] = &[
-    "00",                       // Control::Hello
-    "01",                       // version 1
-    "03 746f6b",                // token "tok"
-    "02 6331",                  // client_name "c1"
-    "00",                       // role Manipulator
-    "02 6565",                  // op "ee"
-    "03 73696d",                // device.name "sim"
-    "03",                       // device.dof 3
-    "03",                       // workspace_min: 3 values
-    "000000000000e0bf",         // -0.5
-    "000000000000e0bf",         // -0.5
-    "00000000000000c0",         // -2.0
-    "03",                       // workspace_max: 3 values
-    "000000000000e03f",         // 0.5
-    "000000000000e03f",         // 0.5
-    "0000000000000040",         // 2.0
-    "0000000000002040",         // max_force_n 8.0
-    "000000000000e03f",         // max_torque_nm 0.5
-    "000000000000a040",         // max_stiffness_n_per_m 2048.0
-    "0000000000003040",         // max_damping_ns_per_m 16.0
-    "0000000000009040",         // native_rate_hz 1024.0
-    "00",                       // form OpSpace
+    "00",               // Control::Hello
+    "01",               // version 1
+    "03 746f6b",        // token "tok"
+    "02 6331",          // client_name "c1"
+    "00",               // role Manipulator
+    "02 6565",          // op "ee"
+    "03 73696d",        // device.name "sim"
+    "03",               // device.dof 3
+    "03",               // workspace_min: 3 values
+    "000000000000e0bf", // -0.5
+    "000000000000e0bf", // -0.5
+    "00000000000000c0", // -2.0
+    "03",               // workspace_max: 3 values
+    "000000000000e03f", // 0.5
+    "000000000000e03f", // 0.5
+    "0000000000000040", // 2.0
+    "0000000000002040", // max_force_n 8.0
+    "000000000000e03f", // max_torque_nm 0.5
+    "000000000000a040", // max_stiffness_n_per_m 2048.0
+    "0000000000003040", // max_damping_ns_per_m 16.0
+    "0000000000009040", // native_rate_hz 1024.0
+    "00",               // form OpSpace
 ];
 
 fn welcome() -> Control {
     Control::Welcome(Welcome {
         session_id: 300,
         user_id: 7,
-        scene: SceneSummary {
-            name: "tb".into(),
-            kind: SceneKind::Planar,
-            n: 4,
-            m: 2,
-            op_dim: 3,
-            op_name: "ee".into(),
-        },
+        scene: SceneSummary { name: "tb".into(), kind: SceneKind::Planar, n: 4, m: 2, op_dim: 3, op_name: "ee".into() },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 500.0,
         gains: RecommendedGains { k_j: 2048.0, b_j: 16.0, k_pc: vec![512.0, 512.0, 4.0], b_pc: vec![2.0, 2.0, 0.25] },
@@ -81,27 +74,27 @@ fn welcome() -> Control {
 }
 
 const WELCOME_BYTES: &[&str] = &[
-    "01",                       // Control::Welcome
-    "fb 2c01",                  // session_id 300
-    "07",                       // user_id 7
-    "02 7462",                  // scene.name "tb"
-    "00",                       // scene.kind Planar
-    "04",                       // scene.n 4
-    "02",                       // scene.m 2
-    "03",                       // scene.op_dim 3
-    "02 6565",                  // scene.op_name "ee"
-    "0000000000408f40",         // ve_rate_hz 1000.0
-    "0000000000407f40",         // snapshot_rate_hz 500.0
-    "000000000000a040",         // gains.k_j 2048.0
-    "0000000000003040",         // gains.b_j 16.0
-    "03",                       // k_pc: 3 values
-    "0000000000008040",         // 512.0
-    "0000000000008040",         // 512.0
-    "0000000000001040",         // 4.0
-    "03",                       // b_pc: 3 values
-    "0000000000000040",         // 2.0
-    "0000000000000040",         // 2.0
-    "000000000000d03f",         // 0.25
+    "01",               // Control::Welcome
+    "fb 2c01",          // session_id 300
+    "07",               // user_id 7
+    "02 7462",          // scene.name "tb"
+    "00",               // scene.kind Planar
+    "04",               // scene.n 4
+    "02",               // scene.m 2
+    "03",               // scene.op_dim 3
+    "02 6565",          // scene.op_name "ee"
+    "0000000000408f40", // ve_rate_hz 1000.0
+    "0000000000407f40", // snapshot_rate_hz 500.0
+    "000000000000a040", // gains.k_j 2048.0
+    "0000000000003040", // gains.b_j 16.0
+    "03",               // k_pc: 3 values
+    "0000000000008040", // 512.0
+    "0000000000008040", // 512.0
+    "0000000000001040", // 4.0
+    "03",               // b_pc: 3 values
+    "0000000000000040", // 2.0
+    "0000000000000040", // 2.0
+    "000000000000d03f", // 0.25
 ];
 
 fn snapshot() -> Datagram {
@@ -124,42 +117,42 @@ fn snapshot() -> Datagram {
 }
 
 const SNAPSHOT_BYTES: &[&str] = &[
-    "00",                       // Datagram::Snapshot
-    "fb e803",                  // seq 1000
-    "000000000000f83f",         // server_time_s 1.5
-    "fb d007",                  // ve_step 2000
-    "01",                       // user_id 1
-    "03",                       // op_pose: 3 values
-    "000000000000d03f",         // x 0.25
-    "000000000000e03f",         // y 0.5
-    "000000000000f03f",         // θ 1.0
-    "03",                       // op_twist: 3 values
-    "000000000000e03f",         // 0.5
-    "000000000000d0bf",         // -0.25
-    "0000000000000000",         // 0.0
-    "06",                       // inverse_inertia: 6 values (upper triangle)
-    "0000000000000040",         // (0,0) 2.0
-    "000000000000e03f",         // (0,1) 0.5
-    "0000000000000000",         // (0,2) 0.0
-    "0000000000001040",         // (1,1) 4.0
-    "0000000000000000",         // (1,2) 0.0
-    "0000000000003040",         // (2,2) 16.0
-    "03",                       // bias_accel: 3 values
-    "0000000000000000",         // 0.0
-    "00000000000020c0",         // -8.0
-    "0000000000000000",         // 0.0
-    "09",                       // directions: 9 values, identity column-major
+    "00",               // Datagram::Snapshot
+    "fb e803",          // seq 1000
+    "000000000000f83f", // server_time_s 1.5
+    "fb d007",          // ve_step 2000
+    "01",               // user_id 1
+    "03",               // op_pose: 3 values
+    "000000000000d03f", // x 0.25
+    "000000000000e03f", // y 0.5
+    "000000000000f03f", // θ 1.0
+    "03",               // op_twist: 3 values
+    "000000000000e03f", // 0.5
+    "000000000000d0bf", // -0.25
+    "0000000000000000", // 0.0
+    "06",               // inverse_inertia: 6 values (upper triangle)
+    "0000000000000040", // (0,0) 2.0
+    "000000000000e03f", // (0,1) 0.5
+    "0000000000000000", // (0,2) 0.0
+    "0000000000001040", // (1,1) 4.0
+    "0000000000000000", // (1,2) 0.0
+    "0000000000003040", // (2,2) 16.0
+    "03",               // bias_accel: 3 values
+    "0000000000000000", // 0.0
+    "00000000000020c0", // -8.0
+    "0000000000000000", // 0.0
+    "09",               // directions: 9 values, identity column-major
     "000000000000f03f 0000000000000000 0000000000000000",
     "0000000000000000 000000000000f03f 0000000000000000",
     "0000000000000000 0000000000000000 000000000000f03f",
-    "03",                       // singular_values: 3 values
-    "0000000000003040",         // 16.0
-    "0000000000001040",         // 4.0
-    "0000000000000000",         // 0.0
-    "01",                       // constraint_count 1
-    "00",                       // contacts: none
-    "00",                       // others: none
-    "00",                       // config: None
+    "03",               // singular_values: 3 values
+    "0000000000003040", // 16.0
+    "0000000000001040", // 4.0
+    "0000000000000000", // 0.0
+    "01",               // constraint_count 1
+    "00",               // contacts: none
+    "00",               // others: none
+    "00",               // config: None
 ];
 
 fn uplink() -> Datagram {
@@ -178,24 +171,24 @@ fn uplink() -> Datagram {
 }
 
 const UPLINK_BYTES: &[&str] = &[
-    "01",                       // Datagram::Uplink
-    "2a",                       // seq 42
-    "0000000000000040",         // client_time_s 2.0
-    "fb e803",                  // last_snapshot_seq 1000
-    "000000000000d03f",         // last_snapshot_age_s 0.25
-    "03",                       // hand_wrench: 3 values
-    "000000000000f03f",         // 1.0
-    "00000000000000c0",         // -2.0
-    "0000000000000000",         // 0.0
-    "03",                       // device_pose
+    "01",               // Datagram::Uplink
+    "2a",               // seq 42
+    "0000000000000040", // client_time_s 2.0
+    "fb e803",          // last_snapshot_seq 1000
+    "000000000000d03f", // last_snapshot_age_s 0.25
+    "03",               // hand_wrench: 3 values
+    "000000000000f03f", // 1.0
+    "00000000000000c0", // -2.0
+    "0000000000000000", // 0.0
+    "03",               // device_pose
     "000000000000d03f 000000000000e03f 000000000000f03f",
-    "03",                       // device_twist
+    "03", // device_twist
     "0000000000000000 0000000000000000 0000000000000000",
-    "03",                       // model_pose
+    "03", // model_pose
     "000000000000d03f 000000000000e03f 000000000000f03f",
-    "03",                       // model_twist
+    "03", // model_twist
     "0000000000000000 0000000000000000 0000000000000000",
-    "0a",                       // flags CLAMPED | IMPEDANCE_MODE
+    "0a", // flags CLAMPED | IMPEDANCE_MODE
 ];
 
 #[test]

@@ -5,7 +5,7 @@ use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
     uplink_flags, ConfigTerms, ContactTerm, Control, Datagram, DeviceCaps, Hello, OtherUser, RecommendedGains,
-    Refused, RefusalReason, SceneSummary, Snapshot, Uplink, Welcome,
+    RefusalReason, Refused, SceneSummary, Snapshot, Uplink, Welcome,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -41,7 +41,11 @@ pub fn hello(h: &Hello) -> Result<(), DecodeError> {
 fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
     text(Field::at("hello.device.name"), &d.name)?;
     if usize::from(d.dof) > MAX_DEVICE_DOF {
-        return Err(DecodeError::TooMany { field: Field::at("hello.device.dof"), got: d.dof.into(), max: MAX_DEVICE_DOF });
+        return Err(DecodeError::TooMany {
+            field: Field::at("hello.device.dof"),
+            got: d.dof.into(),
+            max: MAX_DEVICE_DOF,
+        });
     }
     let min_field = Field::at("hello.device.workspace_min");
     count(min_field, d.workspace_min.len(), MAX_OP_DIM)?;

@@ -29,8 +29,10 @@ pub mod close_codes {
     pub const PROTOCOL: VarInt = VarInt::from_u32(2);
 }
 
-/// TLS alerts (RFC 8446 §6) a client sees when it does not trust the server's certificate.
-const CERTIFICATE_ALERTS: [u8; 7] = [42, 43, 44, 45, 46, 48, 49];
+/// TLS alerts (RFC 8446 §6) a client raises when it does not trust the server's certificate: bad, unsupported,
+/// revoked, expired or unknown certificate, unknown CA, access denied, and decrypt_error, which rustls raises
+/// when a trusted CA's name matches but its signature does not (two self-signed certificates with one name).
+const CERTIFICATE_ALERTS: [u8; 8] = [42, 43, 44, 45, 46, 48, 49, 51];
 /// TLS alert `no_application_protocol`.
 const NO_APPLICATION_PROTOCOL: u8 = 120;
 
@@ -209,7 +211,8 @@ pub async fn accept(
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
         if let Err(error) = validate::welcome(&welcome) {
-            let internal = Control::Error { code: ErrorCode::Internal, message: "the server failed to welcome you".into() };
+            let internal =
+                Control::Error { code: ErrorCode::Internal, message: "the server failed to welcome you".into() };
             // Best effort: the session is being abandoned either way.
             let _ = send_control(&mut send, &internal).await;
             connection.close(close_codes::PROTOCOL, b"internal error");

@@ -108,11 +108,8 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
         decreasing(k),
         0..=k as u8,
     );
-    let surroundings = (
-        vec(contact(shape), 0..4),
-        vec(other_user(shape), 0..4),
-        proptest::option::of(config_terms(shape)),
-    );
+    let surroundings =
+        (vec(contact(shape), 0..4), vec(other_user(shape), 0..4), proptest::option::of(config_terms(shape)));
     (header, local_model, surroundings).prop_map(
         |(
             (seq, server_time_s, ve_step, user_id),
@@ -168,26 +165,26 @@ pub fn uplink(shape: SessionShape) -> impl Strategy<Value = Uplink> {
 /// A shape and a valid datagram for it.
 pub fn shape_and_datagram() -> impl Strategy<Value = (SessionShape, Datagram)> {
     shape().prop_flat_map(|shape| {
-        let datagram = prop_oneof![snapshot(shape).prop_map(Datagram::Snapshot), uplink(shape).prop_map(Datagram::Uplink)];
+        let datagram =
+            prop_oneof![snapshot(shape).prop_map(Datagram::Snapshot), uplink(shape).prop_map(Datagram::Uplink)];
         (Just(shape), datagram)
     })
 }
 
 fn device() -> impl Strategy<Value = DeviceCaps> {
-    (name(), 0u8..=16, vec(within(1.0), 0..=6), 0.0..1e3, 0.0..1e2, 0.0..1e5, 0.0..1e3, 1.0..1e4)
-        .prop_map(|(name, dof, half_extent, max_force_n, max_torque_nm, stiffness, damping, native_rate_hz)| {
-            DeviceCaps {
-                name,
-                dof,
-                workspace_min: half_extent.iter().map(|h| -h.abs()).collect(),
-                workspace_max: half_extent.iter().map(|h| h.abs()).collect(),
-                max_force_n,
-                max_torque_nm,
-                max_stiffness_n_per_m: stiffness,
-                max_damping_ns_per_m: damping,
-                native_rate_hz,
-            }
-        })
+    (name(), 0u8..=16, vec(within(1.0), 0..=6), 0.0..1e3, 0.0..1e2, 0.0..1e5, 0.0..1e3, 1.0..1e4).prop_map(
+        |(name, dof, half_extent, max_force_n, max_torque_nm, stiffness, damping, native_rate_hz)| DeviceCaps {
+            name,
+            dof,
+            workspace_min: half_extent.iter().map(|h| -h.abs()).collect(),
+            workspace_max: half_extent.iter().map(|h| h.abs()).collect(),
+            max_force_n,
+            max_torque_nm,
+            max_stiffness_n_per_m: stiffness,
+            max_damping_ns_per_m: damping,
+            native_rate_hz,
+        },
+    )
 }
 
 fn hello() -> impl Strategy<Value = Hello> {
@@ -233,7 +230,8 @@ fn refusal() -> impl Strategy<Value = RefusalReason> {
         (any::<u16>(), any::<u16>()).prop_map(|(server, client)| RefusalReason::UnsupportedVersion { server, client }),
         Just(RefusalReason::BadToken),
         any::<u32>().prop_map(|max_users| RefusalReason::ServerFull { max_users }),
-        (name(), vec(name(), 0..5)).prop_map(|(requested, available)| RefusalReason::UnknownOp { requested, available }),
+        (name(), vec(name(), 0..5))
+            .prop_map(|(requested, available)| RefusalReason::UnknownOp { requested, available }),
         Just(RefusalReason::RoleNotAllowed),
         name().prop_map(|what| RefusalReason::Malformed { what }),
     ]
@@ -288,7 +286,11 @@ pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
             stiffness: 1e4,
             damping: 10.0,
         }],
-        others: vec![OtherUser { user_id: 3, op_position: vec![0.5, 0.0, 0.2], wrench: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1] }],
+        others: vec![OtherUser {
+            user_id: 3,
+            op_position: vec![0.5, 0.0, 0.2],
+            wrench: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1],
+        }],
         config: Some(ConfigTerms {
             q: vec![0.1, 0.2, 0.3],
             qd: vec![0.0; 3],

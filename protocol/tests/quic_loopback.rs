@@ -1,0 +1,331 @@
+//! Real QUIC over 127.0.0.1: the handshake, its distinct failures, datagrams, oversize snapshots and the
+//! emulated link's delay. Every test is bounded by a timeout and uses ephemeral ports.
+
+mod support;
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use kinloop_protocol::bench::{testbed_shape, testbed_snapshot};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_protocol::quic::*;
+use kinloop_protocol::*;
+use tokio::task::JoinHandle;
+
+const TEST_TIMEOUT: Duration = Duration::from_secs(30);
+const TOKEN: &str = "let-me-in";
+
+async fn bounded<T>(test: impl Future<Output = T>) -> T {
+    tokio::time::timeout(TEST_TIMEOUT, test).await.expect("test exceeded its time bound")
+}
+
+fn loopback() -> SocketAddr {
+    SocketAddr::from(([127, 0, 0, 1], 0))
+}
+
+fn options() -> EndpointOptions {
+    EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() }
+}
+
+fn hello(version: u16, token: &str) -> Hello {
+    Hello {
+        version,
+        token: token.into(),
+        client_name: "test-client".into(),
+        role: Role::Manipulator,
+        op: "ee".into(),
+        device: DeviceCaps {
+            name: "simulated".into(),
+            dof: 3,
+            workspace_min: vec![-0.1, -0.1, -1.0],
+            workspace_max: vec![0.1, 0.1, 1.0],
+            max_force_n: 5.0,
+            max_torque_nm: 0.5,
+            max_stiffness_n_per_m: 2000.0,
+            max_damping_ns_per_m: 20.0,
+            native_rate_hz: 1000.0,
+        },
+        form: LocalModelForm::OpSpace,
+    }
+}
+
+/// The tiny validator the handshake tests use: one token, planar testbed scene.
+fn validate(hello: &Hello) -> Result<Welcome, Refused> {
+    if hello.token != TOKEN {
+        return Err(Refused { reason: RefusalReason::BadToken, message: String::new() });
+    }
+    let shape = testbed_shape();
+    Ok(Welcome {
+        session_id: 77,
+        user_id: 1,
+        scene: SceneSummary {
+            name: "testbed".into(),
+            kind: shape.kind,
+            n: shape.n as u32,
+            m: shape.m as u32,
+            op_dim: 3,
+            op_name: "ee".into(),
+        },
+        ve_rate_hz: 1000.0,
+        snapshot_rate_hz: 1000.0,
+        gains: RecommendedGains { k_j: 1000.0, b_j: 5.0, k_pc: vec![500.0; 3], b_pc: vec![2.0; 3] },
+    })
+}
+
+struct TestServer {
+    endpoint: Endpoint,
+    addr: SocketAddr,
+    identity: ServerIdentity,
+    session: JoinHandle<Result<AcceptedSession, AcceptError>>,
+}
+
+/// A server that accepts one connection and runs the handshake with [`validate`].
+fn start_server(opts: &EndpointOptions) -> TestServer {
+    let identity = ServerIdentity::generate(&DEFAULT_NAMES).unwrap();
+    let endpoint = server_endpoint(loopback(), &identity, opts).unwrap();
+    let addr = endpoint.local_addr().unwrap();
+    let accepting = endpoint.clone();
+    let session = tokio::spawn(async move {
+        let incoming = accepting.accept().await.expect("endpoint open");
+        accept(incoming, validate).await
+    });
+    TestServer { endpoint, addr, identity, session }
+}
+
+async fn connect_with(
+    server: &TestServer,
+    trust: Trust,
+    opts: &EndpointOptions,
+    hello: &Hello,
+) -> Result<ConnectedSession, ConnectError> {
+    let client = client_endpoint(&trust, opts).unwrap();
+    connect(&client, server.addr, "localhost", hello).await
+}
+
+fn pinned(server: &TestServer) -> Trust {
+    Trust::Fingerprint(server.identity.fingerprint.clone())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn handshake_then_snapshots_and_uplinks_flow_as_datagrams() {
+    bounded(async {
+        let server = start_server(&options());
+        let client = connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        let accepted = server.session.await.unwrap().unwrap();
+        assert_eq!(client.welcome.session_id, 77);
+        assert_eq!(accepted.hello.client_name, "test-client");
+
+        let shape = testbed_shape();
+        let to_client = DatagramSender::new(accepted.connection.clone());
+        let mut at_client = DatagramReceiver::new(client.connection.clone(), shape);
+        let snapshot = Datagram::Snapshot(testbed_snapshot());
+        assert_eq!(to_client.send(&snapshot).unwrap(), Route::Datagram);
+        assert_eq!(at_client.recv().await.unwrap(), snapshot);
+
+        let uplink = Datagram::Uplink(Uplink {
+            seq: 1,
+            client_time_s: 0.001,
+            last_snapshot_seq: 123_456,
+            last_snapshot_age_s: 0.0005,
+            hand_wrench: vec![1.0, 0.0, 0.0],
+            device_pose: vec![0.0; 3],
+            device_twist: vec![0.0; 3],
+            model_pose: vec![0.0; 3],
+            model_twist: vec![0.0; 3],
+            flags: 0,
+        });
+        let mut at_server = DatagramReceiver::new(accepted.connection.clone(), shape);
+        DatagramSender::new(client.connection.clone()).send(&uplink).unwrap();
+        assert_eq!(at_server.recv().await.unwrap(), uplink);
+        assert_eq!(at_client.stats().datagrams, 1);
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn oversize_snapshot_travels_on_a_stream_and_arrives_whole() {
+    bounded(async {
+        let server = start_server(&options());
+        let client = connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        let accepted = server.session.await.unwrap().unwrap();
+
+        // Configuration-space terms of a 40-coordinate scene: ≈ 14 KB, far over the ≈ 1.2 KB datagram limit.
+        let shape = SessionShape { kind: SceneKind::Planar, n: 40, m: 8 };
+        let mut snapshot = testbed_snapshot();
+        snapshot.config = Some(ConfigTerms {
+            q: vec![0.1; 40],
+            qd: vec![0.0; 40],
+            mass_matrix: vec![0.5; triangle_len(40)],
+            closure_jacobian: vec![0.25; 8 * 40],
+            closure_bias_stab: vec![0.0; 8],
+            generalized_bias: vec![1.0; 40],
+            op_jacobian: vec![0.5; 3 * 40],
+            op_bias: vec![0.0; 3],
+        });
+        let snapshot = Datagram::Snapshot(snapshot);
+        let encoded_len = codec::encode_datagram(&snapshot).unwrap().len();
+        assert!(encoded_len > accepted.connection.max_datagram_size().unwrap());
+
+        let sender = DatagramSender::new(accepted.connection.clone());
+        let mut receiver = DatagramReceiver::new(client.connection.clone(), shape);
+        assert_eq!(sender.send(&snapshot).unwrap(), Route::Stream);
+        assert_eq!(receiver.recv().await.unwrap(), snapshot);
+        assert_eq!(sender.stats().oversize_streams, 1);
+        assert_eq!(receiver.stats().oversize_streams, 1);
+        assert_eq!(sender.stats().oversize_failed, 0);
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn injected_25ms_each_way_gives_a_50ms_round_trip() {
+    bounded(async {
+        let delayed = EndpointOptions {
+            link: Some(LinkConfig { delay: Duration::from_millis(25), ..LinkConfig::default() }),
+            ..options()
+        };
+        let server = start_server(&delayed);
+        let client = connect_with(&server, pinned(&server), &delayed, &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        let mut accepted = server.session.await.unwrap().unwrap();
+        let echo = tokio::spawn(async move {
+            while let Ok(Control::Ping { nonce, t_s }) = recv_control(&mut accepted.recv).await {
+                send_control(&mut accepted.send, &Control::Pong { nonce, t_s }).await.unwrap();
+            }
+        });
+
+        let (mut send, mut recv) = (client.send, client.recv);
+        let mut rtts_ms = Vec::new();
+        for nonce in 0..10 {
+            let start = Instant::now();
+            send_control(&mut send, &Control::Ping { nonce, t_s: 0.0 }).await.unwrap();
+            match recv_control(&mut recv).await.unwrap() {
+                Control::Pong { nonce: echoed, .. } => assert_eq!(echoed, nonce),
+                other => panic!("expected Pong, got {other:?}"),
+            }
+            rtts_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+        rtts_ms.sort_by(f64::total_cmp);
+        let median = rtts_ms[rtts_ms.len() / 2];
+        assert!((45.0..80.0).contains(&median), "ping/pong RTT {median} ms ({rtts_ms:?})");
+        let quic_rtt = client.connection.rtt().as_secs_f64() * 1e3;
+        eprintln!("ping/pong RTT median {median:.1} ms, QUIC RTT estimate {quic_rtt:.1} ms");
+        assert!((45.0..80.0).contains(&quic_rtt), "QUIC RTT estimate {quic_rtt} ms");
+        echo.abort();
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wrong_alpn_is_reported_as_no_common_protocol() {
+    bounded(async {
+        let server = start_server(&options());
+        let other_protocol = EndpointOptions { alpn_protocols: vec![b"other/1".to_vec()], ..options() };
+        let error =
+            connect_with(&server, pinned(&server), &other_protocol, &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
+        assert!(matches!(error, ConnectError::Alpn), "{error:?}");
+        assert!(matches!(server.session.await.unwrap(), Err(AcceptError::Connection(_))));
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wrong_protocol_version_is_refused_with_both_versions() {
+    bounded(async {
+        let server = start_server(&options());
+        let error =
+            connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION + 1, TOKEN)).await.unwrap_err();
+        let expected = RefusalReason::UnsupportedVersion { server: PROTOCOL_VERSION, client: PROTOCOL_VERSION + 1 };
+        assert!(matches!(&error, ConnectError::Refused(r) if r.reason == expected), "{error:?}");
+        assert!(matches!(server.session.await.unwrap(), Err(AcceptError::Refused(_))));
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wrong_token_is_refused_as_bad_token() {
+    bounded(async {
+        let server = start_server(&options());
+        let error =
+            connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION, "guess")).await.unwrap_err();
+        assert!(matches!(&error, ConnectError::Refused(r) if r.reason == RefusalReason::BadToken), "{error:?}");
+        assert_eq!(error.to_string(), "the server refused: the access token was not accepted");
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn untrusted_certificate_is_reported_with_both_fingerprints() {
+    bounded(async {
+        let server = start_server(&options());
+        let stranger = ServerIdentity::generate(&DEFAULT_NAMES).unwrap();
+        let trust = Trust::Fingerprint(stranger.fingerprint.clone());
+        let error = connect_with(&server, trust, &options(), &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
+        match error {
+            ConnectError::UntrustedCertificate { expected, got } => {
+                assert_eq!(expected, stranger.fingerprint);
+                assert_eq!(got, server.identity.fingerprint);
+            }
+            other => panic!("expected UntrustedCertificate, got {other:?}"),
+        }
+        server.endpoint.close(0u32.into(), b"");
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ca_file_trusts_the_stored_certificate_and_no_other() {
+    bounded(async {
+        let dir = tempfile::tempdir().unwrap();
+        let identity = ServerIdentity::load_or_create(dir.path()).unwrap();
+        let endpoint = server_endpoint(loopback(), &identity, &options()).unwrap();
+        let addr = endpoint.local_addr().unwrap();
+        let accepting = endpoint.clone();
+        tokio::spawn(async move {
+            while let Some(incoming) = accepting.accept().await {
+                tokio::spawn(async move {
+                    // Keep each session until the client closes it, or the welcome may never leave.
+                    if let Ok(session) = accept(incoming, validate).await {
+                        session.connection.closed().await;
+                    }
+                });
+            }
+        });
+        let trusted = client_endpoint(&Trust::CaFile(dir.path().join(CERT_FILE)), &options()).unwrap();
+        connect(&trusted, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+
+        let other_dir = tempfile::tempdir().unwrap();
+        ServerIdentity::load_or_create(other_dir.path()).unwrap();
+        let untrusting = client_endpoint(&Trust::CaFile(other_dir.path().join(CERT_FILE)), &options()).unwrap();
+        let error = connect(&untrusting, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
+        assert!(matches!(error, ConnectError::UntrustedCertificate { .. }), "{error:?}");
+    })
+    .await
+}
+
+#[test]
+fn identity_is_made_once_then_reused_with_a_private_key_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = ServerIdentity::load_or_create(dir.path()).unwrap();
+    let second = ServerIdentity::load_or_create(dir.path()).unwrap();
+    assert_eq!(first.fingerprint, second.fingerprint);
+    assert_eq!(first.fingerprint.len(), 64);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(dir.path().join(KEY_FILE)).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+    }
+    std::fs::remove_file(dir.path().join(KEY_FILE)).unwrap();
+    assert!(matches!(ServerIdentity::load_or_create(dir.path()), Err(IdentityError::HalfPresent { .. })));
+}
+
+#[tokio::test]
+async fn fingerprints_are_accepted_with_colons_and_capitals_and_garbage_is_refused() {
+    let hex = "ab".repeat(32);
+    let openssl_style = vec!["AB"; 32].join(":");
+    assert_eq!(normalize_fingerprint(&openssl_style), Some(hex.clone()));
+    assert_eq!(normalize_fingerprint(&hex[..62]), None);
+    let error = client_endpoint(&Trust::Fingerprint("nope".into()), &options()).unwrap_err();
+    assert!(matches!(error, EndpointError::Trust(TrustError::BadFingerprint(_))), "{error:?}");
+}
