@@ -2,47 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
-pub use scene_kind::SceneKind;
-
-/// Stand-in for `kinloop_linkage::SceneKind` while the linkage crate does not export it yet; same
-/// serde form (`"planar"`, `"spatial"`) and same methods, so switching is a one-line change.
-mod scene_kind {
-    use serde::{Deserialize, Serialize};
-
-    /// Which kind of space a scene lives in.
-    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-    #[serde(rename_all = "lowercase")]
-    pub enum SceneKind {
-        /// Motion in the x-y plane: operational space (x, y, θ).
-        Planar,
-        /// Motion in 3-D: operational space (v, ω).
-        Spatial,
-    }
-
-    impl SceneKind {
-        /// Dimension of the operational space: 3 planar, 6 spatial.
-        pub fn op_dim(self) -> usize {
-            match self {
-                SceneKind::Planar => 3,
-                SceneKind::Spatial => 6,
-            }
-        }
-        /// Dimension of positions: 2 planar, 3 spatial.
-        pub fn point_dim(self) -> usize {
-            match self {
-                SceneKind::Planar => 2,
-                SceneKind::Spatial => 3,
-            }
-        }
-        /// Dimension of angular quantities: 1 planar, 3 spatial.
-        pub fn angular_dim(self) -> usize {
-            match self {
-                SceneKind::Planar => 1,
-                SceneKind::Spatial => 3,
-            }
-        }
-    }
-}
+/// Planar or spatial, with `op_dim()`, `point_dim()`, `angular_dim()`; the linkage crate owns it.
+pub use kinloop_linkage::SceneKind;
 
 /// Dimensions of one session: fixed by the `Welcome`, checked on every snapshot and uplink.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -74,7 +74,6 @@ fn validate(hello: &Hello) -> Result<Welcome, Refused> {
 }
 
 struct TestServer {
-    endpoint: Endpoint,
     addr: SocketAddr,
     identity: ServerIdentity,
     session: JoinHandle<Result<AcceptedSession, AcceptError>>,
@@ -90,7 +89,7 @@ fn start_server(opts: &EndpointOptions) -> TestServer {
         let incoming = accepting.accept().await.expect("endpoint open");
         accept(incoming, validate).await
     });
-    TestServer { endpoint, addr, identity, session }
+    TestServer { addr, identity, session }
 }
 
 async fn connect_with(
@@ -216,61 +215,64 @@ async fn injected_25ms_each_way_gives_a_50ms_round_trip() {
     .await
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn wrong_alpn_is_reported_as_no_common_protocol() {
+/// What each side saw of a handshake that was meant to fail.
+struct FailedHandshake {
+    client: ConnectError,
+    server: Result<AcceptedSession, AcceptError>,
+    server_fingerprint: String,
+}
+
+async fn failed_handshake(client_opts: EndpointOptions, trust: Option<Trust>, hello: Hello) -> FailedHandshake {
     bounded(async {
         let server = start_server(&options());
-        let other_protocol = EndpointOptions { alpn_protocols: vec![b"other/1".to_vec()], ..options() };
-        let error =
-            connect_with(&server, pinned(&server), &other_protocol, &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
-        assert!(matches!(error, ConnectError::Alpn), "{error:?}");
-        assert!(matches!(server.session.await.unwrap(), Err(AcceptError::Connection(_))));
+        let trust = trust.unwrap_or_else(|| pinned(&server));
+        let client = connect_with(&server, trust, &client_opts, &hello).await.expect_err("handshake must fail");
+        FailedHandshake {
+            client,
+            server: server.session.await.unwrap(),
+            server_fingerprint: server.identity.fingerprint.clone(),
+        }
     })
     .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wrong_alpn_is_reported_as_no_common_protocol() {
+    let other_protocol = EndpointOptions { alpn_protocols: vec![b"other/1".to_vec()], ..options() };
+    let failed = failed_handshake(other_protocol, None, hello(PROTOCOL_VERSION, TOKEN)).await;
+    assert!(matches!(failed.client, ConnectError::Alpn), "{:?}", failed.client);
+    assert!(matches!(failed.server, Err(AcceptError::Connection(_))));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn wrong_protocol_version_is_refused_with_both_versions() {
-    bounded(async {
-        let server = start_server(&options());
-        let error =
-            connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION + 1, TOKEN)).await.unwrap_err();
-        let expected = RefusalReason::UnsupportedVersion { server: PROTOCOL_VERSION, client: PROTOCOL_VERSION + 1 };
-        assert!(matches!(&error, ConnectError::Refused(r) if r.reason == expected), "{error:?}");
-        assert!(matches!(server.session.await.unwrap(), Err(AcceptError::Refused(_))));
-    })
-    .await
+    let failed = failed_handshake(options(), None, hello(PROTOCOL_VERSION + 1, TOKEN)).await;
+    let expected = RefusalReason::UnsupportedVersion { server: PROTOCOL_VERSION, client: PROTOCOL_VERSION + 1 };
+    assert!(matches!(&failed.client, ConnectError::Refused(r) if r.reason == expected), "{:?}", failed.client);
+    assert!(matches!(failed.server, Err(AcceptError::Refused(_))));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn wrong_token_is_refused_as_bad_token() {
-    bounded(async {
-        let server = start_server(&options());
-        let error =
-            connect_with(&server, pinned(&server), &options(), &hello(PROTOCOL_VERSION, "guess")).await.unwrap_err();
-        assert!(matches!(&error, ConnectError::Refused(r) if r.reason == RefusalReason::BadToken), "{error:?}");
-        assert_eq!(error.to_string(), "the server refused: the access token was not accepted");
-    })
-    .await
+    let failed = failed_handshake(options(), None, hello(PROTOCOL_VERSION, "guess")).await;
+    let error = failed.client;
+    assert!(matches!(&error, ConnectError::Refused(r) if r.reason == RefusalReason::BadToken), "{error:?}");
+    assert_eq!(error.to_string(), "the server refused: the access token was not accepted");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn untrusted_certificate_is_reported_with_both_fingerprints() {
-    bounded(async {
-        let server = start_server(&options());
-        let stranger = ServerIdentity::generate(&DEFAULT_NAMES).unwrap();
-        let trust = Trust::Fingerprint(stranger.fingerprint.clone());
-        let error = connect_with(&server, trust, &options(), &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
-        match error {
-            ConnectError::UntrustedCertificate { expected, got } => {
-                assert_eq!(expected, stranger.fingerprint);
-                assert_eq!(got, server.identity.fingerprint);
-            }
-            other => panic!("expected UntrustedCertificate, got {other:?}"),
+    let stranger = ServerIdentity::generate(&DEFAULT_NAMES).unwrap();
+    let trust = Trust::Fingerprint(stranger.fingerprint.clone());
+    let failed = failed_handshake(options(), Some(trust), hello(PROTOCOL_VERSION, TOKEN)).await;
+    match failed.client {
+        ConnectError::UntrustedCertificate { expected, got } => {
+            assert_eq!(expected, stranger.fingerprint);
+            assert_eq!(got, failed.server_fingerprint);
         }
-        server.endpoint.close(0u32.into(), b"");
-    })
-    .await
+        other => panic!("expected UntrustedCertificate, got {other:?}"),
+    }
+    assert!(matches!(failed.server, Err(AcceptError::Connection(_))));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -69,6 +69,9 @@ pub enum EndpointError {
     /// The idle timeout does not fit QUIC's encoding.
     #[error("idle timeout {0:?} is too long")]
     IdleTimeout(Duration),
+    /// Endpoints need a tokio runtime (socket registration, the emulated link's release task).
+    #[error("QUIC endpoints must be created inside a tokio runtime")]
+    NoRuntime,
     /// The link emulation settings contradict themselves.
     #[error("link emulation: {0}")]
     Link(#[from] LinkConfigError),
@@ -145,6 +148,7 @@ fn bind(
     addr: SocketAddr,
     opts: &EndpointOptions,
 ) -> Result<(Arc<dyn AsyncUdpSocket>, Option<EmulatedSocketStatsHandle>), EndpointError> {
+    tokio::runtime::Handle::try_current().map_err(|_| EndpointError::NoRuntime)?;
     let socket_error = |source| EndpointError::Socket { addr, source };
     let std_socket = std::net::UdpSocket::bind(addr).map_err(socket_error)?;
     let socket = TokioRuntime.wrap_udp_socket(std_socket).map_err(socket_error)?;
