@@ -184,6 +184,10 @@ fn contradictory_settings_are_refused() {
     assert_eq!(LinkEmulator::<Vec<u8>>::new(both).unwrap_err(), LinkConfigError::LossAndBurst);
     let not_probability = LinkConfig { duplicate: 1.5, ..LinkConfig::default() };
     assert!(matches!(not_probability.validate(), Err(LinkConfigError::NotAProbability { name: "duplicate", .. })));
+    let glacial = LinkConfig { delay: MAX_LINK_DELAY + MS, ..LinkConfig::default() };
+    assert!(matches!(glacial.validate(), Err(LinkConfigError::TooLong { name: "delay", .. })));
+    let trickle = LinkConfig { bandwidth_bps: Some(0.5), ..LinkConfig::default() };
+    assert!(matches!(trickle.validate(), Err(LinkConfigError::Bandwidth { .. })));
 }
 
 #[test]

@@ -77,6 +77,11 @@ pub struct LinkConfig {
     pub seed: u64,
 }
 
+/// Longest delay or jitter a link may have; bounds every time computation far from overflow.
+pub const MAX_LINK_DELAY: Duration = Duration::from_secs(3600);
+/// Slowest bandwidth cap (bits per second); bounds a packet's serialization time.
+pub const MIN_BANDWIDTH_BPS: f64 = 1.0;
+
 /// Longest backlog the bandwidth cap queues before dropping packets (a drop-tail router buffer).
 pub const MAX_QUEUE_DELAY: Duration = Duration::from_millis(200);
 
@@ -119,8 +124,13 @@ impl LinkConfig {
         if self.burst.is_some() && self.loss > 0.0 {
             return Err(LinkConfigError::LossAndBurst);
         }
+        if let Some((name, value)) =
+            [("delay", self.delay), ("jitter", self.jitter)].into_iter().find(|(_, d)| *d > MAX_LINK_DELAY)
+        {
+            return Err(LinkConfigError::TooLong { name, value });
+        }
         match self.bandwidth_bps {
-            Some(bps) if !(bps.is_finite() && bps > 0.0) => Err(LinkConfigError::Bandwidth { bps }),
+            Some(bps) if !(bps.is_finite() && bps >= MIN_BANDWIDTH_BPS) => Err(LinkConfigError::Bandwidth { bps }),
             _ => Ok(()),
         }
     }
@@ -140,8 +150,16 @@ pub enum LinkConfigError {
     /// Both loss models at once.
     #[error("set either --loss or --burst, not both: the burst model replaces independent loss")]
     LossAndBurst,
-    /// A bandwidth that is not a positive rate.
-    #[error("bandwidth {bps} bit/s must be positive")]
+    /// A delay longer than [`MAX_LINK_DELAY`].
+    #[error("{name} {value:?} is longer than the {MAX_LINK_DELAY:?} a link may delay")]
+    TooLong {
+        /// Which setting.
+        name: &'static str,
+        /// Its value.
+        value: Duration,
+    },
+    /// A bandwidth below [`MIN_BANDWIDTH_BPS`].
+    #[error("bandwidth {bps} bit/s must be at least {MIN_BANDWIDTH_BPS} bit/s")]
     Bandwidth {
         /// The rate given.
         bps: f64,

@@ -9,6 +9,6 @@ mod link;
 
 pub use config::{
     parse_bandwidth, parse_burst, parse_duration, parse_probability, GilbertElliott, LinkArgs, LinkConfig,
-    LinkConfigError, LinkParseError, MAX_QUEUE_DELAY,
+    LinkConfigError, LinkParseError, MAX_LINK_DELAY, MAX_QUEUE_DELAY, MIN_BANDWIDTH_BPS,
 };
 pub use link::{LinkEmulator, LinkStats, WireSize};

@@ -163,7 +163,7 @@ const OVERSIZE_BACKLOG: usize = 16;
 pub struct DatagramReceiver {
     connection: Connection,
     shape: SessionShape,
-    oversize: mpsc::Receiver<Vec<u8>>,
+    oversize: mpsc::Receiver<Bytes>,
     oversize_reader: JoinHandle<()>,
     counters: Arc<Counters>,
 }
@@ -180,7 +180,7 @@ impl DatagramReceiver {
     /// The next message. Cancel-safe: a message is never lost when the future is dropped.
     pub async fn recv(&mut self) -> Result<Datagram, RecvError> {
         let (bytes, route) = tokio::select! {
-            datagram = self.connection.read_datagram() => (datagram?.to_vec(), Route::Datagram),
+            datagram = self.connection.read_datagram() => (datagram?, Route::Datagram),
             Some(bytes) = self.oversize.recv() => (bytes, Route::Stream),
         };
         let counter = match route {
@@ -208,7 +208,7 @@ impl Drop for DatagramReceiver {
 
 /// Accepts the peer's unidirectional streams and reads each (concurrently, so one slow stream does not hold
 /// up the next) into the receiver's channel.
-async fn read_oversize_streams(connection: Connection, tx: mpsc::Sender<Vec<u8>>, counters: Arc<Counters>) {
+async fn read_oversize_streams(connection: Connection, tx: mpsc::Sender<Bytes>, counters: Arc<Counters>) {
     while let Ok(mut stream) = connection.accept_uni().await {
         let tx = tx.clone();
         let counters = counters.clone();
@@ -216,7 +216,7 @@ async fn read_oversize_streams(connection: Connection, tx: mpsc::Sender<Vec<u8>>
             match stream.read_to_end(MAX_DATAGRAM_MESSAGE_BYTES).await {
                 Ok(bytes) => {
                     // A closed channel means the receiver is gone; nothing left to deliver to.
-                    let _ = tx.send(bytes).await;
+                    let _ = tx.send(Bytes::from(bytes)).await;
                 }
                 Err(why) => {
                     Counters::bump(&counters.oversize_failed);
