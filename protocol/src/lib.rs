@@ -5,7 +5,7 @@
 //! - [`quic`]: QUIC endpoints, certificates and trust, the handshake, control framing and datagrams;
 //! - [`emulator`]: a seeded, sans-IO link emulator (delay, jitter, loss, bursts, reordering, duplication,
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
-//! - [`bench`]: measurements the `kinloop bench` command reports.
+//! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
 pub mod codec;

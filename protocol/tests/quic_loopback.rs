@@ -185,7 +185,9 @@ async fn injected_25ms_each_way_gives_a_50ms_round_trip() {
             ..options()
         };
         let server = start_server(&delayed);
-        let client = connect_with(&server, pinned(&server), &delayed, &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        let (client_endpoint, link_stats) = client_endpoint_with_link_stats(&pinned(&server), &delayed).unwrap();
+        let client =
+            connect(&client_endpoint, server.addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
         let mut accepted = server.session.await.unwrap().unwrap();
         let echo = tokio::spawn(async move {
             while let Ok(Control::Ping { nonce, t_s }) = recv_control(&mut accepted.recv).await {
@@ -210,6 +212,8 @@ async fn injected_25ms_each_way_gives_a_50ms_round_trip() {
         let quic_rtt = client.connection.rtt().as_secs_f64() * 1e3;
         eprintln!("ping/pong RTT median {median:.1} ms, QUIC RTT estimate {quic_rtt:.1} ms");
         assert!((45.0..80.0).contains(&quic_rtt), "QUIC RTT estimate {quic_rtt} ms");
+        let sent_through_link = link_stats.expect("a delayed link is emulated").get().link;
+        assert!(sent_through_link.sent >= 10 && sent_through_link.delivered > 0, "{sent_through_link:?}");
         echo.abort();
     })
     .await

@@ -271,7 +271,7 @@ pub struct LinkArgs {
     /// Independent loss probability of sent packets (e.g. 2%).
     #[arg(long, value_name = "PROBABILITY", value_parser = parse_probability, default_value = "0")]
     pub loss: f64,
-    /// Burst loss instead of --loss: P_GB,P_BG[,LOSS_GOOD,LOSS_BAD] (e.g. 1%,25%: bursts of 4 on average).
+    /// Burst loss instead of --loss: P_GB,P_BG or P_GB,P_BG,LOSS_GOOD,LOSS_BAD (e.g. 1%,25%: bursts of 4 on average).
     #[arg(long, value_name = "P_GB,P_BG", value_parser = parse_burst)]
     pub burst: Option<GilbertElliott>,
     /// Probability that a packet skips the delay and overtakes those in flight (e.g. 1%).
