@@ -1,0 +1,27 @@
+//! B(q, q̇), the Coriolis and centripetal generalized forces of eq 1, by the recursive Newton-Euler
+//! algorithm in the world frame with q̈ = 0 and no gravity.
+
+use crate::data::Data;
+use crate::model::{Model, NO_PARENT};
+use crate::space::{Space, VecOps};
+
+/// Fills `data.bias`. Needs `forward_kinematics` and `forward_velocity`.
+pub fn bias_forces<S: Space>(model: &Model<S>, data: &mut Data<S>) {
+    let n = model.nq();
+    let kin = &data.kin;
+    for i in 0..n {
+        let inertia = &kin.body_inertia[i];
+        let v = &kin.body_velocity[i];
+        // f_i = I_i a_i + v_i ×* I_i v_i: the force the body needs to follow its velocity-product motion.
+        data.body_force[i] =
+            S::inertia_mul(inertia, &kin.bias_acceleration[i]) + S::cross_force(v, &S::inertia_mul(inertia, v));
+    }
+    for i in (0..n).rev() {
+        data.bias[i] = kin.motion_subspace[i].dot(&data.body_force[i]);
+        let parent = model.joints[i].parent;
+        if parent != NO_PARENT {
+            let f = data.body_force[i];
+            data.body_force[parent] += f;
+        }
+    }
+}

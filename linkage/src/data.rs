@@ -1,0 +1,249 @@
+//! The [`Data`] workspace: every buffer the algorithms write, allocated once from a [`Model`].
+//!
+//! Algorithms take `(&Model, &mut Data)` and leave their results in named fields (`mass_matrix`,
+//! `bias`, `closure_jacobian_t`, `qdd`, ...), so callers compose them without temporaries and the hot
+//! paths allocate nothing.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::model::{Attachment, Model};
+use crate::space::{MatOps, Space, VecOps};
+
+/// Body poses, motion subspaces and velocities in the world frame.
+#[derive(Clone, Debug)]
+pub struct Kinematics<S: Space> {
+    /// Orientation of each body frame.
+    pub body_rot: Vec<S::Rot>,
+    /// Origin of each body frame.
+    pub body_pos: Vec<S::Point>,
+    /// Centre of mass of each body.
+    pub com: Vec<S::Point>,
+    /// Motion subspace S_i of joint i (world frame, at the world origin).
+    pub motion_subspace: Vec<S::Spatial>,
+    /// Spatial inertia of each body about the world origin.
+    pub body_inertia: Vec<S::Inertia>,
+    /// Spatial velocity v_i of each body (world frame).
+    pub body_velocity: Vec<S::Spatial>,
+    /// Velocity-product spatial acceleration of each body: its acceleration when q̈ = 0.
+    pub bias_acceleration: Vec<S::Spatial>,
+}
+
+impl<S: Space> Kinematics<S> {
+    fn new(n: usize) -> Self {
+        Kinematics {
+            body_rot: vec![S::rot_identity(); n],
+            body_pos: vec![S::Point::zero(); n],
+            com: vec![S::Point::zero(); n],
+            motion_subspace: vec![S::Spatial::zero(); n],
+            body_inertia: vec![S::Inertia::zero(); n],
+            body_velocity: vec![S::Spatial::zero(); n],
+            bias_acceleration: vec![S::Spatial::zero(); n],
+        }
+    }
+
+    /// Orientation of a body (identity for ground).
+    pub fn rot(&self, body: Option<usize>) -> S::Rot {
+        body.map_or_else(S::rot_identity, |b| self.body_rot[b])
+    }
+
+    /// World position of an attached point.
+    pub fn point(&self, a: &Attachment<S>) -> S::Point {
+        match a.body {
+            None => a.point,
+            Some(b) => self.body_pos[b] + S::rotate(&self.body_rot[b], &a.point),
+        }
+    }
+
+    /// A body-fixed direction in world axes.
+    pub fn direction(&self, body: Option<usize>, d: &S::Point) -> S::Point {
+        match body {
+            None => *d,
+            Some(b) => S::rotate(&self.body_rot[b], d),
+        }
+    }
+
+    /// Spatial velocity of a body (zero for ground).
+    pub fn velocity(&self, body: Option<usize>) -> S::Spatial {
+        body.map_or_else(S::Spatial::zero, |b| self.body_velocity[b])
+    }
+
+    /// Velocity-product spatial acceleration of a body (zero for ground).
+    pub fn bias_accel(&self, body: Option<usize>) -> S::Spatial {
+        body.map_or_else(S::Spatial::zero, |b| self.bias_acceleration[b])
+    }
+
+    /// Classical velocity of the body-fixed point currently at world position `p`.
+    pub fn point_velocity(&self, body: Option<usize>, p: &S::Point) -> S::Point {
+        let v = self.velocity(body);
+        S::spatial_lin(&v) + S::ang_cross_point(&S::spatial_ang(&v), p)
+    }
+
+    /// Classical acceleration, with q̈ = 0, of the body-fixed point at world position `p`
+    /// (this is J̇ q̇ for that point).
+    pub fn point_bias_acceleration(&self, body: Option<usize>, p: &S::Point) -> S::Point {
+        let a = self.bias_accel(body);
+        let w = S::spatial_ang(&self.velocity(body));
+        let vp = self.point_velocity(body, p);
+        S::spatial_lin(&a) + S::ang_cross_point(&S::spatial_ang(&a), p) + S::ang_cross_point(&w, &vp)
+    }
+}
+
+/// Factors and intermediate products of the KKT solve (eq 4) and of Λ⁻¹ (eq 9).
+#[derive(Clone, Debug)]
+pub struct KktWorkspace {
+    /// U with D = U Uᵀ, U upper triangular with the tree's sparsity (Featherstone's LTL in transposed
+    /// storage), n×n.
+    pub factor: DMatrix<f64>,
+    /// Z = U⁻¹ Wᵀ, n×m.
+    pub z: DMatrix<f64>,
+    /// The Schur complement S = W D⁻¹ Wᵀ = Zᵀ Z, m×m.
+    pub schur: DMatrix<f64>,
+    /// Pivoted Cholesky factor of S (lower, in pivoted order), m×m.
+    pub schur_factor: DMatrix<f64>,
+    /// Pivot order: `schur_perm[k]` is the closure row eliminated at step k.
+    pub schur_perm: Vec<usize>,
+    /// Numerical rank of S: rows `schur_perm[rank..]` are dependent and get λ = 0.
+    pub schur_rank: usize,
+    /// Scratch of length n.
+    pub tmp_n: DVector<f64>,
+    /// Scratch of length m.
+    pub tmp_m: DVector<f64>,
+    /// Scratch of length m.
+    pub tmp_m2: DVector<f64>,
+}
+
+/// Operational-space quantities for one operational point.
+#[derive(Clone, Debug)]
+pub struct OpSpaceWorkspace<S: Space> {
+    /// Jᵀ at the OP, n×k (columns in op order: linear then angular).
+    pub jacobian_t: DMatrix<f64>,
+    /// Y = U⁻¹ Jᵀ, n×k.
+    pub y: DMatrix<f64>,
+    /// G = R⁻¹ (Zᵀ Y)_pivoted, m×k.
+    pub g: DMatrix<f64>,
+    /// J̇ q̇ at the OP (op order).
+    pub jdot_qdot: S::OpVec,
+    /// Λ⁻¹ with the loops closed (eq 9).
+    pub inverse_inertia: S::OpMat,
+    /// Λ⁻¹ with the loops cut open (J D⁻¹ Jᵀ).
+    pub inverse_inertia_open: S::OpMat,
+}
+
+/// Scratch for the integrators.
+#[derive(Clone, Debug)]
+pub struct IntegratorWorkspace {
+    /// Saved configuration at the start of a step.
+    pub q_start: DVector<f64>,
+    /// Saved velocity at the start of a step.
+    pub qd_start: DVector<f64>,
+    /// RK4 stage velocities.
+    pub k_q: [DVector<f64>; 4],
+    /// RK4 stage accelerations.
+    pub k_qd: [DVector<f64>; 4],
+    /// Scratch configuration.
+    pub q_stage: DVector<f64>,
+    /// Scratch velocity.
+    pub qd_stage: DVector<f64>,
+}
+
+/// Everything the algorithms compute, preallocated.
+#[derive(Clone, Debug)]
+pub struct Data<S: Space> {
+    /// Poses, subspaces and velocities.
+    pub kin: Kinematics<S>,
+    /// Composite (subtree) spatial inertias, world frame.
+    pub composite_inertia: Vec<S::Inertia>,
+    /// Per-body spatial forces (scratch of the recursive algorithms).
+    pub body_force: Vec<S::Spatial>,
+    /// D(q), the joint-space mass matrix, n×n symmetric.
+    pub mass_matrix: DMatrix<f64>,
+    /// B(q, q̇), Coriolis and centripetal generalized forces.
+    pub bias: DVector<f64>,
+    /// G(q), gravity and joint springs (the paper's "joint flexibility and gravitational effects").
+    pub gravity: DVector<f64>,
+    /// Joint damping and actuator forces (on the right-hand side of eq 1).
+    pub joint_force: DVector<f64>,
+    /// Applied generalized forces on the right-hand side: Σ Jᵢᵀ Fᵢ + J_hᵀ F_h (filled by the caller).
+    pub applied: DVector<f64>,
+    /// Extra symmetric matrix added to D in the KKT solve (linearly-implicit couplings), n×n.
+    pub implicit_mass: DMatrix<f64>,
+    /// True when `implicit_mass` holds something to add.
+    pub use_implicit_mass: bool,
+    /// h(q), the closure residual, m.
+    pub closure_residual: DVector<f64>,
+    /// Wᵀ = (∂h/∂q)ᵀ, n×m (stored transposed so each closure row is contiguous).
+    pub closure_jacobian_t: DMatrix<f64>,
+    /// w = Ẇ q̇, m.
+    pub closure_bias: DVector<f64>,
+    /// w_stab = w + 2αβ W q̇ + α² h (eq 3), m.
+    pub closure_bias_stab: DVector<f64>,
+    /// KKT factors.
+    pub kkt: KktWorkspace,
+    /// q̈ from the last solve.
+    pub qdd: DVector<f64>,
+    /// λ from the last solve.
+    pub lambda: DVector<f64>,
+    /// Operational-space workspace (one OP at a time).
+    pub op: OpSpaceWorkspace<S>,
+    /// Integrator scratch.
+    pub integ: IntegratorWorkspace,
+}
+
+impl<S: Space> Data<S> {
+    /// Allocates every buffer for `model`.
+    pub fn new(model: &Model<S>) -> Self {
+        let n = model.nq();
+        let m = model.nc();
+        let k = S::DIM;
+        Data {
+            kin: Kinematics::new(n),
+            composite_inertia: vec![S::Inertia::zero(); n],
+            body_force: vec![S::Spatial::zero(); n],
+            mass_matrix: DMatrix::zeros(n, n),
+            bias: DVector::zeros(n),
+            gravity: DVector::zeros(n),
+            joint_force: DVector::zeros(n),
+            applied: DVector::zeros(n),
+            implicit_mass: DMatrix::zeros(n, n),
+            use_implicit_mass: false,
+            closure_residual: DVector::zeros(m),
+            closure_jacobian_t: DMatrix::zeros(n, m),
+            closure_bias: DVector::zeros(m),
+            closure_bias_stab: DVector::zeros(m),
+            kkt: KktWorkspace {
+                factor: DMatrix::zeros(n, n),
+                z: DMatrix::zeros(n, m),
+                schur: DMatrix::zeros(m, m),
+                schur_factor: DMatrix::zeros(m, m),
+                schur_perm: (0..m).collect(),
+                schur_rank: 0,
+                tmp_n: DVector::zeros(n),
+                tmp_m: DVector::zeros(m),
+                tmp_m2: DVector::zeros(m),
+            },
+            qdd: DVector::zeros(n),
+            lambda: DVector::zeros(m),
+            op: OpSpaceWorkspace {
+                jacobian_t: DMatrix::zeros(n, k),
+                y: DMatrix::zeros(n, k),
+                g: DMatrix::zeros(m, k),
+                jdot_qdot: S::OpVec::zero(),
+                inverse_inertia: S::OpMat::zero(),
+                inverse_inertia_open: S::OpMat::zero(),
+            },
+            integ: IntegratorWorkspace {
+                q_start: DVector::zeros(n),
+                qd_start: DVector::zeros(n),
+                k_q: std::array::from_fn(|_| DVector::zeros(n)),
+                k_qd: std::array::from_fn(|_| DVector::zeros(n)),
+                q_stage: DVector::zeros(n),
+                qd_stage: DVector::zeros(n),
+            },
+        }
+    }
+
+    /// The closure Jacobian W (m×n); allocates, for inspection and tests.
+    pub fn closure_jacobian(&self) -> DMatrix<f64> {
+        self.closure_jacobian_t.transpose()
+    }
+}

@@ -1,0 +1,202 @@
+//! Time integration of the constrained dynamics, selectable at run time, with optional projection of q and
+//! q̇ back onto the constraint manifold.
+
+use nalgebra::DVector;
+
+use crate::data::Data;
+use crate::dynamics::{check_state, dynamics_terms, Forces};
+use crate::error::DynamicsError;
+use crate::kinematics::forward_kinematics;
+use crate::kkt;
+use crate::loop_closure::closure_residual;
+use crate::ltl;
+use crate::model::Model;
+use crate::space::Space;
+
+/// Which integration scheme.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Explicit (forward) Euler: q and q̇ both from the start of the step. Included to show where it fails.
+    ExplicitEuler,
+    /// Semi-implicit (symplectic) Euler: q̇ first, then q with the new q̇. One dynamics evaluation per step;
+    /// supports linearly-implicit couplings.
+    SemiImplicitEuler,
+    /// Classical fourth-order Runge-Kutta: four evaluations per step.
+    Rk4,
+}
+
+impl Integrator {
+    /// All schemes, for sweeps.
+    pub const ALL: [Integrator; 3] = [Integrator::ExplicitEuler, Integrator::SemiImplicitEuler, Integrator::Rk4];
+
+    /// Short name used on command lines and in charts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::ExplicitEuler => "explicit-euler",
+            Integrator::SemiImplicitEuler => "euler",
+            Integrator::Rk4 => "rk4",
+        }
+    }
+
+    /// Parses `euler` (semi-implicit), `explicit-euler` or `rk4`.
+    pub fn parse(s: &str) -> Option<Integrator> {
+        match s {
+            "euler" | "semi-implicit-euler" | "symplectic-euler" => Some(Integrator::SemiImplicitEuler),
+            "explicit-euler" | "forward-euler" => Some(Integrator::ExplicitEuler),
+            "rk4" => Some(Integrator::Rk4),
+            _ => None,
+        }
+    }
+
+    /// Dynamics evaluations per step.
+    pub fn evaluations(self) -> usize {
+        match self {
+            Integrator::Rk4 => 4,
+            _ => 1,
+        }
+    }
+}
+
+/// How to take a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepConfig {
+    /// The scheme.
+    pub integrator: Integrator,
+    /// Step size, s.
+    pub dt: f64,
+    /// Project q and q̇ onto the constraint manifold after the step.
+    pub project: bool,
+    /// Let the forces add linearly-implicit terms (semi-implicit Euler only).
+    pub implicit_forces: bool,
+}
+
+impl StepConfig {
+    /// Semi-implicit Euler with projection and implicit couplings: the VE's default.
+    pub fn euler(dt: f64) -> Self {
+        StepConfig { integrator: Integrator::SemiImplicitEuler, dt, project: true, implicit_forces: true }
+    }
+}
+
+/// What a step observed.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct StepReport {
+    /// Norm of the closure residual h at the start of the step (after the previous step's projection).
+    pub closure_error: f64,
+}
+
+/// Advances `(q, q̇)` by one step of `cfg.dt` under `forces`. On error the state is left unchanged.
+pub fn step<S: Space, F: Forces<S> + ?Sized>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+    forces: &mut F,
+    cfg: &StepConfig,
+) -> Result<StepReport, DynamicsError> {
+    check_state(model, q, qd)?;
+    let dt = cfg.dt;
+    let report;
+    match cfg.integrator {
+        Integrator::SemiImplicitEuler | Integrator::ExplicitEuler => {
+            dynamics_terms(model, data, q, qd, forces);
+            report = StepReport { closure_error: data.closure_residual.norm() };
+            data.use_implicit_mass = cfg.implicit_forces && cfg.integrator == Integrator::SemiImplicitEuler && {
+                data.implicit_mass.fill(0.0);
+                forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied)
+            };
+            kkt::factorize(model, data)?;
+            kkt::solve(model, data)?;
+            if cfg.integrator == Integrator::SemiImplicitEuler {
+                qd.axpy(dt, &data.qdd, 1.0);
+                q.axpy(dt, qd, 1.0);
+            } else {
+                q.axpy(dt, qd, 1.0);
+                qd.axpy(dt, &data.qdd, 1.0);
+            }
+        }
+        Integrator::Rk4 => {
+            data.use_implicit_mass = false;
+            let ws = &mut data.integ;
+            ws.q_start.copy_from(q);
+            ws.qd_start.copy_from(qd);
+            let mut closure_error = 0.0;
+            for stage in 0..4 {
+                // Stage state: start + c·dt·k_{stage-1}, c = 0, ½, ½, 1.
+                let c = [0.0, 0.5, 0.5, 1.0][stage];
+                let (mut q_stage, mut qd_stage) = take_stage(data);
+                q_stage.copy_from(&data.integ.q_start);
+                qd_stage.copy_from(&data.integ.qd_start);
+                if stage > 0 {
+                    q_stage.axpy(c * dt, &data.integ.k_q[stage - 1], 1.0);
+                    qd_stage.axpy(c * dt, &data.integ.k_qd[stage - 1], 1.0);
+                }
+                let solved = (|| {
+                    dynamics_terms(model, data, &q_stage, &qd_stage, forces);
+                    if stage == 0 {
+                        closure_error = data.closure_residual.norm();
+                    }
+                    kkt::factorize(model, data)?;
+                    kkt::solve(model, data)
+                })();
+                data.integ.k_q[stage].copy_from(&qd_stage);
+                data.integ.k_qd[stage].copy_from(&data.qdd);
+                put_stage(data, q_stage, qd_stage);
+                solved?;
+            }
+            let ws = &data.integ;
+            for i in 0..model.nq() {
+                q[i] =
+                    ws.q_start[i] + dt / 6.0 * (ws.k_q[0][i] + 2.0 * ws.k_q[1][i] + 2.0 * ws.k_q[2][i] + ws.k_q[3][i]);
+                qd[i] = ws.qd_start[i]
+                    + dt / 6.0 * (ws.k_qd[0][i] + 2.0 * ws.k_qd[1][i] + 2.0 * ws.k_qd[2][i] + ws.k_qd[3][i]);
+            }
+            report = StepReport { closure_error };
+        }
+    }
+    if cfg.project && model.has_loops() {
+        project(model, data, q, qd);
+    }
+    if q.iter().chain(qd.iter()).any(|x| !x.is_finite()) {
+        return Err(DynamicsError::NonFiniteResult { what: "state after the step" });
+    }
+    Ok(report)
+}
+
+fn take_stage<S: Space>(data: &mut Data<S>) -> (DVector<f64>, DVector<f64>) {
+    (
+        std::mem::replace(&mut data.integ.q_stage, DVector::zeros(0)),
+        std::mem::replace(&mut data.integ.qd_stage, DVector::zeros(0)),
+    )
+}
+
+fn put_stage<S: Space>(data: &mut Data<S>, q: DVector<f64>, qd: DVector<f64>) {
+    data.integ.q_stage = q;
+    data.integ.qd_stage = qd;
+}
+
+/// One quasi-Newton projection onto the constraint manifold in the mass metric, reusing the last KKT
+/// factors (W and D from within the step): `q ← q - D⁻¹ Wᵀ S⁺ h(q)`, then `q̇ ← q̇ - D⁻¹ Wᵀ S⁺ W q̇`.
+/// Using W from within the step makes the position residual after projection O(dt·|q̇|·|h|): one iteration
+/// takes the per-step drift (~1e-8 m at 1 kHz) to ~1e-12 m.
+pub fn project<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, qd: &mut DVector<f64>) {
+    forward_kinematics(model, data, q);
+    closure_residual(model, data);
+    let mut r = std::mem::replace(&mut data.kkt.tmp_m, DVector::zeros(0));
+    // Position.
+    r.copy_from(&data.closure_residual);
+    correct(model, data, &mut r, q);
+    // Velocity: W q̇ with the step's W.
+    r.gemv_tr(1.0, &data.closure_jacobian_t, qd, 0.0);
+    correct(model, data, &mut r, qd);
+    data.kkt.tmp_m = r;
+}
+
+/// `x ← x - U⁻ᵀ Z S⁺ r` (r is overwritten).
+fn correct<S: Space>(model: &Model<S>, data: &mut Data<S>, r: &mut DVector<f64>, x: &mut DVector<f64>) {
+    kkt::schur_solve(data, r);
+    let tmp = &mut data.kkt.tmp_n;
+    tmp.gemv(1.0, &data.kkt.z, r, 0.0);
+    ltl::solve_ut(model, &data.kkt.factor, tmp.as_mut_slice());
+    *x -= &*tmp;
+}

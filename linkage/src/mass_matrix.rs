@@ -1,0 +1,32 @@
+//! D(q), the joint-space mass matrix of eq 1, by the composite-rigid-body algorithm in the world frame.
+//!
+//! With every quantity at the world origin, a subtree's composite inertia is the plain sum of its bodies'
+//! spatial inertias and `D_ji = S_jᵀ I^c_i S_i` for each joint j supporting body i: no transforms at all.
+
+use crate::data::Data;
+use crate::jacobian::support;
+use crate::model::{Model, NO_PARENT};
+use crate::space::{Space, VecOps};
+
+/// Fills `data.mass_matrix` (symmetric, n×n). Needs `forward_kinematics`.
+pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
+    let n = model.nq();
+    data.composite_inertia.copy_from_slice(&data.kin.body_inertia);
+    for i in (0..n).rev() {
+        let parent = model.joints[i].parent;
+        if parent != NO_PARENT {
+            let child = data.composite_inertia[i];
+            data.composite_inertia[parent] += child;
+        }
+    }
+    let d = &mut data.mass_matrix;
+    d.fill(0.0);
+    for i in 0..n {
+        let f = S::inertia_mul(&data.composite_inertia[i], &data.kin.motion_subspace[i]);
+        for j in support(model, Some(i)) {
+            let v = data.kin.motion_subspace[j].dot(&f);
+            d[(j, i)] = v;
+            d[(i, j)] = v;
+        }
+    }
+}

@@ -1,0 +1,72 @@
+//! Test fixtures shared by the unit tests of this crate.
+
+use nalgebra::DVector;
+
+use crate::builtin;
+use crate::model::Model;
+use crate::space::{Planar, Space, Spatial};
+
+/// A small deterministic generator (SplitMix64) so tests need no extra dependency.
+pub struct TestRng(pub u64);
+
+impl TestRng {
+    /// Next uniform number in [-1, 1).
+    pub fn next_signed(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+/// The paper's testbed, compiled.
+pub fn paper_testbed() -> Model<Planar> {
+    compile(builtin::scene("paper-testbed").expect("built in").expect("parses"))
+}
+
+/// Compiles a scene, panicking with the error (tests only).
+pub fn compile<S: Space>(scene: crate::Scene) -> Model<S> {
+    Model::compile(&scene, &scene.name.clone()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A state near q0 (±0.1 rad or m) with velocities in ±1, deterministic in `seed`.
+pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVector<f64>) {
+    let mut rng = TestRng(seed.wrapping_mul(7919).wrapping_add(17));
+    let q = DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.1 * rng.next_signed());
+    let qd = DVector::from_fn(model.nq(), |_, _| rng.next_signed());
+    (q, qd)
+}
+
+/// Every planar test scene: the built-in files plus two generated chains.
+pub fn planar_models() -> Vec<(String, Model<Planar>)> {
+    let mut out: Vec<(String, Model<Planar>)> = builtin::SCENE_FILES
+        .iter()
+        .filter(|(n, _)| *n != "spherical-four-bar")
+        .map(|(n, _)| (n.to_string(), compile(builtin::scene(n).unwrap().unwrap())))
+        .collect();
+    out.push(("chain8_loops2".into(), compile(builtin::chain(8, 2))));
+    out.push(("chain6_loops0".into(), compile(builtin::chain(6, 0))));
+    out
+}
+
+/// Every spatial test scene.
+pub fn spatial_models() -> Vec<(String, Model<Spatial>)> {
+    vec![("spherical-four-bar".into(), compile(builtin::scene("spherical-four-bar").unwrap().unwrap()))]
+}
+
+/// Runs `$body` with `$name: &str` and `$model: &Model<_>` bound, for every planar and spatial test model.
+macro_rules! for_each_model {
+    ($name:ident, $model:ident => $body:block) => {{
+        for (n, m) in $crate::testing::planar_models().iter() {
+            let ($name, $model): (&str, &$crate::Model<$crate::Planar>) = (n.as_str(), m);
+            $body
+        }
+        for (n, m) in $crate::testing::spatial_models().iter() {
+            let ($name, $model): (&str, &$crate::Model<$crate::Spatial>) = (n.as_str(), m);
+            $body
+        }
+    }};
+}
+pub(crate) use for_each_model;
