@@ -106,6 +106,9 @@ pub struct SceneSummary {
     pub op_dim: u8,
     /// Name of the operational point granted to this client.
     pub op_name: String,
+    /// The scene's characteristic length L (m): constraint directions and singular values in snapshots are
+    /// expressed in the unit-consistent coordinates `(v, L ω)`.
+    pub length_scale: f64,
 }
 
 /// Controller gains the server recommends for this scene and device.

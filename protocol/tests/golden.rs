@@ -66,7 +66,15 @@ fn welcome() -> Control {
     Control::Welcome(Welcome {
         session_id: 300,
         user_id: 7,
-        scene: SceneSummary { name: "tb".into(), kind: SceneKind::Planar, n: 4, m: 2, op_dim: 3, op_name: "ee".into() },
+        scene: SceneSummary {
+            name: "tb".into(),
+            kind: SceneKind::Planar,
+            n: 4,
+            m: 2,
+            op_dim: 3,
+            op_name: "ee".into(),
+            length_scale: 0.0625,
+        },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 500.0,
         gains: RecommendedGains { k_j: 2048.0, b_j: 16.0, k_pc: vec![512.0, 512.0, 4.0], b_pc: vec![2.0, 2.0, 0.25] },
@@ -83,6 +91,7 @@ const WELCOME_BYTES: &[&str] = &[
     "02",               // scene.m 2
     "03",               // scene.op_dim 3
     "02 6565",          // scene.op_name "ee"
+    "000000000000b03f", // scene.length_scale 0.0625
     "0000000000408f40", // ve_rate_hz 1000.0
     "0000000000407f40", // snapshot_rate_hz 500.0
     "000000000000a040", // gains.k_j 2048.0

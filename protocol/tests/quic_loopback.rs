@@ -66,6 +66,7 @@ fn validate(hello: &Hello) -> Result<Welcome, Refused> {
             m: shape.m as u32,
             op_dim: 3,
             op_name: "ee".into(),
+            length_scale: 0.05,
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 1000.0,

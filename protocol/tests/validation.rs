@@ -144,7 +144,15 @@ fn welcome_with_a_wrong_op_dimension_is_refused() {
     let welcome = Welcome {
         session_id: 1,
         user_id: 1,
-        scene: SceneSummary { name: "s".into(), kind: SceneKind::Spatial, n: 6, m: 0, op_dim: 3, op_name: "ee".into() },
+        scene: SceneSummary {
+            name: "s".into(),
+            kind: SceneKind::Spatial,
+            n: 6,
+            m: 0,
+            op_dim: 3,
+            op_name: "ee".into(),
+            length_scale: 0.05,
+        },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 1000.0,
         gains: RecommendedGains { k_j: 1.0, b_j: 1.0, k_pc: vec![1.0; 6], b_pc: vec![1.0; 6] },

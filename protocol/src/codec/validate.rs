@@ -72,6 +72,7 @@ pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
 fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
     text(Field::at("welcome.scene.name"), &s.name)?;
     text(Field::at("welcome.scene.op_name"), &s.op_name)?;
+    scalar(Field::at("welcome.scene.length_scale"), s.length_scale, 1e-9, MAX_POSITION)?;
     count(Field::at("welcome.scene.n"), s.n as usize, MAX_COORDINATES)?;
     count(Field::at("welcome.scene.m"), s.m as usize, MAX_CLOSURE_ROWS)?;
     if usize::from(s.op_dim) != s.kind.op_dim() {

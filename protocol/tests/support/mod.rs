@@ -216,7 +216,15 @@ fn welcome() -> impl Strategy<Value = Welcome> {
             (vec(0.0..1e4, k), vec(0.0..1e2, k)).prop_map(move |(k_pc, b_pc)| Welcome {
                 session_id,
                 user_id,
-                scene: SceneSummary { name: name.clone(), kind, n, m, op_dim: k as u8, op_name: op_name.clone() },
+                scene: SceneSummary {
+                    name: name.clone(),
+                    kind,
+                    n,
+                    m,
+                    op_dim: k as u8,
+                    op_name: op_name.clone(),
+                    length_scale: 0.05,
+                },
                 ve_rate_hz,
                 snapshot_rate_hz,
                 gains: RecommendedGains { k_j, b_j, k_pc, b_pc },
