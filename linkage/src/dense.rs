@@ -6,13 +6,15 @@ use nalgebra::{DMatrix, DVector};
 /// Diagonal-pivoted, rank-revealing Cholesky of the symmetric positive semi-definite `s` into the lower
 /// triangle of `l`, in pivoted order (`perm[k]` = row eliminated at step k). A row is dependent when its
 /// remaining pivot falls below `tolerance` times its own original diagonal, which makes the decision
-/// independent of each row's units. Returns the numerical rank. `scale` is scratch of length m.
+/// independent of each row's units. At most `max_rank` rows are kept. Returns the numerical rank. `scale`
+/// is scratch of length m.
 pub fn pivoted_cholesky(
     s: &DMatrix<f64>,
     l: &mut DMatrix<f64>,
     perm: &mut [usize],
     scale: &mut DVector<f64>,
     tolerance: f64,
+    max_rank: usize,
 ) -> usize {
     let m = s.nrows();
     l.copy_from(s);
@@ -20,7 +22,7 @@ pub fn pivoted_cholesky(
         *p = i;
         scale[i] = s[(i, i)].max(f64::MIN_POSITIVE);
     }
-    for k in 0..m {
+    for k in 0..m.min(max_rank) {
         let mut best = k;
         let mut best_ratio = -1.0;
         for p in k..m {
@@ -43,15 +45,17 @@ pub fn pivoted_cholesky(
         for i in k + 1..m {
             l[(i, k)] /= lkk;
         }
+        // Update the whole trailing block, both triangles: the symmetric row/column swaps of later pivots
+        // read entries from either side of the diagonal.
         for j in k + 1..m {
             let ljk = l[(j, k)];
-            for i in j..m {
+            for i in k + 1..m {
                 let v = l[(i, k)] * ljk;
                 l[(i, j)] -= v;
             }
         }
     }
-    m
+    m.min(max_rank)
 }
 
 /// Solves `S x = r` in place with a factor from [`pivoted_cholesky`]; rows beyond the rank get `x = 0`.

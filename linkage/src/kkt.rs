@@ -11,9 +11,13 @@
 //! parallelogram, a spherical four-bar closed by a 5-equation revolute cut, a four-bar at a toggle). We never
 //! invert it: S is factored by a *diagonal-pivoted (rank-revealing) Cholesky* that picks, at each step, the
 //! closure row with the largest remaining pivot relative to its own diagonal `S_ii` (so the choice does not
-//! depend on units) and stops when that ratio falls below [`RANK_TOLERANCE`]. The rows left over are linear
-//! combinations of the kept ones: their multipliers are set to zero. q̈ is unique whatever W's rank, so this
-//! gives the exact accelerations; λ is the basic solution on the independent rows (not the minimum-norm one).
+//! depend on units), and stops when that ratio falls below [`RANK_TOLERANCE`] or when it has kept
+//! `Model::closure_rank` rows — the *generic* rank of W, found once at compile time by SVD on the manifold.
+//! The cap matters: off the manifold (drift, or an RK4 stage state) structurally redundant rows are no
+//! longer exactly dependent; their spurious singular value is proportional to the drift, and keeping such a
+//! row would produce enormous multipliers and lock the mechanism. The rows left over get λ = 0; pivoting
+//! still chooses which rows to keep at every solve, so the choice follows the motion. q̈ is unique whatever
+//! W's rank, so this gives the exact accelerations; λ is the basic solution on the kept rows.
 
 use nalgebra::DVector;
 
@@ -37,10 +41,18 @@ pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), D
         kkt.factor += &data.implicit_mass;
     }
     ltl::factor(model, &mut kkt.factor)?;
+    factor_closures(model, data);
+    Ok(())
+}
+
+/// With the mass factor U in place, forms `Z = U⁻¹ Wᵀ`, `S = Zᵀ Z` and the pivoted factor of S from the
+/// current `closure_jacobian_t`.
+pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let m = model.nc();
     if m == 0 {
-        return Ok(());
+        return;
     }
+    let kkt = &mut data.kkt;
     kkt.z.copy_from(&data.closure_jacobian_t);
     let n = model.nq();
     for r in 0..m {
@@ -48,9 +60,14 @@ pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), D
         ltl::solve_u(model, &kkt.factor, col);
     }
     kkt.z.tr_mul_to(&kkt.z, &mut kkt.schur);
-    kkt.schur_rank =
-        dense::pivoted_cholesky(&kkt.schur, &mut kkt.schur_factor, &mut kkt.schur_perm, &mut kkt.tmp_m, RANK_TOLERANCE);
-    Ok(())
+    kkt.schur_rank = dense::pivoted_cholesky(
+        &kkt.schur,
+        &mut kkt.schur_factor,
+        &mut kkt.schur_perm,
+        &mut kkt.tmp_m,
+        RANK_TOLERANCE,
+        model.closure_rank,
+    );
 }
 
 /// Solves `S x = r` in place on the independent rows of the pivoted factor; dependent rows get `x = 0`.

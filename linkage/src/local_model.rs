@@ -383,6 +383,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
                 &mut self.perm,
                 &mut self.tmp_m,
                 RANK_TOLERANCE,
+                m,
             );
         }
         // Response to an OP wrench, column by column: M = P Ĵᵀ.
@@ -424,7 +425,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
     fn op_velocity(&self) -> S::OpVec {
         let mut v = S::OpVec::zero();
         for c in 0..S::DIM {
-            v[c] = self.terms.op_jacobian.row(c).transpose().dot(&self.qd);
+            v[c] = row_dot(&self.terms.op_jacobian, c, &self.qd);
         }
         v
     }
@@ -436,7 +437,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
         self.tmp_n.gemv(1.0, &self.response, &as_column(wrench), 1.0);
         let mut acc = S::OpVec::zero();
         for c in 0..S::DIM {
-            acc[c] = self.terms.op_jacobian.row(c).transpose().dot(&self.tmp_n) + self.terms.op_bias[c];
+            acc[c] = row_dot(&self.terms.op_jacobian, c, &self.tmp_n) + self.terms.op_bias[c];
         }
         self.qd.axpy(dt, &self.tmp_n, 1.0);
         self.q.axpy(dt, &self.qd, 1.0);
@@ -452,11 +453,17 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
         let mut out = S::OpMat::zero();
         for c in 0..S::DIM {
             for r in 0..S::DIM {
-                out[(r, c)] = self.terms.op_jacobian.row(r).transpose().dot(&self.response.column(c));
+                out[(r, c)] =
+                    self.terms.op_jacobian.row(r).iter().zip(self.response.column(c).iter()).map(|(a, b)| a * b).sum();
             }
         }
         out
     }
+}
+
+/// `Σ_j a[r, j] x[j]` without materializing the row.
+fn row_dot(a: &DMatrix<f64>, r: usize, x: &DVector<f64>) -> f64 {
+    a.row(r).iter().zip(x.iter()).map(|(a, b)| a * b).sum()
 }
 
 /// Operational velocity of `op` at the last `forward_velocity`.

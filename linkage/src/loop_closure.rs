@@ -14,15 +14,28 @@ use crate::space::{Space, VecOps};
 /// Fills `closure_residual` (h), `closure_jacobian_t` (Wᵀ) and `closure_bias` (w). Needs
 /// `forward_kinematics` and `forward_velocity`.
 pub fn loop_closure<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    evaluate(model, data, true);
+    evaluate(model, data, Outputs::JacobianAndBias);
 }
 
 /// Fills only `closure_residual` (h). Needs `forward_kinematics`.
 pub fn closure_residual<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    evaluate(model, data, false);
+    evaluate(model, data, Outputs::Residual);
 }
 
-fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, derivatives: bool) {
+/// Fills h and Wᵀ, not w (which needs velocities). Needs `forward_kinematics`.
+pub fn closure_residual_and_jacobian<S: Space>(model: &Model<S>, data: &mut Data<S>) {
+    evaluate(model, data, Outputs::Jacobian);
+}
+
+/// What to compute besides h.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Outputs {
+    Residual,
+    Jacobian,
+    JacobianAndBias,
+}
+
+fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, outputs: Outputs) {
     if !model.has_loops() {
         return;
     }
@@ -30,7 +43,7 @@ fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, derivatives: bool) {
     let wt = &mut data.closure_jacobian_t;
     let h = &mut data.closure_residual;
     let w = &mut data.closure_bias;
-    if derivatives {
+    if outputs != Outputs::Residual {
         wt.fill(0.0);
     }
     for cut in &model.cuts {
@@ -38,28 +51,33 @@ fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, derivatives: bool) {
         for prim in &cut.primitives {
             match prim {
                 ClosurePrimitive::Coincident { a, b } => {
-                    coincident(model, kin, a, b, row, h, derivatives.then_some((&mut *wt, &mut *w)))
+                    coincident(model, kin, a, b, row, h, derivatives(outputs, wt, w))
                 }
                 ClosurePrimitive::OnPlane { a, normal_a, b } => {
-                    on_plane(model, kin, a, normal_a, b, row, h, derivatives.then_some((&mut *wt, &mut *w)))
+                    on_plane(model, kin, a, normal_a, b, row, h, derivatives(outputs, wt, w))
                 }
-                ClosurePrimitive::Perpendicular { body_a, dir_a, body_b, dir_b } => perpendicular(
-                    model,
-                    kin,
-                    *body_a,
-                    dir_a,
-                    *body_b,
-                    dir_b,
-                    row,
-                    h,
-                    derivatives.then_some((&mut *wt, &mut *w)),
-                ),
+                ClosurePrimitive::Perpendicular { body_a, dir_a, body_b, dir_b } => {
+                    perpendicular(model, kin, *body_a, dir_a, *body_b, dir_b, row, h, derivatives(outputs, wt, w))
+                }
                 ClosurePrimitive::SameAngle { body_a, body_b, offset } => {
-                    same_angle(model, kin, *body_a, *body_b, offset, row, h, derivatives.then_some((&mut *wt, &mut *w)))
+                    same_angle(model, kin, *body_a, *body_b, offset, row, h, derivatives(outputs, wt, w))
                 }
             }
             row += prim.rows();
         }
+    }
+}
+
+/// The optional outputs of a primitive: Wᵀ (unless only h is wanted) and w (when wanted too).
+fn derivatives<'a>(
+    outputs: Outputs,
+    wt: &'a mut DMatrix<f64>,
+    w: &'a mut DVector<f64>,
+) -> Option<(&'a mut DMatrix<f64>, Option<&'a mut DVector<f64>>)> {
+    match outputs {
+        Outputs::Residual => None,
+        Outputs::Jacobian => Some((wt, None)),
+        Outputs::JacobianAndBias => Some((wt, Some(w))),
     }
 }
 
@@ -134,7 +152,7 @@ fn coincident<S: Space>(
     b: &Attachment<S>,
     row: usize,
     h: &mut DVector<f64>,
-    derivatives: Option<(&mut DMatrix<f64>, &mut DVector<f64>)>,
+    derivatives: Option<(&mut DMatrix<f64>, Option<&mut DVector<f64>>)>,
 ) {
     let pa = kin.point(a);
     let pb = kin.point(b);
@@ -143,12 +161,13 @@ fn coincident<S: Space>(
         h[row + k] = gap.as_slice()[k];
     }
     let Some((wt, w)) = derivatives else { return };
+    add_point_rows(model, kin, a.body, &pa, 1.0, None, row, wt);
+    add_point_rows(model, kin, b.body, &pb, -1.0, None, row, wt);
+    let Some(w) = w else { return };
     let acc = kin.point_bias_acceleration(a.body, &pa) - kin.point_bias_acceleration(b.body, &pb);
     for k in 0..<S::Point as VecOps>::LEN {
         w[row + k] = acc.as_slice()[k];
     }
-    add_point_rows(model, kin, a.body, &pa, 1.0, None, row, wt);
-    add_point_rows(model, kin, b.body, &pb, -1.0, None, row, wt);
 }
 
 /// `h = n·d` with `n` fixed in a and `d = p_b - p_a`.
@@ -163,7 +182,7 @@ fn on_plane<S: Space>(
     b: &Attachment<S>,
     row: usize,
     h: &mut DVector<f64>,
-    derivatives: Option<(&mut DMatrix<f64>, &mut DVector<f64>)>,
+    derivatives: Option<(&mut DMatrix<f64>, Option<&mut DVector<f64>>)>,
 ) {
     let pa = kin.point(a);
     let pb = kin.point(b);
@@ -175,7 +194,7 @@ fn on_plane<S: Space>(
     add_angular_rows(model, kin, a.body, 1.0, Some(&n_cross_d), row, wt);
     add_point_rows(model, kin, a.body, &pa, -1.0, Some(&n), row, wt);
     add_point_rows(model, kin, b.body, &pb, 1.0, Some(&n), row, wt);
-
+    let Some(w) = w else { return };
     let omega_a = S::spatial_ang(&kin.velocity(a.body));
     let alpha_a = S::spatial_ang(&kin.bias_accel(a.body));
     let n_dot = S::ang_cross_point(&omega_a, &n);
@@ -199,7 +218,7 @@ fn perpendicular<S: Space>(
     dir_b: &S::Point,
     row: usize,
     h: &mut DVector<f64>,
-    derivatives: Option<(&mut DMatrix<f64>, &mut DVector<f64>)>,
+    derivatives: Option<(&mut DMatrix<f64>, Option<&mut DVector<f64>>)>,
 ) {
     let d = kin.direction(body_a, dir_a);
     let e = kin.direction(body_b, dir_b);
@@ -208,6 +227,7 @@ fn perpendicular<S: Space>(
     let c = S::point_cross_point(&d, &e);
     add_angular_rows(model, kin, body_a, 1.0, Some(&c), row, wt);
     add_angular_rows(model, kin, body_b, -1.0, Some(&c), row, wt);
+    let Some(w) = w else { return };
     let (omega_a, omega_b) = (S::spatial_ang(&kin.velocity(body_a)), S::spatial_ang(&kin.velocity(body_b)));
     let (alpha_a, alpha_b) = (S::spatial_ang(&kin.bias_accel(body_a)), S::spatial_ang(&kin.bias_accel(body_b)));
     let c_dot = S::point_cross_point(&S::ang_cross_point(&omega_a, &d), &e)
@@ -225,7 +245,7 @@ fn same_angle<S: Space>(
     offset: &S::Rot,
     row: usize,
     h: &mut DVector<f64>,
-    derivatives: Option<(&mut DMatrix<f64>, &mut DVector<f64>)>,
+    derivatives: Option<(&mut DMatrix<f64>, Option<&mut DVector<f64>>)>,
 ) {
     let relative = S::rot_mul(&S::rot_inverse(&kin.rot(body_b)), &kin.rot(body_a));
     let err = S::rot_log(&S::rot_mul(&S::rot_inverse(offset), &relative));
@@ -233,12 +253,13 @@ fn same_angle<S: Space>(
         h[row + k] = err.as_slice()[k];
     }
     let Some((wt, w)) = derivatives else { return };
+    add_angular_rows(model, kin, body_a, 1.0, None, row, wt);
+    add_angular_rows(model, kin, body_b, -1.0, None, row, wt);
+    let Some(w) = w else { return };
     let acc = S::spatial_ang(&kin.bias_accel(body_a)) - S::spatial_ang(&kin.bias_accel(body_b));
     for k in 0..<S::Angular as VecOps>::LEN {
         w[row + k] = acc.as_slice()[k];
     }
-    add_angular_rows(model, kin, body_a, 1.0, None, row, wt);
-    add_angular_rows(model, kin, body_b, -1.0, None, row, wt);
 }
 
 #[cfg(test)]

@@ -232,6 +232,8 @@ pub struct Model<S: Space> {
     pub cuts: Vec<Cut<S>>,
     /// Total number of closure equations m.
     pub closure_rows: usize,
+    /// Generic rank of the closure Jacobian W on the constraint manifold (m minus the redundant closures).
+    pub closure_rank: usize,
     /// Operational points.
     pub ops: Vec<OpPoint<S>>,
     /// Obstacles.
@@ -681,6 +683,7 @@ impl<S: Space> Compiler<'_, S> {
             chain_prefix,
             cuts: Vec::new(),
             closure_rows: 0,
+            closure_rank: 0,
             ops,
             obstacles,
             gravity,
@@ -691,6 +694,7 @@ impl<S: Space> Compiler<'_, S> {
             qd0,
         };
         self.compile_cuts(&mut model, &new_names)?;
+        model.closure_rank = generic_closure_rank(&model);
         Ok(model)
     }
 
@@ -829,6 +833,32 @@ impl<S: Space> Compiler<'_, S> {
         model.closure_rows = row;
         Ok(())
     }
+}
+
+/// The generic rank of W on the constraint manifold: the largest numerical rank (SVD, relative tolerance
+/// 1e-8) at q0 and at a few closed configurations near it (q0 may sit at a singular configuration).
+fn generic_closure_rank<S: Space>(model: &Model<S>) -> usize {
+    let m = model.closure_rows;
+    if m == 0 {
+        return 0;
+    }
+    let rank_at = |q: &DVector<f64>| {
+        let mut data = Data::new(model);
+        kinematics::forward_kinematics(model, &mut data, q);
+        crate::loop_closure::closure_residual_and_jacobian(model, &mut data);
+        let sv = data.closure_jacobian_t.clone().svd(false, false).singular_values;
+        let max = sv.max();
+        sv.iter().filter(|s| **s > 1e-8 * max).count()
+    };
+    let mut rank = rank_at(&model.q0);
+    for k in 1..=3 {
+        let perturbed =
+            DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.02 * ((i * 7 + k * 13) % 11) as f64 / 11.0 - 0.01);
+        if let Ok(a) = crate::assemble::assemble(model, &perturbed, 1e-12 * model.length_scale) {
+            rank = rank.max(rank_at(&a.q));
+        }
+    }
+    rank.min(m)
 }
 
 /// An orthonormal basis whose first vector is `first` (or the standard basis).

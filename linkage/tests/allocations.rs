@@ -1,0 +1,83 @@
+//! The hot paths allocate nothing: a counting global allocator watches a VE step (both integrators, with
+//! projection and external forces), the operational-space inertia with its SVD, and both local models.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use kinloop_linkage::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::local_model::{
+    op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpPose, OpSpaceLocalModel,
+};
+use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use nalgebra::Vector3;
+
+struct Counting;
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_during(f: impl FnOnce()) -> usize {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    f();
+    ALLOCATIONS.load(Ordering::SeqCst) - before
+}
+
+// One test function only: the counter is global, and tests in one binary run on parallel threads.
+#[test]
+fn hot_paths_allocate_nothing() {
+    for name in ["paper-testbed", "chain20_loops5", "serial-arm", "slider-crank"] {
+        let scene = builtin::scene(name).unwrap().unwrap();
+        let model: Model<Planar> = Model::compile(&scene, name).unwrap();
+        let mut data = Data::new(&model);
+        let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
+        let mut user = OpWrench::<Planar> { op: 0, wrench: Vector3::from(PAPER_WRENCH) };
+        let mut contacts = kinloop_linkage::contact::PenaltyContacts::new(&model);
+        let mut terms = ConfigSpaceTerms::zeros(model.nq(), model.nc(), 3);
+        let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nq(), model.nc());
+        let mut reduced =
+            OpSpaceLocalModel::new(op_space_terms(&data, &user.wrench, LocalModelTerms::full()), OpPose::identity());
+        for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
+            let cfg = StepConfig { integrator, dt: 1e-3, project: true, implicit_forces: true };
+            // Warm up once (nothing should be lazily allocated, but be fair).
+            step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).unwrap();
+            let n = allocations_during(|| {
+                for _ in 0..100 {
+                    step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).unwrap();
+                    step(&model, &mut data, &mut q, &mut qd, &mut contacts, &cfg).unwrap();
+                }
+            });
+            assert_eq!(n, 0, "{name}: {integrator:?} step allocated {n} times");
+        }
+        let n = allocations_during(|| {
+            forward_dynamics(&model, &mut data, &q, &qd, &mut user).unwrap();
+            op_space_inertia(&model, &mut data, 0).unwrap();
+            let cd = constraint_directions::<Planar>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+            assert!(cd.count >= 1 || model.nc() == 0);
+            reduced.terms = op_space_terms(&data, &user.wrench, LocalModelTerms::full());
+            terms.fill_from(&model, &data, &q, &qd, &user.wrench, LocalModelTerms::full());
+            assert!(config.update(&terms, OpPose::of_op(&model, &data, 0)));
+            for _ in 0..100 {
+                reduced.step(1e-3, &user.wrench);
+                config.step(1e-3, &user.wrench);
+            }
+        });
+        assert_eq!(n, 0, "{name}: op space, SVD and local models allocated {n} times");
+    }
+}
