@@ -1,1 +1,17 @@
-//! kinloop-server (work in progress).
+//! # kinloop-server
+//!
+//! The VE host: one linkage with kinematic loops, simulated exactly, that several people grab at once through
+//! their haptic devices.
+//!
+//! - [`core`]: [`VeCore`], the virtual environment as a sans-IO state machine (users, couplings, passivity,
+//!   guards, snapshots), driven with time as an argument;
+//! - [`access`]: tokens and roles, compared in constant time;
+//! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
+//!   network, lock-free rings between them; [`Server::start`] runs it in-process;
+//! - [`bench`]: the numbers `kinloop bench` reports.
+
+pub mod core;
+
+pub use crate::core::{
+    JoinRequest, Joined, UplinkRejection, UplinkSample, UserId, VeConfig, VeCore, VeEvent, VeMetrics,
+};

@@ -1,0 +1,247 @@
+//! What a [`VeCore`](super::VeCore) is told at construction: rates, integration, coupling gains, fades,
+//! guards. Every field has the paper's value or a documented default.
+
+use std::time::Duration;
+
+use kinloop_linkage::{Integrator, Space, VecOps};
+use kinloop_protocol::RecommendedGains;
+
+/// Gains along the operational axes: the same value on every linear axis and on every angular axis, or one
+/// value per axis (`k` of them, linear axes first).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum AxisGains {
+    /// `linear` on x, y (, z) and `angular` on θ (or on ωx, ωy, ωz).
+    Uniform {
+        /// Gain on each linear axis (N/m or N·s/m).
+        linear: f64,
+        /// Gain on each angular axis (N·m/rad or N·m·s/rad).
+        angular: f64,
+    },
+    /// One gain per operational axis, linear first.
+    PerAxis(Vec<f64>),
+}
+
+impl AxisGains {
+    /// The gains as an operational vector of space `S`.
+    pub fn resolve<S: Space>(&self, what: &'static str) -> Result<S::OpVec, VeConfigError> {
+        let lin = <S::Point as VecOps>::LEN;
+        let mut out = S::OpVec::zero();
+        match self {
+            AxisGains::Uniform { linear, angular } => {
+                for axis in 0..S::DIM {
+                    out[axis] = if axis < lin { *linear } else { *angular };
+                }
+            }
+            AxisGains::PerAxis(values) => {
+                if values.len() != S::DIM {
+                    return Err(VeConfigError::GainLength { what, got: values.len(), expected: S::DIM });
+                }
+                out.as_mut_slice().copy_from_slice(values);
+            }
+        }
+        if let Some(&value) = out.as_slice().iter().find(|g| !(g.is_finite() && **g >= 0.0)) {
+            return Err(VeConfigError::Gain { what, value });
+        }
+        Ok(out)
+    }
+}
+
+/// Sanity limits on what a client may report (see `guards`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GuardLimits {
+    /// Largest distance between a client's local-model OP and the VE's OP (m): farther is a broken client.
+    pub max_model_offset_m: f64,
+    /// Largest linear speed of a local-model OP (m/s).
+    pub max_model_speed_m_per_s: f64,
+    /// Largest angular speed of a local-model OP (rad/s).
+    pub max_model_angular_speed_rad_per_s: f64,
+    /// Hand force limit when the device announced none (N).
+    pub default_max_force_n: f64,
+    /// Hand torque limit when the device announced none (N·m).
+    pub default_max_torque_nm: f64,
+    /// Slack over the device's announced peak force and torque before a wrench counts as absurd (fraction).
+    pub device_cap_slack: f64,
+    /// A burst of rejected uplinks ends after this long without a rejection (one log line per burst).
+    pub rejection_burst_quiet: Duration,
+}
+
+impl Default for GuardLimits {
+    fn default() -> Self {
+        GuardLimits {
+            max_model_offset_m: 1.0,
+            max_model_speed_m_per_s: 20.0,
+            max_model_angular_speed_rad_per_s: 200.0,
+            default_max_force_n: 100.0,
+            default_max_torque_nm: 10.0,
+            device_cap_slack: 0.05,
+            rejection_burst_quiet: Duration::from_secs(1),
+        }
+    }
+}
+
+/// Configuration of a [`VeCore`](super::VeCore).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VeConfig {
+    /// Rate of the VE loop (Hz); each tick is one integrator step of `1 / ve_rate_hz`.
+    pub ve_rate_hz: f64,
+    /// Rate at which every user's snapshot is built (Hz), at most `ve_rate_hz`.
+    pub snapshot_rate_hz: f64,
+    /// Integration scheme.
+    pub integrator: Integrator,
+    /// Project q and q̇ onto the closure manifold after each step.
+    pub projection: bool,
+    /// Treat the graphics-controller PD linearly implicitly (semi-implicit Euler only): stable for any gains.
+    /// Off reproduces the explicit coupling of the stability experiment.
+    pub implicit_coupling: bool,
+    /// Graphics-controller stiffness K_g per operational axis (paper: 1000 N/m, 1000 N/m, 10000 N·m/rad).
+    pub coupling_stiffness: AxisGains,
+    /// Graphics-controller damping B_g per operational axis (paper: 100 N·s/m, 100 N·s/m, 10000 N·m·s/rad).
+    pub coupling_damping: AxisGains,
+    /// Penalty contact stiffness (N/m); `None` takes the scene's (paper: 15,000 N/m).
+    pub contact_stiffness: Option<f64>,
+    /// Penalty contact damping (N·s/m); `None` takes the scene's (paper: 300 N·s/m).
+    pub contact_damping: Option<f64>,
+    /// Contacts closer than this gap (m) are sent to clients as local-model contact terms.
+    pub contact_margin_m: f64,
+    /// Time-domain passivity observer/controller on every coupling.
+    pub passivity: bool,
+    /// Largest damping (N·s/m, and N·m·s/rad per L²) the passivity controller may add in one tick.
+    pub passivity_max_damping: f64,
+    /// Duration of a coupling's fade in or out (raised cosine).
+    pub fade_time: Duration,
+    /// A manipulator whose uplinks stop this long fades out until they resume.
+    pub silent_timeout: Duration,
+    /// Most users at once (leaving users still fading out do not count).
+    pub max_users: usize,
+    /// Controller gains recommended to clients (clamped to each device's capabilities).
+    pub recommended_gains: RecommendedGains,
+    /// Limits on what clients may report.
+    pub guards: GuardLimits,
+    /// Most overdue ticks one `handle_timeout` runs; beyond that the VE skips ahead (and counts it) instead
+    /// of running a burst that would make it later still.
+    pub max_catch_up_ticks: u32,
+    /// Seed of the session ids handed out in welcomes.
+    pub session_seed: u64,
+}
+
+impl VeConfig {
+    /// The paper's VE for a scene of space `S`: 1 kHz, semi-implicit Euler with projection and implicit
+    /// coupling, K_g = (1000, 1000, 10000), B_g = (100, 100, 10000), the scene's contacts.
+    pub fn paper() -> Self {
+        VeConfig {
+            ve_rate_hz: 1000.0,
+            snapshot_rate_hz: 1000.0,
+            integrator: Integrator::SemiImplicitEuler,
+            projection: true,
+            implicit_coupling: true,
+            coupling_stiffness: AxisGains::Uniform { linear: 1000.0, angular: 10_000.0 },
+            coupling_damping: AxisGains::Uniform { linear: 100.0, angular: 10_000.0 },
+            contact_stiffness: None,
+            contact_damping: None,
+            contact_margin_m: 0.005,
+            passivity: false,
+            passivity_max_damping: 1.0e4,
+            fade_time: Duration::from_millis(200),
+            silent_timeout: Duration::from_millis(250),
+            max_users: 16,
+            recommended_gains: RecommendedGains { k_j: 3000.0, b_j: 30.0, k_pc: Vec::new(), b_pc: Vec::new() },
+            guards: GuardLimits::default(),
+            max_catch_up_ticks: 10,
+            session_seed: 0x6b69_6e6c_6f6f_70,
+        }
+    }
+
+    /// VE period.
+    pub fn ve_period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.ve_rate_hz)
+    }
+
+    /// Snapshot period.
+    pub fn snapshot_period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.snapshot_rate_hz)
+    }
+
+    /// Checks the numbers; called by [`VeCore::new`](super::VeCore::new).
+    pub fn validate(&self) -> Result<(), VeConfigError> {
+        let rate_ok = |r: f64| r.is_finite() && (1.0..=100_000.0).contains(&r);
+        if !rate_ok(self.ve_rate_hz) {
+            return Err(VeConfigError::Rate { what: "ve_rate_hz", value: self.ve_rate_hz });
+        }
+        if !rate_ok(self.snapshot_rate_hz) || self.snapshot_rate_hz > self.ve_rate_hz {
+            return Err(VeConfigError::Rate { what: "snapshot_rate_hz", value: self.snapshot_rate_hz });
+        }
+        let non_negative = [
+            ("contact_margin_m", self.contact_margin_m),
+            ("passivity_max_damping", self.passivity_max_damping),
+            ("contact_stiffness", self.contact_stiffness.unwrap_or(0.0)),
+            ("contact_damping", self.contact_damping.unwrap_or(0.0)),
+            ("guards.max_model_offset_m", self.guards.max_model_offset_m),
+            ("guards.max_model_speed_m_per_s", self.guards.max_model_speed_m_per_s),
+            ("guards.max_model_angular_speed_rad_per_s", self.guards.max_model_angular_speed_rad_per_s),
+            ("guards.default_max_force_n", self.guards.default_max_force_n),
+            ("guards.default_max_torque_nm", self.guards.default_max_torque_nm),
+            ("guards.device_cap_slack", self.guards.device_cap_slack),
+        ];
+        if let Some((what, value)) = non_negative.into_iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            return Err(VeConfigError::Negative { what, value });
+        }
+        if self.fade_time.is_zero() {
+            return Err(VeConfigError::Negative { what: "fade_time", value: 0.0 });
+        }
+        if self.max_users == 0 || self.max_users > kinloop_protocol::codec::limits::MAX_LIST_ENTRIES {
+            return Err(VeConfigError::MaxUsers { value: self.max_users });
+        }
+        Ok(())
+    }
+}
+
+impl Default for VeConfig {
+    fn default() -> Self {
+        VeConfig::paper()
+    }
+}
+
+/// A [`VeConfig`] that cannot run.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum VeConfigError {
+    /// A rate outside 1 Hz..100 kHz, or a snapshot rate above the VE rate.
+    #[error("{what} = {value} Hz must be between 1 and 100000 Hz (snapshots no faster than the VE)")]
+    Rate {
+        /// Which rate.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A gain vector of the wrong length.
+    #[error("{what} has {got} gains; this scene's operational space has {expected} axes")]
+    GainLength {
+        /// Which gains.
+        what: &'static str,
+        /// Given.
+        got: usize,
+        /// Needed.
+        expected: usize,
+    },
+    /// A negative or non-finite gain.
+    #[error("{what} gain {value} must be finite and ≥ 0")]
+    Gain {
+        /// Which gains.
+        what: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// A negative or non-finite setting (or a zero duration that must be positive).
+    #[error("{what} = {value} must be finite and positive or zero as documented")]
+    Negative {
+        /// Which setting.
+        what: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// `max_users` of 0 or more than a snapshot can list.
+    #[error("max_users = {value} must be between 1 and {}", kinloop_protocol::codec::limits::MAX_LIST_ENTRIES)]
+    MaxUsers {
+        /// The value.
+        value: usize,
+    },
+}

@@ -1,0 +1,240 @@
+//! The wrench each user applies to the VE, and how the integrator sees it.
+//!
+//! For a manipulator at operational point `op` with fade weight `w` (see `fade`), the paper's force channel
+//! plus graphics controller (section IV; Fig 3):
+//! ```text
+//! F = w · [ F_h + K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op) ] − α ⊙ ẋ_op
+//! ```
+//! with `x_lm, ẋ_lm` the client's local-model OP pose and twist (from its newest uplink), `x_op, ẋ_op` the
+//! VE's, `⊖` the pose difference (linear, rotation vector) and `α` the passivity controller's damper (zero
+//! unless `--passivity on` finds the coupling generating energy, see `passivity`). The wrench enters eq 4 as
+//! `Jᵀ F`.
+//!
+//! **Linearly implicit coupling.** The paper's gains (K_g up to 10⁴, B_g up to 10⁴ on a link with
+//! I = 0.0021 kg m²) are far too stiff for an explicit step at 1 kHz. Under semi-implicit Euler the PD is
+//! evaluated at the end of the step, linearized: `x_op⁺ ≈ x_op + h J q̇⁺`, `ẋ_op⁺ = J q̇⁺`, `q̇⁺ = q̇ + h q̈`,
+//! which moves `Jᵀ (w(hB + h²K) + hα) J` to the left of eq 4 and adds `−h Jᵀ (wK ⊙ ẋ_op)` on the right
+//! ([`Forces::add_implicit`]). The step is then stable for any gains; the wrench it effectively applied is
+//! `F − h wK ⊙ ẋ_op − (w(hB + h²K) + hα) ⊙ J q̈` ([`Coupling::implicit_correction`]).
+
+use kinloop_linkage::contact::PenaltyContacts;
+use kinloop_linkage::data::Kinematics;
+use kinloop_linkage::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity, support};
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::{Forces, Model, Space, VecOps};
+use nalgebra::{DMatrix, DVector};
+
+/// One user's coupling to the VE: its reference (the newest checked uplink), gains, weight, and what it
+/// computed at the last evaluation.
+#[derive(Clone, Debug)]
+pub struct Coupling<S: Space> {
+    /// Body carrying the user's operational point.
+    pub body: usize,
+    /// The operational point in the body's frame.
+    pub point: S::Point,
+    /// False for observers and for manipulators before their first uplink: no wrench at all.
+    pub pushes: bool,
+    /// Fade weight w ∈ [0, 1] for the current tick.
+    pub weight: f64,
+    /// F_h from the newest uplink.
+    pub hand_wrench: S::OpVec,
+    /// x_lm from the newest uplink.
+    pub target_pose: OpPose<S>,
+    /// ẋ_lm from the newest uplink.
+    pub target_twist: S::OpVec,
+    /// K_g per axis.
+    pub stiffness: S::OpVec,
+    /// B_g per axis.
+    pub damping: S::OpVec,
+    /// α per axis, the passivity controller's damper for the current tick.
+    pub dissipation: S::OpVec,
+    /// Jᵀ at the OP (n×k) at the last evaluation.
+    pub jacobian_t: DMatrix<f64>,
+    /// x_op at the last evaluation.
+    pub op_pose: OpPose<S>,
+    /// ẋ_op at the last evaluation.
+    pub op_twist: S::OpVec,
+    /// F at the last evaluation (explicit form).
+    pub wrench: S::OpVec,
+    /// The wrench the last step applied: the stage-weighted mean over the step's evaluations, plus the
+    /// implicit correction under semi-implicit Euler.
+    pub step_wrench: S::OpVec,
+}
+
+impl<S: Space> Coupling<S> {
+    /// A coupling at `(body, point)` that does not push yet; `nq` sizes the Jacobian.
+    pub fn new(body: usize, point: S::Point, nq: usize, stiffness: S::OpVec, damping: S::OpVec) -> Self {
+        Coupling {
+            body,
+            point,
+            pushes: false,
+            weight: 0.0,
+            hand_wrench: S::OpVec::zero(),
+            target_pose: OpPose::identity(),
+            target_twist: S::OpVec::zero(),
+            stiffness,
+            damping,
+            dissipation: S::OpVec::zero(),
+            jacobian_t: DMatrix::zeros(nq, S::DIM),
+            op_pose: OpPose::identity(),
+            op_twist: S::OpVec::zero(),
+            wrench: S::OpVec::zero(),
+            step_wrench: S::OpVec::zero(),
+        }
+    }
+
+    /// True when the coupling adds anything to the dynamics.
+    pub fn is_active(&self) -> bool {
+        self.pushes && (self.weight > 0.0 || self.dissipation.as_slice().iter().any(|a| *a > 0.0))
+    }
+
+    /// Updates pose, twist, Jacobian and wrench at the kinematic state `kin` (positions and velocities).
+    pub fn evaluate(&mut self, model: &Model<S>, kin: &Kinematics<S>) {
+        let rotation = kin.body_rot[self.body];
+        let position = kin.body_pos[self.body] + S::rotate(&rotation, &self.point);
+        self.op_pose = OpPose { position, rotation };
+        self.op_twist = frame_velocity(kin, self.body, &position);
+        if self.is_active() {
+            frame_jacobian_t(model, kin, self.body, &position, &mut self.jacobian_t);
+        }
+        self.wrench = self.explicit_wrench();
+    }
+
+    /// `F` of the module documentation at the last evaluated pose and twist.
+    fn explicit_wrench(&self) -> S::OpVec {
+        let mut f = S::OpVec::zero();
+        if !self.pushes {
+            return f;
+        }
+        let offset = self.target_pose.difference(&self.op_pose);
+        let w = self.weight;
+        for a in 0..S::DIM {
+            let pd = self.stiffness[a] * offset[a] + self.damping[a] * (self.target_twist[a] - self.op_twist[a]);
+            f[a] = w * (self.hand_wrench[a] + pd) - self.dissipation[a] * self.op_twist[a];
+        }
+        f
+    }
+
+    /// Per-axis coefficient `w(hB + h²K) + hα` moved to the mass side by the implicit treatment.
+    fn implicit_coefficient(&self, dt: f64) -> S::OpVec {
+        let mut c = S::OpVec::zero();
+        for a in 0..S::DIM {
+            c[a] = self.weight * (dt * self.damping[a] + dt * dt * self.stiffness[a]) + dt * self.dissipation[a];
+        }
+        c
+    }
+
+    /// `J v` for a joint-space vector `v`, touching only the joints that move the OP.
+    pub fn op_space_image(&self, model: &Model<S>, v: &DVector<f64>) -> S::OpVec {
+        let mut out = S::OpVec::zero();
+        for j in support(model, Some(self.body)) {
+            for a in 0..S::DIM {
+                out[a] += self.jacobian_t[(j, a)] * v[j];
+            }
+        }
+        out
+    }
+
+    /// What the implicit treatment added to the explicit wrench in a step of `dt` that produced `qdd`:
+    /// `−h wK ⊙ ẋ_op − (w(hB + h²K) + hα) ⊙ J q̈`.
+    pub fn implicit_correction(&self, model: &Model<S>, qdd: &DVector<f64>, dt: f64) -> S::OpVec {
+        let coefficient = self.implicit_coefficient(dt);
+        let accel = self.op_space_image(model, qdd);
+        let mut out = S::OpVec::zero();
+        for a in 0..S::DIM {
+            out[a] = -dt * self.weight * self.stiffness[a] * self.op_twist[a] - coefficient[a] * accel[a];
+        }
+        out
+    }
+
+    /// The part of the applied wrench that is not the human's own force: the PD and the passivity damper.
+    pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
+        if !self.pushes {
+            return S::OpVec::zero();
+        }
+        *wrench - self.hand_wrench * self.weight
+    }
+}
+
+/// Where the integrator's evaluations are recorded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Evaluation {
+    /// A step: each evaluation's wrench is accumulated into `step_wrench` with these stage weights.
+    Step(&'static [f64]),
+    /// An extra evaluation (snapshots): nothing is accumulated.
+    Probe,
+}
+
+/// Stage weights of an integrator's evaluations.
+pub fn stage_weights(integrator: kinloop_linkage::Integrator) -> &'static [f64] {
+    match integrator {
+        kinloop_linkage::Integrator::Rk4 => &[1.0 / 6.0, 2.0 / 6.0, 2.0 / 6.0, 1.0 / 6.0],
+        _ => &[1.0],
+    }
+}
+
+/// Every external force of the VE: the users' couplings and, when the scene has obstacles, the penalty
+/// contacts. One value per integrator call.
+pub struct VeForces<'a, S: Space> {
+    /// The couplings, one per user.
+    pub couplings: &'a mut [Coupling<S>],
+    /// Penalty contacts, when the scene has obstacles.
+    pub contacts: Option<&'a mut PenaltyContacts<S>>,
+    /// What to record.
+    pub evaluation: Evaluation,
+    /// Evaluations so far.
+    pub stage: usize,
+}
+
+impl<S: Space> Forces<S> for VeForces<'_, S> {
+    fn add_forces(&mut self, model: &Model<S>, kin: &Kinematics<S>, tau: &mut DVector<f64>) {
+        let stage_weight = match self.evaluation {
+            Evaluation::Step(weights) => weights.get(self.stage).copied(),
+            Evaluation::Probe => None,
+        };
+        for c in self.couplings.iter_mut() {
+            c.evaluate(model, kin);
+            if c.is_active() {
+                apply_wrench(model, kin, c.body, &c.op_pose.position, &c.wrench, tau);
+            }
+            if let Some(weight) = stage_weight {
+                c.step_wrench += c.wrench * weight;
+            }
+        }
+        self.stage += 1;
+        if let Some(contacts) = self.contacts.as_deref_mut() {
+            contacts.add_forces(model, kin, tau);
+        }
+    }
+
+    fn add_implicit(
+        &mut self,
+        model: &Model<S>,
+        _kin: &Kinematics<S>,
+        dt: f64,
+        _qd: &DVector<f64>,
+        implicit_mass: &mut DMatrix<f64>,
+        tau: &mut DVector<f64>,
+    ) -> bool {
+        let mut added = false;
+        for c in self.couplings.iter().filter(|c| c.is_active()) {
+            let coefficient = c.implicit_coefficient(dt);
+            let jt = &c.jacobian_t;
+            for i in support(model, Some(c.body)) {
+                // −h Jᵀ (wK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
+                for a in 0..S::DIM {
+                    tau[i] -= jt[(i, a)] * dt * c.weight * c.stiffness[a] * c.op_twist[a];
+                }
+                for j in support(model, Some(c.body)) {
+                    let mut m = 0.0;
+                    for a in 0..S::DIM {
+                        m += jt[(i, a)] * coefficient[a] * jt[(j, a)];
+                    }
+                    implicit_mass[(i, j)] += m;
+                }
+            }
+            added = true;
+        }
+        added
+    }
+}

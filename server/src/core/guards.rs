@@ -1,0 +1,217 @@
+//! What the VE refuses to act on. The codec has already checked bytes, lengths and gross magnitudes; here
+//! an uplink is checked against *physics*: a local model a metre away from the VE's OP, a model moving at
+//! 20 m/s, or a hand pushing harder than the device can are signs of a broken or hostile client. A
+//! rejected uplink changes nothing at all (not even the user's liveness or sequence number).
+
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::{Space, VecOps};
+use kinloop_protocol::{DeviceCaps, Uplink};
+
+use super::config::GuardLimits;
+
+/// Largest operational dimension (spatial).
+pub const MAX_OP_DIM: usize = 6;
+/// Largest pose length (spatial: position and quaternion).
+pub const MAX_POSE_LEN: usize = 7;
+
+/// The numbers of an [`Uplink`] the VE uses, in fixed-size storage so uplinks cross from the network to
+/// the VE thread without allocating or freeing. Build one with [`UplinkSample::from_uplink`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UplinkSample {
+    /// Per-client uplink counter.
+    pub seq: u64,
+    /// Client clock when sent (s).
+    pub client_time_s: f64,
+    /// Status bits (`kinloop_protocol::uplink_flags`).
+    pub flags: u32,
+    /// F_h, first `op_dim` entries used.
+    pub hand_wrench: [f64; MAX_OP_DIM],
+    /// Local-model OP pose, first `pose_len` entries used.
+    pub model_pose: [f64; MAX_POSE_LEN],
+    /// Local-model OP twist, first `op_dim` entries used.
+    pub model_twist: [f64; MAX_OP_DIM],
+    /// Length of the wrench and twist.
+    pub op_dim: u8,
+    /// Length of the pose.
+    pub pose_len: u8,
+}
+
+impl UplinkSample {
+    /// Copies the numbers the VE needs; fails only when a vector is longer than any scene uses.
+    pub fn from_uplink(uplink: &Uplink) -> Result<Self, UplinkRejection> {
+        let k = uplink.hand_wrench.len();
+        if k > MAX_OP_DIM || uplink.model_twist.len() != k {
+            return Err(UplinkRejection::WrongShape { field: "hand_wrench/model_twist" });
+        }
+        if uplink.model_pose.len() > MAX_POSE_LEN {
+            return Err(UplinkRejection::WrongShape { field: "model_pose" });
+        }
+        let mut sample = UplinkSample {
+            seq: uplink.seq,
+            client_time_s: uplink.client_time_s,
+            flags: uplink.flags,
+            hand_wrench: [0.0; MAX_OP_DIM],
+            model_pose: [0.0; MAX_POSE_LEN],
+            model_twist: [0.0; MAX_OP_DIM],
+            op_dim: k as u8,
+            pose_len: uplink.model_pose.len() as u8,
+        };
+        sample.hand_wrench[..k].copy_from_slice(&uplink.hand_wrench);
+        sample.model_twist[..k].copy_from_slice(&uplink.model_twist);
+        sample.model_pose[..uplink.model_pose.len()].copy_from_slice(&uplink.model_pose);
+        Ok(sample)
+    }
+}
+
+/// Why an uplink was not used. No variant owns heap memory, so rejecting allocates nothing.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum UplinkRejection {
+    /// No such user (never joined, or already removed).
+    #[error("no user {user}")]
+    UnknownUser {
+        /// The user id given.
+        user: u32,
+    },
+    /// Not newer than the last uplink used (a duplicate or a reordered datagram); ignored, not an attack.
+    #[error("uplink {seq} is not newer than {last}")]
+    Stale {
+        /// Its sequence number.
+        seq: u64,
+        /// The newest used so far.
+        last: u64,
+    },
+    /// A vector of the wrong length for this scene.
+    #[error("{field} has the wrong length for this scene")]
+    WrongShape {
+        /// Which field.
+        field: &'static str,
+    },
+    /// NaN or infinity.
+    #[error("{field} is not finite")]
+    NonFinite {
+        /// Which field.
+        field: &'static str,
+    },
+    /// An orientation that is not a rotation (e.g. a quaternion of the wrong norm).
+    #[error("model_pose has an invalid orientation")]
+    InvalidOrientation,
+    /// The local model is implausibly far from the VE's OP.
+    #[error("the local model is {offset_m:.3} m from the VE's operational point (limit {limit_m} m)")]
+    ModelTooFar {
+        /// Distance (m).
+        offset_m: f64,
+        /// Limit (m).
+        limit_m: f64,
+    },
+    /// The local model moves implausibly fast.
+    #[error("model_twist {field} speed {speed:.3} exceeds {limit}")]
+    ModelTooFast {
+        /// `linear` or `angular`.
+        field: &'static str,
+        /// Its norm.
+        speed: f64,
+        /// The limit.
+        limit: f64,
+    },
+    /// The hand wrench exceeds what the device can render.
+    #[error("hand {field} {magnitude:.3} exceeds the device's {limit:.3}")]
+    WrenchAboveLimit {
+        /// `force` or `torque`.
+        field: &'static str,
+        /// Its norm.
+        magnitude: f64,
+        /// The limit.
+        limit: f64,
+    },
+}
+
+impl UplinkRejection {
+    /// True for rejections that mean a broken or hostile client (counted and logged), false for the
+    /// ordinary stale/duplicate case of an unreliable network.
+    pub fn is_hostile(&self) -> bool {
+        !matches!(self, UplinkRejection::Stale { .. } | UplinkRejection::UnknownUser { .. })
+    }
+}
+
+/// The largest hand force and torque a user's device may report.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WrenchLimits {
+    /// Force (N).
+    pub max_force_n: f64,
+    /// Torque (N·m).
+    pub max_torque_nm: f64,
+}
+
+impl WrenchLimits {
+    /// From the device's announced peaks (with slack), or the defaults where it announced none.
+    pub fn for_device(device: Option<&DeviceCaps>, limits: &GuardLimits) -> Self {
+        let pick = |announced: Option<f64>, default: f64| match announced {
+            Some(peak) if peak > 0.0 => peak * (1.0 + limits.device_cap_slack),
+            _ => default,
+        };
+        WrenchLimits {
+            max_force_n: pick(device.map(|d| d.max_force_n), limits.default_max_force_n),
+            max_torque_nm: pick(device.map(|d| d.max_torque_nm), limits.default_max_torque_nm),
+        }
+    }
+}
+
+/// An uplink that passed the checks, in the VE's types.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CheckedUplink<S: Space> {
+    /// F_h.
+    pub hand_wrench: S::OpVec,
+    /// Local-model OP pose.
+    pub model_pose: OpPose<S>,
+    /// Local-model OP twist.
+    pub model_twist: S::OpVec,
+}
+
+/// Checks a sample against the scene's dimensions, the user's device and the VE's OP pose.
+pub fn check_uplink<S: Space>(
+    sample: &UplinkSample,
+    ve_op_pose: &OpPose<S>,
+    wrench_limits: &WrenchLimits,
+    limits: &GuardLimits,
+) -> Result<CheckedUplink<S>, UplinkRejection> {
+    let k = S::DIM;
+    if usize::from(sample.op_dim) != k {
+        return Err(UplinkRejection::WrongShape { field: "hand_wrench" });
+    }
+    if usize::from(sample.pose_len) != OpPose::<S>::wire_len() {
+        return Err(UplinkRejection::WrongShape { field: "model_pose" });
+    }
+    let pose_slice = &sample.model_pose[..usize::from(sample.pose_len)];
+    for (field, values) in [
+        ("hand_wrench", &sample.hand_wrench[..k]),
+        ("model_pose", pose_slice),
+        ("model_twist", &sample.model_twist[..k]),
+    ] {
+        if values.iter().any(|x| !x.is_finite()) {
+            return Err(UplinkRejection::NonFinite { field });
+        }
+    }
+    let hand_wrench = S::OpVec::from_slice(&sample.hand_wrench[..k]);
+    let model_twist = S::OpVec::from_slice(&sample.model_twist[..k]);
+    let model_pose = OpPose::<S>::from_slice(pose_slice).ok_or(UplinkRejection::InvalidOrientation)?;
+
+    let offset_m = (model_pose.position - ve_op_pose.position).norm();
+    if offset_m > limits.max_model_offset_m {
+        return Err(UplinkRejection::ModelTooFar { offset_m, limit_m: limits.max_model_offset_m });
+    }
+    let speeds = [
+        ("linear", S::op_lin(&model_twist).norm(), limits.max_model_speed_m_per_s),
+        ("angular", S::op_ang(&model_twist).norm(), limits.max_model_angular_speed_rad_per_s),
+    ];
+    if let Some((field, speed, limit)) = speeds.into_iter().find(|(_, speed, limit)| speed > limit) {
+        return Err(UplinkRejection::ModelTooFast { field, speed, limit });
+    }
+    let magnitudes = [
+        ("force", S::op_lin(&hand_wrench).norm(), wrench_limits.max_force_n),
+        ("torque", S::op_ang(&hand_wrench).norm(), wrench_limits.max_torque_nm),
+    ];
+    if let Some((field, magnitude, limit)) = magnitudes.into_iter().find(|(_, m, limit)| m > limit) {
+        return Err(UplinkRejection::WrenchAboveLimit { field, magnitude, limit });
+    }
+    Ok(CheckedUplink { hand_wrench, model_pose, model_twist })
+}

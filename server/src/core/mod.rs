@@ -1,0 +1,679 @@
+//! `VeCore`: the virtual environment as a sans-IO state machine.
+//!
+//! One linkage, many users. The core owns the scene's [`Model`], its [`Data`] workspace and the state
+//! `(q, q̇)`, and is driven entirely from outside, quinn-proto style: every method takes `&mut self`, time
+//! is a [`Duration`] argument since an arbitrary epoch, and nothing inside reads a clock, touches a socket,
+//! spawns a thread or takes a lock. The same core runs under the real-time driver and in virtual time.
+//!
+//! ```text
+//! join / leave ─────────────┐
+//! handle_uplink(now, ..) ───┤                ┌─► poll_snapshot()  (every user, at the snapshot rate)
+//!                           ├─► VeCore ──────┼─► poll_event()     (log lines)
+//! handle_timeout(now) ──────┘   ▲            └─► state(), metrics()
+//!        poll_timeout() ────────┘ (next tick)
+//! ```
+//!
+//! A tick (`handle_timeout`) is the paper's section II and IV in order: each user's fade and passivity
+//! damper are updated, then one [`kinloop_linkage::step`] integrates eq 4 with every user's coupling
+//! ([`coupling`]) and the penalty contacts; a failed step restores the last good state. After the last
+//! tick due, if a snapshot is due, every user's local model of interaction is built ([`snapshots`]).
+//!
+//! Allocation: join and leave allocate (per-user buffers); ticks, uplinks and snapshots for a fixed set of
+//! users do not (the `no_allocation` test counts).
+
+pub mod config;
+pub mod coupling;
+pub mod events;
+pub mod fade;
+pub mod guards;
+pub mod metrics;
+pub mod passivity;
+mod snapshots;
+pub mod users;
+
+use std::time::Duration;
+
+use kinloop_linkage::contact::{Contact, PenaltyContacts};
+use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::{step, Data, Model, Space, StepConfig, VecOps};
+use kinloop_protocol::{
+    Datagram, RecommendedGains, RefusalReason, Role, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
+};
+use nalgebra::{DMatrix, DVector};
+
+pub use config::{AxisGains, GuardLimits, VeConfig, VeConfigError};
+pub use coupling::Coupling;
+pub use events::{FadeReason, VeEvent};
+pub use guards::{UplinkRejection, UplinkSample, WrenchLimits};
+pub use metrics::VeMetrics;
+pub use passivity::PassivityObserver;
+pub use users::{JoinRequest, Presence, UserId};
+
+use coupling::{stage_weights, Evaluation, VeForces};
+use events::EventQueue;
+use fade::Fade;
+use users::{RejectionBurst, SnapshotSlot, User};
+
+/// A successful join.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joined {
+    /// The new user's id.
+    pub user_id: UserId,
+    /// What to tell the client.
+    pub welcome: Welcome,
+}
+
+/// A leave or lookup for a user the VE does not have.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("no user {user} in the VE")]
+pub struct UnknownUser {
+    /// The id given.
+    pub user: UserId,
+}
+
+/// A snapshot ready to send, borrowed from the core until the next call.
+#[derive(Debug)]
+pub struct PendingSnapshot<'a> {
+    slot: &'a SnapshotSlot,
+}
+
+impl<'a> PendingSnapshot<'a> {
+    /// The user it is for.
+    pub fn user_id(&self) -> UserId {
+        self.slot.snapshot().user_id
+    }
+    /// The snapshot.
+    pub fn snapshot(&self) -> &'a Snapshot {
+        self.slot.snapshot()
+    }
+    /// The snapshot wrapped as a datagram, ready for `codec::encode_datagram_into` (no copy).
+    pub fn datagram(&self) -> &'a Datagram {
+        &self.slot.message
+    }
+}
+
+/// One user's part of [`VeState`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UserState<S: Space> {
+    /// Id.
+    pub user_id: UserId,
+    /// Role.
+    pub role: Role,
+    /// Present or leaving.
+    pub presence: Presence,
+    /// The user's OP in the VE at the last step's evaluation.
+    pub op_pose: OpPose<S>,
+    /// The wrench the last step applied at the OP (force channel, PD, passivity damper; fade included).
+    pub wrench: S::OpVec,
+    /// Fade weight of the last step.
+    pub weight: f64,
+    /// Constraint count of the user's last snapshot.
+    pub constraint_count: u8,
+    /// The user's passivity account.
+    pub passivity: PassivityObserver,
+}
+
+/// The VE's state after the last tick, for recording and tests.
+#[derive(Debug)]
+pub struct VeState<'a, S: Space> {
+    /// Time of the last tick.
+    pub time: Duration,
+    /// Steps taken.
+    pub step: u64,
+    /// Generalized coordinates.
+    pub q: &'a DVector<f64>,
+    /// Generalized velocities.
+    pub qd: &'a DVector<f64>,
+    /// Closure multipliers of the last step.
+    pub lambda: &'a DVector<f64>,
+    /// Closure residual norm at the start of the last step (after the previous projection), m.
+    pub closure_error: f64,
+    users: &'a [User],
+    couplings: &'a [Coupling<S>],
+}
+
+impl<S: Space> VeState<'_, S> {
+    /// Every user, in join order.
+    pub fn users(&self) -> impl ExactSizeIterator<Item = UserState<S>> + '_ {
+        self.users.iter().zip(self.couplings).map(|(u, c)| UserState {
+            user_id: u.id,
+            role: u.role,
+            presence: u.presence,
+            op_pose: c.op_pose,
+            wrench: c.step_wrench,
+            weight: c.weight,
+            constraint_count: u.constraint_count,
+            passivity: u.passivity,
+        })
+    }
+}
+
+/// Reusable buffers of the snapshot build (see `snapshots`).
+#[derive(Debug)]
+struct SnapshotScratch<S: Space> {
+    /// `Y_h = U⁻¹ J_hᵀ` of the user being built (n×k).
+    op_y: DMatrix<f64>,
+    /// `G_h` of the user being built (m×k).
+    op_g: DMatrix<f64>,
+    /// `U⁻¹ J_cᵀ n` of a contact (n).
+    contact_y: DVector<f64>,
+    /// `G_c n` of a contact (m).
+    contact_g: DVector<f64>,
+    /// Contacts within the margin, nearest first.
+    near: Vec<Contact<S>>,
+}
+
+/// The virtual environment (see the module documentation).
+#[derive(Debug)]
+pub struct VeCore<S: Space> {
+    model: Model<S>,
+    data: Data<S>,
+    config: VeConfig,
+    step_config: StepConfig,
+    shape: SessionShape,
+    period: Duration,
+    snapshot_period: Duration,
+    stiffness: S::OpVec,
+    damping: S::OpVec,
+    q: DVector<f64>,
+    qd: DVector<f64>,
+    checkpoint_q: DVector<f64>,
+    lambda: DVector<f64>,
+    closure_error: f64,
+    step: u64,
+    last_tick_at: Duration,
+    next_tick_at: Duration,
+    next_snapshot_at: Duration,
+    users: Vec<User>,
+    couplings: Vec<Coupling<S>>,
+    contacts: Option<PenaltyContacts<S>>,
+    next_user_id: UserId,
+    roster_version: u64,
+    snapshot_cursor: usize,
+    scratch: SnapshotScratch<S>,
+    events: EventQueue,
+    metrics: VeMetrics,
+}
+
+impl<S: Space> VeCore<S> {
+    /// A VE for `model` at its initial state `(q0, q̇0)`, no users, first tick due one period after the
+    /// epoch.
+    pub fn new(model: Model<S>, config: VeConfig) -> Result<Self, VeConfigError> {
+        config.validate()?;
+        let stiffness = config.coupling_stiffness.resolve::<S>("coupling_stiffness")?;
+        let damping = config.coupling_damping.resolve::<S>("coupling_damping")?;
+        let period = config.ve_period();
+        let step_config = StepConfig {
+            integrator: config.integrator,
+            dt: period.as_secs_f64(),
+            project: config.projection,
+            implicit_forces: config.implicit_coupling,
+        };
+        let mut data = Data::new(&model);
+        let q = model.q0.clone();
+        let qd = model.qd0.clone();
+        forward_kinematics(&model, &mut data, &q);
+        forward_velocity(&model, &mut data, &qd);
+        let contacts = (!model.obstacles.is_empty()).then(|| {
+            let mut contacts = PenaltyContacts::new(&model);
+            contacts.stiffness = config.contact_stiffness.unwrap_or(contacts.stiffness);
+            contacts.damping = config.contact_damping.unwrap_or(contacts.damping);
+            contacts
+        });
+        let (n, m, k) = (model.nq(), model.nc(), S::DIM);
+        let scratch = SnapshotScratch {
+            op_y: DMatrix::zeros(n, k),
+            op_g: DMatrix::zeros(m, k),
+            contact_y: DVector::zeros(n),
+            contact_g: DVector::zeros(m),
+            near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
+        };
+        let user_room = 2 * config.max_users;
+        Ok(VeCore {
+            shape: SessionShape { kind: S::KIND, n, m },
+            snapshot_period: config.snapshot_period(),
+            period,
+            step_config,
+            stiffness,
+            damping,
+            checkpoint_q: q.clone(),
+            lambda: DVector::zeros(m),
+            q,
+            qd,
+            closure_error: 0.0,
+            step: 0,
+            last_tick_at: Duration::ZERO,
+            next_tick_at: period,
+            next_snapshot_at: period,
+            users: Vec::with_capacity(user_room),
+            couplings: Vec::with_capacity(user_room),
+            contacts,
+            next_user_id: 1,
+            roster_version: 0,
+            snapshot_cursor: 0,
+            scratch,
+            events: EventQueue::new(),
+            metrics: VeMetrics::default(),
+            data,
+            model,
+            config,
+        })
+    }
+
+    /// The scene.
+    pub fn model(&self) -> &Model<S> {
+        &self.model
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &VeConfig {
+        &self.config
+    }
+
+    /// The dimensions every session of this VE shares.
+    pub fn session_shape(&self) -> SessionShape {
+        self.shape
+    }
+
+    /// Admits a user. Refuses when `max_users` are present or the scene has no operational point of that
+    /// name. A manipulator's coupling fades in from its first accepted uplink.
+    pub fn join(&mut self, _now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
+        let present = self.present_users();
+        if present >= self.config.max_users {
+            self.metrics.joins_refused += 1;
+            return Err(RefusalReason::ServerFull { max_users: self.config.max_users as u32 });
+        }
+        let Some(op) = self.model.op_index(&request.op) else {
+            self.metrics.joins_refused += 1;
+            return Err(RefusalReason::UnknownOp {
+                requested: request.op,
+                available: self.model.ops.iter().map(|o| o.name.clone()).collect(),
+            });
+        };
+        let user_id = self.next_user_id;
+        self.next_user_id += 1;
+        let point = &self.model.ops[op];
+        let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), self.stiffness, self.damping);
+        coupling.evaluate(&self.model, &self.data.kin);
+        let welcome = self.welcome(user_id, &request, op);
+        self.users.push(User {
+            id: user_id,
+            name: request.name,
+            role: request.role,
+            op,
+            form: request.form,
+            wrench_limits: WrenchLimits::for_device(request.device.as_ref(), &self.config.guards),
+            presence: Presence::Present,
+            last_seq: None,
+            last_uplink_at: None,
+            silent: true,
+            fade: Fade::off(),
+            passivity: PassivityObserver::default(),
+            rejections: RejectionBurst::default(),
+            constraint_count: 0,
+            slot: SnapshotSlot::new(&self.model, user_id, request.form),
+        });
+        self.couplings.push(coupling);
+        self.roster_version += 1;
+        self.metrics.users_joined += 1;
+        self.metrics.users = self.present_users() as u32;
+        self.events.push(VeEvent::UserJoined { user: user_id });
+        Ok(Joined { user_id, welcome })
+    }
+
+    /// The user leaves: no more snapshots; its coupling fades out and the user is removed once it is off.
+    pub fn leave(&mut self, _now: Duration, user: UserId) -> Result<(), UnknownUser> {
+        let index = self.index_of(user).ok_or(UnknownUser { user })?;
+        let u = &mut self.users[index];
+        if u.presence == Presence::Present {
+            u.presence = Presence::Leaving;
+            u.slot.pending = false;
+            self.events.push(VeEvent::FadingOut { user, reason: FadeReason::Left });
+            self.metrics.users = self.present_users() as u32;
+        }
+        Ok(())
+    }
+
+    /// Uses an uplink from `user` (see [`UplinkSample`] for the allocation-free form drivers use).
+    pub fn handle_uplink(&mut self, now: Duration, user: UserId, uplink: &Uplink) -> Result<(), UplinkRejection> {
+        let sample = UplinkSample::from_uplink(uplink);
+        match sample {
+            Ok(sample) => self.handle_uplink_sample(now, user, &sample),
+            Err(rejection) => {
+                // A shape error still counts against the user (when there is one).
+                if let Some(index) = self.index_of(user) {
+                    self.reject(index, now, rejection);
+                }
+                Err(rejection)
+            }
+        }
+    }
+
+    /// Uses an uplink sample from `user`: stale or duplicate sequence numbers are ignored, physically absurd
+    /// values rejected (counted, reported once per burst); either way nothing changes. Observers' uplinks
+    /// only keep them alive; their wrenches are ignored.
+    pub fn handle_uplink_sample(
+        &mut self,
+        now: Duration,
+        user: UserId,
+        sample: &UplinkSample,
+    ) -> Result<(), UplinkRejection> {
+        let index = self.index_of(user).filter(|&i| self.users[i].presence == Presence::Present);
+        let Some(index) = index else {
+            return Err(UplinkRejection::UnknownUser { user });
+        };
+        if let Some(last) = self.users[index].last_seq.filter(|last| sample.seq <= *last) {
+            self.metrics.uplinks_stale += 1;
+            return Err(UplinkRejection::Stale { seq: sample.seq, last });
+        }
+        let checked = guards::check_uplink::<S>(
+            sample,
+            &self.couplings[index].op_pose,
+            &self.users[index].wrench_limits,
+            &self.config.guards,
+        );
+        let checked = match checked {
+            Ok(checked) => checked,
+            Err(rejection) => {
+                self.reject(index, now, rejection);
+                return Err(rejection);
+            }
+        };
+        self.metrics.uplinks_accepted += 1;
+        let u = &mut self.users[index];
+        u.last_seq = Some(sample.seq);
+        u.last_uplink_at = Some(now);
+        if u.role == Role::Manipulator {
+            let c = &mut self.couplings[index];
+            c.pushes = true;
+            c.hand_wrench = checked.hand_wrench;
+            c.target_pose = checked.model_pose;
+            c.target_twist = checked.model_twist;
+        }
+        Ok(())
+    }
+
+    fn reject(&mut self, index: usize, now: Duration, rejection: UplinkRejection) {
+        self.metrics.uplinks_rejected += 1;
+        let quiet = self.config.guards.rejection_burst_quiet;
+        let u = &mut self.users[index];
+        let new_burst = u.rejections.last_at.is_none_or(|at| now.saturating_sub(at) > quiet);
+        if new_burst {
+            let previous_burst = u.rejections.count;
+            u.rejections.count = 0;
+            self.events.push(VeEvent::UplinkRejected { user: u.id, rejection, previous_burst });
+        }
+        u.rejections.count += 1;
+        u.rejections.last_at = Some(now);
+    }
+
+    /// When the next tick is due.
+    pub fn poll_timeout(&self) -> Duration {
+        self.next_tick_at
+    }
+
+    /// Runs every tick due at or before `now` at the fixed VE period (at most `max_catch_up_ticks`; beyond
+    /// that the schedule skips ahead and the skip is counted), then builds snapshots if one is due.
+    pub fn handle_timeout(&mut self, now: Duration) {
+        let mut ran = 0;
+        while self.next_tick_at <= now {
+            if ran == self.config.max_catch_up_ticks {
+                let behind = (now - self.next_tick_at).as_nanos() / self.period.as_nanos().max(1) + 1;
+                let behind = u32::try_from(behind).unwrap_or(u32::MAX);
+                self.next_tick_at += self.period * behind;
+                self.metrics.skipped_ticks += u64::from(behind);
+                self.events.push(VeEvent::TicksSkipped { count: u64::from(behind) });
+                break;
+            }
+            let at = self.next_tick_at;
+            self.tick(at);
+            self.next_tick_at += self.period;
+            ran += 1;
+        }
+        if ran > 0 && self.last_tick_at >= self.next_snapshot_at {
+            self.build_snapshots();
+            while self.next_snapshot_at <= self.last_tick_at {
+                self.next_snapshot_at += self.snapshot_period;
+            }
+        }
+        self.metrics.events_dropped = self.events.dropped;
+    }
+
+    /// One VE step at time `at`.
+    fn tick(&mut self, at: Duration) {
+        let dt = self.step_config.dt;
+        self.update_couplings(at, dt);
+        self.checkpoint_q.copy_from(&self.q);
+        let mut forces = VeForces {
+            couplings: &mut self.couplings,
+            contacts: self.contacts.as_mut(),
+            evaluation: Evaluation::Step(stage_weights(self.step_config.integrator)),
+            stage: 0,
+        };
+        match step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut forces, &self.step_config) {
+            Ok(report) => {
+                self.closure_error = report.closure_error;
+                self.metrics.closure_error = report.closure_error;
+                self.metrics.max_closure_error = self.metrics.max_closure_error.max(report.closure_error);
+                self.lambda.copy_from(&self.data.lambda);
+                self.book_step_wrenches(dt);
+            }
+            Err(error) => {
+                // Restoring the velocity too would replay the same divergence: restore at rest.
+                self.q.copy_from(&self.checkpoint_q);
+                self.qd.fill(0.0);
+                for c in &mut self.couplings {
+                    c.step_wrench = S::OpVec::zero();
+                }
+                self.metrics.state_restores += 1;
+                self.events.push(VeEvent::StateRestored { step: self.step, error });
+            }
+        }
+        self.remove_faded_users();
+        self.step += 1;
+        self.metrics.ticks += 1;
+        self.last_tick_at = at;
+    }
+
+    /// Fade weights (join, silence, leave) and passivity dampers for the coming step.
+    fn update_couplings(&mut self, at: Duration, dt: f64) {
+        let fade_s = self.config.fade_time.as_secs_f64();
+        let mut activations = 0;
+        for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
+            let silent = u.is_silent(at, self.config.silent_timeout);
+            if silent != u.silent && u.presence == Presence::Present && c.pushes {
+                self.events.push(if silent {
+                    VeEvent::FadingOut { user: u.id, reason: FadeReason::Silent }
+                } else {
+                    VeEvent::Resumed { user: u.id }
+                });
+            }
+            u.silent = silent;
+            u.fade.advance(u.presence == Presence::Present && c.pushes && !silent, dt, fade_s);
+            c.weight = u.fade.weight();
+            c.step_wrench = S::OpVec::zero();
+            c.dissipation = if self.config.passivity && c.pushes {
+                // Sized with the OP velocity of the previous evaluation (one tick old at most).
+                let before = u.passivity.activations;
+                let alpha = u.passivity.damping::<S>(
+                    &c.op_twist,
+                    dt,
+                    self.model.length_scale,
+                    self.config.passivity_max_damping,
+                );
+                activations += u.passivity.activations - before;
+                alpha
+            } else {
+                S::OpVec::zero()
+            };
+        }
+        if activations > 0 {
+            self.metrics.passivity_activations += 1;
+        }
+    }
+
+    /// After a successful step: the wrench each coupling effectively applied, and the passivity books.
+    fn book_step_wrenches(&mut self, dt: f64) {
+        let implicit = self.data.use_implicit_mass;
+        for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
+            if !c.is_active() {
+                continue;
+            }
+            if implicit {
+                c.step_wrench += c.implicit_correction(&self.model, &self.data.qdd, dt);
+            }
+            if self.config.passivity {
+                // ẋ_op after the step, J q̇⁺: the velocity semi-implicit Euler moved the OP with.
+                let velocity_after = c.op_space_image(&self.model, &self.qd);
+                let damped = if implicit { velocity_after } else { c.op_twist };
+                let mut damper = S::OpVec::zero();
+                for a in 0..S::DIM {
+                    damper[a] = -c.dissipation[a] * damped[a];
+                }
+                u.passivity.observe::<S>(&c.controller_part(&c.step_wrench), &damper, &velocity_after, dt);
+            }
+        }
+    }
+
+    fn remove_faded_users(&mut self) {
+        let mut index = 0;
+        while index < self.users.len() {
+            if self.users[index].presence == Presence::Leaving && self.users[index].fade.is_off() {
+                let user = self.users.remove(index);
+                self.couplings.remove(index);
+                self.roster_version += 1;
+                self.metrics.users_left += 1;
+                self.events.push(VeEvent::UserRemoved { user: user.id });
+            } else {
+                index += 1;
+            }
+        }
+    }
+
+    /// The next snapshot not yet polled (one per present user after each snapshot tick).
+    pub fn poll_snapshot(&mut self) -> Option<PendingSnapshot<'_>> {
+        while self.snapshot_cursor < self.users.len() {
+            let index = self.snapshot_cursor;
+            self.snapshot_cursor += 1;
+            if self.users[index].slot.pending {
+                self.users[index].slot.pending = false;
+                return Some(PendingSnapshot { slot: &self.users[index].slot });
+            }
+        }
+        self.snapshot_cursor = 0;
+        None
+    }
+
+    /// The oldest unreported event.
+    pub fn poll_event(&mut self) -> Option<VeEvent> {
+        self.events.pop()
+    }
+
+    /// Counters.
+    pub fn metrics(&self) -> VeMetrics {
+        self.metrics
+    }
+
+    /// The state after the last tick.
+    pub fn state(&self) -> VeState<'_, S> {
+        VeState {
+            time: self.last_tick_at,
+            step: self.step,
+            q: &self.q,
+            qd: &self.qd,
+            lambda: &self.lambda,
+            closure_error: self.closure_error,
+            users: &self.users,
+            couplings: &self.couplings,
+        }
+    }
+
+    /// Kinetic energy of the linkage at the current state (J). Recomputes kinematics into the workspace,
+    /// which every step recomputes anyway.
+    pub fn kinetic_energy(&mut self) -> f64 {
+        forward_kinematics(&self.model, &mut self.data, &self.q);
+        forward_velocity(&self.model, &mut self.data, &self.qd);
+        kinloop_linkage::gravity::kinetic_energy(&self.model, &self.data)
+    }
+
+    /// Ids of the users present (not leaving), in join order.
+    pub fn present_user_ids(&self) -> impl Iterator<Item = UserId> + '_ {
+        self.users.iter().filter(|u| u.presence == Presence::Present).map(|u| u.id)
+    }
+
+    /// A user's name, for logs.
+    pub fn user_name(&self, user: UserId) -> Option<&str> {
+        self.index_of(user).map(|i| self.users[i].name.as_str())
+    }
+
+    fn present_users(&self) -> usize {
+        self.users.iter().filter(|u| u.presence == Presence::Present).count()
+    }
+
+    fn index_of(&self, user: UserId) -> Option<usize> {
+        self.users.iter().position(|u| u.id == user)
+    }
+
+    fn welcome(&self, user_id: UserId, request: &JoinRequest, op: usize) -> Welcome {
+        Welcome {
+            session_id: splitmix64(self.config.session_seed ^ u64::from(user_id)),
+            user_id,
+            scene: SceneSummary {
+                name: self.model.name.clone(),
+                kind: S::KIND,
+                n: self.model.nq() as u32,
+                m: self.model.nc() as u32,
+                op_dim: S::DIM as u8,
+                op_name: self.model.ops[op].name.clone(),
+                length_scale: self.model.length_scale,
+            },
+            ve_rate_hz: self.config.ve_rate_hz,
+            snapshot_rate_hz: self.config.snapshot_rate_hz,
+            gains: self.recommended_gains(request),
+        }
+    }
+
+    /// The configured gains, with the position channel defaulted per axis when not configured
+    /// (1000 N/m and 10 N·s/m linear, times L² angular) and everything clamped to what the device can render.
+    fn recommended_gains(&self, request: &JoinRequest) -> RecommendedGains {
+        let base = &self.config.recommended_gains;
+        let lin = <S::Point as VecOps>::LEN;
+        let l2 = self.model.length_scale * self.model.length_scale;
+        let per_axis = |given: &Vec<f64>, linear: f64| -> Vec<f64> {
+            if given.len() == S::DIM {
+                given.clone()
+            } else {
+                (0..S::DIM).map(|a| if a < lin { linear } else { linear * l2 }).collect()
+            }
+        };
+        let mut gains = RecommendedGains {
+            k_j: base.k_j,
+            b_j: base.b_j,
+            k_pc: per_axis(&base.k_pc, 1000.0),
+            b_pc: per_axis(&base.b_pc, 10.0),
+        };
+        if let Some(device) = &request.device {
+            let clamp = |value: &mut f64, cap: f64| {
+                if cap > 0.0 {
+                    *value = value.min(cap);
+                }
+            };
+            clamp(&mut gains.k_j, device.max_stiffness_n_per_m);
+            clamp(&mut gains.b_j, device.max_damping_ns_per_m);
+            for a in 0..lin {
+                clamp(&mut gains.k_pc[a], device.max_stiffness_n_per_m);
+                clamp(&mut gains.b_pc[a], device.max_damping_ns_per_m);
+            }
+        }
+        gains
+    }
+}
+
+/// A well-mixed 64-bit hash (SplitMix64), for session ids that do not reveal the user count.
+fn splitmix64(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}

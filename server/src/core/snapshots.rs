@@ -1,0 +1,284 @@
+//! Each user's local model of interaction (paper Fig 3), built after a tick at the snapshot rate.
+//!
+//! **State.** A snapshot describes the VE state *after* the tick. `forward_dynamics` is evaluated once at
+//! that state with every coupling and contact (explicit form): it leaves the kinematics, D, W, the KKT
+//! factor of D *without* the implicit coupling mass (what eq 9 needs), q̈ and every coupling's wrench at
+//! that state. All users share it.
+//!
+//! **Per user** at its operational point h:
+//! - Λ̂⁻¹ with the loops closed (eq 9), `op_space_inertia`; sent as its upper triangle, row-major;
+//! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own wrench F_u (force
+//!   channel and coupling: both act through the client's local model, not through the VE's picture of it);
+//!   other users' wrenches, contacts, gravity and the closure's velocity terms stay in b̂;
+//! - the SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12): directions in `(v, L ω)` coordinates, singular values,
+//!   the constraint count;
+//! - OP pose and twist, the other users' OP positions and wrenches, and the configuration-space terms of
+//!   eq 11 when the user asked for them.
+//!
+//! **Contacts** within `contact_margin_m` (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
+//! loops carry a contact's force to any OP) enter the local model along their normal n. With
+//! `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (the KKT inverse's top-left block) and the factors of eq 9 (`Y = U⁻¹ Jᵀ`,
+//! `G = R⁻¹ (Zᵀ Y)_r`), the cross inertia between the OP frame h and the contact point c is
+//! `Λ⁻¹_hc = J_h P J_cᵀ = Y_hᵀ Y_c − G_hᵀ G_c`. The user's `Y_h, G_h` are kept, `frame_point_inertia` at the
+//! contact point gives `Y_c, G_c` and `Λ⁻¹_cc`, and:
+//! - `op_coupling = Λ⁻¹_hc n = Y_hᵀ (Y_c n) − G_hᵀ (G_c n)`: the OP acceleration per unit normal force and,
+//!   by symmetry of P, the gap acceleration per unit OP wrench;
+//! - `mobility = nᵀ Λ⁻¹_cc n`;
+//! - `bias_accel = nᵀ (J_c q̈ + J̇_c q̇) − op_coupling · F_u − mobility · f_c`, the gap acceleration with
+//!   neither the user's wrench nor this contact's own penalty force f_c (both of which the local model adds).
+
+use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::contact::detect_contacts;
+use kinloop_linkage::data::Data;
+use kinloop_linkage::error::DynamicsError;
+use kinloop_linkage::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::op_space::{frame_point_inertia, op_space_inertia};
+use kinloop_linkage::{forward_dynamics, MatOps, Model, Space, VecOps};
+use kinloop_protocol::codec::limits::MAX_LIST_ENTRIES;
+use kinloop_protocol::codec::validate;
+use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
+use nalgebra::{DMatrix, DVector};
+
+use super::coupling::{Evaluation, VeForces};
+use super::events::VeEvent;
+use super::users::{Presence, User};
+use super::{Coupling, SnapshotScratch, VeCore};
+
+impl<S: Space> VeCore<S> {
+    /// Builds every present user's snapshot at the current state (see the module documentation).
+    pub(super) fn build_snapshots(&mut self) {
+        self.metrics.snapshot_ticks += 1;
+        let mut forces = VeForces {
+            couplings: &mut self.couplings,
+            contacts: self.contacts.as_mut(),
+            evaluation: Evaluation::Probe,
+            stage: 0,
+        };
+        if let Err(error) = forward_dynamics(&self.model, &mut self.data, &self.q, &self.qd, &mut forces) {
+            self.metrics.snapshots_withheld += self.present_users() as u64;
+            self.events.push(VeEvent::SnapshotsWithheld { step: self.step, error });
+            return;
+        }
+        let scratch = &mut self.scratch;
+        if self.contacts.is_some() {
+            detect_contacts(&self.model, &self.data.kin, self.config.contact_margin_m, &mut scratch.near);
+            scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
+            scratch.near.truncate(MAX_LOCAL_CONTACTS);
+        }
+        let time_s = self.last_tick_at.as_secs_f64();
+        for index in 0..self.users.len() {
+            if self.users[index].presence != Presence::Present {
+                continue;
+            }
+            let built = build_one(
+                &self.model,
+                &mut self.data,
+                &self.q,
+                &self.qd,
+                &mut self.users,
+                &self.couplings,
+                index,
+                &mut self.scratch,
+                self.contacts.as_ref().map(|c| (c.stiffness, c.damping)),
+                self.roster_version,
+            );
+            let user = &mut self.users[index];
+            let outcome = built.map_err(SnapshotFailure::Dynamics).and_then(|()| {
+                let snapshot = user.slot.snapshot_mut();
+                snapshot.seq += 1;
+                snapshot.server_time_s = time_s;
+                snapshot.ve_step = self.step;
+                validate::snapshot(snapshot, &self.shape).map_err(SnapshotFailure::Wire)
+            });
+            match outcome {
+                Ok(()) => {
+                    user.slot.pending = true;
+                    user.constraint_count = user.slot.snapshot().constraint_count;
+                    self.metrics.snapshots_built += 1;
+                }
+                Err(failure) => {
+                    user.slot.pending = false;
+                    self.metrics.snapshots_withheld += 1;
+                    self.events.push(match failure {
+                        SnapshotFailure::Dynamics(error) => VeEvent::SnapshotsWithheld { step: self.step, error },
+                        SnapshotFailure::Wire(error) => VeEvent::SnapshotInvalid { user: user.id, error },
+                    });
+                }
+            }
+        }
+        self.snapshot_cursor = 0;
+    }
+}
+
+enum SnapshotFailure {
+    Dynamics(DynamicsError),
+    Wire(kinloop_protocol::codec::DecodeError),
+}
+
+/// Fills user `index`'s snapshot from the evaluated state in `data`.
+#[allow(clippy::too_many_arguments)]
+fn build_one<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &DVector<f64>,
+    qd: &DVector<f64>,
+    users: &mut [User],
+    couplings: &[Coupling<S>],
+    index: usize,
+    scratch: &mut SnapshotScratch<S>,
+    contact_gains: Option<(f64, f64)>,
+    roster_version: u64,
+) -> Result<(), DynamicsError> {
+    let op = users[index].op;
+    let own_wrench = couplings[index].wrench;
+    op_space_inertia(model, data, op)?;
+    let terms = op_space_terms(data, &own_wrench, LocalModelTerms::full());
+    let directions = constraint_directions::<S>(&terms.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+    let pose = OpPose::of_op(model, data, op);
+    let twist = op_twist(model, data, op);
+
+    let (before, rest) = users.split_at_mut(index);
+    let Some((me, after)) = rest.split_first_mut() else {
+        return Ok(());
+    };
+    let others = || {
+        let before = before.iter().enumerate();
+        let after = after.iter().enumerate().map(|(i, u)| (index + 1 + i, u));
+        before.chain(after).filter(|(_, u)| u.role == Role::Manipulator).take(MAX_LIST_ENTRIES)
+    };
+    let slot = &mut me.slot;
+    if slot.roster_version != roster_version {
+        slot.size_others(others().count(), <S::Point as VecOps>::LEN, S::DIM, roster_version);
+    }
+    if let Some(scratch_terms) = slot.config_scratch.as_mut() {
+        scratch_terms.fill_from(model, data, q, qd, &own_wrench, LocalModelTerms::full());
+    }
+    let config_scratch = slot.config_scratch.as_ref();
+    let (snapshot, spare) = match &mut slot.message {
+        kinloop_protocol::Datagram::Snapshot(s) => (s, &mut slot.spare_contacts),
+        kinloop_protocol::Datagram::Uplink(_) => unreachable!("a snapshot slot holds a snapshot"),
+    };
+    set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| pose.to_slice(out));
+    set(&mut snapshot.op_twist, twist.as_slice());
+    set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &terms.inverse_inertia);
+    set(&mut snapshot.bias_accel, terms.bias.as_slice());
+    set(&mut snapshot.directions, directions.directions.as_slice());
+    set(&mut snapshot.singular_values, directions.singular_values.as_slice());
+    snapshot.constraint_count = directions.count as u8;
+    if let (Some(wire), Some(terms)) = (snapshot.config.as_mut(), config_scratch) {
+        write_config_terms(wire, terms);
+    }
+    for (entry, (other, user)) in snapshot.others.iter_mut().zip(others()) {
+        entry.user_id = user.id;
+        set(&mut entry.op_position, couplings[other].op_pose.position.as_slice());
+        set(&mut entry.wrench, couplings[other].wrench.as_slice());
+    }
+
+    // Contacts last: frame_point_inertia overwrites data.op.
+    spare.extend(snapshot.contacts.drain(..));
+    if let Some((stiffness, damping)) = contact_gains.filter(|_| !scratch.near.is_empty()) {
+        scratch.op_y.copy_from(&data.op.y);
+        scratch.op_g.copy_from(&data.op.g);
+        for near_index in 0..scratch.near.len() {
+            let Some(mut term) = spare.pop() else { break };
+            let contact = scratch.near[near_index];
+            fill_contact_term(model, data, scratch, &contact, &own_wrench, (stiffness, damping), &mut term)?;
+            snapshot.contacts.push(term);
+        }
+    }
+    Ok(())
+}
+
+/// `out ← values`, within `out`'s capacity once warmed up.
+fn set(out: &mut Vec<f64>, values: &[f64]) {
+    out.clear();
+    out.extend_from_slice(values);
+}
+
+/// `out ← len` numbers written by `write`.
+fn set_from(out: &mut Vec<f64>, len: usize, write: impl FnOnce(&mut [f64])) {
+    out.clear();
+    out.resize(len, 0.0);
+    write(out);
+}
+
+/// Upper triangle of a symmetric operational matrix, row-major.
+fn set_upper_triangle<S: Space>(out: &mut Vec<f64>, m: &S::OpMat) {
+    out.clear();
+    for r in 0..S::DIM {
+        for c in r..S::DIM {
+            out.push(m[(r, c)]);
+        }
+    }
+}
+
+/// Upper triangle of a dynamic symmetric matrix, row-major.
+fn set_upper_triangle_dyn(out: &mut Vec<f64>, m: &DMatrix<f64>) {
+    out.clear();
+    for r in 0..m.nrows() {
+        for c in r..m.ncols() {
+            out.push(m[(r, c)]);
+        }
+    }
+}
+
+fn write_config_terms(wire: &mut ConfigTerms, terms: &kinloop_linkage::local_model::ConfigSpaceTerms) {
+    set(&mut wire.q, terms.q.as_slice());
+    set(&mut wire.qd, terms.qd.as_slice());
+    set_upper_triangle_dyn(&mut wire.mass_matrix, &terms.mass_matrix);
+    set(&mut wire.closure_jacobian, terms.closure_jacobian.as_slice());
+    set(&mut wire.closure_bias_stab, terms.closure_bias_stab.as_slice());
+    set(&mut wire.generalized_bias, terms.generalized_bias.as_slice());
+    set(&mut wire.op_jacobian, terms.op_jacobian.as_slice());
+    set(&mut wire.op_bias, terms.op_bias.as_slice());
+}
+
+/// One contact's local-model term (formulas in the module documentation). Overwrites `data.op`.
+fn fill_contact_term<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    scratch: &mut SnapshotScratch<S>,
+    contact: &kinloop_linkage::contact::Contact<S>,
+    own_wrench: &S::OpVec,
+    (stiffness, damping): (f64, f64),
+    term: &mut ContactTerm,
+) -> Result<(), DynamicsError> {
+    frame_point_inertia(model, data, contact.body, &contact.point)?;
+    let normal = contact.normal.as_slice();
+    let lin = normal.len();
+    let rank = if model.nc() > 0 { data.kkt.schur_rank } else { 0 };
+    let ws = &data.op;
+    for i in 0..model.nq() {
+        scratch.contact_y[i] = (0..lin).map(|a| ws.y[(i, a)] * normal[a]).sum();
+    }
+    for r in 0..rank {
+        scratch.contact_g[r] = (0..lin).map(|a| ws.g[(r, a)] * normal[a]).sum();
+    }
+    let mut coupling = S::OpVec::zero();
+    for j in 0..S::DIM {
+        let open = scratch.op_y.column(j).dot(&scratch.contact_y);
+        let closed: f64 = (0..rank).map(|r| scratch.op_g[(r, j)] * scratch.contact_g[r]).sum();
+        coupling[j] = open - closed;
+    }
+    let mut mobility = 0.0;
+    let mut gap_accel = 0.0;
+    for a in 0..lin {
+        for b in 0..lin {
+            mobility += normal[a] * ws.inverse_inertia[(a, b)] * normal[b];
+        }
+        let accel_a = ws.jdot_qdot[a] + ws.jacobian_t.column(a).dot(&data.qdd);
+        gap_accel += normal[a] * accel_a;
+    }
+    let gap_rate = contact.normal.dot(&data.kin.point_velocity(Some(contact.body), &contact.point));
+    let penalty = if contact.gap < 0.0 { (-stiffness * contact.gap - damping * gap_rate).max(0.0) } else { 0.0 };
+    set(&mut term.point, contact.point.as_slice());
+    set(&mut term.normal, normal);
+    term.depth = -contact.gap;
+    term.normal_velocity = gap_rate;
+    set(&mut term.op_coupling, coupling.as_slice());
+    term.mobility = mobility.max(0.0);
+    term.bias_accel = gap_accel - coupling.dot(own_wrench) - mobility * penalty;
+    term.stiffness = stiffness;
+    term.damping = damping;
+    Ok(())
+}

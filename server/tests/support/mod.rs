@@ -1,0 +1,88 @@
+//! Shared pieces of the server's tests: scenes, users and uplinks in virtual time.
+#![allow(dead_code)]
+
+use std::time::Duration;
+
+use kinloop_linkage::builtin;
+use kinloop_linkage::{Model, Planar, Scene, Space};
+use kinloop_protocol::{DeviceCaps, LocalModelForm, Role, Snapshot, Uplink};
+use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
+
+/// A built-in scene compiled for space `S`.
+pub fn model<S: Space>(name: &str) -> Model<S> {
+    let scene: Scene = builtin::scene(name).expect("built-in scene").expect("parses");
+    Model::compile(&scene, name).expect("compiles")
+}
+
+/// The paper's testbed.
+pub fn testbed() -> Model<Planar> {
+    model("paper-testbed")
+}
+
+/// A VE on `model` with `config`.
+pub fn core<S: Space>(model: Model<S>, config: VeConfig) -> VeCore<S> {
+    VeCore::new(model, config).expect("valid config")
+}
+
+/// A device able to push 50 N / 5 N·m.
+pub fn device(k: usize) -> DeviceCaps {
+    DeviceCaps {
+        name: "test device".into(),
+        dof: k as u8,
+        workspace_min: vec![-0.2; k],
+        workspace_max: vec![0.2; k],
+        max_force_n: 50.0,
+        max_torque_nm: 5.0,
+        max_stiffness_n_per_m: 3000.0,
+        max_damping_ns_per_m: 50.0,
+        native_rate_hz: 1000.0,
+    }
+}
+
+/// A join request for `op` with `role`.
+pub fn request(name: &str, role: Role, op: &str, k: usize) -> JoinRequest {
+    JoinRequest { name: name.into(), role, op: op.into(), form: LocalModelForm::OpSpace, device: Some(device(k)) }
+}
+
+/// An uplink whose local model sits where `snapshot` put the OP ("following along"), with hand wrench `hand`.
+pub fn following(snapshot: &Snapshot, seq: u64, hand: &[f64]) -> Uplink {
+    uplink(seq, hand, &snapshot.op_pose, &snapshot.op_twist)
+}
+
+/// An uplink with the given hand wrench and local-model pose and twist.
+pub fn uplink(seq: u64, hand: &[f64], pose: &[f64], twist: &[f64]) -> Uplink {
+    Uplink {
+        seq,
+        client_time_s: seq as f64 * 1e-3,
+        last_snapshot_seq: 0,
+        last_snapshot_age_s: 0.0,
+        hand_wrench: hand.to_vec(),
+        device_pose: pose.to_vec(),
+        device_twist: twist.to_vec(),
+        model_pose: pose.to_vec(),
+        model_twist: twist.to_vec(),
+        flags: 0,
+    }
+}
+
+/// Runs ticks until `core.poll_timeout()` passes `until`, calling `each(core, now)` before every tick and
+/// collecting each user's newest snapshot into `latest` (indexed by user id).
+pub fn run<S: Space>(
+    core: &mut VeCore<S>,
+    until: Duration,
+    latest: &mut Vec<Option<Snapshot>>,
+    mut each: impl FnMut(&mut VeCore<S>, Duration, &[Option<Snapshot>]),
+) {
+    while core.poll_timeout() <= until {
+        let now = core.poll_timeout();
+        each(core, now, latest);
+        core.handle_timeout(now);
+        while let Some(pending) = core.poll_snapshot() {
+            let id = pending.user_id() as usize;
+            if latest.len() <= id {
+                latest.resize(id + 1, None);
+            }
+            latest[id] = Some(pending.snapshot().clone());
+        }
+    }
+}
