@@ -24,8 +24,8 @@ pub trait Forces<S: Space> {
 
     /// Linearly-implicit treatment of stiff couplings (semi-implicit Euler only). A spring-damper with
     /// operational stiffness K and damping B at Jacobian J, integrated with step h, adds `J ᵀ(hB + h²K) J` to
-    /// `implicit_mass` and `-h Jᵀ K J q̇` to `tau`, making the step stable for any gains. Returns true when it
-    /// added something. The default adds nothing.
+    /// `implicit_mass` and `-h Jᵀ K J q̇` to `tau`, making the step stable for any gains. `implicit_mass` is
+    /// zero on entry. Returns true exactly when it added something. The default adds nothing.
     fn add_implicit(
         &mut self,
         _model: &Model<S>,

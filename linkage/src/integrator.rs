@@ -101,10 +101,13 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
         Integrator::SemiImplicitEuler | Integrator::ExplicitEuler => {
             dynamics_terms(model, data, q, qd, forces);
             report = StepReport { closure_error: data.closure_residual.norm() };
-            data.use_implicit_mass = cfg.implicit_forces && cfg.integrator == Integrator::SemiImplicitEuler && {
+            // The matrix is zero unless the last step used it: clear it only then (n² writes otherwise wasted).
+            if data.use_implicit_mass {
                 data.implicit_mass.fill(0.0);
-                forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied)
-            };
+            }
+            data.use_implicit_mass = cfg.implicit_forces
+                && cfg.integrator == Integrator::SemiImplicitEuler
+                && forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied);
             kkt::factorize(model, data)?;
             kkt::solve(model, data)?;
             if cfg.integrator == Integrator::SemiImplicitEuler {

@@ -33,6 +33,7 @@
 #![warn(missing_docs)]
 
 pub mod assemble;
+pub mod bench;
 pub mod bias;
 pub mod builtin;
 pub mod constraint_directions;

@@ -20,13 +20,28 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         }
     }
     let d = &mut data.mass_matrix;
-    d.fill(0.0);
+    if !model.is_chain() {
+        // Entries between joints on different branches are structural zeros, never written below.
+        d.fill(0.0);
+    }
+    let s = &data.kin.motion_subspace;
+    let a = d.as_mut_slice();
     for i in 0..n {
-        let f = S::inertia_mul(&data.composite_inertia[i], &data.kin.motion_subspace[i]);
-        for j in support(model, Some(i)) {
-            let v = data.kin.motion_subspace[j].dot(&f);
-            d[(j, i)] = v;
-            d[(i, j)] = v;
+        let f = S::inertia_mul(&data.composite_inertia[i], &s[i]);
+        // Column i above the diagonal (contiguous), then mirrored below.
+        if model.chain_prefix[i] {
+            for (j, dst) in a[i * n..i * n + i + 1].iter_mut().enumerate() {
+                *dst = s[j].dot(&f);
+            }
+        } else {
+            for j in support(model, Some(i)) {
+                a[i * n + j] = s[j].dot(&f);
+            }
+        }
+    }
+    for c in 0..n {
+        for r in c + 1..n {
+            a[c * n + r] = a[r * n + c];
         }
     }
 }

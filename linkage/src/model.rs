@@ -296,6 +296,10 @@ impl<S: Space> Model<S> {
     pub fn total_mass(&self) -> f64 {
         self.bodies.iter().map(|b| b.mass).sum()
     }
+    /// True when the tree is a single chain from ground (every body's parent is the previous body).
+    pub fn is_chain(&self) -> bool {
+        self.chain_prefix.iter().all(|c| *c)
+    }
     /// True when `a` is an ancestor of `b` or `a == b`.
     pub fn supports(&self, a: usize, mut b: usize) -> bool {
         while b != NO_PARENT {

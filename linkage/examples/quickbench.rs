@@ -1,0 +1,25 @@
+use kinloop_linkage::bench::*;
+use kinloop_linkage::Integrator;
+use std::time::Duration;
+fn main() {
+    let budget = Duration::from_millis(400);
+    for scene in ["paper-testbed", "chain20_loops1", "chain20_loops5", "chain50_loops1", "chain50_loops5"] {
+        let mut case = Case::new(scene).unwrap();
+        let t = measure(budget, || case.ve_step(Integrator::SemiImplicitEuler));
+        println!("ve_step/{scene}: {:.0} ns (p10 {:.0} p90 {:.0})", t.median_ns, t.p10_ns, t.p90_ns);
+    }
+    let mut case = Case::new("paper-testbed").unwrap();
+    let t = measure(budget, || case.ve_step(Integrator::Rk4));
+    println!("ve_step_rk4/testbed: {:.0} ns", t.median_ns);
+    case.prepare_op_space();
+    let t = measure(budget, || {
+        case.op_space();
+    });
+    println!("op_space/testbed: {:.0} ns", t.median_ns);
+    let mut lm = case.local_model();
+    let f = paper_wrench();
+    let t = measure(budget, || {
+        lm.step(1e-3, &f);
+    });
+    println!("local_model/testbed: {:.1} ns", t.median_ns);
+}

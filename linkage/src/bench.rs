@@ -1,0 +1,115 @@
+//! Benchmark cases for `kinloop bench` and criterion: each returns the median time per call over several
+//! batches, measured in one run (medians resist the noise of a shared machine).
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use nalgebra::{DVector, Vector3};
+
+use crate::builtin::{self, PAPER_WRENCH};
+use crate::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use crate::local_model::{op_space_terms, LocalModelTerms, OpPose, OpSpaceLocalModel};
+use crate::op_space::op_space_inertia;
+use crate::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+
+/// Timing of one benchmark case.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Timing {
+    /// Median over batches of the mean time per call, ns.
+    pub median_ns: f64,
+    /// 10th percentile over batches, ns.
+    pub p10_ns: f64,
+    /// 90th percentile over batches, ns.
+    pub p90_ns: f64,
+    /// Calls measured in total.
+    pub calls: u64,
+}
+
+/// Runs `f` in batches for about `budget` and reports per-call statistics over the batches.
+pub fn measure(budget: Duration, mut f: impl FnMut()) -> Timing {
+    // Calibrate a batch to ~1 ms.
+    let mut batch = 1u64;
+    loop {
+        let t = Instant::now();
+        for _ in 0..batch {
+            f();
+        }
+        if t.elapsed() > Duration::from_micros(500) || batch > 1 << 30 {
+            break;
+        }
+        batch *= 2;
+    }
+    let mut samples = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < budget || samples.len() < 5 {
+        let t = Instant::now();
+        for _ in 0..batch {
+            f();
+        }
+        samples.push(t.elapsed().as_nanos() as f64 / batch as f64);
+    }
+    samples.sort_by(|a, b| a.total_cmp(b));
+    let at = |p: f64| samples[((samples.len() - 1) as f64 * p).round() as usize];
+    Timing { median_ns: at(0.5), p10_ns: at(0.1), p90_ns: at(0.9), calls: batch * samples.len() as u64 }
+}
+
+/// A compiled planar benchmark scene with its state and the paper's user wrench.
+pub struct Case {
+    /// The model.
+    pub model: Model<Planar>,
+    /// Its workspace.
+    pub data: Data<Planar>,
+    /// Configuration.
+    pub q: DVector<f64>,
+    /// Velocity.
+    pub qd: DVector<f64>,
+    /// The paper's user: a constant wrench at the first OP.
+    pub user: OpWrench<Planar>,
+}
+
+impl Case {
+    /// `paper-testbed` or `chainN_loopsL`, started 0.5 s into the paper's manipulation so it is moving.
+    pub fn new(scene: &str) -> Option<Case> {
+        let scene = builtin::scene(scene)?.ok()?;
+        let model: Model<Planar> = Model::compile(&scene, &scene.name).ok()?;
+        let data = Data::new(&model);
+        let (q, qd) = (model.q0.clone(), model.qd0.clone());
+        let mut case = Case { model, data, q, qd, user: OpWrench { op: 0, wrench: Vector3::from(PAPER_WRENCH) } };
+        let cfg = StepConfig::euler(1e-3);
+        for _ in 0..500 {
+            step(&case.model, &mut case.data, &mut case.q, &mut case.qd, &mut case.user, &cfg).ok()?;
+        }
+        Some(case)
+    }
+
+    /// One VE step: semi-implicit Euler with projection at 1 kHz (the state keeps moving between calls).
+    pub fn ve_step(&mut self, integrator: Integrator) {
+        let cfg = StepConfig { integrator, dt: 1e-3, project: true, implicit_forces: true };
+        let r = step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut self.user, &cfg);
+        black_box(r.ok());
+    }
+
+    /// Λ⁻¹ at the OP, its SVD and the constraint count (after the dynamics terms and factors of one solve).
+    pub fn op_space(&mut self) -> usize {
+        let _ = op_space_inertia(&self.model, &mut self.data, 0);
+        constraint_directions::<Planar>(&self.data.op.inverse_inertia, self.model.length_scale, DEFAULT_THRESHOLD).count
+    }
+
+    /// Prepares the factors `op_space` needs at the current state.
+    pub fn prepare_op_space(&mut self) {
+        let _ = forward_dynamics(&self.model, &mut self.data, &self.q, &self.qd, &mut self.user);
+    }
+
+    /// A reduced local model built from the current state.
+    pub fn local_model(&mut self) -> OpSpaceLocalModel<Planar> {
+        self.prepare_op_space();
+        let _ = op_space_inertia(&self.model, &mut self.data, 0);
+        let terms = op_space_terms(&self.data, &self.user.wrench, LocalModelTerms::full());
+        OpSpaceLocalModel::new(terms, OpPose::of_op(&self.model, &self.data, 0))
+    }
+}
+
+/// The paper's wrench as an operational vector.
+pub fn paper_wrench() -> Vector3<f64> {
+    Vector3::from(PAPER_WRENCH)
+}
