@@ -1,0 +1,246 @@
+//! What a [`HapticCore`](super::HapticCore) is told at construction: the device it drives, the controller
+//! choices and gains, the safety envelope and the uplink policy. Plain data, `Clone`, no IO.
+
+use std::time::Duration;
+
+use kinloop_protocol::RecommendedGains;
+
+use crate::device::DeviceSpec;
+
+/// How the joint-constraint controller renders the constrained directions (paper section VI).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ConstraintMode {
+    /// First manipulation (Fig 6): a spring-damper `k_j, b_j` along the constrained directions.
+    #[default]
+    Stiffness,
+    /// Second manipulation (Fig 7): zero the device's acceleration along the constrained directions by
+    /// cancelling the hand wrench there. Needs the hand wrench (sensor, or the observer's estimate).
+    Impedance,
+}
+
+impl ConstraintMode {
+    /// Parses `stiffness` or `impedance`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "stiffness" => Some(ConstraintMode::Stiffness),
+            "impedance" => Some(ConstraintMode::Impedance),
+            _ => None,
+        }
+    }
+}
+
+/// Which local model runs at the haptic rate (paper eq 11/13).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelForm {
+    /// The reduced operational-space form `ẍ = Λ̂⁻¹ F + b̂`: its cost does not grow with the linkage.
+    #[default]
+    Op,
+    /// The paper's configuration-space form (eq 11): needs the snapshot's `config` terms; falls back to the
+    /// reduced form for snapshots without them.
+    Config,
+}
+
+impl ModelForm {
+    /// Parses `op` or `config`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "op" => Some(ModelForm::Op),
+            "config" => Some(ModelForm::Config),
+            _ => None,
+        }
+    }
+}
+
+/// Controller gains in absolute units (the paper's testbed values in [`ControllerGains::paper`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ControllerGains {
+    /// Joint-constraint stiffness `k_j` along constrained directions, in scaled coordinates (N/m).
+    pub joint_stiffness: f64,
+    /// Joint-constraint damping `b_j` (N s/m).
+    pub joint_damping: f64,
+    /// Position-channel stiffness `K_pc` per operational axis (N/m, N m/rad).
+    pub position_stiffness: Vec<f64>,
+    /// Position-channel damping `B_pc` per operational axis (N s/m, N m s/rad).
+    pub position_damping: Vec<f64>,
+}
+
+/// The paper's joint-constraint stiffness per kilogram of device mass (section VI), N/m/kg.
+pub const PAPER_JOINT_STIFFNESS_PER_KG: f64 = 200.0;
+/// The paper's joint-constraint damping per kilogram of device mass, N s/m/kg.
+pub const PAPER_JOINT_DAMPING_PER_KG: f64 = 50.0;
+
+impl ControllerGains {
+    /// The paper's gains for a device of `device_mass_kg` on its linear axes: `k_j = 200 N/m/kg`,
+    /// `b_j = 50 N s/m/kg`, `K_pc = (100 N/m, 100 N/m, 0.5 N m/rad)`, `B_pc = (70, 70, 0.375)`; spatial
+    /// scenes repeat the linear and angular values on each axis.
+    pub fn paper(device_mass_kg: f64, op_dim: usize) -> Self {
+        let linear = if op_dim == 6 { 3 } else { 2 };
+        let per_axis = |lin: f64, ang: f64| (0..op_dim).map(|i| if i < linear { lin } else { ang }).collect();
+        ControllerGains {
+            joint_stiffness: PAPER_JOINT_STIFFNESS_PER_KG * device_mass_kg,
+            joint_damping: PAPER_JOINT_DAMPING_PER_KG * device_mass_kg,
+            position_stiffness: per_axis(100.0, 0.5),
+            position_damping: per_axis(70.0, 0.375),
+        }
+    }
+
+    /// The gains a server recommended in its `Welcome`.
+    pub fn from_recommended(g: &RecommendedGains) -> Self {
+        ControllerGains {
+            joint_stiffness: g.k_j,
+            joint_damping: g.b_j,
+            position_stiffness: g.k_pc.clone(),
+            position_damping: g.b_pc.clone(),
+        }
+    }
+}
+
+/// Where the controller gains come from.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum GainChoice {
+    /// The server's recommendation in the `Welcome`.
+    #[default]
+    Recommended,
+    /// The paper's values scaled by this device's linear mass ([`ControllerGains::paper`]).
+    Paper,
+    /// Exactly these.
+    Custom(ControllerGains),
+}
+
+/// How constrained directions are weighted from the snapshot's relative singular values `r_i = σ_i / σ_1`.
+///
+/// The weight is 1 at or below `full_below`, 0 at or above `none_above`, and a smoothstep in between, so a
+/// direction that drifts across the server's 0.02 threshold (the testbed does, ≈1 s into the paper's
+/// manipulation) fades in and out instead of switching the joint-constraint force on and off. The reported
+/// count uses hysteresis: a direction counts once `r_i ≤ count_enter` and stops counting at `r_i ≥ count_exit`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ConstraintWeighting {
+    /// Full weight at or below this relative singular value.
+    pub full_below: f64,
+    /// Zero weight at or above this relative singular value.
+    pub none_above: f64,
+    /// A direction starts counting at or below this relative singular value (the server's threshold).
+    pub count_enter: f64,
+    /// A counted direction stops counting at or above this relative singular value.
+    pub count_exit: f64,
+}
+
+impl Default for ConstraintWeighting {
+    fn default() -> Self {
+        ConstraintWeighting { full_below: 0.02, none_above: 0.04, count_enter: 0.02, count_exit: 0.03 }
+    }
+}
+
+/// The safety envelope (see [`super::safety`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SafetyConfig {
+    /// Time to ramp the force in at start and after every resume.
+    pub ramp_in: Duration,
+    /// A snapshot older than this is stale: the force fades out.
+    pub max_snapshot_age: Duration,
+    /// Time to fade the force to zero once the snapshot is stale (smooth: a smoothstep of a linear ramp).
+    pub fade_out: Duration,
+    /// Snapshot Λ̂⁻¹ entries beyond this magnitude (1/kg) are refused as corrupt.
+    pub max_inverse_inertia: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        SafetyConfig {
+            ramp_in: Duration::from_millis(200),
+            max_snapshot_age: Duration::from_millis(100),
+            fade_out: Duration::from_millis(50),
+            max_inverse_inertia: 1e6,
+        }
+    }
+}
+
+/// Perceptual deadband on the uplink (IEEE 1918.1.1 style, Weber's law): an uplink leaves only when the
+/// wrench changed by more than `weber_fraction` of its last sent value (plus a floor), when the model pose
+/// moved by more than `pose_threshold` (scaled metres: `(Δp, L Δθ)`), when the status flags changed, or when
+/// `max_interval` passed since the last one.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct UplinkDeadband {
+    /// Relative change of the wrench that is perceptible (Weber fraction), e.g. 0.1.
+    pub weber_fraction: f64,
+    /// Smallest wrench change sent, N (scaled: torques divided by L), so a near-zero wrench does not chatter.
+    pub wrench_floor_n: f64,
+    /// Smallest model pose change sent, m (scaled).
+    pub pose_threshold_m: f64,
+    /// Longest gap between uplinks.
+    pub max_interval: Duration,
+}
+
+impl Default for UplinkDeadband {
+    fn default() -> Self {
+        UplinkDeadband {
+            weber_fraction: 0.1,
+            wrench_floor_n: 0.02,
+            pose_threshold_m: 2e-4,
+            max_interval: Duration::from_millis(20),
+        }
+    }
+}
+
+/// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoreConfig {
+    /// The device the core drives (limits, masses).
+    pub device: DeviceSpec,
+    /// Stiffness or acceleration-zeroing rendering of the constrained directions.
+    pub constraint_mode: ConstraintMode,
+    /// Which local model.
+    pub form: ModelForm,
+    /// Gains.
+    pub gains: GainChoice,
+    /// Constrained-direction weighting and count hysteresis.
+    pub weighting: ConstraintWeighting,
+    /// Nominal tick period (used for the first tick and to bound a late tick's step).
+    pub period: Duration,
+    /// Time constant with which the local model is pulled toward the VE's (predicted) operational point
+    /// along the constrained directions, where the frozen local model drifts off the linkage's motion (it
+    /// moves on straight lines while the OP moves on curves). The paper resets the local model at each
+    /// update; a first-order pull with a short time constant keeps it as close while never stepping the force.
+    pub blend_time_constant: Duration,
+    /// Time constant of the same pull in the free directions. There the VE follows the local model (the
+    /// graphics controller couples it to the uplink's model pose) and lags it by the uplink path, so a fast
+    /// pull would drag the model back onto a VE that is only following it, and slow both; a slow pull only
+    /// keeps them from parting for good.
+    pub free_blend_time_constant: Duration,
+    /// Time constant of the first-order filter on the snapshot terms the controllers use (Λ̂⁻¹ and the
+    /// constrained-direction projector), so a new snapshot never steps the force; zero takes them as they come.
+    pub terms_time_constant: Duration,
+    /// Bandwidth (rad/s) of the momentum observer that estimates the hand wrench on devices without a
+    /// force sensor (used only by the impedance-mode joint-constraint controller); 0 disables it.
+    pub hand_observer_bandwidth: f64,
+    /// Map the device's current pose onto the operational point at the first snapshot (position offset
+    /// plus a handle-frame orientation offset), as a user grasping the handle where the linkage is.
+    pub index_at_first_snapshot: bool,
+    /// The safety envelope.
+    pub safety: SafetyConfig,
+    /// Uplink deadband; `None` sends an uplink every tick.
+    pub deadband: Option<UplinkDeadband>,
+}
+
+impl CoreConfig {
+    /// Defaults for `device`: stiffness mode, reduced form, the server's gains, 1 kHz.
+    pub fn new(device: DeviceSpec) -> Self {
+        CoreConfig {
+            device,
+            constraint_mode: ConstraintMode::Stiffness,
+            form: ModelForm::Op,
+            gains: GainChoice::Recommended,
+            weighting: ConstraintWeighting::default(),
+            period: Duration::from_millis(1),
+            blend_time_constant: Duration::from_millis(20),
+            free_blend_time_constant: Duration::from_millis(500),
+            terms_time_constant: Duration::from_millis(5),
+            hand_observer_bandwidth: 50.0,
+            index_at_first_snapshot: true,
+            safety: SafetyConfig::default(),
+            deadband: None,
+        }
+    }
+}

@@ -1,0 +1,225 @@
+//! The controllers of the paper's section III (Fig 2) as they act on the device in its Fig 4:
+//! joint-constraint control along the constrained directions, impedance control with Λ̂⁻¹ in the free
+//! directions, and the four-channel teleoperator between device and local model.
+//!
+//! **Units.** Û and Σ̂ arrive in the unit-consistent coordinates of `constraint_directions`: a twist is
+//! `T ẋ = (v, L ω)`, a wrench `T⁻¹ F = (f, τ / L)`, with `T = diag(1 linear, L angular)`. A scaled projector
+//! P̃ therefore acts on twists as `T⁻¹ P̃ T`, on wrenches as `T P̃ T⁻¹`, and a scaled stiffness `k P̃` becomes
+//! the physical stiffness `T P̃ T k` (N/m along linear, N m/rad along angular directions).
+//!
+//! **Weights instead of a count.** `P̃_c = Σ wᵢ ũᵢ ũᵢᵀ` with a continuous weight of the relative singular
+//! value (see [`ConstraintWeighting`]): a direction crossing the threshold fades in and out, and equal
+//! singular values get equal weights, so a swap in the SVD's order changes nothing. The free-direction
+//! projector is `I − P̃_c = Σ (1 − wᵢ) ũᵢ ũᵢᵀ`.
+
+use kinloop_linkage::constraint_directions::scale_op;
+use kinloop_linkage::local_model::{ContactTerm, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::space::{MatOps, Space, VecOps};
+
+use super::config::ConstraintWeighting;
+use super::intake::SnapshotTerms;
+use super::safety::smoothstep;
+
+/// The weight of a direction with relative singular value `r = σᵢ / σ₁`: 1 at or below `full_below`, 0 at
+/// or above `none_above`, smoothstep between.
+pub fn constraint_weight(r: f64, weighting: &ConstraintWeighting) -> f64 {
+    let span = weighting.none_above - weighting.full_below;
+    if r <= weighting.full_below {
+        1.0
+    } else if r >= weighting.none_above || span <= 0.0 {
+        0.0
+    } else {
+        smoothstep((weighting.none_above - r) / span)
+    }
+}
+
+/// The constrained-direction projector, Λ̂⁻¹ and the free-direction pseudo-inverse, filtered so that a new
+/// snapshot never steps the force, plus the hysteretic constraint count.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ConstraintFrame<S: Space> {
+    target_projector: S::OpMat,
+    target_inverse_inertia: S::OpMat,
+    /// Scaled P̃_c in use (filtered).
+    pub projector: S::OpMat,
+    /// Λ̂⁻¹ in use (filtered, physical units).
+    pub inverse_inertia: S::OpMat,
+    /// Λ̂⁺ restricted to the free directions (physical units): maps an OP acceleration to the OP wrench
+    /// that causes it; used to express contact forces as wrenches at the OP.
+    pub free_inertia: S::OpMat,
+    counted: [bool; 6],
+    /// Directions counted as constrained (with hysteresis).
+    pub count: usize,
+}
+
+impl<S: Space> ConstraintFrame<S> {
+    pub fn new() -> Self {
+        ConstraintFrame {
+            target_projector: S::OpMat::zero(),
+            target_inverse_inertia: S::OpMat::zero(),
+            projector: S::OpMat::zero(),
+            inverse_inertia: S::OpMat::zero(),
+            free_inertia: S::OpMat::zero(),
+            counted: [false; 6],
+            count: 0,
+        }
+    }
+
+    /// Takes a snapshot's directions as the new target; `jump` adopts it at once (first snapshot, resume).
+    pub fn set_target(
+        &mut self,
+        terms: &SnapshotTerms<S>,
+        weighting: &ConstraintWeighting,
+        length_scale: f64,
+        jump: bool,
+    ) {
+        let sigma_max = terms.singular_values[0];
+        let mut projector = S::OpMat::zero();
+        let mut free_scaled = S::OpMat::zero();
+        let mut count = 0;
+        for i in 0..S::DIM {
+            // An immobile OP (σ₁ = 0) is constrained in every direction.
+            let r = if sigma_max > 0.0 { terms.singular_values[i] / sigma_max } else { 0.0 };
+            let w = constraint_weight(r, weighting);
+            let mut u = S::OpVec::zero();
+            for row in 0..S::DIM {
+                u[row] = terms.directions[(row, i)];
+            }
+            let outer = S::op_outer(&u, &u);
+            projector += outer * w;
+            if terms.singular_values[i] > 0.0 && w < 1.0 {
+                free_scaled += outer * ((1.0 - w) / terms.singular_values[i]);
+            }
+            if r <= weighting.count_enter {
+                self.counted[i] = true;
+            } else if r >= weighting.count_exit {
+                self.counted[i] = false;
+            }
+            count += usize::from(self.counted[i]);
+        }
+        self.count = count;
+        self.target_projector = projector;
+        self.target_inverse_inertia = terms.inverse_inertia;
+        // (Λ⁻¹)⁺ = T Λ̃⁺ T because Λ̃⁻¹ = T Λ⁻¹ T.
+        self.free_inertia = scale_both::<S>(&free_scaled, length_scale, length_scale);
+        if jump {
+            self.projector = projector;
+            self.inverse_inertia = terms.inverse_inertia;
+        }
+    }
+
+    /// Moves the terms in use a fraction `alpha` ∈ [0, 1] toward the target (first-order filter).
+    pub fn filter(&mut self, alpha: f64) {
+        self.projector += (self.target_projector - self.projector) * alpha;
+        self.inverse_inertia += (self.target_inverse_inertia - self.inverse_inertia) * alpha;
+    }
+}
+
+/// `A` with rows of angular index multiplied by `row_factor` and columns by `column_factor`:
+/// `diag(1, row_factor) A diag(1, column_factor)`.
+fn scale_both<S: Space>(a: &S::OpMat, row_factor: f64, column_factor: f64) -> S::OpMat {
+    let linear = <S::Point as VecOps>::LEN;
+    let mut out = *a;
+    for c in 0..S::DIM {
+        for r in 0..S::DIM {
+            let f = (if r >= linear { row_factor } else { 1.0 }) * (if c >= linear { column_factor } else { 1.0 });
+            out[(r, c)] *= f;
+        }
+    }
+    out
+}
+
+/// `T P̃ T⁻¹ w`: the part of wrench `w` along the directions P̃ selects.
+pub fn project_wrench<S: Space>(projector: &S::OpMat, length_scale: f64, w: &S::OpVec) -> S::OpVec {
+    scale_op::<S>(&(*projector * scale_op::<S>(w, 1.0 / length_scale)), length_scale)
+}
+
+/// `T⁻¹ P̃ T ẋ`: the part of twist-like `x` along the directions P̃ selects.
+pub fn project_twist<S: Space>(projector: &S::OpMat, length_scale: f64, x: &S::OpVec) -> S::OpVec {
+    scale_op::<S>(&(*projector * scale_op::<S>(x, length_scale)), 1.0 / length_scale)
+}
+
+/// `T P̃ T x`: the scaled projector as a physical stiffness map from a twist-like `x` to a wrench.
+pub fn project_as_stiffness<S: Space>(projector: &S::OpMat, length_scale: f64, x: &S::OpVec) -> S::OpVec {
+    scale_op::<S>(&(*projector * scale_op::<S>(x, length_scale)), length_scale)
+}
+
+/// Component-wise product.
+pub fn hadamard<S: Space>(a: &S::OpVec, b: &S::OpVec) -> S::OpVec {
+    let mut out = *a;
+    for i in 0..S::DIM {
+        out[i] *= b[i];
+    }
+    out
+}
+
+/// Position channels of the four-channel teleoperator (Fig 4, `K_pc`, `B_pc`), on the device:
+/// `K_pc ⊙ (x_m ⊖ x_d) + B_pc ⊙ (ẋ_m − ẋ_d)` with `error = x_d ⊖ x_m`, `error_rate = ẋ_d − ẋ_m`.
+/// The local model receives the opposite wrench.
+pub fn position_channel<S: Space>(
+    stiffness: &S::OpVec,
+    damping: &S::OpVec,
+    error: &S::OpVec,
+    error_rate: &S::OpVec,
+) -> S::OpVec {
+    -(hadamard::<S>(stiffness, error) + hadamard::<S>(damping, error_rate))
+}
+
+/// Joint-constraint control, stiffness mode (Fig 4, first manipulation): a spring-damper along the
+/// constrained directions, `−T P̃_c T (k_j e + b_j ė)`.
+pub fn joint_constraint_stiffness<S: Space>(
+    projector: &S::OpMat,
+    length_scale: f64,
+    stiffness: f64,
+    damping: f64,
+    error: &S::OpVec,
+    error_rate: &S::OpVec,
+) -> S::OpVec {
+    -project_as_stiffness::<S>(projector, length_scale, &(*error * stiffness + *error_rate * damping))
+}
+
+/// Joint-constraint control, impedance mode (second manipulation: "controlling the acceleration of the
+/// end-effector of the haptic device to zero along the directions of cut joint constraint"): cancels, along
+/// the constrained directions, the hand wrench and every other wrench the core commands,
+/// `−T P̃_c T⁻¹ (F_h + F_other)`, so nothing accelerates the device there. Cancelling the hand wrench alone
+/// would leave the position channels pulling along those directions — a stiffness rendering at `K_pc` —
+/// and the device would not drift from the OP as in the paper's Fig 7b.
+pub fn joint_constraint_impedance<S: Space>(
+    projector: &S::OpMat,
+    length_scale: f64,
+    hand: &S::OpVec,
+    other: &S::OpVec,
+) -> S::OpVec {
+    -project_wrench::<S>(projector, length_scale, &(*hand + *other))
+}
+
+/// Impedance control with Λ̂⁻¹ in the free directions: the device (mass M) under the hand wrench plus this
+/// wrench accelerates as the linkage's OP would, `M⁻¹ (F_h + F) = Λ̂⁻¹ F_h`, i.e. `F = (M Λ̂⁻¹ − I) F_h`,
+/// applied only in the free directions: `F_imp = P_f (M Λ̂⁻¹ − I) F_h` with the wrench projector
+/// `P_f = T (I − P̃_c) T⁻¹`. (Exact when M is isotropic within the linear and within the angular axes, as on
+/// the paper's device; otherwise the projection mixes a little of M's anisotropy into the constrained
+/// directions, where the joint-constraint controller dominates.)
+pub fn impedance_free<S: Space>(
+    projector: &S::OpMat,
+    length_scale: f64,
+    device_mass: &S::OpVec,
+    inverse_inertia: &S::OpMat,
+    hand: &S::OpVec,
+) -> S::OpVec {
+    let shaped = hadamard::<S>(device_mass, &(*inverse_inertia * *hand)) - *hand;
+    shaped - project_wrench::<S>(projector, length_scale, &shaped)
+}
+
+/// Force channel from the local model to the device: each live contact's penalty force, expressed as the
+/// OP wrench that gives the OP the same acceleration, `Λ̂⁺ (Λ⁻¹_hc n) f_c` (free directions only: along
+/// constrained directions the joints, not the contact, hold the OP).
+pub fn contact_feedforward<S: Space>(
+    contacts: &[ContactTerm<S>; MAX_LOCAL_CONTACTS],
+    live: usize,
+    free_inertia: &S::OpMat,
+) -> S::OpVec {
+    let mut accel = S::OpVec::zero();
+    for c in &contacts[..live.min(MAX_LOCAL_CONTACTS)] {
+        accel += c.coupling * c.force();
+    }
+    *free_inertia * accel
+}

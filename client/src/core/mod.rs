@@ -1,0 +1,719 @@
+//! `HapticCore`: the sans-IO haptic side of one session — snapshot intake, the local model, the paper's
+//! controllers, the safety envelope and the uplink — as one state machine driven by `handle_snapshot` and
+//! `tick`. Time is an argument (`Duration` since any epoch); the core holds no socket, thread, clock or lock
+//! and allocates nothing after construction, so the same core runs in the real-time driver and in
+//! virtual-time tests and harnesses.
+//!
+//! One tick (paper Fig 3, Fig 4):
+//! 1. take the newest snapshot received (update the local model's frozen terms and the controllers'
+//!    targets; the first snapshot also maps the device onto the operational point);
+//! 2. filter Λ̂⁻¹ and the constrained-direction projector (`terms_time_constant`); pull the local model's
+//!    OP toward the VE's OP predicted to now (first-order: fast along the constrained directions, slow in
+//!    the free ones, see `CoreConfig::free_blend_time_constant`);
+//! 3. step the local model (eq 11/13) under the user's wrench: the hand wrench (force channel, when measured)
+//!    plus the position channels' reaction applied to the device last tick;
+//! 4. the controllers, with `e = x_d ⊖ x_m`: joint constraint (stiffness or impedance mode), impedance with
+//!    Λ̂⁻¹ in the free directions, position channels, contact force channel;
+//! 5. safety: non-finite check, output gate (ramp in, fade out on stale snapshots), device limits;
+//! 6. the uplink (every tick, or through the perceptual deadband).
+//!
+//! **What drives the local model.** The hand wrench F_h (only when a sensor measures it: without one, feeding
+//! an estimate forward would make the user feel the device's mass instead of the linkage's, because the
+//! impedance controller that reshapes the device needs the same measurement) plus the reaction of the
+//! position channels, equal and opposite to what the device received, so the teleoperator exchanges no net
+//! energy of its own. Other users' wrenches are not added: the server's b̂ already contains their effect.
+//! The uplink's `hand_wrench` is exactly this driving wrench, so the VE's force channel pushes the VE's OP
+//! as the local model's is pushed and the graphics controller K_g, B_g only corrects the difference.
+
+pub mod config;
+pub mod controllers;
+pub mod safety;
+
+mod deadband;
+mod intake;
+mod model;
+mod observer;
+
+use std::time::Duration;
+
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::space::{SceneKind, Space, VecOps};
+use kinloop_protocol::{uplink_flags, Snapshot, Uplink, Welcome};
+
+pub use config::{
+    ConstraintMode, ConstraintWeighting, ControllerGains, CoreConfig, GainChoice, ModelForm, SafetyConfig,
+    UplinkDeadband,
+};
+pub use intake::SnapshotRejection;
+
+use controllers::{
+    contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
+    ConstraintFrame,
+};
+use deadband::Deadband;
+use intake::SnapshotTerms;
+use model::LocalModel;
+use observer::HandObserver;
+use safety::{force_ratio, limit_wrench, mask_unactuated, OutputGate, WrenchLimits};
+
+/// Longest step a late tick may take (a stalled loop must not integrate a huge step).
+const MAX_STEP_S: f64 = 0.02;
+
+/// Why a core could not be built for a session.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CoreError {
+    /// The scene lives in another space than the core.
+    #[error("the scene is {scene:?} but this client runs a {core:?} core")]
+    WrongSpace {
+        /// The scene's.
+        scene: SceneKind,
+        /// The core's.
+        core: SceneKind,
+    },
+    /// The welcome's operational dimension disagrees with its kind.
+    #[error("the welcome announces an operational space of dimension {got}, expected {expected}")]
+    WrongOpDim {
+        /// Announced.
+        got: u8,
+        /// Expected for the kind.
+        expected: usize,
+    },
+    /// The device spec does not describe this space's axes.
+    #[error("device {device}: {field} has {got} values, expected {expected}")]
+    DeviceAxes {
+        /// The device.
+        device: String,
+        /// Which list.
+        field: &'static str,
+        /// Its length.
+        got: usize,
+        /// Axes of the space.
+        expected: usize,
+    },
+    /// The scene's length scale is unusable.
+    #[error("the scene's length scale {0} is not a positive length")]
+    LengthScale(f64),
+    /// Gains that cannot be used.
+    #[error("controller gains: {0}")]
+    Gains(String),
+    /// A tick period that is not positive.
+    #[error("the tick period must be positive")]
+    Period,
+}
+
+/// The wrench each controller asks for this tick, before the safety envelope, and what was commanded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerWrenches<S: Space> {
+    /// Four-channel teleoperator, position channels (on the device).
+    pub position_channel: S::OpVec,
+    /// Joint-constraint controller.
+    pub joint_constraint: S::OpVec,
+    /// Impedance controller (free directions).
+    pub impedance: S::OpVec,
+    /// Contact force channel.
+    pub contact: S::OpVec,
+    /// Their sum.
+    pub requested: S::OpVec,
+    /// What the device is commanded after the output gate and the limits.
+    pub command: S::OpVec,
+}
+
+impl<S: Space> ControllerWrenches<S> {
+    fn zero() -> Self {
+        let z = S::OpVec::zero();
+        ControllerWrenches {
+            position_channel: z,
+            joint_constraint: z,
+            impedance: z,
+            contact: z,
+            requested: z,
+            command: z,
+        }
+    }
+}
+
+/// Everything one tick computed, for recording and tests.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickReport<S: Space> {
+    /// The tick's time.
+    pub time: Duration,
+    /// False until the first snapshot: no model, zero output.
+    pub active: bool,
+    /// Device pose mapped into the VE (see `CoreConfig::index_at_first_snapshot`).
+    pub device_pose: OpPose<S>,
+    /// Device twist.
+    pub device_twist: S::OpVec,
+    /// Local model OP pose after this tick's step.
+    pub model_pose: OpPose<S>,
+    /// Local model OP twist.
+    pub model_twist: S::OpVec,
+    /// Hand wrench: measured, or the observer's estimate, or zero.
+    pub hand_wrench: S::OpVec,
+    /// The wrench that drove the local model this tick (and goes up as the uplink's `hand_wrench`).
+    pub model_wrench: S::OpVec,
+    /// Per-controller wrenches.
+    pub wrenches: ControllerWrenches<S>,
+    /// Output gate gain in [0, 1].
+    pub gain: f64,
+    /// Scale the device limits applied (1 = not clamped).
+    pub clamp_scale: f64,
+    /// Constrained directions counted by the core (with hysteresis).
+    pub constraint_count: usize,
+    /// The server's count in the snapshot in use.
+    pub snapshot_constraint_count: u8,
+    /// Seq of the snapshot in use (0 before the first).
+    pub snapshot_seq: u64,
+    /// How long ago the snapshot in use arrived.
+    pub snapshot_age: Option<Duration>,
+    /// `x_d ⊖ x_m`.
+    pub tracking_error: S::OpVec,
+    /// Uplink flags of this tick.
+    pub flags: u32,
+}
+
+impl<S: Space> TickReport<S> {
+    fn idle(time: Duration) -> Self {
+        let z = S::OpVec::zero();
+        TickReport {
+            time,
+            active: false,
+            device_pose: OpPose::identity(),
+            device_twist: z,
+            model_pose: OpPose::identity(),
+            model_twist: z,
+            hand_wrench: z,
+            model_wrench: z,
+            wrenches: ControllerWrenches::zero(),
+            gain: 0.0,
+            clamp_scale: 1.0,
+            constraint_count: 0,
+            snapshot_constraint_count: 0,
+            snapshot_seq: 0,
+            snapshot_age: None,
+            tracking_error: z,
+            flags: 0,
+        }
+    }
+}
+
+/// Counters over the core's life.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CoreStats {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Ticks with a local model (after the first snapshot).
+    pub active_ticks: u64,
+    /// Snapshots taken as newest.
+    pub snapshots_accepted: u64,
+    /// Snapshots dropped because a newer one was already there (latest wins).
+    pub snapshots_superseded: u64,
+    /// Snapshots refused as corrupt.
+    pub snapshots_rejected: u64,
+    /// Ticks whose output was non-finite (zero was commanded instead).
+    pub non_finite_events: u64,
+    /// Ticks whose command was clamped to the device limits.
+    pub clamped_ticks: u64,
+    /// Ticks with a stale snapshot.
+    pub stale_ticks: u64,
+    /// Largest `|f| / f_max` or `|τ| / τ_max` commanded: never above 1.
+    pub max_force_ratio: f64,
+    /// Uplinks built (one per active tick).
+    pub uplinks_built: u64,
+    /// Uplinks that left (all, or those through the deadband).
+    pub uplinks_sent: u64,
+    /// Sum of squared linear tracking errors |x_d − x_m|² over active ticks (m²).
+    pub tracking_error_sum_sq: f64,
+    /// Largest linear tracking error (m).
+    pub tracking_error_max: f64,
+}
+
+impl CoreStats {
+    /// RMS of the linear distance between device and local-model OP (m).
+    pub fn tracking_error_rms(&self) -> f64 {
+        if self.active_ticks == 0 {
+            0.0
+        } else {
+            (self.tracking_error_sum_sq / self.active_ticks as f64).sqrt()
+        }
+    }
+
+    /// Fraction of uplinks the deadband saved (0 without a deadband).
+    pub fn uplink_saving(&self) -> f64 {
+        if self.uplinks_built == 0 {
+            0.0
+        } else {
+            1.0 - self.uplinks_sent as f64 / self.uplinks_built as f64
+        }
+    }
+}
+
+/// What a tick returns: the device command, the uplink to send (borrowed from the core's preallocated
+/// message: a tick allocates nothing), and the report.
+#[derive(Debug)]
+pub struct TickOutput<'a, S: Space> {
+    /// The wrench to command.
+    pub command: S::OpVec,
+    /// The uplink to send this tick, if any.
+    pub uplink: Option<&'a Uplink>,
+    /// What the tick computed.
+    pub report: &'a TickReport<S>,
+}
+
+/// Gains after resolution and capping to the device.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ResolvedGains<S: Space> {
+    /// k_j (N/m, scaled coordinates).
+    pub joint_stiffness: f64,
+    /// b_j (N s/m).
+    pub joint_damping: f64,
+    /// K_pc.
+    pub position_stiffness: S::OpVec,
+    /// B_pc.
+    pub position_damping: S::OpVec,
+    /// Factor applied to every stiffness so that k_j + K_pc stays within the device's stable stiffness.
+    pub stiffness_cap: f64,
+    /// Factor applied to every damping likewise.
+    pub damping_cap: f64,
+}
+
+/// Maps device poses into the VE: a position offset and a handle-frame orientation offset
+/// (`R_ve = R_device R_offset`), so world-frame twists and wrenches are the same on both sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct DeviceIndex<S: Space> {
+    position: S::Point,
+    rotation: S::Rot,
+}
+
+impl<S: Space> DeviceIndex<S> {
+    fn identity() -> Self {
+        DeviceIndex { position: S::Point::zero(), rotation: S::rot_identity() }
+    }
+
+    fn between(device: &OpPose<S>, op: &OpPose<S>) -> Self {
+        DeviceIndex {
+            position: op.position - device.position,
+            rotation: S::rot_mul(&S::rot_inverse(&device.rotation), &op.rotation),
+        }
+    }
+
+    fn apply(&self, pose: &OpPose<S>) -> OpPose<S> {
+        OpPose { position: pose.position + self.position, rotation: S::rot_mul(&pose.rotation, &self.rotation) }
+    }
+}
+
+/// The haptic core of one session (see the module documentation).
+pub struct HapticCore<S: Space> {
+    config: CoreConfig,
+    gains: ResolvedGains<S>,
+    limits: WrenchLimits,
+    device_mass: S::OpVec,
+    length_scale: f64,
+    user_id: u32,
+    incoming: SnapshotTerms<S>,
+    pending: SnapshotTerms<S>,
+    pending_fresh: bool,
+    newest_seq: Option<u64>,
+    active: SnapshotTerms<S>,
+    has_snapshot: bool,
+    model: LocalModel<S>,
+    frame: ConstraintFrame<S>,
+    index: DeviceIndex<S>,
+    gate: OutputGate,
+    observer: HandObserver<S>,
+    reaction: S::OpVec,
+    last_command: S::OpVec,
+    last_now: Option<Duration>,
+    one_way_delay: Duration,
+    deadband: Deadband<S>,
+    uplink: Uplink,
+    stats: CoreStats,
+    report: TickReport<S>,
+}
+
+fn per_axis<S: Space>(what: &str, values: &[f64]) -> Result<S::OpVec, CoreError> {
+    if values.len() != S::DIM || values.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+        return Err(CoreError::Gains(format!("{what} needs {} finite non-negative values, got {values:?}", S::DIM)));
+    }
+    Ok(S::OpVec::from_slice(values))
+}
+
+impl<S: Space> HapticCore<S> {
+    /// A core for the session `welcome` opened, driving `config.device`.
+    pub fn new(config: CoreConfig, welcome: &Welcome) -> Result<Self, CoreError> {
+        let scene = &welcome.scene;
+        if scene.kind != S::KIND {
+            return Err(CoreError::WrongSpace { scene: scene.kind, core: S::KIND });
+        }
+        if usize::from(scene.op_dim) != S::DIM {
+            return Err(CoreError::WrongOpDim { got: scene.op_dim, expected: S::DIM });
+        }
+        if !(scene.length_scale.is_finite() && scene.length_scale > 0.0) {
+            return Err(CoreError::LengthScale(scene.length_scale));
+        }
+        if config.period.is_zero() {
+            return Err(CoreError::Period);
+        }
+        let device = &config.device;
+        if device.mass.len() != S::DIM || device.mass.iter().any(|m| !(m.is_finite() && *m > 0.0)) {
+            return Err(CoreError::DeviceAxes {
+                device: device.name.clone(),
+                field: "mass",
+                got: device.mass.len(),
+                expected: S::DIM,
+            });
+        }
+        let device_mass = S::OpVec::from_slice(&device.mass);
+        let gains = Self::resolve_gains(&config, welcome)?;
+        let config_shape = (config.form == ModelForm::Config).then_some((scene.n as usize, scene.m as usize));
+        let pose_len = OpPose::<S>::wire_len();
+        let k = S::DIM;
+        let uplink = Uplink {
+            seq: 0,
+            client_time_s: 0.0,
+            last_snapshot_seq: 0,
+            last_snapshot_age_s: 0.0,
+            hand_wrench: vec![0.0; k],
+            device_pose: vec![0.0; pose_len],
+            device_twist: vec![0.0; k],
+            model_pose: vec![0.0; pose_len],
+            model_twist: vec![0.0; k],
+            flags: 0,
+        };
+        Ok(HapticCore {
+            gains,
+            limits: WrenchLimits::of(device),
+            device_mass,
+            length_scale: scene.length_scale,
+            user_id: welcome.user_id,
+            incoming: SnapshotTerms::new(config_shape),
+            pending: SnapshotTerms::new(config_shape),
+            pending_fresh: false,
+            newest_seq: None,
+            active: SnapshotTerms::new(config_shape),
+            has_snapshot: false,
+            model: LocalModel::new(config_shape),
+            frame: ConstraintFrame::new(),
+            index: DeviceIndex::identity(),
+            gate: OutputGate::new(&config.safety),
+            observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
+            reaction: S::OpVec::zero(),
+            last_command: S::OpVec::zero(),
+            last_now: None,
+            one_way_delay: Duration::ZERO,
+            deadband: Deadband::new(config.deadband),
+            uplink,
+            stats: CoreStats::default(),
+            report: TickReport::idle(Duration::ZERO),
+            config,
+        })
+    }
+
+    /// Picks the gains and scales them into what the device renders stably: `k_j + K_pc ≤ max_stiffness`
+    /// and `b_j + B_pc ≤ max_damping` on the linear axes (angular gains scale by the same factors).
+    fn resolve_gains(config: &CoreConfig, welcome: &Welcome) -> Result<ResolvedGains<S>, CoreError> {
+        let chosen = match &config.gains {
+            GainChoice::Recommended => ControllerGains::from_recommended(&welcome.gains),
+            GainChoice::Paper => ControllerGains::paper(config.device.linear_mass(), S::DIM),
+            GainChoice::Custom(g) => g.clone(),
+        };
+        let scalar_ok = |x: f64| x.is_finite() && x >= 0.0;
+        if !scalar_ok(chosen.joint_stiffness) || !scalar_ok(chosen.joint_damping) {
+            return Err(CoreError::Gains(format!(
+                "k_j = {} and b_j = {} must be finite and non-negative",
+                chosen.joint_stiffness, chosen.joint_damping
+            )));
+        }
+        let position_stiffness = per_axis::<S>("K_pc", &chosen.position_stiffness)?;
+        let position_damping = per_axis::<S>("B_pc", &chosen.position_damping)?;
+        let linear_max = |v: &S::OpVec| S::op_lin(v).as_slice().iter().fold(0.0f64, |a, b| a.max(*b));
+        let cap = |total: f64, limit: f64| {
+            if limit.is_finite() && limit > 0.0 && total > limit {
+                limit / total
+            } else {
+                1.0
+            }
+        };
+        let stiffness_cap = cap(chosen.joint_stiffness + linear_max(&position_stiffness), config.device.max_stiffness);
+        let damping_cap = cap(chosen.joint_damping + linear_max(&position_damping), config.device.max_damping);
+        Ok(ResolvedGains {
+            joint_stiffness: chosen.joint_stiffness * stiffness_cap,
+            joint_damping: chosen.joint_damping * damping_cap,
+            position_stiffness: position_stiffness * stiffness_cap,
+            position_damping: position_damping * damping_cap,
+            stiffness_cap,
+            damping_cap,
+        })
+    }
+
+    /// The gains in use.
+    pub fn gains(&self) -> &ResolvedGains<S> {
+        &self.gains
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CoreConfig {
+        &self.config
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> CoreStats {
+        self.stats
+    }
+
+    /// The last tick's report.
+    pub fn report(&self) -> &TickReport<S> {
+        &self.report
+    }
+
+    /// True when the configuration-space form steps the local model.
+    pub fn using_config_form(&self) -> bool {
+        self.model.using_config()
+    }
+
+    /// The driver's estimate of the one-way delay from the VE (half the RTT): snapshots are predicted forward
+    /// by their age since arrival plus this.
+    pub fn set_one_way_delay(&mut self, delay: Duration) {
+        self.one_way_delay = delay;
+    }
+
+    /// Takes a snapshot received at `now`. Returns `Ok(true)` when it is the newest so far (it will be used at
+    /// the next tick), `Ok(false)` when a newer one was already there (latest wins), an error when refused.
+    pub fn handle_snapshot(&mut self, now: Duration, snapshot: &Snapshot) -> Result<bool, SnapshotRejection> {
+        if self.newest_seq.is_some_and(|newest| snapshot.seq <= newest) {
+            self.stats.snapshots_superseded += 1;
+            return Ok(false);
+        }
+        if snapshot.user_id != self.user_id {
+            self.stats.snapshots_rejected += 1;
+            return Err(SnapshotRejection::Implausible { field: "user_id" });
+        }
+        if let Err(rejection) = self.incoming.fill_from(snapshot, now, self.config.safety.max_inverse_inertia) {
+            self.stats.snapshots_rejected += 1;
+            return Err(rejection);
+        }
+        std::mem::swap(&mut self.incoming, &mut self.pending);
+        self.pending_fresh = true;
+        self.newest_seq = Some(snapshot.seq);
+        self.stats.snapshots_accepted += 1;
+        Ok(true)
+    }
+
+    /// The VE's OP predicted to `now`: the snapshot's pose moved along its twist for its age plus the one-way
+    /// delay (at most the staleness limit).
+    fn predicted_op(&self, now: Duration) -> OpPose<S> {
+        let horizon =
+            (now.saturating_sub(self.active.received_at) + self.one_way_delay).min(self.config.safety.max_snapshot_age);
+        let mut pose = self.active.op_pose;
+        pose.integrate(&self.active.op_twist, horizon.as_secs_f64());
+        pose
+    }
+
+    /// Makes the pending snapshot the active one.
+    fn apply_pending(&mut self, now: Duration, device: &OpPose<S>) {
+        std::mem::swap(&mut self.pending, &mut self.active);
+        self.pending_fresh = false;
+        let first = !self.has_snapshot;
+        // With the output fully faded (start, or a link that came back) nothing is felt, so the model may jump
+        // onto the VE instead of being pulled there.
+        let restart = first || self.gate.gain() == 0.0;
+        self.model.update(&self.active);
+        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart);
+        if restart {
+            self.model.set_state(self.predicted_op(now), self.active.op_twist);
+            self.model.set_inverse_inertia(&self.frame.inverse_inertia);
+            self.reaction = S::OpVec::zero();
+        }
+        if first && self.config.index_at_first_snapshot {
+            self.index = DeviceIndex::between(device, &self.active.op_pose);
+        }
+        self.has_snapshot = true;
+    }
+
+    /// One haptic tick at `now` with the device reading `device` (see the module documentation).
+    pub fn tick(&mut self, now: Duration, device: &crate::device::DeviceState<S>) -> TickOutput<'_, S> {
+        let dt_s = match self.last_now {
+            Some(last) => now.saturating_sub(last).as_secs_f64().min(MAX_STEP_S),
+            None => self.config.period.as_secs_f64(),
+        };
+        self.last_now = Some(now);
+        self.stats.ticks += 1;
+        let device_finite =
+            device.pose.position.is_finite() && S::rot_is_finite(&device.pose.rotation) && device.twist.is_finite();
+        if self.pending_fresh && device_finite {
+            self.apply_pending(now, &device.pose);
+        }
+        if !self.has_snapshot || !device_finite {
+            return self.idle_tick(now, device_finite);
+        }
+        self.stats.active_ticks += 1;
+        let mut flags = 0;
+        if self.config.constraint_mode == ConstraintMode::Impedance {
+            flags |= uplink_flags::IMPEDANCE_MODE;
+        }
+        let device_pose = self.index.apply(&device.pose);
+        let device_twist = device.twist;
+        let age = now.saturating_sub(self.active.received_at);
+        let stale = age > self.config.safety.max_snapshot_age;
+
+        // 2. Pull toward the VE, filter the terms.
+        let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
+        self.frame.filter(fraction(self.config.terms_time_constant));
+        if !stale {
+            let predicted = self.predicted_op(now);
+            self.model.blend_toward(
+                &predicted,
+                &self.active.op_twist,
+                &self.frame.projector,
+                self.length_scale,
+                fraction(self.config.blend_time_constant),
+                fraction(self.config.free_blend_time_constant),
+            );
+        }
+        self.model.set_inverse_inertia(&self.frame.inverse_inertia);
+
+        // 3. Step the local model under the user's wrench.
+        let sensed = device.hand_wrench.filter(|w| w.is_finite());
+        let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
+        let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
+        let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
+        self.model.step(dt_s, &model_wrench);
+
+        // 4. Controllers.
+        let model_pose = self.model.pose();
+        let model_twist = self.model.twist();
+        let error = device_pose.difference(&model_pose);
+        let error_rate = device_twist - model_twist;
+        let g = &self.gains;
+        let (l, p) = (self.length_scale, &self.frame.projector);
+        let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
+        let imp = match sensed {
+            Some(hand) => impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &hand),
+            None => S::OpVec::zero(),
+        };
+        let (contacts, live) = self.model.contacts();
+        let contact = contact_feedforward::<S>(contacts, live, &self.frame.free_inertia);
+        let jc = match (self.config.constraint_mode, hand_for_constraint) {
+            (ConstraintMode::Impedance, Some(hand)) => {
+                joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact))
+            }
+            // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
+            _ => joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate),
+        };
+        let requested = pc + jc + imp + contact;
+
+        // 5. Safety.
+        let mut command = S::OpVec::zero();
+        let mut clamp_scale = 1.0;
+        let gain;
+        if !requested.is_finite() || !self.model.is_finite() {
+            self.recover_from_non_finite(now);
+            flags |= uplink_flags::SAFETY_STOP;
+            gain = 0.0;
+        } else {
+            gain = self.gate.update(dt_s, !stale);
+            (command, clamp_scale) = limit_wrench::<S>(&(requested * gain), &self.limits);
+            self.reaction = -mask_unactuated::<S>(&pc, &self.limits) * (gain * clamp_scale);
+        }
+        if clamp_scale < 1.0 {
+            flags |= uplink_flags::CLAMPED;
+            self.stats.clamped_ticks += 1;
+        }
+        if stale {
+            flags |= uplink_flags::STALE_SNAPSHOT | uplink_flags::FADING;
+            self.stats.stale_ticks += 1;
+        }
+        self.last_command = command;
+        self.stats.max_force_ratio = self.stats.max_force_ratio.max(force_ratio::<S>(&command, &self.limits));
+        let distance = S::op_lin(&error).norm();
+        if distance.is_finite() {
+            self.stats.tracking_error_sum_sq += distance * distance;
+            self.stats.tracking_error_max = self.stats.tracking_error_max.max(distance);
+        }
+
+        // 6. Uplink.
+        self.stats.uplinks_built += 1;
+        if self.deadband.skipped {
+            flags |= uplink_flags::DEADBAND_SKIPPED;
+        }
+        let send = self.deadband.admit(now, &model_wrench, &model_pose, flags, self.length_scale);
+        if send {
+            self.fill_uplink(now, age, flags, &model_wrench, &device_pose, &device_twist);
+            self.deadband.skipped = false;
+            self.stats.uplinks_sent += 1;
+        } else {
+            self.deadband.skipped = true;
+        }
+
+        self.report = TickReport {
+            time: now,
+            active: true,
+            device_pose,
+            device_twist,
+            model_pose: self.model.pose(),
+            model_twist: self.model.twist(),
+            hand_wrench: sensed.unwrap_or(estimate),
+            model_wrench,
+            wrenches: ControllerWrenches {
+                position_channel: pc,
+                joint_constraint: jc,
+                impedance: imp,
+                contact,
+                requested,
+                command,
+            },
+            gain,
+            clamp_scale,
+            constraint_count: self.frame.count,
+            snapshot_constraint_count: self.active.constraint_count,
+            snapshot_seq: self.active.seq,
+            snapshot_age: Some(age),
+            tracking_error: error,
+            flags,
+        };
+        TickOutput { command, uplink: send.then_some(&self.uplink), report: &self.report }
+    }
+
+    /// Zero output before the first snapshot or with an unusable device reading.
+    fn idle_tick(&mut self, now: Duration, device_finite: bool) -> TickOutput<'_, S> {
+        self.report = TickReport::idle(now);
+        if !device_finite {
+            self.stats.non_finite_events += 1;
+            self.report.flags = uplink_flags::SAFETY_STOP;
+            self.gate.close();
+        }
+        self.last_command = S::OpVec::zero();
+        TickOutput { command: S::OpVec::zero(), uplink: None, report: &self.report }
+    }
+
+    /// A non-finite wrench or model state: command zero, count it, put the model back on the VE at rest and
+    /// ramp in again from zero.
+    fn recover_from_non_finite(&mut self, now: Duration) {
+        self.stats.non_finite_events += 1;
+        self.model.set_state(self.predicted_op(now), S::OpVec::zero());
+        self.reaction = S::OpVec::zero();
+        self.observer.reset();
+        self.gate.close();
+    }
+
+    fn fill_uplink(
+        &mut self,
+        now: Duration,
+        age: Duration,
+        flags: u32,
+        model_wrench: &S::OpVec,
+        device_pose: &OpPose<S>,
+        device_twist: &S::OpVec,
+    ) {
+        let u = &mut self.uplink;
+        u.seq += 1;
+        u.client_time_s = now.as_secs_f64();
+        u.last_snapshot_seq = self.active.seq;
+        u.last_snapshot_age_s = age.as_secs_f64();
+        u.hand_wrench.copy_from_slice(model_wrench.as_slice());
+        device_pose.to_slice(&mut u.device_pose);
+        u.device_twist.copy_from_slice(device_twist.as_slice());
+        self.model.pose().to_slice(&mut u.model_pose);
+        u.model_twist.copy_from_slice(self.model.twist().as_slice());
+        u.flags = flags;
+    }
+}

@@ -1,0 +1,135 @@
+//! The local model of interaction (paper section V, Fig 3) as the core runs it: the reduced form by
+//! default, the paper's configuration-space form (eq 11/13) when configured and the snapshot carries its
+//! terms, and the pull toward the VE that keeps it near the simulation without stepping the force.
+
+use kinloop_linkage::local_model::{
+    ConfigSpaceLocalModel, ContactTerm, OpPose, OpSpaceLocalModel, OpSpaceTerms, MAX_LOCAL_CONTACTS,
+};
+use kinloop_linkage::space::{MatOps, Space, VecOps};
+
+use super::controllers::project_twist;
+use super::intake::SnapshotTerms;
+
+/// The local model in use.
+#[derive(Clone, Debug)]
+pub(crate) struct LocalModel<S: Space> {
+    reduced: OpSpaceLocalModel<S>,
+    config: Option<ConfigSpaceLocalModel<S>>,
+    using_config: bool,
+    /// Snapshots whose configuration terms could not be factored (D̂ not positive definite).
+    pub config_refusals: u64,
+}
+
+impl<S: Space> LocalModel<S> {
+    /// A model at rest at the origin; `config_shape = Some((n, m))` allocates the configuration form.
+    pub fn new(config_shape: Option<(usize, usize)>) -> Self {
+        let terms = OpSpaceTerms { inverse_inertia: S::OpMat::zero(), bias: S::OpVec::zero() };
+        LocalModel {
+            reduced: OpSpaceLocalModel::new(terms, OpPose::identity()),
+            config: config_shape.map(|(n, m)| ConfigSpaceLocalModel::new(n, m)),
+            using_config: false,
+            config_refusals: 0,
+        }
+    }
+
+    /// True when the configuration-space form steps the model.
+    pub fn using_config(&self) -> bool {
+        self.using_config
+    }
+
+    pub fn pose(&self) -> OpPose<S> {
+        match (&self.config, self.using_config) {
+            (Some(c), true) => c.pose,
+            _ => self.reduced.pose,
+        }
+    }
+
+    pub fn twist(&self) -> S::OpVec {
+        match (&self.config, self.using_config) {
+            (Some(c), true) => c.twist,
+            _ => self.reduced.twist,
+        }
+    }
+
+    pub fn set_state(&mut self, pose: OpPose<S>, twist: S::OpVec) {
+        self.reduced.pose = pose;
+        self.reduced.twist = twist;
+        if let Some(c) = self.config.as_mut() {
+            c.pose = pose;
+            c.twist = twist;
+        }
+    }
+
+    /// Takes the snapshot's frozen terms, keeping the model's own OP state (the pull toward the VE moves
+    /// it, not the update).
+    pub fn update(&mut self, terms: &SnapshotTerms<S>) {
+        let (pose, twist) = (self.pose(), self.twist());
+        self.reduced.terms.bias = terms.bias;
+        self.reduced.contacts = terms.contacts;
+        self.reduced.contact_count = terms.contact_count;
+        self.using_config = false;
+        if let (Some(model), Some(config_terms), true) = (self.config.as_mut(), terms.config.as_ref(), terms.has_config)
+        {
+            // `update` resets q, q̇ and the OP state to the snapshot's; only the OP state matters to the step
+            // (q̈ = M F + c is frozen), and it is restored below.
+            if model.update(config_terms, pose) {
+                self.using_config = true;
+            } else {
+                self.config_refusals += 1;
+            }
+        }
+        self.set_state(pose, twist);
+    }
+
+    /// Λ̂⁻¹ for the reduced form (filtered by the caller).
+    pub fn set_inverse_inertia(&mut self, inverse_inertia: &S::OpMat) {
+        self.reduced.terms.inverse_inertia = *inverse_inertia;
+    }
+
+    /// One step of `dt_s` under the OP wrench `wrench`.
+    pub fn step(&mut self, dt_s: f64, wrench: &S::OpVec) {
+        match (&mut self.config, self.using_config) {
+            (Some(c), true) => {
+                c.step(dt_s, wrench);
+            }
+            _ => {
+                self.reduced.step(dt_s, wrench);
+            }
+        }
+    }
+
+    /// Pulls the OP state toward `pose`/`twist` (first-order blend, geodesic in the orientation): the part of
+    /// the difference along the constrained directions (scaled projector `projector`) by the fraction
+    /// `constrained`, the rest by `free`. Nothing jumps, so no force computed from the state jumps.
+    pub fn blend_toward(
+        &mut self,
+        pose: &OpPose<S>,
+        twist: &S::OpVec,
+        projector: &S::OpMat,
+        length_scale: f64,
+        constrained: f64,
+        free: f64,
+    ) {
+        let split = |d: S::OpVec| {
+            let along = project_twist::<S>(projector, length_scale, &d);
+            along * constrained + (d - along) * free
+        };
+        let mut own = self.pose();
+        let own_twist = self.twist();
+        own.integrate(&split(pose.difference(&own)), 1.0);
+        self.set_state(own, own_twist + split(*twist - own_twist));
+    }
+
+    /// The live contacts of the reduced form (the configuration form tracks none: the paper's eq 13 testbed
+    /// has no contacts, and its eq 11 contact Jacobians are not sent).
+    pub fn contacts(&self) -> (&[ContactTerm<S>; MAX_LOCAL_CONTACTS], usize) {
+        let live = if self.using_config { 0 } else { self.reduced.contact_count };
+        (&self.reduced.contacts, live)
+    }
+
+    /// True when the OP state is finite.
+    pub fn is_finite(&self) -> bool {
+        let pose = self.pose();
+        pose.position.is_finite() && S::rot_is_finite(&pose.rotation) && self.twist().is_finite()
+    }
+}

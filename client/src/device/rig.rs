@@ -1,0 +1,73 @@
+//! A simulated device held by a simulated user: the [`HapticDevice`] the driver runs when `--device sim:...`.
+
+use std::time::Duration;
+
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::space::{Space, VecOps};
+
+use super::{DeviceError, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice};
+use crate::user::SimulatedUser;
+
+/// A [`SimulatedDevice`] and the [`SimulatedUser`] holding it. Each `read(now)` integrates the plant from
+/// the previous read to `now` under the held command and the hand wrench of the previous read, then samples
+/// the encoders and asks the user for the hand wrench of the coming period (the force sensor, when the
+/// device has one, reports that wrench).
+pub struct SimulatedRig<S: Space> {
+    device: SimulatedDevice<S>,
+    user: Box<dyn SimulatedUser<S>>,
+    last_read: Option<Duration>,
+    hand: S::OpVec,
+}
+
+impl<S: Space> SimulatedRig<S> {
+    /// A rig of `device` and `user`.
+    pub fn new(device: SimulatedDevice<S>, user: Box<dyn SimulatedUser<S>>) -> Self {
+        SimulatedRig { device, user, last_read: None, hand: S::OpVec::zero() }
+    }
+
+    /// The simulated device (exact state, applied command).
+    pub fn device(&self) -> &SimulatedDevice<S> {
+        &self.device
+    }
+
+    /// The hand wrench applied during the current period.
+    pub fn hand_wrench(&self) -> S::OpVec {
+        self.hand
+    }
+
+    /// The exact handle pose (no quantization).
+    pub fn true_pose(&self) -> OpPose<S> {
+        self.device.true_pose()
+    }
+}
+
+impl<S: Space> HapticDevice<S> for SimulatedRig<S> {
+    fn spec(&self) -> &DeviceSpec {
+        self.device.spec()
+    }
+
+    fn read(&mut self, now: Duration) -> Result<DeviceState<S>, DeviceError> {
+        if let Some(last) = self.last_read {
+            self.device.advance(now.saturating_sub(last).as_secs_f64(), &self.hand);
+        }
+        self.last_read = Some(now);
+        let (pose, twist) = self.device.sample();
+        let mut state = DeviceState { pose, twist, hand_wrench: None };
+        self.hand = self.user.wrench(now, &state);
+        if self.device.spec().has_force_sensor {
+            state.hand_wrench = Some(self.hand);
+        }
+        Ok(state)
+    }
+
+    fn command(&mut self, _now: Duration, wrench: &S::OpVec) -> Result<(), DeviceError> {
+        if !wrench.is_finite() {
+            return Err(DeviceError::Force {
+                device: self.device.spec().name.clone(),
+                reason: "non-finite wrench refused".into(),
+            });
+        }
+        self.device.set_command(wrench);
+        Ok(())
+    }
+}
