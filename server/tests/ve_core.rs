@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use kinloop_linkage::builtin::PAPER_WRENCH;
 use kinloop_protocol::Role;
-use kinloop_server::core::VeConfig;
+use kinloop_server::core::{AxisGains, VeConfig};
 
 use support::*;
 
@@ -35,4 +35,296 @@ fn paper_manipulation_keeps_the_loop_closed_to_1e_9_m_for_10_s() {
     // The linkage did move: the force channel pushed it.
     let moved = (ve.state().q - &ve.model().q0).norm();
     assert!(moved > 0.1, "the linkage barely moved ({moved} rad)");
+}
+
+/// Static equilibrium of the testbed with user A pushing F_A at link 2 (its local model following the VE)
+/// and user B's local model holding the COM of link 3 at a fixed pose through the coupling spring. Solved
+/// independently as a static problem: find q and λ with `J_Aᵀ F_A + J_Bᵀ K_g (x_B* ⊖ x_B(q)) = Wᵀ λ` and
+/// `h(q) = 0` (Newton on 6 unknowns).
+#[test]
+fn two_users_pulling_against_each_other_settle_at_the_static_equilibrium() {
+    use kinloop_linkage::jacobian::frame_jacobian_t;
+    use kinloop_linkage::kinematics::forward_kinematics;
+    use kinloop_linkage::local_model::OpPose;
+    use kinloop_linkage::loop_closure::loop_closure;
+    use kinloop_linkage::{Data, Model, Planar};
+    use nalgebra::{DMatrix, DVector, Vector2};
+
+    let base = testbed();
+    let link3 = base.body_index("link3").unwrap();
+    let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
+    let push = [-0.5, 0.3, 0.0];
+    // The paper's B_g = 10⁴ N·m·s/rad against K_g = 10³ N/m at centimetre lever arms makes an overdamped
+    // mode with a time constant of hours; gains with a well-damped settling keep the test short.
+    let k_g = [1000.0, 1000.0, 1.0];
+    let mut config = VeConfig::paper();
+    config.coupling_stiffness = AxisGains::PerAxis(k_g.to_vec());
+    config.coupling_damping = AxisGains::PerAxis(vec![300.0, 300.0, 0.3]);
+    let mut ve = core(model.clone(), config);
+    let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+    let b = ve.join(Duration::ZERO, request("B", Role::Manipulator, "link3", 3)).unwrap().user_id;
+    let mut held: Option<Vec<f64>> = None;
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    run(&mut ve, Duration::from_secs(6), &mut latest, |ve, now, latest| {
+        let (Some(Some(sa)), Some(Some(sb))) = (latest.get(a as usize), latest.get(b as usize)) else { return };
+        seq += 1;
+        ve.handle_uplink(now, a, &following(sa, seq, &push)).unwrap();
+        let anchor = held.get_or_insert_with(|| sb.op_pose.clone());
+        ve.handle_uplink(now, b, &uplink(seq, &[0.0; 3], anchor, &[0.0; 3])).unwrap();
+    });
+    let anchor = OpPose::<Planar>::from_slice(held.as_ref().unwrap()).unwrap();
+    let state = ve.state();
+    assert!(state.qd.norm() < 1e-7, "not settled: |q̇| = {:e}", state.qd.norm());
+    let q_ve = state.q.clone();
+
+    // Independent static solve.
+    let (op_a, op_b) = (model.op_index("link2").unwrap(), model.op_index("link3").unwrap());
+    let mut data = Data::new(&model);
+    let residual = |data: &mut Data<Planar>, x: &DVector<f64>| -> DVector<f64> {
+        let q = x.rows(0, 4).into_owned();
+        forward_kinematics(&model, data, &q);
+        loop_closure(&model, data);
+        let mut r = DVector::zeros(6);
+        let mut jt = DMatrix::zeros(4, 3);
+        for (op, wrench) in [(op_a, None), (op_b, Some(()))] {
+            let pose = OpPose::of_op(&model, data, op);
+            let o = &model.ops[op];
+            frame_jacobian_t(&model, &data.kin, o.body, &pose.position, &mut jt);
+            let f = match wrench {
+                None => DVector::from_column_slice(&push),
+                Some(()) => {
+                    let d = anchor.difference(&pose);
+                    DVector::from_fn(3, |i, _| k_g[i] * d[i])
+                }
+            };
+            let tau = &jt * f;
+            for i in 0..4 {
+                r[i] += tau[i];
+            }
+        }
+        let wt = &data.closure_jacobian_t;
+        let lambda = x.rows(4, 2);
+        let tau_c = wt * lambda;
+        for i in 0..4 {
+            r[i] -= tau_c[i];
+        }
+        r[4] = data.closure_residual[0];
+        r[5] = data.closure_residual[1];
+        r
+    };
+    let mut x = DVector::zeros(6);
+    x.rows_mut(0, 4).copy_from(&model.q0);
+    for _ in 0..50 {
+        let r = residual(&mut data, &x);
+        if r.norm() < 1e-12 {
+            break;
+        }
+        let mut jac = DMatrix::zeros(6, 6);
+        for c in 0..6 {
+            let mut xp = x.clone();
+            xp[c] += 1e-7;
+            let rp = residual(&mut data, &xp);
+            jac.set_column(c, &((rp - &r) / 1e-7));
+        }
+        x -= jac.lu().solve(&r).expect("regular static Jacobian");
+    }
+    assert!(residual(&mut data, &x).norm() < 1e-9, "the static solve did not converge");
+    let q_static = x.rows(0, 4).into_owned();
+    let error = (&q_ve - &q_static).norm();
+    assert!(error < 1e-6, "VE settled at {q_ve:?}, statics predict {q_static:?} (|Δq| = {error:e})");
+    // And the pull was real: the linkage moved well away from q0.
+    assert!((&q_static - &model.q0).norm() > 1e-3);
+}
+
+/// A user joining, falling silent and leaving while the linkage moves never changes its wrench by more
+/// than the fade allows in one tick.
+#[test]
+fn join_silence_and_leave_in_mid_motion_make_no_wrench_step() {
+    let config = VeConfig::paper();
+    let max_weight_step = kinloop_server::core::fade::Fade::max_step(1e-3, config.fade_time.as_secs_f64());
+    let mut ve = core(testbed(), config);
+    let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+    let mut b = None;
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    let mut wrench_b: Vec<(Duration, f64, [f64; 3])> = Vec::new();
+    let ms = Duration::from_millis;
+    run(&mut ve, ms(2500), &mut latest, |ve, now, latest| {
+        let Some(Some(sa)) = latest.get(a as usize) else { return };
+        seq += 1;
+        ve.handle_uplink(now, a, &following(sa, seq, &kinloop_linkage::builtin::PAPER_WRENCH)).unwrap();
+        if now == ms(300) {
+            b = Some(ve.join(now, request("B", Role::Manipulator, "link2", 3)).unwrap().user_id);
+        }
+        // B's local model leads the VE by 4 mm in x: a 4 N pull at full weight. It falls silent from 1.0 s
+        // to 1.5 s, speaks again, and leaves at 2.0 s.
+        if let Some(b) = b {
+            let talking = now < ms(1000) || (now >= ms(1500) && now < ms(2000));
+            if let (true, Some(Some(sb))) = (talking, latest.get(b as usize)) {
+                let mut pose = sb.op_pose.clone();
+                pose[0] += 0.004;
+                ve.handle_uplink(now, b, &uplink(seq, &[0.0; 3], &pose, &sb.op_twist)).unwrap();
+            }
+            if now == ms(2000) {
+                ve.leave(now, b).unwrap();
+            }
+            if let Some(state) = ve.state().users().find(|u| u.user_id == b) {
+                wrench_b.push((now, state.weight, [state.wrench[0], state.wrench[1], state.wrench[2]]));
+            }
+        }
+    });
+    let full = wrench_b.iter().map(|(_, _, w)| w[0].abs()).fold(0.0, f64::max);
+    assert!(full > 3.0 && full < 10.0, "B should pull with several newtons, got {full}");
+    // The weight never moves faster than the ramp allows...
+    for pair in wrench_b.windows(2) {
+        let step = (pair[1].1 - pair[0].1).abs();
+        assert!(step <= max_weight_step + 1e-12, "weight jumped by {step} at {:?}", pair[1].0);
+    }
+    // ...so B's wrench starts and ends near zero instead of jumping to or from several newtons: the first
+    // tick it pushes and the last tick before it stops each carry at most one ramp step of its full pull.
+    let size = |w: &[f64; 3]| w.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let pushing: Vec<_> = wrench_b.iter().filter(|(_, weight, _)| *weight > 0.0).collect();
+    let first = pushing.first().unwrap();
+    assert!(size(&first.2) <= 2.0 * max_weight_step * full, "B started with {:?} N", first.2);
+    for (t, weight, w) in &wrench_b {
+        if *weight == 0.0 {
+            assert_eq!(size(w), 0.0, "B pushes {w:?} at zero weight at {t:?}");
+        }
+    }
+    // Silence: the last tick before the weight reaches zero; leave: the last tick before removal.
+    let mut before_off: Vec<_> = wrench_b.windows(2).filter(|p| p[0].1 > 0.0 && p[1].1 == 0.0).map(|p| p[0]).collect();
+    before_off.extend(wrench_b.last().copied());
+    assert_eq!(before_off.len(), 2, "B should fade out twice (silence, leave)");
+    for (t, _, w) in before_off {
+        assert!(size(&w) <= 2.0 * max_weight_step * full, "B still pushed {w:?} N just before {t:?}");
+    }
+    // It faded out while silent and after leaving, and was removed after the fade.
+    let weight_at = |t: Duration| wrench_b.iter().find(|(when, _, _)| *when >= t).map(|(_, w, _)| *w).unwrap_or(0.0);
+    assert_eq!(weight_at(ms(950)), 1.0);
+    assert_eq!(weight_at(ms(1480)), 0.0);
+    assert_eq!(weight_at(ms(1950)), 1.0);
+    assert_eq!(ve.state().users().len(), 1, "B should be removed after fading out");
+    assert_eq!(ve.metrics().users_left, 1);
+}
+
+/// Malformed, stale, duplicate and hostile uplinks leave the VE bit-identical to a run without them.
+#[test]
+fn malformed_stale_duplicate_and_hostile_uplinks_change_nothing() {
+    let simulate = |hostile: bool| {
+        let mut ve = core(testbed(), VeConfig::paper());
+        let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+        let mut latest = Vec::new();
+        let mut seq = 0;
+        let mut rejected = 0;
+        run(&mut ve, Duration::from_millis(800), &mut latest, |ve, now, latest| {
+            let Some(Some(s)) = latest.get(a as usize) else { return };
+            let good = following(s, seq + 1, &kinloop_linkage::builtin::PAPER_WRENCH);
+            if hostile {
+                let mut bad = Vec::new();
+                let mut with = |f: &dyn Fn(&mut kinloop_protocol::Uplink)| {
+                    let mut u = good.clone();
+                    f(&mut u);
+                    bad.push(u);
+                };
+                with(&|u| u.hand_wrench[0] = f64::NAN);
+                with(&|u| u.model_twist[2] = f64::INFINITY);
+                with(&|u| u.hand_wrench.truncate(2));
+                with(&|u| u.model_pose.push(0.0));
+                with(&|u| u.model_pose[0] += 2.0);
+                with(&|u| u.model_twist[0] = 500.0);
+                with(&|u| u.hand_wrench[0] = 1e3);
+                with(&|u| u.hand_wrench[2] = 100.0);
+                if seq > 0 {
+                    with(&|u| u.seq = seq); // duplicate of the last one used
+                    with(&|u| u.seq = seq - 1); // stale
+                }
+                for u in &bad {
+                    assert!(ve.handle_uplink(now, a, u).is_err());
+                    rejected += 1;
+                }
+                assert!(ve.handle_uplink(now, 999, &good).is_err(), "unknown user");
+            }
+            seq += 1;
+            ve.handle_uplink(now, a, &good).unwrap();
+        });
+        (ve.state().q.clone(), ve.state().qd.clone(), latest[a as usize].clone(), ve.metrics(), rejected)
+    };
+    let (q, qd, snapshot, clean, _) = simulate(false);
+    let (q_h, qd_h, snapshot_h, attacked, sent) = simulate(true);
+    let bits = |v: &nalgebra::DVector<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&q), bits(&q_h), "q differs");
+    assert_eq!(bits(&qd), bits(&qd_h), "q̇ differs");
+    assert_eq!(snapshot, snapshot_h, "the last snapshot differs");
+    assert_eq!(clean.uplinks_accepted, attacked.uplinks_accepted);
+    assert_eq!(attacked.uplinks_rejected + attacked.uplinks_stale, sent);
+    assert!(attacked.uplinks_stale > 0 && attacked.uplinks_rejected > 0);
+}
+
+/// Hostile uplinks are reported once per burst, not once per uplink.
+#[test]
+fn rejections_are_reported_once_per_burst() {
+    let mut ve = core(testbed(), VeConfig::paper());
+    let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+    let pose = ve.state().users().next().unwrap().op_pose;
+    let mut wire = [0.0; 3];
+    pose.to_slice(&mut wire);
+    for i in 0..100u64 {
+        let bad = uplink(i + 1, &[f64::NAN, 0.0, 0.0], &wire, &[0.0; 3]);
+        let _ = ve.handle_uplink(Duration::from_millis(i), a, &bad);
+    }
+    let mut reported = 0;
+    while let Some(event) = ve.poll_event() {
+        if matches!(event, kinloop_server::VeEvent::UplinkRejected { .. }) {
+            reported += 1;
+        }
+    }
+    assert_eq!(reported, 1);
+    assert_eq!(ve.metrics().uplinks_rejected, 100);
+}
+
+/// Capacity and operational points at the core: `max_users` present users, leaving ones make room, an
+/// unknown OP is refused with the list of those that exist, and two users may share one OP.
+#[test]
+fn joins_respect_max_users_and_known_operational_points() {
+    use kinloop_protocol::RefusalReason;
+    let mut config = VeConfig::paper();
+    config.max_users = 2;
+    let mut ve = core(testbed(), config);
+    let t = Duration::ZERO;
+    let first = ve.join(t, request("1", Role::Manipulator, "link2", 3)).unwrap();
+    assert_eq!(first.welcome.scene.op_name, "link2");
+    assert_eq!(first.welcome.scene.length_scale, ve.model().length_scale);
+    ve.join(t, request("2", Role::Observer, "link2", 3)).unwrap();
+    assert_eq!(
+        ve.join(t, request("3", Role::Manipulator, "link2", 3)).unwrap_err(),
+        RefusalReason::ServerFull { max_users: 2 }
+    );
+    ve.leave(t, first.user_id).unwrap();
+    match ve.join(t, request("4", Role::Manipulator, "nowhere", 3)).unwrap_err() {
+        RefusalReason::UnknownOp { requested, available } => {
+            assert_eq!(requested, "nowhere");
+            assert_eq!(available, vec!["link2".to_string()]);
+        }
+        other => panic!("expected UnknownOp, got {other:?}"),
+    }
+    ve.join(t, request("5", Role::Manipulator, "link2", 3)).unwrap();
+    assert_eq!(ve.metrics().joins_refused, 2);
+}
+
+/// An observer receives snapshots, but whatever it reports pushes nothing.
+#[test]
+fn observers_receive_snapshots_and_push_nothing() {
+    let mut ve = core(testbed(), VeConfig::paper());
+    let o = ve.join(Duration::ZERO, request("O", Role::Observer, "link2", 3)).unwrap().user_id;
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    run(&mut ve, Duration::from_millis(300), &mut latest, |ve, now, latest| {
+        if let Some(Some(s)) = latest.get(o as usize) {
+            seq += 1;
+            ve.handle_uplink(now, o, &following(s, seq, &[-5.0, 5.0, 0.1])).unwrap();
+        }
+    });
+    assert_eq!(latest[o as usize].as_ref().unwrap().seq, 300);
+    assert_eq!(ve.state().q, &ve.model().q0, "an observer moved the linkage");
 }

@@ -140,7 +140,7 @@ impl VeConfig {
             contact_damping: None,
             contact_margin_m: 0.005,
             passivity: false,
-            passivity_max_damping: 1.0e4,
+            passivity_max_damping: 1.0e6,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
             max_users: 16,
