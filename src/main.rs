@@ -1,1 +1,35 @@
-fn main() {}
+//! `kinloop`: inspect, simulate and benchmark linkages with kinematic loops; run the demo and experiments.
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use kinloop::cli;
+
+#[derive(Parser, Debug)]
+#[command(name = "kinloop", version, about = "Feel virtual linkages with kinematic loops through haptic devices")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Everything the dynamics core knows at one configuration: q̈, λ, Λ⁻¹, its SVD, the constraint count.
+    Inspect(cli::inspect::InspectArgs),
+    /// Integrate a scene and report closure error, energy error and cost per step.
+    Simulate(cli::simulate::SimulateArgs),
+    /// The benchmark suite (median ns per call).
+    Bench(cli::bench::BenchArgs),
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match &cli.command {
+        Command::Inspect(a) => cli::inspect::run(a),
+        Command::Simulate(a) => cli::simulate::run(a),
+        Command::Bench(a) => cli::bench::run(a),
+    }
+}

@@ -1,0 +1,5 @@
+//! The `kinloop` command line.
+
+pub mod bench;
+pub mod inspect;
+pub mod simulate;
