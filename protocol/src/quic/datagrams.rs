@@ -88,7 +88,12 @@ impl DatagramSender {
 
     /// Encodes and sends `msg`, choosing the route by the connection's current datagram size limit.
     pub fn send(&self, msg: &Datagram) -> Result<Route, SendError> {
-        let bytes = Bytes::from(codec::encode_datagram(msg)?);
+        self.send_encoded(Bytes::from(codec::encode_datagram(msg)?))
+    }
+
+    /// Sends a message already encoded with [`codec::encode_datagram_into`] (by a thread that must not hand
+    /// messages across, for instance), choosing the route as [`DatagramSender::send`] does.
+    pub fn send_encoded(&self, bytes: Bytes) -> Result<Route, SendError> {
         let fits = self.connection.max_datagram_size().is_some_and(|max| bytes.len() <= max);
         if fits {
             match self.connection.send_datagram(bytes.clone()) {

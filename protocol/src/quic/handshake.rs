@@ -195,6 +195,17 @@ pub async fn accept(
     incoming: Incoming,
     validate: impl FnOnce(&Hello) -> Result<Welcome, Refused>,
 ) -> Result<AcceptedSession, AcceptError> {
+    accept_with(incoming, |hello| std::future::ready(validate(&hello))).await
+}
+
+/// [`accept`] with an asynchronous decision, for servers whose admission lives elsewhere (the VE server asks
+/// its simulation thread, which owns the users). `validate` gets a copy of the hello; the whole handshake,
+/// decision included, is bounded by [`HANDSHAKE_TIMEOUT`].
+pub async fn accept_with<F, Fut>(incoming: Incoming, validate: F) -> Result<AcceptedSession, AcceptError>
+where
+    F: FnOnce(Hello) -> Fut,
+    Fut: std::future::Future<Output = Result<Welcome, Refused>>,
+{
     let handshake = async {
         let connection = incoming.await?;
         let (mut send, mut recv) = connection.accept_bi().await?;
@@ -206,7 +217,7 @@ pub async fn accept(
                 return Err(error);
             }
         };
-        let welcome = match validate(&hello) {
+        let welcome = match validate(hello.clone()).await {
             Ok(welcome) => welcome,
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
