@@ -1,9 +1,32 @@
+//! Runs one benchmark case in a loop for profilers:
+//! `profile_step [SCENE] [CALLS] [step|rk4|op_space]` (defaults: paper-testbed, 200000, step).
+//! `perf record -g` shows where the time goes; for instruction counts, which do not suffer from a noisy
+//! machine, run under `valgrind --tool=callgrind --collect-atstart=no --toggle-collect='*run_calls*'`.
+
 use kinloop_linkage::bench::*;
 use kinloop_linkage::Integrator;
-fn main() {
-    let scene = std::env::args().nth(1).unwrap_or("paper-testbed".into());
-    let mut case = Case::new(&scene).unwrap();
-    for _ in 0..200_000 {
-        case.ve_step(Integrator::SemiImplicitEuler);
+
+#[inline(never)]
+fn run_calls(case: &mut Case, calls: usize, what: &str) {
+    for _ in 0..calls {
+        match what {
+            "rk4" => case.ve_step(Integrator::Rk4),
+            "op_space" => {
+                std::hint::black_box(case.op_space());
+            }
+            _ => case.ve_step(Integrator::SemiImplicitEuler),
+        }
     }
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let scene = args.next().unwrap_or("paper-testbed".into());
+    let calls = args.next().map_or(200_000, |s| s.parse().expect("CALLS is a count"));
+    let what = args.next().unwrap_or("step".into());
+    let mut case = Case::new(&scene).expect("a benchmark scene");
+    if what == "op_space" {
+        case.prepare_op_space();
+    }
+    run_calls(&mut case, calls, &what);
 }

@@ -1,8 +1,28 @@
+//! Prints the median time per call of every benchmark case (one run, so medians compare within it).
+//! `quickbench scaling` times `ve_step/chainN_loopsL` for N ∈ {20, 50, 100} and L ∈ {1, 5, 10} instead.
+
 use kinloop_linkage::bench::*;
 use kinloop_linkage::Integrator;
 use std::time::Duration;
+
 fn main() {
     let budget = Duration::from_millis(400);
+    if std::env::args().nth(1).as_deref() == Some("scaling") {
+        println!("ve_step/chainN_loopsL median, µs");
+        println!("{:>6} {:>8} {:>8} {:>8}", "N \\ L", 1, 5, 10);
+        for n in [20, 50, 100] {
+            let row: Vec<String> = [1, 5, 10]
+                .iter()
+                .map(|l| {
+                    let mut case = Case::new(&format!("chain{n}_loops{l}")).unwrap();
+                    let t = measure(budget, || case.ve_step(Integrator::SemiImplicitEuler));
+                    format!("{:>8.2}", t.median_ns / 1000.0)
+                })
+                .collect();
+            println!("{n:>6} {}", row.join(" "));
+        }
+        return;
+    }
     for scene in ["paper-testbed", "chain20_loops1", "chain20_loops5", "chain50_loops1", "chain50_loops5"] {
         let mut case = Case::new(scene).unwrap();
         let t = measure(budget, || case.ve_step(Integrator::SemiImplicitEuler));
