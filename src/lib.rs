@@ -6,4 +6,5 @@
 
 pub mod charts;
 pub mod cli;
+pub mod harness;
 pub mod scene_arg;

@@ -1,0 +1,481 @@
+//! The virtual-time harness: one [`VeCore`] and N [`HapticCore`]s with simulated devices and users, joined by
+//! seeded link emulators, stepped as a discrete-event simulation — str0m's test style: whichever party is
+//! due next runs, and every datagram goes through the real codec and the emulated link.
+//!
+//! Nothing here reads a clock (except to measure the VE's compute cost, which is reported but never feeds
+//! back), so the same plan and seeds give the same results bit for bit, far faster than real time.
+
+pub mod record;
+
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context, Result};
+use kinloop_client::core::{ConstraintMode, CoreConfig, HapticCore, ModelForm};
+use kinloop_client::device::presets::DevicePreset;
+use kinloop_client::device::rig::SimulatedRig;
+use kinloop_client::device::HapticDevice;
+use kinloop_client::user::UserSpec;
+use kinloop_linkage::{Model, Planar, Scene, SceneKind, Space, Spatial, VecOps};
+use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
+use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
+use kinloop_protocol::{Datagram, LocalModelForm, Role, SessionShape};
+use kinloop_server::core::{JoinRequest, UserId, VeConfig, VeCore};
+
+pub use record::{ClientSample, Recording, VeSample};
+
+/// One simulated participant.
+#[derive(Clone, Debug)]
+pub struct ClientPlan {
+    /// Name (logs and charts).
+    pub name: String,
+    /// Operational point to hold.
+    pub op: String,
+    /// Manipulator or observer.
+    pub role: Role,
+    /// Simulated device.
+    pub device: DevicePreset,
+    /// Simulated user.
+    pub user: UserSpec,
+    /// Stiffness or impedance rendering of the constrained directions.
+    pub constraint_mode: ConstraintMode,
+    /// Local-model form.
+    pub form: ModelForm,
+    /// Haptic loop rate, Hz.
+    pub rate_hz: f64,
+    /// Client → server link.
+    pub uplink: LinkConfig,
+    /// Server → client link.
+    pub downlink: LinkConfig,
+    /// When the client joins.
+    pub join_at: Duration,
+    /// When it leaves (never if `None`).
+    pub leave_at: Option<Duration>,
+    /// Changes to the client's core configuration (gains, safety, ...), applied after the defaults.
+    pub tweak: Option<fn(&mut CoreConfig)>,
+}
+
+impl ClientPlan {
+    /// The paper's user: the `paper` device at OP `link2`, the constant wrench (−0.5 N, 0, −0.0025 N m),
+    /// stiffness mode, 1 kHz, a perfect network.
+    pub fn paper(name: &str) -> Self {
+        ClientPlan {
+            name: name.to_string(),
+            op: "link2".into(),
+            role: Role::Manipulator,
+            device: DevicePreset::Paper,
+            user: UserSpec::paper(),
+            constraint_mode: ConstraintMode::Stiffness,
+            form: ModelForm::Op,
+            rate_hz: 1000.0,
+            uplink: LinkConfig::default(),
+            downlink: LinkConfig::default(),
+            join_at: Duration::ZERO,
+            leave_at: None,
+            tweak: None,
+        }
+    }
+
+    /// The same network conditions both ways (each direction gets its own seed).
+    pub fn with_link(mut self, link: LinkConfig) -> Self {
+        self.downlink = LinkConfig { seed: link.seed.wrapping_mul(2).wrapping_add(1), ..link.clone() };
+        self.uplink = link;
+        self
+    }
+}
+
+/// A whole session.
+#[derive(Clone, Debug)]
+pub struct SessionPlan {
+    /// The scene.
+    pub scene: Scene,
+    /// The VE's configuration.
+    pub ve: VeConfig,
+    /// The participants.
+    pub clients: Vec<ClientPlan>,
+    /// Simulated time.
+    pub duration: Duration,
+    /// Record every this many haptic ticks of each client (and VE ticks); 0 records nothing.
+    pub record_every: u32,
+}
+
+impl SessionPlan {
+    /// The paper's session: the testbed, the paper's VE, one paper user, 3 s, recording every tick.
+    pub fn paper() -> Result<Self> {
+        Ok(SessionPlan {
+            scene: kinloop_linkage::builtin::scene("paper-testbed").context("built in")??,
+            ve: VeConfig::paper(),
+            clients: vec![ClientPlan::paper("user")],
+            duration: Duration::from_secs(3),
+            record_every: 1,
+        })
+    }
+}
+
+/// What a session measured.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SessionSummary {
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// VE steps taken.
+    pub ve_steps: u64,
+    /// Largest closure error (m) over the session.
+    pub max_closure_error: f64,
+    /// Wall-clock compute of the VE per simulated second (µs/s).
+    pub ve_compute_us_per_s: f64,
+    /// Wall-clock compute of all haptic cores per simulated second (µs/s).
+    pub client_compute_us_per_s: f64,
+    /// VE states that went non-finite and were restored.
+    pub ve_restores: u64,
+    /// Per-client results.
+    pub clients: Vec<ClientSummary>,
+    /// Wall-clock seconds the whole simulation took.
+    pub wall_s: f64,
+}
+
+/// One client's results.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ClientSummary {
+    /// Name.
+    pub name: String,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Largest commanded force or torque over the device's limit (≤ 1 always).
+    pub max_force_ratio: f64,
+    /// RMS distance between the device (mapped into the VE by the client's indexing) and the VE's operational
+    /// point (m), over active ticks.
+    pub device_op_rms_m: f64,
+    /// Largest device–OP distance (m).
+    pub device_op_max_m: f64,
+    /// RMS distance between the device and the local model's OP (the client's tracking error), m.
+    pub device_model_rms_m: f64,
+    /// Fraction of active ticks with the command clamped at the device limit.
+    pub saturated_fraction: f64,
+    /// Snapshots the client accepted.
+    pub snapshots: u64,
+    /// Uplinks the client sent.
+    pub uplinks: u64,
+    /// Fraction of uplinks the deadband saved.
+    pub uplink_saving: f64,
+    /// Non-finite values refused by the safety layer.
+    pub non_finite: u64,
+    /// Uplinks the server refused (undecodable or failing its guards).
+    pub uplinks_refused: u64,
+    /// Snapshots the client could not decode.
+    pub snapshots_refused: u64,
+}
+
+struct Participant<S: Space> {
+    plan: ClientPlan,
+    rig: SimulatedRig<S>,
+    core: Option<HapticCore<S>>,
+    user_id: Option<UserId>,
+    up: LinkEmulator<Vec<u8>>,
+    down: LinkEmulator<Vec<u8>>,
+    period: Duration,
+    next_tick: Duration,
+    ticks: u64,
+    left: bool,
+    op_sum_sq: f64,
+    op_max: f64,
+    model_sum_sq: f64,
+    active_ticks: u64,
+    saturated: u64,
+    compute: Duration,
+    uplinks_refused: u64,
+    snapshots_refused: u64,
+}
+
+/// Runs a session to its end; `progress` is called with the simulated time from time to time.
+pub fn run(plan: &SessionPlan, progress: &mut dyn FnMut(Duration)) -> Result<(SessionSummary, Recording)> {
+    match plan.scene.kind {
+        SceneKind::Planar => Session::<Planar>::new(plan)?.run(progress),
+        SceneKind::Spatial => Session::<Spatial>::new(plan)?.run(progress),
+    }
+}
+
+/// A running session in space `S`.
+pub struct Session<S: Space> {
+    ve: VeCore<S>,
+    shape: SessionShape,
+    participants: Vec<Participant<S>>,
+    duration: Duration,
+    record_every: u32,
+    recording: Recording,
+    max_closure: f64,
+    ve_compute: Duration,
+    encode_buf: Vec<u8>,
+    ve_ticks_seen: u64,
+}
+
+impl<S: Space> Session<S> {
+    /// Builds the VE and every participant (none has joined yet).
+    pub fn new(plan: &SessionPlan) -> Result<Self> {
+        let model: Model<S> = Model::compile(&plan.scene, &plan.scene.name)?;
+        let ve = VeCore::new(model, plan.ve.clone()).map_err(|e| anyhow!("VE configuration: {e}"))?;
+        let shape = ve.session_shape();
+        let mut participants = Vec::with_capacity(plan.clients.len());
+        for c in &plan.clients {
+            let device = c.device.build::<S>().map_err(|e| anyhow!("{}: device: {e}", c.name))?;
+            let user = c.user.build::<S>().map_err(|e| anyhow!("{}: user: {e}", c.name))?;
+            anyhow::ensure!(c.rate_hz > 0.0 && c.rate_hz <= 100_000.0, "{}: haptic rate {} Hz", c.name, c.rate_hz);
+            let period = Duration::from_secs_f64(1.0 / c.rate_hz);
+            participants.push(Participant {
+                rig: SimulatedRig::new(device, user),
+                core: None,
+                user_id: None,
+                up: LinkEmulator::new(c.uplink.clone()).map_err(|e| anyhow!("{}: uplink: {e}", c.name))?,
+                down: LinkEmulator::new(c.downlink.clone()).map_err(|e| anyhow!("{}: downlink: {e}", c.name))?,
+                period,
+                next_tick: c.join_at,
+                ticks: 0,
+                left: false,
+                op_sum_sq: 0.0,
+                op_max: 0.0,
+                model_sum_sq: 0.0,
+                active_ticks: 0,
+                saturated: 0,
+                compute: Duration::ZERO,
+                uplinks_refused: 0,
+                snapshots_refused: 0,
+                plan: c.clone(),
+            });
+        }
+        let names = plan.clients.iter().map(|c| c.name.clone()).collect();
+        Ok(Session {
+            ve,
+            shape,
+            participants,
+            duration: plan.duration,
+            record_every: plan.record_every,
+            recording: Recording::new(names),
+            max_closure: 0.0,
+            ve_compute: Duration::ZERO,
+            encode_buf: Vec::with_capacity(2048),
+            ve_ticks_seen: 0,
+        })
+    }
+
+    /// The VE core (for tests that inspect it).
+    pub fn ve(&self) -> &VeCore<S> {
+        &self.ve
+    }
+
+    fn join(&mut self, i: usize, now: Duration) -> Result<()> {
+        let p = &mut self.participants[i];
+        let request = JoinRequest {
+            name: p.plan.name.clone(),
+            role: p.plan.role,
+            op: p.plan.op.clone(),
+            form: match p.plan.form {
+                ModelForm::Op => LocalModelForm::OpSpace,
+                ModelForm::Config => LocalModelForm::ConfigSpace,
+            },
+            device: Some(p.rig.spec().caps()),
+        };
+        let joined = self.ve.join(now, request).map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
+        let mut config = CoreConfig::new(p.rig.spec().clone());
+        config.constraint_mode = p.plan.constraint_mode;
+        config.form = p.plan.form;
+        config.period = p.period;
+        if let Some(tweak) = p.plan.tweak {
+            tweak(&mut config);
+        }
+        let mut core = HapticCore::new(config, &joined.welcome).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        core.set_one_way_delay(p.plan.downlink.delay);
+        p.core = Some(core);
+        p.user_id = Some(joined.user_id);
+        Ok(())
+    }
+
+    /// Runs to the end of the plan.
+    pub fn run(mut self, progress: &mut dyn FnMut(Duration)) -> Result<(SessionSummary, Recording)> {
+        let wall = Instant::now();
+        let mut now = Duration::ZERO;
+        let mut last_progress = Duration::ZERO;
+        loop {
+            // Deliver everything due, VE first at equal times (its tick happens "before" clients read).
+            let next_ve = self.ve.poll_timeout();
+            let mut next = next_ve;
+            for p in &self.participants {
+                if !p.left {
+                    next = next.min(p.next_tick);
+                }
+                for t in [p.up.poll_timeout(), p.down.poll_timeout()].into_iter().flatten() {
+                    next = next.min(t);
+                }
+            }
+            if next > self.duration {
+                break;
+            }
+            now = next.max(now);
+            self.deliver_links(now)?;
+            if next_ve <= now {
+                let t = Instant::now();
+                self.ve.handle_timeout(now);
+                self.ve_compute += t.elapsed();
+                self.after_ve_tick(now);
+                self.send_snapshots(now);
+            }
+            for i in 0..self.participants.len() {
+                if self.participants[i].left || self.participants[i].next_tick > now {
+                    continue;
+                }
+                self.client_tick(i, now)?;
+            }
+            if now - last_progress >= Duration::from_millis(100) {
+                last_progress = now;
+                progress(now);
+            }
+        }
+        progress(self.duration);
+        Ok(self.finish(wall.elapsed()))
+    }
+
+    fn deliver_links(&mut self, now: Duration) -> Result<()> {
+        for i in 0..self.participants.len() {
+            // Datagrams that do not decode (a client reporting absurd values, say) are refused and counted,
+            // as a real server and client would.
+            while let Some(bytes) = self.participants[i].up.poll(now) {
+                let Some(user) = self.participants[i].user_id else { continue };
+                match decode_datagram(&bytes, &self.shape) {
+                    Ok(Datagram::Uplink(u)) => {
+                        if self.ve.handle_uplink(now, user, &u).is_err() {
+                            self.participants[i].uplinks_refused += 1;
+                        }
+                    }
+                    _ => self.participants[i].uplinks_refused += 1,
+                }
+            }
+            while let Some(bytes) = self.participants[i].down.poll(now) {
+                match (decode_datagram(&bytes, &self.shape), self.participants[i].core.as_mut()) {
+                    (Ok(Datagram::Snapshot(s)), Some(core)) => {
+                        let _ = core.handle_snapshot(now, &s);
+                    }
+                    (Ok(_), _) => {}
+                    (Err(_), _) => self.participants[i].snapshots_refused += 1,
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn after_ve_tick(&mut self, now: Duration) {
+        let state = self.ve.state();
+        self.max_closure = self.max_closure.max(state.closure_error);
+        self.ve_ticks_seen += 1;
+        if self.record_every > 0 && self.ve_ticks_seen % self.record_every as u64 == 0 {
+            self.recording.push_ve(VeSample::from_state(now, &state));
+        }
+    }
+
+    fn send_snapshots(&mut self, now: Duration) {
+        while let Some(pending) = self.ve.poll_snapshot() {
+            let user = pending.user_id();
+            self.encode_buf.clear();
+            if encode_datagram_into(pending.datagram(), &mut self.encode_buf).is_err() {
+                continue;
+            }
+            if let Some(p) = self.participants.iter_mut().find(|p| p.user_id == Some(user) && !p.left) {
+                p.down.send(now, self.encode_buf.clone());
+            }
+        }
+    }
+
+    fn client_tick(&mut self, i: usize, now: Duration) -> Result<()> {
+        let p = &mut self.participants[i];
+        if p.core.is_none() && now >= p.plan.join_at {
+            self.join(i, now)?;
+        }
+        let p = &mut self.participants[i];
+        if let Some(leave) = p.plan.leave_at {
+            if now >= leave {
+                if let Some(user) = p.user_id {
+                    let _ = self.ve.leave(now, user);
+                }
+                p.left = true;
+                return Ok(());
+            }
+        }
+        let state = p.rig.read(now).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        let Some(core) = p.core.as_mut() else {
+            p.next_tick += p.period;
+            return Ok(());
+        };
+        let t = Instant::now();
+        let out = core.tick(now, &state);
+        p.compute += t.elapsed();
+        let command = out.command;
+        let report = *out.report;
+        if let Some(uplink) = out.uplink {
+            self.encode_buf.clear();
+            if encode_datagram_into(&Datagram::Uplink(uplink.clone()), &mut self.encode_buf).is_ok() {
+                p.up.send(now, self.encode_buf.clone());
+            }
+        }
+        p.rig.command(now, &command).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        p.ticks += 1;
+        p.next_tick += p.period;
+        if report.active {
+            p.active_ticks += 1;
+            let model = report.device_pose.difference(&report.model_pose);
+            p.model_sum_sq += S::op_lin(&model).dot(&S::op_lin(&model));
+            if report.clamp_scale < 1.0 {
+                p.saturated += 1;
+            }
+            if let Some(user) = p.user_id {
+                if let Some(u) = self.ve.state().users().find(|u| u.user_id == user) {
+                    let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm();
+                    p.op_sum_sq += d * d;
+                    p.op_max = p.op_max.max(d);
+                }
+            }
+        }
+        if self.record_every > 0 && p.ticks % self.record_every as u64 == 0 {
+            let ve_op =
+                p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user).map(|u| u.op_pose));
+            self.recording.push_client(i, ClientSample::from_report(&report, report.device_pose, ve_op, &command));
+        }
+        Ok(())
+    }
+
+    fn finish(self, wall: Duration) -> (SessionSummary, Recording) {
+        let seconds = self.duration.as_secs_f64().max(1e-9);
+        let metrics = self.ve.metrics();
+        let mut client_compute = Duration::ZERO;
+        let clients = self
+            .participants
+            .iter()
+            .map(|p| {
+                client_compute += p.compute;
+                let stats = p.core.as_ref().map(|c| c.stats()).unwrap_or_default();
+                let active = p.active_ticks.max(1) as f64;
+                ClientSummary {
+                    name: p.plan.name.clone(),
+                    ticks: p.ticks,
+                    max_force_ratio: stats.max_force_ratio,
+                    device_op_rms_m: (p.op_sum_sq / active).sqrt(),
+                    device_op_max_m: p.op_max,
+                    device_model_rms_m: (p.model_sum_sq / active).sqrt(),
+                    saturated_fraction: p.saturated as f64 / active,
+                    snapshots: stats.snapshots_accepted,
+                    uplinks: stats.uplinks_sent,
+                    uplink_saving: stats.uplink_saving(),
+                    non_finite: stats.non_finite_events,
+                    uplinks_refused: p.uplinks_refused,
+                    snapshots_refused: p.snapshots_refused,
+                }
+            })
+            .collect();
+        let summary = SessionSummary {
+            duration_s: seconds,
+            ve_steps: self.ve.state().step,
+            max_closure_error: self.max_closure,
+            ve_compute_us_per_s: self.ve_compute.as_secs_f64() * 1e6 / seconds,
+            client_compute_us_per_s: client_compute.as_secs_f64() * 1e6 / seconds,
+            ve_restores: metrics.state_restores,
+            clients,
+            wall_s: wall.as_secs_f64(),
+        };
+        (summary, self.recording)
+    }
+}
