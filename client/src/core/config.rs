@@ -235,7 +235,7 @@ impl CoreConfig {
             weighting: ConstraintWeighting::default(),
             period: Duration::from_millis(1),
             blend_time_constant: Duration::from_millis(20),
-            free_blend_time_constant: Duration::from_millis(500),
+            free_blend_time_constant: Duration::from_millis(200),
             terms_time_constant: Duration::from_millis(5),
             hand_observer_bandwidth: 50.0,
             index_at_first_snapshot: true,

@@ -141,7 +141,14 @@ impl DevicePreset {
 
     /// Plant parameters of the simulation.
     pub fn params(self, kind: SceneKind) -> SimulatedDeviceParams {
-        let common = |damping: (f64, f64), coulomb: (f64, f64), resolution: (f64, f64), wall: (f64, f64)| {
+        // Velocity from encoder differences is filtered as vendor SDKs do: one count per millisecond is
+        // 1 mm/s on the paper's 1 µm encoder and 60 mm/s on the Falcon's, noise the damping gains would
+        // turn into force ripple.
+        let common = |damping: (f64, f64),
+                      coulomb: (f64, f64),
+                      resolution: (f64, f64),
+                      wall: (f64, f64),
+                      velocity_filter_hz: f64| {
             SimulatedDeviceParams {
                 damping: per_axis(kind, damping.0, damping.1),
                 coulomb: per_axis(kind, coulomb.0, coulomb.1),
@@ -150,16 +157,17 @@ impl DevicePreset {
                 wall_stiffness: per_axis(kind, wall.0, wall.1),
                 wall_damping: per_axis(kind, wall.0 / 100.0, wall.1 / 100.0),
                 plant_rate_hz: 10_000.0,
-                velocity_filter_hz: 150.0,
+                velocity_filter_hz,
             }
         };
         match self {
-            // Linear motors with 1 µm optical encoders: little friction.
-            DevicePreset::Paper => common((0.02, 2e-5), (0.002, 1e-5), (1e-6, 1e-5), (5000.0, 5.0)),
+            // Direct-drive linear motors with 1 µm optical encoders: little friction (an impedance device whose
+            // friction would otherwise mask the linkage's inertia, the very thing the experiment renders).
+            DevicePreset::Paper => common((0.02, 2e-5), (0.002, 1e-5), (1e-6, 1e-5), (5000.0, 5.0), 50.0),
             // 400 dpi encoders through the delta arms ≈ 60 µm; capstan friction ≈ 0.05 N.
-            DevicePreset::Falcon => common((0.5, 0.0), (0.05, 0.0), (6e-5, 0.0), (3000.0, 1.0)),
+            DevicePreset::Falcon => common((0.5, 0.0), (0.05, 0.0), (6e-5, 0.0), (3000.0, 1.0), 30.0),
             // 450 dpi ≈ 55 µm; gimbal pots ≈ 2 mrad.
-            DevicePreset::Touch => common((0.05, 1e-5), (0.03, 1e-5), (5.5e-5, 2e-3), (2000.0, 0.5)),
+            DevicePreset::Touch => common((0.05, 1e-5), (0.03, 1e-5), (5.5e-5, 2e-3), (2000.0, 0.5), 30.0),
         }
     }
 

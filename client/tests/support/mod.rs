@@ -106,7 +106,14 @@ impl TestbedVe {
         TestbedVe {
             q: model.q0.clone(),
             qd: model.qd0.clone(),
-            coupling: Coupling { op, kg: K_G, bg: B_G, hand: Vector3::zeros(), target: None, jacobian_t: DMatrix::zeros(n, 3) },
+            coupling: Coupling {
+                op,
+                kg: K_G,
+                bg: B_G,
+                hand: Vector3::zeros(),
+                target: None,
+                jacobian_t: DMatrix::zeros(n, 3),
+            },
             step_config: StepConfig::euler(1e-3),
             seq: 0,
             time_s: 0.0,
@@ -164,6 +171,9 @@ impl TestbedVe {
 
     /// One VE step of 1 ms.
     pub fn step(&mut self) {
+        // Work-around for linkage 427d6d5: `step` clears `implicit_mass` only when `use_implicit_mass` is
+        // set, but `forward_dynamics` (our snapshot) resets that flag, so the coupling would be added twice.
+        self.data.implicit_mass.fill(0.0);
         step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut self.coupling, &self.step_config)
             .expect("the testbed steps");
         self.time_s += 1e-3;
@@ -284,7 +294,14 @@ impl ClosedLoop {
         let ve = TestbedVe::new(send_config);
         let core = HapticCore::new(config, &ve.welcome()).expect("core");
         let device = DevicePreset::Paper.build::<Planar>().expect("paper device");
-        ClosedLoop { ve, core, rig: SimulatedRig::new(device, user), now: Duration::ZERO, last_uplink: None, link_up: true }
+        ClosedLoop {
+            ve,
+            core,
+            rig: SimulatedRig::new(device, user),
+            now: Duration::ZERO,
+            last_uplink: None,
+            link_up: true,
+        }
     }
 
     /// One millisecond: the VE steps under the last uplink and snapshots; the client reads the device,
