@@ -8,10 +8,16 @@
 //! - [`access`]: tokens and roles, compared in constant time;
 //! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
-//! - [`bench`]: the numbers `kinloop bench` reports.
+//! - [`bench`](mod@bench): the numbers `kinloop bench` reports.
 
+pub mod bench;
 pub mod core;
 
 pub use crate::core::{
     JoinRequest, Joined, UplinkRejection, UplinkSample, UserId, VeConfig, VeCore, VeEvent, VeMetrics,
 };
+pub mod access;
+pub mod driver;
+
+pub use crate::access::Access;
+pub use crate::driver::{Identity, Server, ServerConfig, ServerError, ServerHandle, ServerStats};

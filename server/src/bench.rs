@@ -1,0 +1,269 @@
+//! Measurements `kinloop bench --json` reports for this crate, kept next to the code they measure.
+//!
+//! - [`ve_tick_users`]: `server/ve_tick_users_N`, one VE tick with N users on the paper's testbed — every
+//!   user's uplink, the dynamics with every coupling, and every user's snapshot terms — in ns per tick;
+//! - [`realtime_run`]: the real VE thread (absolute deadlines, spin_sleep, SCHED_FIFO when allowed) with N
+//!   synthetic in-process users for a while: tick-time percentiles and deadline misses.
+
+use std::hint::black_box;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use kinloop_linkage::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial};
+use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape, Snapshot};
+use rtrb::RingBuffer;
+use serde::Serialize;
+
+use crate::core::{JoinRequest, UplinkSample, VeConfig, VeConfigError, VeCore};
+use crate::driver::ve_thread::{self, Command, UserLink, VeThreadIo};
+use crate::driver::VeLoopStats;
+
+/// Why a measurement could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// The scene did not load.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// The VE configuration was refused.
+    #[error(transparent)]
+    Config(#[from] VeConfigError),
+    /// A user was refused.
+    #[error("user {index} was refused: {reason}")]
+    Refused {
+        /// Which user.
+        index: usize,
+        /// Why.
+        reason: kinloop_protocol::RefusalReason,
+    },
+    /// A thread failed.
+    #[error("the {0} thread failed")]
+    Thread(&'static str),
+}
+
+/// The testbed with one operational point at the COM of each link (`link1`..`link4`; `link2` is the
+/// paper's), so benchmark users can spread over the linkage.
+pub fn testbed_with_ops() -> Result<Model<Planar>, BenchError> {
+    let scene = builtin::scene("paper-testbed").ok_or(BenchError::Thread("scene"))??;
+    let mut model = Model::<Planar>::compile(&scene, "paper-testbed")?;
+    for name in ["link1", "link3", "link4"] {
+        if let Some(body) = model.body_index(name) {
+            let com = model.bodies[body].com;
+            model = model.with_op(name, body, com);
+        }
+    }
+    Ok(model)
+}
+
+/// Names of the operational points users are spread over, round robin.
+fn op_for(model: &Model<impl Space>, index: usize) -> String {
+    model.ops[index % model.ops.len()].name.clone()
+}
+
+fn bench_device(k: usize) -> DeviceCaps {
+    DeviceCaps {
+        name: "bench".into(),
+        dof: k as u8,
+        workspace_min: vec![-1.0; k],
+        workspace_max: vec![1.0; k],
+        max_force_n: 100.0,
+        max_torque_nm: 10.0,
+        max_stiffness_n_per_m: 5000.0,
+        max_damping_ns_per_m: 100.0,
+        native_rate_hz: 1000.0,
+    }
+}
+
+fn join_request(model: &Model<impl Space>, index: usize, k: usize) -> JoinRequest {
+    JoinRequest {
+        name: format!("bench-{index}"),
+        role: Role::Manipulator,
+        op: op_for(model, index),
+        form: LocalModelForm::OpSpace,
+        device: Some(bench_device(k)),
+    }
+}
+
+/// An uplink sample "following" a snapshot: the local model where the VE put the OP, and a share of the
+/// paper's hand wrench (users alternate its sign, pulling against each other).
+fn follow(snapshot: &Snapshot, seq: u64, index: usize, users: usize) -> UplinkSample {
+    let k = snapshot.op_twist.len();
+    let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+    let mut sample = UplinkSample {
+        seq,
+        client_time_s: 0.0,
+        flags: 0,
+        hand_wrench: [0.0; 6],
+        model_pose: [0.0; 7],
+        model_twist: [0.0; 6],
+        op_dim: k as u8,
+        pose_len: snapshot.op_pose.len() as u8,
+    };
+    for (a, w) in PAPER_WRENCH.iter().enumerate().take(k) {
+        sample.hand_wrench[a] = sign * w / users as f64;
+    }
+    sample.model_pose[..snapshot.op_pose.len()].copy_from_slice(&snapshot.op_pose);
+    sample.model_twist[..k].copy_from_slice(&snapshot.op_twist);
+    sample
+}
+
+/// Mean ns of one VE tick on the testbed with `users` users (spread over the four links' COMs): every
+/// user's uplink, one integrator step with every coupling, and every user's snapshot. `iters` ticks are
+/// measured after `iters / 10` of warm-up.
+pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
+    let model = testbed_with_ops()?;
+    let mut config = VeConfig::paper();
+    config.max_users = users.max(1);
+    let mut core = VeCore::new(model.clone(), config)?;
+    let ids = (0..users)
+        .map(|i| {
+            core.join(Duration::ZERO, join_request(&model, i, 3))
+                .map(|j| j.user_id)
+                .map_err(|reason| BenchError::Refused { index: i, reason })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut samples: Vec<Option<UplinkSample>> = vec![None; users];
+    let mut seq = 0u64;
+    let mut tick = |core: &mut VeCore<Planar>, seq: &mut u64| {
+        let now = core.poll_timeout();
+        *seq += 1;
+        for (i, id) in ids.iter().enumerate() {
+            if let Some(sample) = samples[i].as_mut() {
+                sample.seq = *seq;
+                let _ = core.handle_uplink_sample(now, *id, sample);
+            }
+        }
+        core.handle_timeout(now);
+        while let Some(pending) = core.poll_snapshot() {
+            let index = ids.iter().position(|id| *id == pending.user_id()).unwrap_or(0);
+            match samples[index].as_mut() {
+                // Reuse the sample: only the pose and twist change (no allocation in the loop).
+                Some(sample) => {
+                    let s = pending.snapshot();
+                    sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
+                    sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
+                }
+                None => samples[index] = Some(follow(pending.snapshot(), 0, index, users)),
+            }
+        }
+    };
+    for _ in 0..(iters / 10).max(10) {
+        tick(&mut core, &mut seq);
+    }
+    let start = Instant::now();
+    for _ in 0..iters {
+        tick(black_box(&mut core), &mut seq);
+    }
+    Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
+}
+
+/// A real-time run of the VE thread with synthetic users.
+#[derive(Clone, Debug)]
+pub struct RealtimeRun {
+    /// The linkage.
+    pub scene: Scene,
+    /// Where it came from.
+    pub scene_label: String,
+    /// Synthetic users (spread over the scene's operational points).
+    pub users: usize,
+    /// How long to run.
+    pub duration: Duration,
+    /// The VE configuration (`max_users` is raised to `users` if needed).
+    pub ve: VeConfig,
+}
+
+/// What a real-time run measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct RealtimeReport {
+    /// Users.
+    pub users: usize,
+    /// Seconds run.
+    pub duration_s: f64,
+    /// The VE thread's statistics (step time percentiles, deadline misses, SCHED_FIFO).
+    pub ve: VeLoopStats,
+    /// Snapshots the synthetic clients received.
+    pub snapshots_received: u64,
+}
+
+/// Runs the VE thread for `run.duration` with `run.users` synthetic users fed from a helper thread at
+/// about 1 kHz (uplinks following each user's newest snapshot), and reports its timing.
+pub fn realtime_run(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
+    match run.scene.kind {
+        SceneKind::Planar => realtime_run_in::<Planar>(run),
+        SceneKind::Spatial => realtime_run_in::<Spatial>(run),
+    }
+}
+
+fn realtime_run_in<S: Space>(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
+    let model = Model::<S>::compile(&run.scene, &run.scene_label)?;
+    let (n, m) = (model.nq(), model.nc());
+    let shape = SessionShape { kind: S::KIND, n, m };
+    let mut ve = run.ve.clone();
+    ve.max_users = ve.max_users.max(run.users);
+    let core = VeCore::new(model.clone(), ve)?;
+    let (mut command_tx, command_rx) = RingBuffer::new(run.users.max(1) + 4);
+    let (event_tx, mut event_rx) = RingBuffer::new(1024);
+    let (stats_tx, _stats_rx) = RingBuffer::new(64);
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut clients = Vec::new();
+    let mut replies = Vec::new();
+    let ring_bytes = 4 * (ve_thread::FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m));
+    for i in 0..run.users {
+        let (uplink_tx, uplink_rx) = RingBuffer::new(64);
+        let (snapshot_tx, snapshot_rx) = RingBuffer::new(ring_bytes);
+        let (reply_tx, reply_rx) = tokio::sync::oneshot::channel();
+        let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: Arc::default() };
+        let command = Command::Join { request: join_request(&model, i, S::DIM), link, reply: reply_tx };
+        if command_tx.push(command).is_err() {
+            return Err(BenchError::Thread("command ring"));
+        }
+        clients.push((uplink_tx, snapshot_rx));
+        replies.push(reply_rx);
+    }
+    let io = VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: None, stop: stop.clone() };
+    let ve_thread = std::thread::Builder::new()
+        .name("kinloop-ve".into())
+        .spawn(move || ve_thread::run(core, io, true))
+        .map_err(|_| BenchError::Thread("VE"))?;
+    let users = run.users;
+    let client_stop = stop.clone();
+    let client_thread = std::thread::Builder::new()
+        .name("kinloop-synthetic-users".into())
+        .spawn(move || {
+            let ids: Vec<Option<u32>> =
+                replies.into_iter().map(|r| r.blocking_recv().ok().and_then(|j| j.ok()).map(|j| j.user_id)).collect();
+            let mut frame = Vec::new();
+            let mut received = 0u64;
+            let mut seq = 0u64;
+            while !client_stop.load(Ordering::Relaxed) {
+                seq += 1;
+                for (i, (uplinks, snapshots)) in clients.iter_mut().enumerate() {
+                    if ids[i].is_none() || ve_thread::take_latest_frame(snapshots, &mut frame) == 0 {
+                        continue;
+                    }
+                    received += 1;
+                    if let Ok(Datagram::Snapshot(s)) = codec::decode_datagram(&frame, &shape) {
+                        let _ = uplinks.push(follow(&s, seq, i, users));
+                    }
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            received
+        })
+        .map_err(|_| BenchError::Thread("synthetic users"))?;
+    let started = Instant::now();
+    while started.elapsed() < run.duration {
+        std::thread::sleep(Duration::from_millis(20));
+        while event_rx.pop().is_ok() {}
+    }
+    stop.store(true, Ordering::Relaxed);
+    let ve_stats = ve_thread.join().map_err(|_| BenchError::Thread("VE"))?;
+    let received = client_thread.join().map_err(|_| BenchError::Thread("synthetic users"))?;
+    Ok(RealtimeReport {
+        users,
+        duration_s: started.elapsed().as_secs_f64(),
+        ve: ve_stats,
+        snapshots_received: received,
+    })
+}

@@ -1,0 +1,472 @@
+//! The thin real-time shell around [`VeCore`]: [`Server::start`] runs the VE on its own OS thread
+//! (`ve_thread`) and the network on the caller's tokio runtime (quinn), joined by bounded lock-free rings.
+//!
+//! ```text
+//!  quinn tasks (tokio)                               VE thread (spin_sleep, SCHED_FIFO if allowed)
+//!  accept ─ handshake ─ Command::Join ──── rtrb ───►  core.join ─► reply (oneshot)
+//!  uplink receiver ───── UplinkSample ──── rtrb ───►  core.handle_uplink_sample
+//!  snapshot sender ◄─ [len][bytes] frames ◄ rtrb ───  core.poll_snapshot ─► encode_datagram_into
+//!  event logger    ◄──── VeEvent ──────────  rtrb ───  core.poll_event
+//!  stats collector ◄──── VeLoopStats ──────  rtrb ───  every 100 ms
+//!  CSV writer thread ◄── rows ───────────── rtrb ───  --record
+//! ```
+//! Many sessions send commands, so the command ring's producer sits behind a mutex that only network
+//! tasks take; the VE thread owns every consumer and producer it touches and never waits.
+
+mod record;
+mod session;
+pub mod stats;
+pub mod ve_thread;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_protocol::quic::{
+    close_codes, server_endpoint, Endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity,
+};
+use kinloop_protocol::SessionShape;
+use rtrb::RingBuffer;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+pub use record::RecordError;
+pub use stats::{LatencyHistogram, Percentiles, ServerStats, UserStats, VeLoopStats};
+
+use crate::access::Access;
+use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use session::UserEntry;
+use ve_thread::{Command, VeThreadIo};
+
+/// Commands waiting for the VE thread.
+const COMMAND_RING: usize = 64;
+/// Events waiting for the logger.
+const EVENT_RING: usize = 1024;
+/// Rows waiting for the CSV writer (about 2 s of a small scene at 1 kHz).
+const RECORD_RING: usize = 1 << 17;
+/// How often the collector drains the VE thread's statistics and events.
+const COLLECT_EVERY: Duration = Duration::from_millis(50);
+/// Longest wait for sessions to tell their clients and close at shutdown.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(3);
+
+/// Where the certificate comes from.
+#[derive(Clone, Debug)]
+pub enum Identity {
+    /// Load from, or create once in, a directory (stable fingerprint across restarts).
+    CertDir(PathBuf),
+    /// A fresh self-signed certificate in memory (tests, demos).
+    Ephemeral,
+}
+
+/// Everything a server needs.
+#[derive(Clone, Debug)]
+pub struct ServerConfig {
+    /// The linkage.
+    pub scene: Scene,
+    /// Where the scene came from, for messages.
+    pub scene_label: String,
+    /// UDP address to listen on.
+    pub listen: SocketAddr,
+    /// The VE's configuration.
+    pub ve: VeConfig,
+    /// Who may join.
+    pub access: Access,
+    /// Certificate source.
+    pub identity: Identity,
+    /// Impairments applied to everything the server sends (`--delay`, `--loss`...).
+    pub link: Option<LinkConfig>,
+    /// CSV file for one row per VE step.
+    pub record: Option<PathBuf>,
+    /// Log statistics this often.
+    pub stats_every: Option<Duration>,
+    /// Try SCHED_FIFO for the VE thread.
+    pub realtime: bool,
+}
+
+impl ServerConfig {
+    /// A server for `scene` on `listen` with the paper's VE, open access and an ephemeral certificate.
+    pub fn new(scene: Scene, scene_label: impl Into<String>, listen: SocketAddr) -> Self {
+        ServerConfig {
+            scene,
+            scene_label: scene_label.into(),
+            listen,
+            ve: VeConfig::paper(),
+            access: Access::open(),
+            identity: Identity::Ephemeral,
+            link: None,
+            record: None,
+            stats_every: None,
+            realtime: true,
+        }
+    }
+}
+
+/// Why a server could not start or stop cleanly.
+#[derive(Debug, thiserror::Error)]
+pub enum ServerError {
+    /// The scene does not compile.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// The VE configuration is invalid.
+    #[error("invalid VE configuration: {0}")]
+    Config(#[from] VeConfigError),
+    /// The certificate could not be loaded or made.
+    #[error(transparent)]
+    Identity(#[from] IdentityError),
+    /// The QUIC endpoint could not be set up.
+    #[error(transparent)]
+    Endpoint(#[from] EndpointError),
+    /// Recording could not start.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// A thread could not be spawned or panicked.
+    #[error("the {which} thread {what}")]
+    Thread {
+        /// Which thread.
+        which: &'static str,
+        /// What went wrong.
+        what: String,
+    },
+    /// The server was started outside a tokio runtime.
+    #[error("the server must be started inside a tokio runtime")]
+    NoRuntime,
+}
+
+/// State the network tasks share (the VE thread sees none of it).
+pub(crate) struct Shared {
+    commands: Mutex<rtrb::Producer<Command>>,
+    users: Mutex<Vec<UserEntry>>,
+    ve_stats: Mutex<VeLoopStats>,
+    started: Instant,
+    ve_rate_hz: f64,
+    shape: SessionShape,
+    snapshot_ring_bytes: usize,
+    access: Access,
+    shutdown: watch::Sender<bool>,
+}
+
+/// A full command ring for this long means the VE thread is gone.
+const COMMAND_PATIENCE: Duration = Duration::from_secs(2);
+
+impl Shared {
+    /// Hands a command to the VE thread, waiting (on the network side) while its ring is full.
+    async fn send_command(&self, mut command: Command) -> Result<(), ()> {
+        let give_up = Instant::now() + COMMAND_PATIENCE;
+        loop {
+            let pushed = match self.commands.lock() {
+                Ok(mut ring) => ring.push(command),
+                Err(_) => return Err(()),
+            };
+            match pushed {
+                Ok(()) => return Ok(()),
+                Err(rtrb::PushError::Full(back)) if Instant::now() < give_up => {
+                    command = back;
+                    tokio::time::sleep(Duration::from_millis(1)).await;
+                }
+                Err(_) => return Err(()),
+            }
+        }
+    }
+
+    fn register(&self, entry: UserEntry) {
+        if let Ok(mut users) = self.users.lock() {
+            users.push(entry);
+        }
+    }
+
+    fn user_name(&self, user: u32) -> String {
+        let users = self.users.lock();
+        users.ok().and_then(|u| u.iter().find(|e| e.user_id == user).map(|e| e.name.clone())).unwrap_or_default()
+    }
+
+    fn stats(&self) -> ServerStats {
+        let ve = self.ve_stats.lock().map(|s| *s).unwrap_or_default();
+        let per_user = self
+            .users
+            .lock()
+            .map(|users| {
+                users
+                    .iter()
+                    .map(|e| {
+                        let c = &e.counters;
+                        let load = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+                        let (received, lost) = (load(&c.uplinks_received), load(&c.uplinks_lost));
+                        UserStats {
+                            user_id: e.user_id,
+                            name: e.name.clone(),
+                            role: format!("{:?}", e.role).to_lowercase(),
+                            rtt_ms: e.connection.rtt().as_secs_f64() * 1e3,
+                            uplinks_received: received,
+                            uplinks_lost: lost,
+                            uplink_loss: if received + lost > 0 { lost as f64 / (received + lost) as f64 } else { 0.0 },
+                            uplinks_undecodable: load(&c.uplinks_undecodable),
+                            snapshots_sent: load(&c.snapshots_sent),
+                            snapshot_bytes: load(&c.snapshot_bytes),
+                            snapshots_oversize: load(&c.snapshots_oversize),
+                            connected: c.connected.load(Ordering::Relaxed),
+                        }
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        ServerStats {
+            uptime_s: self.started.elapsed().as_secs_f64(),
+            ve_rate_hz: self.ve_rate_hz,
+            users: ve.core.users,
+            ve,
+            per_user,
+        }
+    }
+}
+
+/// Starts servers.
+pub struct Server;
+
+impl Server {
+    /// Compiles the scene, binds the endpoint, starts the VE thread and the network tasks on the current
+    /// tokio runtime, and returns at once. Must be called inside a tokio runtime.
+    pub fn start(config: ServerConfig) -> Result<ServerHandle, ServerError> {
+        tokio::runtime::Handle::try_current().map_err(|_| ServerError::NoRuntime)?;
+        match config.scene.kind {
+            SceneKind::Planar => start_with::<Planar>(config),
+            SceneKind::Spatial => start_with::<Spatial>(config),
+        }
+    }
+}
+
+/// A running server.
+pub struct ServerHandle {
+    local_addr: SocketAddr,
+    fingerprint: String,
+    shared: Arc<Shared>,
+    endpoint: Endpoint,
+    accept: JoinHandle<()>,
+    collector: JoinHandle<()>,
+    stop: Arc<AtomicBool>,
+    ve_thread: Option<std::thread::JoinHandle<VeLoopStats>>,
+    recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
+}
+
+impl ServerHandle {
+    /// The address the server listens on (with the real port when bound to port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local_addr
+    }
+
+    /// SHA-256 fingerprint of the certificate, what clients pin with `--trust-fingerprint`.
+    pub fn fingerprint(&self) -> &str {
+        &self.fingerprint
+    }
+
+    /// Statistics so far.
+    pub fn stats(&self) -> ServerStats {
+        self.shared.stats()
+    }
+
+    /// Tells every client (`Leave`), waits for them to close, closes the endpoint, stops the VE thread and
+    /// the recorder, and returns the final statistics.
+    pub async fn shutdown(mut self) -> Result<ServerStats, ServerError> {
+        self.shared.shutdown.send_replace(true);
+        if tokio::time::timeout(SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
+            self.accept.abort();
+        }
+        self.endpoint.close(close_codes::NORMAL, b"server shutdown");
+        let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.endpoint.wait_idle()).await;
+        self.stop.store(true, Ordering::Relaxed);
+        let final_ve = match self.ve_thread.take() {
+            Some(thread) => tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .map_err(|e| ServerError::Thread { which: "VE", what: e.to_string() })?
+                .map_err(|_| ServerError::Thread { which: "VE", what: "panicked".into() })?,
+            None => VeLoopStats::default(),
+        };
+        if let Ok(mut ve) = self.shared.ve_stats.lock() {
+            *ve = final_ve;
+        }
+        self.collector.abort();
+        if let Some((stop, thread)) = self.recorder.take() {
+            stop.store(true, Ordering::Release);
+            let written = tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .map_err(|e| ServerError::Thread { which: "record", what: e.to_string() })?
+                .map_err(|_| ServerError::Thread { which: "record", what: "panicked".into() })?;
+            if let Err(error) = written {
+                tracing::error!(%error, "the recording is incomplete");
+            }
+        }
+        Ok(self.shared.stats())
+    }
+}
+
+impl Drop for ServerHandle {
+    fn drop(&mut self) {
+        // A handle dropped without shutdown must not leave the VE thread spinning.
+        self.stop.store(true, Ordering::Relaxed);
+        self.accept.abort();
+        self.collector.abort();
+    }
+}
+
+fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerError> {
+    let model = Model::<S>::compile(&config.scene, &config.scene_label)?;
+    let (n, m) = (model.nq(), model.nc());
+    let core = VeCore::new(model, config.ve.clone())?;
+    let identity = match &config.identity {
+        Identity::CertDir(dir) => ServerIdentity::load_or_create(dir)?,
+        Identity::Ephemeral => ServerIdentity::generate(&kinloop_protocol::quic::DEFAULT_NAMES)?,
+    };
+    let options = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
+    let endpoint = server_endpoint(config.listen, &identity, &options)?;
+    let local_addr = endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
+    if config.access.is_open() {
+        tracing::warn!("no --token-file: any token is accepted");
+    }
+
+    let (command_tx, command_rx) = RingBuffer::new(COMMAND_RING);
+    let (event_tx, event_rx) = RingBuffer::new(EVENT_RING);
+    let (stats_tx, stats_rx) = RingBuffer::new(64);
+    let stop = Arc::new(AtomicBool::new(false));
+    let recorder = match &config.record {
+        Some(path) => {
+            let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
+            let done = Arc::new(AtomicBool::new(false));
+            let thread = record::spawn_writer(path, record::header::<S>(n, m), row_rx, done.clone())?;
+            Some((row_tx, (done, thread)))
+        }
+        None => None,
+    };
+    let (row_tx, recorder) = match recorder {
+        Some((tx, handle)) => (Some(tx), Some(handle)),
+        None => (None, None),
+    };
+    let io = VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: row_tx, stop: stop.clone() };
+    let realtime = config.realtime;
+    let ve_thread = std::thread::Builder::new()
+        .name("kinloop-ve".into())
+        .spawn(move || ve_thread::run(core, io, realtime))
+        .map_err(|e| ServerError::Thread { which: "VE", what: e.to_string() })?;
+
+    let (shutdown, _) = watch::channel(false);
+    let shared = Arc::new(Shared {
+        commands: Mutex::new(command_tx),
+        users: Mutex::new(Vec::new()),
+        ve_stats: Mutex::new(VeLoopStats::default()),
+        started: Instant::now(),
+        ve_rate_hz: config.ve.ve_rate_hz,
+        shape: SessionShape { kind: S::KIND, n, m },
+        snapshot_ring_bytes: 4 * (ve_thread::FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
+        access: config.access.clone(),
+        shutdown,
+    });
+    let accept = tokio::spawn(accept_loop(endpoint.clone(), shared.clone()));
+    let collector = tokio::spawn(collect(shared.clone(), stats_rx, event_rx, config.stats_every));
+    Ok(ServerHandle {
+        local_addr,
+        fingerprint: identity.fingerprint.clone(),
+        shared,
+        endpoint,
+        accept,
+        collector,
+        stop,
+        ve_thread: Some(ve_thread),
+        recorder,
+    })
+}
+
+/// Accepts connections until shutdown, then waits (bounded) for every session to finish.
+async fn accept_loop(endpoint: Endpoint, shared: Arc<Shared>) {
+    let mut sessions = tokio::task::JoinSet::new();
+    let mut shutdown = shared.shutdown.subscribe();
+    loop {
+        tokio::select! {
+            incoming = endpoint.accept() => match incoming {
+                Some(incoming) => drop(sessions.spawn(session::serve(incoming, shared.clone()))),
+                None => break,
+            },
+            _ = shutdown.changed() => break,
+            Some(_) = sessions.join_next(), if !sessions.is_empty() => {}
+        }
+    }
+    while sessions.join_next().await.is_some() {}
+}
+
+/// Drains the VE thread's statistics and events; logs statistics every `stats_every`.
+async fn collect(
+    shared: Arc<Shared>,
+    mut stats: rtrb::Consumer<VeLoopStats>,
+    mut events: rtrb::Consumer<VeEvent>,
+    stats_every: Option<Duration>,
+) {
+    let mut tick = tokio::time::interval(COLLECT_EVERY);
+    let mut last_log = Instant::now();
+    loop {
+        tick.tick().await;
+        while let Ok(latest) = stats.pop() {
+            if let Ok(mut ve) = shared.ve_stats.lock() {
+                *ve = latest;
+            }
+        }
+        while let Ok(event) = events.pop() {
+            log_event(&shared, &event);
+        }
+        if stats_every.is_some_and(|e| !e.is_zero() && last_log.elapsed() >= e) {
+            last_log = Instant::now();
+            let s = shared.stats();
+            tracing::info!(
+                users = s.users,
+                step_p50_us = s.ve.step_time.p50_ns as f64 / 1e3,
+                step_p99_us = s.ve.step_time.p99_ns as f64 / 1e3,
+                step_max_us = s.ve.step_time.max_ns as f64 / 1e3,
+                deadline_misses = s.ve.deadline_misses,
+                closure_error_m = s.ve.core.closure_error,
+                uplinks_rejected = s.ve.core.uplinks_rejected,
+                "VE stats"
+            );
+            for u in s.per_user.iter().filter(|u| u.connected) {
+                tracing::info!(
+                    user = u.user_id,
+                    name = %u.name,
+                    rtt_ms = u.rtt_ms,
+                    uplink_loss = u.uplink_loss,
+                    snapshot_bytes = u.snapshot_bytes,
+                    "user stats"
+                );
+            }
+        }
+    }
+}
+
+fn log_event(shared: &Shared, event: &VeEvent) {
+    match event {
+        VeEvent::UserJoined { user } => tracing::info!(user, name = %shared.user_name(*user), "joined the VE"),
+        VeEvent::FadingOut { user, reason } => tracing::info!(user, ?reason, "coupling fading out"),
+        VeEvent::Resumed { user } => tracing::info!(user, "uplinks resumed; coupling fading in"),
+        VeEvent::UserRemoved { user } => tracing::info!(user, "left the VE"),
+        VeEvent::UplinkRejected { user, rejection, previous_burst } => {
+            tracing::warn!(user, %rejection, previous_burst, "rejecting uplinks (logged once per burst)")
+        }
+        VeEvent::StateRestored { step, error } => {
+            tracing::error!(step, %error, "VE step failed; restored the last good configuration at rest")
+        }
+        VeEvent::SnapshotsWithheld { step, error } => tracing::error!(step, %error, "snapshots withheld"),
+        VeEvent::SnapshotInvalid { user, error } => tracing::error!(user, %error, "snapshot withheld"),
+        VeEvent::TicksSkipped { count } => tracing::warn!(count, "the VE fell behind and skipped ticks"),
+    }
+}
+
+/// A scene from a file path or a built-in name (`paper-testbed`, `chain50_loops5`...): the path wins when
+/// it exists. Errors name the file and key (from linkage) or list the built-in names.
+pub fn load_scene(arg: &str) -> Result<(Scene, String), SceneError> {
+    let path = std::path::Path::new(arg);
+    if path.exists() {
+        return Ok((Scene::from_file(path)?, path.display().to_string()));
+    }
+    match kinloop_linkage::builtin::scene(arg) {
+        Some(scene) => Ok((scene?, format!("builtin:{arg}"))),
+        None => Scene::from_file(path).map(|scene| (scene, arg.to_string())),
+    }
+}

@@ -1,0 +1,194 @@
+//! One client's session on the network side: handshake (token, then the VE thread's decision), then three
+//! tasks: uplinks in, snapshots out, and the control stream (ping, leave, shutdown).
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use bytes::Bytes;
+use kinloop_protocol::quic::{
+    accept_with, close_codes, recv_control, send_control, AcceptedSession, Connection, DatagramReceiver,
+    DatagramSender, Incoming, Route,
+};
+use kinloop_protocol::{Control, Datagram, RefusalReason, Refused, Role};
+use rtrb::RingBuffer;
+use tokio::sync::{oneshot, Notify};
+
+use super::ve_thread::{take_latest_frame, Command, UserLink};
+use super::Shared;
+use crate::core::{JoinRequest, UplinkSample};
+
+/// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
+const UPLINK_RING: usize = 64;
+/// How long a leaving server waits for a client to close after telling it.
+const LEAVE_LINGER: Duration = Duration::from_secs(1);
+
+/// Network-side counters of one user, shared with `stats()`.
+#[derive(Debug, Default)]
+pub struct UserCounters {
+    pub uplinks_received: AtomicU64,
+    pub uplinks_lost: AtomicU64,
+    pub uplinks_undecodable: AtomicU64,
+    pub uplinks_dropped: AtomicU64,
+    pub snapshots_sent: AtomicU64,
+    pub snapshot_bytes: AtomicU64,
+    pub snapshots_oversize: AtomicU64,
+    pub connected: AtomicBool,
+}
+
+/// A user as the stats see it.
+pub struct UserEntry {
+    pub user_id: u32,
+    pub name: String,
+    pub role: Role,
+    pub connection: Connection,
+    pub counters: Arc<UserCounters>,
+}
+
+fn refused(reason: RefusalReason) -> Refused {
+    Refused { reason, message: String::new() }
+}
+
+/// Serves one incoming connection to its end.
+pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
+    let remote = incoming.remote_address();
+    let mut ends = None;
+    let (slot, shared_ref) = (&mut ends, &shared);
+    let handshake = accept_with(incoming, move |hello| async move {
+        let shared = shared_ref;
+        shared.access.admit(&hello.token, hello.role).map_err(refused)?;
+        let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
+        let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.snapshot_ring_bytes);
+        let notify = Arc::new(Notify::new());
+        let (reply_tx, reply_rx) = oneshot::channel();
+        let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
+        let command = Command::Join { request: JoinRequest::from_hello(&hello), link, reply: reply_tx };
+        let shutting_down = || refused(RefusalReason::Malformed { what: "the server is shutting down".into() });
+        shared.send_command(command).await.map_err(|_| shutting_down())?;
+        let joined = reply_rx.await.map_err(|_| shutting_down())?.map_err(refused)?;
+        *slot = Some((uplink_tx, snapshot_rx, notify));
+        Ok(joined.welcome)
+    });
+    let session = match handshake.await {
+        Ok(session) => session,
+        Err(error) => {
+            // Never the hello itself: it carries the token.
+            tracing::info!(%remote, %error, "handshake ended without a session");
+            return;
+        }
+    };
+    let Some((uplink_tx, snapshot_rx, notify)) = ends else { return };
+    run_session(session, shared, uplink_tx, snapshot_rx, notify).await;
+}
+
+async fn run_session(
+    session: AcceptedSession,
+    shared: Arc<Shared>,
+    mut uplinks: rtrb::Producer<UplinkSample>,
+    mut snapshots: rtrb::Consumer<u8>,
+    notify: Arc<Notify>,
+) {
+    let AcceptedSession { connection, mut send, mut recv, hello, welcome } = session;
+    let user = welcome.user_id;
+    let counters = Arc::new(UserCounters::default());
+    counters.connected.store(true, Ordering::Relaxed);
+    shared.register(UserEntry {
+        user_id: user,
+        name: hello.client_name.clone(),
+        role: hello.role,
+        connection: connection.clone(),
+        counters: counters.clone(),
+    });
+    tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %hello.op, remote = %connection.remote_address(), "session started");
+
+    let receive = {
+        let counters = counters.clone();
+        let mut receiver = DatagramReceiver::new(connection.clone(), shared.shape);
+        tokio::spawn(async move {
+            let mut last_seq: Option<u64> = None;
+            loop {
+                match receiver.recv().await {
+                    Ok(Datagram::Uplink(uplink)) => {
+                        counters.uplinks_received.fetch_add(1, Ordering::Relaxed);
+                        match last_seq {
+                            Some(last) if uplink.seq > last + 1 => {
+                                counters.uplinks_lost.fetch_add(uplink.seq - last - 1, Ordering::Relaxed);
+                            }
+                            _ => {}
+                        }
+                        last_seq = Some(last_seq.map_or(uplink.seq, |last| last.max(uplink.seq)));
+                        let pushed = UplinkSample::from_uplink(&uplink).map(|sample| uplinks.push(sample));
+                        match pushed {
+                            Ok(Ok(())) => {}
+                            Ok(Err(_)) => drop(counters.uplinks_dropped.fetch_add(1, Ordering::Relaxed)),
+                            Err(_) => drop(counters.uplinks_undecodable.fetch_add(1, Ordering::Relaxed)),
+                        }
+                    }
+                    Ok(Datagram::Snapshot(_)) => drop(counters.uplinks_undecodable.fetch_add(1, Ordering::Relaxed)),
+                    Err(error) if error.is_fatal() => break,
+                    Err(_) => drop(counters.uplinks_undecodable.fetch_add(1, Ordering::Relaxed)),
+                }
+            }
+        })
+    };
+    let transmit = {
+        let counters = counters.clone();
+        let connection = connection.clone();
+        tokio::spawn(async move {
+            let sender = DatagramSender::new(connection.clone());
+            let mut frame = Vec::new();
+            loop {
+                tokio::select! {
+                    _ = notify.notified() => {}
+                    _ = connection.closed() => break,
+                }
+                if take_latest_frame(&mut snapshots, &mut frame) == 0 {
+                    continue;
+                }
+                match sender.send_encoded(Bytes::copy_from_slice(&frame)) {
+                    Ok(route) => {
+                        counters.snapshots_sent.fetch_add(1, Ordering::Relaxed);
+                        counters.snapshot_bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
+                        if route == Route::Stream {
+                            counters.snapshots_oversize.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                    Err(error) => {
+                        tracing::debug!(user, %error, "snapshot not sent; ending the sender");
+                        break;
+                    }
+                }
+            }
+        })
+    };
+
+    let mut shutdown = shared.shutdown.subscribe();
+    let reason = loop {
+        if *shutdown.borrow() {
+            let _ = send_control(&mut send, &Control::Leave { reason: "the server is shutting down".into() }).await;
+            let _ = send.finish();
+            let _ = tokio::time::timeout(LEAVE_LINGER, connection.closed()).await;
+            break "server shutdown";
+        }
+        tokio::select! {
+            message = recv_control(&mut recv) => match message {
+                Ok(Control::Leave { .. }) => break "client left",
+                Ok(Control::Ping { nonce, t_s }) => {
+                    if send_control(&mut send, &Control::Pong { nonce, t_s }).await.is_err() {
+                        break "control stream failed";
+                    }
+                }
+                Ok(other) => tracing::debug!(user, message = other.kind_name(), "ignored control message"),
+                Err(_) => break "connection lost",
+            },
+            _ = shutdown.changed() => {}
+        }
+    };
+    // Best effort: if the VE thread is gone the user is gone with it.
+    let _ = shared.send_command(Command::Leave { user }).await;
+    connection.close(close_codes::NORMAL, b"bye");
+    receive.abort();
+    transmit.abort();
+    counters.connected.store(false, Ordering::Relaxed);
+    tracing::info!(user, reason, "session ended");
+}

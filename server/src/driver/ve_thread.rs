@@ -1,0 +1,259 @@
+//! The VE thread: wakes at absolute deadlines `epoch + k·period` (spin_sleep's hybrid sleep, SCHED_FIFO
+//! when granted), moves uplinks in and snapshots out through lock-free rings, and runs the core.
+//!
+//! It never blocks, never allocates for a fixed set of users, and never logs per tick: events go to a ring
+//! that a tokio task turns into log lines, statistics are copied out every 100 ms. Joins and leaves arrive
+//! as commands (they allocate and free per-user buffers, once per user).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use kinloop_linkage::{Space, VecOps};
+use kinloop_protocol::codec;
+use kinloop_protocol::RefusalReason;
+use rtrb::{Consumer, Producer};
+use tokio::sync::{oneshot, Notify};
+
+use super::stats::{LatencyHistogram, VeLoopStats};
+use crate::core::{JoinRequest, Joined, UplinkSample, UserId, VeCore, VeEvent};
+
+/// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
+pub const FRAME_HEADER: usize = 4;
+
+/// A request from the network side.
+pub enum Command {
+    /// Admit a user; the reply carries the welcome or the refusal.
+    Join {
+        /// What the client asked for.
+        request: JoinRequest,
+        /// The VE thread's ends of the user's rings.
+        link: UserLink,
+        /// Where the decision goes.
+        reply: oneshot::Sender<Result<Joined, RefusalReason>>,
+    },
+    /// The user's session ended.
+    Leave {
+        /// Who.
+        user: UserId,
+    },
+}
+
+/// The VE thread's ends of one user's rings.
+pub struct UserLink {
+    /// Uplinks from the user's receive task.
+    pub uplinks: Consumer<UplinkSample>,
+    /// Length-prefixed encoded snapshots to the user's send task.
+    pub snapshots: Producer<u8>,
+    /// Wakes the send task.
+    pub notify: Arc<Notify>,
+}
+
+struct ActiveLink {
+    user: UserId,
+    link: UserLink,
+}
+
+/// The VE thread's ends of the shared rings.
+pub struct VeThreadIo {
+    /// Joins and leaves.
+    pub commands: Consumer<Command>,
+    /// Events for the log.
+    pub events: Producer<VeEvent>,
+    /// Statistics, a few times per second.
+    pub stats: Producer<VeLoopStats>,
+    /// Recorded rows (see `record`), when recording.
+    pub record: Option<Producer<f64>>,
+    /// Set to stop the loop.
+    pub stop: Arc<AtomicBool>,
+}
+
+/// Tries to run the calling thread under SCHED_FIFO; false when not permitted.
+pub fn try_realtime_priority() -> bool {
+    #[cfg(unix)]
+    {
+        use thread_priority::{
+            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadPriority,
+            ThreadPriorityValue, ThreadSchedulePolicy,
+        };
+        let Ok(value) = ThreadPriorityValue::try_from(80u8) else { return false };
+        set_thread_priority_and_policy(
+            thread_native_id(),
+            ThreadPriority::Crossplatform(value),
+            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+        )
+        .is_ok()
+    }
+    #[cfg(not(unix))]
+    {
+        false
+    }
+}
+
+/// Runs the VE loop until `io.stop` is set; returns the final statistics.
+pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) -> VeLoopStats {
+    let mut stats = VeLoopStats { realtime_priority: realtime && try_realtime_priority(), ..Default::default() };
+    if realtime && !stats.realtime_priority {
+        tracing::warn!("SCHED_FIFO not permitted (needs root or CAP_SYS_NICE); the VE thread runs at normal priority");
+    }
+    let period = core.config().ve_period();
+    let half_period = period / 2;
+    let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;
+    let mut histogram = LatencyHistogram::default();
+    let mut links: Vec<ActiveLink> = Vec::with_capacity(2 * core.config().max_users);
+    let mut encoded = Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES);
+    let sleeper = spin_sleep::SpinSleeper::default();
+    let epoch = Instant::now();
+    let mut iterations = 0u64;
+    while !io.stop.load(Ordering::Relaxed) {
+        let deadline = epoch + core.poll_timeout();
+        sleeper.sleep_until(deadline);
+        let woke = Instant::now();
+        let lateness = woke.saturating_duration_since(deadline);
+        stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
+        if lateness > half_period {
+            stats.deadline_misses += 1;
+        }
+        let now = woke - epoch;
+        serve_commands(&mut core, &mut io.commands, &mut links, now);
+        for l in &mut links {
+            while let Ok(sample) = l.link.uplinks.pop() {
+                // Rejections are counted (and reported once per burst) by the core.
+                let _ = core.handle_uplink_sample(now, l.user, &sample);
+            }
+        }
+        core.handle_timeout(now);
+        while let Some(pending) = core.poll_snapshot() {
+            let user = pending.user_id();
+            let Some(l) = links.iter_mut().find(|l| l.user == user) else { continue };
+            let sent = codec::encode_datagram_into(pending.datagram(), &mut encoded).is_ok()
+                && push_frame(&mut l.link.snapshots, &encoded);
+            if sent {
+                l.link.notify.notify_one();
+            } else {
+                stats.snapshots_dropped += 1;
+            }
+        }
+        while let Some(event) = core.poll_event() {
+            // A full event ring drops the event; the core's counters still count what happened.
+            let _ = io.events.push(event);
+        }
+        if let Some(record) = io.record.as_mut() {
+            if super::record::write_row(&core, record) {
+                stats.record_rows += 1;
+            } else {
+                stats.record_rows_dropped += 1;
+            }
+        }
+        histogram.record(woke.elapsed().as_nanos() as u64);
+        iterations += 1;
+        if iterations % publish_every == 0 {
+            stats.step_time = histogram.summary();
+            stats.core = core.metrics();
+            let _ = io.stats.push(stats);
+        }
+    }
+    stats.step_time = histogram.summary();
+    stats.core = core.metrics();
+    let _ = io.stats.push(stats);
+    stats
+}
+
+fn serve_commands<S: Space>(
+    core: &mut VeCore<S>,
+    commands: &mut Consumer<Command>,
+    links: &mut Vec<ActiveLink>,
+    now: Duration,
+) {
+    while let Ok(command) = commands.pop() {
+        match command {
+            Command::Join { request, link, reply } => {
+                let decision = core.join(now, request);
+                if let Ok(joined) = &decision {
+                    links.push(ActiveLink { user: joined.user_id, link });
+                }
+                // The session may have given up waiting; then the user leaves on its own.
+                if let Err(Ok(joined)) = reply.send(decision) {
+                    let _ = core.leave(now, joined.user_id);
+                    links.retain(|l| l.user != joined.user_id);
+                }
+            }
+            Command::Leave { user } => {
+                let _ = core.leave(now, user);
+                links.retain(|l| l.user != user);
+            }
+        }
+    }
+}
+
+/// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room.
+pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
+    let total = FRAME_HEADER + bytes.len();
+    let Ok(chunk) = ring.write_chunk_uninit(total) else { return false };
+    let header = (bytes.len() as u32).to_le_bytes();
+    chunk.fill_from_iter(header.iter().chain(bytes).copied()) == total
+}
+
+/// Reads every complete frame from a snapshot ring and keeps the newest in `out` (latest wins); returns
+/// how many frames were read.
+pub fn take_latest_frame(ring: &mut Consumer<u8>, out: &mut Vec<u8>) -> usize {
+    let mut frames = 0;
+    loop {
+        let len = {
+            let Ok(header) = ring.read_chunk(FRAME_HEADER) else { break };
+            let (a, b) = header.as_slices();
+            let mut bytes = [0u8; FRAME_HEADER];
+            for (dst, src) in bytes.iter_mut().zip(a.iter().chain(b)) {
+                *dst = *src;
+            }
+            u32::from_le_bytes(bytes) as usize
+        };
+        // The writer commits a frame whole, so the body is there whenever its header is.
+        let Ok(chunk) = ring.read_chunk(FRAME_HEADER + len) else { break };
+        let (a, b) = chunk.as_slices();
+        out.clear();
+        out.extend(a.iter().chain(b).skip(FRAME_HEADER));
+        chunk.commit_all();
+        frames += 1;
+    }
+    frames
+}
+
+/// An upper bound of a user's encoded snapshot (bytes) for a scene with `n` coordinates, `m` closure rows
+/// and operational dimension `k`: every number as 8 bytes plus generous framing.
+pub fn snapshot_size_bound<S: Space>(n: usize, m: usize) -> usize {
+    let k = S::DIM;
+    let point = <S::Point as VecOps>::LEN;
+    let fixed = 7 + k + k * (k + 1) / 2 + 3 * k + k * k;
+    let contact = 2 * point + k + 6;
+    let other = point + k;
+    let config = 3 * n + n * (n + 1) / 2 + m * n + m + k * n + k;
+    let numbers = fixed
+        + kinloop_linkage::local_model::MAX_LOCAL_CONTACTS * contact
+        + kinloop_protocol::codec::limits::MAX_LIST_ENTRIES * other
+        + config;
+    (numbers * 8 + 1024).min(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_round_trip_and_the_newest_wins() {
+        let (mut tx, mut rx) = rtrb::RingBuffer::new(64);
+        assert!(push_frame(&mut tx, b"first"));
+        assert!(push_frame(&mut tx, b"second frame"));
+        assert!(!push_frame(&mut tx, &[0u8; 60]), "no room: refused whole");
+        let mut out = Vec::new();
+        assert_eq!(take_latest_frame(&mut rx, &mut out), 2);
+        assert_eq!(out, b"second frame");
+        assert_eq!(take_latest_frame(&mut rx, &mut out), 0);
+        // Wrapping around the ring's end.
+        for i in 0..20u8 {
+            assert!(push_frame(&mut tx, &[i; 13]));
+            assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
+            assert_eq!(out, [i; 13]);
+        }
+    }
+}

@@ -1,0 +1,160 @@
+//! `kinloop-server`: hosts one linkage for many haptic users over QUIC.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Parser, ValueEnum};
+use kinloop_linkage::Integrator;
+use kinloop_protocol::emulator::LinkArgs;
+use kinloop_server::driver::load_scene;
+use kinloop_server::{Access, Identity, Server, ServerConfig, VeConfig};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Switch {
+    On,
+    Off,
+}
+
+/// Host a virtual linkage with kinematic loops that several people feel at once through haptic devices.
+#[derive(Debug, Parser)]
+#[command(name = "kinloop-server", version)]
+struct Cli {
+    /// Scene file (TOML) or built-in name (paper-testbed, fourbar-crank-rocker, chain50_loops5, ...).
+    #[arg(long, value_name = "FILE_OR_BUILTIN_NAME")]
+    scene: String,
+    /// UDP address to listen on, e.g. 0.0.0.0:4433 or 127.0.0.1:0.
+    #[arg(long, value_name = "ADDR")]
+    listen: SocketAddr,
+    /// VE loop rate (Hz).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    ve_rate: f64,
+    /// Snapshot rate (Hz); defaults to the VE rate.
+    #[arg(long, value_name = "HZ")]
+    snapshot_rate: Option<f64>,
+    /// Integrator: euler (semi-implicit, implicit coupling), rk4 or explicit-euler.
+    #[arg(long, value_name = "NAME", default_value = "euler", value_parser = parse_integrator)]
+    integrator: Integrator,
+    /// Token file: one token per line, optionally `TOKEN manipulator|observer`; `#` comments.
+    #[arg(long, value_name = "F")]
+    token_file: Option<PathBuf>,
+    /// Most users at once.
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    max_users: usize,
+    /// Directory of the server certificate (created on first start; the fingerprint stays the same).
+    #[arg(long, value_name = "D", default_value = ".kinloop-server")]
+    cert_dir: PathBuf,
+    #[command(flatten)]
+    link: LinkArgs,
+    /// Write one CSV row per VE step to this file.
+    #[arg(long, value_name = "FILE")]
+    record: Option<PathBuf>,
+    /// Time-domain passivity observer/controller on each coupling.
+    #[arg(long, value_name = "on|off", default_value = "off")]
+    passivity: Switch,
+    /// Log statistics every S seconds (0: never).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    stats_every: f64,
+    /// Stop after S seconds (default: run until Ctrl-C).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Print the final statistics as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Instead of listening, run the VE thread for --duration with N synthetic in-process users and report
+    /// tick times and deadline misses (the real-time check).
+    #[arg(long, value_name = "N")]
+    synthetic_users: Option<usize>,
+}
+
+fn parse_integrator(s: &str) -> Result<Integrator, String> {
+    Integrator::parse(s).ok_or_else(|| format!("unknown integrator {s:?}; use euler, rk4 or explicit-euler"))
+}
+
+fn seconds(what: &str, s: f64) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(s).with_context(|| format!("{what} must be a non-negative number of seconds"))
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
+    let mut ve = VeConfig::paper();
+    ve.ve_rate_hz = cli.ve_rate;
+    ve.snapshot_rate_hz = cli.snapshot_rate.unwrap_or(cli.ve_rate);
+    ve.integrator = cli.integrator;
+    ve.max_users = cli.max_users;
+    ve.passivity = cli.passivity == Switch::On;
+    let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
+
+    if let Some(users) = cli.synthetic_users {
+        let run = kinloop_server::bench::RealtimeRun {
+            scene,
+            scene_label: label,
+            users,
+            duration: duration.unwrap_or(Duration::from_secs(10)),
+            ve,
+        };
+        let report = kinloop_server::bench::realtime_run(run)?;
+        if cli.json {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            println!(
+                "{} users, {} ticks: step p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; {} deadline misses; SCHED_FIFO {}",
+                report.users,
+                report.ve.step_time.samples,
+                report.ve.step_time.p50_ns as f64 / 1e3,
+                report.ve.step_time.p99_ns as f64 / 1e3,
+                report.ve.step_time.max_ns as f64 / 1e3,
+                report.ve.deadline_misses,
+                if report.ve.realtime_priority { "on" } else { "off" },
+            );
+        }
+        return Ok(());
+    }
+
+    let access = match &cli.token_file {
+        Some(path) => Access::from_file(path)?,
+        None => Access::open(),
+    };
+    let config = ServerConfig {
+        scene,
+        scene_label: label,
+        listen: cli.listen,
+        ve,
+        access,
+        identity: Identity::CertDir(cli.cert_dir.clone()),
+        link: cli.link.emulated_link()?,
+        record: cli.record.clone(),
+        stats_every: Some(seconds("--stats-every", cli.stats_every)?),
+        realtime: true,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    runtime.block_on(async move {
+        let server = Server::start(config)?;
+        println!("kinloop-server listening on {}", server.local_addr());
+        println!("certificate fingerprint (sha-256): {}", server.fingerprint());
+        let stop = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: telling clients and shutting down"),
+            _ = stop => tracing::info!("--duration elapsed: shutting down"),
+        }
+        let stats = server.shutdown().await?;
+        if cli.json {
+            println!("{}", serde_json::to_string_pretty(&stats)?);
+        }
+        anyhow::Ok(())
+    })
+}
