@@ -60,7 +60,8 @@ pub fn limit_wrench<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> (S::OpVec,
     if ratio <= 1.0 {
         (actuated, 1.0)
     } else {
-        let scale = 1.0 / ratio;
+        // A hair under 1 / ratio, so rounding never leaves the result a few ulps above the limit.
+        let scale = (1.0 - 1e-12) / ratio;
         (actuated * scale, scale)
     }
 }

@@ -279,6 +279,8 @@ pub struct LoopSample {
     pub ve_op: OpPose<Planar>,
     pub device: DeviceState<Planar>,
     pub command: Vector3<f64>,
+    /// True when the core sent an uplink this tick.
+    pub uplink_sent: bool,
 }
 
 impl ClosedLoop {
@@ -318,6 +320,7 @@ impl ClosedLoop {
         let device = self.rig.read(self.now).expect("simulated device reads");
         let out = self.core.tick(self.now, &device);
         let command = out.command;
+        let uplink_sent = out.uplink.is_some();
         if let Some(uplink) = out.uplink {
             if self.link_up {
                 self.last_uplink = Some(uplink.clone());
@@ -327,6 +330,6 @@ impl ClosedLoop {
         self.rig.command(self.now, &command).expect("finite command");
         self.now += Duration::from_millis(1);
         let ve_op = self.ve.op_pose();
-        LoopSample { report, ve_op, device, command }
+        LoopSample { report, ve_op, device, command, uplink_sent }
     }
 }
