@@ -37,6 +37,9 @@ pub enum BenchError {
         /// Why.
         reason: kinloop_protocol::RefusalReason,
     },
+    /// A built-in scene is missing from this build.
+    #[error("the built-in scene {0} is missing")]
+    MissingScene(&'static str),
     /// A thread failed.
     #[error("the {0} thread failed")]
     Thread(&'static str),
@@ -45,7 +48,7 @@ pub enum BenchError {
 /// The testbed with one operational point at the COM of each link (`link1`..`link4`; `link2` is the
 /// paper's), so benchmark users can spread over the linkage.
 pub fn testbed_with_ops() -> Result<Model<Planar>, BenchError> {
-    let scene = builtin::scene("paper-testbed").ok_or(BenchError::Thread("scene"))??;
+    let scene = builtin::scene("paper-testbed").ok_or(BenchError::MissingScene("paper-testbed"))??;
     let mut model = Model::<Planar>::compile(&scene, "paper-testbed")?;
     for name in ["link1", "link3", "link4"] {
         if let Some(body) = model.body_index(name) {

@@ -147,7 +147,7 @@ impl VeConfig {
             recommended_gains: RecommendedGains { k_j: 3000.0, b_j: 30.0, k_pc: Vec::new(), b_pc: Vec::new() },
             guards: GuardLimits::default(),
             max_catch_up_ticks: 10,
-            session_seed: 0x6b69_6e6c_6f6f_70,
+            session_seed: 0x006b_696e_6c6f_6f70,
         }
     }
 

@@ -180,7 +180,7 @@ fn build_one<S: Space>(
     }
 
     // Contacts last: frame_point_inertia overwrites data.op.
-    spare.extend(snapshot.contacts.drain(..));
+    spare.append(&mut snapshot.contacts);
     if let Some((stiffness, damping)) = contact_gains.filter(|_| !scratch.near.is_empty()) {
         scratch.op_y.copy_from(&data.op.y);
         scratch.op_g.copy_from(&data.op.g);

@@ -117,11 +117,13 @@ async fn run_session(
                             _ => {}
                         }
                         last_seq = Some(last_seq.map_or(uplink.seq, |last| last.max(uplink.seq)));
-                        let pushed = UplinkSample::from_uplink(&uplink).map(|sample| uplinks.push(sample));
-                        match pushed {
-                            Ok(Ok(())) => {}
-                            Ok(Err(_)) => drop(counters.uplinks_dropped.fetch_add(1, Ordering::Relaxed)),
-                            Err(_) => drop(counters.uplinks_undecodable.fetch_add(1, Ordering::Relaxed)),
+                        let counter = match UplinkSample::from_uplink(&uplink) {
+                            Ok(sample) if uplinks.push(sample).is_ok() => None,
+                            Ok(_) => Some(&counters.uplinks_dropped),
+                            Err(_) => Some(&counters.uplinks_undecodable),
+                        };
+                        if let Some(counter) = counter {
+                            counter.fetch_add(1, Ordering::Relaxed);
                         }
                     }
                     Ok(Datagram::Snapshot(_)) => drop(counters.uplinks_undecodable.fetch_add(1, Ordering::Relaxed)),

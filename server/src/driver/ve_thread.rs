@@ -21,7 +21,9 @@ use crate::core::{JoinRequest, Joined, UplinkSample, UserId, VeCore, VeEvent};
 /// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
 pub const FRAME_HEADER: usize = 4;
 
-/// A request from the network side.
+/// A request from the network side. Joins are rare and cross the ring by value; boxing them would only
+/// move the allocation elsewhere.
+#[allow(clippy::large_enum_variant)]
 pub enum Command {
     /// Admit a user; the reply carries the welcome or the refusal.
     Join {

@@ -1,0 +1,148 @@
+//! A VE tick and the snapshots it builds allocate nothing once the users have joined: counted by a global
+//! allocator that counts the calls made on the measuring thread.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::time::Duration;
+
+use kinloop_linkage::{Model, Planar, Scene, Space};
+use kinloop_protocol::{codec, DeviceCaps, LocalModelForm, Role};
+use kinloop_server::core::{JoinRequest, UplinkSample, VeConfig, VeCore};
+
+struct Counting;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static CALLS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note() {
+    // `try_with`: the thread-locals may be gone while a thread exits.
+    if COUNTING.try_with(|c| c.get()).unwrap_or(false) {
+        let _ = CALLS.try_with(|c| c.set(c.get() + 1));
+    }
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        note();
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// Allocator calls (allocations, frees, reallocations) made by `f` on this thread.
+fn allocator_calls(f: impl FnOnce()) -> u64 {
+    CALLS.with(|c| c.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    CALLS.with(|c| c.get())
+}
+
+fn device() -> DeviceCaps {
+    DeviceCaps {
+        name: "d".into(),
+        dof: 3,
+        workspace_min: vec![-1.0; 3],
+        workspace_max: vec![1.0; 3],
+        max_force_n: 50.0,
+        max_torque_nm: 5.0,
+        max_stiffness_n_per_m: 0.0,
+        max_damping_ns_per_m: 0.0,
+        native_rate_hz: 1000.0,
+    }
+}
+
+/// Joins `forms.len()` users (manipulators and one observer), then counts the allocator calls of `ticks`
+/// ticks in which every user sends an uplink and every snapshot is polled and encoded.
+fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity: bool, ticks: usize) -> u64 {
+    let mut config = VeConfig::paper();
+    config.passivity = passivity;
+    let op = model.ops[0].name.clone();
+    let mut core = VeCore::new(model, config).unwrap();
+    let users: Vec<u32> = forms
+        .iter()
+        .enumerate()
+        .map(|(i, form)| {
+            let role = if i == 1 { Role::Observer } else { Role::Manipulator };
+            let request =
+                JoinRequest { name: format!("u{i}"), role, op: op.clone(), form: *form, device: Some(device()) };
+            core.join(Duration::ZERO, request).unwrap().user_id
+        })
+        .collect();
+    let mut samples: Vec<Option<UplinkSample>> = vec![None; users.len()];
+    let mut encoded = Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES);
+    let mut seq = 0;
+    let mut tick = |core: &mut VeCore<S>| {
+        let now = core.poll_timeout();
+        seq += 1;
+        for (i, user) in users.iter().enumerate() {
+            if let Some(sample) = samples[i].as_mut() {
+                sample.seq = seq;
+                sample.hand_wrench[0] = if i % 2 == 0 { -0.5 } else { 0.4 };
+                core.handle_uplink_sample(now, *user, sample).unwrap();
+            }
+        }
+        core.handle_timeout(now);
+        while let Some(pending) = core.poll_snapshot() {
+            codec::encode_datagram_into(pending.datagram(), &mut encoded).unwrap();
+            let s = pending.snapshot();
+            let i = users.iter().position(|u| *u == s.user_id).unwrap();
+            let sample = samples[i].get_or_insert(UplinkSample {
+                seq: 0,
+                client_time_s: 0.0,
+                flags: 0,
+                hand_wrench: [0.0; 6],
+                model_pose: [0.0; 7],
+                model_twist: [0.0; 6],
+                op_dim: s.op_twist.len() as u8,
+                pose_len: s.op_pose.len() as u8,
+            });
+            sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
+            sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
+        }
+        while core.poll_event().is_some() {}
+    };
+    // Warm up: first snapshots size the lists, first uplinks start the fades.
+    for _ in 0..300 {
+        tick(&mut core);
+    }
+    let calls = allocator_calls(|| {
+        for _ in 0..ticks {
+            tick(&mut core);
+        }
+    });
+    assert_eq!(core.metrics().state_restores, 0);
+    assert!(core.metrics().snapshots_built > 0);
+    calls
+}
+
+fn scene(name: &str) -> Scene {
+    kinloop_linkage::builtin::scene(name).unwrap().unwrap()
+}
+
+#[test]
+fn ticks_and_snapshots_allocate_nothing_for_a_fixed_set_of_users() {
+    use LocalModelForm::{ConfigSpace, OpSpace};
+    // The counter does count.
+    assert!(allocator_calls(|| drop(std::hint::black_box(vec![1u8; 10]))) >= 2);
+    let testbed = Model::<Planar>::compile(&scene("paper-testbed"), "paper-testbed").unwrap();
+    assert_eq!(calls_per_run(testbed.clone(), &[OpSpace, OpSpace, ConfigSpace, OpSpace], false, 500), 0);
+    assert_eq!(calls_per_run(testbed, &[OpSpace, OpSpace], true, 500), 0, "with passivity");
+    // A scene with an obstacle: contact terms in every snapshot.
+    let slider = Model::<Planar>::compile(&scene("slider-crank"), "slider-crank").unwrap();
+    assert_eq!(calls_per_run(slider, &[OpSpace, OpSpace, ConfigSpace], false, 500), 0, "with contacts");
+    let spatial = Model::<kinloop_linkage::Spatial>::compile(&scene("spherical-four-bar"), "spherical").unwrap();
+    assert_eq!(calls_per_run(spatial, &[OpSpace, OpSpace], false, 500), 0, "spatial");
+}
