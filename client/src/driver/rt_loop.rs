@@ -1,0 +1,234 @@
+//! The haptic loop thread: absolute deadlines `start + k·period`, spin-sleep, SCHED_FIFO when permitted.
+//! Each tick: read the device, take the snapshots waiting in the ring, tick the core, command the device,
+//! hand the uplink and the record row to other threads through rings. No lock, no allocation, no IO, no
+//! log line per tick; buffers that must be freed go back through return rings to be dropped elsewhere.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::Thread;
+use std::time::{Duration, Instant};
+
+use kinloop_linkage::space::Space;
+use kinloop_protocol::{Snapshot, Uplink};
+
+use super::record::TickRecord;
+use super::timing::LatenessHistogram;
+use crate::core::{CoreStats, HapticCore};
+use crate::device::HapticDevice;
+
+/// State the loop shares with the rest of the client, all atomics.
+#[derive(Debug, Default)]
+pub struct LoopShared {
+    /// Lateness histogram.
+    pub lateness: LatenessHistogram,
+    /// Set to stop the loop (by the handle, or by the loop itself at the end of its duration).
+    pub stop: AtomicBool,
+    /// One-way delay estimate (ns) from the network side's RTT measurements.
+    pub one_way_delay_ns: AtomicU64,
+    /// Largest force ratio over every session (f64 bits).
+    pub max_force_ratio_bits: AtomicU64,
+    /// Uplinks dropped because the network side fell behind.
+    pub uplinks_dropped: AtomicU64,
+    /// Record rows dropped because the writer fell behind.
+    pub records_dropped: AtomicU64,
+    /// Recoverable device errors.
+    pub device_force_errors: AtomicU64,
+    /// Set when the device failed for good.
+    pub device_lost: AtomicBool,
+    /// Nanoseconds since the loop started, at its last tick.
+    pub elapsed_ns: AtomicU64,
+}
+
+impl LoopShared {
+    /// Largest `|F| / F_max` commanded so far.
+    pub fn max_force_ratio(&self) -> f64 {
+        f64::from_bits(self.max_force_ratio_bits.load(Ordering::Relaxed))
+    }
+}
+
+/// A periodic report to the logging side.
+#[derive(Clone, Copy, Debug)]
+pub struct LoopReport {
+    /// Time since start.
+    pub elapsed: Duration,
+    /// The current session's core counters.
+    pub core: CoreStats,
+    /// Constrained directions now.
+    pub constraint_count: usize,
+    /// Output gain now.
+    pub gain: f64,
+    /// Age of the snapshot in use.
+    pub snapshot_age: Option<Duration>,
+}
+
+/// The loop's ends of the rings.
+pub struct LoopRings<S: Space> {
+    /// Snapshots from the network.
+    pub snapshots: rtrb::Consumer<Snapshot>,
+    /// Used snapshots back to the network side, to be dropped there.
+    pub spent_snapshots: rtrb::Producer<Snapshot>,
+    /// Uplinks to send.
+    pub uplinks: rtrb::Producer<Uplink>,
+    /// Empty uplink buffers to fill.
+    pub free_uplinks: rtrb::Consumer<Uplink>,
+    /// A new core for a new session.
+    pub cores: rtrb::Consumer<Box<HapticCore<S>>>,
+    /// Replaced cores, to be dropped by the network side.
+    pub spent_cores: rtrb::Producer<Box<HapticCore<S>>>,
+    /// Rows for `--record`.
+    pub records: Option<rtrb::Producer<TickRecord>>,
+    /// Periodic reports.
+    pub reports: rtrb::Producer<LoopReport>,
+    /// The thread that sends uplinks (unparked after each push).
+    pub uplink_sender: Option<Thread>,
+}
+
+/// Loop settings.
+#[derive(Clone, Copy, Debug)]
+pub struct LoopSettings {
+    /// Tick rate (Hz).
+    pub rate_hz: f64,
+    /// Stop after this long.
+    pub duration: Option<Duration>,
+    /// Try SCHED_FIFO.
+    pub realtime_priority: bool,
+    /// Ticks between reports.
+    pub report_every: u64,
+}
+
+/// Asks for SCHED_FIFO; returns why not when refused (no permission, not Linux...).
+pub fn try_realtime_priority() -> Result<(), String> {
+    #[cfg(unix)]
+    {
+        use thread_priority::unix::{
+            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
+        };
+        let priority = thread_priority::ThreadPriority::Crossplatform(
+            80u8.try_into().map_err(|e| format!("priority value: {e:?}"))?,
+        );
+        set_thread_priority_and_policy(
+            thread_native_id(),
+            priority,
+            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+        )
+        .map_err(|e| format!("{e:?}"))
+    }
+    #[cfg(not(unix))]
+    {
+        Err("SCHED_FIFO is a POSIX policy".into())
+    }
+}
+
+/// Runs the loop until `shared.stop`, the duration, or a lost device; returns the last core's counters.
+pub fn run<S: Space, D: HapticDevice<S>>(
+    mut device: D,
+    mut core: Box<HapticCore<S>>,
+    mut rings: LoopRings<S>,
+    shared: Arc<LoopShared>,
+    settings: LoopSettings,
+) -> CoreStats {
+    if settings.realtime_priority {
+        if let Err(why) = try_realtime_priority() {
+            tracing::warn!(%why, "could not switch the haptic loop to SCHED_FIFO; running at normal priority");
+        }
+    }
+    let period = Duration::from_secs_f64(1.0 / settings.rate_hz);
+    let sleeper = spin_sleep::SpinSleeper::default();
+    let start = Instant::now();
+    let mut k: u64 = 0;
+    loop {
+        let deadline = start + Duration::from_nanos(period.as_nanos() as u64 * k);
+        sleeper.sleep_until(deadline);
+        let woke = Instant::now();
+        let lateness = woke.saturating_duration_since(deadline);
+        shared.lateness.record(lateness.as_nanos() as u64);
+        let now = woke - start;
+        shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
+        if shared.stop.load(Ordering::Relaxed) || settings.duration.is_some_and(|d| now >= d) {
+            break;
+        }
+        // A new session's core replaces the old one, which goes back to be dropped off this thread.
+        while let Ok(next) = rings.cores.pop() {
+            let old = std::mem::replace(&mut core, next);
+            if let Err(rtrb::PushError::Full(old)) = rings.spent_cores.push(old) {
+                // The network side is not collecting: keep the old core alive rather than free it here.
+                std::mem::forget(old);
+            }
+        }
+        core.set_one_way_delay(Duration::from_nanos(shared.one_way_delay_ns.load(Ordering::Relaxed)));
+        while let Ok(snapshot) = rings.snapshots.pop() {
+            // Refused snapshots are counted by the core.
+            let _ = core.handle_snapshot(now, &snapshot);
+            if let Err(rtrb::PushError::Full(snapshot)) = rings.spent_snapshots.push(snapshot) {
+                std::mem::forget(snapshot);
+            }
+        }
+        let state = match device.read(now) {
+            Ok(state) => state,
+            Err(e) if e.is_fatal() => {
+                shared.device_lost.store(true, Ordering::Relaxed);
+                break;
+            }
+            Err(_) => {
+                shared.device_force_errors.fetch_add(1, Ordering::Relaxed);
+                k += 1;
+                continue;
+            }
+        };
+        let out = core.tick(now, &state);
+        if let Err(e) = device.command(now, &out.command) {
+            if e.is_fatal() {
+                shared.device_lost.store(true, Ordering::Relaxed);
+                break;
+            }
+            shared.device_force_errors.fetch_add(1, Ordering::Relaxed);
+        }
+        if let Some(uplink) = out.uplink {
+            match rings.free_uplinks.pop() {
+                Ok(mut buffer) => {
+                    // Same lengths as the buffers were made with: clone_from copies without allocating.
+                    buffer.clone_from(uplink);
+                    if rings.uplinks.push(buffer).is_err() {
+                        shared.uplinks_dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                    if let Some(sender) = &rings.uplink_sender {
+                        sender.unpark();
+                    }
+                }
+                Err(_) => {
+                    shared.uplinks_dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+        if let Some(records) = rings.records.as_mut() {
+            if records.push(TickRecord::of(out.report)).is_err() {
+                shared.records_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        let stats = core.stats();
+        shared.max_force_ratio_bits.fetch_max(stats.max_force_ratio.to_bits(), Ordering::Relaxed);
+        if k % settings.report_every.max(1) == 0 {
+            let report = core.report();
+            let _ = rings.reports.push(LoopReport {
+                elapsed: now,
+                core: stats,
+                constraint_count: report.constraint_count,
+                gain: report.gain,
+                snapshot_age: report.snapshot_age,
+            });
+        }
+        k += 1;
+        // Skip deadlines already missed rather than run a burst of late ticks.
+        let behind = (Instant::now().saturating_duration_since(start).as_nanos() / period.as_nanos()) as u64;
+        if behind > k {
+            k = behind;
+        }
+    }
+    let _ = device.command(start.elapsed(), &zero::<S>());
+    shared.stop.store(true, Ordering::Relaxed);
+    core.stats()
+}
+
+fn zero<S: Space>() -> S::OpVec {
+    <S::OpVec as kinloop_linkage::space::VecOps>::zero()
+}
