@@ -34,6 +34,9 @@ fn clamping_keeps_the_direction_and_zeroes_unactuated_axes() {
     assert_eq!((w, scale), (Vector3::zeros(), 0.0));
 }
 
+/// A way to corrupt a snapshot.
+type Corruption = Box<dyn Fn(&mut Snapshot)>;
+
 /// A valid testbed snapshot to corrupt.
 fn base_snapshot(seq: u64) -> Snapshot {
     let mut ve = TestbedVe::new(false);
@@ -49,7 +52,7 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
     config.gains = kinloop_client::core::GainChoice::Paper;
     let mut core = HapticCore::<Planar>::new(config, &ve.welcome()).expect("core");
     let limits = paper_limits();
-    let hostile: Vec<Box<dyn Fn(&mut Snapshot)>> = vec![
+    let hostile: Vec<Corruption> = vec![
         Box::new(|_| {}),
         Box::new(|s| s.inverse_inertia = vec![9e5, 0.0, 0.0, 9e5, 0.0, 9e5]),
         Box::new(|s| s.op_pose[0] = f64::NAN),

@@ -157,7 +157,7 @@ impl<S: Space> SimulatedDevice<S> {
         if all.iter().any(|v| v.as_slice().iter().any(|x| !(x.is_finite() && *x >= 0.0))) {
             return Err(invalid("damping, friction, resolution and wall gains must be finite and ≥ 0".into()));
         }
-        if (0..k).any(|i| !(workspace_min[i] <= workspace_max[i])) {
+        if (0..k).any(|i| workspace_min[i].partial_cmp(&workspace_max[i]).is_none_or(|o| o.is_gt())) {
             return Err(invalid("every workspace_min must be ≤ its workspace_max".into()));
         }
         let linear = <S::Point as VecOps>::LEN;
@@ -234,7 +234,7 @@ impl<S: Space> SimulatedDevice<S> {
 
     /// Integrates the plant for `dt_s` seconds under the held command and a constant `hand_wrench`.
     pub fn advance(&mut self, dt_s: f64, hand_wrench: &S::OpVec) {
-        if !(dt_s > 0.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let hand = if hand_wrench.is_finite() { *hand_wrench } else { S::OpVec::zero() };
