@@ -105,7 +105,17 @@ pub fn forward_dynamics<S: Space, F: Forces<S> + ?Sized>(
     forces: &mut F,
 ) -> Result<(), DynamicsError> {
     dynamics_terms(model, data, q, qd, forces);
-    data.use_implicit_mass = false;
+    drop_implicit_mass(data);
     kkt::factorize(model, data)?;
     kkt::solve(model, data)
+}
+
+/// Stops using the linearly-implicit mass, keeping the invariant that `implicit_mass` is zero whenever
+/// `use_implicit_mass` is false (the integrators only clear it when the flag says it was used, and
+/// `Forces::add_implicit` adds to it).
+pub fn drop_implicit_mass<S: Space>(data: &mut Data<S>) {
+    if data.use_implicit_mass {
+        data.implicit_mass.fill(0.0);
+        data.use_implicit_mass = false;
+    }
 }

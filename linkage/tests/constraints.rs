@@ -186,3 +186,46 @@ fn benchmark_chains_compile_closed() {
         assert!(data.closure_residual.amax() < 1e-15);
     }
 }
+
+/// A step with linearly-implicit forces, then a plain `forward_dynamics`, then a step again: the second
+/// step must not see the first step's implicit terms (they are cleared whenever the flag drops).
+#[test]
+fn implicit_mass_never_leaks_between_solves() {
+    use kinloop_linkage::data::Kinematics;
+    use kinloop_linkage::Forces;
+    struct Stiff;
+    impl Forces<Planar> for Stiff {
+        fn add_forces(&mut self, _: &Model<Planar>, _: &Kinematics<Planar>, _: &mut nalgebra::DVector<f64>) {}
+        fn add_implicit(
+            &mut self,
+            _: &Model<Planar>,
+            _: &Kinematics<Planar>,
+            _: f64,
+            _: &nalgebra::DVector<f64>,
+            m: &mut nalgebra::DMatrix<f64>,
+            _: &mut nalgebra::DVector<f64>,
+        ) -> bool {
+            for i in 0..m.nrows() {
+                m[(i, i)] += 1.0;
+            }
+            true
+        }
+    }
+    let model = testbed();
+    let cfg = StepConfig::euler(1e-3);
+    let run = |interleave: bool| {
+        let mut data = Data::new(&model);
+        let (mut q, mut qd) = (model.q0.clone(), nalgebra::DVector::from_element(4, 0.1));
+        for _ in 0..5 {
+            step(&model, &mut data, &mut q, &mut qd, &mut Stiff, &cfg).unwrap();
+            if interleave {
+                forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
+            }
+        }
+        (q, data.implicit_mass.amax())
+    };
+    let (plain, _) = run(false);
+    let (interleaved, implicit) = run(true);
+    assert_eq!(plain, interleaved, "a forward_dynamics between steps must not change the steps");
+    assert_eq!(implicit, 0.0, "forward_dynamics leaves no implicit mass behind");
+}
