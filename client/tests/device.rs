@@ -76,7 +76,7 @@ fn the_motors_saturate_and_the_walls_hold() {
     params.wall_damping = vec![50.0, 50.0, 0.0];
     let mut d = SimulatedDevice::<Planar>::new(spec, &params, at_origin()).unwrap();
     d.set_command(&Vector3::new(30.0, 40.0, 0.0));
-    assert!((d.applied_command() - Vector3::new(3.0, 4.0, 0.0)).norm() < 1e-12, "saturated, direction kept");
+    assert!((d.applied_command() - Vector3::new(3.0, 4.0, 0.0)).norm() < 1e-9, "saturated, direction kept");
     for _ in 0..3000 {
         d.advance(1e-3, &Vector3::zeros());
     }
