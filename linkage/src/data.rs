@@ -92,10 +92,14 @@ impl<S: Space> Kinematics<S> {
 #[derive(Clone, Debug)]
 pub struct KktWorkspace {
     /// U with D = U Uᵀ, U upper triangular with the tree's sparsity (Featherstone's LTL in transposed
-    /// storage), n×n.
+    /// storage), n×n. Only the upper triangle is written.
     pub factor: DMatrix<f64>,
+    /// Reciprocals of U's diagonal (for the triangular solves), n.
+    pub factor_inv_diag: DVector<f64>,
     /// Z = U⁻¹ Wᵀ, n×m.
     pub z: DMatrix<f64>,
+    /// Support of each column c of Wᵀ and Z: rows `z_rows[c]..n` of the column are zero.
+    pub z_rows: Vec<usize>,
     /// The Schur complement S = W D⁻¹ Wᵀ = Zᵀ Z, m×m.
     pub schur: DMatrix<f64>,
     /// Pivoted Cholesky factor of S (lower, in pivoted order), m×m.
@@ -110,6 +114,10 @@ pub struct KktWorkspace {
     pub tmp_m: DVector<f64>,
     /// Scratch of length m.
     pub tmp_m2: DVector<f64>,
+    /// Scratch of length m.
+    pub tmp_m3: DVector<f64>,
+    /// Scratch of n×2 (two right-hand sides solved together).
+    pub tmp_n2: DMatrix<f64>,
 }
 
 /// Operational-space quantities for one operational point.
@@ -212,7 +220,9 @@ impl<S: Space> Data<S> {
             closure_bias_stab: DVector::zeros(m),
             kkt: KktWorkspace {
                 factor: DMatrix::zeros(n, n),
+                factor_inv_diag: DVector::zeros(n),
                 z: DMatrix::zeros(n, m),
+                z_rows: vec![n; m],
                 schur: DMatrix::zeros(m, m),
                 schur_factor: DMatrix::zeros(m, m),
                 schur_perm: (0..m).collect(),
@@ -220,6 +230,8 @@ impl<S: Space> Data<S> {
                 tmp_n: DVector::zeros(n),
                 tmp_m: DVector::zeros(m),
                 tmp_m2: DVector::zeros(m),
+                tmp_m3: DVector::zeros(m),
+                tmp_n2: DMatrix::zeros(n, 2),
             },
             qdd: DVector::zeros(n),
             lambda: DVector::zeros(m),

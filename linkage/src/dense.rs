@@ -3,6 +3,64 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::simd::F64x4;
+
+/// `a * b + c`: one fused instruction with one rounding where the target has FMA (x86-64-v3, as this
+/// workspace builds, and every aarch64). Without FMA hardware `f64::mul_add` becomes a libm call that is
+/// far slower than the rounding it saves, so it falls back to the unfused form. Rust never contracts
+/// `a * b + c` by itself, hence this helper in every kernel.
+#[inline(always)]
+pub fn mul_add(a: f64, b: f64, c: f64) -> f64 {
+    #[cfg(target_feature = "fma")]
+    {
+        a.mul_add(b, c)
+    }
+    #[cfg(not(target_feature = "fma"))]
+    {
+        a * b + c
+    }
+}
+
+/// `Σ a_i b_i` over the common length, in eight interleaved partial sums: a serial sum is one long chain of
+/// dependent additions (Rust keeps the written order of floating-point operations), this vectorizes.
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let len = a.len().min(b.len());
+    let (a, b) = (&a[..len], &b[..len]);
+    let (mut acc0, mut acc1) = (F64x4::zero(), F64x4::zero());
+    let mut i = 0;
+    while i + 8 <= len {
+        acc0 = acc0.add_mul(F64x4::load(&a[i..]), F64x4::load(&b[i..]));
+        acc1 = acc1.add_mul(F64x4::load(&a[i + 4..]), F64x4::load(&b[i + 4..]));
+        i += 8;
+    }
+    if i + 4 <= len {
+        acc0 = acc0.add_mul(F64x4::load(&a[i..]), F64x4::load(&b[i..]));
+        i += 4;
+    }
+    let mut s = acc0.add(acc1).sum();
+    for (x, y) in a[i..].iter().zip(&b[i..]) {
+        s = mul_add(*x, *y, s);
+    }
+    s
+}
+
+/// `y ← y - alpha x` over the common length.
+#[inline]
+pub fn sub_scaled(y: &mut [f64], alpha: f64, x: &[f64]) {
+    let len = y.len().min(x.len());
+    let (y, x) = (&mut y[..len], &x[..len]);
+    let a = F64x4::splat(alpha);
+    let mut i = 0;
+    while i + 4 <= len {
+        F64x4::load(&y[i..]).sub_mul(a, F64x4::load(&x[i..])).store(&mut y[i..]);
+        i += 4;
+    }
+    for (y, x) in y[i..].iter_mut().zip(&x[i..]) {
+        *y = mul_add(-alpha, *x, *y);
+    }
+}
+
 /// Diagonal-pivoted, rank-revealing Cholesky of the symmetric positive semi-definite `s` into the lower
 /// triangle of `l`, in pivoted order (`perm[k]` = row eliminated at step k). A row is dependent when its
 /// remaining pivot falls below `tolerance` times its own original diagonal, which makes the decision

@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
-use crate::dynamics::{check_state, dynamics_terms, Forces};
+use crate::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::error::DynamicsError;
 use crate::kinematics::forward_kinematics;
 use crate::kkt;
@@ -102,9 +102,7 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             dynamics_terms(model, data, q, qd, forces);
             report = StepReport { closure_error: data.closure_residual.norm() };
             // The matrix is zero unless the last step used it: clear it only then (n² writes otherwise wasted).
-            if data.use_implicit_mass {
-                data.implicit_mass.fill(0.0);
-            }
+            drop_implicit_mass(data);
             data.use_implicit_mass = cfg.implicit_forces
                 && cfg.integrator == Integrator::SemiImplicitEuler
                 && forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied);
@@ -119,7 +117,7 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             }
         }
         Integrator::Rk4 => {
-            data.use_implicit_mass = false;
+            drop_implicit_mass(data);
             let ws = &mut data.integ;
             ws.q_start.copy_from(q);
             ws.qd_start.copy_from(qd);
@@ -185,23 +183,32 @@ fn put_stage<S: Space>(data: &mut Data<S>, q: DVector<f64>, qd: DVector<f64>) {
 /// constraint of the configuration it belongs to (using the W of the step's start instead makes an O(dt)
 /// velocity error every step). The correction of q (~1e-8) is too small to matter for W.
 /// Leaves h, Wᵀ and the closure factors at the new q (before its correction).
+/// Both corrections are `U⁻ᵀ Z S⁺ r`, so they go through the two triangular solves together.
 pub fn project<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, qd: &mut DVector<f64>) {
     forward_kinematics(model, data, q);
     closure_residual_and_jacobian(model, data);
     kkt::factor_closures(model, data);
-    let mut r = std::mem::replace(&mut data.kkt.tmp_m, DVector::zeros(0));
-    r.copy_from(&data.closure_residual);
-    correct(model, data, &mut r, q);
-    r.gemv_tr(1.0, &data.closure_jacobian_t, qd, 0.0);
-    correct(model, data, &mut r, qd);
-    data.kkt.tmp_m = r;
-}
-
-/// `x ← x - U⁻ᵀ Z S⁺ r` (r is overwritten).
-fn correct<S: Space>(model: &Model<S>, data: &mut Data<S>, r: &mut DVector<f64>, x: &mut DVector<f64>) {
-    kkt::schur_solve(data, r);
-    let tmp = &mut data.kkt.tmp_n;
-    tmp.gemv(1.0, &data.kkt.z, r, 0.0);
-    ltl::solve_ut(model, &data.kkt.factor, tmp.as_mut_slice());
-    *x -= &*tmp;
+    let kkt = &mut data.kkt;
+    let mut r_q = std::mem::replace(&mut kkt.tmp_m, DVector::zeros(0));
+    let mut r_v = std::mem::replace(&mut kkt.tmp_m3, DVector::zeros(0));
+    r_q.copy_from(&data.closure_residual);
+    kkt::columns_dot(&data.closure_jacobian_t, &kkt.z_rows, qd.as_slice(), r_v.as_mut_slice());
+    kkt::schur_solve(data, &mut r_q);
+    kkt::schur_solve(data, &mut r_v);
+    let kkt = &mut data.kkt;
+    kkt.tmp_n2.fill(0.0);
+    let (t_q, t_v) = kkt.tmp_n2.as_mut_slice().split_at_mut(model.nq());
+    // x - U⁻ᵀ Z s computed as x + U⁻ᵀ (-Z s).
+    kkt::sub_columns_times(&kkt.z, &kkt.z_rows, r_q.as_slice(), t_q);
+    kkt::sub_columns_times(&kkt.z, &kkt.z_rows, r_v.as_slice(), t_v);
+    ltl::solve_ut_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), kkt.tmp_n2.as_mut_slice());
+    let (t_q, t_v) = kkt.tmp_n2.as_slice().split_at(model.nq());
+    for (x, t) in q.iter_mut().zip(t_q) {
+        *x += t;
+    }
+    for (x, t) in qd.iter_mut().zip(t_v) {
+        *x += t;
+    }
+    kkt.tmp_m = r_q;
+    kkt.tmp_m3 = r_v;
 }

@@ -19,10 +19,10 @@
 //! still chooses which rows to keep at every solve, so the choice follows the motion. q̈ is unique whatever
 //! W's rank, so this gives the exact accelerations; λ is the basic solution on the kept rows.
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 use crate::data::Data;
-use crate::dense;
+use crate::dense::{self, dot, sub_scaled};
 use crate::error::DynamicsError;
 use crate::ltl;
 use crate::model::Model;
@@ -36,30 +36,48 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 /// factor of S. Needs `mass_matrix` and `loop_closure`.
 pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
     let kkt = &mut data.kkt;
-    kkt.factor.copy_from(&data.mass_matrix);
-    if data.use_implicit_mass {
-        kkt.factor += &data.implicit_mass;
-    }
-    ltl::factor(model, &mut kkt.factor)?;
+    let extra = data.use_implicit_mass.then_some(&data.implicit_mass);
+    ltl::factor_sum(model, &data.mass_matrix, extra, &mut kkt.factor)?;
+    ltl::inverse_diagonal(&kkt.factor, kkt.factor_inv_diag.as_mut_slice());
     factor_closures(model, data);
     Ok(())
 }
 
 /// With the mass factor U in place, forms `Z = U⁻¹ Wᵀ`, `S = Zᵀ Z` and the pivoted factor of S from the
-/// current `closure_jacobian_t`.
+/// current `closure_jacobian_t`. Each column of Wᵀ is nonzero only on the joints supporting the closure's
+/// bodies, and so is its column of Z (see `ltl`): the solves and the products stop at that support.
 pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let m = model.nc();
     if m == 0 {
         return;
     }
+    let n = model.nq();
     let kkt = &mut data.kkt;
     kkt.z.copy_from(&data.closure_jacobian_t);
-    let n = model.nq();
-    for r in 0..m {
-        let col = &mut kkt.z.as_mut_slice()[r * n..(r + 1) * n];
-        ltl::solve_u(model, &kkt.factor, col);
+    let z = kkt.z.as_mut_slice();
+    for (rows, col) in kkt.z_rows.iter_mut().zip(z.chunks_exact(n)) {
+        *rows = col.iter().rposition(|x| *x != 0.0).map_or(0, |r| r + 1);
     }
-    kkt.z.tr_mul_to(&kkt.z, &mut kkt.schur);
+    // Consecutive columns with the same support (the rows of one primitive) are solved together.
+    let mut c = 0;
+    while c < m {
+        let rows = kkt.z_rows[c];
+        let mut end = c + 1;
+        while end < m && end - c < 4 && kkt.z_rows[end] == rows {
+            end += 1;
+        }
+        ltl::solve_u_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), &mut z[c * n..end * n], rows);
+        c = end;
+    }
+    let s = kkt.schur.as_mut_slice();
+    for j in 0..m {
+        let zj = &z[j * n..j * n + kkt.z_rows[j]];
+        for i in 0..=j {
+            let v = dot(&z[i * n..i * n + kkt.z_rows[i]], zj);
+            s[j * m + i] = v;
+            s[i * m + j] = v;
+        }
+    }
     kkt.schur_rank = dense::pivoted_cholesky(
         &kkt.schur,
         &mut kkt.schur_factor,
@@ -70,6 +88,23 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     );
 }
 
+/// `out[c] = a[:, c] · x` for the columns of `a` (Wᵀ or Z, n×m), each over its support `rows[c]`
+/// (`KktWorkspace::z_rows`).
+pub fn columns_dot(a: &DMatrix<f64>, rows: &[usize], x: &[f64], out: &mut [f64]) {
+    let n = a.nrows();
+    for ((o, col), rows) in out.iter_mut().zip(a.as_slice().chunks_exact(n)).zip(rows) {
+        *o = dot(&col[..*rows], &x[..*rows]);
+    }
+}
+
+/// `x ← x - a r` for `a` as in [`columns_dot`].
+pub fn sub_columns_times(a: &DMatrix<f64>, rows: &[usize], r: &[f64], x: &mut [f64]) {
+    let n = a.nrows();
+    for ((col, rows), rc) in a.as_slice().chunks_exact(n).zip(rows).zip(r) {
+        sub_scaled(&mut x[..*rows], *rc, &col[..*rows]);
+    }
+}
+
 /// Solves `S x = r` in place on the independent rows of the pivoted factor; dependent rows get `x = 0`.
 pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
     let kkt = &mut data.kkt;
@@ -78,25 +113,26 @@ pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
 
 /// Solves eq 4 for `data.qdd` and `data.lambda` with the right-hand side
 /// `τ = applied + joint_force - bias - gravity` and `-w_stab`. Needs [`factorize`] and `stabilize`.
+/// With `y = U⁻¹ τ`: `λ = S⁺ (Zᵀ y + w_stab)` (= `S⁺ (W q̈_free + w_stab)`) and `q̈ = U⁻ᵀ (y - Z λ)`
+/// (= `q̈_free - D⁻¹ Wᵀ λ`): one solve with U and one with Uᵀ.
 pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
     let n = model.nq();
     for i in 0..n {
         data.qdd[i] = data.applied[i] + data.joint_force[i] - data.bias[i] - data.gravity[i];
     }
-    // Unconstrained accelerations D⁻¹ τ.
-    ltl::solve(model, &data.kkt.factor, data.qdd.as_mut_slice());
+    let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
+    ltl::solve_u_columns(model, factor, inv, data.qdd.as_mut_slice(), n);
     if model.nc() > 0 {
-        // λ = S⁺ (W q̈_free + w_stab), then q̈ = q̈_free - D⁻¹ Wᵀ λ = q̈_free - U⁻ᵀ Z λ.
         let mut rhs = std::mem::replace(&mut data.lambda, DVector::zeros(0));
-        rhs.copy_from(&data.closure_bias_stab);
-        rhs.gemv_tr(1.0, &data.closure_jacobian_t, &data.qdd, 1.0);
+        let kkt = &data.kkt;
+        columns_dot(&kkt.z, &kkt.z_rows, data.qdd.as_slice(), rhs.as_mut_slice());
+        rhs += &data.closure_bias_stab;
         schur_solve(data, &mut rhs);
+        sub_columns_times(&data.kkt.z, &data.kkt.z_rows, rhs.as_slice(), data.qdd.as_mut_slice());
         data.lambda = rhs;
-        let tmp = &mut data.kkt.tmp_n;
-        tmp.gemv(1.0, &data.kkt.z, &data.lambda, 0.0);
-        ltl::solve_ut(model, &data.kkt.factor, tmp.as_mut_slice());
-        data.qdd -= &*tmp;
     }
+    let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
+    ltl::solve_ut_columns(model, factor, inv, data.qdd.as_mut_slice());
     if data.qdd.iter().any(|x| !x.is_finite()) {
         return Err(DynamicsError::NonFiniteResult { what: "joint accelerations" });
     }

@@ -56,6 +56,7 @@ pub mod mass_matrix;
 pub mod model;
 pub mod op_space;
 pub mod scene;
+mod simd;
 pub mod space;
 
 #[cfg(test)]

@@ -228,6 +228,9 @@ pub struct Model<S: Space> {
     /// `chain_prefix[k]` is true when the ancestors of body k are exactly bodies `0..k` (lets the
     /// factorization use contiguous loops).
     pub chain_prefix: Vec<bool>,
+    /// Number of bodies on the chain prefix: `chain_prefix[k]` exactly for `k < chain_prefix_len` (the
+    /// ancestors of a chain-prefix body are on the chain prefix too, so these bodies come first).
+    pub chain_prefix_len: usize,
     /// Cut joints.
     pub cuts: Vec<Cut<S>>,
     /// Total number of closure equations m.
@@ -298,7 +301,7 @@ impl<S: Space> Model<S> {
     }
     /// True when the tree is a single chain from ground (every body's parent is the previous body).
     pub fn is_chain(&self) -> bool {
-        self.chain_prefix.iter().all(|c| *c)
+        self.chain_prefix_len == self.joints.len()
     }
     /// True when `a` is an ancestor of `b` or `a == b`.
     pub fn supports(&self, a: usize, mut b: usize) -> bool {
@@ -662,7 +665,7 @@ impl<S: Space> Compiler<'_, S> {
             });
         }
 
-        let chain_prefix = (0..joints.len())
+        let chain_prefix: Vec<bool> = (0..joints.len())
             .map(|k| {
                 let mut expect = k;
                 let mut b = joints[k].parent;
@@ -684,6 +687,7 @@ impl<S: Space> Compiler<'_, S> {
             has_gravity: gravity.norm() > 0.0,
             bodies,
             joints,
+            chain_prefix_len: chain_prefix.iter().take_while(|c| **c).count(),
             chain_prefix,
             cuts: Vec::new(),
             closure_rows: 0,

@@ -9,6 +9,7 @@
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
 
 use crate::data::Data;
+use crate::dense::{dot, mul_add};
 use crate::error::DynamicsError;
 use crate::jacobian::{frame_bias_acceleration, frame_jacobian_t};
 use crate::ltl;
@@ -37,40 +38,41 @@ pub fn frame_point_inertia<S: Space>(
     frame_jacobian_t(model, &data.kin, body, p, &mut ws.jacobian_t);
     ws.jdot_qdot = frame_bias_acceleration(&data.kin, body, p);
     ws.y.copy_from(&ws.jacobian_t);
-    for c in 0..k {
-        ltl::solve_u(model, &data.kkt.factor, &mut ws.y.as_mut_slice()[c * n..(c + 1) * n]);
-    }
+    // Jᵀ, and so Y, is nonzero only on the joints that move `body`: rows 0..=body.
+    let rows = body + 1;
+    let kkt = &data.kkt;
+    ltl::solve_u_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), ws.y.as_mut_slice(), rows);
+    let y = ws.y.as_slice();
     let mut open = S::OpMat::zero();
     for c in 0..k {
         for r in 0..=c {
-            let v = ws.y.column(r).dot(&ws.y.column(c));
+            let v = dot(&y[r * n..r * n + rows], &y[c * n..c * n + rows]);
             open[(r, c)] = v;
             open[(c, r)] = v;
         }
     }
     ws.inverse_inertia_open = open;
     let mut closed = open;
-    let rank = data.kkt.schur_rank;
+    let rank = kkt.schur_rank;
     if model.nc() > 0 && rank > 0 {
         // G = R⁻¹ (Zᵀ Y) restricted to the pivoted independent rows, one column of Y at a time.
-        let l = &data.kkt.schur_factor;
+        let l = kkt.schur_factor.as_slice();
+        let m = model.nc();
+        let z = kkt.z.as_slice();
         for c in 0..k {
-            let yc = ws.y.column(c);
+            let yc = &y[c * n..c * n + rows];
             for i in 0..rank {
-                let zi = data.kkt.z.column(data.kkt.schur_perm[i]);
-                let mut s = zi.dot(&yc);
+                let zi = kkt.schur_perm[i];
+                let mut s = dot(&z[zi * n..zi * n + kkt.z_rows[zi]], yc);
                 for j in 0..i {
-                    s -= l[(i, j)] * ws.g[(j, c)];
+                    s = mul_add(-l[j * m + i], ws.g[(j, c)], s);
                 }
-                ws.g[(i, c)] = s / l[(i, i)];
+                ws.g[(i, c)] = s / l[i * m + i];
             }
         }
         for c in 0..k {
             for r in 0..=c {
-                let mut s = 0.0;
-                for i in 0..rank {
-                    s += ws.g[(i, r)] * ws.g[(i, c)];
-                }
+                let s = dot(&ws.g.column(r).as_slice()[..rank], &ws.g.column(c).as_slice()[..rank]);
                 closed[(r, c)] -= s;
                 if r != c {
                     closed[(c, r)] -= s;
