@@ -6,6 +6,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::kinematics::AnchoredSinCos;
 use crate::model::{Attachment, Model};
 use crate::space::{MatOps, Space, VecOps};
 
@@ -26,6 +27,8 @@ pub struct Kinematics<S: Space> {
     pub body_velocity: Vec<S::Spatial>,
     /// Velocity-product spatial acceleration of each body: its acceleration when q̈ = 0.
     pub bias_acceleration: Vec<S::Spatial>,
+    /// Per joint, sin and cos at the last anchor of its angle (see `kinematics::AnchoredSinCos`).
+    pub(crate) sin_cos: Vec<AnchoredSinCos>,
 }
 
 impl<S: Space> Kinematics<S> {
@@ -38,6 +41,7 @@ impl<S: Space> Kinematics<S> {
             body_inertia: vec![S::Inertia::zero(); n],
             body_velocity: vec![S::Spatial::zero(); n],
             bias_acceleration: vec![S::Spatial::zero(); n],
+            sin_cos: vec![AnchoredSinCos::default(); n],
         }
     }
 

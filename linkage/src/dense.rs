@@ -28,18 +28,18 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let len = a.len().min(b.len());
     let (a, b) = (&a[..len], &b[..len]);
     let (mut acc0, mut acc1) = (F64x4::zero(), F64x4::zero());
-    let mut i = 0;
-    while i + 8 <= len {
-        acc0 = acc0.add_mul(F64x4::load(&a[i..]), F64x4::load(&b[i..]));
-        acc1 = acc1.add_mul(F64x4::load(&a[i + 4..]), F64x4::load(&b[i + 4..]));
-        i += 8;
+    let (mut ca, mut cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        acc0 = acc0.add_mul(F64x4::load(&x[..4]), F64x4::load(&y[..4]));
+        acc1 = acc1.add_mul(F64x4::load(&x[4..]), F64x4::load(&y[4..]));
     }
-    if i + 4 <= len {
-        acc0 = acc0.add_mul(F64x4::load(&a[i..]), F64x4::load(&b[i..]));
-        i += 4;
+    let (mut ra, mut rb) = (ca.remainder(), cb.remainder());
+    if ra.len() >= 4 {
+        acc0 = acc0.add_mul(F64x4::load(ra), F64x4::load(rb));
+        (ra, rb) = (&ra[4..], &rb[4..]);
     }
     let mut s = acc0.add(acc1).sum();
-    for (x, y) in a[i..].iter().zip(&b[i..]) {
+    for (x, y) in ra.iter().zip(rb) {
         s = mul_add(*x, *y, s);
     }
     s
@@ -51,12 +51,11 @@ pub fn sub_scaled(y: &mut [f64], alpha: f64, x: &[f64]) {
     let len = y.len().min(x.len());
     let (y, x) = (&mut y[..len], &x[..len]);
     let a = F64x4::splat(alpha);
-    let mut i = 0;
-    while i + 4 <= len {
-        F64x4::load(&y[i..]).sub_mul(a, F64x4::load(&x[i..])).store(&mut y[i..]);
-        i += 4;
+    let (mut cy, mut cx) = (y.chunks_exact_mut(4), x.chunks_exact(4));
+    for (y, x) in (&mut cy).zip(&mut cx) {
+        F64x4::load(y).sub_mul(a, F64x4::load(x)).store(y);
     }
-    for (y, x) in y[i..].iter_mut().zip(&x[i..]) {
+    for (y, x) in cy.into_remainder().iter_mut().zip(cx.remainder()) {
         *y = mul_add(-alpha, *x, *y);
     }
 }
@@ -75,16 +74,20 @@ pub fn pivoted_cholesky(
     max_rank: usize,
 ) -> usize {
     let m = s.nrows();
-    l.copy_from(s);
-    for (i, p) in perm.iter_mut().enumerate() {
+    let a = l.as_mut_slice();
+    a.copy_from_slice(s.as_slice());
+    let scale = &mut scale.as_mut_slice()[..m];
+    let perm = &mut perm[..m];
+    for (i, (p, sc)) in perm.iter_mut().zip(scale.iter_mut()).enumerate() {
         *p = i;
-        scale[i] = s[(i, i)].max(f64::MIN_POSITIVE);
+        *sc = a[i * m + i].max(f64::MIN_POSITIVE);
     }
-    for k in 0..m.min(max_rank) {
+    let cap = m.min(max_rank);
+    for k in 0..cap {
         let mut best = k;
         let mut best_ratio = -1.0;
         for p in k..m {
-            let ratio = l[(p, p)] / scale[perm[p]];
+            let ratio = a[p * m + p] / scale[perm[p]];
             if ratio > best_ratio {
                 best_ratio = ratio;
                 best = p;
@@ -94,48 +97,51 @@ pub fn pivoted_cholesky(
             return k;
         }
         if best != k {
-            l.swap_rows(k, best);
-            l.swap_columns(k, best);
+            // Symmetric swap of rows and columns k and best (k < best).
+            for c in 0..m {
+                a.swap(c * m + k, c * m + best);
+            }
+            let (left, right) = a.split_at_mut(best * m);
+            left[k * m..(k + 1) * m].swap_with_slice(&mut right[..m]);
             perm.swap(k, best);
         }
-        let lkk = l[(k, k)].sqrt();
-        l[(k, k)] = lkk;
-        for i in k + 1..m {
-            l[(i, k)] /= lkk;
+        let (head, trailing) = a.split_at_mut((k + 1) * m);
+        let col_k = &mut head[k * m..];
+        let lkk = col_k[k].sqrt();
+        col_k[k] = lkk;
+        let inv = 1.0 / lkk;
+        for x in &mut col_k[k + 1..] {
+            *x *= inv;
         }
         // Update the whole trailing block, both triangles: the symmetric row/column swaps of later pivots
         // read entries from either side of the diagonal.
-        for j in k + 1..m {
-            let ljk = l[(j, k)];
-            for i in k + 1..m {
-                let v = l[(i, k)] * ljk;
-                l[(i, j)] -= v;
-            }
+        for (col_j, ljk) in trailing.chunks_exact_mut(m).zip(&col_k[k + 1..]) {
+            sub_scaled(&mut col_j[k + 1..], *ljk, &col_k[k + 1..]);
         }
     }
-    m.min(max_rank)
+    cap
 }
 
 /// Solves `S x = r` in place with a factor from [`pivoted_cholesky`]; rows beyond the rank get `x = 0`.
 /// `y` is scratch of length m.
 pub fn pivoted_solve(l: &DMatrix<f64>, perm: &[usize], rank: usize, r: &mut DVector<f64>, y: &mut DVector<f64>) {
+    let m = l.nrows();
+    let a = l.as_slice();
+    let y = &mut y.as_mut_slice()[..rank];
     for k in 0..rank {
         let mut s = r[perm[k]];
-        for j in 0..k {
-            s -= l[(k, j)] * y[j];
+        for (j, yj) in y[..k].iter().enumerate() {
+            s = mul_add(-a[j * m + k], *yj, s);
         }
-        y[k] = s / l[(k, k)];
+        y[k] = s / a[k * m + k];
     }
     for k in (0..rank).rev() {
-        let mut s = y[k];
-        for j in k + 1..rank {
-            s -= l[(j, k)] * y[j];
-        }
-        y[k] = s / l[(k, k)];
+        let col = &a[k * m..k * m + rank];
+        y[k] = (y[k] - dot(&col[k + 1..], &y[k + 1..])) / col[k];
     }
-    r.fill(0.0);
-    for k in 0..rank {
-        r[perm[k]] = y[k];
+    r.as_mut_slice().fill(0.0);
+    for (p, yk) in perm.iter().zip(y.iter()) {
+        r[*p] = *yk;
     }
 }
 

@@ -24,7 +24,7 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
             }
         }
     } else {
-        data.gravity.fill(0.0);
+        data.gravity.as_mut_slice().fill(0.0);
     }
     if model.has_springs {
         for (i, joint) in model.joints.iter().enumerate() {

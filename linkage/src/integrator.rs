@@ -4,6 +4,7 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
+use crate::dense::sub_scaled;
 use crate::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::error::DynamicsError;
 use crate::kinematics::forward_kinematics;
@@ -109,11 +110,11 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             kkt::factorize(model, data)?;
             kkt::solve(model, data)?;
             if cfg.integrator == Integrator::SemiImplicitEuler {
-                qd.axpy(dt, &data.qdd, 1.0);
-                q.axpy(dt, qd, 1.0);
+                add_scaled(qd, dt, &data.qdd);
+                add_scaled(q, dt, qd);
             } else {
-                q.axpy(dt, qd, 1.0);
-                qd.axpy(dt, &data.qdd, 1.0);
+                add_scaled(q, dt, qd);
+                add_scaled(qd, dt, &data.qdd);
             }
         }
         Integrator::Rk4 => {
@@ -164,6 +165,11 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
     Ok(report)
 }
 
+/// `x ← x + h v`.
+fn add_scaled(x: &mut DVector<f64>, h: f64, v: &DVector<f64>) {
+    sub_scaled(x.as_mut_slice(), -h, v.as_slice());
+}
+
 fn take_stage<S: Space>(data: &mut Data<S>) -> (DVector<f64>, DVector<f64>) {
     (
         std::mem::replace(&mut data.integ.q_stage, DVector::zeros(0)),
@@ -191,12 +197,12 @@ pub fn project<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f
     let kkt = &mut data.kkt;
     let mut r_q = std::mem::replace(&mut kkt.tmp_m, DVector::zeros(0));
     let mut r_v = std::mem::replace(&mut kkt.tmp_m3, DVector::zeros(0));
-    r_q.copy_from(&data.closure_residual);
+    r_q.as_mut_slice().copy_from_slice(data.closure_residual.as_slice());
     kkt::columns_dot(&data.closure_jacobian_t, &kkt.z_rows, qd.as_slice(), r_v.as_mut_slice());
     kkt::schur_solve(data, &mut r_q);
     kkt::schur_solve(data, &mut r_v);
     let kkt = &mut data.kkt;
-    kkt.tmp_n2.fill(0.0);
+    kkt.tmp_n2.as_mut_slice().fill(0.0);
     let (t_q, t_v) = kkt.tmp_n2.as_mut_slice().split_at_mut(model.nq());
     // x - U⁻ᵀ Z s computed as x + U⁻ᵀ (-Z s).
     kkt::sub_columns_times(&kkt.z, &kkt.z_rows, r_q.as_slice(), t_q);

@@ -45,7 +45,7 @@ pub fn frame_jacobian_t<S: Space>(
     p: &S::Point,
     jt: &mut DMatrix<f64>,
 ) {
-    jt.fill(0.0);
+    jt.as_mut_slice().fill(0.0);
     let lin_len = <S::Point as VecOps>::LEN;
     for j in support(model, Some(body)) {
         let lin = point_column(kin, j, p);

@@ -10,7 +10,7 @@ use crate::space::Space;
 /// Fills `data.joint_force` with `-b q̇ + clamp(kp (target - q) - kd q̇)` for every joint.
 pub fn joint_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>, qd: &DVector<f64>) {
     if !model.has_joint_forces {
-        data.joint_force.fill(0.0);
+        data.joint_force.as_mut_slice().fill(0.0);
         return;
     }
     for (i, joint) in model.joints.iter().enumerate() {

@@ -7,6 +7,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Data, Kinematics};
+use crate::dense::{dot, mul_add};
 use crate::jacobian::{point_column, support};
 use crate::model::{Attachment, ClosurePrimitive, Model};
 use crate::space::{Space, VecOps};
@@ -44,7 +45,7 @@ fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, outputs: Outputs) {
     let h = &mut data.closure_residual;
     let w = &mut data.closure_bias;
     if outputs != Outputs::Residual {
-        wt.fill(0.0);
+        wt.as_mut_slice().fill(0.0);
     }
     for cut in &model.cuts {
         let mut row = cut.row;
@@ -89,9 +90,12 @@ pub fn stabilize<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVector<f6
     }
     let (alpha, beta) = (model.baumgarte.alpha, model.baumgarte.beta);
     // ḣ = W q̇, one contiguous column of Wᵀ per closure row.
-    data.closure_bias_stab.copy_from(&data.closure_bias);
-    data.closure_bias_stab.gemv_tr(2.0 * alpha * beta, &data.closure_jacobian_t, qd, 1.0);
-    data.closure_bias_stab.axpy(alpha * alpha, &data.closure_residual, 1.0);
+    let n = data.closure_jacobian_t.nrows();
+    let wt = data.closure_jacobian_t.as_slice();
+    let out = data.closure_bias_stab.iter_mut().zip(data.closure_bias.iter()).zip(data.closure_residual.iter());
+    for (((s, w), h), col) in out.zip(wt.chunks_exact(n)) {
+        *s = mul_add(alpha * alpha, *h, mul_add(2.0 * alpha * beta, dot(col, qd.as_slice()), *w));
+    }
 }
 
 /// Adds `sign · (c · J_v(p))` for body-fixed point `p` on `body` into column `row` of Wᵀ, where c selects a

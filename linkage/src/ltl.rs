@@ -372,11 +372,13 @@ fn update_rows<const W: usize>(
     lo: usize,
     hi: usize,
 ) {
+    let [u0, u1, u2, u3] = u.map(|c| c[lo..hi].chunks_exact(4));
     for (x, v) in cols.iter_mut().zip(vals) {
         let [v0, v1, v2, v3] = v.map(F64x4::splat);
-        for i in (lo..hi).step_by(4) {
-            let xi = F64x4::load(&x[i..]).sub_mul(F64x4::load(&u[3][i..]), v3).sub_mul(F64x4::load(&u[2][i..]), v2);
-            xi.sub_mul(F64x4::load(&u[1][i..]), v1).sub_mul(F64x4::load(&u[0][i..]), v0).store(&mut x[i..]);
+        let rows = x[lo..hi].chunks_exact_mut(4).zip(u0.clone().zip(u1.clone())).zip(u2.clone().zip(u3.clone()));
+        for ((x, (a0, a1)), (a2, a3)) in rows {
+            let xi = F64x4::load(x).sub_mul(F64x4::load(a3), v3).sub_mul(F64x4::load(a2), v2);
+            xi.sub_mul(F64x4::load(a1), v1).sub_mul(F64x4::load(a0), v0).store(x);
         }
     }
 }
@@ -427,12 +429,15 @@ fn solve_ut_group<S: Space, const W: usize>(model: &Model<S>, a: &[f64], n: usiz
 #[inline(always)]
 fn dot4(u: &[&[f64]; 4], x: &[f64]) -> [f64; 4] {
     debug_assert!(x.len() % 4 == 0);
+    let len = x.len();
+    let [u0, u1, u2, u3] = u.map(|c| c[..len].chunks_exact(4));
     let mut acc = [F64x4::zero(); 4];
-    for i in (0..x.len()).step_by(4) {
-        let xi = F64x4::load(&x[i..]);
-        for (a, uc) in acc.iter_mut().zip(u) {
-            *a = a.add_mul(F64x4::load(&uc[i..]), xi);
-        }
+    for (xi, ((a0, a1), (a2, a3))) in x.chunks_exact(4).zip(u0.zip(u1).zip(u2.zip(u3))) {
+        let xi = F64x4::load(xi);
+        acc[0] = acc[0].add_mul(F64x4::load(a0), xi);
+        acc[1] = acc[1].add_mul(F64x4::load(a1), xi);
+        acc[2] = acc[2].add_mul(F64x4::load(a2), xi);
+        acc[3] = acc[3].add_mul(F64x4::load(a3), xi);
     }
     acc.map(F64x4::sum)
 }

@@ -22,7 +22,7 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let d = &mut data.mass_matrix;
     if !model.is_chain() {
         // Entries between joints on different branches are structural zeros, never written below.
-        d.fill(0.0);
+        d.as_mut_slice().fill(0.0);
     }
     let s = &data.kin.motion_subspace;
     let a = d.as_mut_slice();

@@ -37,7 +37,7 @@ pub fn frame_point_inertia<S: Space>(
     let ws = &mut data.op;
     frame_jacobian_t(model, &data.kin, body, p, &mut ws.jacobian_t);
     ws.jdot_qdot = frame_bias_acceleration(&data.kin, body, p);
-    ws.y.copy_from(&ws.jacobian_t);
+    ws.y.as_mut_slice().copy_from_slice(ws.jacobian_t.as_slice());
     // Jᵀ, and so Y, is nonzero only on the joints that move `body`: rows 0..=body.
     let rows = body + 1;
     let kkt = &data.kkt;
