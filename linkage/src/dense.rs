@@ -22,11 +22,19 @@ pub fn mul_add(a: f64, b: f64, c: f64) -> f64 {
 }
 
 /// `Σ a_i b_i` over the common length, in eight interleaved partial sums: a serial sum is one long chain of
-/// dependent additions (Rust keeps the written order of floating-point operations), this vectorizes.
+/// dependent additions (Rust keeps the written order of floating-point operations), this vectorizes. Short
+/// vectors (Jacobian columns of a body near the base, the testbed's four joints) take a plain loop.
 #[inline]
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let len = a.len().min(b.len());
     let (a, b) = (&a[..len], &b[..len]);
+    if len < 8 {
+        let mut s = 0.0;
+        for (x, y) in a.iter().zip(b) {
+            s = mul_add(*x, *y, s);
+        }
+        return s;
+    }
     let (mut acc0, mut acc1) = (F64x4::zero(), F64x4::zero());
     let (mut ca, mut cb) = (a.chunks_exact(8), b.chunks_exact(8));
     for (x, y) in (&mut ca).zip(&mut cb) {
@@ -127,6 +135,7 @@ pub fn pivoted_cholesky(
 pub fn pivoted_solve(l: &DMatrix<f64>, perm: &[usize], rank: usize, r: &mut DVector<f64>, y: &mut DVector<f64>) {
     let m = l.nrows();
     let a = l.as_slice();
+    let r = r.as_mut_slice();
     let y = &mut y.as_mut_slice()[..rank];
     for k in 0..rank {
         let mut s = r[perm[k]];
@@ -139,7 +148,7 @@ pub fn pivoted_solve(l: &DMatrix<f64>, perm: &[usize], rank: usize, r: &mut DVec
         let col = &a[k * m..k * m + rank];
         y[k] = (y[k] - dot(&col[k + 1..], &y[k + 1..])) / col[k];
     }
-    r.as_mut_slice().fill(0.0);
+    r.fill(0.0);
     for (p, yk) in perm.iter().zip(y.iter()) {
         r[*p] = *yk;
     }

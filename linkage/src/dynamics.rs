@@ -68,7 +68,7 @@ pub fn check_state<S: Space>(model: &Model<S>, q: &DVector<f64>, qd: &DVector<f6
         if v.len() != n {
             return Err(DynamicsError::WrongLength { what, got: v.len(), expected: n });
         }
-        if let Some(index) = v.iter().position(|x| !x.is_finite()) {
+        if let Some(index) = v.as_slice().iter().position(|x| !x.is_finite()) {
             return Err(DynamicsError::NonFiniteInput { what, index });
         }
     }

@@ -5,76 +5,132 @@
 //! decides whether a direction is constrained — has no allocation, and for 3x3 and 6x6 converges in a few
 //! sweeps (measured against nalgebra's `SymmetricEigen` in the tests and benches).
 
+use crate::dense::mul_add;
 use crate::space::{MatOps, Space, VecOps};
+
+/// `(t, c, s)` of the Jacobi rotation that zeroes `a_pq` given `d = a_qq - a_pp`: `t = tan φ` is the smaller
+/// root of `t² + 2θt - 1 = 0` with `θ = d / (2 a_pq)` (Golub & Van Loan, Matrix Computations, §8.5.2), and
+/// `c = 1/√(1 + t²)`, `s = t c`. Each rotation waits for the one before it, so what counts is the chain of
+/// square roots and divisions, shortened here in three regimes that agree with the textbook formula to
+/// round-off:
+/// - general: with `r = √(d² + 4a_pq²)` and `g = |d| + r`, `t = 2a_pq sgn(d) / g` and `1 + t² = 2r / g`, so
+///   `c = √(g / 2r)`: t and c in parallel after r (θ's division is folded in);
+/// - `|θ| > 256` (typically the third sweep): series in `t₀ = a_pq / d`, `u = t₀²`:
+///   `t = tan(½ atan 2t₀) = t₀ (1 - u + 2u² - 5u³)` and `c = 1 - u/2 + 11u²/8 - 69u³/16`, next terms below
+///   2⁻⁷⁰: one division, no square root;
+/// - `|θ| > 2²⁷` (the last sweep): `θ² + 1 = θ²` and `t² + 1 = 1` in floating point, so the textbook
+///   formula is exactly `t = 1/(2θ)`, `c = 1`, `s = t`.
+#[inline]
+fn rotation(d: f64, apq: f64) -> (f64, f64, f64) {
+    const TINY: f64 = (1u64 << 28) as f64;
+    let (ad, aa) = (d.abs(), apq.abs());
+    if ad > TINY * aa {
+        let t = apq / d;
+        return (t, 1.0, t);
+    }
+    if ad > 512.0 * aa {
+        let t0 = apq / d;
+        let u = t0 * t0;
+        let t = t0 * mul_add(u, mul_add(u, mul_add(u, -5.0, 2.0), -1.0), 1.0);
+        let c = mul_add(u, mul_add(u, mul_add(u, -69.0 / 16.0, 11.0 / 8.0), -0.5), 1.0);
+        return (t, c, t * c);
+    }
+    let r = mul_add(d, d, 4.0 * apq * apq).sqrt();
+    let g = ad + r;
+    let t = 2.0 * apq / g;
+    let t = if d.is_sign_negative() { -t } else { t };
+    let c = (g / (2.0 * r)).sqrt();
+    (t, c, t * c)
+}
 
 /// Eigenvalues in decreasing order and the matching unit eigenvectors as columns.
 pub fn symmetric_eigen<S: Space>(a: &S::OpMat) -> (S::OpVec, S::OpMat) {
-    let n = S::DIM;
-    let mut a = *a;
-    let mut v = S::OpMat::identity();
-    let scale: f64 = (0..n).map(|i| a[(i, i)].abs()).fold(0.0, f64::max);
+    let mut values = S::OpVec::zero();
+    let mut vectors = S::OpMat::zero();
+    match S::DIM {
+        3 => jacobi::<3>(a.as_slice(), values.as_mut_slice(), vectors.as_mut_slice()),
+        6 => jacobi::<6>(a.as_slice(), values.as_mut_slice(), vectors.as_mut_slice()),
+        n => unreachable!("operational spaces are 3- or 6-dimensional, not {n}"),
+    }
+    (values, vectors)
+}
+
+/// Cyclic Jacobi on an N×N symmetric matrix (column-major `a`), writing the eigenvalues in decreasing order
+/// and the eigenvectors as columns. On fixed-size arrays so that, for N = 3, the sweep unrolls into straight
+/// code with constant indices.
+#[allow(clippy::needless_range_loop)] // p, q, r, k name matrix entries, as in the algorithm's statement
+fn jacobi<const N: usize>(a_in: &[f64], values: &mut [f64], vectors: &mut [f64]) {
+    let mut a = [[0.0; N]; N];
+    for (col, src) in a.iter_mut().zip(a_in.chunks_exact(N)) {
+        col.copy_from_slice(src);
+    }
+    let mut v = [[0.0; N]; N];
+    for (i, col) in v.iter_mut().enumerate() {
+        col[i] = 1.0;
+    }
+    let scale: f64 = (0..N).map(|i| a[i][i].abs()).fold(0.0, f64::max);
     for _sweep in 0..30 {
         let mut off = 0.0;
-        for p in 0..n {
-            for q in p + 1..n {
-                off += a[(p, q)] * a[(p, q)];
+        for q in 0..N {
+            for p in 0..q {
+                off += a[q][p] * a[q][p];
             }
         }
         if off <= (f64::EPSILON * scale).powi(2) * 1e-4 || off == 0.0 {
             break;
         }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = a[(p, q)];
+        for p in 0..N {
+            for q in p + 1..N {
+                let apq = a[q][p];
                 if apq == 0.0 {
                     continue;
                 }
-                let theta = (a[(q, q)] - a[(p, p)]) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (akp, akq) = (a[(k, p)], a[(k, q)]);
-                    a[(k, p)] = c * akp - s * akq;
-                    a[(k, q)] = s * akp + c * akq;
+                let (t, c, s) = rotation(a[q][q] - a[p][p], apq);
+                // A ← Jᵀ A J on the symmetric matrix: the two diagonal entries in closed form (the rotation
+                // zeroes a_pq), the other entries of rows and columns p, q rotated once and mirrored.
+                a[p][p] = mul_add(-t, apq, a[p][p]);
+                a[q][q] = mul_add(t, apq, a[q][q]);
+                a[q][p] = 0.0;
+                a[p][q] = 0.0;
+                for r in 0..N {
+                    if r == p || r == q {
+                        continue;
+                    }
+                    let (arp, arq) = (a[p][r], a[q][r]);
+                    let new_p = mul_add(c, arp, -s * arq);
+                    let new_q = mul_add(s, arp, c * arq);
+                    a[p][r] = new_p;
+                    a[r][p] = new_p;
+                    a[q][r] = new_q;
+                    a[r][q] = new_q;
                 }
-                for k in 0..n {
-                    let (apk, aqk) = (a[(p, k)], a[(q, k)]);
-                    a[(p, k)] = c * apk - s * aqk;
-                    a[(q, k)] = s * apk + c * aqk;
-                }
-                a[(p, q)] = 0.0;
-                a[(q, p)] = 0.0;
-                for k in 0..n {
-                    let (vkp, vkq) = (v[(k, p)], v[(k, q)]);
-                    v[(k, p)] = c * vkp - s * vkq;
-                    v[(k, q)] = s * vkp + c * vkq;
+                for k in 0..N {
+                    let (vkp, vkq) = (v[p][k], v[q][k]);
+                    v[p][k] = mul_add(c, vkp, -s * vkq);
+                    v[q][k] = mul_add(s, vkp, c * vkq);
                 }
             }
         }
     }
-    // Selection sort by decreasing eigenvalue (n ≤ 6), swapping eigenvector columns along.
-    let mut values = S::OpVec::zero();
-    for i in 0..n {
-        values[i] = a[(i, i)];
+    // Selection sort by decreasing eigenvalue (N ≤ 6), swapping eigenvector columns along.
+    for i in 0..N {
+        values[i] = a[i][i];
     }
-    for i in 0..n {
+    for i in 0..N {
         let mut best = i;
-        for j in i + 1..n {
+        for j in i + 1..N {
             if values[j] > values[best] {
                 best = j;
             }
         }
         if best != i {
-            values.as_mut_slice().swap(i, best);
-            for k in 0..n {
-                let tmp = v[(k, i)];
-                v[(k, i)] = v[(k, best)];
-                v[(k, best)] = tmp;
-            }
+            values.swap(i, best);
+            v.swap(i, best);
         }
     }
-    (values, v)
+    for (dst, col) in vectors.chunks_exact_mut(N).zip(&v) {
+        dst.copy_from_slice(col);
+    }
 }
 
 #[cfg(test)]
@@ -82,6 +138,25 @@ mod tests {
     use super::*;
     use crate::{Planar, Spatial};
     use nalgebra::{Matrix3, Matrix6};
+
+    /// The three regimes of `rotation` agree with the textbook formula to round-off, and zero a_pq.
+    #[test]
+    fn rotation_regimes_match_the_textbook_formula() {
+        for apq in [1.0, -0.3, 1e-3, -2e-7, 1e-12] {
+            for d in [0.0, -0.0, 0.7, -2.5, 1.0, 300.0, -1e4, 1e7, 3e9] {
+                let theta: f64 = d / (2.0 * apq);
+                let t_ref = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let c_ref = 1.0 / (t_ref * t_ref + 1.0).sqrt();
+                let (t, c, s) = rotation(d, apq);
+                assert!((t - t_ref).abs() <= 4.0 * f64::EPSILON * t_ref.abs(), "d {d}, a {apq}: t {t} vs {t_ref}");
+                assert!((c - c_ref).abs() <= 4.0 * f64::EPSILON, "d {d}, a {apq}: c {c} vs {c_ref}");
+                assert!((s - t_ref * c_ref).abs() <= 4.0 * f64::EPSILON * s.abs(), "d {d}, a {apq}: s");
+                // The rotated a_pq: c s (a_pp - a_qq) + (c² - s²) a_pq = 0.
+                let rotated = c * s * (-d) + (c * c - s * s) * apq;
+                assert!(rotated.abs() <= 1e-15 * (d.abs() + apq.abs()), "d {d}, a {apq}: {rotated}");
+            }
+        }
+    }
 
     /// Matches nalgebra's eigenvalues and reconstructs the matrix, including a rank-deficient one.
     #[test]

@@ -159,7 +159,7 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
     if cfg.project && model.has_loops() {
         project(model, data, q, qd);
     }
-    if q.iter().chain(qd.iter()).any(|x| !x.is_finite()) {
+    if q.as_slice().iter().chain(qd.as_slice()).any(|x| !x.is_finite()) {
         return Err(DynamicsError::NonFiniteResult { what: "state after the step" });
     }
     Ok(report)

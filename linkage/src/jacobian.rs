@@ -45,18 +45,18 @@ pub fn frame_jacobian_t<S: Space>(
     p: &S::Point,
     jt: &mut DMatrix<f64>,
 ) {
-    jt.as_mut_slice().fill(0.0);
+    let n = jt.nrows();
+    let jt = jt.as_mut_slice();
+    jt.fill(0.0);
     let lin_len = <S::Point as VecOps>::LEN;
     for j in support(model, Some(body)) {
         let lin = point_column(kin, j, p);
         let ang = S::spatial_ang(&kin.motion_subspace[j]);
-        for (c, x) in lin.as_slice().iter().enumerate() {
-            jt[(j, c)] = *x;
-        }
-        for (c, x) in ang.as_slice().iter().enumerate() {
-            jt[(j, lin_len + c)] = *x;
+        for (c, x) in lin.as_slice().iter().chain(ang.as_slice()).enumerate() {
+            jt[c * n + j] = *x;
         }
     }
+    debug_assert_eq!(lin_len + <S::Angular as VecOps>::LEN, S::DIM);
 }
 
 /// J̇ q̇ of the frame at world position `p` fixed to `body`: its operational acceleration when q̈ = 0.

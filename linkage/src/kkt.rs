@@ -117,8 +117,9 @@ pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
 /// (= `q̈_free - D⁻¹ Wᵀ λ`): one solve with U and one with Uᵀ.
 pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
     let n = model.nq();
-    for i in 0..n {
-        data.qdd[i] = data.applied[i] + data.joint_force[i] - data.bias[i] - data.gravity[i];
+    let tau = data.applied.as_slice().iter().zip(data.joint_force.as_slice()).zip(data.bias.as_slice());
+    for ((x, ((a, f), b)), g) in data.qdd.as_mut_slice().iter_mut().zip(tau).zip(data.gravity.as_slice()) {
+        *x = a + f - b - g;
     }
     let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
     ltl::solve_u_columns(model, factor, inv, data.qdd.as_mut_slice(), n);
@@ -133,7 +134,7 @@ pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dynam
     }
     let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
     ltl::solve_ut_columns(model, factor, inv, data.qdd.as_mut_slice());
-    if data.qdd.iter().any(|x| !x.is_finite()) {
+    if data.qdd.as_slice().iter().any(|x| !x.is_finite()) {
         return Err(DynamicsError::NonFiniteResult { what: "joint accelerations" });
     }
     Ok(())

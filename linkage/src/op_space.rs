@@ -59,20 +59,21 @@ pub fn frame_point_inertia<S: Space>(
         let l = kkt.schur_factor.as_slice();
         let m = model.nc();
         let z = kkt.z.as_slice();
-        for c in 0..k {
-            let yc = &y[c * n..c * n + rows];
+        let g = ws.g.as_mut_slice();
+        for (yc, gc) in y.chunks_exact(n).zip(g.chunks_exact_mut(m)) {
+            let yc = &yc[..rows];
             for i in 0..rank {
                 let zi = kkt.schur_perm[i];
                 let mut s = dot(&z[zi * n..zi * n + kkt.z_rows[zi]], yc);
-                for j in 0..i {
-                    s = mul_add(-l[j * m + i], ws.g[(j, c)], s);
+                for (j, gj) in gc[..i].iter().enumerate() {
+                    s = mul_add(-l[j * m + i], *gj, s);
                 }
-                ws.g[(i, c)] = s / l[i * m + i];
+                gc[i] = s / l[i * m + i];
             }
         }
         for c in 0..k {
             for r in 0..=c {
-                let s = dot(&ws.g.column(r).as_slice()[..rank], &ws.g.column(c).as_slice()[..rank]);
+                let s = dot(&g[r * m..r * m + rank], &g[c * m..c * m + rank]);
                 closed[(r, c)] -= s;
                 if r != c {
                     closed[(c, r)] -= s;
