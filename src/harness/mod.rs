@@ -7,6 +7,7 @@
 
 pub mod record;
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
@@ -19,7 +20,7 @@ use kinloop_linkage::{Model, Planar, Scene, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
 use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
 use kinloop_protocol::{Datagram, LocalModelForm, Role, SessionShape};
-use kinloop_server::core::{JoinRequest, UserId, VeConfig, VeCore};
+use kinloop_server::core::{JoinRequest, PassivityObserver, UserId, VeConfig, VeCore};
 
 pub use record::{ClientSample, Recording, VeSample};
 
@@ -52,6 +53,32 @@ pub struct ClientPlan {
     pub leave_at: Option<Duration>,
     /// Changes to the client's core configuration (gains, safety, ...), applied after the defaults.
     pub tweak: Option<fn(&mut CoreConfig)>,
+    /// Like `tweak`, but a closure that may capture values (the gains of one point of a sweep); applied
+    /// after `tweak`.
+    pub configure: Option<CoreEdit>,
+}
+
+/// A change to a client's [`CoreConfig`] that may capture values; cheap to clone and shareable across the
+/// threads of a sweep.
+#[derive(Clone)]
+pub struct CoreEdit(Arc<dyn Fn(&mut CoreConfig) + Send + Sync>);
+
+impl CoreEdit {
+    /// Wraps `edit`.
+    pub fn new(edit: impl Fn(&mut CoreConfig) + Send + Sync + 'static) -> Self {
+        CoreEdit(Arc::new(edit))
+    }
+
+    /// Applies the edit.
+    pub fn apply(&self, config: &mut CoreConfig) {
+        (self.0)(config)
+    }
+}
+
+impl std::fmt::Debug for CoreEdit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CoreEdit(..)")
+    }
 }
 
 impl ClientPlan {
@@ -72,6 +99,7 @@ impl ClientPlan {
             join_at: Duration::ZERO,
             leave_at: None,
             tweak: None,
+            configure: None,
         }
     }
 
@@ -162,6 +190,13 @@ pub struct ClientSummary {
     pub uplinks_refused: u64,
     /// Snapshots the client could not decode.
     pub snapshots_refused: u64,
+    /// Energy the user's coupling absorbed from the VE, as the VE's passivity observer booked it (J; negative:
+    /// the coupling generated energy). Zero unless the VE runs with `passivity`.
+    pub passivity_absorbed_j: f64,
+    /// Energy the passivity controller's damper dissipated (J).
+    pub passivity_dissipated_j: f64,
+    /// VE ticks in which the passivity controller added damping for this user.
+    pub passivity_activations: u64,
 }
 
 struct Participant<S: Space> {
@@ -183,6 +218,7 @@ struct Participant<S: Space> {
     compute: Duration,
     uplinks_refused: u64,
     snapshots_refused: u64,
+    passivity: PassivityObserver,
 }
 
 /// Runs a session to its end; `progress` is called with the simulated time from time to time.
@@ -237,6 +273,7 @@ impl<S: Space> Session<S> {
                 compute: Duration::ZERO,
                 uplinks_refused: 0,
                 snapshots_refused: 0,
+                passivity: PassivityObserver::default(),
                 plan: c.clone(),
             });
         }
@@ -279,6 +316,9 @@ impl<S: Space> Session<S> {
         config.period = p.period;
         if let Some(tweak) = p.plan.tweak {
             tweak(&mut config);
+        }
+        if let Some(edit) = &p.plan.configure {
+            edit.apply(&mut config);
         }
         let mut core = HapticCore::new(config, &joined.welcome).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         core.set_one_way_delay(p.plan.downlink.delay);
@@ -364,7 +404,9 @@ impl<S: Space> Session<S> {
         self.max_closure = self.max_closure.max(state.closure_error);
         self.ve_ticks_seen += 1;
         if self.record_every > 0 && self.ve_ticks_seen % self.record_every as u64 == 0 {
-            self.recording.push_ve(VeSample::from_state(now, &state));
+            let mut sample = VeSample::from_state(now, &state);
+            sample.kinetic_energy = self.ve.kinetic_energy();
+            self.recording.push_ve(sample);
         }
     }
 
@@ -424,6 +466,7 @@ impl<S: Space> Session<S> {
             }
             if let Some(user) = p.user_id {
                 if let Some(u) = self.ve.state().users().find(|u| u.user_id == user) {
+                    p.passivity = u.passivity;
                     let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm();
                     p.op_sum_sq += d * d;
                     p.op_max = p.op_max.max(d);
@@ -463,6 +506,9 @@ impl<S: Space> Session<S> {
                     non_finite: stats.non_finite_events,
                     uplinks_refused: p.uplinks_refused,
                     snapshots_refused: p.snapshots_refused,
+                    passivity_absorbed_j: p.passivity.absorbed_j,
+                    passivity_dissipated_j: p.passivity.dissipated_j,
+                    passivity_activations: p.passivity.activations,
                 }
             })
             .collect();

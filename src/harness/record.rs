@@ -14,8 +14,12 @@ pub struct ClientSample {
     pub t: f64,
     /// Device handle position, mapped into the VE's frame by the client's indexing.
     pub device: Vec<f64>,
+    /// Device twist (linear first) as the core measured it.
+    pub device_twist: Vec<f64>,
     /// Local-model OP position.
     pub model: Vec<f64>,
+    /// Local-model OP twist.
+    pub model_twist: Vec<f64>,
     /// The VE's OP position (as the VE last computed it), if joined.
     pub ve_op: Option<Vec<f64>>,
     /// Joint-constraint controller wrench.
@@ -55,7 +59,9 @@ impl ClientSample {
         ClientSample {
             t: r.time.as_secs_f64(),
             device: v(&device.position),
+            device_twist: v(&r.device_twist),
             model: v(&r.model_pose.position),
+            model_twist: v(&r.model_twist),
             ve_op: ve_op.map(|p| v(&p.position)),
             joint_constraint: v(&r.wrenches.joint_constraint),
             position_channel: v(&r.wrenches.position_channel),
@@ -82,6 +88,8 @@ pub struct VeSample {
     pub closure_error: f64,
     /// Per user: OP position, applied wrench, constraint count.
     pub users: Vec<(u32, Vec<f64>, Vec<f64>, u8)>,
+    /// Kinetic energy of the linkage after the tick, J.
+    pub kinetic_energy: f64,
 }
 
 impl VeSample {
@@ -92,6 +100,7 @@ impl VeSample {
             q: s.q.as_slice().to_vec(),
             closure_error: s.closure_error,
             users: s.users().map(|u| (u.user_id, v(&u.op_pose.position), v(&u.wrench), u.constraint_count)).collect(),
+            kinetic_energy: 0.0,
         }
     }
 }
