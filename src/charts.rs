@@ -60,6 +60,31 @@ impl Series {
     }
 }
 
+/// Where a chart's legend goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Legend {
+    /// Upper right corner (the default).
+    #[default]
+    UpperRight,
+    /// Upper left corner.
+    UpperLeft,
+    /// Lower right corner.
+    LowerRight,
+    /// Lower left corner.
+    LowerLeft,
+}
+
+impl Legend {
+    fn position(self) -> SeriesLabelPosition {
+        match self {
+            Legend::UpperRight => SeriesLabelPosition::UpperRight,
+            Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
+            Legend::LowerRight => SeriesLabelPosition::LowerRight,
+            Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
+        }
+    }
+}
+
 /// What a line or scatter chart shows.
 #[derive(Clone, Debug)]
 pub struct Chart {
@@ -77,6 +102,8 @@ pub struct Chart {
     pub equal_axes: bool,
     /// The series.
     pub series: Vec<Series>,
+    /// Where the legend goes.
+    pub legend: Legend,
 }
 
 impl Chart {
@@ -90,12 +117,49 @@ impl Chart {
             log_y: false,
             equal_axes: false,
             series: Vec::new(),
+            legend: Legend::UpperRight,
         }
     }
     /// Adds a series.
     pub fn with(mut self, s: Series) -> Self {
         self.series.push(s);
         self
+    }
+    /// Puts the legend in another corner.
+    pub fn legend(mut self, legend: Legend) -> Self {
+        self.legend = legend;
+        self
+    }
+}
+
+/// An axis tick label: at most 3 significant digits, exponent notation outside 0.001..100000.
+pub fn tick_label(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let magnitude = v.abs().log10().floor() as i32;
+    let scale = 10f64.powi(2 - magnitude);
+    let rounded = (v * scale).round() / scale;
+    if !(-3..5).contains(&magnitude) {
+        let mantissa = (rounded / 10f64.powi(magnitude) * 100.0).round() / 100.0;
+        format!("{mantissa}e{magnitude}")
+    } else {
+        format!("{rounded}")
+    }
+}
+
+/// A log-axis tick label: only at 1, 2 and 5 times a power of ten (the axis may place a tick at every
+/// digit; the others stay unlabelled so the labels never crowd).
+pub fn log_tick_label(v: f64) -> String {
+    if !(v > 0.0 && v.is_finite()) {
+        return String::new();
+    }
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    let nearest = mantissa.round();
+    if (mantissa - nearest).abs() < 1e-6 && [1.0, 2.0, 5.0, 10.0].contains(&nearest) {
+        tick_label(v)
+    } else {
+        String::new()
     }
 }
 
@@ -164,6 +228,11 @@ where
             ctx.configure_mesh()
                 .x_desc(chart.x_label.as_str())
                 .y_desc(chart.y_label.as_str())
+                .x_labels(if chart.log_x { 20 } else { 10 })
+                .y_labels(if chart.log_y { 20 } else { 10 })
+                .light_line_style(if chart.log_x || chart.log_y { WHITE.mix(0.0) } else { BLACK.mix(0.04) })
+                .x_label_formatter(&|v| if chart.log_x { log_tick_label(*v) } else { tick_label(*v) })
+                .y_label_formatter(&|v| if chart.log_y { log_tick_label(*v) } else { tick_label(*v) })
                 .label_style(("sans-serif", 14))
                 .axis_desc_style(("sans-serif", 16))
                 .draw()
@@ -192,7 +261,7 @@ where
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .label_font(("sans-serif", 14))
-                .position(SeriesLabelPosition::UpperRight)
+                .position(chart.legend.position())
                 .draw()
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
         }};
@@ -229,8 +298,10 @@ pub struct StabilityMap {
     pub log: bool,
     /// Cells: (x, y, stable).
     pub cells: Vec<(f64, f64, bool)>,
-    /// Curves drawn over the map.
+    /// Curves (or markers) drawn over the map.
     pub overlays: Vec<Series>,
+    /// Where the legend goes.
+    pub legend: Legend,
 }
 
 /// Writes a stability map as `stem.svg` and `stem.png`.
@@ -306,6 +377,8 @@ where
             ctx.configure_mesh()
                 .x_desc(map.x_label.as_str())
                 .y_desc(map.y_label.as_str())
+                .x_label_formatter(&|v| tick_label(*v))
+                .y_label_formatter(&|v| tick_label(*v))
                 .label_style(("sans-serif", 13))
                 .axis_desc_style(("sans-serif", 15))
                 .disable_mesh()
@@ -321,13 +394,23 @@ where
             }))
             .map_err(|e| anyhow::anyhow!("{e}"))?;
             for (k, s) in map.overlays.iter().enumerate() {
-                let color = [BLACK, RGBColor(30, 30, 160), RGBColor(120, 0, 120)][k % 3];
+                let color =
+                    [BLACK, RGBColor(30, 30, 160), RGBColor(120, 0, 120), RGBColor(190, 110, 0), RGBColor(0, 110, 110)]
+                        [k % 5];
                 let pts: Vec<(f64, f64)> =
                     s.points.iter().copied().filter(|(x, y)| *x >= x0 && *x <= x1 && *y >= y0 && *y <= y1).collect();
-                ctx.draw_series(LineSeries::new(pts, color.stroke_width(3)))
-                    .map_err(|e| anyhow::anyhow!("{e}"))?
-                    .label(s.label.as_str())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3)));
+                if s.markers {
+                    ctx.draw_series(pts.iter().map(|&p| Circle::new(p, 6, color.stroke_width(3))))
+                        .map_err(|e| anyhow::anyhow!("{e}"))?
+                        .label(s.label.as_str())
+                        .legend(move |(x, y)| Circle::new((x + 9, y), 5, color.stroke_width(2)));
+                } else {
+                    let style = if s.dashed { color.stroke_width(2) } else { color.stroke_width(3) };
+                    ctx.draw_series(LineSeries::new(pts, style))
+                        .map_err(|e| anyhow::anyhow!("{e}"))?
+                        .label(s.label.as_str())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3)));
+                }
             }
             ctx.draw_series(std::iter::once(Rectangle::new([(x0, y0), (x0, y0)], stable.filled())))
                 .map_err(|e| anyhow::anyhow!("{e}"))?
@@ -341,7 +424,7 @@ where
                 .background_style(WHITE.mix(0.9))
                 .border_style(BLACK)
                 .label_font(("sans-serif", 13))
-                .position(SeriesLabelPosition::UpperLeft)
+                .position(map.legend.position())
                 .draw()
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
         }};
@@ -360,6 +443,18 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick_label(0.0009000000001), "9e-4");
+        assert_eq!(tick_label(0.0020000000001), "0.002");
+        assert_eq!(tick_label(1000.0), "1000");
+        assert_eq!(tick_label(2.5e-6), "2.5e-6");
+        assert_eq!(tick_label(1e6), "1e6");
+        assert_eq!(tick_label(-0.5), "-0.5");
+        assert_eq!(log_tick_label(2000.0), "2000");
+        assert_eq!(log_tick_label(3000.0), "");
+    }
 
     /// Charts render text with the shipped font into non-trivial PNG and SVG files.
     #[test]
@@ -382,6 +477,7 @@ mod tests {
             log: true,
             cells: vec![(1.0, 1.0, true), (10.0, 1.0, false), (1.0, 10.0, true), (10.0, 10.0, true)],
             overlays: vec![Series::line("bound", vec![(1.0, 0.5), (10.0, 5.0)])],
+            legend: Legend::UpperLeft,
         };
         let files = save_map(&map, &dir.path().join("m")).unwrap();
         assert!(std::fs::read(&files[1]).unwrap().len() > 5_000);
