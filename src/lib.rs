@@ -6,5 +6,6 @@
 
 pub mod charts;
 pub mod cli;
+pub mod experiments;
 pub mod harness;
 pub mod scene_arg;

@@ -19,6 +19,8 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// The benchmark suite (median ns per call).
     Bench(cli::bench::BenchArgs),
+    /// Run an experiment: charts (SVG, PNG) and summary.json in DIR/NAME/.
+    Experiment(cli::experiment::ExperimentArgs),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +33,6 @@ fn main() -> Result<()> {
         Command::Inspect(a) => cli::inspect::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Experiment(a) => cli::experiment::run(a),
     }
 }

@@ -1,5 +1,6 @@
 //! The `kinloop` command line.
 
 pub mod bench;
+pub mod experiment;
 pub mod inspect;
 pub mod simulate;

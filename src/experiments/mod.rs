@@ -1,0 +1,87 @@
+//! The experiments of `kinloop experiment NAME`: each runs the system in virtual time (or benchmarks the
+//! linkage), writes SVG and PNG charts and a `summary.json` into `OUT/NAME/`, and returns a [`Report`].
+//!
+//! | name | question |
+//! |---|---|
+//! | [`paper`] | do the paper's two manipulations (Figs 6, 7) come out the same? |
+//! | [`speed_accuracy`] | which integrator, VE rate, snapshot rate and local-model form buy accuracy cheapest? |
+//! | [`stability`] | where do the joint-constraint gains, the haptic rate, Baumgarte and the coupling fail? |
+//! | [`latency`] | how much network delay, jitter and loss does the coupling take, with and without passivity control? |
+//! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
+//! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
+//!
+//! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
+//! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
+//! wall-clock and are the only numbers that vary between runs.
+
+pub mod common;
+pub mod latency;
+pub mod paper;
+pub mod scale;
+pub mod speed_accuracy;
+pub mod stability;
+pub mod users;
+pub mod verdict;
+
+use anyhow::Result;
+
+pub use common::{Options, Report};
+
+/// An experiment's name, as given on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Name {
+    /// The paper's two manipulations (Figs 6, 7).
+    Paper,
+    /// Accuracy against cost, with the Pareto front.
+    SpeedAccuracy,
+    /// Stability maps.
+    Stability,
+    /// Delay, jitter and loss, with and without passivity control.
+    Latency,
+    /// 1 to 16 users on one linkage.
+    Users,
+    /// Cost and snapshot size against links and loops.
+    Scale,
+}
+
+impl Name {
+    /// Every experiment, in the order `all` runs them.
+    pub const ALL: [Name; 6] =
+        [Name::Paper, Name::SpeedAccuracy, Name::Stability, Name::Latency, Name::Users, Name::Scale];
+
+    /// What the experiment answers, in a line (the command line's help).
+    pub fn about(self) -> &'static str {
+        match self {
+            Name::Paper => "the paper's two manipulations (Figs 6, 7)",
+            Name::SpeedAccuracy => "accuracy vs cost for integrators, VE rates, snapshot rates and local-model forms",
+            Name::Stability => "stability maps: k_j x b_j, haptic rate, Baumgarte alpha x time step, K_g x B_g",
+            Name::Latency => "one-way delay, jitter and loss with and without the passivity controller",
+            Name::Users => "1 to 16 users on one linkage",
+            Name::Scale => "cost and snapshot size against links and loops",
+        }
+    }
+
+    /// The name on the command line and of the output directory.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Name::Paper => "paper",
+            Name::SpeedAccuracy => "speed-accuracy",
+            Name::Stability => "stability",
+            Name::Latency => "latency",
+            Name::Users => "users",
+            Name::Scale => "scale",
+        }
+    }
+}
+
+/// Runs one experiment.
+pub fn run(name: Name, options: &Options) -> Result<Report> {
+    match name {
+        Name::Paper => paper::run(options),
+        Name::SpeedAccuracy => speed_accuracy::run(options),
+        Name::Stability => stability::run(options),
+        Name::Latency => latency::run(options),
+        Name::Users => users::run(options),
+        Name::Scale => scale::run(options),
+    }
+}

@@ -1,0 +1,281 @@
+//! `users`: 1 to 16 users manipulating the testbed at once, each with a simulated paper device at 1 kHz on
+//! a perfect network, joining 10 ms apart, for 3 s. Two layouts:
+//!
+//! - **same OP**: every user holds the testbed's operational point `link2`;
+//! - **spread**: users hold distinct operational points added to the scene at run time along the four links
+//!   (the first four at the links' midpoints, then at a quarter, three quarters and nine tenths of each).
+//!
+//! The users share the paper's wrench: each pushes `F / N` with F = (−0.5 N, 0, −0.0025 N m), so the
+//! linkage is driven as hard as by the paper's single user whatever N (with the same OP, the VE's motion
+//! should not depend on N at all; its deviation from the one-user run is reported). Each session is
+//! labelled by [`super::verdict`] over all users. Cost: the VE's compute per VE tick (its step with every
+//! coupling, and every user's snapshot) and the haptic cores' per user and tick, measured single-threaded,
+//! best of three.
+
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use kinloop_client::user::UserSpec;
+use kinloop_linkage::builtin::PAPER_WRENCH;
+use kinloop_linkage::scene::{GeometrySpec, OpSpec};
+use serde_json::{json, Value};
+
+use super::common::{paper_plan, round, session, significant, sweep, timed_cost, Options, Output, Report};
+use super::verdict::{self, Verdict};
+use crate::charts::{Chart, Legend, Series, StabilityMap};
+use crate::harness::{ClientPlan, SessionPlan};
+
+/// Simulated seconds per session.
+const DURATION_S: f64 = 3.0;
+/// Time between two users' joins.
+const JOIN_SPACING: Duration = Duration::from_millis(10);
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Layout {
+    SameOp,
+    Spread,
+}
+
+impl Layout {
+    fn name(self) -> &'static str {
+        match self {
+            Layout::SameOp => "same OP (link2)",
+            Layout::Spread => "spread over the links",
+        }
+    }
+    fn key(self) -> &'static str {
+        match self {
+            Layout::SameOp => "same_op",
+            Layout::Spread => "spread",
+        }
+    }
+}
+
+/// Adds operational points along every link (by the length of its capsule, or twice its COM offset) and
+/// returns their names in the order users take them.
+fn spread_ops(plan: &mut SessionPlan) -> Vec<String> {
+    let mut names = Vec::new();
+    for fraction in [0.5, 0.25, 0.75, 0.9] {
+        for body in &plan.scene.bodies {
+            let tip = body
+                .geometry
+                .iter()
+                .find_map(|g| match g {
+                    GeometrySpec::Capsule { to, .. } => Some(to.clone()),
+                    GeometrySpec::Ball { .. } => None,
+                })
+                .unwrap_or_else(|| body.com.iter().map(|c| 2.0 * c).collect());
+            let name = format!("{}@{}", body.name, fraction);
+            names.push(name.clone());
+            plan.scene.ops.push(OpSpec {
+                name,
+                body: body.name.clone(),
+                point: tip.iter().map(|x| x * fraction).collect(),
+            });
+        }
+    }
+    names
+}
+
+fn plan(layout: Layout, users: usize, seconds: f64) -> Result<SessionPlan> {
+    let mut plan = paper_plan(seconds)?;
+    let ops = match layout {
+        Layout::SameOp => vec!["link2".to_string()],
+        Layout::Spread => spread_ops(&mut plan),
+    };
+    let share: Vec<f64> = PAPER_WRENCH.iter().map(|w| w / users as f64).collect();
+    plan.clients = (0..users)
+        .map(|i| {
+            let mut c = ClientPlan::paper(&format!("user{}", i + 1));
+            c.op = ops[i % ops.len()].clone();
+            c.user = UserSpec::Constant(share.clone());
+            c.join_at = JOIN_SPACING * i as u32;
+            c
+        })
+        .collect();
+    Ok(plan)
+}
+
+#[derive(Clone, Debug)]
+struct Measured {
+    layout: Layout,
+    users: usize,
+    verdict: Verdict,
+    op_rms_mean_m: f64,
+    op_rms_max_m: f64,
+    /// RMS distance of the VE's `link2` from the one-user run's (same OP only), m.
+    deviation_from_one_user_m: Option<f64>,
+    ve_us_per_tick: f64,
+    client_us_per_tick_per_user: f64,
+    uplinks_refused: u64,
+    link2: Vec<[f64; 2]>,
+}
+
+fn measure(layout: Layout, users: usize) -> Result<Measured> {
+    let plan = plan(layout, users, DURATION_S)?;
+    let (summary, rec) = session(&plan).with_context(|| format!("{} users, {}", users, layout.name()))?;
+    let rms: Vec<f64> = summary.clients.iter().map(|c| c.device_op_rms_m).collect();
+    // The VE's link2 as the first user (always at link2 or link2's midpoint) saw it, every tick.
+    let link2 = rec.clients[0].iter().filter_map(|s| s.ve_op.as_ref().map(|p| [p[0], p[1]])).collect();
+    Ok(Measured {
+        layout,
+        users,
+        verdict: verdict::judge(&summary, &rec),
+        op_rms_mean_m: rms.iter().sum::<f64>() / rms.len().max(1) as f64,
+        op_rms_max_m: rms.iter().copied().fold(0.0, f64::max),
+        deviation_from_one_user_m: None,
+        ve_us_per_tick: f64::NAN,
+        client_us_per_tick_per_user: f64::NAN,
+        uplinks_refused: summary.clients.iter().map(|c| c.uplinks_refused).sum(),
+        link2,
+    })
+}
+
+fn rms_between(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    let n = a.len().min(b.len());
+    let sum: f64 = a.iter().zip(b).take(n).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sum();
+    (sum / n.max(1) as f64).sqrt()
+}
+
+fn point_json(m: &Measured) -> Value {
+    json!({
+        "layout": m.layout.key(),
+        "users": m.users,
+        "stable": m.verdict.stable,
+        "reasons": m.verdict.reasons,
+        "device_op_rms_mm_mean_over_users": round(m.op_rms_mean_m * 1e3, 3),
+        "device_op_rms_mm_worst_user": round(m.op_rms_max_m * 1e3, 3),
+        "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
+        "ve_link2_deviation_from_one_user_mm": m.deviation_from_one_user_m.map(|d| round(d * 1e3, 4)),
+        "ve_us_per_tick": round(m.ve_us_per_tick, 2),
+        "haptic_core_us_per_tick_per_user": round(m.client_us_per_tick_per_user, 3),
+        "worst_saturation": round(m.verdict.worst_saturation, 3),
+        "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
+        "uplinks_refused_by_server": m.uplinks_refused,
+    })
+}
+
+fn line_per_layout(chart: Chart, measured: &[Measured], label: &str, y: impl Fn(&Measured) -> f64) -> Chart {
+    [Layout::SameOp, Layout::Spread].into_iter().fold(chart, |chart, layout| {
+        chart.with(Series::line(
+            format!("{label}, {}", layout.name()),
+            measured.iter().filter(|m| m.layout == layout).map(|m| (m.users as f64, y(m))).collect(),
+        ))
+    })
+}
+
+/// Runs the experiment.
+pub fn run(options: &Options) -> Result<Report> {
+    let mut out = Output::new("users", options)?;
+    let counts: Vec<usize> = options.pick(vec![1, 2, 4, 8, 12, 16], vec![1, 4, 16]);
+    let points: Vec<(Layout, usize)> =
+        [Layout::SameOp, Layout::Spread].into_iter().flat_map(|l| counts.iter().map(move |&n| (l, n))).collect();
+    let mut measured =
+        sweep("users (sessions)", &points, options.threads, options.progress, |&(layout, n)| measure(layout, n))?;
+    let reps = 3;
+    let costs = sweep("users (cost, 1 thread)", &points, 1, options.progress, |&(layout, n)| {
+        let mut p = plan(layout, n, 2.0)?;
+        p.record_every = 0;
+        let ve_rate = p.ve.ve_rate_hz;
+        let client_rate = p.clients[0].rate_hz;
+        let (ve, client) = timed_cost(&p, reps)?;
+        Ok((ve / ve_rate, client / client_rate / n as f64))
+    })?;
+    let one_user = measured.iter().find(|m| m.layout == Layout::SameOp && m.users == 1).map(|m| m.link2.clone());
+    for (m, (ve, client)) in measured.iter_mut().zip(costs) {
+        m.ve_us_per_tick = ve;
+        m.client_us_per_tick_per_user = client;
+        if m.layout == Layout::SameOp {
+            m.deviation_from_one_user_m = one_user.as_ref().map(|base| rms_between(&m.link2, base));
+        }
+    }
+
+    let mut cost = line_per_layout(
+        Chart::new(
+            "VE compute per tick against the number of users (testbed, 1 kHz)",
+            "users",
+            "VE compute per tick (us)",
+        ),
+        &measured,
+        "VE step + every user's snapshot",
+        |m| m.ve_us_per_tick,
+    )
+    .legend(Legend::UpperLeft);
+    cost = line_per_layout(cost, &measured, "haptic core per user", |m| m.client_us_per_tick_per_user);
+    out.chart("ve_cost_per_tick_vs_users", &cost)?;
+    let tracking = line_per_layout(
+        Chart::new(
+            "Tracking against the number of users: device-OP distance (RMS over each user, then mean)",
+            "users",
+            "device-OP distance, RMS (mm)",
+        ),
+        &measured,
+        "mean over users",
+        |m| m.op_rms_mean_m * 1e3,
+    );
+    let tracking =
+        line_per_layout(tracking, &measured, "worst user", |m| m.op_rms_max_m * 1e3).legend(Legend::UpperLeft);
+    out.chart("tracking_vs_users", &tracking)?;
+    out.map(
+        "stability_users",
+        &StabilityMap {
+            title: "Stability with 1 to 16 users (0 = same OP, 1 = spread over the links)".into(),
+            x_label: "users".into(),
+            y_label: "layout (0 same OP, 1 spread)".into(),
+            log: false,
+            cells: measured
+                .iter()
+                .map(|m| (m.users as f64, if m.layout == Layout::SameOp { 0.0 } else { 1.0 }, m.verdict.stable))
+                .collect(),
+            overlays: Vec::new(),
+            legend: Legend::UpperLeft,
+        },
+    )?;
+
+    let find = |layout: Layout, n: usize| measured.iter().find(|m| m.layout == layout && m.users == n);
+    let max_n = counts.iter().copied().max().unwrap_or(1);
+    let verdict_of = |layout: Layout| {
+        find(layout, max_n).map_or("not run".to_string(), |m| {
+            if m.verdict.stable {
+                "stable".to_string()
+            } else {
+                format!("UNSTABLE ({})", m.verdict.reasons.join(", "))
+            }
+        })
+    };
+    let per_user_cost = |layout: Layout| {
+        let (a, b) = (find(layout, 1)?, find(layout, max_n)?);
+        Some(significant((b.ve_us_per_tick - a.ve_us_per_tick) / (max_n - 1).max(1) as f64, 3))
+    };
+    let answer = format!(
+        "{max_n} users on one OP: {}; {max_n} users spread over the links: {}. The VE's compute per tick grows from \
+         {:.1} us with 1 user to {:.1} us with {max_n} (about {:?} us per extra user, same OP).",
+        verdict_of(Layout::SameOp),
+        verdict_of(Layout::Spread),
+        find(Layout::SameOp, 1).map_or(f64::NAN, |m| m.ve_us_per_tick),
+        find(Layout::SameOp, max_n).map_or(f64::NAN, |m| m.ve_us_per_tick),
+        per_user_cost(Layout::SameOp),
+    );
+    let results = json!({
+        "answer": answer,
+        "stable_with_max_users": {
+            "users": max_n,
+            "same_op": find(Layout::SameOp, max_n).map(|m| m.verdict.stable),
+            "spread": find(Layout::Spread, max_n).map(|m| m.verdict.stable),
+        },
+        "ve_us_per_extra_user": { "same_op": per_user_cost(Layout::SameOp), "spread": per_user_cost(Layout::Spread) },
+        "criterion": verdict::criterion_json(),
+        "setup": {
+            "session": "paper testbed, sim:paper devices at 1 kHz, 1 kHz VE and snapshots, perfect network, 3 s, users join 10 ms apart",
+            "load": "each of N users pushes F/N with F the paper's (-0.5 N, 0, -0.0025 N m): the total is the paper's",
+            "spread_ops": "added at run time: every link at 0.5, then 0.25, 0.75, 0.9 of its length",
+            "cost": format!("single thread, best of {reps} runs of 2 s without recording"),
+        },
+        "points": measured.iter().map(point_json).collect::<Vec<_>>(),
+    });
+    out.finish(
+        "1 to 16 users on one linkage: stability, tracking and VE cost",
+        "about 15 s on 2 cores (12 sessions of 3 s and their timing pass); --quick about 8 s",
+        results,
+    )
+}

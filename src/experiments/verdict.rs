@@ -1,0 +1,248 @@
+//! The one stability criterion every experiment labels its points with.
+//!
+//! A session is **unstable** when any of these holds, and **stable** otherwise:
+//! 1. **divergence** — a client commanded or computed a non-finite value, the VE restored a non-finite
+//!    state, a device ended up more than [`DIVERGENCE_DISTANCE_M`] (5 cm) from its operational point in the
+//!    VE, or the loop-closure error exceeded [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
+//! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
+//!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
+//!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
+//! 3. **energy growth** — at some instant the linkage holds more kinetic energy than all hands together
+//!    have done work on their devices, by more than [`ENERGY_FRACTION`] (half) of the largest work done so
+//!    far plus [`ENERGY_FLOOR_J`] (5 mJ): the system made energy nobody put in. (A passive chain from hand to
+//!    linkage keeps `E_kin(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy and the
+//!    springs of the couplings.)
+//!
+//! The hand's work is `W(t) = Σ_k F_h(k) · ẋ_d(k) Δt` over haptic ticks (force and torque, the device's
+//! measured twist), the linkage's kinetic energy `½ q̇ᵀ D q̇` after every VE tick. The verdict needs a
+//! recording of every tick (`record_every = 1`).
+
+use serde::Serialize;
+use serde_json::{json, Value};
+
+use crate::harness::{Recording, SessionSummary};
+
+/// Device–OP distance beyond which a session has diverged (m).
+pub const DIVERGENCE_DISTANCE_M: f64 = 0.05;
+/// Closure error beyond which the loop has opened (m).
+pub const CLOSURE_LIMIT_M: f64 = 1e-3;
+/// Length of the saturation window (s).
+pub const SATURATION_WINDOW_S: f64 = 1.0;
+/// Largest fraction of clamped ticks in any window.
+pub const SATURATION_FRACTION: f64 = 0.10;
+/// Ticks before this time (the client's output ramp-in) are not judged for saturation (s).
+pub const RAMP_IN_S: f64 = 0.25;
+/// Energy made beyond the hands' work, as a fraction of the largest work done so far.
+pub const ENERGY_FRACTION: f64 = 0.5;
+/// Energy made beyond the hands' work that is never held against a session (J).
+pub const ENERGY_FLOOR_J: f64 = 0.005;
+
+/// The criterion in one sentence, for summaries.
+pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, a device more than 5 cm \
+from its OP in the VE, or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
+ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
+linkage's kinetic energy exceeds the work all hands have done on their devices by more than half the largest work \
+done so far plus 5 mJ); stable otherwise";
+
+/// The criterion as a JSON object (the sentence and its thresholds).
+pub fn criterion_json() -> Value {
+    json!({
+        "rule": CRITERION,
+        "divergence_distance_m": DIVERGENCE_DISTANCE_M,
+        "closure_limit_m": CLOSURE_LIMIT_M,
+        "saturation_window_s": SATURATION_WINDOW_S,
+        "saturation_fraction": SATURATION_FRACTION,
+        "ramp_in_s": RAMP_IN_S,
+        "energy_fraction_of_work": ENERGY_FRACTION,
+        "energy_floor_j": ENERGY_FLOOR_J,
+    })
+}
+
+/// The label of one session and the numbers behind it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Verdict {
+    /// Stable by the criterion.
+    pub stable: bool,
+    /// Which parts of the criterion failed (empty when stable).
+    pub reasons: Vec<&'static str>,
+    /// Largest device–OP distance over all clients (m).
+    pub device_op_max_m: f64,
+    /// Largest closure error (m).
+    pub max_closure_error_m: f64,
+    /// Largest fraction of clamped ticks in any window, over all clients.
+    pub worst_saturation: f64,
+    /// Largest `E_kin(t) − W(t)` (J).
+    pub energy_excess_j: f64,
+    /// Largest total work the hands had done at any instant (J).
+    pub hand_work_max_j: f64,
+    /// Largest kinetic energy of the linkage (J).
+    pub kinetic_energy_max_j: f64,
+}
+
+/// Judges a session from its summary and its every-tick recording.
+pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
+    let mut reasons = Vec::new();
+    let device_op_max_m = summary.clients.iter().map(|c| c.device_op_max_m).fold(0.0, f64::max);
+    let non_finite = summary.clients.iter().any(|c| c.non_finite > 0);
+    if non_finite {
+        reasons.push("divergence: non-finite value");
+    }
+    if summary.ve_restores > 0 {
+        reasons.push("divergence: VE state restored");
+    }
+    if exceeds(device_op_max_m, DIVERGENCE_DISTANCE_M) {
+        reasons.push("divergence: device more than 5 cm from its OP");
+    }
+    if exceeds(summary.max_closure_error, CLOSURE_LIMIT_M) {
+        reasons.push("divergence: closure error above 1 mm");
+    }
+    let worst_saturation = rec.clients.iter().map(|samples| worst_window(samples)).fold(0.0, f64::max);
+    if worst_saturation > SATURATION_FRACTION {
+        reasons.push("sustained saturation");
+    }
+    let (energy_excess_j, hand_work_max_j, kinetic_energy_max_j) = energy_balance(rec);
+    if exceeds(energy_excess_j, ENERGY_FRACTION * hand_work_max_j + ENERGY_FLOOR_J) {
+        reasons.push("energy growth");
+    }
+    Verdict {
+        stable: reasons.is_empty(),
+        reasons,
+        device_op_max_m,
+        max_closure_error_m: summary.max_closure_error,
+        worst_saturation,
+        energy_excess_j,
+        hand_work_max_j,
+        kinetic_energy_max_j,
+    }
+}
+
+/// `x > limit`, counting NaN as beyond any limit.
+fn exceeds(x: f64, limit: f64) -> bool {
+    x.is_nan() || x > limit
+}
+
+/// The largest fraction of clamped ticks in any window of [`SATURATION_WINDOW_S`] starting at or after
+/// [`RAMP_IN_S`] (one window over what remains when the run is shorter).
+fn worst_window(samples: &[crate::harness::ClientSample]) -> f64 {
+    let judged: Vec<(f64, bool)> =
+        samples.iter().filter(|s| s.t >= RAMP_IN_S && s.gain > 0.0).map(|s| (s.t, s.clamp_scale < 1.0)).collect();
+    if judged.is_empty() {
+        return 0.0;
+    }
+    let mut clamped_before = Vec::with_capacity(judged.len() + 1);
+    clamped_before.push(0usize);
+    for &(_, c) in &judged {
+        clamped_before.push(clamped_before.last().copied().unwrap_or(0) + usize::from(c));
+    }
+    let t_last = judged[judged.len() - 1].0;
+    let mut worst: f64 = 0.0;
+    let mut end = 0;
+    for start in 0..judged.len() {
+        let t0 = judged[start].0;
+        if t0 + SATURATION_WINDOW_S > t_last && start > 0 {
+            break;
+        }
+        while end < judged.len() && judged[end].0 < t0 + SATURATION_WINDOW_S {
+            end += 1;
+        }
+        let n = end - start;
+        if n > 0 {
+            worst = worst.max((clamped_before[end] - clamped_before[start]) as f64 / n as f64);
+        }
+    }
+    worst
+}
+
+/// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample.
+fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
+    // Cumulative work per client at each of its samples.
+    let work: Vec<Vec<(f64, f64)>> = rec
+        .clients
+        .iter()
+        .map(|samples| {
+            let mut w = 0.0;
+            let mut last_t: Option<f64> = None;
+            samples
+                .iter()
+                .map(|s| {
+                    let dt = last_t.map_or(0.0, |t| s.t - t);
+                    last_t = Some(s.t);
+                    let power: f64 = s.hand.iter().zip(&s.device_twist).map(|(f, v)| f * v).sum();
+                    if power.is_finite() {
+                        w += power * dt;
+                    }
+                    (s.t, w)
+                })
+                .collect()
+        })
+        .collect();
+    let mut cursors = vec![0usize; work.len()];
+    let (mut excess, mut work_max, mut ke_max) = (f64::NEG_INFINITY, 0.0f64, 0.0f64);
+    for v in &rec.ve {
+        let mut w_total = 0.0;
+        for (series, cursor) in work.iter().zip(cursors.iter_mut()) {
+            while *cursor + 1 < series.len() && series[*cursor + 1].0 <= v.t {
+                *cursor += 1;
+            }
+            if let Some(&(t, w)) = series.get(*cursor) {
+                if t <= v.t {
+                    w_total += w;
+                }
+            }
+        }
+        work_max = work_max.max(w_total);
+        let ke = if v.kinetic_energy.is_finite() { v.kinetic_energy } else { f64::INFINITY };
+        ke_max = ke_max.max(ke);
+        excess = excess.max(ke - w_total);
+    }
+    (if excess == f64::NEG_INFINITY { 0.0 } else { excess }, work_max, ke_max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::harness::{ClientSample, VeSample};
+
+    fn sample(t: f64, clamped: bool, hand: f64, v: f64) -> ClientSample {
+        ClientSample {
+            t,
+            hand: vec![hand, 0.0, 0.0],
+            device_twist: vec![v, 0.0, 0.0],
+            gain: 1.0,
+            clamp_scale: if clamped { 0.5 } else { 1.0 },
+            ..ClientSample::default()
+        }
+    }
+
+    fn recording(clamp_from: f64, ke: f64) -> (SessionSummary, Recording) {
+        let mut rec = Recording::new(vec!["a".into()]);
+        for k in 0..3000 {
+            let t = k as f64 * 1e-3;
+            rec.push_client(0, sample(t, t >= clamp_from, 1.0, 0.01));
+            rec.push_ve(VeSample { t, kinetic_energy: ke * t / 3.0, ..VeSample::default() });
+        }
+        let summary = SessionSummary { clients: vec![Default::default()], ..Default::default() };
+        (summary, rec)
+    }
+
+    #[test]
+    fn a_quiet_session_is_stable() {
+        // 1 N at 1 cm/s for 3 s: 30 mJ of work; the linkage ends with 20 mJ.
+        let (s, r) = recording(10.0, 0.02);
+        let v = judge(&s, &r);
+        assert!(v.stable, "{v:?}");
+        assert!((v.hand_work_max_j - 0.03).abs() < 1e-3);
+    }
+
+    #[test]
+    fn saturation_and_energy_growth_are_caught() {
+        let (s, r) = recording(2.5, 0.0);
+        let v = judge(&s, &r);
+        assert_eq!(v.reasons, vec!["sustained saturation"], "{v:?}");
+        let (s, r) = recording(10.0, 0.2);
+        assert_eq!(judge(&s, &r).reasons, vec!["energy growth"]);
+        let (mut s, r) = recording(10.0, 0.0);
+        s.clients[0].device_op_max_m = 0.06;
+        assert!(!judge(&s, &r).stable);
+    }
+}

@@ -1,0 +1,198 @@
+//! Every experiment's `--quick` variant runs, writes its charts and `summary.json`, and its numbers answer
+//! the questions they are meant to answer in ways that could have come out otherwise.
+
+use std::path::Path;
+use std::process::Command;
+
+use kinloop::experiments::{self, Name, Options, Report};
+use serde_json::Value;
+
+fn run(name: Name, out: &Path) -> Report {
+    let options = Options { out: out.to_path_buf(), quick: true, progress: false, threads: 2 };
+    let report = experiments::run(name, &options).unwrap_or_else(|e| panic!("{}: {e:#}", name.as_str()));
+    assert_eq!(report.dir, out.join(name.as_str()));
+    assert!(report.files.iter().any(|f| f.ends_with(".png")), "{}: charts written", name.as_str());
+    for file in &report.files {
+        let path = report.dir.join(file);
+        let len = std::fs::metadata(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).len();
+        let least = if file.ends_with(".png") { 5_000 } else { 100 };
+        assert!(len > least, "{} has {len} bytes", path.display());
+    }
+    let written: Value =
+        serde_json::from_str(&std::fs::read_to_string(report.dir.join("summary.json")).unwrap()).unwrap();
+    assert!(same(&written, &report.summary), "summary.json is what the report returned");
+    assert_eq!(written["experiment"], name.as_str());
+    assert!(written["results"]["answer"].as_str().is_some_and(|a| a.len() > 40), "a one-line answer");
+    report
+}
+
+/// Equal JSON, numbers within a relative 1e-12 (a float read back from text may differ in its last bit).
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())
+        }
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(x, y)| same(x, y)),
+        (Value::Object(x), Value::Object(y)) => {
+            x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same(v, w)))
+        }
+        _ => a == b,
+    }
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// Figs 6 and 7: the device follows the OP under stiffness control and drifts from it under impedance
+/// control; the loop closure binds near 0.9 s, and binds the device harder when it does (Fig 6c). And the
+/// experiment gives the same numbers twice.
+#[test]
+fn paper_stiffness_rendering_keeps_the_device_on_the_op_and_impedance_drifts() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Paper, dir.path());
+    let r = &report.summary["results"]["gains"]["paper"];
+    let (stiff, imp) = (&r["stiffness"], &r["impedance"]);
+    assert!(f(&stiff["device_op_rms_mm"]) < 3.0, "{stiff}");
+    assert!(f(&imp["device_op_rms_mm"]) > 5.0 * f(&stiff["device_op_rms_mm"]), "{imp} vs {stiff}");
+    let first = f(&stiff["first_time_two_constraints_s"]);
+    assert!((0.7..1.3).contains(&first), "two constraints first at {first} s");
+    assert!(
+        f(&stiff["mean_joint_constraint_force_n_with_2_constraints"])
+            > f(&stiff["mean_joint_constraint_force_n_with_1_constraint"]),
+        "{stiff}"
+    );
+    assert!(f(&stiff["max_closure_error_m"]) < 1e-9);
+    let again = run(Name::Paper, &dir.path().join("again"));
+    assert_eq!(report.summary["results"], again.summary["results"], "deterministic");
+}
+
+/// The Pareto front is non-empty and none of its members is dominated by a stable configuration; RK4
+/// is the most accurate integrator on the linkage alone.
+#[test]
+fn speed_accuracy_front_is_non_dominated() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::SpeedAccuracy, dir.path());
+    let r = &report.summary["results"];
+    let points = r["points"].as_array().unwrap();
+    let front = r["pareto_front_points"].as_array().unwrap();
+    assert!(!front.is_empty());
+    let key = |p: &Value| (f(&p["cost_us_per_simulated_s"]), f(&p["op_error_rms_m"]));
+    for member in front {
+        let (c, e) = key(member);
+        assert!(c > 0.0 && e > 0.0);
+        for p in points.iter().filter(|p| p["stable"] == true) {
+            let (cp, ep) = key(p);
+            assert!(!(cp <= c && ep <= e && (cp < c || ep < e)), "{member} is dominated by {p}");
+        }
+    }
+    let alone = r["linkage_alone"]["points"].as_array().unwrap();
+    let fastest = alone.iter().map(|p| f(&p["rate_hz"])).fold(0.0, f64::max);
+    let error_of = |name: &str| {
+        alone.iter().find(|p| p["integrator"] == name && f(&p["rate_hz"]) == fastest).map(|p| f(&p["op_error_rms_m"]))
+    };
+    assert!(error_of("rk4").unwrap() < error_of("euler").unwrap() / 10.0, "{alone:?}");
+}
+
+/// Some gains are stable and some are not; the paper's are stable; the largest stable k_j lies far above
+/// Colgate's passivity bound; implicit coupling is stable wherever explicit coupling is.
+#[test]
+fn stability_maps_have_both_labels_and_the_passivity_bound_is_conservative() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Stability, dir.path());
+    let r = &report.summary["results"];
+    let a = &r["a_joint_constraint_gains"];
+    let cells = a["cells"].as_array().unwrap();
+    assert!(cells.iter().any(|c| c["stable"] == true) && cells.iter().any(|c| c["stable"] == false));
+    assert_eq!(a["paper_gains_stable"], true);
+    let bound = f(&a["passivity_bound"]["largest_passive_k_j_with_b_j_0_n_per_m"]);
+    assert!((bound - 40.0).abs() < 1e-9, "2 b / T with b = 0.02 N s/m at 1 kHz");
+    assert!(f(&a["largest_stable_k_j_n_per_m"]) > 10.0 * bound);
+    let d = &r["d_coupling"];
+    let stable_count = |which: &str| d[which]["stable_points"].as_u64().unwrap();
+    assert!(stable_count("implicit") >= stable_count("explicit"));
+    assert_eq!(d["explicit"]["paper_exact_gains_stable"], false, "the paper's angular gains need implicit coupling");
+    assert_eq!(d["implicit"]["paper_exact_gains_stable"], true);
+    let per_step = r["c_baumgarte"]["per_step"].as_array().unwrap();
+    let alpha_max = |p: &Value| f(&p["stable_alpha_max"]);
+    let (coarse, fine) = (&per_step[0], &per_step[per_step.len() - 1]);
+    assert!(f(&fine["step_ms"]) < f(&coarse["step_ms"]));
+    assert!(alpha_max(fine) > alpha_max(coarse), "a smaller step tolerates a stiffer Baumgarte: {per_step:?}");
+}
+
+/// Plain coupling over a perfect network is stable, tracking degrades with delay, and the reported failing
+/// delays are the sweep's own unstable points.
+#[test]
+fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Latency, dir.path());
+    let r = &report.summary["results"];
+    let delay = &r["sweeps"]["delay"];
+    let plain = delay["plain"].as_array().unwrap();
+    assert_eq!(plain[0]["value"], 0.0);
+    assert_eq!(plain[0]["stable"], true, "{}", plain[0]);
+    let last = &plain[plain.len() - 1];
+    assert!(f(&last["device_op_rms_mm"]) > 3.0 * f(&plain[0]["device_op_rms_mm"]), "{last} vs {}", plain[0]);
+    for (mode, list) in [("plain", "unstable_values_plain"), ("passivity", "unstable_values_passivity")] {
+        let unstable: Vec<f64> =
+            delay[mode].as_array().unwrap().iter().filter(|p| p["stable"] == false).map(|p| f(&p["value"])).collect();
+        let listed: Vec<f64> = delay[list].as_array().unwrap().iter().map(f).collect();
+        assert_eq!(unstable, listed);
+    }
+    assert_eq!(r["failing_delay_ms"]["plain_coupling"], delay["first_unstable_value_plain"]);
+    for sweep in ["jitter", "loss"] {
+        assert!(r["sweeps"][sweep]["plain"].as_array().is_some_and(|p| p.len() >= 3), "{sweep} swept");
+    }
+}
+
+/// 16 users stay stable on one OP and spread over the links, and every user costs the VE something.
+#[test]
+fn sixteen_users_stay_stable_and_cost_grows_with_users() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Users, dir.path());
+    let r = &report.summary["results"];
+    assert_eq!(r["stable_with_max_users"]["users"], 16);
+    assert_eq!(r["stable_with_max_users"]["same_op"], true, "{}", r["answer"]);
+    assert_eq!(r["stable_with_max_users"]["spread"], true, "{}", r["answer"]);
+    let points = r["points"].as_array().unwrap();
+    let cost = |layout: &str, n: u64| {
+        points.iter().find(|p| p["layout"] == layout && p["users"] == n).map(|p| f(&p["ve_us_per_tick"])).unwrap()
+    };
+    assert!(cost("same_op", 16) > 2.0 * cost("same_op", 1));
+    assert!(cost("spread", 16) > 2.0 * cost("spread", 1));
+}
+
+/// The reduced local model's step does not grow with the linkage; the VE step and the configuration form's
+/// snapshot do.
+#[test]
+fn scale_op_form_is_flat_and_ve_cost_grows_with_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Scale, dir.path());
+    let r = &report.summary["results"];
+    let growth = &r["growth_exponents_over_links"];
+    assert!(f(&growth["op_local_model_step"]["loops_1"]) < 0.5, "{growth}");
+    assert!(f(&growth["ve_step"]["loops_1"]) > 0.7, "{growth}");
+    let points = r["points"].as_array().unwrap();
+    let (small, large) = (&points[0], &points[points.len() - 1]);
+    assert!(f(&large["ve_step_us"]) > 10.0 * f(&small["ve_step_us"]));
+    assert_eq!(small["snapshot_bytes_op"], large["snapshot_bytes_op"], "op-form snapshots do not grow");
+    assert!(f(&large["snapshot_bytes_config"]) > 10.0 * f(&large["snapshot_bytes_op"]));
+}
+
+/// Bad command lines are refused with a message, not a panic.
+#[test]
+fn bad_experiment_arguments_are_refused_cleanly() {
+    let bin = env!("CARGO_BIN_EXE_kinloop");
+    let unknown = Command::new(bin).args(["experiment", "nonsense"]).output().unwrap();
+    assert!(!unknown.status.success());
+    let stderr = String::from_utf8_lossy(&unknown.stderr);
+    assert!(stderr.contains("invalid value") && !stderr.contains("panicked"), "{stderr}");
+    let file = tempfile::NamedTempFile::new().unwrap();
+    let bad_out = Command::new(bin).args(["experiment", "paper", "--out"]).arg(file.path()).output().unwrap();
+    assert!(!bad_out.status.success());
+    let stderr = String::from_utf8_lossy(&bad_out.stderr);
+    assert!(stderr.contains("not a directory") && !stderr.contains("panicked"), "{stderr}");
+    let threads = Command::new(bin).args(["experiment", "paper", "--threads", "0"]).output().unwrap();
+    assert!(!threads.status.success() && String::from_utf8_lossy(&threads.stderr).contains("--threads"));
+}
