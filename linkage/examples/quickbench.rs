@@ -2,7 +2,10 @@
 //! `quickbench scaling` times `ve_step/chainN_loopsL` for N ∈ {20, 50, 100} and L ∈ {1, 5, 10} instead.
 
 use kinloop_linkage::bench::*;
-use kinloop_linkage::Integrator;
+use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::{Integrator, Planar};
+use std::hint::black_box;
 use std::time::Duration;
 
 fn main() {
@@ -36,6 +39,16 @@ fn main() {
         case.op_space();
     });
     println!("op_space/testbed: {:.0} ns", t.median_ns);
+    // Its two halves: Λ⁻¹ alone, and the SVD (Jacobi) with the count alone.
+    let t = measure(budget, || {
+        let _ = op_space_inertia(&case.model, &mut case.data, 0);
+    });
+    println!("  Λ⁻¹ only: {:.0} ns", t.median_ns);
+    let (inverse_inertia, length_scale) = (case.data.op.inverse_inertia, case.model.length_scale);
+    let t = measure(budget, || {
+        black_box(constraint_directions::<Planar>(black_box(&inverse_inertia), length_scale, DEFAULT_THRESHOLD));
+    });
+    println!("  SVD + count only: {:.0} ns", t.median_ns);
     let mut lm = case.local_model();
     let f = paper_wrench();
     let t = measure(budget, || {

@@ -81,9 +81,28 @@ pub fn pivoted_cholesky(
     tolerance: f64,
     max_rank: usize,
 ) -> usize {
-    let m = s.nrows();
-    let a = l.as_mut_slice();
-    a.copy_from_slice(s.as_slice());
+    // The sizes of a few closure rows get their own copy with m a constant, so the loops unroll (their
+    // bookkeeping otherwise outweighs a 2x2 factorization several times).
+    match s.nrows() {
+        1 => pivoted_cholesky_m(1, s, l, perm, scale, tolerance, max_rank),
+        2 => pivoted_cholesky_m(2, s, l, perm, scale, tolerance, max_rank),
+        3 => pivoted_cholesky_m(3, s, l, perm, scale, tolerance, max_rank),
+        m => pivoted_cholesky_m(m, s, l, perm, scale, tolerance, max_rank),
+    }
+}
+
+#[inline(always)]
+fn pivoted_cholesky_m(
+    m: usize,
+    s: &DMatrix<f64>,
+    l: &mut DMatrix<f64>,
+    perm: &mut [usize],
+    scale: &mut DVector<f64>,
+    tolerance: f64,
+    max_rank: usize,
+) -> usize {
+    let a = &mut l.as_mut_slice()[..m * m];
+    a.copy_from_slice(&s.as_slice()[..m * m]);
     let scale = &mut scale.as_mut_slice()[..m];
     let perm = &mut perm[..m];
     for (i, (p, sc)) in perm.iter_mut().zip(scale.iter_mut()).enumerate() {
@@ -133,10 +152,20 @@ pub fn pivoted_cholesky(
 /// Solves `S x = r` in place with a factor from [`pivoted_cholesky`]; rows beyond the rank get `x = 0`.
 /// `y` is scratch of length m.
 pub fn pivoted_solve(l: &DMatrix<f64>, perm: &[usize], rank: usize, r: &mut DVector<f64>, y: &mut DVector<f64>) {
-    let m = l.nrows();
-    let a = l.as_slice();
-    let r = r.as_mut_slice();
-    let y = &mut y.as_mut_slice()[..rank];
+    let (r, y) = (r.as_mut_slice(), y.as_mut_slice());
+    match (l.nrows(), rank) {
+        (2, 2) => pivoted_solve_m(2, 2, l, perm, r, y),
+        (3, 3) => pivoted_solve_m(3, 3, l, perm, r, y),
+        (m, rank) => pivoted_solve_m(m, rank, l, perm, r, y),
+    }
+}
+
+/// [`pivoted_solve`] with the sizes as arguments, copied with constants for the common small cases.
+#[inline(always)]
+fn pivoted_solve_m(m: usize, rank: usize, l: &DMatrix<f64>, perm: &[usize], r: &mut [f64], y: &mut [f64]) {
+    let a = &l.as_slice()[..m * m];
+    let r = &mut r[..m];
+    let y = &mut y[..rank];
     for k in 0..rank {
         let mut s = r[perm[k]];
         for (j, yj) in y[..k].iter().enumerate() {

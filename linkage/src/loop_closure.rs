@@ -111,13 +111,15 @@ fn add_point_rows<S: Space>(
     row: usize,
     wt: &mut DMatrix<f64>,
 ) {
+    let n = wt.nrows();
+    let cols = &mut wt.as_mut_slice()[row * n..];
     for j in support(model, body) {
         let col = point_column(kin, j, p);
         match direction {
-            Some(n) => wt[(j, row)] += sign * n.dot(&col),
+            Some(d) => cols[j] += sign * d.dot(&col),
             None => {
                 for (k, x) in col.as_slice().iter().enumerate() {
-                    wt[(j, row + k)] += sign * x;
+                    cols[k * n + j] += sign * x;
                 }
             }
         }
@@ -134,13 +136,15 @@ fn add_angular_rows<S: Space>(
     row: usize,
     wt: &mut DMatrix<f64>,
 ) {
+    let n = wt.nrows();
+    let cols = &mut wt.as_mut_slice()[row * n..];
     for j in support(model, body) {
         let w = S::spatial_ang(&kin.motion_subspace[j]);
         match c {
-            Some(c) => wt[(j, row)] += sign * c.dot(&w),
+            Some(c) => cols[j] += sign * c.dot(&w),
             None => {
                 for (k, x) in w.as_slice().iter().enumerate() {
-                    wt[(j, row + k)] += sign * x;
+                    cols[k * n + j] += sign * x;
                 }
             }
         }

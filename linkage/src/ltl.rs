@@ -309,6 +309,9 @@ fn four_columns(a: &[f64], n: usize, k0: usize) -> [&[f64]; 4] {
     std::array::from_fn(|c| &a[(k0 + c) * n..(k0 + c) * n + k0 + c + 1])
 }
 
+// Not inlined: each width keeps its own (small) set-up instead of the dispatcher computing every width's
+// loop invariants on entry.
+#[inline(never)]
 fn solve_u_group<S: Space, const W: usize>(
     model: &Model<S>,
     a: &[f64],
@@ -355,9 +358,12 @@ fn solve_u_group<S: Space, const W: usize>(
             x[k0..k].copy_from_slice(v);
         }
         // The four rows just above first: the next block waits for them, not for the rest.
-        let split = k0.saturating_sub(4);
-        update_rows(&u, &vals, &mut cols, split, k0);
-        update_rows(&u, &vals, &mut cols, 0, split);
+        if k0 > 0 {
+            update_rows(&u, &vals, &mut cols, k0 - 4, k0);
+        }
+        if k0 > 4 {
+            update_rows(&u, &vals, &mut cols, 0, k0 - 4);
+        }
         k = k0;
     }
 }
@@ -400,6 +406,7 @@ pub fn solve_ut_columns<S: Space>(model: &Model<S>, u: &DMatrix<f64>, inv: &[f64
     }
 }
 
+#[inline(never)]
 fn solve_ut_group<S: Space, const W: usize>(model: &Model<S>, a: &[f64], n: usize, inv: &[f64], x: &mut [f64]) {
     let mut cols = columns::<W>(x, n);
     let prefix = model.chain_prefix_len;
@@ -407,7 +414,7 @@ fn solve_ut_group<S: Space, const W: usize>(model: &Model<S>, a: &[f64], n: usiz
     while k0 + 4 <= prefix {
         let u = four_columns(a, n, k0);
         for x in cols.iter_mut() {
-            let d = dot4(&u, &x[..k0]);
+            let d = if k0 > 0 { dot4(&u, &x[..k0]) } else { [0.0; 4] };
             let x0 = (x[k0] - d[0]) * inv[k0];
             let x1 = mul_add(-u[1][k0], x0, x[k0 + 1] - d[1]) * inv[k0 + 1];
             let x2 = mul_add(-u[2][k0 + 1], x1, mul_add(-u[2][k0], x0, x[k0 + 2] - d[2])) * inv[k0 + 2];
