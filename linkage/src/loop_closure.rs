@@ -92,7 +92,8 @@ pub fn stabilize<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVector<f6
     // ḣ = W q̇, one contiguous column of Wᵀ per closure row.
     let n = data.closure_jacobian_t.nrows();
     let wt = data.closure_jacobian_t.as_slice();
-    let out = data.closure_bias_stab.iter_mut().zip(data.closure_bias.iter()).zip(data.closure_residual.iter());
+    let out = data.closure_bias_stab.as_mut_slice().iter_mut();
+    let out = out.zip(data.closure_bias.as_slice()).zip(data.closure_residual.as_slice());
     for (((s, w), h), col) in out.zip(wt.chunks_exact(n)) {
         *s = mul_add(alpha * alpha, *h, mul_add(2.0 * alpha * beta, dot(col, qd.as_slice()), *w));
     }

@@ -39,9 +39,11 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
             }
         }
     }
-    for c in 0..n {
-        for r in c + 1..n {
-            a[c * n + r] = a[r * n + c];
+    // Mirror: column c below the diagonal is row c right of it (a strided read of the later columns).
+    for c in 0..n.saturating_sub(1) {
+        let (left, right) = a.split_at_mut((c + 1) * n);
+        for (dst, col) in left[c * n + c + 1..].iter_mut().zip(right.chunks_exact(n)) {
+            *dst = col[c];
         }
     }
 }
