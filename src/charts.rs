@@ -196,7 +196,15 @@ fn bounds(chart: &Chart) -> ((f64, f64), (f64, f64)) {
             return if log { (0.1, 10.0) } else { (0.0, 1.0) };
         }
         if log {
-            (lo / 1.5, hi * 1.5)
+            let (lo, hi) = (lo / 1.5, hi * 1.5);
+            // Keep a power of ten inside the range: log axes label only at powers of ten and their 2 and 5
+            // multiples, counted from the first power of ten in range.
+            let below = 10f64.powf(lo.log10().floor()) * 0.999;
+            if below * 10.01 > hi {
+                (below, hi)
+            } else {
+                (lo, hi)
+            }
         } else {
             let span = (hi - lo).max(1e-12 * hi.abs().max(1.0));
             (lo - 0.05 * span, hi + 0.05 * span)
@@ -377,8 +385,10 @@ where
             ctx.configure_mesh()
                 .x_desc(map.x_label.as_str())
                 .y_desc(map.y_label.as_str())
-                .x_label_formatter(&|v| tick_label(*v))
-                .y_label_formatter(&|v| tick_label(*v))
+                .x_labels(if map.log { 20 } else { 10 })
+                .y_labels(if map.log { 20 } else { 10 })
+                .x_label_formatter(&|v| if map.log { log_tick_label(*v) } else { tick_label(*v) })
+                .y_label_formatter(&|v| if map.log { log_tick_label(*v) } else { tick_label(*v) })
                 .label_style(("sans-serif", 13))
                 .axis_desc_style(("sans-serif", 15))
                 .disable_mesh()

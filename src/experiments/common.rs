@@ -11,6 +11,11 @@ use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::{json, Value};
 
+use kinloop_linkage::kinematics::forward_kinematics;
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::{Data, Model, Planar};
+use nalgebra::DVector;
+
 use crate::charts::{self, Chart, StabilityMap};
 use crate::harness::{self, Recording, SessionPlan, SessionSummary};
 
@@ -214,6 +219,55 @@ pub fn paper_plan(seconds: f64) -> Result<SessionPlan> {
     plan.duration = Duration::from_secs_f64(seconds);
     plan.record_every = 1;
     Ok(plan)
+}
+
+/// Positions (x, y) of an operational point over time (s, m).
+pub type Trajectory = Vec<(f64, [f64; 2])>;
+
+/// The (x, y) position of operational point `op` at configuration `q`.
+pub fn op_position(model: &Model<Planar>, data: &mut Data<Planar>, q: &DVector<f64>, op: usize) -> [f64; 2] {
+    forward_kinematics(model, data, q);
+    let p = OpPose::<Planar>::of_op(model, data, op).position;
+    [p[0], p[1]]
+}
+
+/// The VE's operational point `op` over a session, from the q recorded after every VE tick.
+pub fn ve_op_trajectory(plan: &SessionPlan, rec: &Recording, op: &str) -> Result<Trajectory> {
+    let model: Model<Planar> = Model::compile(&plan.scene, &plan.scene.name)?;
+    let index = model.op_index(op).ok_or_else(|| anyhow!("no operational point {op}"))?;
+    let mut data = Data::new(&model);
+    Ok(rec.ve.iter().map(|v| (v.t, op_position(&model, &mut data, &DVector::from_column_slice(&v.q), index))).collect())
+}
+
+/// The position of `reference` at time `t`, linearly interpolated (held beyond its ends).
+pub fn trajectory_at(reference: &Trajectory, t: f64) -> [f64; 2] {
+    let i = reference.partition_point(|s| s.0 <= t);
+    if i == 0 {
+        return reference.first().map_or([f64::NAN; 2], |s| s.1);
+    }
+    if i >= reference.len() {
+        return reference[reference.len() - 1].1;
+    }
+    let ((t0, a), (t1, b)) = (reference[i - 1], reference[i]);
+    let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 };
+    [a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s]
+}
+
+/// RMS distance of `trajectory` from `reference` at the trajectory's times (m).
+pub fn rms_error(trajectory: &Trajectory, reference: &Trajectory) -> f64 {
+    let sum: f64 = trajectory
+        .iter()
+        .map(|(t, p)| {
+            let r = trajectory_at(reference, *t);
+            (p[0] - r[0]).powi(2) + (p[1] - r[1]).powi(2)
+        })
+        .sum();
+    (sum / trajectory.len().max(1) as f64).sqrt()
+}
+
+/// Length of the path a trajectory travels (m).
+pub fn path_length(trajectory: &Trajectory) -> f64 {
+    trajectory.windows(2).map(|w| (w[1].1[0] - w[0].1[0]).hypot(w[1].1[1] - w[0].1[1])).sum()
 }
 
 /// `per_decade` log-spaced values from `lo` to `hi` inclusive (values rounded to 3 significant digits so

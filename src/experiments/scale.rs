@@ -310,7 +310,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Scaling: VE step, local-model step and snapshot size against links and loops",
-        "about 40 s on one core (45 chains, 7 timings each); --quick about 5 s",
+        "about 30 s on one core (45 chains, 7 timings of 0.1 s each); --quick about 2 s",
         results,
     )
 }

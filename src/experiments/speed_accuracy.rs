@@ -24,25 +24,21 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use kinloop_client::core::ModelForm;
-use kinloop_linkage::kinematics::forward_kinematics;
-use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
 use kinloop_server::core::AxisGains;
-use nalgebra::{DVector, Vector3};
+use nalgebra::Vector3;
 use serde_json::{json, Value};
 
 use super::common::{
-    paper_plan, pareto_front, round, session, significant, sweep, timed_cost, Options, Output, Report,
+    op_position, paper_plan, pareto_front, rms_error, round, session, significant, sweep, timed_cost, ve_op_trajectory,
+    Options, Output, Report, Trajectory,
 };
 use super::verdict;
 use crate::charts::{Chart, Legend, Series};
-use crate::harness::{Recording, SessionPlan};
+use crate::harness::SessionPlan;
 
 const PAPER_KG: f64 = 1000.0;
 const PAPER_BG: f64 = 100.0;
-
-/// The VE's OP position (x, y) at a time, m.
-type Trajectory = Vec<(f64, [f64; 2])>;
 
 /// One configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,12 +91,6 @@ fn fade(t: f64, fade_s: f64) -> f64 {
     }
 }
 
-fn op_position(model: &Model<Planar>, data: &mut Data<Planar>, q: &DVector<f64>) -> [f64; 2] {
-    forward_kinematics(model, data, q);
-    let p = OpPose::<Planar>::of_op(model, data, 0).position;
-    [p[0], p[1]]
-}
-
 /// The linkage alone under the paper's wrench, faded in from `start` over `fade` seconds when `fade_in` is
 /// `Some((start, fade))`, sampled after every step; also returns the wall-clock seconds spent in `step`.
 fn linkage_alone(
@@ -117,8 +107,9 @@ fn linkage_alone(
     let dt = 1.0 / rate_hz;
     let cfg = StepConfig { integrator, dt, project: true, implicit_forces: false };
     let steps = (plan.duration.as_secs_f64() * rate_hz).round() as usize;
+    let op = force.op;
     let mut out = Vec::with_capacity(steps + 1);
-    out.push((0.0, op_position(&model, &mut data, &q)));
+    out.push((0.0, op_position(&model, &mut data, &q, op)));
     let mut spent = Duration::ZERO;
     for k in 0..steps {
         let t = k as f64 * dt;
@@ -128,34 +119,9 @@ fn linkage_alone(
         let started = Instant::now();
         step(&model, &mut data, &mut q, &mut qd, &mut force, &cfg).with_context(|| format!("step {k}"))?;
         spent += started.elapsed();
-        out.push(((k + 1) as f64 * dt, op_position(&model, &mut data, &q)));
+        out.push(((k + 1) as f64 * dt, op_position(&model, &mut data, &q, op)));
     }
     Ok((out, spent.as_secs_f64()))
-}
-
-/// The reference position at time `t` (linear interpolation between samples).
-fn at(reference: &Trajectory, t: f64) -> [f64; 2] {
-    let i = reference.partition_point(|s| s.0 <= t);
-    if i == 0 {
-        return reference[0].1;
-    }
-    if i >= reference.len() {
-        return reference[reference.len() - 1].1;
-    }
-    let ((t0, a), (t1, b)) = (reference[i - 1], reference[i]);
-    let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 };
-    [a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s]
-}
-
-fn rms_error(trajectory: &Trajectory, reference: &Trajectory) -> f64 {
-    let sum: f64 = trajectory
-        .iter()
-        .map(|(t, p)| {
-            let r = at(reference, *t);
-            (p[0] - r[0]).powi(2) + (p[1] - r[1]).powi(2)
-        })
-        .sum();
-    (sum / trajectory.len().max(1) as f64).sqrt()
 }
 
 /// What one configuration measured.
@@ -173,24 +139,17 @@ struct Measured {
     client_cost_us_per_s: f64,
 }
 
-/// The VE's OP trajectory of a session, from the recorded q of every VE tick.
-fn ve_of(plan: &SessionPlan, rec: &Recording) -> Result<Trajectory> {
-    let model: Model<Planar> = Model::compile(&plan.scene, &plan.scene.name)?;
-    let mut data = Data::new(&model);
-    Ok(rec.ve.iter().map(|v| (v.t, op_position(&model, &mut data, &DVector::from_column_slice(&v.q)))).collect())
-}
-
 fn ve_trajectory(c: &Config, seconds: f64, length: f64) -> Result<Trajectory> {
     let plan = plan(c, seconds, length)?;
     let (_, rec) = session(&plan).with_context(|| c.label())?;
-    ve_of(&plan, &rec)
+    ve_op_trajectory(&plan, &rec, "link2")
 }
 
 fn accuracy(c: &Config, seconds: f64, length: f64, reference: &Trajectory, fine: &Trajectory) -> Result<Measured> {
     let plan = plan(c, seconds, length)?;
     let (summary, rec) = session(&plan).with_context(|| c.label())?;
     let verdict = verdict::judge(&summary, &rec);
-    let ve = ve_of(&plan, &rec)?;
+    let ve = ve_op_trajectory(&plan, &rec, "link2")?;
     let device: Trajectory =
         rec.clients[0].iter().filter(|s| s.gain > 0.0).map(|s| (s.t, [s.device[0], s.device[1]])).collect();
     Ok(Measured {
@@ -439,7 +398,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Speed against accuracy: integrators x VE rates x snapshot rates x local-model forms, with the Pareto front",
-        "about 1 minute on 2 cores (84 sessions of 3 s, their timing pass, 18 linkage-alone runs); --quick about 15 s",
+        "about 5 s on this 2-core machine (84 sessions of 3 s, their timing pass, 18 linkage-alone runs); --quick about 1 s",
         results,
     )
 }

@@ -20,7 +20,10 @@ use kinloop_linkage::builtin::PAPER_WRENCH;
 use kinloop_linkage::scene::{GeometrySpec, OpSpec};
 use serde_json::{json, Value};
 
-use super::common::{paper_plan, round, session, significant, sweep, timed_cost, Options, Output, Report};
+use super::common::{
+    paper_plan, path_length, rms_error, round, session, significant, sweep, timed_cost, ve_op_trajectory, Options,
+    Output, Report, Trajectory,
+};
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, Legend, Series, StabilityMap};
 use crate::harness::{ClientPlan, SessionPlan};
@@ -103,20 +106,21 @@ struct Measured {
     verdict: Verdict,
     op_rms_mean_m: f64,
     op_rms_max_m: f64,
-    /// RMS distance of the VE's `link2` from the one-user run's (same OP only), m.
+    /// RMS distance of the VE's `link2` from the one-user same-OP run's, m.
     deviation_from_one_user_m: Option<f64>,
+    /// Path the VE's `link2` travelled, m.
+    link2_path_m: f64,
     ve_us_per_tick: f64,
     client_us_per_tick_per_user: f64,
     uplinks_refused: u64,
-    link2: Vec<[f64; 2]>,
+    link2: Trajectory,
 }
 
 fn measure(layout: Layout, users: usize) -> Result<Measured> {
     let plan = plan(layout, users, DURATION_S)?;
     let (summary, rec) = session(&plan).with_context(|| format!("{} users, {}", users, layout.name()))?;
     let rms: Vec<f64> = summary.clients.iter().map(|c| c.device_op_rms_m).collect();
-    // The VE's link2 as the first user (always at link2 or link2's midpoint) saw it, every tick.
-    let link2 = rec.clients[0].iter().filter_map(|s| s.ve_op.as_ref().map(|p| [p[0], p[1]])).collect();
+    let link2 = ve_op_trajectory(&plan, &rec, "link2")?;
     Ok(Measured {
         layout,
         users,
@@ -124,17 +128,12 @@ fn measure(layout: Layout, users: usize) -> Result<Measured> {
         op_rms_mean_m: rms.iter().sum::<f64>() / rms.len().max(1) as f64,
         op_rms_max_m: rms.iter().copied().fold(0.0, f64::max),
         deviation_from_one_user_m: None,
+        link2_path_m: path_length(&link2),
         ve_us_per_tick: f64::NAN,
         client_us_per_tick_per_user: f64::NAN,
         uplinks_refused: summary.clients.iter().map(|c| c.uplinks_refused).sum(),
         link2,
     })
-}
-
-fn rms_between(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
-    let n = a.len().min(b.len());
-    let sum: f64 = a.iter().zip(b).take(n).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sum();
-    (sum / n.max(1) as f64).sqrt()
 }
 
 fn point_json(m: &Measured) -> Value {
@@ -146,7 +145,8 @@ fn point_json(m: &Measured) -> Value {
         "device_op_rms_mm_mean_over_users": round(m.op_rms_mean_m * 1e3, 3),
         "device_op_rms_mm_worst_user": round(m.op_rms_max_m * 1e3, 3),
         "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
-        "ve_link2_deviation_from_one_user_mm": m.deviation_from_one_user_m.map(|d| round(d * 1e3, 4)),
+        "ve_link2_path_mm": round(m.link2_path_m * 1e3, 2),
+        "ve_link2_deviation_from_one_user_mm": m.deviation_from_one_user_m.map(|d| round(d * 1e3, 3)),
         "ve_us_per_tick": round(m.ve_us_per_tick, 2),
         "haptic_core_us_per_tick_per_user": round(m.client_us_per_tick_per_user, 3),
         "worst_saturation": round(m.verdict.worst_saturation, 3),
@@ -186,7 +186,7 @@ pub fn run(options: &Options) -> Result<Report> {
         m.ve_us_per_tick = ve;
         m.client_us_per_tick_per_user = client;
         if m.layout == Layout::SameOp {
-            m.deviation_from_one_user_m = one_user.as_ref().map(|base| rms_between(&m.link2, base));
+            m.deviation_from_one_user_m = one_user.as_ref().map(|base| rms_error(&m.link2, base));
         }
     }
 
@@ -214,8 +214,21 @@ pub fn run(options: &Options) -> Result<Report> {
         |m| m.op_rms_mean_m * 1e3,
     );
     let tracking =
-        line_per_layout(tracking, &measured, "worst user", |m| m.op_rms_max_m * 1e3).legend(Legend::UpperLeft);
+        line_per_layout(tracking, &measured, "worst user", |m| m.op_rms_max_m * 1e3).legend(Legend::UpperRight);
     out.chart("tracking_vs_users", &tracking)?;
+    let motion = line_per_layout(
+        Chart::new("Linkage motion when N users share the paper's push (link 2's COM, 3 s)", "users", "length (mm)"),
+        &measured,
+        "path travelled",
+        |m| m.link2_path_m * 1e3,
+    );
+    let motion = motion
+        .with(Series::line(
+            "RMS deviation from the one-user run, same OP",
+            measured.iter().filter_map(|m| m.deviation_from_one_user_m.map(|d| (m.users as f64, d * 1e3))).collect(),
+        ))
+        .legend(Legend::UpperRight);
+    out.chart("linkage_motion_vs_users", &motion)?;
     out.map(
         "stability_users",
         &StabilityMap {
@@ -249,12 +262,17 @@ pub fn run(options: &Options) -> Result<Report> {
     };
     let answer = format!(
         "{max_n} users on one OP: {}; {max_n} users spread over the links: {}. The VE's compute per tick grows from \
-         {:.1} us with 1 user to {:.1} us with {max_n} (about {:?} us per extra user, same OP).",
+         {:.1} us with 1 user to {:.1} us with {max_n} (about {} us per extra user, same OP). Sharing the paper's push \
+         among N users on one OP should move the linkage as one user does, but link 2's COM travels {:.0} mm with 1 \
+         user and {:.0} mm with {max_n} (likely because each device's impedance controller shapes only its own hand's \
+         force, so the others' pushes reach it through the position channels and drag its 1 kg).",
         verdict_of(Layout::SameOp),
         verdict_of(Layout::Spread),
         find(Layout::SameOp, 1).map_or(f64::NAN, |m| m.ve_us_per_tick),
         find(Layout::SameOp, max_n).map_or(f64::NAN, |m| m.ve_us_per_tick),
-        per_user_cost(Layout::SameOp),
+        per_user_cost(Layout::SameOp).unwrap_or(f64::NAN),
+        find(Layout::SameOp, 1).map_or(f64::NAN, |m| m.link2_path_m * 1e3),
+        find(Layout::SameOp, max_n).map_or(f64::NAN, |m| m.link2_path_m * 1e3),
     );
     let results = json!({
         "answer": answer,
@@ -264,6 +282,8 @@ pub fn run(options: &Options) -> Result<Report> {
             "spread": find(Layout::Spread, max_n).map(|m| m.verdict.stable),
         },
         "ve_us_per_extra_user": { "same_op": per_user_cost(Layout::SameOp), "spread": per_user_cost(Layout::Spread) },
+        "link2_path_mm_same_op": measured.iter().filter(|m| m.layout == Layout::SameOp)
+            .map(|m| json!({ "users": m.users, "path_mm": round(m.link2_path_m * 1e3, 1) })).collect::<Vec<_>>(),
         "criterion": verdict::criterion_json(),
         "setup": {
             "session": "paper testbed, sim:paper devices at 1 kHz, 1 kHz VE and snapshots, perfect network, 3 s, users join 10 ms apart",
@@ -275,7 +295,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "1 to 16 users on one linkage: stability, tracking and VE cost",
-        "about 15 s on 2 cores (12 sessions of 3 s and their timing pass); --quick about 8 s",
+        "about 5 s on this 2-core machine (12 sessions of 3 s and their timing pass); --quick about 2 s",
         results,
     )
 }
