@@ -96,9 +96,10 @@ fn jacobi<const N: usize>(a_in: &[f64], values: &mut [f64], vectors: &mut [f64])
                     if r == p || r == q {
                         continue;
                     }
+                    // c (a_rp - t a_rq) rather than c a_rp - s a_rq: t is ready before c (see `rotation`).
                     let (arp, arq) = (a[p][r], a[q][r]);
-                    let new_p = mul_add(c, arp, -s * arq);
-                    let new_q = mul_add(s, arp, c * arq);
+                    let new_p = c * mul_add(-t, arq, arp);
+                    let new_q = c * mul_add(t, arp, arq);
                     a[p][r] = new_p;
                     a[r][p] = new_p;
                     a[q][r] = new_q;
