@@ -132,10 +132,23 @@ impl Chart {
     }
 }
 
+/// The name of category `v` when `v` is (nearly) an index into `names`, else nothing.
+fn category_label(names: &[String], v: f64) -> String {
+    let i = v.round();
+    if (v - i).abs() < 1e-6 && i >= 0.0 {
+        names.get(i as usize).cloned().unwrap_or_default()
+    } else {
+        String::new()
+    }
+}
+
 /// An axis tick label: at most 3 significant digits, exponent notation outside 0.001..100000.
 pub fn tick_label(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
+    if !v.is_finite() {
         return format!("{v}");
+    }
+    if v.abs() < 1e-12 {
+        return "0".into();
     }
     let magnitude = v.abs().log10().floor() as i32;
     let scale = 10f64.powi(2 - magnitude);
@@ -310,6 +323,8 @@ pub struct StabilityMap {
     pub overlays: Vec<Series>,
     /// Where the legend goes.
     pub legend: Legend,
+    /// Names of the rows when y is a category (row `i` at y = i); empty for a numeric y axis.
+    pub y_categories: Vec<String>,
 }
 
 /// Writes a stability map as `stem.svg` and `stem.png`.
@@ -388,7 +403,15 @@ where
                 .x_labels(if map.log { 20 } else { 10 })
                 .y_labels(if map.log { 20 } else { 10 })
                 .x_label_formatter(&|v| if map.log { log_tick_label(*v) } else { tick_label(*v) })
-                .y_label_formatter(&|v| if map.log { log_tick_label(*v) } else { tick_label(*v) })
+                .y_label_formatter(&|v| {
+                    if !map.y_categories.is_empty() {
+                        category_label(&map.y_categories, *v)
+                    } else if map.log {
+                        log_tick_label(*v)
+                    } else {
+                        tick_label(*v)
+                    }
+                })
                 .label_style(("sans-serif", 13))
                 .axis_desc_style(("sans-serif", 15))
                 .disable_mesh()
@@ -488,6 +511,7 @@ mod tests {
             cells: vec![(1.0, 1.0, true), (10.0, 1.0, false), (1.0, 10.0, true), (10.0, 10.0, true)],
             overlays: vec![Series::line("bound", vec![(1.0, 0.5), (10.0, 5.0)])],
             legend: Legend::UpperLeft,
+            y_categories: Vec::new(),
         };
         let files = save_map(&map, &dir.path().join("m")).unwrap();
         assert!(std::fs::read(&files[1]).unwrap().len() > 5_000);

@@ -203,9 +203,9 @@ fn charts(out: &mut Output, variable: Variable, points: &[Measured]) -> Result<(
     out.map(
         &format!("stability_{name}"),
         &StabilityMap {
-            title: format!("Stability vs {name} (0 = plain coupling, 1 = passivity controller)"),
+            title: format!("Stability vs {name}: plain coupling and passivity controller"),
             x_label: variable.axis().into(),
-            y_label: "passivity controller (0 off, 1 on)".into(),
+            y_label: "coupling".into(),
             log: false,
             cells: points
                 .iter()
@@ -213,6 +213,7 @@ fn charts(out: &mut Output, variable: Variable, points: &[Measured]) -> Result<(
                 .collect(),
             overlays: Vec::new(),
             legend: Legend::UpperLeft,
+            y_categories: vec!["plain".into(), "passivity".into()],
         },
     )
 }

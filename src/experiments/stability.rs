@@ -162,6 +162,7 @@ fn map_with_legend(
         cells: cells.iter().map(|c| (c.x, c.y, c.verdict.stable)).collect(),
         overlays,
         legend,
+        y_categories: Vec::new(),
     }
 }
 

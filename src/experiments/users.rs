@@ -232,9 +232,9 @@ pub fn run(options: &Options) -> Result<Report> {
     out.map(
         "stability_users",
         &StabilityMap {
-            title: "Stability with 1 to 16 users (0 = same OP, 1 = spread over the links)".into(),
+            title: "Stability with 1 to 16 users, on one OP and spread over the links".into(),
             x_label: "users".into(),
-            y_label: "layout (0 same OP, 1 spread)".into(),
+            y_label: "layout".into(),
             log: false,
             cells: measured
                 .iter()
@@ -242,6 +242,7 @@ pub fn run(options: &Options) -> Result<Report> {
                 .collect(),
             overlays: Vec::new(),
             legend: Legend::UpperLeft,
+            y_categories: vec!["same OP".into(), "spread".into()],
         },
     )?;
 
