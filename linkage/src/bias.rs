@@ -16,8 +16,9 @@ pub fn bias_forces<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         data.body_force[i] =
             S::inertia_mul(inertia, &kin.bias_acceleration[i]) + S::cross_force(v, &S::inertia_mul(inertia, v));
     }
+    let bias = data.bias.as_mut_slice();
     for i in (0..n).rev() {
-        data.bias[i] = kin.motion_subspace[i].dot(&data.body_force[i]);
+        bias[i] = kin.motion_subspace[i].dot(&data.body_force[i]);
         let parent = model.joints[i].parent;
         if parent != NO_PARENT {
             let f = data.body_force[i];

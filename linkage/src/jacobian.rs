@@ -85,6 +85,7 @@ pub fn apply_wrench<S: Space>(
 ) {
     let force = S::op_lin(wrench);
     let torque = S::op_ang(wrench);
+    let tau = tau.as_mut_slice();
     for j in support(model, Some(body)) {
         tau[j] += point_column(kin, j, p).dot(&force) + S::spatial_ang(&kin.motion_subspace[j]).dot(&torque);
     }

@@ -12,6 +12,7 @@ use crate::space::{Space, VecOps};
 /// world frame, at configuration `q`.
 pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
     let kin = &mut data.kin;
+    let q = q.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {
         let (parent_rot, parent_pos) = if joint.parent == NO_PARENT {
             (S::rot_identity(), S::Point::zero())
@@ -95,6 +96,7 @@ impl AnchoredSinCos {
 /// `a_i = a_λ(i) + v_i × S_i q̇_i` (the body's acceleration when q̈ = 0). Needs [`forward_kinematics`].
 pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVector<f64>) {
     let kin = &mut data.kin;
+    let qd = qd.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {
         let (v_parent, a_parent) = if joint.parent == NO_PARENT {
             (S::Spatial::zero(), S::Spatial::zero())

@@ -37,8 +37,7 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
     let kkt = &mut data.kkt;
     let extra = data.use_implicit_mass.then_some(&data.implicit_mass);
-    ltl::factor_sum(model, &data.mass_matrix, extra, &mut kkt.factor)?;
-    ltl::inverse_diagonal(&kkt.factor, kkt.factor_inv_diag.as_mut_slice());
+    ltl::factor_sum(model, &data.mass_matrix, extra, &mut kkt.factor, kkt.factor_inv_diag.as_mut_slice())?;
     factor_closures(model, data);
     Ok(())
 }

@@ -8,6 +8,10 @@
 //! supporting joints, so `U⁻¹ Jᵀ` (and `U⁻¹ Wᵀ` for a loop closure near the base) costs O(depth²) instead of
 //! O(n²). Column k of U holds exactly k's supporting joints, contiguous when they are `0..k` (a chain), so the
 //! inner loops vectorize there.
+//!
+//! The hot paths use [`factor_sum`] (left-looking, two columns per pass, FMA) and the blocked multi-column
+//! solves [`solve_u_columns`] / [`solve_ut_columns`] with the reciprocals of U's diagonal; [`solve_u`] and
+//! [`solve_ut`] are the plain reference forms.
 
 use nalgebra::DMatrix;
 
@@ -21,27 +25,31 @@ use crate::space::Space;
 /// The strict lower triangle is neither read nor written.
 pub fn factor<S: Space>(model: &Model<S>, u: &mut DMatrix<f64>) -> Result<(), DynamicsError> {
     let n = u.nrows();
-    factor_columns(model, u.as_mut_slice(), n, |_, _| {})
+    factor_columns(model, u.as_mut_slice(), n, |_, _| {}, None)
 }
 
 /// Factors `D + extra` into `u` (`U Uᵀ = D + extra`), reading only the upper triangles of `d` and `extra`
-/// and writing only the upper triangle of `u`: the copy of each column is fused into its factorization.
+/// and writing only the upper triangle of `u` (the copy of each column is fused into its factorization),
+/// and writes the reciprocals of U's diagonal into `inv_diag` (what [`inverse_diagonal`] computes, here
+/// for free: the factorization scales by them).
 pub fn factor_sum<S: Space>(
     model: &Model<S>,
     d: &DMatrix<f64>,
     extra: Option<&DMatrix<f64>>,
     u: &mut DMatrix<f64>,
+    inv_diag: &mut [f64],
 ) -> Result<(), DynamicsError> {
     let n = u.nrows();
     let (d, extra) = (d.as_slice(), extra.map(|e| e.as_slice()));
-    factor_columns(model, u.as_mut_slice(), n, |k, col| {
+    let init = |k: usize, col: &mut [f64]| {
         col.copy_from_slice(&d[k * n..k * n + col.len()]);
         if let Some(e) = extra {
             for (c, e) in col.iter_mut().zip(&e[k * n..]) {
                 *c += e;
             }
         }
-    })
+    };
+    factor_columns(model, u.as_mut_slice(), n, init, Some(&mut inv_diag[..n]))
 }
 
 /// The factorization proper, column by column from the last, in the left-looking ("dot-product") order:
@@ -49,13 +57,19 @@ pub fn factor_sum<S: Space>(
 /// by `1/U_kk`. Each entry is accumulated in registers over all j and stored once, where the right-looking
 /// order (Featherstone's listing) reads and writes the whole remaining triangle for every k; the
 /// arithmetic, and so the result up to round-off, is the same. `init(k, col)` fills rows `0..=k` of
-/// column k with D's entries (nothing to do in place).
+/// column k with D's entries (nothing to do in place); the reciprocals `1/U_kk` go to `inv_diag`.
 fn factor_columns<S: Space>(
     model: &Model<S>,
     a: &mut [f64],
     n: usize,
     mut init: impl FnMut(usize, &mut [f64]),
+    mut inv_diag: Option<&mut [f64]>,
 ) -> Result<(), DynamicsError> {
+    let mut record = |k: usize, inv: f64| {
+        if let Some(out) = inv_diag.as_deref_mut() {
+            out[k] = inv;
+        }
+    };
     let mut k = n;
     while k > 0 {
         k -= 1;
@@ -69,10 +83,10 @@ fn factor_columns<S: Space>(
             init(k, col_k);
             init(k - 1, col_p);
             update_pair(col_k, col_p, done, n, k);
-            finish_contiguous(col_k, k)?;
+            record(k, finish_contiguous(col_k, k)?);
             // The one finished column the pass could not include: k itself.
             sub_scaled(col_p, col_k[k - 1], &col_k[..k]);
-            finish_contiguous(col_p, k - 1)?;
+            record(k - 1, finish_contiguous(col_p, k - 1)?);
             k -= 1;
             continue;
         }
@@ -82,16 +96,16 @@ fn factor_columns<S: Space>(
         if k == 0 {
             // The root column (single row); every other column on the chain prefix went in a pair.
             update_pair_block::<1, false>(col, &mut [], done, n, k, 0);
-            finish_contiguous(col, k)?;
+            record(k, finish_contiguous(col, k)?);
         } else {
             update_ancestors(model, col, done, n, k);
-            let ukk = finish_pivot(col, k)?;
-            let inv = 1.0 / ukk;
+            let inv = 1.0 / finish_pivot(col, k)?;
             let mut i = model.joints[k].parent;
             while i != NO_PARENT {
                 col[i] *= inv;
                 i = model.joints[i].parent;
             }
+            record(k, inv);
         }
     }
     Ok(())
@@ -109,14 +123,14 @@ fn finish_pivot(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
     Ok(ukk)
 }
 
-/// Pivot and scaling of a column with contiguous rows `0..=k`.
+/// Pivot and scaling of a column with contiguous rows `0..=k`; returns `1/U_kk`.
 #[inline]
-fn finish_contiguous(col: &mut [f64], k: usize) -> Result<(), DynamicsError> {
+fn finish_contiguous(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
     let inv = 1.0 / finish_pivot(col, k)?;
     for x in &mut col[..k] {
         *x *= inv;
     }
-    Ok(())
+    Ok(inv)
 }
 
 /// `col_k[0..=k] -= Σ_j U_kj U_{0..=k, j}` and `col_p[0..k] -= Σ_j U_{k-1,j} U_{0..k, j}` over the finished
@@ -160,8 +174,7 @@ fn update_pair_block<const B: usize, const PAIR: bool>(
     k: usize,
     r: usize,
 ) {
-    let out_k: &mut [f64; B] = (&mut col_k[r..r + B]).try_into().expect("block inside the column");
-    let mut acc_k = *out_k;
+    let mut acc_k: [f64; B] = col_k[r..r + B].try_into().expect("block inside the column");
     let mut acc_p = [0.0; B];
     if PAIR {
         acc_p.copy_from_slice(&col_p[r..r + B]);
@@ -179,7 +192,7 @@ fn update_pair_block<const B: usize, const PAIR: bool>(
             }
         }
     }
-    *out_k = acc_k;
+    col_k[r..r + B].copy_from_slice(&acc_k);
     if PAIR {
         col_p[r..r + B].copy_from_slice(&acc_p);
     }
@@ -480,7 +493,11 @@ mod tests {
         }
         for (extra, total) in [(None, d.clone()), (Some(&extra), &d + &extra)] {
             let mut u = DMatrix::from_element(n, n, f64::NAN);
-            factor_sum(model, &d, extra, &mut u).unwrap();
+            let mut inv = vec![f64::NAN; n];
+            factor_sum(model, &d, extra, &mut u, &mut inv).unwrap();
+            let mut inv_ref = vec![0.0; n];
+            inverse_diagonal(&u, &mut inv_ref);
+            assert_eq!(inv, inv_ref, "{name}: reciprocals of the diagonal");
             let upper = u.upper_triangle();
             let rebuilt = &upper * upper.transpose();
             assert!((&rebuilt - &total).amax() < 1e-13 * total.amax(), "{name}: U Uᵀ ≠ D");
