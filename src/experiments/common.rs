@@ -287,6 +287,18 @@ pub fn significant(x: f64, digits: i32) -> f64 {
     (x * scale).round() / scale
 }
 
+/// A number for a sentence: whole numbers without decimals, others to 3 significant digits; "n/a" when
+/// not finite.
+pub fn num(x: f64) -> String {
+    if !x.is_finite() {
+        "n/a".into()
+    } else if x == x.round() && x.abs() < 1e12 {
+        format!("{x:.0}")
+    } else {
+        format!("{}", significant(x, 3))
+    }
+}
+
 /// `x` rounded to `decimals` decimals (for summaries).
 pub fn round(x: f64, decimals: i32) -> f64 {
     let scale = 10f64.powi(decimals);

@@ -283,7 +283,8 @@ pub fn run(options: &Options) -> Result<Report> {
     };
     let answer = format!(
         "Plain coupling first fails at {}; with the passivity controller at {}. Device-OP RMS at 0 / 100 / 500 ms: \
-         {} / {} / {} mm plain, {} / {} / {} mm with passivity.",
+         {} / {} / {} mm plain, {} / {} / {} mm with passivity. At 50 ms delay, plain coupling fails first at a jitter \
+         of {} and at a loss of {}.",
         describe(false),
         describe(true),
         rms_at(0.0, false),
@@ -292,6 +293,10 @@ pub fn run(options: &Options) -> Result<Report> {
         rms_at(0.0, true),
         rms_at(100.0, true),
         rms_at(500.0, true),
+        sweeps["jitter"]["first_unstable_value_plain"]
+            .as_f64()
+            .map_or("(none up to 40 ms)".into(), |v| format!("{v} ms")),
+        sweeps["loss"]["first_unstable_value_plain"].as_f64().map_or("(none up to 50 %)".into(), |v| format!("{v} %")),
     );
     let results = json!({
         "answer": answer,

@@ -345,7 +345,11 @@ pub fn run(options: &Options) -> Result<Report> {
     let describe = |front: &[usize]| {
         let distinct = |f: &dyn Fn(&Config) -> String| {
             let mut v: Vec<String> = front.iter().map(|&i| f(&measured[i].config)).collect();
-            v.sort();
+            // Numbers in numeric order, names in alphabetical order.
+            v.sort_by(|a, b| match (a.parse::<f64>(), b.parse::<f64>()) {
+                (Ok(x), Ok(y)) => x.total_cmp(&y),
+                _ => a.cmp(b),
+            });
             v.dedup();
             v.join(", ")
         };

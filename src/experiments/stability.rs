@@ -23,7 +23,7 @@ use kinloop_linkage::{Model, Planar, SceneKind};
 use kinloop_server::core::AxisGains;
 use serde_json::{json, Value};
 
-use super::common::{log_grid, paper_plan, round, session, significant, sweep, Options, Output, Report};
+use super::common::{log_grid, num, paper_plan, round, session, significant, sweep, Options, Output, Report};
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, Legend, Series, StabilityMap};
 use crate::harness::{CoreEdit, SessionPlan};
@@ -129,15 +129,7 @@ fn cells_json(cells: &[Cell], x: &str, y: &str) -> Value {
     Value::Array(
         cells
             .iter()
-            .map(|c| {
-                json!({
-                    x: c.x, y: c.y, "stable": c.verdict.stable, "reasons": c.verdict.reasons,
-                    "device_op_max_mm": round(c.verdict.device_op_max_m * 1e3, 3),
-                    "worst_saturation": round(c.verdict.worst_saturation, 3),
-                    "energy_excess_j": significant(c.verdict.energy_excess_j, 3),
-                    "max_closure_error_m": significant(c.verdict.max_closure_error_m, 3),
-                })
-            })
+            .map(|c| json!({ x: c.x, y: c.y, "stable": c.verdict.stable, "reasons": c.verdict.reasons }))
             .collect(),
     )
 }
@@ -422,13 +414,50 @@ pub fn run(options: &Options) -> Result<Report> {
     let rate = rate_map(&mut out, options)?;
     let baumgarte = baumgarte_map(&mut out, options)?;
     let coupling = coupling_maps(&mut out, options)?;
+    let f = |v: &Value| num(v.as_f64().unwrap_or(f64::NAN));
+    let per_rate: Vec<(f64, f64)> = rate["largest_stable_k_j_per_rate"]
+        .as_array()
+        .map(|v| {
+            v.iter()
+                .map(|p| {
+                    (
+                        p["rate_hz"].as_f64().unwrap_or(f64::NAN),
+                        p["largest_stable_k_j_n_per_m"].as_f64().unwrap_or(f64::NAN),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let k_top = per_rate.iter().map(|p| p.1).fold(f64::NAN, f64::max);
+    let first_top = per_rate.iter().find(|p| p.1 == k_top).map_or(f64::NAN, |p| p.0);
+    let alpha_h: Vec<f64> = baumgarte["per_step"]
+        .as_array()
+        .map(|v| v.iter().filter_map(|p| p["largest_stable_alpha_times_h"].as_f64()).collect())
+        .unwrap_or_default();
+    let stable_bs: Vec<String> =
+        gains["stable_b_j_at_largest_k_j"].as_array().map(|v| v.iter().map(&f).collect()).unwrap_or_default();
     let answer = format!(
-        "At 1 kHz the largest stable joint-constraint stiffness on the grid is k_j = {} N/m (N/m/kg on the 1 kg device), \
-         {}x Colgate's passivity bound of {} N/m (2 b / T with the device's own 0.02 N s/m); the paper's gains are {}.",
-        gains["largest_stable_k_j_n_per_m"],
-        gains["largest_stable_k_j_over_passivity_bound"],
-        gains["passivity_bound"]["largest_passive_k_j_with_b_j_0_n_per_m"],
+        "At 1 kHz the largest stable joint-constraint stiffness on the grid is k_j = {} N/m (N/m/kg on the 1 kg device; \
+         stable there for b_j = {} N s/m), {}x Colgate's passivity bound of {} N/m (2 b / T with the device's own \
+         0.02 N s/m of viscous damping); the paper's gains are {}. At b_j = 50 N s/m the limit rises from {} N/m at {} Hz \
+         to {} N/m at {} Hz and stays there up to {} Hz. Without projection, Baumgarte holds the loop up to alpha h = \
+         {:.2}-{:.2}. Explicit coupling is stable up to K_g = {} N/m with unit-consistent angular gains but not at the \
+         paper's own gains (angular 10^4); implicit coupling is stable at {} of {} points.",
+        f(&gains["largest_stable_k_j_n_per_m"]),
+        stable_bs.join(", "),
+        f(&gains["largest_stable_k_j_over_passivity_bound"]),
+        f(&gains["passivity_bound"]["largest_passive_k_j_with_b_j_0_n_per_m"]),
         if gains["paper_gains_stable"].as_bool() == Some(true) { "stable" } else { "unstable" },
+        num(per_rate.first().map_or(f64::NAN, |p| p.1)),
+        num(per_rate.first().map_or(f64::NAN, |p| p.0)),
+        num(k_top),
+        num(first_top),
+        num(per_rate.last().map_or(f64::NAN, |p| p.0)),
+        alpha_h.iter().copied().fold(f64::INFINITY, f64::min),
+        alpha_h.iter().copied().fold(0.0, f64::max),
+        f(&coupling["explicit"]["largest_stable_k_g_n_per_m"]),
+        coupling["implicit"]["stable_points"],
+        coupling["implicit"]["points"],
     );
     let results = json!({
         "answer": answer,
