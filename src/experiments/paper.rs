@@ -176,11 +176,15 @@ pub fn run(options: &Options) -> Result<Report> {
     for (label, run) in [("stiffness control (Fig 6)", stiff), ("impedance control (Fig 7)", imp)] {
         distance = distance.with(Series::line(
             label,
-            run.1.clients[0].iter().filter_map(|s| device_op_distance(s).map(|d| (s.t, d * 1e3))).collect(),
+            run.1.clients[0]
+                .iter()
+                .filter(|s| s.gain > 0.0)
+                .filter_map(|s| device_op_distance(s).map(|d| (s.t, d * 1e3)))
+                .collect(),
         ));
     }
     distance.log_y = true;
-    out.chart("device_op_distance", &distance)?;
+    out.chart("device_op_distance", &distance.legend(Legend::LowerRight))?;
 
     let mut by_gains = serde_json::Map::new();
     for ((mode, gains), (summary, rec)) in cases.iter().zip(&runs) {
