@@ -209,15 +209,9 @@ fn bounds(chart: &Chart) -> ((f64, f64), (f64, f64)) {
             return if log { (0.1, 10.0) } else { (0.0, 1.0) };
         }
         if log {
-            let (lo, hi) = (lo / 1.5, hi * 1.5);
-            // Keep a power of ten inside the range: log axes label only at powers of ten and their 2 and 5
-            // multiples, counted from the first power of ten in range.
-            let below = 10f64.powf(lo.log10().floor()) * 0.999;
-            if below * 10.01 > hi {
-                (below, hi)
-            } else {
-                (lo, hi)
-            }
+            // Start at a power of ten: log axes label only powers of ten and their 2 and 5 multiples counted
+            // from the first power of ten in range, so a partial decade at the bottom would stay unlabelled.
+            (10f64.powf((lo / 1.5).log10().floor()) * 0.999, hi * 1.5)
         } else {
             let span = (hi - lo).max(1e-12 * hi.abs().max(1.0));
             (lo - 0.05 * span, hi + 0.05 * span)
