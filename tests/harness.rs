@@ -107,3 +107,28 @@ fn virtual_latency_sweep_tracking_error_grows_with_delay() {
     let increasing = errors.windows(2).filter(|w| w[1].1 >= w[0].1 * 0.95).count();
     assert!(increasing >= errors.len() - 2, "mostly non-decreasing: {errors:?}");
 }
+
+/// Two users holding the same operational point (the second joining in mid-motion), with and without delay:
+/// both keep tracking it. Before snapshots left the PD couplings out of the other user's b̂ this session
+/// diverged (each user saw the other's coupling as a stiff spring one snapshot late).
+#[test]
+fn two_users_on_one_operational_point_stay_stable() {
+    for delay_ms in [0u64, 20] {
+        let mut plan = SessionPlan::paper().unwrap();
+        plan.duration = Duration::from_millis(2500);
+        plan.record_every = 0;
+        let link = LinkConfig { delay: Duration::from_millis(delay_ms), seed: 7, ..LinkConfig::default() };
+        plan.clients[0] = ClientPlan::paper("a").with_link(link.clone());
+        let mut b = ClientPlan::paper("b").with_link(LinkConfig { seed: 99, ..link });
+        b.join_at = Duration::from_millis(300);
+        plan.clients.push(b);
+        let (s, _) = run(&plan, &mut |_| {}).unwrap();
+        assert_eq!(s.ve_restores, 0, "{delay_ms} ms: the VE never went non-finite");
+        assert!(s.max_closure_error <= 1e-9, "{delay_ms} ms: closure {:.3e}", s.max_closure_error);
+        for c in &s.clients {
+            assert!(c.device_op_rms_m < 5e-3, "{delay_ms} ms, {}: rms {} m", c.name, c.device_op_rms_m);
+            assert!(c.device_op_max_m < 2e-2, "{delay_ms} ms, {}: max {} m", c.name, c.device_op_max_m);
+            assert!(c.max_force_ratio <= 1.0 && c.non_finite == 0);
+        }
+    }
+}

@@ -21,7 +21,8 @@ pub use framing::{
     body_len, encode_frame, recv_control, recv_frame, send_control, ControlStreamError, FRAME_HEADER_BYTES,
 };
 pub use handshake::{
-    accept, accept_with, close_codes, connect, AcceptError, AcceptedSession, ConnectError, ConnectedSession, HANDSHAKE_TIMEOUT,
+    accept, accept_with, close_codes, connect, AcceptError, AcceptedSession, ConnectError, ConnectedSession,
+    HANDSHAKE_TIMEOUT,
 };
 pub use identity::{
     fingerprint_hex, normalize_fingerprint, IdentityError, ServerIdentity, CERT_FILE, DEFAULT_NAMES, KEY_FILE,

@@ -147,6 +147,14 @@ impl<S: Space> Coupling<S> {
         out
     }
 
+    /// The human's own force as the VE applies it (force channel, fade included; zero for observers).
+    pub fn hand_part(&self) -> S::OpVec {
+        if !self.pushes {
+            return S::OpVec::zero();
+        }
+        self.hand_wrench * self.weight
+    }
+
     /// The part of the applied wrench that is not the human's own force: the PD and the passivity damper.
     pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
         if !self.pushes {
@@ -163,6 +171,12 @@ pub enum Evaluation {
     Step(&'static [f64]),
     /// An extra evaluation (snapshots): nothing is accumulated.
     Probe,
+    /// The snapshot evaluation: as `Probe`, but each coupling applies only its hand wrench (force
+    /// channel), not its graphics-controller PD or passivity damper. Those are a numerical tie between the
+    /// VE and one user's local model, not a physical force: folded into another user's frozen bias they act
+    /// as a stiff spring seen one snapshot late and without its stiffness, which made sessions with two
+    /// users on one OP go unstable.
+    ProbeHands,
 }
 
 /// Stage weights of an integrator's evaluations.
@@ -190,12 +204,14 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
     fn add_forces(&mut self, model: &Model<S>, kin: &Kinematics<S>, tau: &mut DVector<f64>) {
         let stage_weight = match self.evaluation {
             Evaluation::Step(weights) => weights.get(self.stage).copied(),
-            Evaluation::Probe => None,
+            Evaluation::Probe | Evaluation::ProbeHands => None,
         };
+        let hands_only = self.evaluation == Evaluation::ProbeHands;
         for c in self.couplings.iter_mut() {
             c.evaluate(model, kin);
             if c.is_active() {
-                apply_wrench(model, kin, c.body, &c.op_pose.position, &c.wrench, tau);
+                let applied = if hands_only { c.hand_part() } else { c.wrench };
+                apply_wrench(model, kin, c.body, &c.op_pose.position, &applied, tau);
             }
             if let Some(weight) = stage_weight {
                 c.step_wrench += c.wrench * weight;

@@ -1,15 +1,19 @@
 //! Each user's local model of interaction (paper Fig 3), built after a tick at the snapshot rate.
 //!
 //! **State.** A snapshot describes the VE state *after* the tick. `forward_dynamics` is evaluated once at
-//! that state with every coupling and contact (explicit form): it leaves the kinematics, D, W, the KKT
-//! factor of D *without* the implicit coupling mass (what eq 9 needs), q̈ and every coupling's wrench at
-//! that state. All users share it.
+//! that state with every user's *hand* wrench (force channel) and the contacts, but without the
+//! graphics-controller PDs and passivity dampers (`Evaluation::ProbeHands`): it leaves the kinematics, D, W,
+//! the KKT factor of D *without* the implicit coupling mass (what eq 9 needs), that q̈ and every coupling's
+//! full wrench at that state. All users share it.
 //!
 //! **Per user** at its operational point h:
 //! - Λ̂⁻¹ with the loops closed (eq 9), `op_space_inertia`; sent as its upper triangle, row-major;
-//! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own wrench F_u (force
-//!   channel and coupling: both act through the client's local model, not through the VE's picture of it);
-//!   other users' wrenches, contacts, gravity and the closure's velocity terms stay in b̂;
+//! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own hand wrench F_u (the
+//!   client's local model applies it itself); other users' hand wrenches, contacts, gravity and the
+//!   closure's velocity terms stay in b̂. No user's PD coupling does: it is a numerical tie between the VE
+//!   and one local model, and in another user's frozen b̂ it would act as a stiff spring seen one snapshot
+//!   late without its stiffness — two users on one OP went unstable that way. A user feels the others through
+//!   their hands (in b̂) and through the VE, which its own local model is blended toward;
 //! - the SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12): directions in `(v, L ω)` coordinates, singular values,
 //!   the constraint count;
 //! - OP pose and twist, the other users' OP positions and wrenches, and the configuration-space terms of
@@ -51,7 +55,7 @@ impl<S: Space> VeCore<S> {
         let mut forces = VeForces {
             couplings: &mut self.couplings,
             contacts: self.contacts.as_mut(),
-            evaluation: Evaluation::Probe,
+            evaluation: Evaluation::ProbeHands,
             stage: 0,
         };
         // `step` clears `implicit_mass` only when the flag says the last step used it; `forward_dynamics`
@@ -135,7 +139,8 @@ fn build_one<S: Space>(
     roster_version: u64,
 ) -> Result<(), DynamicsError> {
     let op = users[index].op;
-    let own_wrench = couplings[index].wrench;
+    // What of this user's wrench the probe applied: its hand (see the module documentation).
+    let own_wrench = couplings[index].hand_part();
     op_space_inertia(model, data, op)?;
     let terms = op_space_terms(data, &own_wrench, LocalModelTerms::full());
     let directions = constraint_directions::<S>(&terms.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
