@@ -27,30 +27,35 @@ pub struct Timing {
 
 /// Runs `f` in batches for about `budget` and reports per-call statistics over the batches.
 pub fn measure(budget: Duration, mut f: impl FnMut()) -> Timing {
-    // Calibrate a batch to ~1 ms.
-    let mut batch = 1u64;
-    loop {
+    let batch = |calls: u64| {
         let t = Instant::now();
-        for _ in 0..batch {
+        for _ in 0..calls {
             f();
         }
-        if t.elapsed() > Duration::from_micros(500) || batch > 1 << 30 {
-            break;
-        }
-        batch *= 2;
+        Ok::<_, std::convert::Infallible>(t.elapsed().as_nanos() as f64 / calls as f64)
+    };
+    match measure_batches(budget, batch) {
+        Ok(timing) => timing,
+        Err(never) => match never {},
+    }
+}
+
+/// Like [`measure`] for code that times its own batches (it sets up state it must not count):
+/// `batch(calls)` runs `calls` calls and returns the mean ns per call. Batches are calibrated to about
+/// 0.5 ms of measured work; the first error stops the measurement.
+pub fn measure_batches<E>(budget: Duration, mut batch: impl FnMut(u64) -> Result<f64, E>) -> Result<Timing, E> {
+    let mut calls = 1u64;
+    while batch(calls)? * (calls as f64) < 500_000.0 && calls <= 1 << 30 {
+        calls *= 2;
     }
     let mut samples = Vec::new();
     let start = Instant::now();
     while start.elapsed() < budget || samples.len() < 5 {
-        let t = Instant::now();
-        for _ in 0..batch {
-            f();
-        }
-        samples.push(t.elapsed().as_nanos() as f64 / batch as f64);
+        samples.push(batch(calls)?);
     }
     samples.sort_by(|a, b| a.total_cmp(b));
     let at = |p: f64| samples[((samples.len() - 1) as f64 * p).round() as usize];
-    Timing { median_ns: at(0.5), p10_ns: at(0.1), p90_ns: at(0.9), calls: batch * samples.len() as u64 }
+    Ok(Timing { median_ns: at(0.5), p10_ns: at(0.1), p90_ns: at(0.9), calls: calls * samples.len() as u64 })
 }
 
 /// A compiled planar benchmark scene with its state and the paper's user wrench.

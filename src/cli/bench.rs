@@ -1,10 +1,11 @@
 //! `kinloop bench`: a fixed suite of the hot paths, each measured as the median over batches in one run.
-//! With `--json`, one object per line: `{"name": ..., "ns_per_call": ..., ...}`.
+//! With `--json`, one object per line: `{"name": ..., "ns_per_call": ..., ...}`. Cases with a goal in the
+//! issues (`server/ve_tick_users_N`, `client/tick_testbed`) also carry `goal_ns` and `meets_goal`.
 
 use std::time::Duration;
 
-use anyhow::Result;
-use kinloop_linkage::bench::{measure, paper_wrench, Case, Timing};
+use anyhow::{Context, Result};
+use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, Timing};
 use kinloop_linkage::Integrator;
 use serde_json::{json, Value};
 
@@ -51,9 +52,32 @@ impl Reporter<'_> {
     }
 
     fn timing(&self, name: &str, t: Timing) {
-        self.emit(name, t.median_ns, json!({ "p10_ns": t.p10_ns, "p90_ns": t.p90_ns, "calls": t.calls }));
+        self.emit(name, t.median_ns, timing_fields(&t));
+    }
+
+    /// A timing against its goal (ns per call): the median must not exceed it.
+    fn timing_with_goal(&self, name: &str, t: Timing, goal_ns: f64) {
+        let mut extra = timing_fields(&t);
+        extra["goal_ns"] = json!(goal_ns);
+        extra["meets_goal"] = json!(t.median_ns <= goal_ns);
+        self.emit(name, t.median_ns, extra);
     }
 }
+
+fn timing_fields(t: &Timing) -> Value {
+    json!({ "p10_ns": t.p10_ns, "p90_ns": t.p90_ns, "calls": t.calls })
+}
+
+/// Users of the `server/ve_tick_users_N` cases (issue 4).
+const VE_TICK_USERS: [usize; 4] = [1, 4, 16, 64];
+
+/// Issue 4's goal for one VE tick: 1 µs with one user, 0.4 µs more per extra user.
+fn ve_tick_goal_ns(users: usize) -> f64 {
+    1000.0 + 400.0 * users.saturating_sub(1) as f64
+}
+
+/// Issue 5's goal for one haptic tick on the testbed.
+const CLIENT_TICK_GOAL_NS: f64 = 500.0;
 
 /// Runs the suite.
 pub fn run(args: &BenchArgs) -> Result<()> {
@@ -94,6 +118,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 std::hint::black_box(lm.step(1e-3, &f));
             }),
         );
+    }
+    for users in VE_TICK_USERS {
+        let name = format!("server/ve_tick_users_{users}");
+        if !r.wanted(&name) {
+            continue;
+        }
+        // Each batch builds its own VE (set-up not timed) and ticks it `calls` times from the paper's start.
+        let t = measure_batches(budget, |calls| kinloop_server::bench::ve_tick_users(users, calls))
+            .with_context(|| name.clone())?;
+        r.timing_with_goal(&name, t, ve_tick_goal_ns(users));
+    }
+    if r.wanted("client/tick_testbed") {
+        let t = measure_batches(budget, kinloop_client::bench::client_tick_testbed).context("client/tick_testbed")?;
+        r.timing_with_goal("client/tick_testbed", t, CLIENT_TICK_GOAL_NS);
     }
     if r.wanted("codec/snapshot_testbed") {
         let iters = (200_000.0 * args.seconds).max(1000.0) as u64;
