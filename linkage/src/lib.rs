@@ -59,8 +59,9 @@ pub mod scene;
 mod simd;
 pub mod space;
 
-#[cfg(test)]
-mod testing;
+/// Test fixtures shared by the unit tests and the integration tests (not part of the API).
+#[doc(hidden)]
+pub mod testing;
 
 pub use data::Data;
 pub use dynamics::{forward_dynamics, Forces, OpWrench};

@@ -1,4 +1,5 @@
-//! Test fixtures shared by the unit tests of this crate.
+//! Test fixtures shared by this crate's unit tests and its integration tests (`tests/common`): one
+//! deterministic generator, the test scenes, random states near q0.
 
 use nalgebra::DVector;
 
@@ -11,7 +12,7 @@ pub struct TestRng(pub u64);
 
 impl TestRng {
     /// Next uniform number in [-1, 1).
-    pub fn next_signed(&mut self) -> f64 {
+    pub fn signed(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -21,42 +22,49 @@ impl TestRng {
     }
 }
 
+/// A built-in scene file, parsed (panics if it is missing or broken: tests only).
+pub fn builtin_scene(name: &str) -> crate::Scene {
+    builtin::scene(name).expect("built in").expect("parses")
+}
+
 /// The paper's testbed, compiled.
 pub fn paper_testbed() -> Model<Planar> {
-    compile(builtin::scene("paper-testbed").expect("built in").expect("parses"))
+    compile(&builtin_scene("paper-testbed"))
 }
 
 /// Compiles a scene, panicking with the error (tests only).
-pub fn compile<S: Space>(scene: crate::Scene) -> Model<S> {
-    Model::compile(&scene, &scene.name.clone()).unwrap_or_else(|e| panic!("{e}"))
+pub fn compile<S: Space>(scene: &crate::Scene) -> Model<S> {
+    Model::compile(scene, &scene.name).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// A state near q0 (±0.1 rad or m) with velocities in ±1, deterministic in `seed`.
 pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVector<f64>) {
     let mut rng = TestRng(seed.wrapping_mul(7919).wrapping_add(17));
-    let q = DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.1 * rng.next_signed());
-    let qd = DVector::from_fn(model.nq(), |_, _| rng.next_signed());
+    let q = DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.1 * rng.signed());
+    let qd = DVector::from_fn(model.nq(), |_, _| rng.signed());
     (q, qd)
 }
 
-/// Every planar test scene: the built-in files plus two generated chains.
+/// Every planar test scene: the built-in files plus generated chains (with and without loops).
 pub fn planar_models() -> Vec<(String, Model<Planar>)> {
     let mut out: Vec<(String, Model<Planar>)> = builtin::SCENE_FILES
         .iter()
         .filter(|(n, _)| *n != "spherical-four-bar")
-        .map(|(n, _)| (n.to_string(), compile(builtin::scene(n).unwrap().unwrap())))
+        .map(|(n, _)| (n.to_string(), compile(&builtin_scene(n))))
         .collect();
-    out.push(("chain8_loops2".into(), compile(builtin::chain(8, 2))));
-    out.push(("chain6_loops0".into(), compile(builtin::chain(6, 0))));
+    for (links, loops) in [(8, 2), (6, 0), (12, 3)] {
+        out.push((format!("chain{links}_loops{loops}"), compile(&builtin::chain(links, loops))));
+    }
     out
 }
 
 /// Every spatial test scene.
 pub fn spatial_models() -> Vec<(String, Model<Spatial>)> {
-    vec![("spherical-four-bar".into(), compile(builtin::scene("spherical-four-bar").unwrap().unwrap()))]
+    vec![("spherical-four-bar".into(), compile(&builtin_scene("spherical-four-bar")))]
 }
 
 /// Runs `$body` with `$name: &str` and `$model: &Model<_>` bound, for every planar and spatial test model.
+#[cfg(test)]
 macro_rules! for_each_model {
     ($name:ident, $model:ident => $body:block) => {{
         for (n, m) in $crate::testing::planar_models().iter() {
@@ -69,4 +77,5 @@ macro_rules! for_each_model {
         }
     }};
 }
+#[cfg(test)]
 pub(crate) use for_each_model;

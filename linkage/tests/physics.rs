@@ -175,8 +175,14 @@ fn check_op_space<S: Space>(name: &str, model: &Model<S>) {
             let open = DMatrix::from_column_slice(S::DIM, S::DIM, data.op.inverse_inertia_open.as_slice());
             let d_inv = data.mass_matrix.clone().try_inverse().unwrap();
             assert_close(&format!("{name} op {op}: open Λ⁻¹"), &open, &(&j * d_inv * j.transpose()), 1e-10);
-            let expected = null_space_inverse_inertia(&data.mass_matrix, &data.closure_jacobian(), &j);
-            assert_close(&format!("{name} op {op}: closed Λ⁻¹"), &closed, &expected, 1e-8);
+            let w = data.closure_jacobian();
+            let expected = null_space_inverse_inertia(&data.mass_matrix, &w, &j);
+            // Both formulations lose about ε κ² near a configuration where a kept closure row is almost
+            // redundant (κ: W's condition over its kept rows); random states do land near one (the
+            // parallelogram at seed 1 has σ = 1.9e-6 beside 0.74), so the tolerance follows κ.
+            let kappa = kept_condition(&w);
+            let tolerance = 1e-8 + 16.0 * f64::EPSILON * kappa * kappa;
+            assert_close(&format!("{name} op {op}: closed Λ⁻¹ (κ {kappa:.1e})"), &closed, &expected, tolerance);
         }
     }
 }

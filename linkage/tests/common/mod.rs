@@ -1,56 +1,12 @@
 //! Fixtures for the linkage integration tests, and the *independent* formulations the library is checked
 //! against (null-space dynamics through nalgebra's SVD, finite differences).
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
-use kinloop_linkage::{builtin, Model, Planar, Scene, Space, Spatial};
 use nalgebra::{DMatrix, DVector};
 
-/// SplitMix64: deterministic test randomness without a dependency.
-pub struct Rng(pub u64);
-impl Rng {
-    pub fn signed(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
-}
-
-pub fn compile<S: Space>(scene: &Scene) -> Model<S> {
-    Model::compile(scene, &scene.name).unwrap_or_else(|e| panic!("{e}"))
-}
-
-pub fn builtin_scene(name: &str) -> Scene {
-    builtin::scene(name).expect("built in").expect("parses")
-}
-
-pub fn testbed() -> Model<Planar> {
-    compile(&builtin_scene("paper-testbed"))
-}
-
-pub fn planar_models() -> Vec<(String, Model<Planar>)> {
-    let mut v: Vec<(String, Model<Planar>)> = builtin::SCENE_FILES
-        .iter()
-        .filter(|(n, _)| *n != "spherical-four-bar")
-        .map(|(n, _)| (n.to_string(), compile(&builtin_scene(n))))
-        .collect();
-    v.push(("chain12_loops3".into(), compile(&builtin::chain(12, 3))));
-    v
-}
-
-pub fn spatial_models() -> Vec<(String, Model<Spatial>)> {
-    vec![("spherical-four-bar".into(), compile(&builtin_scene("spherical-four-bar")))]
-}
-
-/// A state near q0 with velocities in ±1.
-pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVector<f64>) {
-    let mut rng = Rng(seed * 7919 + 3);
-    let q = DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.1 * rng.signed());
-    let qd = DVector::from_fn(model.nq(), |_, _| rng.signed());
-    (q, qd)
-}
+pub use kinloop_linkage::testing::{
+    builtin_scene, compile, paper_testbed as testbed, planar_models, random_state, spatial_models, TestRng as Rng,
+};
 
 /// An orthonormal basis of the null space of W (n×(n-r)), from nalgebra's SVD.
 pub fn null_space(w: &DMatrix<f64>, n: usize) -> DMatrix<f64> {
@@ -84,6 +40,17 @@ pub fn null_space_accelerations(
 }
 
 /// Λ⁻¹ by the null-space formula J N (Nᵀ D N)⁻¹ Nᵀ Jᵀ.
+/// W's condition number over the rows the null-space formula keeps (singular values above 1e-9 σ_max).
+pub fn kept_condition(w: &DMatrix<f64>) -> f64 {
+    if w.nrows() == 0 {
+        return 1.0;
+    }
+    let sv = w.clone().svd(false, false).singular_values;
+    let smax = sv.max();
+    let smin = sv.iter().copied().filter(|&s| s > 1e-9 * smax).fold(f64::INFINITY, f64::min);
+    smax / smin
+}
+
 pub fn null_space_inverse_inertia(d: &DMatrix<f64>, w: &DMatrix<f64>, j: &DMatrix<f64>) -> DMatrix<f64> {
     let nmat = null_space(w, d.nrows());
     let reduced = nmat.transpose() * d * &nmat;
