@@ -1,0 +1,56 @@
+//! Shared pieces of the end-to-end tests: one real-time session at a time with a hard time limit, servers
+//! and clients in-process over loopback QUIC, the same drivers in child processes (to kill them), and the
+//! CSV recordings both sides write.
+#![allow(dead_code)] // each e2e binary uses its own part of this module
+
+pub mod child;
+pub mod live;
+pub mod records;
+
+use std::sync::mpsc;
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+/// The machine has two cores and each session spins a VE loop and a haptic loop per client: sessions in
+/// one test binary run one after another (test binaries already run one after another under cargo).
+static SERIAL: Mutex<()> = Mutex::new(());
+
+/// Held for the whole test: the serial lock and a watchdog that ends the process when the test overruns
+/// its hard limit (a hung driver must fail the run, not stall CI). Child processes die with the process:
+/// they exit when their stdin closes.
+pub struct Bounded {
+    _serial: MutexGuard<'static, ()>,
+    _disarm: mpsc::Sender<()>,
+}
+
+/// Starts a test that must finish within `limit` (counted once it holds the serial lock).
+pub fn bounded(name: &'static str, limit: Duration) -> Bounded {
+    // A test that failed while holding the lock poisons it; the next one is still welcome.
+    let serial = SERIAL.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let (disarm, armed) = mpsc::channel::<()>();
+    std::thread::spawn(move || {
+        if let Err(mpsc::RecvTimeoutError::Timeout) = armed.recv_timeout(limit) {
+            eprintln!("e2e: `{name}` exceeded its hard limit of {limit:?}; ending the test process");
+            std::process::exit(101);
+        }
+    });
+    Bounded { _serial: serial, _disarm: disarm }
+}
+
+/// Polls `done` every 10 ms until it holds; panics naming `what` after `limit`. Returns the time it took.
+pub fn wait_until(what: &str, limit: Duration, mut done: impl FnMut() -> bool) -> Duration {
+    let start = Instant::now();
+    while !done() {
+        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    start.elapsed()
+}
+
+/// A temporary directory under cargo's target/tmp (so even a hard-killed run leaves nothing in /tmp),
+/// removed when dropped.
+pub fn temp_dir() -> tempfile::TempDir {
+    let base = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+    std::fs::create_dir_all(base).expect("target tmp dir");
+    tempfile::Builder::new().prefix("e2e-").tempdir_in(base).expect("temp dir")
+}

@@ -1,0 +1,129 @@
+//! The CSV recordings of planar sessions, read back by column name: the client's one row per haptic tick
+//! (`kinloop-client --record`) and the server's one row per VE step (`kinloop-server --record`).
+
+use std::path::Path;
+
+/// One haptic tick.
+#[derive(Clone, Copy, Debug)]
+pub struct Tick {
+    /// Time since the client's loop started (s).
+    pub t: f64,
+    /// Device pose in the VE frame (x, y, θ).
+    pub device: [f64; 3],
+    /// Commanded wrench (fx, fy, τz).
+    pub command: [f64; 3],
+    /// Age of the snapshot in use (s), NaN before the first.
+    pub snapshot_age: f64,
+    /// Output gain in [0, 1].
+    pub gain: f64,
+}
+
+/// One user's part of a VE step.
+#[derive(Clone, Copy, Debug)]
+pub struct UserStep {
+    /// Id in the VE.
+    pub user_id: u32,
+    /// Operational point pose (x, y, θ).
+    pub op: [f64; 3],
+    /// Wrench the step applied at the OP (fx, fy, τz), fade included.
+    pub wrench: [f64; 3],
+}
+
+/// One VE step.
+#[derive(Clone, Debug)]
+pub struct Step {
+    /// VE time (s).
+    pub t: f64,
+    /// Loop-closure residual (m).
+    pub closure_error: f64,
+    /// The users present.
+    pub users: Vec<UserStep>,
+}
+
+fn read(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default().split(',').map(str::to_owned).collect();
+    let rows = lines
+        .enumerate()
+        .map(|(i, line)| {
+            line.split(',')
+                .map(|v| {
+                    v.parse().unwrap_or_else(|_| panic!("{} line {}: {v:?} is not a number", path.display(), i + 2))
+                })
+                .collect()
+        })
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], name: &str, path: &Path) -> usize {
+    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("{}: no column {name}", path.display()))
+}
+
+fn three(row: &[f64], first: usize) -> [f64; 3] {
+    [row[first], row[first + 1], row[first + 2]]
+}
+
+/// A client's recording.
+pub fn client_ticks(path: &Path) -> Vec<Tick> {
+    let (header, rows) = read(path);
+    let col = |name| column(&header, name, path);
+    let (t, device, command, age, gain) =
+        (col("time_s"), col("device_x"), col("cmd_fx"), col("snapshot_age_s"), col("gain"));
+    rows.iter()
+        .map(|r| Tick {
+            t: r[t],
+            device: three(r, device),
+            command: three(r, command),
+            snapshot_age: r[age],
+            gain: r[gain],
+        })
+        .collect()
+}
+
+/// A server's recording.
+pub fn ve_steps(path: &Path) -> Vec<Step> {
+    let (header, rows) = read(path);
+    let col = |name| column(&header, name, path);
+    let (t, closure, users, first_group) = (col("t_s"), col("closure_error_m"), col("users"), col("user_id"));
+    let group = col("constraint_count") + 1 - first_group;
+    rows.iter()
+        .map(|r| Step {
+            t: r[t],
+            closure_error: r[closure],
+            users: (0..r[users] as usize)
+                .map(|u| {
+                    let g = first_group + u * group;
+                    UserStep { user_id: r[g] as u32, op: three(r, g + 1), wrench: three(r, g + 4) }
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// Linear magnitude of a planar wrench or pose difference.
+pub fn linear(v: [f64; 3]) -> f64 {
+    v[0].hypot(v[1])
+}
+
+/// The step a user appears in at VE time `t` (the last step at or before it).
+pub fn user_at(steps: &[Step], t: f64, user_id: u32) -> Option<&UserStep> {
+    let i = steps.partition_point(|s| s.t <= t).checked_sub(1)?;
+    steps[i].users.iter().find(|u| u.user_id == user_id)
+}
+
+/// RMS and largest distance between a client's device and its operational point in the VE at the same
+/// moment, over the client's ticks with full output gain; `offset_s` maps client loop time to VE time.
+pub fn device_op_distance(ticks: &[Tick], steps: &[Step], user_id: u32, offset_s: f64) -> (f64, f64, usize) {
+    let (mut sum_sq, mut max, mut n) = (0.0, 0.0f64, 0);
+    for tick in ticks.iter().filter(|t| t.gain >= 1.0) {
+        if let Some(u) = user_at(steps, tick.t + offset_s, user_id) {
+            let d = (tick.device[0] - u.op[0]).hypot(tick.device[1] - u.op[1]);
+            sum_sq += d * d;
+            max = max.max(d);
+            n += 1;
+        }
+    }
+    ((sum_sq / n.max(1) as f64).sqrt(), max, n)
+}
