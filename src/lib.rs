@@ -6,6 +6,7 @@
 
 pub mod charts;
 pub mod cli;
+pub mod demo;
 pub mod experiments;
 pub mod harness;
 pub mod scene_arg;

@@ -1,4 +1,4 @@
-//! `kinloop`: inspect, simulate and benchmark linkages with kinematic loops; run the demo and experiments.
+//! `kinloop`: run the demo; inspect, simulate and benchmark linkages with kinematic loops; run experiments.
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -13,6 +13,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// The whole system in one process: a VE server and N simulated-device clients over loopback QUIC, in
+    /// real time for a few seconds; prints a summary and writes the paper's charts into DIR/demo/.
+    Demo(cli::demo::DemoArgs),
     /// Everything the dynamics core knows at one configuration: q̈, λ, Λ⁻¹, its SVD, the constraint count.
     Inspect(cli::inspect::InspectArgs),
     /// Integrate a scene and report closure error, energy error and cost per step.
@@ -30,6 +33,7 @@ fn main() -> Result<()> {
         .init();
     let cli = Cli::parse();
     match &cli.command {
+        Command::Demo(a) => cli::demo::run(a),
         Command::Inspect(a) => cli::inspect::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Bench(a) => cli::bench::run(a),

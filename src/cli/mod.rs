@@ -1,6 +1,7 @@
 //! The `kinloop` command line.
 
 pub mod bench;
+pub mod demo;
 pub mod experiment;
 pub mod inspect;
 pub mod simulate;

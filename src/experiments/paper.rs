@@ -81,7 +81,8 @@ fn mean_force_with(samples: &[ClientSample], count: u8) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
-fn device_op_distance(s: &ClientSample) -> Option<f64> {
+/// Distance (m) between the device and the VE's OP in the plane, when the VE's OP is known.
+pub(crate) fn device_op_distance(s: &ClientSample) -> Option<f64> {
     s.ve_op.as_ref().map(|op| (s.device[0] - op[0]).hypot(s.device[1] - op[1]))
 }
 
@@ -104,22 +105,31 @@ fn mode_results(summary: &SessionSummary, rec: &Recording) -> Value {
     })
 }
 
-fn count_chart(fig: &str, mode: &str, samples: &[ClientSample]) -> Chart {
-    Chart::new(
-        format!("Fig {fig} ({mode} control): joint constraints on the OP, paper testbed"),
-        "time (s)",
-        "number of joint constraints",
-    )
-    .with(Series::line("in the VE (snapshot)", samples.iter().map(|s| (s.t, f64::from(s.snapshot_count))).collect()))
-    .with(Series::reference(
-        "used by the controllers (hysteresis)",
-        samples.iter().map(|s| (s.t, s.constraint_count as f64)).collect(),
-    ))
+/// The device-OP distance (mm) over time, from the first tick with output (the device is mapped onto the OP
+/// at the first snapshot, before which the distance means nothing).
+pub(crate) fn distance_series(label: &str, samples: &[ClientSample]) -> Series {
+    let points = samples.iter().filter(|s| s.gain > 0.0);
+    Series::line(label, points.filter_map(|s| device_op_distance(s).map(|d| (s.t, d * 1e3))).collect())
 }
 
-fn trajectory_chart(fig: &str, mode: &str, samples: &[ClientSample]) -> Chart {
+/// Figs 6a, 7a: the constraint count on the OP over time (`heading` names the figure, `scene` the linkage).
+pub(crate) fn count_chart(heading: &str, scene: &str, samples: &[ClientSample]) -> Chart {
+    Chart::new(format!("{heading}: joint constraints on the OP, {scene}"), "time (s)", "number of joint constraints")
+        .with(Series::line(
+            "in the VE (snapshot)",
+            samples.iter().map(|s| (s.t, f64::from(s.snapshot_count))).collect(),
+        ))
+        .with(Series::reference(
+            "used by the controllers (hysteresis)",
+            samples.iter().map(|s| (s.t, s.constraint_count as f64)).collect(),
+        ))
+}
+
+/// Figs 6b, 7b: the device against the VE's OP in the plane, over the samples' time span.
+pub(crate) fn trajectory_chart(heading: &str, samples: &[ClientSample]) -> Chart {
+    let span = samples.last().map_or(0.0, |s| s.t) - samples.first().map_or(0.0, |s| s.t);
     let mut chart =
-        Chart::new(format!("Fig {fig} ({mode} control): device (HD) and OP trajectories, 3 s"), "x (mm)", "y (mm)")
+        Chart::new(format!("{heading}: device (HD) and OP trajectories, {} s", round(span, 1)), "x (mm)", "y (mm)")
             .with(Series::line(
                 "OP on the linkage (VE)",
                 samples.iter().filter_map(|s| s.ve_op.as_ref().map(|p| (p[0] * 1e3, p[1] * 1e3))).collect(),
@@ -132,9 +142,10 @@ fn trajectory_chart(fig: &str, mode: &str, samples: &[ClientSample]) -> Chart {
     chart.legend(Legend::UpperLeft)
 }
 
-fn wrench_chart(samples: &[ClientSample]) -> Chart {
+/// Fig 6c: the joint-constraint wrench on the device, with the VE's constraint count for reference.
+pub(crate) fn wrench_chart(heading: &str, samples: &[ClientSample]) -> Chart {
     Chart::new(
-        "Fig 6c (stiffness control): joint-constraint wrench on the device",
+        format!("{heading}: joint-constraint wrench on the device"),
         "time (s)",
         "force (N), torque (N cm), count",
     )
@@ -163,25 +174,20 @@ pub fn run(options: &Options) -> Result<Report> {
         manipulation(mode, gains)
     })?;
     let (stiff, imp) = (&runs[0], &runs[1]);
-    out.chart("fig6a_stiffness_constraint_count", &count_chart("6a", "stiffness", &stiff.1.clients[0]))?;
-    out.chart("fig6b_stiffness_trajectories", &trajectory_chart("6b", "stiffness", &stiff.1.clients[0]))?;
-    out.chart("fig6c_stiffness_joint_constraint_wrench", &wrench_chart(&stiff.1.clients[0]))?;
-    out.chart("fig7a_impedance_constraint_count", &count_chart("7a", "impedance", &imp.1.clients[0]))?;
-    out.chart("fig7b_impedance_trajectories", &trajectory_chart("7b", "impedance", &imp.1.clients[0]))?;
+    let (s, i) = (&stiff.1.clients[0], &imp.1.clients[0]);
+    let testbed = "paper testbed";
+    out.chart("fig6a_stiffness_constraint_count", &count_chart("Fig 6a (stiffness control)", testbed, s))?;
+    out.chart("fig6b_stiffness_trajectories", &trajectory_chart("Fig 6b (stiffness control)", s))?;
+    out.chart("fig6c_stiffness_joint_constraint_wrench", &wrench_chart("Fig 6c (stiffness control)", s))?;
+    out.chart("fig7a_impedance_constraint_count", &count_chart("Fig 7a (impedance control)", testbed, i))?;
+    out.chart("fig7b_impedance_trajectories", &trajectory_chart("Fig 7b (impedance control)", i))?;
     let mut distance = Chart::new(
         "Device-OP distance: stiffness vs impedance rendering of the loop closure (paper gains)",
         "time (s)",
         "device-OP distance (mm)",
     );
     for (label, run) in [("stiffness control (Fig 6)", stiff), ("impedance control (Fig 7)", imp)] {
-        distance = distance.with(Series::line(
-            label,
-            run.1.clients[0]
-                .iter()
-                .filter(|s| s.gain > 0.0)
-                .filter_map(|s| device_op_distance(s).map(|d| (s.t, d * 1e3)))
-                .collect(),
-        ));
+        distance = distance.with(distance_series(label, &run.1.clients[0]));
     }
     distance.log_y = true;
     out.chart("device_op_distance", &distance.legend(Legend::LowerRight))?;

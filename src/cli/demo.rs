@@ -1,0 +1,141 @@
+//! `kinloop demo [--users N] [--duration S] [--delay D] [--jitter J] [--loss L] [--seed N] [--scene FILE]
+//! [--json] [--out DIR]`: a server and N simulated-device clients over loopback QUIC in this process, in
+//! real time (see [`crate::demo`]); prints a summary (one JSON object on stdout with `--json`) and writes
+//! the charts, the records and `summary.json` into `DIR/demo/`.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use kinloop_protocol::emulator::{parse_duration, LinkArgs};
+
+use crate::demo::{self, DemoOptions, DemoSummary, MAX_DURATION, MAX_USERS};
+use crate::scene_arg::load_scene;
+
+/// Arguments of `kinloop demo`. The link options are `kinloop-server`'s and `kinloop-client`'s; in the
+/// demo both sides apply them to what they send, so `--delay 20ms` makes a 40 ms round trip.
+#[derive(clap::Args, Debug)]
+pub struct DemoArgs {
+    /// Simulated users: each a client with the paper's device, pushing an equal share of the paper's hand
+    /// wrench on the scene's first operational point.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = parse_users)]
+    pub users: usize,
+    /// How long the clients run: seconds (1.5) or with a unit (1500ms).
+    #[arg(long, value_name = "S", default_value = "3", value_parser = parse_seconds)]
+    pub duration: Duration,
+    #[command(flatten)]
+    pub link: LinkArgs,
+    /// Scene file (TOML) or built-in name.
+    #[arg(long, value_name = "FILE", default_value = "paper-testbed")]
+    pub scene: String,
+    /// Print the summary as one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Charts, records and summary.json go to DIR/demo/.
+    #[arg(long, value_name = "DIR", default_value = "results")]
+    pub out: PathBuf,
+    /// Do not ask for SCHED_FIFO for the VE and haptic threads.
+    #[arg(long)]
+    pub no_realtime: bool,
+}
+
+fn parse_users(s: &str) -> Result<usize, String> {
+    let n: usize = s.parse().map_err(|_| format!("{s:?} is not a whole number"))?;
+    if (1..=MAX_USERS).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("{n} users: between 1 and {MAX_USERS}"))
+    }
+}
+
+fn parse_seconds(s: &str) -> Result<Duration, String> {
+    let parsed = match s.trim().parse::<f64>() {
+        Ok(seconds) => Duration::try_from_secs_f64(seconds).map_err(|_| format!("{s:?} is not a number of seconds")),
+        Err(_) => parse_duration(s).map_err(|e| e.to_string()),
+    }?;
+    if parsed.is_zero() || parsed > MAX_DURATION {
+        return Err(format!("{s}: more than 0 s and at most {} s", MAX_DURATION.as_secs()));
+    }
+    Ok(parsed)
+}
+
+/// Runs the demo and reports.
+pub fn run(args: &DemoArgs) -> Result<()> {
+    let scene = load_scene(&args.scene)?;
+    let options = DemoOptions {
+        scene: scene.scene,
+        scene_label: scene.label,
+        users: args.users,
+        duration: args.duration,
+        link: args.link.config(),
+        out: args.out.clone(),
+        progress: true,
+        ctrl_c: true,
+        realtime: !args.no_realtime,
+    };
+    let report = demo::run(&options).context("kinloop demo")?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report.summary)?);
+    } else {
+        print!("{}", human(&report.summary));
+        println!("charts, records and summary.json: {}", report.dir.display());
+    }
+    Ok(())
+}
+
+fn fmt_opt(v: Option<f64>, unit: &str, decimals: usize) -> String {
+    v.map_or_else(|| "n/a".into(), |v| format!("{v:.decimals$} {unit}"))
+}
+
+/// The summary for people.
+pub fn human(s: &DemoSummary) -> String {
+    let link = if s.delay_ms == 0.0 && s.jitter_ms == 0.0 && s.loss == 0.0 {
+        "no emulated impairment".to_string()
+    } else {
+        format!("each side adds {} ms ± {} ms, loses {:.1} %", s.delay_ms, s.jitter_ms, s.loss * 100.0)
+    };
+    let mut out = format!(
+        "kinloop demo: {} user{} on {} over loopback QUIC ({link}), {:.1} s{}\n",
+        s.users,
+        if s.users == 1 { "" } else { "s" },
+        s.scene,
+        s.wall_s,
+        if s.cancelled { ", stopped by Ctrl-C" } else { "" }
+    );
+    out += &format!(
+        "  VE      {:.0} Hz, {} ticks: tick p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; {} deadline misses; SCHED_FIFO {}\n",
+        s.ve_rate_hz,
+        s.ve_ticks,
+        s.ve_tick_us_p50,
+        s.ve_tick_us_p99,
+        s.ve_tick_us_max,
+        s.ve_deadline_misses,
+        if s.ve_realtime_priority { "on" } else { "off" }
+    );
+    out += &format!(
+        "  haptic  {} ticks: lateness p50 {:.1} µs, p99 {:.1} µs (worst user), max {:.1} µs; {} misses (> 500 µs late)\n",
+        s.loop_ticks, s.loop_lateness_us_p50, s.loop_lateness_us_p99, s.loop_lateness_us_max, s.loop_misses
+    );
+    out += &format!(
+        "  physics closure error ≤ {:.2e} m; largest force {:.1} % of the device limit; {} uplinks refused\n",
+        s.max_closure_error,
+        s.max_force_ratio * 100.0,
+        s.uplinks_rejected
+    );
+    out += &format!("  network round trip p50 {}\n", fmt_opt(s.rtt_ms_p50, "ms", 2));
+    for u in &s.per_user {
+        let c = &u.client;
+        out += &format!(
+            "  {} (user {}, {}): rtt p50 {}, device-OP rms {} (max {}), force ratio {:.3}, snapshots {}\n",
+            u.name,
+            u.user_id,
+            u.op,
+            fmt_opt(c["rtt_ms_p50"].as_f64(), "ms", 2),
+            fmt_opt(u.device_op_rms_mm, "mm", 2),
+            fmt_opt(u.device_op_max_mm, "mm", 2),
+            c["max_force_ratio"].as_f64().unwrap_or(f64::NAN),
+            c["snapshots_received"]
+        );
+    }
+    out
+}

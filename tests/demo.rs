@@ -1,0 +1,185 @@
+//! `kinloop demo` in-process: a real server and real clients over loopback QUIC in real time. The summary
+//! must be sane, the charts and `summary.json` written, the linkage must move as the virtual-time harness
+//! (the same cores without threads, sockets or clocks) says it does, and an emulated delay must show in the
+//! round trip. Demos run one at a time (each is a VE thread and a 1 kHz thread per user on two cores) and
+//! each is bounded in time.
+
+use std::path::Path;
+use std::sync::{mpsc, Mutex};
+use std::time::Duration;
+
+use kinloop::demo::{self, records, DemoOptions, DemoReport, DemoSummary};
+use kinloop::experiments::common::{trajectory_at, ve_op_trajectory, Trajectory};
+use kinloop::harness::{self, ClientPlan, SessionPlan};
+use kinloop_client::user::UserSpec;
+use kinloop_linkage::builtin::PAPER_WRENCH;
+use kinloop_linkage::SceneKind;
+use serde_json::Value;
+
+/// Real-time demos must not share the two cores with each other.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+/// Longest a demo of a couple of seconds may take, start-up and charts included.
+const BOUND: Duration = Duration::from_secs(60);
+
+fn options(out: &Path, users: usize, seconds: f64) -> DemoOptions {
+    let mut o = DemoOptions::new(out).unwrap();
+    o.users = users;
+    o.duration = Duration::from_secs_f64(seconds);
+    o.progress = false;
+    o
+}
+
+fn run_bounded(options: DemoOptions) -> DemoReport {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(demo::run(&options));
+    });
+    match rx.recv_timeout(BOUND) {
+        Ok(result) => result.unwrap_or_else(|e| panic!("the demo failed: {e:#}")),
+        Err(_) => panic!("the demo took longer than {BOUND:?}"),
+    }
+}
+
+/// What every demo must satisfy whatever the network: the device limit, the closure, and files written.
+fn assert_sane(report: &DemoReport, users: usize) {
+    let s = &report.summary;
+    assert_eq!(s.users, users);
+    assert_eq!(s.per_user.len(), users);
+    assert!(!s.cancelled);
+    assert!(s.max_force_ratio > 0.0 && s.max_force_ratio <= 1.0, "max force ratio {}", s.max_force_ratio);
+    assert!(s.max_closure_error <= 1e-6, "closure error {} m", s.max_closure_error);
+    assert!(s.ve_ticks > 0 && s.loop_ticks > 0, "{s:?}");
+    assert_eq!(s.uplinks_rejected, 0);
+    for u in &s.per_user {
+        let server = u.server.as_ref().unwrap_or_else(|| panic!("the server saw {}", u.name));
+        assert!(server.uplinks_received > 0 && server.snapshots_sent > 0, "{server:?}");
+        assert!(u.client["snapshots_received"].as_u64().is_some_and(|n| n > 0), "{}", u.client);
+    }
+    let mut ids: Vec<u32> = s.per_user.iter().map(|u| u.user_id).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(ids.len(), users, "distinct users");
+
+    for stem in ["fig6a_constraint_count", "fig6b_trajectories", "fig6c_joint_constraint_wrench", "device_op_distance"]
+    {
+        for (ext, least) in [("svg", 1_000), ("png", 5_000)] {
+            let file = format!("{stem}.{ext}");
+            assert!(s.files.contains(&file), "{file} listed in {:?}", s.files);
+            let len = std::fs::metadata(report.dir.join(&file)).map(|m| m.len()).unwrap_or(0);
+            assert!(len > least, "{file} has {len} bytes");
+        }
+    }
+    let text = std::fs::read_to_string(report.dir.join("summary.json")).expect("summary.json written");
+    let written: Value = serde_json::from_str(&text).expect("summary.json is JSON");
+    for key in [
+        "users",
+        "ve_tick_us_p99",
+        "ve_deadline_misses",
+        "loop_lateness_us_p99",
+        "loop_misses",
+        "rtt_ms_p50",
+        "max_closure_error",
+        "max_force_ratio",
+    ] {
+        assert!(written.get(key).is_some(), "summary.json has {key}: {text}");
+    }
+    assert_eq!(written["users"], users);
+    assert_eq!(written["per_user"].as_array().map(Vec::len), Some(users));
+}
+
+fn rtt_ms(s: &DemoSummary) -> f64 {
+    let rtt = s.rtt_ms_p50.expect("some ping was answered");
+    assert!(rtt.is_finite() && rtt > 0.0, "rtt {rtt}");
+    rtt
+}
+
+/// The VE's OP of `user` in the demo's record, on the time since that user joined the VE.
+fn demo_op_path(report: &DemoReport, user: u32) -> Trajectory {
+    let ve = records::read_ve(&report.dir.join("ve.csv"), SceneKind::Planar).unwrap();
+    let rows = ve.iter().filter_map(|v| v.users.iter().find(|u| u.0 == user).map(|u| (v.t, [u.1[0], u.1[1]])));
+    let rows: Vec<(f64, [f64; 2])> = rows.collect();
+    let joined = rows.first().expect("the user is in the VE's record").0;
+    rows.into_iter().map(|(t, p)| (t - joined, p)).collect()
+}
+
+#[test]
+fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let seconds = 1.5;
+    let report = run_bounded(options(dir.path(), 2, seconds));
+    assert_sane(&report, 2);
+    let s = &report.summary;
+    let rtt = rtt_ms(s);
+    assert!(rtt < 20.0, "loopback round trip {rtt} ms");
+    // Stiffness control keeps each device near the OP it holds (the paper's Fig 6b; the harness gives
+    // 0.4 mm RMS for the paper's single user with the default gains).
+    for u in &s.per_user {
+        let rms = u.device_op_rms_mm.expect("distances from the records");
+        assert!(rms < 3.0, "{}: device-OP RMS {rms} mm", u.name);
+    }
+
+    // The same session in virtual time: two paper users on link2, each pushing half the paper's wrench,
+    // the second joining when it joined here. The real-time VE must trace the same path.
+    let (first, second) = (&s.per_user[0], &s.per_user[1]);
+    let mut plan = SessionPlan::paper().unwrap();
+    plan.duration = Duration::from_secs_f64(seconds);
+    let half: Vec<f64> = PAPER_WRENCH.iter().map(|w| w / 2.0).collect();
+    let lag = (second.record_offset_s - first.record_offset_s).max(0.0);
+    plan.clients = (0..2)
+        .map(|i| {
+            let mut c = ClientPlan::paper(&format!("user{}", i + 1));
+            c.user = UserSpec::Constant(half.clone());
+            c.join_at = Duration::from_secs_f64(if i == 0 { 0.0 } else { lag }).min(Duration::from_millis(500));
+            c
+        })
+        .collect();
+    let (_, recording) = harness::run(&plan, &mut |_| {}).unwrap();
+    let reference = ve_op_trajectory(&plan, &recording, "link2").unwrap();
+    let path = demo_op_path(&report, first.user_id);
+    let travelled = {
+        let (a, b) = (path[0].1, path[path.len() - 1].1);
+        (a[0] - b[0]).hypot(a[1] - b[1])
+    };
+    assert!(travelled > 0.005, "the paper's wrench moves the OP by about 14 mm in {seconds} s, not {travelled} m");
+    let compared: Vec<f64> = path
+        .iter()
+        .filter(|(t, _)| *t <= seconds - 0.1)
+        .map(|(t, p)| {
+            let r = trajectory_at(&reference, *t);
+            (p[0] - r[0]).hypot(p[1] - r[1])
+        })
+        .collect();
+    let rms = (compared.iter().map(|d| d * d).sum::<f64>() / compared.len() as f64).sqrt();
+    // Measured: about 0.02 mm; a few ms of scheduling noise shifts the path by a few hundredths of a mm.
+    assert!(rms < 0.5e-3, "real-time OP path {:.3} mm RMS from the harness's", rms * 1e3);
+}
+
+#[test]
+fn an_emulated_delay_of_20_ms_each_way_shows_in_the_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut o = options(dir.path(), 1, 1.5);
+    o.link.delay = Duration::from_millis(20);
+    let report = run_bounded(o);
+    assert_sane(&report, 1);
+    let rtt = rtt_ms(&report.summary);
+    assert!((35.0..80.0).contains(&rtt), "round trip {rtt} ms with 20 ms added each way");
+    assert_eq!(report.summary.delay_ms, 20.0);
+}
+
+#[test]
+fn bad_settings_are_refused_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let refused = |edit: &dyn Fn(&mut DemoOptions), says: &str| {
+        let mut o = options(dir.path(), 1, 1.0);
+        edit(&mut o);
+        let e = demo::run(&o).map(|_| ()).expect_err(says);
+        assert!(format!("{e:#}").contains(says), "{e:#} should mention {says:?}");
+    };
+    refused(&|o| o.users = 0, "--users 0");
+    refused(&|o| o.users = demo::MAX_USERS + 1, "--users 65");
+    refused(&|o| o.duration = Duration::ZERO, "--duration");
+    refused(&|o| o.link.loss = 1.5, "loss");
+    refused(&|o| o.scene.ops.clear(), "no operational point");
+    assert!(!dir.path().join("demo").exists(), "nothing written");
+}
