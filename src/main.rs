@@ -15,6 +15,11 @@ struct Cli {
 enum Command {
     /// The whole system in one process: a VE server and N simulated-device clients over loopback QUIC, in
     /// real time for a few seconds; prints a summary and writes the paper's charts into DIR/demo/.
+    #[command(
+        after_help = "Both the server and every client apply the link options to what they send (each side with its \
+                            own seed derived from --seed), so --delay 20ms makes a 40 ms round trip. Ctrl-C stops early and \
+                            still writes the summary and charts."
+    )]
     Demo(cli::demo::DemoArgs),
     /// Everything the dynamics core knows at one configuration: q̈, λ, Λ⁻¹, its SVD, the constraint count.
     Inspect(cli::inspect::InspectArgs),
