@@ -15,8 +15,9 @@ use support::*;
 
 /// A client whose local model is a free mass tied by a spring-damper to the VE's OP as it last heard of
 /// it, with `delay` each way: position-position teleoperation through a delayed channel, a textbook way
-/// for a coupling to generate energy. Returns the VE's kinetic energy every 10 ms.
-fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> Vec<f64> {
+/// for a coupling to generate energy. Returns the VE's kinetic energy every 10 ms and the coupling's energy
+/// account at the end (J absorbed; negative: generated).
+fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Vec<f64>, f64) {
     let mut config = VeConfig::paper();
     config.passivity = passivity;
     config.coupling_damping = AxisGains::Uniform { linear: 2.0, angular: 0.01 };
@@ -65,7 +66,8 @@ fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> Vec
             energies.push(ve.kinetic_energy());
         }
     });
-    energies
+    let account = ve.state().users().next().map_or(f64::NAN, |u| u.passivity.absorbed_j);
+    (energies, account)
 }
 
 /// Energy the coupling's spring holds at the start: the client's mass starts 1 cm from the VE's OP.
@@ -74,12 +76,16 @@ const STORED_AT_START_J: f64 = 0.5 * 1000.0 * 0.01 * 0.01;
 #[test]
 fn passivity_controller_keeps_a_delayed_coupling_from_pumping_energy() {
     let peak = |e: &[f64]| e.iter().cloned().filter(|x| x.is_finite()).fold(0.0, f64::max);
+    let allowance = VeConfig::paper().passivity_allowance_j;
     for delay_ms in [25, 100] {
-        let plain = peak(&delayed_mass_client(false, delay_ms, 5));
-        let passive = peak(&delayed_mass_client(true, delay_ms, 5));
+        let (plain, _) = delayed_mass_client(false, delay_ms, 5);
+        let (passive, account) = delayed_mass_client(true, delay_ms, 5);
+        let (plain, passive) = (peak(&plain), peak(&passive));
         // Without the controller the delayed loop pumps far more energy into the VE than the coupling ever
-        // held; with it the VE never gains more than that.
+        // held; with it the VE never gains more than that, and the coupling generated at most its allowance
+        // on each of its three axes (plus a tick's worth).
         assert!(plain > 100.0 * STORED_AT_START_J, "delay {delay_ms} ms: plain coupling peaked at {plain:e} J");
         assert!(passive <= STORED_AT_START_J, "delay {delay_ms} ms: passive coupling reached {passive:e} J");
+        assert!(account >= -3.3 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
     }
 }

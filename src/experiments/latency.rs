@@ -6,7 +6,7 @@
 //! independent packet loss at 50 ms delay. Each point is an 8 s session of the paper's user and
 //! device; the client knows the nominal one-way delay (its driver would measure it as half the RTT) and
 //! predicts snapshots forward by it. Measured: the device–OP distance (tracking), the energy balance of the
-//! criterion (linkage kinetic energy against the hand's work) and the passivity controller's dissipation,
+//! criterion (linkage kinetic energy against the hand's work) and the couplings' energy account,
 //! and the stability label of [`super::verdict`]. A delay "fails" when its point is unstable.
 
 use std::time::Duration;
@@ -72,7 +72,7 @@ struct Measured {
     verdict: Verdict,
     device_op_rms_m: f64,
     device_model_rms_m: f64,
-    passivity_dissipated_j: f64,
+    passivity_absorbed_j: f64,
     passivity_activations: u64,
     uplinks_refused: u64,
 }
@@ -89,7 +89,7 @@ fn measure(p: &Point, seconds: f64) -> Result<Measured> {
         verdict: verdict::judge(&summary, &rec),
         device_op_rms_m: c.device_op_rms_m,
         device_model_rms_m: c.device_model_rms_m,
-        passivity_dissipated_j: c.passivity_dissipated_j,
+        passivity_absorbed_j: c.passivity_absorbed_j,
         passivity_activations: c.passivity_activations,
         uplinks_refused: c.uplinks_refused,
     })
@@ -116,7 +116,7 @@ fn point_json(m: &Measured) -> Value {
         "hand_work_max_j": significant(m.verdict.hand_work_max_j, 3),
         "linkage_kinetic_energy_max_j": significant(m.verdict.kinetic_energy_max_j, 3),
         "worst_saturation": round(m.verdict.worst_saturation, 3),
-        "passivity_dissipated_j": significant(m.passivity_dissipated_j, 3),
+        "passivity_absorbed_j": significant(m.passivity_absorbed_j, 3),
         "passivity_activations": m.passivity_activations,
         "uplinks_refused_by_server": m.uplinks_refused,
     })
@@ -192,11 +192,11 @@ fn charts(out: &mut Output, variable: Variable, points: &[Measured]) -> Result<(
             .collect(),
     ));
     energy = energy.with(Series::reference(
-        "energy the passivity controller dissipated",
+        "energy the couplings generated, passivity on (booked by its observer)",
         points
             .iter()
             .filter(|m| m.point.passivity)
-            .map(|m| (m.point.value, m.passivity_dissipated_j.max(floor)))
+            .map(|m| (m.point.value, (-m.passivity_absorbed_j).max(floor)))
             .collect(),
     ));
     out.chart(&format!("energy_vs_{name}"), &energy)?;
@@ -309,7 +309,7 @@ pub fn run(options: &Options) -> Result<Report> {
         "setup": {
             "session": format!("paper testbed, user and device, 1 kHz VE and haptic loop, {seconds} s per point"),
             "network": "the same conditions in both directions; each point its own emulator seeds",
-            "passivity": "VeConfig::passivity: time-domain passivity observer on each coupling port, damper when it turns active",
+            "passivity": "VeConfig::passivity: time-domain passivity observer on each axis of each coupling port (the graphics-controller PD, the hand's force channel excluded); an axis whose PD generated more energy than the port as a whole absorbed has its PD scaled down, to zero once the excess reaches passivity_allowance_j",
             "null": "a null failing value means no point of the sweep was unstable",
         },
         "sweeps": Value::Object(sweeps),

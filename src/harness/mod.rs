@@ -193,9 +193,7 @@ pub struct ClientSummary {
     /// Energy the user's coupling absorbed from the VE, as the VE's passivity observer booked it (J; negative:
     /// the coupling generated energy). Zero unless the VE runs with `passivity`.
     pub passivity_absorbed_j: f64,
-    /// Energy the passivity controller's damper dissipated (J).
-    pub passivity_dissipated_j: f64,
-    /// VE ticks in which the passivity controller added damping for this user.
+    /// VE ticks in which the passivity controller scaled this user's PD down.
     pub passivity_activations: u64,
 }
 
@@ -507,7 +505,6 @@ impl<S: Space> Session<S> {
                     uplinks_refused: p.uplinks_refused,
                     snapshots_refused: p.snapshots_refused,
                     passivity_absorbed_j: p.passivity.absorbed_j,
-                    passivity_dissipated_j: p.passivity.dissipated_j,
                     passivity_activations: p.passivity.activations,
                 }
             })

@@ -105,8 +105,10 @@ pub struct VeConfig {
     pub contact_margin_m: f64,
     /// Time-domain passivity observer/controller on every coupling.
     pub passivity: bool,
-    /// Largest damping (N·s/m, and N·m·s/rad per L²) the passivity controller may add in one tick.
-    pub passivity_max_damping: f64,
+    /// Energy each axis of a coupling may generate (beyond what the coupling as a whole absorbed) before the
+    /// passivity controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see
+    /// `passivity`).
+    pub passivity_allowance_j: f64,
     /// Duration of a coupling's fade in or out (raised cosine).
     pub fade_time: Duration,
     /// A manipulator whose uplinks stop this long fades out until they resume.
@@ -140,7 +142,9 @@ impl VeConfig {
             contact_damping: None,
             contact_margin_m: 0.005,
             passivity: false,
-            passivity_max_damping: 1.0e6,
+            // About what the graphics controller's linear spring (1000 N/m) holds at 2 mm, the device-OP
+            // distance stiffness rendering keeps (Fig 6b).
+            passivity_allowance_j: 2.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
             max_users: 16,
@@ -172,7 +176,7 @@ impl VeConfig {
         }
         let non_negative = [
             ("contact_margin_m", self.contact_margin_m),
-            ("passivity_max_damping", self.passivity_max_damping),
+            ("passivity_allowance_j", self.passivity_allowance_j),
             ("contact_stiffness", self.contact_stiffness.unwrap_or(0.0)),
             ("contact_damping", self.contact_damping.unwrap_or(0.0)),
             ("guards.max_model_offset_m", self.guards.max_model_offset_m),

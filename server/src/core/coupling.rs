@@ -3,19 +3,19 @@
 //! For a manipulator at operational point `op` with fade weight `w` (see `fade`), the paper's force channel
 //! plus graphics controller (section IV; Fig 3):
 //! ```text
-//! F = w · [ F_h + K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op) ] − α ⊙ ẋ_op
+//! F = w · [ F_h + β ⊙ (K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op)) ]
 //! ```
 //! with `x_lm, ẋ_lm` the client's local-model OP pose and twist (from its newest uplink), `x_op, ẋ_op` the
-//! VE's, `⊖` the pose difference (linear, rotation vector) and `α` the passivity controller's damper (zero
-//! unless `--passivity on` finds the coupling generating energy, see `passivity`). The wrench enters eq 4 as
-//! `Jᵀ F`.
+//! VE's, `⊖` the pose difference (linear, rotation vector) and `β ∈ [0, 1]` per axis the passivity
+//! controller's scale on the PD (one unless `--passivity on` finds the coupling generating energy, see
+//! `passivity`). The wrench enters eq 4 as `Jᵀ F`.
 //!
 //! **Linearly implicit coupling.** The paper's gains (K_g up to 10⁴, B_g up to 10⁴ on a link with
 //! I = 0.0021 kg m²) are far too stiff for an explicit step at 1 kHz. Under semi-implicit Euler the PD is
 //! evaluated at the end of the step, linearized: `x_op⁺ ≈ x_op + h J q̇⁺`, `ẋ_op⁺ = J q̇⁺`, `q̇⁺ = q̇ + h q̈`,
-//! which moves `Jᵀ (w(hB + h²K) + hα) J` to the left of eq 4 and adds `−h Jᵀ (wK ⊙ ẋ_op)` on the right
+//! which moves `Jᵀ (wβ(hB + h²K)) J` to the left of eq 4 and adds `−h Jᵀ (wβK ⊙ ẋ_op)` on the right
 //! ([`Forces::add_implicit`]). The step is then stable for any gains; the wrench it effectively applied is
-//! `F − h wK ⊙ ẋ_op − (w(hB + h²K) + hα) ⊙ J q̈` ([`Coupling::implicit_correction`]).
+//! `F − h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈` ([`Coupling::implicit_correction`]).
 
 use kinloop_linkage::contact::PenaltyContacts;
 use kinloop_linkage::data::Kinematics;
@@ -46,8 +46,8 @@ pub struct Coupling<S: Space> {
     pub stiffness: S::OpVec,
     /// B_g per axis.
     pub damping: S::OpVec,
-    /// α per axis, the passivity controller's damper for the current tick.
-    pub dissipation: S::OpVec,
+    /// β per axis, the passivity controller's scale on the PD for the current tick (ones when it is off).
+    pub pd_scale: S::OpVec,
     /// Jᵀ at the OP (n×k) at the last evaluation.
     pub jacobian_t: DMatrix<f64>,
     /// x_op at the last evaluation.
@@ -74,7 +74,7 @@ impl<S: Space> Coupling<S> {
             target_twist: S::OpVec::zero(),
             stiffness,
             damping,
-            dissipation: S::OpVec::zero(),
+            pd_scale: full_scale::<S>(),
             jacobian_t: DMatrix::zeros(nq, S::DIM),
             op_pose: OpPose::identity(),
             op_twist: S::OpVec::zero(),
@@ -85,7 +85,7 @@ impl<S: Space> Coupling<S> {
 
     /// True when the coupling adds anything to the dynamics.
     pub fn is_active(&self) -> bool {
-        self.pushes && (self.weight > 0.0 || self.dissipation.as_slice().iter().any(|a| *a > 0.0))
+        self.pushes && self.weight > 0.0
     }
 
     /// Updates pose, twist, Jacobian and wrench at the kinematic state `kin` (positions and velocities).
@@ -106,20 +106,34 @@ impl<S: Space> Coupling<S> {
         if !self.pushes {
             return f;
         }
-        let offset = self.target_pose.difference(&self.op_pose);
-        let w = self.weight;
+        let pd = self.pd_wrench();
         for a in 0..S::DIM {
-            let pd = self.stiffness[a] * offset[a] + self.damping[a] * (self.target_twist[a] - self.op_twist[a]);
-            f[a] = w * (self.hand_wrench[a] + pd) - self.dissipation[a] * self.op_twist[a];
+            f[a] = self.weight * (self.hand_wrench[a] + self.pd_scale[a] * pd[a]);
         }
         f
     }
 
-    /// Per-axis coefficient `w(hB + h²K) + hα` moved to the mass side by the implicit treatment.
+    /// The unscaled, unfaded PD `K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op)` at the last evaluated pose and
+    /// twist and the newest reference.
+    pub fn pd_wrench(&self) -> S::OpVec {
+        let offset = self.target_pose.difference(&self.op_pose);
+        let mut f = S::OpVec::zero();
+        for a in 0..S::DIM {
+            f[a] = self.stiffness[a] * offset[a] + self.damping[a] * (self.target_twist[a] - self.op_twist[a]);
+        }
+        f
+    }
+
+    /// Per-axis weight `wβ` of the PD in the wrench.
+    fn pd_weight(&self, axis: usize) -> f64 {
+        self.weight * self.pd_scale[axis]
+    }
+
+    /// Per-axis coefficient `wβ(hB + h²K)` moved to the mass side by the implicit treatment.
     fn implicit_coefficient(&self, dt: f64) -> S::OpVec {
         let mut c = S::OpVec::zero();
         for a in 0..S::DIM {
-            c[a] = self.weight * (dt * self.damping[a] + dt * dt * self.stiffness[a]) + dt * self.dissipation[a];
+            c[a] = self.pd_weight(a) * (dt * self.damping[a] + dt * dt * self.stiffness[a]);
         }
         c
     }
@@ -136,13 +150,13 @@ impl<S: Space> Coupling<S> {
     }
 
     /// What the implicit treatment added to the explicit wrench in a step of `dt` that produced `qdd`:
-    /// `−h wK ⊙ ẋ_op − (w(hB + h²K) + hα) ⊙ J q̈`.
+    /// `−h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈`.
     pub fn implicit_correction(&self, model: &Model<S>, qdd: &DVector<f64>, dt: f64) -> S::OpVec {
         let coefficient = self.implicit_coefficient(dt);
         let accel = self.op_space_image(model, qdd);
         let mut out = S::OpVec::zero();
         for a in 0..S::DIM {
-            out[a] = -dt * self.weight * self.stiffness[a] * self.op_twist[a] - coefficient[a] * accel[a];
+            out[a] = -dt * self.pd_weight(a) * self.stiffness[a] * self.op_twist[a] - coefficient[a] * accel[a];
         }
         out
     }
@@ -155,13 +169,20 @@ impl<S: Space> Coupling<S> {
         self.hand_wrench * self.weight
     }
 
-    /// The part of the applied wrench that is not the human's own force: the PD and the passivity damper.
+    /// The part of the applied wrench that is not the human's own force: the (scaled) PD.
     pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
         }
         *wrench - self.hand_wrench * self.weight
     }
+}
+
+/// β = 1 on every axis: the PD at full strength.
+pub fn full_scale<S: Space>() -> S::OpVec {
+    let mut scale = S::OpVec::zero();
+    scale.as_mut_slice().fill(1.0);
+    scale
 }
 
 /// Where the integrator's evaluations are recorded.
@@ -172,7 +193,7 @@ pub enum Evaluation {
     /// An extra evaluation (snapshots): nothing is accumulated.
     Probe,
     /// The snapshot evaluation: as `Probe`, but each coupling applies only its hand wrench (force
-    /// channel), not its graphics-controller PD or passivity damper. Those are a numerical tie between the
+    /// channel), not its graphics-controller PD. Those are a numerical tie between the
     /// VE and one user's local model, not a physical force: folded into another user's frozen bias they act
     /// as a stiff spring seen one snapshot late and without its stiffness, which made sessions with two
     /// users on one OP go unstable.
@@ -237,9 +258,9 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
             let coefficient = c.implicit_coefficient(dt);
             let jt = &c.jacobian_t;
             for i in support(model, Some(c.body)) {
-                // −h Jᵀ (wK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
+                // −h Jᵀ (wβK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
                 for a in 0..S::DIM {
-                    tau[i] -= jt[(i, a)] * dt * c.weight * c.stiffness[a] * c.op_twist[a];
+                    tau[i] -= jt[(i, a)] * dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a];
                 }
                 for j in support(model, Some(c.body)) {
                     let mut m = 0.0;

@@ -29,7 +29,7 @@ pub struct VeMetrics {
     pub users_left: u64,
     /// Joins refused.
     pub joins_refused: u64,
-    /// Ticks in which some passivity controller added damping.
+    /// Ticks in which some passivity controller scaled a PD down.
     pub passivity_activations: u64,
     /// Closure residual norm at the start of the last step (m).
     pub closure_error: f64,

@@ -14,7 +14,7 @@
 //! ```
 //!
 //! A tick (`handle_timeout`) is the paper's section II and IV in order: each user's fade and passivity
-//! damper are updated, then one [`kinloop_linkage::step`] integrates eq 4 with every user's coupling
+//! scale are updated, then one [`kinloop_linkage::step`] integrates eq 4 with every user's coupling
 //! ([`coupling`]) and the penalty contacts; a failed step restores the last good state. After the last
 //! tick due, if a snapshot is due, every user's local model of interaction is built ([`snapshots`]).
 //!
@@ -104,7 +104,7 @@ pub struct UserState<S: Space> {
     pub presence: Presence,
     /// The user's OP in the VE at the last step's evaluation.
     pub op_pose: OpPose<S>,
-    /// The wrench the last step applied at the OP (force channel, PD, passivity damper; fade included).
+    /// The wrench the last step applied at the OP (force channel and PD; fade and passivity scale included).
     pub wrench: S::OpVec,
     /// Fade weight of the last step.
     pub weight: f64,
@@ -476,7 +476,7 @@ impl<S: Space> VeCore<S> {
         self.last_tick_at = at;
     }
 
-    /// Fade weights (join, silence, leave) and passivity dampers for the coming step.
+    /// Fade weights (join, silence, leave) and passivity scales for the coming step.
     fn update_couplings(&mut self, at: Duration, dt: f64) {
         let fade_s = self.config.fade_time.as_secs_f64();
         let mut activations = 0;
@@ -493,19 +493,20 @@ impl<S: Space> VeCore<S> {
             u.fade.advance(u.presence == Presence::Present && c.pushes && !silent, dt, fade_s);
             c.weight = u.fade.weight();
             c.step_wrench = S::OpVec::zero();
-            c.dissipation = if self.config.passivity && c.pushes {
-                // Sized with the OP velocity of the previous evaluation (one tick old at most).
+            c.pd_scale = if self.config.passivity && c.pushes {
+                // The power the full PD would deliver, from the OP twist of the previous evaluation (one tick
+                // old at most) and the newest reference.
+                let pd = c.pd_wrench();
+                let mut power = S::OpVec::zero();
+                for a in 0..S::DIM {
+                    power[a] = c.weight * pd[a] * c.op_twist[a];
+                }
                 let before = u.passivity.activations;
-                let alpha = u.passivity.damping::<S>(
-                    &c.op_twist,
-                    dt,
-                    self.model.length_scale,
-                    self.config.passivity_max_damping,
-                );
+                let scale = u.passivity.pd_scale::<S>(&power, self.config.passivity_allowance_j);
                 activations += u.passivity.activations - before;
-                alpha
+                scale
             } else {
-                S::OpVec::zero()
+                coupling::full_scale::<S>()
             };
         }
         if activations > 0 {
@@ -526,12 +527,7 @@ impl<S: Space> VeCore<S> {
             if self.config.passivity {
                 // ẋ_op after the step, J q̇⁺: the velocity semi-implicit Euler moved the OP with.
                 let velocity_after = c.op_space_image(&self.model, &self.qd);
-                let damped = if implicit { velocity_after } else { c.op_twist };
-                let mut damper = S::OpVec::zero();
-                for a in 0..S::DIM {
-                    damper[a] = -c.dissipation[a] * damped[a];
-                }
-                u.passivity.observe::<S>(&c.controller_part(&c.step_wrench), &damper, &velocity_after, dt);
+                u.passivity.observe::<S>(&c.controller_part(&c.step_wrench), &velocity_after, dt);
             }
         }
     }
