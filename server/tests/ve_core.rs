@@ -283,6 +283,34 @@ fn rejections_are_reported_once_per_burst() {
     assert_eq!(ve.metrics().uplinks_rejected, 100);
 }
 
+/// A hand wrench somewhat over the device's rating (50 N, 5 N·m, 5 % slack) is clipped to it, not refused:
+/// the VE then runs exactly as if the client had sent the rating along the same direction.
+#[test]
+fn a_hand_wrench_somewhat_over_the_rating_is_clipped_not_refused() {
+    let simulate = |hand: [f64; 3]| {
+        let mut ve = core(testbed(), VeConfig::paper());
+        let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+        let mut latest = Vec::new();
+        let mut seq = 0;
+        run(&mut ve, Duration::from_millis(300), &mut latest, |ve, now, latest| {
+            let Some(Some(s)) = latest.get(a as usize) else { return };
+            seq += 1;
+            ve.handle_uplink(now, a, &following(s, seq, &hand)).unwrap();
+        });
+        let bits = ve.state().q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        (bits, ve.metrics())
+    };
+    let slack = 1.0 + VeConfig::paper().guards.device_cap_slack;
+    // 60 N along (0.6, −0.8) and 6 N·m: force to 52.5 N, torque to 5.25 N·m.
+    let (over, metrics) = simulate([36.0, -48.0, 6.0]);
+    let (rated, clean) = simulate([0.6 * 50.0 * slack, -0.8 * 50.0 * slack, 5.0 * slack]);
+    assert_eq!(metrics.uplinks_rejected, 0);
+    assert_eq!(metrics.uplinks_clipped, metrics.uplinks_accepted);
+    assert!(metrics.uplinks_accepted > 250);
+    assert_eq!(clean.uplinks_clipped, 0);
+    assert_eq!(over, rated, "a clipped wrench acts as the rating");
+}
+
 /// Capacity and operational points at the core: `max_users` present users, leaving ones make room, an
 /// unknown OP is refused with the list of those that exist, and two users may share one OP.
 #[test]

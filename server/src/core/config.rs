@@ -59,8 +59,11 @@ pub struct GuardLimits {
     pub default_max_force_n: f64,
     /// Hand torque limit when the device announced none (N·m).
     pub default_max_torque_nm: f64,
-    /// Slack over the device's announced peak force and torque before a wrench counts as absurd (fraction).
+    /// Slack over the device's announced peak force and torque before a hand wrench is clipped (fraction).
     pub device_cap_slack: f64,
+    /// A hand wrench beyond the device's peak (with slack) times this is absurd and the uplink rejected;
+    /// below that it is clipped to the peak (≥ 1).
+    pub absurd_wrench_factor: f64,
     /// A burst of rejected uplinks ends after this long without a rejection (one log line per burst).
     pub rejection_burst_quiet: Duration,
 }
@@ -74,6 +77,7 @@ impl Default for GuardLimits {
             default_max_force_n: 100.0,
             default_max_torque_nm: 10.0,
             device_cap_slack: 0.05,
+            absurd_wrench_factor: 10.0,
             rejection_burst_quiet: Duration::from_secs(1),
         }
     }
@@ -188,6 +192,12 @@ impl VeConfig {
         ];
         if let Some((what, value)) = non_negative.into_iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
             return Err(VeConfigError::Negative { what, value });
+        }
+        if !(self.guards.absurd_wrench_factor.is_finite() && self.guards.absurd_wrench_factor >= 1.0) {
+            return Err(VeConfigError::Negative {
+                what: "guards.absurd_wrench_factor (at least 1)",
+                value: self.guards.absurd_wrench_factor,
+            });
         }
         if self.fade_time.is_zero() {
             return Err(VeConfigError::Negative { what: "fade_time", value: 0.0 });

@@ -1,7 +1,13 @@
 //! What the VE refuses to act on. The codec has already checked bytes, lengths and gross magnitudes; here
 //! an uplink is checked against *physics*: a local model a metre away from the VE's OP, a model moving at
-//! 20 m/s, or a hand pushing harder than the device can are signs of a broken or hostile client. A
-//! rejected uplink changes nothing at all (not even the user's liveness or sequence number).
+//! 20 m/s, or a hand wrench an order of magnitude beyond what the device is rated for are signs of a broken
+//! or hostile client. A rejected uplink changes nothing at all (not even the user's liveness or sequence
+//! number).
+//!
+//! A hand wrench *somewhat* over the device's rating is plausible (a hand can push harder than the motors,
+//! and the wrench that drives a local model includes its position channels' reaction) and is clipped to the
+//! rating, direction kept, force and torque each on their own: a clipped value keeps the user coupled, a
+//! dropped uplink would leave the coupling to fade out.
 
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Space, VecOps};
@@ -113,15 +119,15 @@ pub enum UplinkRejection {
         /// The limit.
         limit: f64,
     },
-    /// The hand wrench exceeds what the device can render.
-    #[error("hand {field} {magnitude:.3} exceeds the device's {limit:.3}")]
-    WrenchAboveLimit {
+    /// The hand wrench is absurd for the device: beyond its rating times `absurd_wrench_factor`.
+    #[error("hand {field} {magnitude:.3} is absurd for a device rated {rating:.3}")]
+    WrenchAbsurd {
         /// `force` or `torque`.
         field: &'static str,
         /// Its norm.
         magnitude: f64,
-        /// The limit.
-        limit: f64,
+        /// The device's rating (with slack).
+        rating: f64,
     },
 }
 
@@ -165,6 +171,8 @@ pub struct CheckedUplink<S: Space> {
     pub model_pose: OpPose<S>,
     /// Local-model OP twist.
     pub model_twist: S::OpVec,
+    /// The hand wrench was over the device's rating and has been clipped to it.
+    pub clipped: bool,
 }
 
 /// Checks a sample against the scene's dimensions, the user's device and the VE's OP pose.
@@ -206,12 +214,73 @@ pub fn check_uplink<S: Space>(
     if let Some((field, speed, limit)) = speeds.into_iter().find(|(_, speed, limit)| speed > limit) {
         return Err(UplinkRejection::ModelTooFast { field, speed, limit });
     }
-    let magnitudes = [
-        ("force", S::op_lin(&hand_wrench).norm(), wrench_limits.max_force_n),
-        ("torque", S::op_ang(&hand_wrench).norm(), wrench_limits.max_torque_nm),
+    let (hand_wrench, clipped) = clip_hand_wrench::<S>(&hand_wrench, wrench_limits, limits.absurd_wrench_factor)?;
+    Ok(CheckedUplink { hand_wrench, model_pose, model_twist, clipped })
+}
+
+/// The hand wrench with its force and its torque each clipped to the device's rating (direction kept), and
+/// whether anything was clipped; an error when either is beyond the rating times `absurd_factor`.
+pub fn clip_hand_wrench<S: Space>(
+    wrench: &S::OpVec,
+    rating: &WrenchLimits,
+    absurd_factor: f64,
+) -> Result<(S::OpVec, bool), UplinkRejection> {
+    let lin = <S::Point as VecOps>::LEN;
+    let parts = [
+        ("force", 0..lin, S::op_lin(wrench).norm(), rating.max_force_n),
+        ("torque", lin..S::DIM, S::op_ang(wrench).norm(), rating.max_torque_nm),
     ];
-    if let Some((field, magnitude, limit)) = magnitudes.into_iter().find(|(_, m, limit)| m > limit) {
-        return Err(UplinkRejection::WrenchAboveLimit { field, magnitude, limit });
+    let mut out = *wrench;
+    let mut clipped = false;
+    for (field, axes, magnitude, limit) in parts {
+        if magnitude > limit * absurd_factor {
+            return Err(UplinkRejection::WrenchAbsurd { field, magnitude, rating: limit });
+        }
+        if magnitude > limit {
+            let scale = limit / magnitude;
+            for axis in axes {
+                out[axis] *= scale;
+            }
+            clipped = true;
+        }
     }
-    Ok(CheckedUplink { hand_wrench, model_pose, model_twist })
+    Ok((out, clipped))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::Planar;
+
+    type V = <Planar as Space>::OpVec;
+    const RATING: WrenchLimits = WrenchLimits { max_force_n: 10.0, max_torque_nm: 0.2 };
+
+    #[test]
+    fn a_wrench_within_the_rating_passes_unchanged() {
+        let w = V::from_slice(&[6.0, -8.0, 0.2]);
+        assert_eq!(clip_hand_wrench::<Planar>(&w, &RATING, 10.0), Ok((w, false)));
+    }
+
+    #[test]
+    fn a_plausible_wrench_over_the_rating_is_clipped_to_it_direction_kept() {
+        // 25 N along (3, −4)/5 and 0.5 N·m: force to 10 N along the same direction, torque to 0.2 N·m.
+        let (out, clipped) = clip_hand_wrench::<Planar>(&V::from_slice(&[15.0, -20.0, -0.5]), &RATING, 10.0).unwrap();
+        assert!(clipped);
+        let expected = [6.0, -8.0, -0.2];
+        for (got, want) in out.as_slice().iter().zip(expected) {
+            assert!((got - want).abs() < 1e-12, "{out:?}");
+        }
+        // Only the part over its rating is touched.
+        let (out, _) = clip_hand_wrench::<Planar>(&V::from_slice(&[1.0, 0.0, 0.5]), &RATING, 10.0).unwrap();
+        assert_eq!(out.as_slice()[0], 1.0);
+    }
+
+    #[test]
+    fn an_absurd_wrench_is_rejected_naming_the_part() {
+        let err = clip_hand_wrench::<Planar>(&V::from_slice(&[0.0, 101.0, 0.0]), &RATING, 10.0).unwrap_err();
+        assert_eq!(err, UplinkRejection::WrenchAbsurd { field: "force", magnitude: 101.0, rating: 10.0 });
+        let err = clip_hand_wrench::<Planar>(&V::from_slice(&[0.0, 0.0, -2.5]), &RATING, 10.0).unwrap_err();
+        assert!(matches!(err, UplinkRejection::WrenchAbsurd { field: "torque", .. }), "{err}");
+        assert!(err.is_hostile());
+    }
 }

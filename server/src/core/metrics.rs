@@ -19,6 +19,8 @@ pub struct VeMetrics {
     pub uplinks_accepted: u64,
     /// Uplinks refused as broken or hostile.
     pub uplinks_rejected: u64,
+    /// Uplinks used with their hand wrench clipped to the device's rating.
+    pub uplinks_clipped: u64,
     /// Uplinks ignored as stale or duplicate.
     pub uplinks_stale: u64,
     /// Users present now (leaving ones not counted).

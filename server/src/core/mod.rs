@@ -381,6 +381,9 @@ impl<S: Space> VeCore<S> {
             }
         };
         self.metrics.uplinks_accepted += 1;
+        if checked.clipped {
+            self.metrics.uplinks_clipped += 1;
+        }
         let u = &mut self.users[index];
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
