@@ -89,3 +89,21 @@ fn both_local_model_forms_give_the_same_device_motion() {
     println!("largest device difference between the forms: {largest:e} m");
     assert!(largest < 1e-6, "the forms differ by {largest} m");
 }
+
+#[test]
+fn impedance_mode_drives_the_local_model_no_harder_than_the_device_pushes_back() {
+    // The local model (and, through the uplink, the VE) is driven by the hand and by the reaction to what
+    // the device felt from the position channels. The acceleration-zeroing controller cancels the channels
+    // along the constrained directions, so that part is felt by nobody and must not push the model: it grows
+    // with the drift of Fig 7b, while the device itself is never commanded past its rating.
+    let samples = run(ConstraintMode::Impedance, ModelForm::Op, 3000);
+    let (mut force, mut torque) = (0.0f64, 0.0f64);
+    for s in samples.iter().filter(|s| s.report.active) {
+        let reaction = s.report.model_wrench - s.report.hand_wrench;
+        force = force.max(reaction.fixed_rows::<2>(0).norm());
+        torque = torque.max(reaction[2].abs());
+    }
+    let spec = kinloop_client::device::presets::DevicePreset::Paper.spec(kinloop_linkage::SceneKind::Planar).unwrap();
+    println!("largest reaction on the local model: {force:.3} N, {torque:.4} N m");
+    assert!(force <= spec.max_force_n && torque <= spec.max_torque_nm, "{force} N, {torque} N m");
+}

@@ -48,7 +48,7 @@ pub use intake::SnapshotRejection;
 
 use controllers::{
     contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
-    ConstraintFrame,
+    project_wrench, ConstraintFrame,
 };
 use deadband::Deadband;
 use intake::SnapshotTerms;
@@ -592,12 +592,19 @@ impl<S: Space> HapticCore<S> {
         };
         let (contacts, live) = self.model.contacts();
         let contact = contact_feedforward::<S>(contacts, live, &self.frame.free_inertia);
-        let jc = match (self.config.constraint_mode, hand_for_constraint) {
-            (ConstraintMode::Impedance, Some(hand)) => {
-                joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact))
-            }
+        // `pc_felt`: what the device receives from the position channels once the joint-constraint controller
+        // has acted, so what the local model gets back as their reaction (step 5).
+        let (jc, pc_felt) = match (self.config.constraint_mode, hand_for_constraint) {
+            (ConstraintMode::Impedance, Some(hand)) => (
+                joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact)),
+                // The acceleration-zeroing controller cancels the channels along the constrained directions:
+                // the device feels only their free part. Reacting to the cancelled part would push the local
+                // model (and, through the uplink, the VE) along directions the joints hold with K_pc times a
+                // drift that grows without bound in this mode (Fig 7b): 80 N on a 10 N device after 5 s.
+                pc - project_wrench::<S>(p, l, &pc),
+            ),
             // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
-            _ => joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate),
+            _ => (joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate), pc),
         };
         let requested = pc + jc + imp + contact;
 
@@ -612,7 +619,7 @@ impl<S: Space> HapticCore<S> {
         } else {
             gain = self.gate.update(dt_s, !stale);
             (command, clamp_scale) = limit_wrench::<S>(&(requested * gain), &self.limits);
-            self.reaction = -mask_unactuated::<S>(&pc, &self.limits) * (gain * clamp_scale);
+            self.reaction = -mask_unactuated::<S>(&pc_felt, &self.limits) * (gain * clamp_scale);
         }
         if clamp_scale < 1.0 {
             flags |= uplink_flags::CLAMPED;
