@@ -161,6 +161,14 @@ fn sixteen_users_stay_stable_and_cost_grows_with_users() {
     };
     assert!(cost("same_op", 16) > 2.0 * cost("same_op", 1));
     assert!(cost("spread", 16) > 2.0 * cost("spread", 1));
+    // The users feel each other: sixteen users sharing the paper's push on one OP move the linkage about as
+    // the one user does (each device renders the OP's acceleration from every hand, not from its own only).
+    let deviation = points
+        .iter()
+        .find(|p| p["layout"] == "same_op" && p["users"] == 16)
+        .map(|p| f(&p["ve_link2_deviation_from_one_user_mm"]))
+        .unwrap();
+    assert!(deviation < 20.0, "16 users moved link 2 {deviation} mm RMS away from the one-user path");
 }
 
 /// The reduced local model's step does not grow with the linkage; the VE step and the configuration form's

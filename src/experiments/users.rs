@@ -273,12 +273,13 @@ pub fn run(options: &Options) -> Result<Report> {
     if let (Some(one), Some(many)) = (find(Layout::SameOp, 1), find(Layout::SameOp, max_n)) {
         if one.verdict.stable && many.verdict.stable && max_n > 1 {
             answer.push_str(&format!(
-                " Sharing the paper's push among N users on one OP should move the linkage as one user does, but link \
-                 2's COM travels {:.0} mm with 1 user and {:.0} mm with {max_n} (likely because each device's impedance \
-                 controller shapes only its own hand's force, so the others' pushes reach it through the position \
-                 channels and drag its 1 kg).",
+                " Sharing the paper's push among N users on one OP should move the linkage as one user does: link 2's \
+                 COM travels {:.0} mm with 1 user and {:.0} mm with {max_n}, {:.1} mm RMS from the one-user path (each \
+                 device renders the OP's acceleration from every hand, the local model's bias b̂, so the users feel \
+                 each other and their devices' masses stay hidden).",
                 one.link2_path_m * 1e3,
                 many.link2_path_m * 1e3,
+                many.deviation_from_one_user_m.unwrap_or(f64::NAN) * 1e3,
             ));
         }
     }

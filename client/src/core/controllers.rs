@@ -39,10 +39,14 @@ pub fn constraint_weight(r: f64, weighting: &ConstraintWeighting) -> f64 {
 pub(crate) struct ConstraintFrame<S: Space> {
     target_projector: S::OpMat,
     target_inverse_inertia: S::OpMat,
+    target_bias: S::OpVec,
     /// Scaled P̃_c in use (filtered).
     pub projector: S::OpMat,
     /// Λ̂⁻¹ in use (filtered, physical units).
     pub inverse_inertia: S::OpMat,
+    /// b̂ in use (filtered): the OP acceleration of everything but this user's hand (other users' hands,
+    /// velocity terms, gravity).
+    pub bias: S::OpVec,
     /// Λ̂⁺ restricted to the free directions (physical units): maps an OP acceleration to the OP wrench
     /// that causes it; used to express contact forces as wrenches at the OP.
     pub free_inertia: S::OpMat,
@@ -56,8 +60,10 @@ impl<S: Space> ConstraintFrame<S> {
         ConstraintFrame {
             target_projector: S::OpMat::zero(),
             target_inverse_inertia: S::OpMat::zero(),
+            target_bias: S::OpVec::zero(),
             projector: S::OpMat::zero(),
             inverse_inertia: S::OpMat::zero(),
+            bias: S::OpVec::zero(),
             free_inertia: S::OpMat::zero(),
             counted: [false; 6],
             count: 0,
@@ -99,11 +105,13 @@ impl<S: Space> ConstraintFrame<S> {
         self.count = count;
         self.target_projector = projector;
         self.target_inverse_inertia = terms.inverse_inertia;
+        self.target_bias = terms.bias;
         // (Λ⁻¹)⁺ = T Λ̃⁺ T because Λ̃⁻¹ = T Λ⁻¹ T.
         self.free_inertia = scale_both::<S>(&free_scaled, length_scale, length_scale);
         if jump {
             self.projector = projector;
             self.inverse_inertia = terms.inverse_inertia;
+            self.bias = terms.bias;
         }
     }
 
@@ -111,6 +119,7 @@ impl<S: Space> ConstraintFrame<S> {
     pub fn filter(&mut self, alpha: f64) {
         self.projector += (self.target_projector - self.projector) * alpha;
         self.inverse_inertia += (self.target_inverse_inertia - self.inverse_inertia) * alpha;
+        self.bias += (self.target_bias - self.bias) * alpha;
     }
 }
 
@@ -193,19 +202,23 @@ pub fn joint_constraint_impedance<S: Space>(
 }
 
 /// Impedance control with Λ̂⁻¹ in the free directions: the device (mass M) under the hand wrench plus this
-/// wrench accelerates as the linkage's OP would, `M⁻¹ (F_h + F) = Λ̂⁻¹ F_h`, i.e. `F = (M Λ̂⁻¹ − I) F_h`,
-/// applied only in the free directions: `F_imp = P_f (M Λ̂⁻¹ − I) F_h` with the wrench projector
-/// `P_f = T (I − P̃_c) T⁻¹`. (Exact when M is isotropic within the linear and within the angular axes, as on
-/// the paper's device; otherwise the projection mixes a little of M's anisotropy into the constrained
-/// directions, where the joint-constraint controller dominates.)
+/// wrench accelerates as the linkage's OP would (eq 5 with the local model's bias, `ẍ = Λ̂⁻¹ F_h + b̂`),
+/// `M⁻¹ (F_h + F) = Λ̂⁻¹ F_h + b̂`, i.e. `F = M (Λ̂⁻¹ F_h + b̂) − F_h`, applied only in the free directions:
+/// `F_imp = P_f (M (Λ̂⁻¹ F_h + b̂) − F_h)` with the wrench projector `P_f = T (I − P̃_c) T⁻¹`. The bias carries
+/// what moves the OP besides this hand (other users' hands above all): without it each device renders the
+/// linkage as if its own hand alone pushed it, and the others' pushes reach it only through the position
+/// channels, which then drag the device's own mass along. (Exact when M is isotropic within the linear and
+/// within the angular axes, as on the paper's device; otherwise the projection mixes a little of M's
+/// anisotropy into the constrained directions, where the joint-constraint controller dominates.)
 pub fn impedance_free<S: Space>(
     projector: &S::OpMat,
     length_scale: f64,
     device_mass: &S::OpVec,
     inverse_inertia: &S::OpMat,
+    bias: &S::OpVec,
     hand: &S::OpVec,
 ) -> S::OpVec {
-    let shaped = hadamard::<S>(device_mass, &(*inverse_inertia * *hand)) - *hand;
+    let shaped = hadamard::<S>(device_mass, &(*inverse_inertia * *hand + *bias)) - *hand;
     shaped - project_wrench::<S>(projector, length_scale, &shaped)
 }
 
@@ -222,4 +235,35 @@ pub fn contact_feedforward<S: Space>(
         accel += c.coupling * c.force();
     }
     *free_inertia * accel
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::Planar;
+
+    type V = <Planar as Space>::OpVec;
+    type M = <Planar as Space>::OpMat;
+
+    #[test]
+    fn impedance_control_makes_the_device_accelerate_as_the_op_with_its_bias() {
+        // Device of 1 kg per linear axis and 0.005 kg m² in θ; an OP with Λ̂⁻¹ = diag(2, 0.5, 300) and a bias
+        // of (0.3, −0.1, 4) (another user's push, say). No constrained direction: the device under the hand
+        // plus the controller must accelerate as ẍ = Λ̂⁻¹ F_h + b̂, computed here by hand.
+        let mass = V::from_slice(&[1.0, 1.0, 0.005]);
+        let inverse_inertia = M::from_diagonal(&V::from_slice(&[2.0, 0.5, 300.0]));
+        let bias = V::from_slice(&[0.3, -0.1, 4.0]);
+        let hand = V::from_slice(&[-0.5, 0.2, -0.0025]);
+        let f = impedance_free::<Planar>(&M::zero(), 0.05, &mass, &inverse_inertia, &bias, &hand);
+        let expected = [2.0 * -0.5 + 0.3, 0.5 * 0.2 - 0.1, 300.0 * -0.0025 + 4.0];
+        for axis in 0..3 {
+            let accel = (hand[axis] + f[axis]) / mass[axis];
+            assert!((accel - expected[axis]).abs() < 1e-12, "axis {axis}: {accel} vs {}", expected[axis]);
+        }
+        // Along a constrained direction (x here) the controller adds nothing: the joints render it.
+        let x_constrained = M::from_diagonal(&V::from_slice(&[1.0, 0.0, 0.0]));
+        let f = impedance_free::<Planar>(&x_constrained, 0.05, &mass, &inverse_inertia, &bias, &hand);
+        assert_eq!(f[0], 0.0);
+        assert!((f[1] - (1.0 * (0.5 * 0.2 - 0.1) - 0.2)).abs() < 1e-12);
+    }
 }

@@ -587,7 +587,9 @@ impl<S: Space> HapticCore<S> {
         let (l, p) = (self.length_scale, &self.frame.projector);
         let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
         let imp = match sensed {
-            Some(hand) => impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &hand),
+            Some(hand) => {
+                impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &self.frame.bias, &hand)
+            }
             None => S::OpVec::zero(),
         };
         let (contacts, live) = self.model.contacts();
