@@ -2,14 +2,13 @@
 
 use std::time::Duration;
 
-use kinloop::harness::{run, ClientPlan, CoreEdit, SessionPlan};
-use kinloop_client::core::{ConstraintMode, GainChoice};
+use kinloop::harness::{run, ClientPlan, SessionPlan};
+use kinloop_client::core::ConstraintMode;
 use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
 
-fn paper(mode: ConstraintMode, gains: GainChoice) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
+fn paper(mode: ConstraintMode) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
     let mut plan = SessionPlan::paper().unwrap();
     plan.clients[0].constraint_mode = mode;
-    plan.clients[0].configure = Some(CoreEdit::new(move |c| c.gains = gains.clone()));
     run(&plan, &mut |_| {}).unwrap()
 }
 
@@ -19,13 +18,8 @@ fn paper(mode: ConstraintMode, gains: GainChoice) -> (kinloop::harness::SessionS
 /// (Fig 6a); the loop stays closed; the device is never commanded past its limits.
 #[test]
 fn paper_manipulations_reproduce_figs_6_and_7() {
-    let (stiff, rec) = paper(ConstraintMode::Stiffness, GainChoice::Recommended);
-    // The second manipulation with the paper's gains (k_j = 200 N/m, K_pc = 100 N/m), as in Fig 7. With the
-    // server's recommended, five times stiffer position channels the device drifts to its workspace wall
-    // within 3 s and the channels then spin the linkage (1.6 J; closure error 7e-9 m): a limit of the
-    // acceleration-zeroing mode, not of the loop closure, that the server hid while it refused those
-    // sessions' uplinks.
-    let (imp, _) = paper(ConstraintMode::Impedance, GainChoice::Paper);
+    let (stiff, rec) = paper(ConstraintMode::Stiffness);
+    let (imp, _) = paper(ConstraintMode::Impedance);
     let (s, i) = (&stiff.clients[0], &imp.clients[0]);
     assert!(s.device_op_rms_m < 2e-3, "stiffness mode keeps the device on the OP: {} m", s.device_op_rms_m);
     assert!(
