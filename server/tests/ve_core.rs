@@ -356,3 +356,42 @@ fn observers_receive_snapshots_and_push_nothing() {
     assert_eq!(latest[o as usize].as_ref().unwrap().seq, 300);
     assert_eq!(ve.state().q, &ve.model().q0, "an observer moved the linkage");
 }
+
+/// A hand pushing the slider-crank's slider into its wall until everything rests: the snapshot's local model,
+/// with the contact force it computes itself, must predict no OP acceleration (the VE's own, at rest). The
+/// contact's force may enter once: frozen in b̂ *or* live in the local model, not both.
+#[test]
+fn local_model_at_a_resting_contact_predicts_no_acceleration() {
+    let model = model::<kinloop_linkage::Planar>("slider-crank");
+    let mut ve = core(model, VeConfig::paper());
+    let user = ve.join(Duration::ZERO, request("P", Role::Manipulator, "slider", 3)).unwrap().user_id;
+    let push = [5.0, 0.0, 0.0];
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    run(&mut ve, Duration::from_secs(3), &mut latest, |ve, now, latest| {
+        let Some(Some(s)) = latest.get(user as usize) else { return };
+        seq += 1;
+        ve.handle_uplink(now, user, &following(s, seq, &push)).unwrap();
+    });
+    assert!(ve.state().qd.norm() < 1e-6, "at rest: |q̇| = {:e}", ve.state().qd.norm());
+    let s = latest[user as usize].as_ref().unwrap();
+    assert!(!s.contacts.is_empty() && s.contacts[0].depth > 0.0, "the slider presses on the wall: {:?}", s.contacts);
+    // Λ̂⁻¹ from its upper triangle (row-major), then a = Λ̂⁻¹ F + b̂ + Σ g_c f_c as the client computes it.
+    let t = &s.inverse_inertia;
+    let inv = [[t[0], t[1], t[2]], [t[1], t[3], t[4]], [t[2], t[4], t[5]]];
+    let mut hand_part = [0.0; 3];
+    let mut predicted = [0.0; 3];
+    for i in 0..3 {
+        hand_part[i] = (0..3).map(|j| inv[i][j] * push[j]).sum::<f64>();
+        predicted[i] = hand_part[i] + s.bias_accel[i];
+    }
+    for c in &s.contacts {
+        let force = (c.stiffness * c.depth - c.damping * c.normal_velocity).max(0.0);
+        for (p, g) in predicted.iter_mut().zip(&c.op_coupling) {
+            *p += g * force;
+        }
+    }
+    let scale = hand_part.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let error = predicted.iter().map(|x| x * x).sum::<f64>().sqrt();
+    assert!(error < 1e-3 * scale, "predicted OP acceleration {predicted:?} at rest (hand alone gives {scale} m/s²)");
+}

@@ -273,7 +273,7 @@ pub fn run(options: &Options) -> Result<Report> {
     out.chart(
         "pareto_op_error_vs_cost",
         &scatter(
-            "Accuracy vs cost: VE OP error against an RK4 10 kHz reference (paper manipulation)",
+            "Accuracy vs cost: VE OP error against the ideal linkage (alone, RK4 at 10 kHz)",
             "RMS OP trajectory error (m)",
             &measured,
             |m| m.op_error_rms_m,

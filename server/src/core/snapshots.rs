@@ -29,7 +29,10 @@
 //!   by symmetry of P, the gap acceleration per unit OP wrench;
 //! - `mobility = nᵀ Λ⁻¹_cc n`;
 //! - `bias_accel = nᵀ (J_c q̈ + J̇_c q̇) − op_coupling · F_u − mobility · f_c`, the gap acceleration with
-//!   neither the user's wrench nor this contact's own penalty force f_c (both of which the local model adds).
+//!   neither the user's wrench nor this contact's own penalty force f_c (both of which the local model adds);
+//! - and the user's b̂ loses `op_coupling f_c` for every contact sent, for the same reason. The other sent
+//!   contacts' forces stay frozen in each contact's `bias_accel` (the local model has no contact-contact
+//!   cross inertia); contacts beyond the nearest `MAX_LOCAL_CONTACTS` stay frozen in b̂.
 
 use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
 use kinloop_linkage::contact::detect_contacts;
@@ -192,7 +195,13 @@ fn build_one<S: Space>(
         for near_index in 0..scratch.near.len() {
             let Some(mut term) = spare.pop() else { break };
             let contact = scratch.near[near_index];
-            fill_contact_term(model, data, scratch, &contact, &own_wrench, (stiffness, damping), &mut term)?;
+            let penalty =
+                fill_contact_term(model, data, scratch, &contact, &own_wrench, (stiffness, damping), &mut term)?;
+            // The probe applied this contact's penalty, so b̂ holds its effect on the OP; the local model adds
+            // the live penalty itself, so take the frozen one out of b̂ (else the contact pushes twice).
+            for (b, g) in snapshot.bias_accel.iter_mut().zip(&term.op_coupling) {
+                *b -= g * penalty;
+            }
             snapshot.contacts.push(term);
         }
     }
@@ -243,7 +252,8 @@ fn write_config_terms(wire: &mut ConfigTerms, terms: &kinloop_linkage::local_mod
     set(&mut wire.op_bias, terms.op_bias.as_slice());
 }
 
-/// One contact's local-model term (formulas in the module documentation). Overwrites `data.op`.
+/// One contact's local-model term (formulas in the module documentation). Overwrites `data.op`. Returns
+/// the penalty force the probe applied at this contact.
 fn fill_contact_term<S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
@@ -252,7 +262,7 @@ fn fill_contact_term<S: Space>(
     own_wrench: &S::OpVec,
     (stiffness, damping): (f64, f64),
     term: &mut ContactTerm,
-) -> Result<(), DynamicsError> {
+) -> Result<f64, DynamicsError> {
     frame_point_inertia(model, data, contact.body, &contact.point)?;
     let normal = contact.normal.as_slice();
     let lin = normal.len();
@@ -290,5 +300,5 @@ fn fill_contact_term<S: Space>(
     term.bias_accel = gap_accel - coupling.dot(own_wrench) - mobility * penalty;
     term.stiffness = stiffness;
     term.damping = damping;
-    Ok(())
+    Ok(penalty)
 }
