@@ -30,7 +30,10 @@ fn three_users_manipulate_the_testbed_together_and_leave_cleanly() {
     config.record = Some(dir.path().join("ve.csv"));
     let server = live::start_server(&rt, config);
 
-    let devices = [DevicePreset::Paper, DevicePreset::Touch, DevicePreset::Paper];
+    // Two kinds of device. Not the Touch: at 400 N/m it cannot render the testbed's closure stiffly, its
+    // user drifts about 1 cm from the OP even alone, and a session mixing it with stiff devices is marginal
+    // (README, known limits; in virtual time it stays bounded, in real time on a loaded machine it did not).
+    let devices = [DevicePreset::Paper, DevicePreset::Falcon, DevicePreset::Paper];
     let share = live::paper_share(3);
     let clients: Vec<_> = OPS
         .iter()
