@@ -10,10 +10,8 @@ use common::records::{self, linear};
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientError};
 use kinloop_linkage::SceneKind;
-use kinloop_protocol::quic::{
-    client_endpoint, connect, ConnectError, EndpointOptions, ServerIdentity, Trust, CERT_FILE,
-};
-use kinloop_protocol::{Hello, LocalModelForm, RefusalReason, Role, PROTOCOL_VERSION};
+use kinloop_protocol::quic::{ConnectError, ServerIdentity, Trust, CERT_FILE};
+use kinloop_protocol::{Hello, RefusalReason, PROTOCOL_VERSION};
 use kinloop_server::driver::load_scene;
 use kinloop_server::{Access, Identity, Server, ServerConfig};
 
@@ -170,22 +168,9 @@ fn wrong_token_certificate_and_version_are_refused_clearly_and_the_server_carrie
     }
 
     let version = PROTOCOL_VERSION + 1;
-    let hello = Hello {
-        version,
-        token: "right-token".into(),
-        client_name: "from the future".into(),
-        role: Role::Manipulator,
-        op: "link2".into(),
-        device: DevicePreset::Paper.spec(SceneKind::Planar).unwrap().caps(),
-        form: LocalModelForm::OpSpace,
-    };
-    let refused = rt.block_on(async {
-        let options = EndpointOptions { client_bind: live::LOOPBACK, ..EndpointOptions::default() };
-        let endpoint = client_endpoint(&Trust::Fingerprint(server.fingerprint().into()), &options).unwrap();
-        let answer = connect(&endpoint, server.local_addr(), "localhost", &hello).await;
-        endpoint.wait_idle().await;
-        answer
-    });
+    let hello = Hello { version, ..live::paper_hello("from the future", "link2", "right-token") };
+    let (endpoint, refused) = live::raw_session(&rt, &server, &hello);
+    rt.block_on(endpoint.wait_idle());
     match refused {
         Err(ConnectError::Refused(r)) => {
             assert_eq!(r.reason, RefusalReason::UnsupportedVersion { server: PROTOCOL_VERSION, client: version })

@@ -6,12 +6,16 @@ use std::net::SocketAddr;
 use std::path::Path;
 use std::time::Duration;
 
+use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle};
 use kinloop_client::user::UserSpec;
 use kinloop_linkage::builtin::{self, PAPER_WRENCH};
 use kinloop_linkage::scene::OpSpec;
-use kinloop_linkage::Scene;
-use kinloop_protocol::quic::Trust;
+use kinloop_linkage::{Scene, SceneKind};
+use kinloop_protocol::quic::{
+    client_endpoint, connect, ConnectError, ConnectedSession, Endpoint, EndpointOptions, Trust,
+};
+use kinloop_protocol::{Hello, LocalModelForm, Role, PROTOCOL_VERSION};
 use kinloop_server::{Server, ServerConfig, ServerHandle, ServerStats};
 use tokio::runtime::Runtime;
 
@@ -86,4 +90,34 @@ pub fn recorded_client_of(server: &ServerHandle, name: &str, op: &str, wrench: &
 pub fn start_client(config: ClientConfig) -> ClientHandle {
     let name = config.client_name.clone();
     Client::start(config).unwrap_or_else(|e| panic!("client {name} could not start: {e}"))
+}
+
+/// The hello `kinloop-client` sends for the simulated paper device (a raw session built by hand can then
+/// misbehave in ways the real client never would).
+pub fn paper_hello(name: &str, op: &str, token: &str) -> Hello {
+    Hello {
+        version: PROTOCOL_VERSION,
+        token: token.into(),
+        client_name: name.into(),
+        role: Role::Manipulator,
+        op: op.into(),
+        device: DevicePreset::Paper.spec(SceneKind::Planar).expect("paper device").caps(),
+        form: LocalModelForm::OpSpace,
+    }
+}
+
+/// A session opened by hand with `hello` against `server` (pinned by fingerprint); the endpoint is returned
+/// too, to close it when done.
+pub fn raw_session(
+    rt: &Runtime,
+    server: &ServerHandle,
+    hello: &Hello,
+) -> (Endpoint, Result<ConnectedSession, ConnectError>) {
+    rt.block_on(async {
+        let options = EndpointOptions { client_bind: LOOPBACK, ..EndpointOptions::default() };
+        let endpoint =
+            client_endpoint(&Trust::Fingerprint(server.fingerprint().into()), &options).expect("client endpoint");
+        let session = connect(&endpoint, server.local_addr(), "localhost", hello).await;
+        (endpoint, session)
+    })
 }

@@ -3,6 +3,7 @@
 //! CSV recordings both sides write.
 #![allow(dead_code)] // each e2e binary uses its own part of this module
 
+pub mod checks;
 pub mod child;
 pub mod live;
 pub mod records;
