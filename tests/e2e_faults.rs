@@ -247,11 +247,7 @@ fn assert_safe(what: &str, s: &Impaired) {
 
 /// 30 % loss in bursts (Gilbert–Elliott, mean burst 14 packets) each way, on top of 10 ms each way. The
 /// session stays safe: nothing non-finite, force within limits, and whenever the snapshots starve the
-/// force is faded out rather than rendered from a stale model. How much is left to feel is printed, not
-/// asserted: over real QUIC the congestion controller takes the loss for congestion and throttles the
-/// 1 kHz streams far below what the emulated loss alone would leave, so the force is off for much of the
-/// run; a pushing hand moves the unforced device away from its OP meanwhile (up to ≈5 cm was seen) and
-/// the position channel pulls it back, at the device's limit, when snapshots return.
+/// force is faded out rather than rendered from a stale model; and the device stays near its OP.
 #[test]
 fn thirty_percent_bursty_loss_leaves_the_session_stable() {
     let _bounded = common::bounded("thirty_percent_bursty_loss_leaves_the_session_stable", Duration::from_secs(40));
@@ -284,6 +280,10 @@ fn thirty_percent_bursty_loss_leaves_the_session_stable() {
     assert!(user.uplink_loss >= 0.15, "uplink loss {}: the bursts were not injected", user.uplink_loss);
     assert!(starved.iter().all(|t| t.gain == 0.0 && t.command == [0.0; 3]), "force rendered from a stale model");
     assert_safe("30% bursty loss", &s);
+    // With BBR (protocol/src/quic/endpoint.rs) enough snapshots get through to keep rendering: the latency
+    // experiment's divergence criterion holds. (Under Cubic the force was off most of the run and a pushing
+    // hand once took the device 5 cm away.)
+    assert!(s.device_op_max < 0.05, "the device ended {} m from its OP", s.device_op_max);
 }
 
 /// A tenth of the packets each way overtake those in flight (5 ms each way): the VE ignores the
