@@ -331,18 +331,7 @@ impl Junk {
     /// absurd values. (Never a plausible uplink: from an authenticated manipulator that is a command, not
     /// junk; and a random bit flip in a valid uplink often is one.)
     fn datagram(&mut self, i: u64) -> Vec<u8> {
-        let uplink = |seq: u64| Uplink {
-            seq,
-            client_time_s: seq as f64 * 1e-3,
-            last_snapshot_seq: 0,
-            last_snapshot_age_s: 0.0,
-            hand_wrench: vec![0.0; 3],
-            device_pose: vec![0.0; 3],
-            device_twist: vec![0.0; 3],
-            model_pose: vec![0.0; 3],
-            model_twist: vec![0.0; 3],
-            flags: 0,
-        };
+        let uplink = |seq: u64| Uplink::at_rest(seq, 3, 3);
         let encode = |u: Uplink| codec::encode_datagram(&Datagram::Uplink(u)).expect("encodes");
         match i % 6 {
             0 => (0..1 + self.next() % 1100).map(|_| self.next() as u8).collect(),

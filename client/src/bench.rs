@@ -135,18 +135,7 @@ pub fn realtime_loop_sim(
     let (spent_tx, mut spent_rx) = rtrb::RingBuffer::new(32);
     let (uplinks_tx, mut uplinks_rx) = rtrb::RingBuffer::new(64);
     let (mut free_tx, free_rx) = rtrb::RingBuffer::new(64);
-    let template = kinloop_protocol::Uplink {
-        seq: 0,
-        client_time_s: 0.0,
-        last_snapshot_seq: 0,
-        last_snapshot_age_s: 0.0,
-        hand_wrench: vec![0.0; 3],
-        device_pose: vec![0.0; 3],
-        device_twist: vec![0.0; 3],
-        model_pose: vec![0.0; 3],
-        model_twist: vec![0.0; 3],
-        flags: 0,
-    };
+    let template = kinloop_protocol::Uplink::at_rest(0, 3, 3);
     for _ in 0..64 {
         let _ = free_tx.push(template.clone());
     }

@@ -429,6 +429,25 @@ pub struct Uplink {
     pub flags: u32,
 }
 
+impl Uplink {
+    /// An uplink at rest: no hand wrench, every pose and twist zero (`k` operational components, `pose_dim`
+    /// pose numbers), sent at `seq` milliseconds. Clients fill one in place each tick; tests start from it.
+    pub fn at_rest(seq: u64, k: usize, pose_dim: usize) -> Uplink {
+        Uplink {
+            seq,
+            client_time_s: seq as f64 * 1e-3,
+            last_snapshot_seq: 0,
+            last_snapshot_age_s: 0.0,
+            hand_wrench: vec![0.0; k],
+            device_pose: vec![0.0; pose_dim],
+            device_twist: vec![0.0; k],
+            model_pose: vec![0.0; pose_dim],
+            model_twist: vec![0.0; k],
+            flags: 0,
+        }
+    }
+}
+
 /// Unreliable messages, one per QUIC datagram (or per unidirectional stream when too large for a datagram).
 // Messages are built and sent one at a time, so the size gap costs nothing; boxing would cost an allocation.
 #[allow(clippy::large_enum_variant)]

@@ -92,18 +92,7 @@ fn too_many_contacts_are_refused() {
 
 #[test]
 fn unknown_uplink_flags_are_refused() {
-    let uplink = Uplink {
-        seq: 1,
-        client_time_s: 1.0,
-        last_snapshot_seq: 0,
-        last_snapshot_age_s: 0.0,
-        hand_wrench: vec![0.0; 3],
-        device_pose: vec![0.0; 3],
-        device_twist: vec![0.0; 3],
-        model_pose: vec![0.0; 3],
-        model_twist: vec![0.0; 3],
-        flags: 1 << 31,
-    };
+    let uplink = Uplink { flags: 1 << 31, ..Uplink::at_rest(1, 3, 3) };
     let bytes = encode_datagram(&Datagram::Uplink(uplink)).unwrap();
     assert_eq!(decode_datagram(&bytes, &testbed_shape()).unwrap_err(), DecodeError::UnknownFlags { bits: 1 << 31 });
 }
