@@ -367,18 +367,7 @@ impl<S: Space> HapticCore<S> {
         let config_shape = (config.form == ModelForm::Config).then_some((scene.n as usize, scene.m as usize));
         let pose_len = OpPose::<S>::wire_len();
         let k = S::DIM;
-        let uplink = Uplink {
-            seq: 0,
-            client_time_s: 0.0,
-            last_snapshot_seq: 0,
-            last_snapshot_age_s: 0.0,
-            hand_wrench: vec![0.0; k],
-            device_pose: vec![0.0; pose_len],
-            device_twist: vec![0.0; k],
-            model_pose: vec![0.0; pose_len],
-            model_twist: vec![0.0; k],
-            flags: 0,
-        };
+        let uplink = Uplink::at_rest(0, k, pose_len);
         Ok(HapticCore {
             gains,
             limits: WrenchLimits::of(device),
