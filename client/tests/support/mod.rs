@@ -171,9 +171,6 @@ impl TestbedVe {
 
     /// One VE step of 1 ms.
     pub fn step(&mut self) {
-        // Work-around for linkage 427d6d5: `step` clears `implicit_mass` only when `use_implicit_mass` is
-        // set, but `forward_dynamics` (our snapshot) resets that flag, so the coupling would be added twice.
-        self.data.implicit_mass.fill(0.0);
         step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut self.coupling, &self.step_config)
             .expect("the testbed steps");
         self.time_s += 1e-3;

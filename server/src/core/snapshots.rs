@@ -61,12 +61,8 @@ impl<S: Space> VeCore<S> {
             evaluation: Evaluation::ProbeHands,
             stage: 0,
         };
-        // `step` clears `implicit_mass` only when the flag says the last step used it; `forward_dynamics`
-        // lowers the flag without clearing, so put it back or the next step would add to stale terms.
-        let implicit_mass_in_use = self.data.use_implicit_mass;
-        let evaluated = forward_dynamics(&self.model, &mut self.data, &self.q, &self.qd, &mut forces);
-        self.data.use_implicit_mass = implicit_mass_in_use;
-        if let Err(error) = evaluated {
+        // `forward_dynamics` drops the last step's implicit coupling mass itself (eq 9 needs D alone).
+        if let Err(error) = forward_dynamics(&self.model, &mut self.data, &self.q, &self.qd, &mut forces) {
             self.metrics.snapshots_withheld += self.present_users() as u64;
             self.events.push(VeEvent::SnapshotsWithheld { step: self.step, error });
             return;
