@@ -79,16 +79,19 @@ pub trait VecOps:
     /// Mutable components, in order.
     fn as_mut_slice(&mut self) -> &mut [f64];
     /// Builds from exactly `LEN` components (callers guarantee the length).
+    #[inline]
     fn from_slice(v: &[f64]) -> Self {
         let mut out = Self::zero();
         out.as_mut_slice().copy_from_slice(&v[..Self::LEN]);
         out
     }
     /// Euclidean norm.
+    #[inline]
     fn norm(&self) -> f64 {
         self.dot(self).sqrt()
     }
     /// True when every component is finite.
+    #[inline]
     fn is_finite(&self) -> bool {
         self.as_slice().iter().all(|x| f64::is_finite(*x))
     }
@@ -96,15 +99,19 @@ pub trait VecOps:
 
 impl VecOps for f64 {
     const LEN: usize = 1;
+    #[inline]
     fn zero() -> Self {
         0.0
     }
+    #[inline]
     fn dot(&self, other: &Self) -> f64 {
         self * other
     }
+    #[inline]
     fn as_slice(&self) -> &[f64] {
         std::slice::from_ref(self)
     }
+    #[inline]
     fn as_mut_slice(&mut self) -> &mut [f64] {
         std::slice::from_mut(self)
     }
@@ -114,15 +121,19 @@ macro_rules! impl_vec_ops {
     ($t:ty, $n:expr) => {
         impl VecOps for $t {
             const LEN: usize = $n;
+            #[inline]
             fn zero() -> Self {
                 <$t>::zeros()
             }
+            #[inline]
             fn dot(&self, other: &Self) -> f64 {
                 nalgebra::Matrix::dot(self, other)
             }
+            #[inline]
             fn as_slice(&self) -> &[f64] {
                 nalgebra::Matrix::as_slice(self)
             }
+            #[inline]
             fn as_mut_slice(&mut self) -> &mut [f64] {
                 nalgebra::Matrix::as_mut_slice(self)
             }
@@ -161,6 +172,7 @@ pub trait MatOps:
     /// Transpose.
     fn transpose(&self) -> Self;
     /// True when every component is finite.
+    #[inline]
     fn is_finite(&self) -> bool {
         self.as_slice().iter().all(|x| f64::is_finite(*x))
     }
@@ -170,18 +182,23 @@ macro_rules! impl_mat_ops {
     ($t:ty, $n:expr) => {
         impl MatOps for $t {
             const DIM: usize = $n;
+            #[inline]
             fn zero() -> Self {
                 <$t>::zeros()
             }
+            #[inline]
             fn identity() -> Self {
                 <$t>::identity()
             }
+            #[inline]
             fn as_slice(&self) -> &[f64] {
                 nalgebra::Matrix::as_slice(self)
             }
+            #[inline]
             fn as_mut_slice(&mut self) -> &mut [f64] {
                 nalgebra::Matrix::as_mut_slice(self)
             }
+            #[inline]
             fn transpose(&self) -> Self {
                 nalgebra::Matrix::transpose(self)
             }
@@ -288,6 +305,7 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
     /// Angular part of an operational-space vector.
     fn op_ang(v: &Self::OpVec) -> Self::Angular;
     /// Outer product `a bᵀ` of two operational-space vectors.
+    #[inline]
     fn op_outer(a: &Self::OpVec, b: &Self::OpVec) -> Self::OpMat {
         let mut m = Self::OpMat::zero();
         for c in 0..Self::DIM {
@@ -319,34 +337,44 @@ impl Space for Planar {
     type OpVec = Vector3<f64>;
     type OpMat = Matrix3<f64>;
 
+    #[inline]
     fn rot_identity() -> Self::Rot {
         UnitComplex::identity()
     }
+    #[inline]
     fn rot_mul(a: &Self::Rot, b: &Self::Rot) -> Self::Rot {
         a * b
     }
+    #[inline]
     fn rot_inverse(r: &Self::Rot) -> Self::Rot {
         r.inverse()
     }
+    #[inline]
     fn rotate(r: &Self::Rot, p: &Self::Point) -> Self::Point {
         r * p
     }
+    #[inline]
     fn rot_about_axis(_axis: &Self::Point, cos: f64, sin: f64) -> Self::Rot {
         UnitComplex::from_cos_sin_unchecked(cos, sin)
     }
+    #[inline]
     fn rot_from_vector(v: &f64) -> Self::Rot {
         UnitComplex::new(*v)
     }
+    #[inline]
     fn rot_log(r: &Self::Rot) -> f64 {
         r.angle()
     }
+    #[inline]
     fn rot_is_finite(r: &Self::Rot) -> bool {
         r.re.is_finite() && r.im.is_finite()
     }
     const ROT_PARAMS: usize = 1;
+    #[inline]
     fn rot_to_params(r: &Self::Rot, out: &mut [f64]) {
         out[0] = r.angle();
     }
+    #[inline]
     fn rot_from_params(p: &[f64]) -> Option<Self::Rot> {
         match p {
             [a] if a.is_finite() => Some(UnitComplex::new(*a)),
@@ -367,43 +395,55 @@ impl Space for Planar {
             _ => Err(format!("expected one number (kg m² about z) for a planar scene, got {}", v.len())),
         }
     }
+    #[inline]
     fn rot_inertia_size(i: &f64) -> f64 {
         *i
     }
+    #[inline]
     fn default_axis() -> Self::Point {
         Vector2::new(1.0, 0.0)
     }
+    #[inline]
     fn axis_as_angular(_axis_world: &Self::Point) -> f64 {
         1.0
     }
 
+    #[inline]
     fn ang_cross_point(w: &f64, p: &Self::Point) -> Self::Point {
         Vector2::new(-w * p.y, w * p.x)
     }
+    #[inline]
     fn point_cross_point(a: &Self::Point, b: &Self::Point) -> f64 {
         a.x * b.y - a.y * b.x
     }
 
+    #[inline]
     fn spatial(ang: f64, lin: Self::Point) -> Self::Spatial {
         Vector3::new(ang, lin.x, lin.y)
     }
+    #[inline]
     fn spatial_ang(s: &Self::Spatial) -> f64 {
         s[0]
     }
+    #[inline]
     fn spatial_lin(s: &Self::Spatial) -> Self::Point {
         Vector2::new(s[1], s[2])
     }
+    #[inline]
     fn cross_motion(v: &Self::Spatial, m: &Self::Spatial) -> Self::Spatial {
         // crm(v) = [[0,0,0],[vy,0,-ω],[-vx,ω,0]] (Featherstone's planar algebra).
         Vector3::new(0.0, v[2] * m[0] - v[0] * m[2], -v[1] * m[0] + v[0] * m[1])
     }
+    #[inline]
     fn cross_force(v: &Self::Spatial, f: &Self::Spatial) -> Self::Spatial {
         // crf(v) = -crm(v)ᵀ = [[0,-vy,vx],[0,0,-ω],[0,ω,0]].
         Vector3::new(-v[2] * f[1] + v[1] * f[2], -v[0] * f[2], v[0] * f[1])
     }
+    #[inline]
     fn inertia_mul(i: &Self::Inertia, m: &Self::Spatial) -> Self::Spatial {
         i * m
     }
+    #[inline]
     fn inertia_world(mass: f64, c: &Self::Point, inertia_com: &f64, _rot: &Self::Rot) -> Self::Inertia {
         // Kinetic energy ½ m |v + ω ẑ×c|² + ½ I_c ω² written as ½ (ω,v)ᵀ M (ω,v).
         let mc_x = mass * c.x;
@@ -411,12 +451,15 @@ impl Space for Planar {
         Matrix3::new(inertia_com + mass * (c.x * c.x + c.y * c.y), -mc_y, mc_x, -mc_y, mass, 0.0, mc_x, 0.0, mass)
     }
 
+    #[inline]
     fn op(lin: Self::Point, ang: f64) -> Self::OpVec {
         Vector3::new(lin.x, lin.y, ang)
     }
+    #[inline]
     fn op_lin(v: &Self::OpVec) -> Self::Point {
         Vector2::new(v[0], v[1])
     }
+    #[inline]
     fn op_ang(v: &Self::OpVec) -> f64 {
         v[2]
     }
@@ -439,26 +482,33 @@ impl Space for Spatial {
     type OpVec = Vector6<f64>;
     type OpMat = Matrix6<f64>;
 
+    #[inline]
     fn rot_identity() -> Self::Rot {
         Rotation3::identity()
     }
+    #[inline]
     fn rot_mul(a: &Self::Rot, b: &Self::Rot) -> Self::Rot {
         a * b
     }
+    #[inline]
     fn rot_inverse(r: &Self::Rot) -> Self::Rot {
         r.inverse()
     }
+    #[inline]
     fn rotate(r: &Self::Rot, p: &Self::Point) -> Self::Point {
         r * p
     }
+    #[inline]
     fn rot_about_axis(axis: &Self::Point, cos: f64, sin: f64) -> Self::Rot {
         // Rodrigues: R = I + s [a]× + (1 - c) [a]×², for a unit axis a.
         let k = skew(axis);
         Rotation3::from_matrix_unchecked(Matrix3::identity() + k * sin + k * k * (1.0 - cos))
     }
+    #[inline]
     fn rot_from_vector(v: &Self::Angular) -> Self::Rot {
         Rotation3::new(*v)
     }
+    #[inline]
     fn rot_log(r: &Self::Rot) -> Self::Angular {
         // sin θ · axis from the skew part and cos θ from the trace: atan2 keeps full relative accuracy for
         // small angles (acos of the trace, as in `scaled_axis`, loses half the digits there).
@@ -478,14 +528,17 @@ impl Space for Spatial {
             r.scaled_axis()
         }
     }
+    #[inline]
     fn rot_is_finite(r: &Self::Rot) -> bool {
         r.matrix().iter().all(|x| x.is_finite())
     }
     const ROT_PARAMS: usize = 4;
+    #[inline]
     fn rot_to_params(r: &Self::Rot, out: &mut [f64]) {
         let q = nalgebra::UnitQuaternion::from_rotation_matrix(r);
         out[..4].copy_from_slice(&[q.w, q.i, q.j, q.k]);
     }
+    #[inline]
     fn rot_from_params(p: &[f64]) -> Option<Self::Rot> {
         match p {
             [w, x, y, z] if p.iter().all(|v| v.is_finite()) => {
@@ -521,45 +574,57 @@ impl Space for Spatial {
         }
         Ok(m)
     }
+    #[inline]
     fn rot_inertia_size(i: &Matrix3<f64>) -> f64 {
         i.trace() / 3.0
     }
+    #[inline]
     fn default_axis() -> Self::Point {
         Vector3::new(0.0, 0.0, 1.0)
     }
+    #[inline]
     fn axis_as_angular(axis_world: &Self::Point) -> Self::Angular {
         *axis_world
     }
 
+    #[inline]
     fn ang_cross_point(w: &Self::Angular, p: &Self::Point) -> Self::Point {
         w.cross(p)
     }
+    #[inline]
     fn point_cross_point(a: &Self::Point, b: &Self::Point) -> Self::Angular {
         a.cross(b)
     }
 
+    #[inline]
     fn spatial(ang: Self::Angular, lin: Self::Point) -> Self::Spatial {
         Vector6::new(ang.x, ang.y, ang.z, lin.x, lin.y, lin.z)
     }
+    #[inline]
     fn spatial_ang(s: &Self::Spatial) -> Self::Angular {
         Vector3::new(s[0], s[1], s[2])
     }
+    #[inline]
     fn spatial_lin(s: &Self::Spatial) -> Self::Point {
         Vector3::new(s[3], s[4], s[5])
     }
+    #[inline]
     fn cross_motion(v: &Self::Spatial, m: &Self::Spatial) -> Self::Spatial {
         let (w, vl) = (Self::spatial_ang(v), Self::spatial_lin(v));
         let (mw, ml) = (Self::spatial_ang(m), Self::spatial_lin(m));
         Self::spatial(w.cross(&mw), w.cross(&ml) + vl.cross(&mw))
     }
+    #[inline]
     fn cross_force(v: &Self::Spatial, f: &Self::Spatial) -> Self::Spatial {
         let (w, vl) = (Self::spatial_ang(v), Self::spatial_lin(v));
         let (n, fl) = (Self::spatial_ang(f), Self::spatial_lin(f));
         Self::spatial(w.cross(&n) + vl.cross(&fl), w.cross(&fl))
     }
+    #[inline]
     fn inertia_mul(i: &Self::Inertia, m: &Self::Spatial) -> Self::Spatial {
         i * m
     }
+    #[inline]
     fn inertia_world(mass: f64, c: &Self::Point, inertia_com: &Matrix3<f64>, rot: &Self::Rot) -> Self::Inertia {
         // I_O = [[R I_c Rᵀ + m [c]×[c]×ᵀ, m [c]×], [m [c]×ᵀ, m 1]].
         let r = rot.matrix();
@@ -574,12 +639,15 @@ impl Space for Spatial {
         out
     }
 
+    #[inline]
     fn op(lin: Self::Point, ang: Self::Angular) -> Self::OpVec {
         Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
     }
+    #[inline]
     fn op_lin(v: &Self::OpVec) -> Self::Point {
         Vector3::new(v[0], v[1], v[2])
     }
+    #[inline]
     fn op_ang(v: &Self::OpVec) -> Self::Angular {
         Vector3::new(v[3], v[4], v[5])
     }
