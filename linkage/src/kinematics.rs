@@ -11,6 +11,19 @@ use crate::space::{Space, VecOps};
 /// Computes body poses, the motion subspace S_i of every joint and every body's spatial inertia, all in the
 /// world frame, at configuration `q`.
 pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
+    forward_poses(model, data, q);
+    let kin = &mut data.kin;
+    for (i, body) in model.bodies.iter().enumerate() {
+        kin.com[i] = kin.body_pos[i] + S::rotate(&kin.body_rot[i], &body.com);
+        kin.body_inertia[i] = S::inertia_world(body.mass, &kin.com[i], &body.inertia, &kin.body_rot[i]);
+    }
+}
+
+/// The geometric part of [`forward_kinematics`]: body poses and motion subspaces, what the loop closure's h
+/// and W need, but not the centres of mass and spatial inertias, which keep their values from the last full
+/// evaluation (the projection after a step evaluates the closure this way; the next step's dynamics redo it
+/// all).
+pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
     let kin = &mut data.kin;
     let q = q.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {
@@ -37,9 +50,6 @@ pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DV
                 kin.motion_subspace[i] = S::spatial(S::Angular::zero(), axis_world);
             }
         }
-        let body = &model.bodies[i];
-        kin.com[i] = kin.body_pos[i] + S::rotate(&kin.body_rot[i], &body.com);
-        kin.body_inertia[i] = S::inertia_world(body.mass, &kin.com[i], &body.inertia, &kin.body_rot[i]);
     }
 }
 
