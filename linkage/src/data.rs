@@ -108,6 +108,8 @@ pub struct KktWorkspace {
     pub schur: DMatrix<f64>,
     /// Pivoted Cholesky factor of S (lower, in pivoted order), m×m.
     pub schur_factor: DMatrix<f64>,
+    /// Reciprocals of the diagonal of `schur_factor` (the first `schur_rank` entries are valid), m.
+    pub schur_inv_diag: DVector<f64>,
     /// Pivot order: `schur_perm[k]` is the closure row eliminated at step k.
     pub schur_perm: Vec<usize>,
     /// Numerical rank of S: rows `schur_perm[rank..]` are dependent and get λ = 0.
@@ -229,6 +231,7 @@ impl<S: Space> Data<S> {
                 z_rows: vec![n; m],
                 schur: DMatrix::zeros(m, m),
                 schur_factor: DMatrix::zeros(m, m),
+                schur_inv_diag: DVector::zeros(m),
                 schur_perm: (0..m).collect(),
                 schur_rank: 0,
                 tmp_n: DVector::zeros(n),

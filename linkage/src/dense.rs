@@ -72,22 +72,24 @@ pub fn sub_scaled(y: &mut [f64], alpha: f64, x: &[f64]) {
 /// triangle of `l`, in pivoted order (`perm[k]` = row eliminated at step k). A row is dependent when its
 /// remaining pivot falls below `tolerance` times its own original diagonal, which makes the decision
 /// independent of each row's units. At most `max_rank` rows are kept. Returns the numerical rank. `scale`
-/// is scratch of length m.
+/// is scratch of length m; `inv_diag[k]` receives `1 / l_kk` for the kept rows, so that the solves
+/// multiply instead of dividing (a solve with two rows is a chain of four dependent divisions otherwise).
 pub fn pivoted_cholesky(
     s: &DMatrix<f64>,
     l: &mut DMatrix<f64>,
     perm: &mut [usize],
     scale: &mut DVector<f64>,
+    inv_diag: &mut [f64],
     tolerance: f64,
     max_rank: usize,
 ) -> usize {
     // The sizes of a few closure rows get their own copy with m a constant, so the loops unroll (their
     // bookkeeping otherwise outweighs a 2x2 factorization several times).
     match s.nrows() {
-        1 => pivoted_cholesky_m(1, s, l, perm, scale, tolerance, max_rank),
-        2 => pivoted_cholesky_m(2, s, l, perm, scale, tolerance, max_rank),
-        3 => pivoted_cholesky_m(3, s, l, perm, scale, tolerance, max_rank),
-        m => pivoted_cholesky_m(m, s, l, perm, scale, tolerance, max_rank),
+        1 => pivoted_cholesky_m(1, s, l, perm, scale, inv_diag, tolerance, max_rank),
+        2 => pivoted_cholesky_m(2, s, l, perm, scale, inv_diag, tolerance, max_rank),
+        3 => pivoted_cholesky_m(3, s, l, perm, scale, inv_diag, tolerance, max_rank),
+        m => pivoted_cholesky_m(m, s, l, perm, scale, inv_diag, tolerance, max_rank),
     }
 }
 
@@ -98,6 +100,7 @@ fn pivoted_cholesky_m(
     l: &mut DMatrix<f64>,
     perm: &mut [usize],
     scale: &mut DVector<f64>,
+    inv_diag: &mut [f64],
     tolerance: f64,
     max_rank: usize,
 ) -> usize {
@@ -134,9 +137,12 @@ fn pivoted_cholesky_m(
         }
         let (head, trailing) = a.split_at_mut((k + 1) * m);
         let col_k = &mut head[k * m..];
-        let lkk = col_k[k].sqrt();
+        // sqrt(p) and 1/p side by side rather than 1/sqrt(p) in sequence (as in `ltl`).
+        let pivot = col_k[k];
+        let lkk = pivot.sqrt();
         col_k[k] = lkk;
-        let inv = 1.0 / lkk;
+        let inv = lkk * (1.0 / pivot);
+        inv_diag[k] = inv;
         for x in &mut col_k[k + 1..] {
             *x *= inv;
         }
@@ -149,20 +155,35 @@ fn pivoted_cholesky_m(
     cap
 }
 
-/// Solves `S x = r` in place with a factor from [`pivoted_cholesky`]; rows beyond the rank get `x = 0`.
-/// `y` is scratch of length m.
-pub fn pivoted_solve(l: &DMatrix<f64>, perm: &[usize], rank: usize, r: &mut DVector<f64>, y: &mut DVector<f64>) {
+/// Solves `S x = r` in place with a factor (and its `inv_diag`) from [`pivoted_cholesky`]; rows beyond the
+/// rank get `x = 0`. `y` is scratch of length m.
+pub fn pivoted_solve(
+    l: &DMatrix<f64>,
+    inv_diag: &[f64],
+    perm: &[usize],
+    rank: usize,
+    r: &mut DVector<f64>,
+    y: &mut DVector<f64>,
+) {
     let (r, y) = (r.as_mut_slice(), y.as_mut_slice());
     match (l.nrows(), rank) {
-        (2, 2) => pivoted_solve_m(2, 2, l, perm, r, y),
-        (3, 3) => pivoted_solve_m(3, 3, l, perm, r, y),
-        (m, rank) => pivoted_solve_m(m, rank, l, perm, r, y),
+        (2, 2) => pivoted_solve_m(2, 2, l, inv_diag, perm, r, y),
+        (3, 3) => pivoted_solve_m(3, 3, l, inv_diag, perm, r, y),
+        (m, rank) => pivoted_solve_m(m, rank, l, inv_diag, perm, r, y),
     }
 }
 
 /// [`pivoted_solve`] with the sizes as arguments, copied with constants for the common small cases.
 #[inline(always)]
-fn pivoted_solve_m(m: usize, rank: usize, l: &DMatrix<f64>, perm: &[usize], r: &mut [f64], y: &mut [f64]) {
+fn pivoted_solve_m(
+    m: usize,
+    rank: usize,
+    l: &DMatrix<f64>,
+    inv_diag: &[f64],
+    perm: &[usize],
+    r: &mut [f64],
+    y: &mut [f64],
+) {
     let a = &l.as_slice()[..m * m];
     let r = &mut r[..m];
     let y = &mut y[..rank];
@@ -171,11 +192,11 @@ fn pivoted_solve_m(m: usize, rank: usize, l: &DMatrix<f64>, perm: &[usize], r: &
         for (j, yj) in y[..k].iter().enumerate() {
             s = mul_add(-a[j * m + k], *yj, s);
         }
-        y[k] = s / a[k * m + k];
+        y[k] = s * inv_diag[k];
     }
     for k in (0..rank).rev() {
         let col = &a[k * m..k * m + rank];
-        y[k] = (y[k] - dot(&col[k + 1..], &y[k + 1..])) / col[k];
+        y[k] = (y[k] - dot(&col[k + 1..], &y[k + 1..])) * inv_diag[k];
     }
     r.fill(0.0);
     for (p, yk) in perm.iter().zip(y.iter()) {

@@ -82,6 +82,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         &mut kkt.schur_factor,
         &mut kkt.schur_perm,
         &mut kkt.tmp_m,
+        kkt.schur_inv_diag.as_mut_slice(),
         RANK_TOLERANCE,
         model.closure_rank,
     );
@@ -107,7 +108,8 @@ pub fn sub_columns_times(a: &DMatrix<f64>, rows: &[usize], r: &[f64], x: &mut [f
 /// Solves `S x = r` in place on the independent rows of the pivoted factor; dependent rows get `x = 0`.
 pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
     let kkt = &mut data.kkt;
-    dense::pivoted_solve(&kkt.schur_factor, &kkt.schur_perm, kkt.schur_rank, r, &mut kkt.tmp_m2);
+    let inv = kkt.schur_inv_diag.as_slice();
+    dense::pivoted_solve(&kkt.schur_factor, inv, &kkt.schur_perm, kkt.schur_rank, r, &mut kkt.tmp_m2);
 }
 
 /// Solves eq 4 for `data.qdd` and `data.lambda` with the right-hand side

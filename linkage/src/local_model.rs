@@ -305,6 +305,7 @@ pub struct ConfigSpaceLocalModel<S: Space> {
     z: DMatrix<f64>,
     schur: DMatrix<f64>,
     schur_factor: DMatrix<f64>,
+    schur_inv_diag: DVector<f64>,
     perm: Vec<usize>,
     rank: usize,
     response: DMatrix<f64>,
@@ -332,6 +333,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
             z: DMatrix::zeros(n, m),
             schur: DMatrix::zeros(m, m),
             schur_factor: DMatrix::zeros(m, m),
+            schur_inv_diag: DVector::zeros(m),
             perm: (0..m).collect(),
             rank: 0,
             response: DMatrix::zeros(n, k),
@@ -382,6 +384,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
                 &mut self.schur_factor,
                 &mut self.perm,
                 &mut self.tmp_m,
+                self.schur_inv_diag.as_mut_slice(),
                 RANK_TOLERANCE,
                 m,
             );
@@ -417,7 +420,8 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
         // With y = L⁻¹ τ: λ = S⁺ (Zᵀ y + w), q̈ = L⁻ᵀ (y - Z λ).
         self.tmp_m.gemv_tr(1.0, &self.z, &self.tmp_n, 0.0);
         self.tmp_m.axpy(closure_weight, &self.terms.closure_bias_stab, 1.0);
-        dense::pivoted_solve(&self.schur_factor, &self.perm, self.rank, &mut self.tmp_m, &mut self.tmp_m2);
+        let inv = self.schur_inv_diag.as_slice();
+        dense::pivoted_solve(&self.schur_factor, inv, &self.perm, self.rank, &mut self.tmp_m, &mut self.tmp_m2);
         self.tmp_n.gemv(-1.0, &self.z, &self.tmp_m, 1.0);
         dense::solve_lower_t(&self.factor, &mut self.tmp_n.as_mut_slice()[..n]);
     }

@@ -68,7 +68,7 @@ pub fn frame_point_inertia<S: Space>(
                 for (j, gj) in gc[..i].iter().enumerate() {
                     s = mul_add(-l[j * m + i], *gj, s);
                 }
-                gc[i] = s / l[i * m + i];
+                gc[i] = s * kkt.schur_inv_diag[i];
             }
         }
         for c in 0..k {
