@@ -94,6 +94,7 @@ pub fn pivoted_cholesky(
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)] // the sizes are arguments so that each copy gets them as constants
 fn pivoted_cholesky_m(
     m: usize,
     s: &DMatrix<f64>,
