@@ -201,6 +201,45 @@ pub struct Data<S: Space> {
     pub op: OpSpaceWorkspace<S>,
     /// Integrator scratch.
     pub integ: IntegratorWorkspace,
+    /// The state at which the position- and velocity-dependent terms above were last evaluated.
+    pub(crate) terms_at: TermsMemo,
+}
+
+/// The state `(q, q̇)` at which `dynamics_terms` last evaluated everything but the applied forces, so that
+/// an evaluation at the same state (the VE server's next step, at the state its snapshots just probed)
+/// recomputes only the forces. Exact: a hit needs the very same bits, and whatever changes the kinematics
+/// (`forward_poses`, `forward_velocity`) clears it.
+#[derive(Clone, Debug)]
+pub(crate) struct TermsMemo {
+    q: DVector<f64>,
+    qd: DVector<f64>,
+    valid: bool,
+}
+
+impl TermsMemo {
+    fn new(n: usize) -> Self {
+        TermsMemo { q: DVector::zeros(n), qd: DVector::zeros(n), valid: false }
+    }
+
+    /// True when the terms were evaluated at exactly `(q, q̇)` and nothing has touched them since.
+    pub(crate) fn holds(&self, q: &DVector<f64>, qd: &DVector<f64>) -> bool {
+        let same = |a: &DVector<f64>, b: &DVector<f64>| {
+            a.len() == b.len() && a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        self.valid && same(&self.q, q) && same(&self.qd, qd)
+    }
+
+    /// Records that the terms now belong to `(q, q̇)`.
+    pub(crate) fn record(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
+        self.q.copy_from(q);
+        self.qd.copy_from(qd);
+        self.valid = true;
+    }
+
+    /// Forgets the state: the kinematics are being changed.
+    pub(crate) fn clear(&mut self) {
+        self.valid = false;
+    }
 }
 
 impl<S: Space> Data<S> {
@@ -220,6 +259,7 @@ impl<S: Space> Data<S> {
             applied: DVector::zeros(n),
             implicit_mass: DMatrix::zeros(n, n),
             use_implicit_mass: false,
+            terms_at: TermsMemo::new(n),
             closure_residual: DVector::zeros(m),
             closure_jacobian_t: DMatrix::zeros(n, m),
             closure_bias: DVector::zeros(m),

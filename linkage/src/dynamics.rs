@@ -76,7 +76,8 @@ pub fn check_state<S: Space>(model: &Model<S>, q: &DVector<f64>, qd: &DVector<f6
 }
 
 /// Computes every term of eq 1-3 at `(q, q̇)`: kinematics, D, B, G, joint forces, h, W, w, w_stab, and the
-/// external forces into `data.applied`. Does not solve.
+/// external forces into `data.applied`. Does not solve. When the terms already belong to exactly this
+/// state (see `TermsMemo`), only the external forces are evaluated again.
 pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
     model: &Model<S>,
     data: &mut Data<S>,
@@ -84,14 +85,17 @@ pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
     qd: &DVector<f64>,
     forces: &mut F,
 ) {
-    forward_kinematics(model, data, q);
-    forward_velocity(model, data, qd);
-    mass_matrix(model, data);
-    bias_forces(model, data);
-    gravity_forces(model, data, q);
-    joint_forces(model, data, q, qd);
-    loop_closure(model, data);
-    stabilize(model, data, qd);
+    if !data.terms_at.holds(q, qd) {
+        forward_kinematics(model, data, q);
+        forward_velocity(model, data, qd);
+        mass_matrix(model, data);
+        bias_forces(model, data);
+        gravity_forces(model, data, q);
+        joint_forces(model, data, q, qd);
+        loop_closure(model, data);
+        stabilize(model, data, qd);
+        data.terms_at.record(q, qd);
+    }
     data.applied.fill(0.0);
     forces.add_forces(model, &data.kin, &mut data.applied);
 }
@@ -117,5 +121,57 @@ pub fn drop_implicit_mass<S: Space>(data: &mut Data<S>) {
     if data.use_implicit_mass {
         data.implicit_mass.fill(0.0);
         data.use_implicit_mass = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::{paper_testbed, random_state};
+    use nalgebra::Vector3;
+
+    /// `(q̈, λ)` of the last solve.
+    fn solved<S: Space>(model: &Model<S>, data: &Data<S>) -> DVector<f64> {
+        let mut out = data.qdd.clone().resize_vertically(model.nq() + model.nc(), 0.0);
+        out.rows_mut(model.nq(), model.nc()).copy_from(&data.lambda);
+        out
+    }
+
+    /// `(q̈, λ)` from a fresh workspace.
+    fn fresh<S: Space, F: Forces<S>>(model: &Model<S>, q: &DVector<f64>, qd: &DVector<f64>, f: &mut F) -> DVector<f64> {
+        let mut data = Data::new(model);
+        forward_dynamics(model, &mut data, q, qd, f).unwrap();
+        solved(model, &data)
+    }
+
+    /// Re-evaluating at the state the terms belong to recomputes only the forces, and gives bit for bit what
+    /// a fresh workspace gives; a change of q, of q̇, or kinematics evaluated elsewhere in between, is seen.
+    #[test]
+    fn terms_are_reused_exactly_when_the_state_is_the_same() {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let (q, qd) = random_state(&model, 3);
+        let (q2, qd2) = random_state(&model, 4);
+        let mut push = OpWrench { op: 0, wrench: Vector3::new(-0.5, 0.2, 0.01) };
+        let mut pull = OpWrench { op: 0, wrench: Vector3::new(1.0, -0.3, 0.0) };
+        forward_dynamics(&model, &mut data, &q, &qd, &mut push).unwrap();
+        assert_eq!(solved(&model, &data), fresh(&model, &q, &qd, &mut push));
+        // Same state, other forces: reused terms, new forces.
+        assert!(data.terms_at.holds(&q, &qd));
+        forward_dynamics(&model, &mut data, &q, &qd, &mut pull).unwrap();
+        assert_eq!(solved(&model, &data), fresh(&model, &q, &qd, &mut pull));
+        assert_ne!(solved(&model, &data), fresh(&model, &q, &qd, &mut push), "the forces must have been re-evaluated");
+        // Another q̇, then another q.
+        forward_dynamics(&model, &mut data, &q, &qd2, &mut pull).unwrap();
+        assert_eq!(solved(&model, &data), fresh(&model, &q, &qd2, &mut pull));
+        forward_dynamics(&model, &mut data, &q2, &qd2, &mut pull).unwrap();
+        assert_eq!(solved(&model, &data), fresh(&model, &q2, &qd2, &mut pull));
+        // Kinematics evaluated at another state in between (as the projection does): recomputed.
+        forward_kinematics(&model, &mut data, &q);
+        assert!(!data.terms_at.holds(&q2, &qd2));
+        forward_dynamics(&model, &mut data, &q2, &qd2, &mut pull).unwrap();
+        assert_eq!(solved(&model, &data), fresh(&model, &q2, &qd2, &mut pull));
+        forward_velocity(&model, &mut data, &qd);
+        assert!(!data.terms_at.holds(&q2, &qd2));
     }
 }

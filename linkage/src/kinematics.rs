@@ -24,6 +24,7 @@ pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DV
 /// evaluation (the projection after a step evaluates the closure this way; the next step's dynamics redo it
 /// all).
 pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
+    data.terms_at.clear();
     let kin = &mut data.kin;
     let q = q.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {
@@ -105,6 +106,7 @@ impl AnchoredSinCos {
 /// Computes every body's spatial velocity `v_i = v_λ(i) + S_i q̇_i` and velocity-product acceleration
 /// `a_i = a_λ(i) + v_i × S_i q̇_i` (the body's acceleration when q̈ = 0). Needs [`forward_kinematics`].
 pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVector<f64>) {
+    data.terms_at.clear();
     let kin = &mut data.kin;
     let qd = qd.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {
