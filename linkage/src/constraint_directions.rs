@@ -13,7 +13,7 @@
 //! `threshold · σ_max` ([`DEFAULT_THRESHOLD`] = 0.02: the OP is at least 50 times harder to accelerate
 //! along it than along its easiest direction), or when σ_max itself vanishes (an immobile OP).
 
-use crate::eigen::symmetric_eigen;
+use crate::eigen::symmetric_eigen_from;
 use crate::space::{Space, VecOps};
 
 /// Default relative threshold on singular values below which a direction counts as constrained.
@@ -73,6 +73,17 @@ pub fn constraint_directions<S: Space>(
     length_scale: f64,
     threshold: f64,
 ) -> ConstraintDirections<S> {
+    constraint_directions_from(inverse_inertia, length_scale, threshold, None)
+}
+
+/// As [`constraint_directions`], continuing from the `previous` directions at a nearby state (a VE
+/// server's last snapshot for this OP): see [`symmetric_eigen_from`] for what the warm start buys and costs.
+pub fn constraint_directions_from<S: Space>(
+    inverse_inertia: &S::OpMat,
+    length_scale: f64,
+    threshold: f64,
+    previous: Option<&S::OpMat>,
+) -> ConstraintDirections<S> {
     let lin = <S::Point as VecOps>::LEN;
     let mut scaled = *inverse_inertia;
     for c in 0..S::DIM {
@@ -81,7 +92,7 @@ pub fn constraint_directions<S: Space>(
             scaled[(r, c)] *= f;
         }
     }
-    let (values, vectors) = symmetric_eigen::<S>(&scaled);
+    let (values, vectors) = symmetric_eigen_from::<S>(&scaled, previous);
     let sigma_max = values[0];
     let count = if sigma_max.is_nan() || sigma_max <= 0.0 {
         S::DIM

@@ -45,29 +45,83 @@ fn rotation(d: f64, apq: f64) -> (f64, f64, f64) {
 
 /// Eigenvalues in decreasing order and the matching unit eigenvectors as columns.
 pub fn symmetric_eigen<S: Space>(a: &S::OpMat) -> (S::OpVec, S::OpMat) {
+    symmetric_eigen_from::<S>(a, None)
+}
+
+/// As [`symmetric_eigen`], warm-started from a previous eigenvector matrix `guess` (the last snapshot's
+/// directions; Λ⁻¹ moves little from one snapshot to the next): Jacobi runs on `Gᵀ A G`, nearly diagonal,
+/// and its rotations accumulate onto G. Jacobi then converges in the cheap regimes of [`rotation`] (one
+/// or two sweeps without square roots) instead of three or four from the identity, and the eigenvector signs
+/// follow the guess rather than jumping. The price is that small eigenvalues are accurate relative to the
+/// largest (round-off of the products, ~ε σ_max) rather than to themselves, far inside what the constraint
+/// count (a 2 % threshold) and the controllers need. A guess that is not orthonormal to 1e-9 (none yet, or
+/// not finite) is ignored.
+pub fn symmetric_eigen_from<S: Space>(a: &S::OpMat, guess: Option<&S::OpMat>) -> (S::OpVec, S::OpMat) {
     let mut values = S::OpVec::zero();
     let mut vectors = S::OpMat::zero();
+    let guess = guess.map(|g| g.as_slice());
     match S::DIM {
-        3 => jacobi::<3>(a.as_slice(), values.as_mut_slice(), vectors.as_mut_slice()),
-        6 => jacobi::<6>(a.as_slice(), values.as_mut_slice(), vectors.as_mut_slice()),
+        3 => warm_jacobi::<3>(a.as_slice(), guess, values.as_mut_slice(), vectors.as_mut_slice()),
+        6 => warm_jacobi::<6>(a.as_slice(), guess, values.as_mut_slice(), vectors.as_mut_slice()),
         n => unreachable!("operational spaces are 3- or 6-dimensional, not {n}"),
     }
     (values, vectors)
 }
 
-/// Cyclic Jacobi on an N×N symmetric matrix (column-major `a`), writing the eigenvalues in decreasing order
-/// and the eigenvectors as columns. On fixed-size arrays so that, for N = 3, the sweep unrolls into straight
-/// code with constant indices.
-#[allow(clippy::needless_range_loop)] // p, q, r, k name matrix entries, as in the algorithm's statement
-fn jacobi<const N: usize>(a_in: &[f64], values: &mut [f64], vectors: &mut [f64]) {
-    let mut a = [[0.0; N]; N];
-    for (col, src) in a.iter_mut().zip(a_in.chunks_exact(N)) {
+/// Column-major N×N array from a slice.
+fn columns<const N: usize>(m: &[f64]) -> [[f64; N]; N] {
+    let mut out = [[0.0; N]; N];
+    for (col, src) in out.iter_mut().zip(m.chunks_exact(N)) {
         col.copy_from_slice(src);
     }
+    out
+}
+
+/// `Gᵀ A G` (symmetrized) and G when `guess` is an orthonormal G, else A and the identity.
+#[allow(clippy::needless_range_loop)] // i, j, k name matrix entries
+fn warm_jacobi<const N: usize>(a_in: &[f64], guess: Option<&[f64]>, values: &mut [f64], vectors: &mut [f64]) {
+    let mut a = columns::<N>(a_in);
     let mut v = [[0.0; N]; N];
     for (i, col) in v.iter_mut().enumerate() {
         col[i] = 1.0;
     }
+    if let Some(g) = guess.map(columns::<N>).filter(is_orthonormal::<N>) {
+        // A G, column by column, then Gᵀ (A G).
+        let mut ag = [[0.0; N]; N];
+        for j in 0..N {
+            for k in 0..N {
+                for i in 0..N {
+                    ag[j][i] = mul_add(a[k][i], g[j][k], ag[j][i]);
+                }
+            }
+        }
+        for j in 0..N {
+            for i in 0..=j {
+                let x = (0..N).fold(0.0, |s, k| mul_add(g[i][k], ag[j][k], s));
+                a[j][i] = x;
+                a[i][j] = x;
+            }
+        }
+        v = g;
+    }
+    jacobi::<N>(a, v, values, vectors);
+}
+
+/// True when the columns of `g` are orthonormal to 1e-9 (and finite).
+fn is_orthonormal<const N: usize>(g: &[[f64; N]; N]) -> bool {
+    (0..N).all(|i| {
+        (0..=i).all(|j| {
+            let d = (0..N).fold(0.0, |s, k| mul_add(g[i][k], g[j][k], s));
+            (d - if i == j { 1.0 } else { 0.0 }).abs() <= 1e-9
+        })
+    })
+}
+
+/// Cyclic Jacobi on an N×N symmetric matrix (columns `a`), writing the eigenvalues in decreasing order and
+/// the eigenvectors as columns: the rotations accumulate onto `v` (the identity, or a warm start's G). On fixed-size arrays so that, for N = 3, the sweep unrolls into straight
+/// code with constant indices.
+#[allow(clippy::needless_range_loop)] // p, q, r, k name matrix entries, as in the algorithm's statement
+fn jacobi<const N: usize>(mut a: [[f64; N]; N], mut v: [[f64; N]; N], values: &mut [f64], vectors: &mut [f64]) {
     let scale: f64 = (0..N).map(|i| a[i][i].abs()).fold(0.0, f64::max);
     for _sweep in 0..30 {
         let mut off = 0.0;
@@ -181,5 +235,44 @@ mod tests {
         assert!(vals6[4].abs() < 1e-12 * vals6[0] && vals6[5].abs() < 1e-12 * vals6[0], "{vals6}");
         let rebuilt6 = vecs6 * Matrix6::from_diagonal(&vals6) * vecs6.transpose();
         assert!((rebuilt6 - a6).norm() < 1e-11 * a6.norm());
+    }
+
+    /// Warm-started from the eigenvectors of a nearby matrix (as from one snapshot to the next), the result
+    /// matches the cold decomposition: eigenvalues to round-off of the largest, the same eigenvectors up to
+    /// sign with the guess's signs kept, and a full reconstruction; a guess that is not orthonormal (zeros, as
+    /// before any snapshot, or NaN) falls back to the cold start.
+    #[test]
+    fn warm_start_matches_the_cold_decomposition() {
+        let b = Matrix3::new(1.0, 0.2, -0.3, 0.5, 2.0, 0.1, 0.0, -0.7, 0.4);
+        let a0 = b * b.transpose() + Matrix3::from_diagonal(&nalgebra::Vector3::new(0.0, 0.0, 1e-4));
+        let (_, v0) = symmetric_eigen::<Planar>(&a0);
+        // Flip one column of the guess: the warm result must keep that sign.
+        let mut guess = v0;
+        guess.column_mut(1).neg_mut();
+        let nudge = Matrix3::new(0.0, 1e-3, 0.0, 1e-3, 2e-3, -1e-3, 0.0, -1e-3, 0.0);
+        let a = a0 + nudge;
+        let (cold_vals, cold_vecs) = symmetric_eigen::<Planar>(&a);
+        let (vals, vecs) = symmetric_eigen_from::<Planar>(&a, Some(&guess));
+        for i in 0..3 {
+            assert!((vals[i] - cold_vals[i]).abs() <= 1e-14 * cold_vals[0], "{vals} vs {cold_vals}");
+            let (warm, cold) = (vecs.column(i), cold_vecs.column(i));
+            assert!((warm.dot(&cold).abs() - 1.0).abs() < 1e-12, "column {i}: {warm} vs {cold}");
+            assert!(warm.dot(&guess.column(i)) > 0.9, "column {i} keeps the guess's sign");
+        }
+        let rebuilt = vecs * Matrix3::from_diagonal(&vals) * vecs.transpose();
+        assert!((rebuilt - a).norm() < 1e-13 * a.norm());
+        for bad in [Matrix3::zeros(), Matrix3::from_element(f64::NAN), guess * 1.01] {
+            let (v, e) = symmetric_eigen_from::<Planar>(&a, Some(&bad));
+            assert_eq!((v, e), (cold_vals, cold_vecs), "guess {bad} should be ignored");
+        }
+        // The spatial 6x6 path too.
+        let c = nalgebra::SMatrix::<f64, 6, 6>::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 - 1.7 + 0.1 * j as f64);
+        let a6: Matrix6<f64> = c * c.transpose();
+        let (_, g6) = symmetric_eigen::<Spatial>(&a6);
+        let a6n = a6 + Matrix6::from_fn(|i, j| 1e-4 * ((i + j) % 3) as f64);
+        let (cold6, _) = symmetric_eigen::<Spatial>(&a6n);
+        let (vals6, vecs6) = symmetric_eigen_from::<Spatial>(&a6n, Some(&g6));
+        assert!((vals6 - cold6).amax() <= 1e-13 * cold6[0], "{vals6} vs {cold6}");
+        assert!((vecs6 * Matrix6::from_diagonal(&vals6) * vecs6.transpose() - a6n).norm() < 1e-12 * a6n.norm());
     }
 }
