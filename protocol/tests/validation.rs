@@ -166,3 +166,25 @@ fn refusals_read_well() {
         "refused: protocol version 2 is not supported (the server speaks version 1) — please upgrade"
     );
 }
+
+/// A sender that checks the other users' entries once (`other_user`) and each snapshot without them
+/// (`snapshot_but_others`) refuses exactly what the full check refuses: a bad entry is caught by the first,
+/// a bad own field by the second, and the count of entries by both.
+#[test]
+fn split_snapshot_check_covers_what_the_whole_check_does() {
+    use kinloop_protocol::codec::validate;
+    let shape = testbed_shape();
+    let mut s = testbed_snapshot();
+    s.others = vec![OtherUser { user_id: 2, op_position: vec![0.1, 0.2], wrench: vec![0.5, f64::INFINITY, 0.0] }];
+    assert!(validate::snapshot(&s, &shape).is_err());
+    assert!(validate::snapshot_but_others(&s, &shape).is_ok());
+    let error = validate::other_user(0, &s.others[0].op_position, &s.others[0].wrench, &shape).unwrap_err();
+    assert_eq!(field_of(&error), "snapshot.others[0].wrench");
+    s.others[0].wrench[1] = 0.0;
+    assert!(validate::snapshot(&s, &shape).is_ok());
+    s.op_twist[0] = f64::NAN;
+    assert!(validate::snapshot_but_others(&s, &shape).is_err());
+    s.op_twist[0] = 0.0;
+    s.others = vec![s.others[0].clone(); MAX_LIST_ENTRIES + 1];
+    assert!(matches!(validate::snapshot_but_others(&s, &shape), Err(DecodeError::TooMany { .. })));
+}

@@ -34,7 +34,7 @@
 //!   contacts' forces stay frozen in each contact's `bias_accel` (the local model has no contact-contact
 //!   cross inertia); contacts beyond the nearest `MAX_LOCAL_CONTACTS` stay frozen in b̂.
 
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::constraint_directions::{constraint_directions_from, DEFAULT_THRESHOLD};
 use kinloop_linkage::contact::detect_contacts;
 use kinloop_linkage::data::Data;
 use kinloop_linkage::error::DynamicsError;
@@ -74,6 +74,14 @@ impl<S: Space> VeCore<S> {
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
         let time_s = self.last_tick_at.as_secs_f64();
+        // Every snapshot carries the same entries for the other users: check each once here. If one fails,
+        // each snapshot is checked whole, and those that carry it are withheld.
+        let others_valid = self.users.iter().zip(&self.couplings).all(|(user, coupling)| {
+            user.role != Role::Manipulator || {
+                let (position, wrench) = (coupling.op_pose.position.as_slice(), coupling.wrench.as_slice());
+                validate::other_user(0, position, wrench, &self.shape).is_ok()
+            }
+        });
         for index in 0..self.users.len() {
             if self.users[index].presence != Presence::Present {
                 continue;
@@ -96,7 +104,12 @@ impl<S: Space> VeCore<S> {
                 snapshot.seq += 1;
                 snapshot.server_time_s = time_s;
                 snapshot.ve_step = self.step;
-                validate::snapshot(snapshot, &self.shape).map_err(SnapshotFailure::Wire)
+                let checked = if others_valid {
+                    validate::snapshot_but_others(snapshot, &self.shape)
+                } else {
+                    validate::snapshot(snapshot, &self.shape)
+                };
+                checked.map_err(SnapshotFailure::Wire)
             });
             match outcome {
                 Ok(()) => {
@@ -142,7 +155,15 @@ fn build_one<S: Space>(
     let own_wrench = couplings[index].hand_part();
     op_space_inertia(model, data, op)?;
     let terms = op_space_terms(data, &own_wrench, LocalModelTerms::full());
-    let directions = constraint_directions::<S>(&terms.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+    // Warm start from this user's last directions (Λ⁻¹ moves little between snapshots).
+    let mut previous = S::OpMat::zero();
+    let last = &users[index].slot.snapshot().directions;
+    let warm = (last.len() == S::DIM * S::DIM).then(|| {
+        previous.as_mut_slice().copy_from_slice(last);
+        &previous
+    });
+    let directions =
+        constraint_directions_from::<S>(&terms.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm);
     let pose = OpPose::of_op(model, data, op);
     let twist = op_twist(model, data, op);
 
