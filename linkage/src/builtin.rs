@@ -27,6 +27,30 @@ pub fn scene(name: &str) -> Option<Result<Scene, SceneError>> {
     parse_chain_name(name).map(|(n, l)| Ok(chain(n, l)))
 }
 
+/// A scene named on a command line: a file when `arg` exists or looks like a path (ends in `.toml` or
+/// holds a `/`), else a built-in scene by name. Returns the scene and the label its messages carry: the
+/// path, or `builtin:NAME`. One rule for every command (`kinloop`, `kinloop-server`), so a name means the
+/// same thing everywhere.
+pub fn load(arg: &str) -> Result<(Scene, String), SceneError> {
+    let path = std::path::Path::new(arg);
+    if path.exists() || arg.ends_with(".toml") || arg.contains('/') {
+        return Ok((Scene::from_file(path)?, arg.to_string()));
+    }
+    match scene(arg) {
+        Some(scene) => Ok((scene?, format!("builtin:{arg}"))),
+        None => {
+            let names: Vec<&str> = SCENE_FILES.iter().map(|(n, _)| *n).collect();
+            Err(SceneError::Io {
+                file: arg.to_string(),
+                message: format!(
+                    "no such file, and no built-in scene of that name (built in: {}, chainN_loopsL)",
+                    names.join(", ")
+                ),
+            })
+        }
+    }
+}
+
 /// Parses `chainN_loopsL` into `(N, L)`.
 pub fn parse_chain_name(name: &str) -> Option<(usize, usize)> {
     let rest = name.strip_prefix("chain")?;
@@ -121,5 +145,28 @@ mod tests {
         assert_eq!(parse_chain_name("chain3_loops4"), None);
         assert_eq!(parse_chain_name("chainx_loops1"), None);
         assert_eq!(parse_chain_name("chain1_loops0"), None);
+    }
+
+    /// A command-line scene argument: built-in names and chains by name, paths as files (even missing
+    /// ones, whose error names the path), and an unknown name gets the list of what is built in.
+    #[test]
+    fn scene_arguments_resolve_to_files_or_builtins() {
+        let (scene, label) = load("paper-testbed").unwrap();
+        assert_eq!((scene.name.as_str(), label.as_str()), ("paper-testbed", "builtin:paper-testbed"));
+        assert_eq!(load("chain6_loops2").unwrap().1, "builtin:chain6_loops2");
+        let file = format!("{}/../scenes/slider-crank.toml", env!("CARGO_MANIFEST_DIR"));
+        assert_eq!(load(&file).unwrap(), (scene_named("slider-crank", &file), file.clone()));
+        for missing in ["no/such/dir/x.toml", "nothing.toml"] {
+            let message = load(missing).unwrap_err().to_string();
+            assert!(message.starts_with(missing) && message.contains("cannot read"), "{message}");
+        }
+        let message = load("paper-tesbed").unwrap_err().to_string();
+        assert!(message.contains("paper-tesbed") && message.contains("paper-testbed, fourbar"), "{message}");
+    }
+
+    /// The built-in scene `name` as parsed from `file` (the label in its errors is the only difference).
+    fn scene_named(name: &str, file: &str) -> Scene {
+        let text = SCENE_FILES.iter().find(|(n, _)| *n == name).unwrap().1;
+        Scene::from_toml_str(text, file).unwrap()
     }
 }

@@ -458,15 +458,5 @@ fn log_event(shared: &Shared, event: &VeEvent) {
     }
 }
 
-/// A scene from a file path or a built-in name (`paper-testbed`, `chain50_loops5`...): the path wins when
-/// it exists. Errors name the file and key (from linkage) or list the built-in names.
-pub fn load_scene(arg: &str) -> Result<(Scene, String), SceneError> {
-    let path = std::path::Path::new(arg);
-    if path.exists() {
-        return Ok((Scene::from_file(path)?, path.display().to_string()));
-    }
-    match kinloop_linkage::builtin::scene(arg) {
-        Some(scene) => Ok((scene?, format!("builtin:{arg}"))),
-        None => Scene::from_file(path).map(|scene| (scene, arg.to_string())),
-    }
-}
+/// Loads a scene argument: a file, or a built-in name (see [`kinloop_linkage::builtin::load`]).
+pub use kinloop_linkage::builtin::load as load_scene;
