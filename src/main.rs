@@ -29,6 +29,8 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Run an experiment: charts (SVG, PNG) and summary.json in DIR/NAME/.
     Experiment(cli::experiment::ExperimentArgs),
+    /// The lateness of an idle 1 kHz loop timed as the haptic loop is: the machine's floor under real time.
+    TimerFloor(cli::timer_floor::TimerFloorArgs),
 }
 
 fn main() -> Result<()> {
@@ -43,5 +45,6 @@ fn main() -> Result<()> {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Experiment(a) => cli::experiment::run(a),
+        Command::TimerFloor(a) => cli::timer_floor::run(a),
     }
 }

@@ -183,3 +183,23 @@ fn bad_settings_are_refused_before_anything_starts() {
     refused(&|o| o.scene.ops.clear(), "no operational point");
     assert!(!dir.path().join("demo").exists(), "nothing written");
 }
+
+/// `kinloop timer-floor` times an idle loop as the haptic loop times itself and reports the same keys; a
+/// bad rate is refused with the flag's name.
+#[test]
+fn timer_floor_reports_an_idle_loops_lateness() {
+    let bin = env!("CARGO_BIN_EXE_kinloop");
+    let out = std::process::Command::new(bin).args(["timer-floor", "--duration", "0.3", "--json"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let f = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k} missing in {v}"));
+    // 300 deadlines at 1 kHz; a stalled machine skips some rather than bursting.
+    assert!((150.0..=301.0).contains(&f("ticks")), "{v}");
+    assert!(f("loop_lateness_us_p50") <= f("loop_lateness_us_p99"), "{v}");
+    assert!(f("loop_lateness_us_p99") <= f("loop_lateness_us_max"), "{v}");
+    assert!(f("loop_misses") <= f("ticks") && (f("miss_rate") - f("loop_misses") / f("ticks")).abs() < 1e-12);
+    assert_eq!(f("miss_threshold_us"), 500.0);
+    let bad = std::process::Command::new(bin).args(["timer-floor", "--rate", "0"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && stderr.contains("--rate") && !stderr.contains("panicked"), "{stderr}");
+}

@@ -5,3 +5,4 @@ pub mod demo;
 pub mod experiment;
 pub mod inspect;
 pub mod simulate;
+pub mod timer_floor;

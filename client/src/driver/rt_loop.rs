@@ -12,7 +12,7 @@ use kinloop_linkage::space::Space;
 use kinloop_protocol::{Snapshot, Uplink};
 
 use super::record::TickRecord;
-use super::timing::LatenessHistogram;
+use super::timing::{LatenessHistogram, LatenessSummary};
 use crate::core::{CoreStats, HapticCore};
 use crate::device::HapticDevice;
 
@@ -132,17 +132,9 @@ pub fn run<S: Space, D: HapticDevice<S>>(
             tracing::warn!(%why, "could not switch the haptic loop to SCHED_FIFO; running at normal priority");
         }
     }
-    let period = Duration::from_secs_f64(1.0 / settings.rate_hz);
-    let sleeper = spin_sleep::SpinSleeper::default();
-    let start = Instant::now();
-    let mut k: u64 = 0;
+    let mut ticker = Ticker::new(settings.rate_hz);
     loop {
-        let deadline = start + Duration::from_nanos(period.as_nanos() as u64 * k);
-        sleeper.sleep_until(deadline);
-        let woke = Instant::now();
-        let lateness = woke.saturating_duration_since(deadline);
-        shared.lateness.record(lateness.as_nanos() as u64);
-        let now = woke - start;
+        let now = ticker.wait(&shared.lateness);
         shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
         if shared.stop.load(Ordering::Relaxed) || settings.duration.is_some_and(|d| now >= d) {
             break;
@@ -171,7 +163,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
             }
             Err(_) => {
                 shared.device_force_errors.fetch_add(1, Ordering::Relaxed);
-                k += 1;
+                ticker.advance();
                 continue;
             }
         };
@@ -207,7 +199,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         }
         let stats = core.stats();
         shared.max_force_ratio_bits.fetch_max(stats.max_force_ratio.to_bits(), Ordering::Relaxed);
-        if k % settings.report_every.max(1) == 0 {
+        if ticker.tick % settings.report_every.max(1) == 0 {
             let report = core.report();
             let _ = rings.reports.push(LoopReport {
                 elapsed: now,
@@ -217,16 +209,63 @@ pub fn run<S: Space, D: HapticDevice<S>>(
                 snapshot_age: report.snapshot_age,
             });
         }
-        k += 1;
-        // Skip deadlines already missed rather than run a burst of late ticks.
-        let behind = (Instant::now().saturating_duration_since(start).as_nanos() / period.as_nanos()) as u64;
-        if behind > k {
-            k = behind;
-        }
+        ticker.advance();
     }
-    let _ = device.command(start.elapsed(), &zero::<S>());
+    let _ = device.command(ticker.start.elapsed(), &zero::<S>());
     shared.stop.store(true, Ordering::Relaxed);
     core.stats()
+}
+
+/// The loop's clock: absolute deadlines `start + k·period` (no drift), reached by spin_sleep (a native
+/// sleep, then a spin for the last stretch), each tick's lateness recorded.
+struct Ticker {
+    sleeper: spin_sleep::SpinSleeper,
+    start: Instant,
+    period: Duration,
+    /// Index of the current tick.
+    tick: u64,
+}
+
+impl Ticker {
+    fn new(rate_hz: f64) -> Self {
+        Ticker {
+            sleeper: spin_sleep::SpinSleeper::default(),
+            start: Instant::now(),
+            period: Duration::from_secs_f64(1.0 / rate_hz),
+            tick: 0,
+        }
+    }
+
+    /// Sleeps until the current tick's deadline, records how late it woke, and returns the time since the
+    /// start.
+    fn wait(&mut self, lateness: &LatenessHistogram) -> Duration {
+        let deadline = self.start + Duration::from_nanos(self.period.as_nanos() as u64 * self.tick);
+        self.sleeper.sleep_until(deadline);
+        let woke = Instant::now();
+        lateness.record(woke.saturating_duration_since(deadline).as_nanos() as u64);
+        woke - self.start
+    }
+
+    /// On to the next tick, skipping deadlines already missed rather than running a burst of late ticks.
+    fn advance(&mut self) {
+        self.tick += 1;
+        let behind = (Instant::now().saturating_duration_since(self.start).as_nanos() / self.period.as_nanos()) as u64;
+        self.tick = self.tick.max(behind);
+    }
+}
+
+/// The floor under the loop's timing on this machine: the same clock, priority and sleep as [`run`] with no
+/// work in the ticks, for `duration` at `rate_hz`. What it measures is the operating system's and the
+/// hypervisor's share of the lateness, which no change to the loop's work can remove. Returns the lateness
+/// and whether SCHED_FIFO was granted.
+pub fn timer_floor(rate_hz: f64, duration: Duration, realtime_priority: bool) -> (LatenessSummary, bool) {
+    let fifo = realtime_priority && try_realtime_priority().is_ok();
+    let lateness = LatenessHistogram::default();
+    let mut ticker = Ticker::new(rate_hz);
+    while ticker.wait(&lateness) < duration {
+        ticker.advance();
+    }
+    (lateness.summary(), fifo)
 }
 
 fn zero<S: Space>() -> S::OpVec {
