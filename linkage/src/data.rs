@@ -236,6 +236,12 @@ impl TermsMemo {
         self.valid = true;
     }
 
+    /// The configuration of the last evaluation (kept after `clear`): where the KKT factors of the step
+    /// that followed it belong.
+    pub(crate) fn q(&self) -> &DVector<f64> {
+        &self.q
+    }
+
     /// Forgets the state: the kinematics are being changed.
     pub(crate) fn clear(&mut self) {
         self.valid = false;
