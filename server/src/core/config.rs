@@ -117,10 +117,6 @@ pub struct VeConfig {
     pub fade_time: Duration,
     /// A manipulator whose uplinks stop this long fades out until they resume.
     pub silent_timeout: Duration,
-    /// A manipulator whose newest uplink is this old has its reference held still: the coupling pulls
-    /// toward the last reported pose with zero target twist, instead of dragging the linkage (and everyone
-    /// else on it) along a velocity nobody reports any more until the silent fade ends it.
-    pub reference_hold: Duration,
     /// Most users at once (leaving users still fading out do not count).
     pub max_users: usize,
     /// Controller gains recommended to clients (clamped to each device's capabilities).
@@ -155,8 +151,6 @@ impl VeConfig {
             passivity_allowance_j: 2.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
-            // Twenty uplink periods at 1 kHz: network jitter alone does not hold a reference.
-            reference_hold: Duration::from_millis(20),
             max_users: 16,
             recommended_gains: RecommendedGains { k_j: 3000.0, b_j: 30.0, k_pc: Vec::new(), b_pc: Vec::new() },
             guards: GuardLimits::default(),

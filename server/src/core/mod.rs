@@ -493,10 +493,6 @@ impl<S: Space> VeCore<S> {
                 });
             }
             u.silent = silent;
-            if u.is_silent(at, self.config.reference_hold) {
-                // The next uplink sets it again.
-                c.target_twist = S::OpVec::zero();
-            }
             u.fade.advance(u.presence == Presence::Present && c.pushes && !silent, dt, fade_s);
             c.weight = u.fade.weight();
             c.step_wrench = S::OpVec::zero();
