@@ -119,6 +119,14 @@ pub enum DynamicsError {
         /// Which result.
         what: &'static str,
     },
+    /// The loop closure residual exceeded what a closed linkage can show (the state is tearing apart).
+    #[error("the loops are torn open: closure residual {residual:.3e} m over the limit {limit:.3e} m")]
+    ClosureBroken {
+        /// Residual norm ‖h‖, m.
+        residual: f64,
+        /// The limit it exceeded, m.
+        limit: f64,
+    },
     /// An operational point index that does not exist.
     #[error("operational point {index} does not exist (the model has {count})")]
     UnknownOp {
