@@ -187,7 +187,7 @@ pub struct VeCore<S: Space> {
     qd: DVector<f64>,
     /// Restore point: q at the start of the last step that began with the loop closed (see `tick`).
     checkpoint_q: DVector<f64>,
-    /// q at the start of the current step.
+    /// q at the start of the current step (after a successful step, the previous restore point: scratch).
     step_start_q: DVector<f64>,
     lambda: DVector<f64>,
     closure_error: f64,
@@ -483,7 +483,8 @@ impl<S: Space> VeCore<S> {
             });
         match stepped {
             Ok(report) => {
-                self.checkpoint_q.copy_from(&self.step_start_q);
+                // The step began closed: its start is the new restore point (a swap, not a second copy).
+                std::mem::swap(&mut self.checkpoint_q, &mut self.step_start_q);
                 self.closure_error = report.closure_error;
                 self.metrics.closure_error = report.closure_error;
                 self.metrics.max_closure_error = self.metrics.max_closure_error.max(report.closure_error);
