@@ -52,6 +52,7 @@ pub mod kkt;
 pub mod local_model;
 pub mod loop_closure;
 pub mod ltl;
+mod ltl_small;
 pub mod mass_matrix;
 pub mod model;
 pub mod op_space;

@@ -9,7 +9,8 @@
 //! O(n²). Column k of U holds exactly k's supporting joints, contiguous when they are `0..k` (a chain), so the
 //! inner loops vectorize there.
 //!
-//! The hot paths use [`factor_sum`] (left-looking, two columns per pass, FMA) and the blocked multi-column
+//! Models of at most `ltl_small::MAX_N` joints take fixed-size dense kernels with the same results and
+//! zeros (see `ltl_small`). The hot paths use [`factor_sum`] (left-looking, two columns per pass, FMA) and the blocked multi-column
 //! solves [`solve_u_columns`] / [`solve_ut_columns`] with the reciprocals of U's diagonal; [`solve_u`] and
 //! [`solve_ut`] are the plain reference forms.
 
@@ -17,6 +18,7 @@ use nalgebra::DMatrix;
 
 use crate::dense::{dot, mul_add, sub_scaled};
 use crate::error::DynamicsError;
+use crate::ltl_small::{self, by_size};
 use crate::model::{Model, NO_PARENT};
 use crate::simd::F64x4;
 use crate::space::Space;
@@ -41,6 +43,7 @@ pub fn factor_sum<S: Space>(
 ) -> Result<(), DynamicsError> {
     let n = u.nrows();
     let (d, extra) = (d.as_slice(), extra.map(|e| e.as_slice()));
+    by_size!(n, N => return ltl_small::factor_sum::<N>(d, extra, u.as_mut_slice(), inv_diag), _ => ());
     let init = |k: usize, col: &mut [f64]| {
         col.copy_from_slice(&d[k * n..k * n + col.len()]);
         if let Some(e) = extra {
@@ -128,7 +131,7 @@ fn finish_pivot(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
 
 /// Pivot and scaling of a column with contiguous rows `0..=k`; returns `1/U_kk`.
 #[inline]
-fn finish_contiguous(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
+pub(crate) fn finish_contiguous(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
     let inv = finish_pivot(col, k)?;
     for x in &mut col[..k] {
         *x *= inv;
@@ -302,6 +305,7 @@ pub fn inverse_diagonal(u: &DMatrix<f64>, inv: &mut [f64]) {
 pub fn solve_u_columns<S: Space>(model: &Model<S>, u: &DMatrix<f64>, inv: &[f64], x: &mut [f64], len: usize) {
     let n = u.nrows();
     let a = u.as_slice();
+    by_size!(n, N => return ltl_small::solve_u_columns::<N>(a, inv, x), _ => ());
     for group in x.chunks_mut(4 * n) {
         match group.len() / n {
             1 => solve_u_group::<S, 1>(model, a, n, inv, group, len),
@@ -412,6 +416,7 @@ fn update_rows<const W: usize>(
 pub fn solve_ut_columns<S: Space>(model: &Model<S>, u: &DMatrix<f64>, inv: &[f64], x: &mut [f64]) {
     let n = u.nrows();
     let a = u.as_slice();
+    by_size!(n, N => return ltl_small::solve_ut_columns::<N>(a, inv, x), _ => ());
     for group in x.chunks_mut(4 * n) {
         match group.len() / n {
             1 => solve_ut_group::<S, 1>(model, a, n, inv, group),
