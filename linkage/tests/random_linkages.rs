@@ -133,14 +133,24 @@ fn check<S: Space>(scene: &Scene, seed: u64) -> Result<(), TestCaseError> {
     let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
     let residual = &data.mass_matrix * &data.qdd + &data.closure_jacobian_t * &data.lambda - &tau;
     prop_assert!(residual.amax() < 1e-8 * (1.0 + tau.amax() + data.lambda.amax()), "eq 4 residual {}", residual.amax());
-    // At q0 the closures are exactly satisfied (h = 0), so W q̈ + w_stab = 0 on every row, kept or not.
+    // At q0 the closures hold (h = 0). W q̈ + w_stab = 0 on the rows the pivoting kept, always; on the
+    // dependent rows too whenever the system is consistent (w_stab in the range of W), as a structural
+    // redundancy makes it (the parallelogram's). A random linkage may be built at a shaky configuration
+    // (links aligned, where W drops rank only at that point): a q̇ in W's null space there is not a real
+    // motion and no q̈ satisfies every row (seen: residual 2.7e-4 on the dropped row, w_stab not in the
+    // range of W); the documented answer is then the basic solution on the kept rows.
     let closure = data.closure_jacobian() * &data.qdd + &data.closure_bias_stab;
     let scale = 1.0 + data.closure_bias_stab.amax() + data.qdd.amax();
+    let consistent = model.nc() == 0 || {
+        let left_null = null_space(&data.closure_jacobian().transpose(), model.nc());
+        (left_null.transpose() * &data.closure_bias_stab).amax() <= 1e-9 * scale
+    };
+    let rank = data.kkt.schur_rank;
+    let rows: Vec<usize> = if consistent { (0..model.nc()).collect() } else { data.kkt.schur_perm[..rank].to_vec() };
+    let worst = rows.iter().map(|&r| closure[r].abs()).fold(0.0, f64::max);
     prop_assert!(
-        closure.amax() < 1e-7 * scale,
-        "acceleration closure {} (rank {}/{})",
-        closure.amax(),
-        data.kkt.schur_rank,
+        worst < 1e-7 * scale,
+        "acceleration closure {worst} on rows {rows:?} (rank {rank}/{}, consistent {consistent})",
         model.nc()
     );
 
