@@ -9,9 +9,9 @@
 //! O(n²). Column k of U holds exactly k's supporting joints, contiguous when they are `0..k` (a chain), so the
 //! inner loops vectorize there.
 //!
-//! Models of at most `ltl_small::MAX_N` joints take fixed-size dense kernels with the same results and
-//! zeros (see `ltl_small`). The hot paths use [`factor_sum`] (left-looking, two columns per pass, FMA) and the blocked multi-column
-//! solves [`solve_u_columns`] / [`solve_ut_columns`] with the reciprocals of U's diagonal; [`solve_u`] and
+//! Models of at most 8 joints take fixed-size dense kernels with the same results and zeros (`ltl_small`).
+//! Above that, the hot paths use [`factor_sum`] (left-looking, two columns per pass, FMA) and the blocked
+//! multi-column solves [`solve_u_columns`] / [`solve_ut_columns`] with the reciprocals of U's diagonal; [`solve_u`] and
 //! [`solve_ut`] are the plain reference forms.
 
 use nalgebra::DMatrix;
