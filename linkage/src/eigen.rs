@@ -1,9 +1,11 @@
-//! Symmetric eigen-decomposition of small fixed-size matrices by cyclic Jacobi rotations.
+//! Symmetric eigen-decomposition of small fixed-size matrices: a closed form for a cold 3x3, cyclic Jacobi
+//! rotations for warm starts and 6x6.
 //!
-//! Λ⁻¹ is symmetric positive semi-definite, so its SVD (eq 10, 12) is its eigen-decomposition. Jacobi is
-//! chosen over a QR-based solver because it computes small eigenvalues to high *relative* accuracy — what
-//! decides whether a direction is constrained — has no allocation, and for 3x3 and 6x6 converges in a few
-//! sweeps (measured against nalgebra's `SymmetricEigen` in the tests and benches).
+//! Λ⁻¹ is symmetric positive semi-definite, so its SVD (eq 10, 12) is its eigen-decomposition. Both methods
+//! allocate nothing, return orthonormal eigenvectors, and give eigenvalues to round-off of the largest, far
+//! inside the 2 % threshold that decides whether a direction is constrained (checked against nalgebra's
+//! `SymmetricEigen` in the tests). A planar OP needs the 3x3 one per snapshot, so its cost is a chain of
+//! dependent square roots and divisions: the closed form is written to keep that chain short.
 
 use crate::dense::mul_add;
 use crate::space::{MatOps, Space, VecOps};
@@ -74,43 +76,44 @@ pub fn symmetric_eigen_from<S: Space>(a: &S::OpMat, guess: Option<&S::OpMat>) ->
 
 /// The cold 3x3 decomposition in closed form, after D. Eberly ("A Robust Eigensolver for 3x3 Symmetric
 /// Matrices", Geometric Tools, 2014): the root of the characteristic cubic farthest from the other two by
-/// the trigonometric formula, its eigenvector as the largest cross product of two rows of `A - λI`, then
+/// the trigonometric formula (its cosine of a third of an arccosine found as the root of a cubic, see
+/// [`largest_trisection_root`]), its eigenvector as the largest cross product of two rows of `A - λI`, then
 /// the 2x2 problem on the plane orthogonal to it by one Jacobi rotation (where Eberly uses the other
 /// trigonometric roots, which lose half their digits near a double root: a pair 1e-9 apart came out mixed).
 /// Orthonormal by construction, and robust to repeated eigenvalues (a 1-DOF linkage's two constrained
 /// directions share the eigenvalue 0: an orthonormal pair spanning that plane is returned). Eigenvalues
 /// are accurate to round-off of the largest, as with the warm start.
 /// About 2.5 times fewer instructions than cold Jacobi, which stays for warm starts (their signs follow
-/// the guess) and for 6x6.
+/// the guess) and for 6x6. On the testbed's Λ̃⁻¹ one decomposition takes ~165 ns where the first version
+/// (normalized basis, library `acos`/`cos`, division by the largest entry) took ~245 ns with about as
+/// many instructions (~430 against ~540 with libm's): what changed is the length of the chain.
 fn closed_form_3(a: &[[f64; 3]; 3], values: &mut [f64], vectors: &mut [f64]) {
-    // Scaled by the largest entry: no overflow or underflow in the cubic's coefficients.
-    let max_abs = a.iter().flatten().fold(0.0, |m: f64, x| m.max(x.abs()));
-    let scale = if max_abs > 0.0 && max_abs.is_finite() { max_abs } else { 1.0 };
-    let inv = 1.0 / scale;
-    let b: [[f64; 3]; 3] = std::array::from_fn(|c| std::array::from_fn(|r| a[c][r] * inv));
+    // Entries within 2^±200 of one cannot overflow or underflow the cubic's coefficients or the squared
+    // norms of cross products (fourth powers): decomposed as they are, so that the dependency chain does
+    // not start with the scan for the largest entry (the branch is predicted). Others are scaled first by
+    // a power of two near the largest entry, exactly.
+    let max_abs = max_abs(a);
+    const SAFE: std::ops::RangeInclusive<f64> = 6.2e-61..=1.6e60; // 2^-200..=2^200
+    let (scale, inv) = if SAFE.contains(&max_abs) { (1.0, 1.0) } else { power_of_two_scale(max_abs) };
+    let b: [[f64; 3]; 3] =
+        if inv == 1.0 { *a } else { std::array::from_fn(|c| std::array::from_fn(|r| a[c][r] * inv)) };
     let (b01, b02, b12) = (b[1][0], b[2][0], b[2][1]);
     let off = b01 * b01 + b02 * b02 + b12 * b12;
     let mut pairs = if max_abs > 0.0 && off.is_finite() && off > 0.0 {
         let q = (b[0][0] + b[1][1] + b[2][2]) / 3.0;
         let (c00, c11, c22) = (b[0][0] - q, b[1][1] - q, b[2][2] - q);
-        let p = ((c00 * c00 + c11 * c11 + c22 * c22 + 2.0 * off) / 6.0).sqrt();
-        // det((B - qI)/p)/2 = cos 3θ, in [-1, 1] up to round-off.
+        let p2 = (c00 * c00 + c11 * c11 + c22 * c22 + 2.0 * off) / 6.0;
+        let p = p2.sqrt();
+        // The eigenvalues are q + p t for the roots t of t³ - 3t = 2r, r = det((B - qI)/p)/2 in [-1, 1]
+        // up to round-off (the trigonometric roots 2 cos(θ/3 + 2πk/3), cos θ = r).
         let det = c00 * (c11 * c22 - b12 * b12) - b01 * (b01 * c22 - b12 * b02) + b02 * (b01 * b12 - c11 * b02);
-        let half_det = (det / (2.0 * p * p * p)).clamp(-1.0, 1.0);
-        let angle = half_det.acos() / 3.0;
-        // The roots q + 2p cos(θ + 2πk/3): largest at k = 0, smallest at k = 1. The one farthest from the
-        // other two (the largest when cos 3θ ≥ 0) is accurate and its rows of B - λI are well conditioned;
-        // the other two roots are not used (see `eigenpairs_in_complement`).
-        const SQRT3: f64 = 1.732_050_807_568_877_2;
-        let farthest = if half_det >= 0.0 {
-            q + 2.0 * p * angle.cos()
-        } else {
-            let (sin, cos) = angle.sin_cos();
-            q + p * (-cos - SQRT3 * sin)
-        };
-        let e_far = eigenvector_from_rows(&b, farthest);
-        let [pair_1, pair_2] = eigenpairs_in_complement(&b, &e_far);
-        [(farthest, e_far), pair_1, pair_2]
+        // det / (2p³) as det p / (2p⁴): the division need not wait for the square root.
+        let r = (det / (2.0 * p2 * p2) * p).clamp(-1.0, 1.0);
+        // The root farthest from the other two is the largest when r ≥ 0 and the smallest (the largest
+        // of the mirrored cubic, negated) when r < 0; it is accurate and its rows of B - λI are well
+        // conditioned. The other two roots are not used (see `eigenpairs_from_normal`).
+        let farthest = q + p * largest_trisection_root(r.abs()).copysign(r);
+        eigenpairs_from_normal(&b, farthest, &eigenvector_from_rows(&b, farthest))
     } else {
         // Diagonal (or zero): the identity's columns, with the diagonal as values. A non-finite A gives
         // NaN values (`0 · off`), never finite ones that hide it.
@@ -128,6 +131,51 @@ fn closed_form_3(a: &[[f64; 3]; 3], values: &mut [f64], vectors: &mut [f64]) {
     }
 }
 
+/// The largest absolute entry, as a balanced tree of maxima (a left fold is a chain of nine).
+fn max_abs(a: &[[f64; 3]; 3]) -> f64 {
+    let col = |c: &[f64; 3]| c[0].abs().max(c[1].abs()).max(c[2].abs());
+    col(&a[0]).max(col(&a[1])).max(col(&a[2]))
+}
+
+/// `(2^e, 2^-e)` with `2^e` within a factor of two of `x` (a positive normal number, else `(1, 1)`):
+/// scaling by it is exact.
+fn power_of_two_scale(x: f64) -> (f64, f64) {
+    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+    let biased = (x.to_bits() & EXPONENT) >> 52;
+    // 2^e and 2^-e are both normal for biased exponents 1..=2045 (2046 would need 2^-1024).
+    if x > 0.0 && (1..=2045).contains(&biased) {
+        (f64::from_bits(biased << 52), f64::from_bits((2046 - biased) << 52))
+    } else {
+        (1.0, 1.0)
+    }
+}
+
+/// The largest root of `t³ - 3t = 2s` for `s` in [0, 1], `2 cos(acos(s)/3)`, in [√3, 2]: a degree-8 fit
+/// (Chebyshev least squares, error below 3.2e-9) evaluated by Estrin's scheme (four levels of dependent
+/// multiply-adds, not eight) and one Newton step, which squares the error to round-off (the root is simple
+/// on the whole interval: the derivative `3t² - 3` is at least 6). One division where `acos` and `cos` were
+/// two library calls on the chain of dependent operations.
+fn largest_trisection_root(s: f64) -> f64 {
+    const C: [f64; 9] = [
+        1.7320508107323642,
+        0.33333279938759774,
+        -0.09621004522493908,
+        0.04921767374583903,
+        -0.030249555018482182,
+        0.018840195528284195,
+        -0.009945177811262612,
+        0.003581939983696324,
+        -0.000618643680179859,
+    ];
+    let s2 = s * s;
+    let s4 = s2 * s2;
+    let low = mul_add(mul_add(C[3], s, C[2]), s2, mul_add(C[1], s, C[0]));
+    let high = mul_add(mul_add(C[7], s, C[6]), s2, mul_add(C[5], s, C[4]));
+    let t = mul_add(C[8], s4 * s4, mul_add(high, s4, low));
+    let t2 = t * t;
+    t - mul_add(t, t2 - 3.0, -2.0 * s) / mul_add(3.0, t2, -3.0)
+}
+
 /// `x × y`.
 fn cross(x: &[f64; 3], y: &[f64; 3]) -> [f64; 3] {
     [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
@@ -138,49 +186,54 @@ fn dot3(x: &[f64; 3], y: &[f64; 3]) -> f64 {
     mul_add(x[0], y[0], mul_add(x[1], y[1], x[2] * y[2]))
 }
 
-/// The unit eigenvector of a simple eigenvalue λ of the symmetric `b`: the rows of `b - λI` span the plane
-/// orthogonal to it, so the largest of their three cross products is the best-conditioned normal.
+/// A normal to the rows of `b - λI` for a simple eigenvalue λ of the symmetric `b`, not normalized: the rows
+/// span the plane orthogonal to the eigenvector, so the largest of their three cross products is the
+/// best-conditioned normal. Zero when `b = λI`.
 fn eigenvector_from_rows(b: &[[f64; 3]; 3], lambda: f64) -> [f64; 3] {
     let rows: [[f64; 3]; 3] =
         std::array::from_fn(|r| std::array::from_fn(|c| if r == c { b[c][r] - lambda } else { b[c][r] }));
     let candidates = [cross(&rows[0], &rows[1]), cross(&rows[0], &rows[2]), cross(&rows[1], &rows[2])];
-    let (best, norm2) =
-        candidates
-            .iter()
-            .map(|x| (x, dot3(x, x)))
-            .fold((&candidates[0], -1.0), |best, x| if x.1 > best.1 { x } else { best });
-    if norm2 > 0.0 {
-        let inv = 1.0 / norm2.sqrt();
-        best.map(|x| x * inv)
-    } else {
-        // b = λI: every vector is an eigenvector.
-        [1.0, 0.0, 0.0]
-    }
+    let norms = candidates.map(|x| dot3(&x, &x));
+    let best = if norms[1] > norms[0] { 1 } else { 0 };
+    candidates[if norms[2] > norms[best] { 2 } else { best }]
 }
 
-/// The other two eigenpairs of `b`, given its unit eigenvector `w`: on an orthonormal basis (u, v) of the
-/// plane orthogonal to w, `b` is the 2x2 symmetric M, diagonalized by one Jacobi rotation ([`rotation`]),
-/// which also gives the eigenvalues. Accurate to round-off over the gap between the two however close they
-/// are (the trigonometric roots are not: near a double root the arccosine loses half the digits).
-fn eigenpairs_in_complement(b: &[[f64; 3]; 3], w: &[f64; 3]) -> [(f64, [f64; 3]); 2] {
-    let u = if w[0].abs() > w[1].abs() {
-        let inv = 1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt();
-        [-w[2] * inv, 0.0, w[0] * inv]
-    } else {
-        let inv = 1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt();
-        [0.0, w[2] * inv, -w[1] * inv]
-    };
-    let v = cross(w, &u);
+/// All three eigenpairs of `b` given a normal `x` (not unit) to the rows of `b - λI` for its eigenvalue λ:
+/// λ with `x / |x|`, and the other two from the 2x2 symmetric M that `b` is on an orthonormal basis (u, v)
+/// of the plane orthogonal to x, diagonalized by one Jacobi rotation ([`rotation`]), which also gives the
+/// eigenvalues. Accurate to round-off over the gap between the two however close they are (the
+/// trigonometric roots are not: near a double root the arccosine loses half the digits).
+///
+/// The basis is built unnormalized, `ũ ⟂ x` with a zero entry and `ṽ = x × ũ` (so `|ṽ|² = |x|² |ũ|²`),
+/// and M is scaled afterwards: `m00 = ũᵀbũ / |ũ|²`, `m01 = ũᵀbṽ / (|ũ|² |x|)`, `m11 = ṽᵀbṽ / (|ũ|² |x|²)`.
+/// The products with b then do not wait for the square roots and divisions of the normalizations, which
+/// run beside them (this is a chain of dependent operations: its length is the cost).
+fn eigenpairs_from_normal(b: &[[f64; 3]; 3], lambda: f64, x: &[f64; 3]) -> [(f64, [f64; 3]); 3] {
+    let x_norm2 = dot3(x, x);
+    if x_norm2 == 0.0 {
+        // b = λI: every vector is an eigenvector.
+        return std::array::from_fn(|c| (lambda, std::array::from_fn(|r| if r == c { 1.0 } else { 0.0 })));
+    }
+    let u = if x[0].abs() > x[1].abs() { [-x[2], 0.0, x[0]] } else { [0.0, x[2], -x[1]] };
+    let v = cross(x, &u);
+    let inv_x = 1.0 / x_norm2.sqrt();
+    let u_norm2 = dot3(&u, &u);
+    let inv_u2 = 1.0 / u_norm2;
+    let inv_u = 1.0 / u_norm2.sqrt();
     let times =
-        |x: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).fold(0.0, |s, j| mul_add(b[j][i], x[j], s))) };
+        |y: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).fold(0.0, |s, j| mul_add(b[j][i], y[j], s))) };
     let (bu, bv) = (times(&u), times(&v));
-    let (m00, m01, m11) = (dot3(&u, &bu), dot3(&u, &bv), dot3(&v, &bv));
+    let (m00, m01, m11) =
+        (dot3(&u, &bu) * inv_u2, dot3(&u, &bv) * (inv_u2 * inv_x), dot3(&v, &bv) * (inv_u2 * inv_x * inv_x));
+    let w = x.map(|xi| xi * inv_x);
+    let (u, v) = (u.map(|ui| ui * inv_u), v.map(|vi| vi * (inv_u * inv_x)));
     if m01 == 0.0 {
-        return [(m00, u), (m11, v)];
+        return [(lambda, w), (m00, u), (m11, v)];
     }
     // As in `jacobi`: the rotation zeroes m01 and moves the diagonal by ∓t m01.
     let (t, c, s) = rotation(m11 - m00, m01);
     [
+        (lambda, w),
         (mul_add(-t, m01, m00), std::array::from_fn(|i| mul_add(c, u[i], -s * v[i]))),
         (mul_add(t, m01, m11), std::array::from_fn(|i| mul_add(s, u[i], c * v[i]))),
     ]
@@ -406,6 +459,31 @@ mod tests {
             assert!((vecs.transpose() * vecs - Matrix3::identity()).amax() < 1e-14, "{a}: not orthonormal {vecs}");
             let rebuilt = vecs * Matrix3::from_diagonal(&vals) * vecs.transpose();
             assert!((rebuilt - a).amax() <= 1e-13 * big, "{a}: rebuilt {rebuilt}");
+        }
+    }
+
+    /// The trisection root against the trigonometric formula it replaces, and as a root of its cubic.
+    #[test]
+    fn largest_trisection_root_matches_the_trigonometric_formula() {
+        for i in 0..=10_000 {
+            let s = i as f64 / 10_000.0;
+            let t = largest_trisection_root(s);
+            let reference = 2.0 * (s.acos() / 3.0).cos();
+            assert!((t - reference).abs() <= 4.0 * f64::EPSILON, "s {s}: {t} vs {reference}");
+            assert!((t * t * t - 3.0 * t - 2.0 * s).abs() <= 1e-14, "s {s}: residual");
+        }
+    }
+
+    /// Exact power-of-two scales for normal numbers, within a factor of two; the identity elsewhere.
+    #[test]
+    fn power_of_two_scale_is_exact_and_close() {
+        for x in [1.0, 3.0, 0.7, 1e-300, 1e300, f64::MAX / 2.0, f64::MIN_POSITIVE * 3.0] {
+            let (scale, inv) = power_of_two_scale(x);
+            assert!(scale <= x && x < 2.0 * scale, "{x}: {scale}");
+            assert_eq!(scale * inv, 1.0, "{x}");
+        }
+        for x in [0.0, -1.0, f64::NAN, f64::INFINITY, f64::MAX, 1e-310] {
+            assert_eq!(power_of_two_scale(x), (1.0, 1.0), "{x}");
         }
     }
 
