@@ -6,9 +6,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::kinematics::AnchoredSinCos;
 use crate::model::{Attachment, Model};
 use crate::space::{MatOps, Space, VecOps};
+use crate::trig::AnchoredSinCos;
 
 /// Body poses, motion subspaces and velocities in the world frame.
 #[derive(Clone, Debug)]
@@ -27,7 +27,7 @@ pub struct Kinematics<S: Space> {
     pub body_velocity: Vec<S::Spatial>,
     /// Velocity-product spatial acceleration of each body: its acceleration when q̈ = 0.
     pub bias_acceleration: Vec<S::Spatial>,
-    /// Per joint, sin and cos at the last anchor of its angle (see `kinematics::AnchoredSinCos`).
+    /// Per joint, sin and cos at the last anchor of its angle (see `trig::AnchoredSinCos`).
     pub(crate) sin_cos: Vec<AnchoredSinCos>,
 }
 

@@ -4,7 +4,6 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
-use crate::dense::mul_add;
 use crate::model::{JointKind, Model, NO_PARENT};
 use crate::space::{Space, VecOps};
 
@@ -54,55 +53,6 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
     }
 }
 
-/// `sin q` and `cos q` from the exact values at an anchor `a = round(16 q) / 16` and a short Taylor series
-/// in `δ = q - a` (|δ| ≤ 1/32): `sin q = sin a cos δ + cos a sin δ`, `cos q = cos a cos δ - sin a sin δ`.
-/// The anchor's sin and cos come from the library and are kept until the angle moves to another anchor,
-/// which at the speeds of a haptic linkage (a few rad/s, 1 kHz) is every few dozen evaluations; in between
-/// an evaluation costs a dozen multiply-adds instead of a library `sin_cos`. The result depends on q alone
-/// (not on which angles were evaluated before), and agrees with `q.sin_cos()` to round-off: both a and δ are
-/// exact, the series is truncated after δ⁷ (sin) and δ⁸ (cos), whose next terms are below 1e-19.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AnchoredSinCos {
-    /// `16 a` (an integer), NaN before the first evaluation.
-    anchor: f64,
-    sin: f64,
-    cos: f64,
-}
-
-impl Default for AnchoredSinCos {
-    fn default() -> Self {
-        AnchoredSinCos { anchor: f64::NAN, sin: 0.0, cos: 1.0 }
-    }
-}
-
-impl AnchoredSinCos {
-    /// Anchors per radian (a power of two, so `a` and `δ` are exact).
-    const PER_RADIAN: f64 = 16.0;
-
-    /// `(sin q, cos q)`.
-    #[inline]
-    pub fn eval(&mut self, q: f64) -> (f64, f64) {
-        let anchor = (q * Self::PER_RADIAN).round();
-        let a = anchor / Self::PER_RADIAN;
-        if anchor != self.anchor {
-            if a.is_nan() || a.abs() >= 1e15 {
-                // Huge or not a number: no series (and no caching) worth having.
-                return q.sin_cos();
-            }
-            (self.sin, self.cos) = a.sin_cos();
-            self.anchor = anchor;
-        }
-        let d = q - a;
-        let d2 = d * d;
-        // sin δ = δ (1 - δ²/6 (1 - δ²/20 (1 - δ²/42))), cos δ = 1 - δ²/2 (1 - δ²/12 (1 - δ²/30 (1 - δ²/56))).
-        let sin_d = mul_add(d * d2, mul_add(d2, mul_add(d2, -1.0 / 5040.0, 1.0 / 120.0), -1.0 / 6.0), d);
-        let cos_d_minus_1 = d2 * mul_add(d2, mul_add(d2, mul_add(d2, 1.0 / 40320.0, -1.0 / 720.0), 1.0 / 24.0), -0.5);
-        let sin = mul_add(self.cos, sin_d, mul_add(self.sin, cos_d_minus_1, self.sin));
-        let cos = mul_add(-self.sin, sin_d, mul_add(self.cos, cos_d_minus_1, self.cos));
-        (sin, cos)
-    }
-}
-
 /// Computes every body's spatial velocity `v_i = v_λ(i) + S_i q̇_i` and velocity-product acceleration
 /// `a_i = a_λ(i) + v_i × S_i q̇_i` (the body's acceleration when q̈ = 0). Needs [`forward_kinematics`].
 pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVector<f64>) {
@@ -147,30 +97,6 @@ mod tests {
             let fd = (plus[i] - data.kin.com[i]) / (2.0 * h);
             assert!((fd - velocities[i]).norm() < 1e-7, "body {i}: {fd} vs {}", velocities[i]);
         }
-    }
-
-    /// The anchored sin and cos agree with the library's to round-off, for angles that step slowly (the
-    /// cache at work), jump, sit on and next to anchors, are tiny, negative or large.
-    #[test]
-    fn anchored_sin_cos_matches_the_library() {
-        let mut cache = AnchoredSinCos::default();
-        let mut check = |q: f64| {
-            let (s, c) = cache.eval(q);
-            let (s_ref, c_ref) = q.sin_cos();
-            assert!(
-                (s - s_ref).abs() <= 3e-16 && (c - c_ref).abs() <= 3e-16,
-                "q = {q}: ({s}, {c}) vs ({s_ref}, {c_ref})"
-            );
-        };
-        let mut q = -7.0;
-        while q < 7.0 {
-            check(q);
-            q += 0.000_731;
-        }
-        for q in [0.0, 1e-300, -1e-12, 1.0 / 32.0, -1.0 / 32.0, 0.5 - 1e-17, 3.0, -1234.567, 1e14, 1e20, 0.0625] {
-            check(q);
-        }
-        assert!(cache.eval(f64::NAN).0.is_nan());
     }
 
     /// The testbed's tip lands where the issue says (≈ (0.000645, 0.008528) m) at q0.

@@ -59,6 +59,7 @@ pub mod op_space;
 pub mod scene;
 mod simd;
 pub mod space;
+pub mod trig;
 
 /// Test fixtures shared by the unit tests and the integration tests (not part of the API).
 #[doc(hidden)]

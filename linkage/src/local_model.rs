@@ -79,18 +79,38 @@ impl<S: Space> OpPose<S> {
 
     /// Writes `[position, orientation parameters]` into `out` (length [`OpPose::wire_len`]).
     pub fn to_slice(&self, out: &mut [f64]) {
+        self.to_slice_memo(out, &mut S::RotParamsMemo::default());
+    }
+
+    /// As [`OpPose::to_slice`] for a pose written again and again as it moves (see
+    /// [`Space::rot_to_params_memo`]).
+    pub fn to_slice_memo(&self, out: &mut [f64], memo: &mut S::RotParamsMemo) {
         let n = <S::Point as VecOps>::LEN;
         out[..n].copy_from_slice(self.position.as_slice());
-        S::rot_to_params(&self.rotation, &mut out[n..n + S::ROT_PARAMS]);
+        S::rot_to_params_memo(&self.rotation, &mut out[n..n + S::ROT_PARAMS], memo);
     }
 
     /// Reads a pose written by [`OpPose::to_slice`]; `None` when the length is wrong or values invalid.
     pub fn from_slice(v: &[f64]) -> Option<Self> {
+        let (position, params) = Self::split_wire(v)?;
+        Some(OpPose { position, rotation: S::rot_from_params(params)? })
+    }
+
+    /// As [`OpPose::from_slice`] for poses read one after another as they move (see
+    /// [`Space::rot_from_params_memo`]).
+    pub fn from_slice_memo(v: &[f64], memo: &mut S::RotParamsMemo) -> Option<Self> {
+        let (position, params) = Self::split_wire(v)?;
+        Some(OpPose { position, rotation: S::rot_from_params_memo(params, memo)? })
+    }
+
+    /// The position and the orientation's parameters of a pose on the wire, when the length is right and
+    /// the position finite.
+    fn split_wire(v: &[f64]) -> Option<(S::Point, &[f64])> {
         let n = <S::Point as VecOps>::LEN;
         if v.len() != n + S::ROT_PARAMS || v[..n].iter().any(|x| !x.is_finite()) {
             return None;
         }
-        Some(OpPose { position: S::Point::from_slice(&v[..n]), rotation: S::rot_from_params(&v[n..])? })
+        Some((S::Point::from_slice(&v[..n]), &v[n..]))
     }
 }
 

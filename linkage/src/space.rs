@@ -19,6 +19,8 @@ use std::ops::{Add, AddAssign, Index, IndexMut, Mul, Neg, Sub, SubAssign};
 
 use nalgebra::{Matrix3, Matrix6, Rotation3, UnitComplex, Vector2, Vector3, Vector6};
 
+use crate::trig;
+
 /// Which kind of space a scene lives in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -256,6 +258,22 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
     /// Reads an orientation from its parameters; `None` unless finite (and, spatial, a unit quaternion
     /// within 1e-6).
     fn rot_from_params(p: &[f64]) -> Option<Self::Rot>;
+    /// What [`Space::rot_to_params_memo`] and [`Space::rot_from_params_memo`] keep between calls on one
+    /// stream of orientations (planar: trigonometric anchors; spatial: nothing, quaternions need no
+    /// trigonometry).
+    type RotParamsMemo: Clone + Copy + Debug + Default + PartialEq + Send + Sync + 'static;
+    /// As [`Space::rot_to_params`], cheaper for an orientation that moves little between calls with the
+    /// same `memo` (a pose written to the wire every tick); agrees with it to a few units in the last place.
+    fn rot_to_params_memo(r: &Self::Rot, out: &mut [f64], memo: &mut Self::RotParamsMemo) {
+        let _ = memo;
+        Self::rot_to_params(r, out)
+    }
+    /// As [`Space::rot_from_params`], cheaper for parameters that move little between calls with the same
+    /// `memo` (a snapshot's pose every millisecond); agrees with it to round-off.
+    fn rot_from_params_memo(p: &[f64], memo: &mut Self::RotParamsMemo) -> Option<Self::Rot> {
+        let _ = memo;
+        Self::rot_from_params(p)
+    }
 
     // --- reading scenes ----------------------------------------------------------------------
     /// Orientation from a scene's `rotation` numbers (planar: one angle; spatial: roll, pitch, yaw).
@@ -325,6 +343,13 @@ pub struct Planar;
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Spatial;
 
+/// The anchors of [`Space::rot_to_params_memo`] and [`Space::rot_from_params_memo`] for planar angles.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlanarAngleMemo {
+    to_angle: trig::AnchoredAtan2,
+    from_angle: trig::AnchoredSinCos,
+}
+
 impl Space for Planar {
     const KIND: SceneKind = SceneKind::Planar;
     const DIM: usize = 3;
@@ -359,11 +384,12 @@ impl Space for Planar {
     }
     #[inline]
     fn rot_from_vector(v: &f64) -> Self::Rot {
-        UnitComplex::new(*v)
+        let (sin, cos) = trig::sin_cos(*v);
+        UnitComplex::from_cos_sin_unchecked(cos, sin)
     }
     #[inline]
     fn rot_log(r: &Self::Rot) -> f64 {
-        r.angle()
+        trig::atan2(r.im, r.re)
     }
     #[inline]
     fn rot_is_finite(r: &Self::Rot) -> bool {
@@ -378,6 +404,21 @@ impl Space for Planar {
     fn rot_from_params(p: &[f64]) -> Option<Self::Rot> {
         match p {
             [a] if a.is_finite() => Some(UnitComplex::new(*a)),
+            _ => None,
+        }
+    }
+    type RotParamsMemo = PlanarAngleMemo;
+    #[inline]
+    fn rot_to_params_memo(r: &Self::Rot, out: &mut [f64], memo: &mut PlanarAngleMemo) {
+        out[0] = memo.to_angle.eval(r.im, r.re);
+    }
+    #[inline]
+    fn rot_from_params_memo(p: &[f64], memo: &mut PlanarAngleMemo) -> Option<Self::Rot> {
+        match p {
+            [a] if a.is_finite() => {
+                let (sin, cos) = memo.from_angle.eval(*a);
+                Some(UnitComplex::from_cos_sin_unchecked(cos, sin))
+            }
             _ => None,
         }
     }
@@ -517,7 +558,7 @@ impl Space for Spatial {
         let sin = v.norm();
         let cos = (m.trace() - 1.0) * 0.5;
         if cos > -0.9 {
-            let angle = sin.atan2(cos);
+            let angle = trig::atan2(sin, cos);
             if sin < 1e-12 {
                 v * (1.0 + angle * angle / 6.0)
             } else {
@@ -533,6 +574,7 @@ impl Space for Spatial {
         r.matrix().iter().all(|x| x.is_finite())
     }
     const ROT_PARAMS: usize = 4;
+    type RotParamsMemo = ();
     #[inline]
     fn rot_to_params(r: &Self::Rot, out: &mut [f64]) {
         let q = nalgebra::UnitQuaternion::from_rotation_matrix(r);

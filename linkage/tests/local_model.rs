@@ -102,3 +102,38 @@ fn local_model_predicts_the_full_dynamics_over_short_horizons() {
     let ratio = errors[0] / errors[1];
     assert!(ratio > 3.0, "error should shrink ~4x (second order+): {errors:?}");
 }
+
+/// Poses written and read with a memo (a stream that moves a little each tick, as the client's uplink and
+/// snapshot intake do) agree with the plain conversions, planar and spatial, including a wrap through ±π
+/// and a jump.
+#[test]
+fn memoized_pose_conversions_match_the_plain_ones() {
+    fn check<S: Space>(poses: impl Iterator<Item = OpPose<S>>) {
+        let mut write_memo = S::RotParamsMemo::default();
+        let mut read_memo = S::RotParamsMemo::default();
+        let (mut plain, mut memo) = (vec![0.0; OpPose::<S>::wire_len()], vec![0.0; OpPose::<S>::wire_len()]);
+        for pose in poses {
+            pose.to_slice(&mut plain);
+            pose.to_slice_memo(&mut memo, &mut write_memo);
+            for (a, b) in plain.iter().zip(&memo) {
+                assert!((a - b).abs() <= 1e-15, "written {memo:?} vs {plain:?}");
+            }
+            let read = OpPose::<S>::from_slice(&plain).expect("a valid pose");
+            let read_memo_pose = OpPose::<S>::from_slice_memo(&plain, &mut read_memo).expect("a valid pose");
+            let d = read.difference(&read_memo_pose);
+            assert!(d.norm() <= 1e-15, "read {d:?}");
+        }
+        assert!(OpPose::<S>::from_slice_memo(&vec![f64::NAN; OpPose::<S>::wire_len()], &mut read_memo).is_none());
+    }
+    let angles = (0..20_000).map(|i| 3.0 + i as f64 * 4e-4).chain([-1.0, 2.5, -3.1]);
+    check::<Planar>(angles.clone().map(|a| {
+        let mut p = OpPose::<Planar>::identity();
+        p.integrate(&Vector3::new(0.1, -0.2, a), 1.0);
+        p
+    }));
+    check::<kinloop_linkage::Spatial>(angles.step_by(100).map(|a| {
+        let mut p = OpPose::<kinloop_linkage::Spatial>::identity();
+        p.integrate(&nalgebra::Vector6::new(0.1, -0.2, 0.3, a, 0.5 * a, -0.2), 1.0);
+        p
+    }));
+}

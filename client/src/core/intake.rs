@@ -105,10 +105,12 @@ impl<S: Space> SnapshotTerms<S> {
         snap: &Snapshot,
         received_at: Duration,
         max_inverse_inertia: f64,
+        pose_memo: &mut S::RotParamsMemo,
     ) -> Result<(), SnapshotRejection> {
         let k = S::DIM;
         finite_of_len("op_pose", &snap.op_pose, OpPose::<S>::wire_len())?;
-        self.op_pose = OpPose::from_slice(&snap.op_pose).ok_or(SnapshotRejection::Implausible { field: "op_pose" })?;
+        self.op_pose = OpPose::from_slice_memo(&snap.op_pose, pose_memo)
+            .ok_or(SnapshotRejection::Implausible { field: "op_pose" })?;
         finite_of_len("op_twist", &snap.op_twist, k)?;
         self.op_twist = S::OpVec::from_slice(&snap.op_twist);
         finite_of_len("inverse_inertia", &snap.inverse_inertia, k * (k + 1) / 2)?;

@@ -326,8 +326,19 @@ pub struct HapticCore<S: Space> {
     one_way_delay: Duration,
     deadband: Deadband<S>,
     uplink: Uplink,
+    /// Trigonometric anchors for the three pose streams converted every tick or snapshot.
+    pose_memos: PoseMemos<S>,
     stats: CoreStats,
     report: TickReport<S>,
+}
+
+/// One memo per stream of poses the core reads or writes on the wire (see `Space::RotParamsMemo`): each
+/// stream moves little from one conversion to the next, which the memo turns into fewer library calls.
+#[derive(Clone, Copy, Debug, Default)]
+struct PoseMemos<S: Space> {
+    snapshot_op: S::RotParamsMemo,
+    uplink_device: S::RotParamsMemo,
+    uplink_model: S::RotParamsMemo,
 }
 
 fn per_axis<S: Space>(what: &str, values: &[f64]) -> Result<S::OpVec, CoreError> {
@@ -391,6 +402,7 @@ impl<S: Space> HapticCore<S> {
             one_way_delay: Duration::ZERO,
             deadband: Deadband::new(config.deadband),
             uplink,
+            pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),
             report: TickReport::idle(Duration::ZERO),
             config,
@@ -476,7 +488,12 @@ impl<S: Space> HapticCore<S> {
             self.stats.snapshots_rejected += 1;
             return Err(SnapshotRejection::Implausible { field: "user_id" });
         }
-        if let Err(rejection) = self.incoming.fill_from(snapshot, now, self.config.safety.max_inverse_inertia) {
+        if let Err(rejection) = self.incoming.fill_from(
+            snapshot,
+            now,
+            self.config.safety.max_inverse_inertia,
+            &mut self.pose_memos.snapshot_op,
+        ) {
             self.stats.snapshots_rejected += 1;
             return Err(rejection);
         }
@@ -708,9 +725,9 @@ impl<S: Space> HapticCore<S> {
         u.last_snapshot_seq = self.active.seq;
         u.last_snapshot_age_s = age.as_secs_f64();
         u.hand_wrench.copy_from_slice(model_wrench.as_slice());
-        device_pose.to_slice(&mut u.device_pose);
+        device_pose.to_slice_memo(&mut u.device_pose, &mut self.pose_memos.uplink_device);
         u.device_twist.copy_from_slice(device_twist.as_slice());
-        self.model.pose().to_slice(&mut u.model_pose);
+        self.model.pose().to_slice_memo(&mut u.model_pose, &mut self.pose_memos.uplink_model);
         u.model_twist.copy_from_slice(self.model.twist().as_slice());
         u.flags = flags;
     }
