@@ -133,8 +133,12 @@ pub struct OpSpaceWorkspace<S: Space> {
     pub jacobian_t: DMatrix<f64>,
     /// Y = U⁻¹ Jᵀ, n×k.
     pub y: DMatrix<f64>,
-    /// G = R⁻¹ (Zᵀ Y)_pivoted, m×k.
-    pub g: DMatrix<f64>,
+    /// `Q = Z_r R⁻ᵀ`: an orthonormal basis of the kept closures' directions (see `op_space`), n×m (the
+    /// first `schur_rank` columns are valid).
+    pub closure_basis: DMatrix<f64>,
+    /// Ỹ = Y with the kept closures' directions projected out (see `op_space`), n×k: `Λ⁻¹ = Ỹᵀ Ỹ` and,
+    /// for another point on the linkage, the closed-loop coupling `Ỹᵀ Ỹ'`. Equal to Y without loops.
+    pub y_closed: DMatrix<f64>,
     /// J̇ q̇ at the OP (op order).
     pub jdot_qdot: S::OpVec,
     /// Λ⁻¹ with the loops closed (eq 9).
@@ -291,7 +295,8 @@ impl<S: Space> Data<S> {
             op: OpSpaceWorkspace {
                 jacobian_t: DMatrix::zeros(n, k),
                 y: DMatrix::zeros(n, k),
-                g: DMatrix::zeros(m, k),
+                closure_basis: DMatrix::zeros(n, m),
+                y_closed: DMatrix::zeros(n, k),
                 jdot_qdot: S::OpVec::zero(),
                 inverse_inertia: S::OpMat::zero(),
                 inverse_inertia_open: S::OpMat::zero(),

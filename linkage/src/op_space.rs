@@ -5,7 +5,16 @@
 //! `S = W D⁻¹ Wᵀ`: singular for redundant closures. We compute the same quantity as `J P Jᵀ` with
 //! `P = D⁻¹ - D⁻¹ Wᵀ S⁺ W D⁻¹` (the top-left block of the KKT inverse) using the factors of the KKT solve:
 //! with `Y = U⁻¹ Jᵀ`, `Z = U⁻¹ Wᵀ` and the rank-revealing factor `S_rr = R Rᵀ` over the independent rows,
-//! `Λ⁻¹ = Yᵀ Y - Gᵀ G` where `G = R⁻¹ (Zᵀ Y)_r`. The first term is the open-chain `Λ⁻¹`.
+//! `Q = Z_r R⁻ᵀ` has orthonormal columns spanning the kept closures' directions and
+//! `Λ⁻¹ = Yᵀ (I - Q Qᵀ) Y`. `Yᵀ Y` is the open-chain `Λ⁻¹`.
+//!
+//! **Gram form.** We build Q (from Z and the factor, no new factorization), compute `Ỹ = Y - Q (Qᵀ Y)` and
+//! take `Λ⁻¹ = Ỹᵀ Ỹ`, not the shorter `Yᵀ Y - Gᵀ G` with `G = Qᵀ Y = R⁻¹ (Zᵀ Y)_r`: near a configuration where the closures lose rank, a kept row can have a
+//! relative pivot near [`crate::kkt::RANK_TOLERANCE`], R a condition number up to 1e5, and the difference
+//! of two large Gram matrices lost its small eigenvalues to round-off: random linkages built at such a
+//! configuration gave an eigenvalue of -1.7e-6 (not positive semi-definite, so not an inverse inertia).
+//! A Gram matrix is positive semi-definite whatever the round-off, and its small eigenvalues come from
+//! the small columns of Ỹ rather than from a cancellation.
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
 
 use crate::data::Data;
@@ -13,10 +22,11 @@ use crate::dense::{dot, mul_add};
 use crate::error::DynamicsError;
 use crate::jacobian::{frame_bias_acceleration, frame_jacobian_t};
 use crate::ltl;
+use crate::ltl_small::by_size;
 use crate::model::Model;
 use crate::space::{MatOps, Space};
 
-/// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Λ⁻¹ (closed) and Λ⁻¹ (open). Needs
+/// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ, Λ⁻¹ (closed) and Λ⁻¹ (open). Needs
 /// `forward_kinematics`, `forward_velocity` (for J̇q̇), `mass_matrix`, `loop_closure` and `kkt::factorize`
 /// at the same configuration, with no implicit mass in the factor.
 pub fn op_space_inertia<S: Space>(model: &Model<S>, data: &mut Data<S>, op: usize) -> Result<(), DynamicsError> {
@@ -54,30 +64,23 @@ pub fn frame_point_inertia<S: Space>(
     ws.inverse_inertia_open = open;
     let mut closed = open;
     let rank = kkt.schur_rank;
+    let y_closed = ws.y_closed.as_mut_slice();
+    y_closed.copy_from_slice(y);
     if model.nc() > 0 && rank > 0 {
-        // G = R⁻¹ (Zᵀ Y) restricted to the pivoted independent rows, one column of Y at a time.
-        let l = kkt.schur_factor.as_slice();
-        let m = model.nc();
-        let z = kkt.z.as_slice();
-        let g = ws.g.as_mut_slice();
-        for (yc, gc) in y.chunks_exact(n).zip(g.chunks_exact_mut(m)) {
-            let yc = &yc[..rows];
-            for i in 0..rank {
-                let zi = kkt.schur_perm[i];
-                let mut s = dot(&z[zi * n..zi * n + kkt.z_rows[zi]], yc);
-                for (j, gj) in gc[..i].iter().enumerate() {
-                    s = mul_add(-l[j * m + i], *gj, s);
-                }
-                gc[i] = s * kkt.schur_inv_diag[i];
-            }
-        }
+        let basis = Closures {
+            z: kkt.z.as_slice(),
+            l: kkt.schur_factor.as_slice(),
+            inv_diag: kkt.schur_inv_diag.as_slice(),
+            perm: &kkt.schur_perm[..rank],
+            m: model.nc(),
+        };
+        let q = ws.closure_basis.as_mut_slice();
+        by_size!(n, N => project_out::<N>(N, &basis, q, y_closed), _ => project_out::<0>(n, &basis, q, y_closed));
         for c in 0..k {
             for r in 0..=c {
-                let s = dot(&g[r * m..r * m + rank], &g[c * m..c * m + rank]);
-                closed[(r, c)] -= s;
-                if r != c {
-                    closed[(c, r)] -= s;
-                }
+                let v = dot(&y_closed[r * n..(r + 1) * n], &y_closed[c * n..(c + 1) * n]);
+                closed[(r, c)] = v;
+                closed[(c, r)] = v;
             }
         }
     }
@@ -86,4 +89,49 @@ pub fn frame_point_inertia<S: Space>(
     }
     ws.inverse_inertia = closed;
     Ok(())
+}
+
+/// The kept closures' directions in the metric of D: Z's columns, the pivoted factor `S_rr = L Lᵀ` and its
+/// reciprocal diagonal (the KKT workspace's).
+struct Closures<'a> {
+    z: &'a [f64],
+    l: &'a [f64],
+    inv_diag: &'a [f64],
+    perm: &'a [usize],
+    m: usize,
+}
+
+/// Builds the orthonormal basis `Q = Z_r L⁻ᵀ` (n×rank, into `q`: column i is Z's column `perm[i]` minus
+/// its components along the columns before it, scaled, as in Gram-Schmidt but with the coefficients taken
+/// from the factor) and projects it out of every column of `y`: `y ← y - Q (Qᵀ y)`. Called with the
+/// constant `N = n` for small linkages, so that the loops over rows unroll, and with `N = 0` otherwise.
+#[inline(always)]
+fn project_out<const N: usize>(n: usize, c: &Closures<'_>, q: &mut [f64], y: &mut [f64]) {
+    let n = if N > 0 { N } else { n };
+    let rank = c.perm.len();
+    for (i, &zi) in c.perm.iter().enumerate() {
+        let (done, rest) = q.split_at_mut(i * n);
+        let qi = &mut rest[..n];
+        qi.copy_from_slice(&c.z[zi * n..(zi + 1) * n]);
+        for (j, qj) in done.chunks_exact(n).enumerate() {
+            // L[i][j], column-major m×m.
+            let lij = c.l[j * c.m + i];
+            for (x, v) in qi.iter_mut().zip(qj) {
+                *x = mul_add(-lij, *v, *x);
+            }
+        }
+        let inv = c.inv_diag[i];
+        for x in qi.iter_mut() {
+            *x *= inv;
+        }
+    }
+    let q = &q[..rank * n];
+    for yc in y.chunks_exact_mut(n) {
+        for qi in q.chunks_exact(n) {
+            let g = dot(qi, yc);
+            for (x, v) in yc.iter_mut().zip(qi) {
+                *x = mul_add(-g, *v, *x);
+            }
+        }
+    }
 }

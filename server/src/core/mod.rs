@@ -159,14 +159,10 @@ impl<S: Space> VeState<'_, S> {
 /// Reusable buffers of the snapshot build (see `snapshots`).
 #[derive(Debug)]
 struct SnapshotScratch<S: Space> {
-    /// `Y_h = U⁻¹ J_hᵀ` of the user being built (n×k).
+    /// `Ỹ_h` of the user being built (n×k, see `kinloop_linkage::op_space`).
     op_y: DMatrix<f64>,
-    /// `G_h` of the user being built (m×k).
-    op_g: DMatrix<f64>,
-    /// `U⁻¹ J_cᵀ n` of a contact (n).
+    /// `Ỹ_c n` of a contact (n).
     contact_y: DVector<f64>,
-    /// `G_c n` of a contact (m).
-    contact_g: DVector<f64>,
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
 }
@@ -234,9 +230,7 @@ impl<S: Space> VeCore<S> {
         let (n, m, k) = (model.nq(), model.nc(), S::DIM);
         let scratch = SnapshotScratch {
             op_y: DMatrix::zeros(n, k),
-            op_g: DMatrix::zeros(m, k),
             contact_y: DVector::zeros(n),
-            contact_g: DVector::zeros(m),
             near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
         };
         let user_room = 2 * config.max_users;

@@ -21,11 +21,11 @@
 //!
 //! **Contacts** within `contact_margin_m` (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
 //! loops carry a contact's force to any OP) enter the local model along their normal n. With
-//! `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (the KKT inverse's top-left block) and the factors of eq 9 (`Y = U⁻¹ Jᵀ`,
-//! `G = R⁻¹ (Zᵀ Y)_r`), the cross inertia between the OP frame h and the contact point c is
-//! `Λ⁻¹_hc = J_h P J_cᵀ = Y_hᵀ Y_c − G_hᵀ G_c`. The user's `Y_h, G_h` are kept, `frame_point_inertia` at the
-//! contact point gives `Y_c, G_c` and `Λ⁻¹_cc`, and:
-//! - `op_coupling = Λ⁻¹_hc n = Y_hᵀ (Y_c n) − G_hᵀ (G_c n)`: the OP acceleration per unit normal force and,
+//! `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (the KKT inverse's top-left block) and the factors of eq 9 (`Ỹ`: `U⁻¹ Jᵀ`
+//! with the kept closures' directions projected out, see `kinloop_linkage::op_space`), the cross inertia
+//! between the OP frame h and the contact point c is `Λ⁻¹_hc = J_h P J_cᵀ = Ỹ_hᵀ Ỹ_c`. The user's `Ỹ_h` is
+//! kept, `frame_point_inertia` at the contact point gives `Ỹ_c` and `Λ⁻¹_cc`, and:
+//! - `op_coupling = Λ⁻¹_hc n = Ỹ_hᵀ (Ỹ_c n)`: the OP acceleration per unit normal force and,
 //!   by symmetry of P, the gap acceleration per unit OP wrench;
 //! - `mobility = nᵀ Λ⁻¹_cc n`;
 //! - `bias_accel = nᵀ (J_c q̈ + J̇_c q̇) − op_coupling · F_u − mobility · f_c`, the gap acceleration with
@@ -207,8 +207,7 @@ fn build_one<S: Space>(
     // Contacts last: frame_point_inertia overwrites data.op.
     spare.append(&mut snapshot.contacts);
     if let Some((stiffness, damping)) = contact_gains.filter(|_| !scratch.near.is_empty()) {
-        scratch.op_y.copy_from(&data.op.y);
-        scratch.op_g.copy_from(&data.op.g);
+        scratch.op_y.copy_from(&data.op.y_closed);
         for near_index in 0..scratch.near.len() {
             let Some(mut term) = spare.pop() else { break };
             let contact = scratch.near[near_index];
@@ -283,19 +282,13 @@ fn fill_contact_term<S: Space>(
     frame_point_inertia(model, data, contact.body, &contact.point)?;
     let normal = contact.normal.as_slice();
     let lin = normal.len();
-    let rank = if model.nc() > 0 { data.kkt.schur_rank } else { 0 };
     let ws = &data.op;
     for i in 0..model.nq() {
-        scratch.contact_y[i] = (0..lin).map(|a| ws.y[(i, a)] * normal[a]).sum();
-    }
-    for r in 0..rank {
-        scratch.contact_g[r] = (0..lin).map(|a| ws.g[(r, a)] * normal[a]).sum();
+        scratch.contact_y[i] = (0..lin).map(|a| ws.y_closed[(i, a)] * normal[a]).sum();
     }
     let mut coupling = S::OpVec::zero();
     for j in 0..S::DIM {
-        let open = scratch.op_y.column(j).dot(&scratch.contact_y);
-        let closed: f64 = (0..rank).map(|r| scratch.op_g[(r, j)] * scratch.contact_g[r]).sum();
-        coupling[j] = open - closed;
+        coupling[j] = scratch.op_y.column(j).dot(&scratch.contact_y);
     }
     let mut mobility = 0.0;
     let mut gap_accel = 0.0;

@@ -1,4 +1,4 @@
-//! Runs `client/tick_testbed` for profilers: `profile_tick [ITERS]` (default 2,000,000).
+//! Runs `client/tick_testbed` for profilers: `profile_client_tick [ITERS]` (default 2,000,000).
 //! `perf record` shows where the time goes; `valgrind --tool=callgrind` counts instructions, which do not
 //! suffer from a noisy machine.
 
