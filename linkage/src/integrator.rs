@@ -215,7 +215,7 @@ pub const CHORD_TOLERANCE: f64 = 2e-9;
 pub fn project<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, qd: &mut DVector<f64>) {
     // How far q moved from the configuration of the factors (the step's last dynamics evaluation): W moved
     // by about as much, relatively, and the chord leaves that fraction of the residual.
-    let moved = q.iter().zip(data.terms_at.q().iter()).fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
+    let moved = q.as_slice().iter().zip(data.terms_at.q().as_slice()).fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
     forward_poses(model, data, q);
     closure_residual_and_jacobian(model, data);
     let chord_leaves = moved * data.closure_residual.norm();
@@ -244,10 +244,10 @@ pub fn project<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f
     kkt::sub_columns_times(&kkt.z, &kkt.z_rows, r_v.as_slice(), t_v);
     ltl::solve_ut_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), kkt.tmp_n2.as_mut_slice());
     let (t_q, t_v) = kkt.tmp_n2.as_slice().split_at(n);
-    for (x, t) in q.iter_mut().zip(t_q) {
+    for (x, t) in q.as_mut_slice().iter_mut().zip(t_q) {
         *x += t;
     }
-    for (x, t) in qd.iter_mut().zip(t_v) {
+    for (x, t) in qd.as_mut_slice().iter_mut().zip(t_v) {
         *x += t;
     }
     kkt.tmp_m = r_q;

@@ -459,7 +459,7 @@ impl<S: Space> VeCore<S> {
     fn tick(&mut self, at: Duration) {
         let dt = self.step_config.dt;
         self.update_couplings(at, dt);
-        self.step_start_q.copy_from(&self.q);
+        self.step_start_q.as_mut_slice().copy_from_slice(self.q.as_slice());
         let mut forces = VeForces {
             couplings: &mut self.couplings,
             contacts: self.contacts.as_mut(),
@@ -482,7 +482,7 @@ impl<S: Space> VeCore<S> {
                 self.closure_error = report.closure_error;
                 self.metrics.closure_error = report.closure_error;
                 self.metrics.max_closure_error = self.metrics.max_closure_error.max(report.closure_error);
-                self.lambda.copy_from(&self.data.lambda);
+                self.lambda.as_mut_slice().copy_from_slice(self.data.lambda.as_slice());
                 self.book_step_wrenches(dt);
             }
             Err(error) => {
