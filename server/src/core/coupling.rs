@@ -88,13 +88,16 @@ impl<S: Space> Coupling<S> {
         self.pushes && self.weight > 0.0
     }
 
-    /// Updates pose, twist, Jacobian and wrench at the kinematic state `kin` (positions and velocities).
-    pub fn evaluate(&mut self, model: &Model<S>, kin: &Kinematics<S>) {
+    /// Updates pose, twist and wrench at the kinematic state `kin` (positions and velocities), and the
+    /// Jacobian when `with_jacobian`: a step needs it (implicit mass, the passivity books after the step),
+    /// the snapshot probe does not (it applies hand wrenches through `apply_wrench`, and the next step
+    /// evaluates again at the same state).
+    pub fn evaluate(&mut self, model: &Model<S>, kin: &Kinematics<S>, with_jacobian: bool) {
         let rotation = kin.body_rot[self.body];
         let position = kin.body_pos[self.body] + S::rotate(&rotation, &self.point);
         self.op_pose = OpPose { position, rotation };
         self.op_twist = frame_velocity(kin, self.body, &position);
-        if self.is_active() {
+        if with_jacobian && self.is_active() {
             frame_jacobian_t(model, kin, self.body, &position, &mut self.jacobian_t);
         }
         self.wrench = self.explicit_wrench();
@@ -229,7 +232,7 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         };
         let hands_only = self.evaluation == Evaluation::ProbeHands;
         for c in self.couplings.iter_mut() {
-            c.evaluate(model, kin);
+            c.evaluate(model, kin, !hands_only);
             if c.is_active() {
                 let applied = if hands_only { c.hand_part() } else { c.wrench };
                 apply_wrench(model, kin, c.body, &c.op_pose.position, &applied, tau);

@@ -300,7 +300,7 @@ impl<S: Space> VeCore<S> {
         self.next_user_id += 1;
         let point = &self.model.ops[op];
         let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), self.stiffness, self.damping);
-        coupling.evaluate(&self.model, &self.data.kin);
+        coupling.evaluate(&self.model, &self.data.kin, true);
         let welcome = self.welcome(user_id, &request, op);
         self.users.push(User {
             id: user_id,
