@@ -41,6 +41,37 @@ fn run_bounded(options: DemoOptions) -> DemoReport {
     }
 }
 
+/// Loop lateness (µs) beyond which a run does not count as on time: the clients' default stale-snapshot age
+/// (100 ms). Past it a client fades its force to zero by design and the device drifts under the hand's
+/// push, so neither the tracking nor the linkage's path is what the paper's control gives.
+const STALL_US: f64 = 100_000.0;
+
+/// Runs a demo of `users` for `seconds` until one run is on time (no client ticked on a stale snapshot,
+/// no loop later than [`STALL_US`]), at most three times: this VM's host sometimes stalls it for seconds
+/// (an idle 1 kHz loop has missed 10-33 % of its deadlines in a bad hour), and the claims checked on the
+/// result (tracking, the harness's path) are claims about a session that ran. Every run, stalled or not,
+/// must be sane: device limits, closure, files.
+fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
+    let mut stalled = Vec::new();
+    for attempt in 0..3 {
+        let out = dir.join(format!("attempt{attempt}"));
+        std::fs::create_dir_all(&out).unwrap();
+        let report = run_bounded(options(&out, users, seconds));
+        assert_sane(&report, users);
+        let s = &report.summary;
+        let stale: u64 = s
+            .per_user
+            .iter()
+            .map(|u| u.client["stale_ticks"].as_u64().expect("client statistics carry stale_ticks"))
+            .sum();
+        if stale == 0 && s.loop_lateness_us_max < STALL_US {
+            return report;
+        }
+        stalled.push(format!("{stale} stale ticks, loops up to {:.0} µs late", s.loop_lateness_us_max));
+    }
+    panic!("the host stalled all three runs: {stalled:?}");
+}
+
 /// What every demo must satisfy whatever the network: the device limit, the closure, and files written.
 fn assert_sane(report: &DemoReport, users: usize) {
     let s = &report.summary;
@@ -107,8 +138,7 @@ fn demo_op_path(report: &DemoReport, user: u32) -> Trajectory {
 fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
     let dir = tempfile::tempdir().unwrap();
     let seconds = 1.5;
-    let report = run_bounded(options(dir.path(), 2, seconds));
-    assert_sane(&report, 2);
+    let report = run_on_time(dir.path(), 2, seconds);
     let s = &report.summary;
     let rtt = rtt_ms(s);
     assert!(rtt < 20.0, "loopback round trip {rtt} ms");
