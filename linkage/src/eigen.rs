@@ -295,8 +295,8 @@ fn is_orthonormal<const N: usize>(g: &[[f64; N]; N]) -> bool {
 }
 
 /// Cyclic Jacobi on an N×N symmetric matrix (columns `a`), writing the eigenvalues in decreasing order and
-/// the eigenvectors as columns: the rotations accumulate onto `v` (the identity, or a warm start's G). On fixed-size arrays so that, for N = 3, the sweep unrolls into straight
-/// code with constant indices.
+/// the eigenvectors as columns: the rotations accumulate onto `v` (the identity, or a warm start's G). On
+/// fixed-size arrays so that, for N = 3, the sweep unrolls into straight code with constant indices.
 #[allow(clippy::needless_range_loop)] // p, q, r, k name matrix entries, as in the algorithm's statement
 fn jacobi<const N: usize>(mut a: [[f64; N]; N], mut v: [[f64; N]; N], values: &mut [f64], vectors: &mut [f64]) {
     let scale: f64 = (0..N).map(|i| a[i][i].abs()).fold(0.0, f64::max);

@@ -195,19 +195,19 @@ pub const CHORD_TOLERANCE: f64 = 2e-9;
 /// Why this is enough: any positive-definite metric gives a valid projection, and the residual left after
 /// the correction is `(W(q) - W_s) D⁻¹ W_sᵀ S⁺ h`: W moves by O(dt q̇) in a step (~1e-3 relative at 1 kHz),
 /// so 1e-8 m of drift per step leaves ~1e-11 m, and every step corrects what the last one left (the closure
-/// error measured at the start of the steps stays below 8e-11 m over the paper's 3 s on the testbed). The velocity satisfies the
-/// constraint of the configuration it belongs to up to the same factor (the W of the step's start in place
-/// of W(q) would leave an O(dt) velocity error every step). Reusing the factors saves the second
-/// triangular solve of Wᵀ, the Schur complement and its pivoted factorization; the poses at the new q
-/// come from [`forward_poses`] (no inertias: the closure does not need them).
+/// error measured at the start of the steps stays below 8e-11 m over the paper's 3 s on the testbed). The
+/// velocity satisfies the constraint of the configuration it belongs to up to the same factor (the W of the
+/// step's start in place of W(q) would leave an O(dt) velocity error every step). Reusing the factors saves
+/// the second triangular solve of Wᵀ, the Schur complement and its pivoted factorization; the poses at the
+/// new q come from [`forward_poses`] (no inertias: the closure does not need them).
 ///
 /// **Fast motion** refactors Z and S at the new q, the full Newton step, when the chord would leave more
-/// than [`CHORD_TOLERANCE`] times the length scale: its residual is about `|Δq|∞ · |h|`, Δq the motion since the factors' state
-/// (the 60 s demo, where the paper's constant push speeds the linkage up without bound, reached 5e-8 m
-/// with the chord alone). **Redundant closures** (`closure_rank < nc`: the spherical four-bar's revolute
-/// cut) always take the full step: there the pivoting keeps only some rows, and with the rows and
-/// factors of the solve's state the drift of the dropped rows was not corrected (the spherical four-bar's
-/// closure error grew by 3 % a step, to 1e-7 m within 0.1 s of swinging).
+/// than [`CHORD_TOLERANCE`] times the length scale: its residual is about `|Δq|∞ · |h|`, Δq the motion
+/// since the factors' state (the 60 s demo, where the paper's constant push speeds the linkage up without
+/// bound, reached 5e-8 m with the chord alone). **Redundant closures** (`closure_rank < nc`: the spherical
+/// four-bar's revolute cut) always take the full step: there the pivoting keeps only some rows, and with the
+/// rows and factors of the solve's state the drift of the dropped rows was not corrected (the spherical
+/// four-bar's closure error grew by 3 % a step, to 1e-7 m within 0.1 s of swinging).
 ///
 /// Needs [`kkt::factorize`] at a nearby state (the step's dynamics). Leaves h and Wᵀ at the new q (before
 /// its correction) and the body poses there; both corrections are `U⁻ᵀ Z S⁺ r`, so they go through the

@@ -9,10 +9,11 @@
 //! `Λ⁻¹ = Yᵀ (I - Q Qᵀ) Y`. `Yᵀ Y` is the open-chain `Λ⁻¹`.
 //!
 //! **Gram form.** We build Q (from Z and the factor, no new factorization), compute `Ỹ = Y - Q (Qᵀ Y)` and
-//! take `Λ⁻¹ = Ỹᵀ Ỹ`, not the shorter `Yᵀ Y - Gᵀ G` with `G = Qᵀ Y = R⁻¹ (Zᵀ Y)_r`: near a configuration where the closures lose rank, a kept row can have a
-//! relative pivot near [`crate::kkt::RANK_TOLERANCE`], R a condition number up to 1e5, and the difference
-//! of two large Gram matrices lost its small eigenvalues to round-off: random linkages built at such a
-//! configuration gave an eigenvalue of -1.7e-6 (not positive semi-definite, so not an inverse inertia).
+//! take `Λ⁻¹ = Ỹᵀ Ỹ`, not the shorter `Yᵀ Y - Gᵀ G` with `G = Qᵀ Y = R⁻¹ (Zᵀ Y)_r`: near a configuration
+//! where the closures lose rank, a kept row can have a relative pivot near [`crate::kkt::RANK_TOLERANCE`],
+//! R a condition number up to 1e5, and the difference of two large Gram matrices lost its small eigenvalues
+//! to round-off: random linkages built at such a configuration gave an eigenvalue of -1.7e-6 (not positive
+//! semi-definite, so not an inverse inertia).
 //! A Gram matrix is positive semi-definite whatever the round-off, and its small eigenvalues come from
 //! the small columns of Ỹ rather than from a cancellation.
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
