@@ -122,6 +122,8 @@ pub struct KktWorkspace {
     pub tmp_m2: DVector<f64>,
     /// Scratch of length m.
     pub tmp_m3: DVector<f64>,
+    /// Scratch of length m.
+    pub tmp_m4: DVector<f64>,
     /// Scratch of n×2 (two right-hand sides solved together).
     pub tmp_n2: DMatrix<f64>,
 }
@@ -241,12 +243,6 @@ impl TermsMemo {
         self.valid = true;
     }
 
-    /// The configuration of the last evaluation (kept after `clear`): where the KKT factors of the step
-    /// that followed it belong.
-    pub(crate) fn q(&self) -> &DVector<f64> {
-        &self.q
-    }
-
     /// Forgets the state: the kinematics are being changed.
     pub(crate) fn clear(&mut self) {
         self.valid = false;
@@ -289,6 +285,7 @@ impl<S: Space> Data<S> {
                 tmp_m: DVector::zeros(m),
                 tmp_m2: DVector::zeros(m),
                 tmp_m3: DVector::zeros(m),
+                tmp_m4: DVector::zeros(m),
                 tmp_n2: DMatrix::zeros(n, 2),
             },
             qdd: DVector::zeros(n),
