@@ -252,8 +252,9 @@ pub fn project<S: Space>(
             chord_iterations += 1;
             let after = r_q.norm();
             converged = after <= tolerance;
-            // Not contracting by at least half: W(q) is too far from the factors' W_s for the chord.
-            if converged || !(after <= 0.5 * before) {
+            // Not contracting by at least half (or NaN): W(q) is too far from the factors' W_s for the chord.
+            let contracting = after <= 0.5 * before;
+            if converged || !contracting {
                 break;
             }
             before = after;
