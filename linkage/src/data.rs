@@ -173,10 +173,15 @@ pub struct Data<S: Space> {
     pub kin: Kinematics<S>,
     /// Composite (subtree) spatial inertias, world frame.
     pub composite_inertia: Vec<S::Inertia>,
+    /// Articulated-body inertias, world frame (scratch of `articulated::factor`).
+    pub articulated_inertia: Vec<S::Inertia>,
     /// Per-body spatial forces (scratch of the recursive algorithms).
     pub body_force: Vec<S::Spatial>,
-    /// D(q), the joint-space mass matrix, n×n symmetric.
+    /// D(q), the joint-space mass matrix, n×n symmetric, written by `mass_matrix` (the forward dynamics
+    /// factors D without forming it, see `articulated`; `mass_matrix::ensure` fills it when stale).
     pub mass_matrix: DMatrix<f64>,
+    /// True when `mass_matrix` belongs to the current kinematics.
+    pub(crate) mass_matrix_fresh: bool,
     /// B(q, q̇), Coriolis and centripetal generalized forces.
     pub bias: DVector<f64>,
     /// G(q), gravity and joint springs (the paper's "joint flexibility and gravitational effects").
@@ -258,8 +263,10 @@ impl<S: Space> Data<S> {
         Data {
             kin: Kinematics::new(n),
             composite_inertia: vec![S::Inertia::zero(); n],
+            articulated_inertia: vec![S::Inertia::zero(); n],
             body_force: vec![S::Spatial::zero(); n],
             mass_matrix: DMatrix::zeros(n, n),
+            mass_matrix_fresh: false,
             bias: DVector::zeros(n),
             gravity: DVector::zeros(n),
             joint_force: DVector::zeros(n),

@@ -12,7 +12,6 @@ use crate::joint_forces::joint_forces;
 use crate::kinematics::{forward_kinematics, forward_velocity};
 use crate::kkt;
 use crate::loop_closure::{loop_closure, stabilize};
-use crate::mass_matrix::mass_matrix;
 use crate::model::Model;
 use crate::space::Space;
 
@@ -75,7 +74,8 @@ pub fn check_state<S: Space>(model: &Model<S>, q: &DVector<f64>, qd: &DVector<f6
     Ok(())
 }
 
-/// Computes every term of eq 1-3 at `(q, q̇)`: kinematics, D, B, G, joint forces, h, W, w, w_stab, and the
+/// Computes every term of eq 1-3 at `(q, q̇)`: kinematics (with the bodies' inertias, from which
+/// `kkt::factorize` factors D without forming it), B, G, joint forces, h, W, w, w_stab, and the
 /// external forces into `data.applied`. Does not solve. When the terms already belong to exactly this
 /// state (see `TermsMemo`), only the external forces are evaluated again.
 pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
@@ -88,7 +88,6 @@ pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
     if !data.terms_at.holds(q, qd) {
         forward_kinematics(model, data, q);
         forward_velocity(model, data, qd);
-        mass_matrix(model, data);
         bias_forces(model, data);
         gravity_forces(model, data, q);
         joint_forces(model, data, q, qd);

@@ -24,6 +24,7 @@ pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DV
 /// all).
 pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
     data.terms_at.clear();
+    data.mass_matrix_fresh = false;
     let kin = &mut data.kin;
     let q = q.as_slice();
     for (i, joint) in model.joints.iter().enumerate() {

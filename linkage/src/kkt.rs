@@ -21,10 +21,12 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::articulated;
 use crate::data::Data;
 use crate::dense::{self, dot, sub_scaled};
 use crate::error::DynamicsError;
 use crate::ltl;
+use crate::mass_matrix;
 use crate::model::Model;
 use crate::space::Space;
 
@@ -33,11 +35,18 @@ use crate::space::Space;
 pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// Factors D (plus `implicit_mass` when in use) and, when the model has loops, forms Z, S and the pivoted
-/// factor of S. Needs `mass_matrix` and `loop_closure`.
+/// factor of S. Needs `forward_kinematics` and `loop_closure`. D alone is factored from the bodies'
+/// articulated inertias without being formed (`articulated`); with `implicit_mass`, D is formed (if it is
+/// not already) and the sum factored by `ltl`.
 pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
-    let kkt = &mut data.kkt;
-    let extra = data.use_implicit_mass.then_some(&data.implicit_mass);
-    ltl::factor_sum(model, &data.mass_matrix, extra, &mut kkt.factor, kkt.factor_inv_diag.as_mut_slice())?;
+    if data.use_implicit_mass {
+        mass_matrix::ensure(model, data);
+        let kkt = &mut data.kkt;
+        let (d, extra) = (&data.mass_matrix, Some(&data.implicit_mass));
+        ltl::factor_sum(model, d, extra, &mut kkt.factor, kkt.factor_inv_diag.as_mut_slice())?;
+    } else {
+        articulated::factor(model, data)?;
+    }
     factor_closures(model, data);
     Ok(())
 }

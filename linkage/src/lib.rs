@@ -17,6 +17,7 @@
 //! | [`joint_forces`] | damping, PD actuators (active linkages) | eq 1 |
 //! | [`loop_closure`] | h, W, w = Ẇq̇ (analytic), Baumgarte w_stab | eq 2, 3 |
 //! | [`ltl`] | tree-sparse factorization D = U Uᵀ | |
+//! | [`articulated`] | the same U from articulated-body inertias, without D | |
 //! | [`kkt`] | the KKT solve, rank-revealing for redundant closures | eq 4 |
 //! | [`dynamics`] | the forward-dynamics pipeline, external forces | eq 1-4 |
 //! | [`integrator`] | Euler, semi-implicit Euler, RK4, projection | |
@@ -32,6 +33,7 @@
 
 #![warn(missing_docs)]
 
+pub mod articulated;
 pub mod assemble;
 pub mod bench;
 pub mod bias;

@@ -278,11 +278,12 @@ impl ConfigSpaceTerms {
 
     /// Fills the terms at operational point `op` from a solved VE state (see [`op_space_terms`]);
     /// `user_wrench` is this user's wrench the VE applied at the OP. Needs `forward_dynamics` and
-    /// `op_space_inertia(op)`. Allocation-free when the sizes match.
+    /// `op_space_inertia(op)`; forms D when the dynamics have not (`mass_matrix::ensure`). Allocation-free
+    /// when the sizes match.
     pub fn fill_from<S: Space>(
         &mut self,
         model: &Model<S>,
-        data: &Data<S>,
+        data: &mut Data<S>,
         q: &DVector<f64>,
         qd: &DVector<f64>,
         user_wrench: &S::OpVec,
@@ -290,6 +291,7 @@ impl ConfigSpaceTerms {
     ) {
         self.q.copy_from(q);
         self.qd.copy_from(qd);
+        crate::mass_matrix::ensure(model, data);
         self.mass_matrix.copy_from(&data.mass_matrix);
         data.closure_jacobian_t.transpose_to(&mut self.closure_jacobian);
         data.op.jacobian_t.transpose_to(&mut self.op_jacobian);

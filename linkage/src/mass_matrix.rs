@@ -8,6 +8,13 @@ use crate::jacobian::support;
 use crate::model::{Model, NO_PARENT};
 use crate::space::{Space, VecOps};
 
+/// Fills `data.mass_matrix` unless it already belongs to the current kinematics. Needs `forward_kinematics`.
+pub fn ensure<S: Space>(model: &Model<S>, data: &mut Data<S>) {
+    if !data.mass_matrix_fresh {
+        mass_matrix(model, data);
+    }
+}
+
 /// Fills `data.mass_matrix` (symmetric, n×n). Needs `forward_kinematics`.
 pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let n = model.nq();
@@ -46,4 +53,5 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
             *dst = col[c];
         }
     }
+    data.mass_matrix_fresh = true;
 }

@@ -89,7 +89,7 @@ fn hot_paths_allocate_nothing() {
             let cd = constraint_directions::<Planar>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
             assert!(cd.count >= 1 || model.nc() == 0);
             reduced.terms = op_space_terms(&data, &user.wrench, LocalModelTerms::full());
-            terms.fill_from(&model, &data, &q, &qd, &user.wrench, LocalModelTerms::full());
+            terms.fill_from(&model, &mut data, &q, &qd, &user.wrench, LocalModelTerms::full());
             assert!(config.update(&terms, OpPose::of_op(&model, &data, 0)));
             for _ in 0..100 {
                 reduced.step(1e-3, &user.wrench);

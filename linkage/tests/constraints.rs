@@ -99,6 +99,7 @@ fn loop_free_scene_takes_the_plain_path() {
     assert_eq!(data.lambda.len(), 0);
     let (q, qd) = random_state(&model, 5);
     forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
+    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
     let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
     let expected = data.mass_matrix.clone().lu().solve(&tau).unwrap();
     assert!((&data.qdd - expected).amax() < 1e-10);
@@ -112,6 +113,7 @@ fn serial_chain_gives_the_classic_inverse_inertia() {
     let (q, qd) = random_state(&model, 2);
     forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
     op_space_inertia(&model, &mut data, 0).unwrap();
+    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
     let j = data.op.jacobian_t.transpose();
     let classic = &j * data.mass_matrix.clone().try_inverse().unwrap() * j.transpose();
     for r in 0..3 {

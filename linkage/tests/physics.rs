@@ -138,6 +138,8 @@ fn check_kkt<S: Space>(name: &str, model: &Model<S>) {
             *x = 0.3 * (i as f64 + 1.0) * if seed % 2 == 0 { 1.0 } else { -1.0 };
         }
         forward_dynamics(model, &mut data, &q, &qd, &mut wrench).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // D by composite rigid bodies: the dynamics factored it from articulated inertias without forming it.
+        mass_matrix(model, &mut data);
         let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
         let w = data.closure_jacobian();
         // Make the velocity consistent too, so w_stab is in the range of W.
@@ -168,6 +170,7 @@ fn check_op_space<S: Space>(name: &str, model: &Model<S>) {
         let (q, qd) = random_state(model, seed);
         let q = kinloop_linkage::assemble::assemble(model, &q, 1e-13).map(|a| a.q).unwrap_or(q);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
+        mass_matrix(model, &mut data);
         for op in 0..model.ops.len() {
             op_space_inertia(model, &mut data, op).unwrap();
             let j = data.op.jacobian_t.transpose();

@@ -130,6 +130,8 @@ fn check<S: Space>(scene: &Scene, seed: u64) -> Result<(), TestCaseError> {
     }
     forward_dynamics(&model, &mut data, &model.q0, &qd, &mut user).map_err(|e| TestCaseError::fail(e.to_string()))?;
     prop_assert!(data.qdd.iter().chain(data.lambda.iter()).all(|x| x.is_finite()));
+    // D by composite rigid bodies: the dynamics factored it from articulated inertias without forming it.
+    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
     let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
     let residual = &data.mass_matrix * &data.qdd + &data.closure_jacobian_t * &data.lambda - &tau;
     prop_assert!(residual.amax() < 1e-8 * (1.0 + tau.amax() + data.lambda.amax()), "eq 4 residual {}", residual.amax());

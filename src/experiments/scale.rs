@@ -93,7 +93,7 @@ fn measure_chain(links: usize, loops: usize, budget: Duration) -> Result<Option<
     op_space_inertia(&case.model, &mut case.data, 0).with_context(|| format!("{name}: op-space inertia"))?;
     let (n, m) = (case.model.nq(), case.model.nc());
     let mut terms = ConfigSpaceTerms::zeros(n, m, 3);
-    terms.fill_from(&case.model, &case.data, &case.q, &case.qd, &f, LocalModelTerms::full());
+    terms.fill_from(&case.model, &mut case.data, &case.q, &case.qd, &f, LocalModelTerms::full());
     let pose = OpPose::<Planar>::of_op(&case.model, &case.data, 0);
     let mut config = ConfigSpaceLocalModel::<Planar>::new(n, m);
     let config_update_ns = measure(budget, || {

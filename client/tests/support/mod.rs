@@ -203,7 +203,7 @@ impl TestbedVe {
         let config = self.send_config.then(|| {
             self.config_terms.fill_from(
                 &self.model,
-                &self.data,
+                &mut self.data,
                 &self.q,
                 &self.qd,
                 &user_wrench,
