@@ -182,6 +182,10 @@ pub struct Data<S: Space> {
     pub mass_matrix: DMatrix<f64>,
     /// True when `mass_matrix` belongs to the current kinematics.
     pub(crate) mass_matrix_fresh: bool,
+    /// Form D in every dynamics evaluation, and factor it, rather than factor D from the articulated
+    /// inertias without forming it: for callers that need D at every state anyway (the VE server adds its
+    /// couplings' implicit mass to it, and its snapshot probe and next step share one state). False by default.
+    pub keep_mass_matrix: bool,
     /// B(q, q̇), Coriolis and centripetal generalized forces.
     pub bias: DVector<f64>,
     /// G(q), gravity and joint springs (the paper's "joint flexibility and gravitational effects").
@@ -267,6 +271,7 @@ impl<S: Space> Data<S> {
             body_force: vec![S::Spatial::zero(); n],
             mass_matrix: DMatrix::zeros(n, n),
             mass_matrix_fresh: false,
+            keep_mass_matrix: false,
             bias: DVector::zeros(n),
             gravity: DVector::zeros(n),
             joint_force: DVector::zeros(n),

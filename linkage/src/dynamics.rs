@@ -12,6 +12,7 @@ use crate::joint_forces::joint_forces;
 use crate::kinematics::{forward_kinematics, forward_velocity};
 use crate::kkt;
 use crate::loop_closure::{loop_closure, stabilize};
+use crate::mass_matrix::mass_matrix;
 use crate::model::Model;
 use crate::space::Space;
 
@@ -88,6 +89,9 @@ pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
     if !data.terms_at.holds(q, qd) {
         forward_kinematics(model, data, q);
         forward_velocity(model, data, qd);
+        if data.keep_mass_matrix {
+            mass_matrix(model, data);
+        }
         bias_forces(model, data);
         gravity_forces(model, data, q);
         joint_forces(model, data, q, qd);

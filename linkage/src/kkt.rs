@@ -23,9 +23,10 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::articulated;
 use crate::data::Data;
-use crate::dense::{self, dot, sub_scaled};
+use crate::dense::{self, dot, mul_add, sub_scaled};
 use crate::error::DynamicsError;
 use crate::ltl;
+use crate::ltl_small::by_size;
 use crate::mass_matrix;
 use crate::model::Model;
 use crate::space::Space;
@@ -36,13 +37,13 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// Factors D (plus `implicit_mass` when in use) and, when the model has loops, forms Z, S and the pivoted
 /// factor of S. Needs `forward_kinematics` and `loop_closure`. D alone is factored from the bodies'
-/// articulated inertias without being formed (`articulated`); with `implicit_mass`, D is formed (if it is
-/// not already) and the sum factored by `ltl`.
+/// articulated inertias without being formed (`articulated`), unless it is formed already
+/// (`Data::keep_mass_matrix`); with `implicit_mass`, D is formed if need be and the sum factored by `ltl`.
 pub fn factorize<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
-    if data.use_implicit_mass {
+    if data.use_implicit_mass || data.mass_matrix_fresh {
         mass_matrix::ensure(model, data);
         let kkt = &mut data.kkt;
-        let (d, extra) = (&data.mass_matrix, Some(&data.implicit_mass));
+        let (d, extra) = (&data.mass_matrix, data.use_implicit_mass.then_some(&data.implicit_mass));
         ltl::factor_sum(model, d, extra, &mut kkt.factor, kkt.factor_inv_diag.as_mut_slice())?;
     } else {
         articulated::factor(model, data)?;
@@ -81,7 +82,9 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     for j in 0..m {
         let zj = &z[j * n..j * n + kkt.z_rows[j]];
         for i in 0..=j {
-            let v = dot(&z[i * n..i * n + kkt.z_rows[i]], zj);
+            let zi = &z[i * n..i * n + kkt.z_rows[i]];
+            // Up to 8 joints, over whole columns: the same sum (the rows past a support add exact zeros).
+            let v = by_size!(n, N => dot_fixed::<N>(&z[i * n..], &z[j * n..]), _ => dot(zi, zj));
             s[j * m + i] = v;
             s[i * m + j] = v;
         }
@@ -99,19 +102,49 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
 
 /// `out[c] = a[:, c] · x` for the columns of `a` (Wᵀ or Z, n×m), each over its support `rows[c]`
 /// (`KktWorkspace::z_rows`).
+/// Up to 8 joints the columns are taken whole, with n a constant: the same sums (the rows past a support
+/// add exact zeros) without the loop bookkeeping, which outweighs four multiplications.
 pub fn columns_dot(a: &DMatrix<f64>, rows: &[usize], x: &[f64], out: &mut [f64]) {
     let n = a.nrows();
-    for ((o, col), rows) in out.iter_mut().zip(a.as_slice().chunks_exact(n)).zip(rows) {
-        *o = dot(&col[..*rows], &x[..*rows]);
-    }
+    let columns = a.as_slice().chunks_exact(n);
+    by_size!(n, N => {
+        for (o, col) in out.iter_mut().zip(columns) {
+            *o = dot_fixed::<N>(col, x);
+        }
+    }, _ => {
+        for ((o, col), rows) in out.iter_mut().zip(columns).zip(rows) {
+            *o = dot(&col[..*rows], &x[..*rows]);
+        }
+    })
 }
 
-/// `x ← x - a r` for `a` as in [`columns_dot`].
+/// `x ← x - a r` for `a` as in [`columns_dot`] (whole columns up to 8 joints, likewise).
 pub fn sub_columns_times(a: &DMatrix<f64>, rows: &[usize], r: &[f64], x: &mut [f64]) {
     let n = a.nrows();
-    for ((col, rows), rc) in a.as_slice().chunks_exact(n).zip(rows).zip(r) {
-        sub_scaled(&mut x[..*rows], *rc, &col[..*rows]);
+    let columns = a.as_slice().chunks_exact(n);
+    by_size!(n, N => {
+        let x: &mut [f64; N] = (&mut x[..N]).try_into().expect("n entries");
+        for (col, rc) in columns.zip(r) {
+            for (x, c) in x.iter_mut().zip(col) {
+                *x = mul_add(-rc, *c, *x);
+            }
+        }
+    }, _ => {
+        for ((col, rows), rc) in columns.zip(rows).zip(r) {
+            sub_scaled(&mut x[..*rows], *rc, &col[..*rows]);
+        }
+    })
+}
+
+/// `Σ_{i<N} a_i b_i` in order (as `dense::dot` sums fewer than 8 terms), N a constant.
+#[inline(always)]
+fn dot_fixed<const N: usize>(a: &[f64], b: &[f64]) -> f64 {
+    let (a, b): (&[f64; N], &[f64; N]) = (a[..N].try_into().expect("N entries"), b[..N].try_into().expect("N entries"));
+    let mut s = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        s = mul_add(*x, *y, s);
     }
+    s
 }
 
 /// Solves `S x = r` in place on the independent rows of the pivoted factor; dependent rows get `x = 0`.

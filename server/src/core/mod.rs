@@ -217,6 +217,9 @@ impl<S: Space> VeCore<S> {
             implicit_forces: config.implicit_coupling,
         };
         let mut data = Data::new(&model);
+        // The implicit coupling mass is added to D at every step, and the state each snapshot probes is the
+        // next step's: D formed once per state serves both factorizations and the config-space terms.
+        data.keep_mass_matrix = config.implicit_coupling;
         let q = model.q0.clone();
         let qd = model.qd0.clone();
         forward_kinematics(&model, &mut data, &q);
