@@ -41,19 +41,20 @@ fn run_bounded(options: DemoOptions) -> DemoReport {
     }
 }
 
-/// Loop lateness (µs) beyond which a run does not count as on time: the clients' default stale-snapshot age
-/// (100 ms). Past it a client fades its force to zero by design and the device drifts under the hand's
-/// push, so neither the tracking nor the linkage's path is what the paper's control gives.
-const STALL_US: f64 = 100_000.0;
+/// Loop lateness (µs) beyond which a run does not count as on time for the tracking and the harness's path.
+/// A client whose loop is held up past the stale-snapshot age (100 ms) fades its force to zero by design, and
+/// any loop held up for tens of ms lets the coupling springs stretch and kick: runs whose loops were 45-58 ms
+/// late left the real-time path 0.8-2.2 mm RMS from the harness's; 14 runs up to 17 ms late, 0.02-0.18 mm.
+const STALL_US: f64 = 25_000.0;
 
 /// Runs a demo of `users` for `seconds` until one run is on time (no client ticked on a stale snapshot,
-/// no loop later than [`STALL_US`]), at most three times: this VM's host sometimes stalls it for seconds
+/// no loop later than [`STALL_US`]), at most five times: this VM's host sometimes stalls it for seconds
 /// (an idle 1 kHz loop has missed 10-33 % of its deadlines in a bad hour), and the claims checked on the
 /// result (tracking, the harness's path) are claims about a session that ran. Every run, stalled or not,
 /// must be sane: device limits, closure, files.
 fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
     let mut stalled = Vec::new();
-    for attempt in 0..3 {
+    for attempt in 0..5 {
         let out = dir.join(format!("attempt{attempt}"));
         std::fs::create_dir_all(&out).unwrap();
         let report = run_bounded(options(&out, users, seconds));
@@ -69,7 +70,7 @@ fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
         }
         stalled.push(format!("{stale} stale ticks, loops up to {:.0} µs late", s.loop_lateness_us_max));
     }
-    panic!("the host stalled all three runs: {stalled:?}");
+    panic!("the host stalled all five runs: {stalled:?}");
 }
 
 /// What every demo must satisfy whatever the network: the device limit, the closure, and files written.
