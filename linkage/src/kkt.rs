@@ -80,11 +80,11 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     }
     let s = kkt.schur.as_mut_slice();
     for j in 0..m {
-        let zj = &z[j * n..j * n + kkt.z_rows[j]];
         for i in 0..=j {
-            let zi = &z[i * n..i * n + kkt.z_rows[i]];
             // Up to 8 joints, over whole columns: the same sum (the rows past a support add exact zeros).
-            let v = by_size!(n, N => dot_fixed::<N>(&z[i * n..], &z[j * n..]), _ => dot(zi, zj));
+            let v = by_size!(n, N => dot_fixed::<N>(&z[i * n..], &z[j * n..]), _ => {
+                dot(&z[i * n..i * n + kkt.z_rows[i]], &z[j * n..j * n + kkt.z_rows[j]])
+            });
             s[j * m + i] = v;
             s[i * m + j] = v;
         }
@@ -102,6 +102,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
 
 /// `out[c] = a[:, c] · x` for the columns of `a` (Wᵀ or Z, n×m), each over its support `rows[c]`
 /// (`KktWorkspace::z_rows`).
+///
 /// Up to 8 joints the columns are taken whole, with n a constant: the same sums (the rows past a support
 /// add exact zeros) without the loop bookkeeping, which outweighs four multiplications.
 pub fn columns_dot(a: &DMatrix<f64>, rows: &[usize], x: &[f64], out: &mut [f64]) {
