@@ -47,11 +47,16 @@ fn run_bounded(options: DemoOptions) -> DemoReport {
 /// late left the real-time path 0.8-2.2 mm RMS from the harness's; 14 runs up to 17 ms late, 0.02-0.18 mm.
 const STALL_US: f64 = 25_000.0;
 
-/// Runs a demo of `users` for `seconds` until one run is on time (no client ticked on a stale snapshot,
-/// no loop later than [`STALL_US`]), at most five times: this VM's host sometimes stalls it for seconds
-/// (an idle 1 kHz loop has missed 10-33 % of its deadlines in a bad hour), and the claims checked on the
-/// result (tracking, the harness's path) are claims about a session that ran. Every run, stalled or not,
-/// must be sane: device limits, closure, files.
+/// Largest share of the VE's ticks that may miss their deadline in a run that counts as on time. The VE
+/// thread stalls too: a run with loops at most 17 ms late but 264 VE misses in 1,642 ticks (16 %) left
+/// 0.74 mm; the 14 runs above had 3-100 misses (at most 7 %), four more failing ones 171-308.
+const VE_MISS_SHARE: f64 = 0.05;
+
+/// Runs a demo of `users` for `seconds` until one run is on time (no client ticked on a stale snapshot, no
+/// loop later than [`STALL_US`], VE misses within [`VE_MISS_SHARE`]), at most five times: this VM's host
+/// sometimes stalls it for seconds (an idle 1 kHz loop has missed 10-33 % of its deadlines in a bad hour),
+/// and the claims checked on the result (tracking, the harness's path) are claims about a session that ran.
+/// Every run, stalled or not, must be sane: device limits, closure, files.
 fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
     let mut stalled = Vec::new();
     for attempt in 0..5 {
@@ -65,10 +70,14 @@ fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
             .iter()
             .map(|u| u.client["stale_ticks"].as_u64().expect("client statistics carry stale_ticks"))
             .sum();
-        if stale == 0 && s.loop_lateness_us_max < STALL_US {
+        let ve_misses = s.ve_deadline_misses as f64 / s.ve_ticks.max(1) as f64;
+        if stale == 0 && s.loop_lateness_us_max < STALL_US && ve_misses <= VE_MISS_SHARE {
             return report;
         }
-        stalled.push(format!("{stale} stale ticks, loops up to {:.0} µs late", s.loop_lateness_us_max));
+        stalled.push(format!(
+            "{stale} stale ticks, loops up to {:.0} µs late, VE misses {} of {} ticks",
+            s.loop_lateness_us_max, s.ve_deadline_misses, s.ve_ticks
+        ));
     }
     panic!("the host stalled all five runs: {stalled:?}");
 }
