@@ -80,11 +80,11 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     }
     let s = kkt.schur.as_mut_slice();
     for j in 0..m {
+        let zj = &z[j * n..j * n + kkt.z_rows[j]];
         for i in 0..=j {
+            let zi = &z[i * n..i * n + kkt.z_rows[i]];
             // Up to 8 joints, over whole columns: the same sum (the rows past a support add exact zeros).
-            let v = by_size!(n, N => dot_fixed::<N>(&z[i * n..], &z[j * n..]), _ => {
-                dot(&z[i * n..i * n + kkt.z_rows[i]], &z[j * n..j * n + kkt.z_rows[j]])
-            });
+            let v = by_size!(n, N => dot_fixed::<N>(&z[i * n..], &z[j * n..]), _ => dot(zi, zj));
             s[j * m + i] = v;
             s[i * m + j] = v;
         }
