@@ -87,7 +87,7 @@ pub fn pivoted_cholesky(
     // bookkeeping otherwise outweighs a 2x2 factorization several times).
     match s.nrows() {
         1 => pivoted_cholesky_m(1, s, l, perm, scale, inv_diag, tolerance, max_rank),
-        2 => pivoted_cholesky_m(2, s, l, perm, scale, inv_diag, tolerance, max_rank),
+        2 => pivoted_cholesky_2(s, l, perm, inv_diag, tolerance, max_rank),
         3 => pivoted_cholesky_m(3, s, l, perm, scale, inv_diag, tolerance, max_rank),
         m => pivoted_cholesky_m(m, s, l, perm, scale, inv_diag, tolerance, max_rank),
     }
@@ -154,6 +154,68 @@ fn pivoted_cholesky_m(
         }
     }
     cap
+}
+
+/// [`pivoted_cholesky_m`] for m = 2 (a planar pin joint's closure, the commonest cut) written out: the same
+/// operations in the same order, so the same bits (a test compares the two), without the general loops'
+/// swaps, scale array and trailing-block bookkeeping, which cost three times the arithmetic.
+fn pivoted_cholesky_2(
+    s: &DMatrix<f64>,
+    l: &mut DMatrix<f64>,
+    perm: &mut [usize],
+    inv_diag: &mut [f64],
+    tolerance: f64,
+    max_rank: usize,
+) -> usize {
+    let [s00, s10, _, s11]: [f64; 4] = s.as_slice()[..4].try_into().expect("a 2x2 matrix");
+    let out: &mut [f64; 4] = (&mut l.as_mut_slice()[..4]).try_into().expect("a 2x2 factor");
+    *out = [s00, s10, s10, s11];
+    perm[..2].copy_from_slice(&[0, 1]);
+    let scale = [s00.max(f64::MIN_POSITIVE), s11.max(f64::MIN_POSITIVE)];
+    let cap = max_rank.min(2);
+    if cap == 0 {
+        return 0;
+    }
+    // First pivot: the larger of the two relative diagonals (the first on a tie), NaN never chosen.
+    let (r0, r1) = (s00 / scale[0], s11 / scale[1]);
+    let mut best_ratio = -1.0;
+    let mut best = 0;
+    if r0 > best_ratio {
+        best_ratio = r0;
+    }
+    if r1 > best_ratio {
+        best_ratio = r1;
+        best = 1;
+    }
+    if best_ratio.is_nan() || best_ratio <= tolerance {
+        return 0;
+    }
+    // In pivoted order: (a, b; b, c) with a the chosen diagonal.
+    let (a, c) = if best == 1 { (s11, s00) } else { (s00, s11) };
+    if best == 1 {
+        perm[..2].copy_from_slice(&[1, 0]);
+        out[0] = s11;
+        out[3] = s00;
+    }
+    let l00 = a.sqrt();
+    let inv0 = l00 * (1.0 / a);
+    let l10 = s10 * inv0;
+    let c = mul_add(-l10, l10, c);
+    out[0] = l00;
+    out[1] = l10;
+    out[3] = c;
+    inv_diag[0] = inv0;
+    if cap == 1 {
+        return 1;
+    }
+    let ratio = c / scale[perm[1]];
+    if ratio.is_nan() || !(ratio > -1.0) || ratio <= tolerance {
+        return 1;
+    }
+    let l11 = c.sqrt();
+    out[3] = l11;
+    inv_diag[1] = l11 * (1.0 / c);
+    2
 }
 
 /// Solves `S x = r` in place with a factor (and its `inv_diag`) from [`pivoted_cholesky`]; rows beyond the
@@ -251,5 +313,59 @@ pub fn solve_lower_t(l: &DMatrix<f64>, x: &mut [f64]) {
             s -= l[(k, i)] * x[k];
         }
         x[i] = s / l[(i, i)];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::TestRng;
+
+    /// The written-out 2x2 pivoted factorization gives the general loop's bits: rank, order, factor and
+    /// reciprocals, on random positive-definite, nearly and exactly singular, indefinite and non-finite
+    /// matrices, for every rank cap and a few tolerances.
+    #[test]
+    fn pivoted_cholesky_2_is_the_general_one() {
+        let mut rng = TestRng(5);
+        let mut cases: Vec<[f64; 3]> = (0..2000)
+            .map(|i| {
+                let (x, y, z) = (rng.signed(), rng.signed(), rng.signed());
+                match i % 5 {
+                    // A Gram matrix of two random columns: positive (semi-)definite.
+                    0 | 1 => [x * x + z * z, x * y + z * y * 0.5, y * y + 0.25 * y * y],
+                    // Rank one, up to round-off.
+                    2 => [x * x, x * y, y * y * (1.0 + 1e-13 * z)],
+                    // Scaled very differently (units).
+                    3 => [1e6 * (x * x + 1.0), 1e3 * x * y, 1e-2 * (y * y + 1.0)],
+                    _ => [x, y, z],
+                }
+            })
+            .collect();
+        cases.extend([[0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [f64::NAN, 0.0, 1.0], [1.0, f64::NAN, 1.0]]);
+        cases.extend([[1.0, 0.0, f64::INFINITY], [-1.0, 0.5, 2.0], [2.0, 2.0, 2.0]]);
+        for [a, b, c] in cases {
+            let s = DMatrix::from_column_slice(2, 2, &[a, b, b, c]);
+            for max_rank in 0..=2 {
+                for tolerance in [0.0, 1e-10, 0.5] {
+                    let (mut l1, mut l2) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 2));
+                    let (mut p1, mut p2) = ([9; 2], [9; 2]);
+                    let (mut d1, mut d2) = ([0.0; 2], [0.0; 2]);
+                    let mut scale = DVector::zeros(2);
+                    let m = std::hint::black_box(2);
+                    let r1 = pivoted_cholesky_m(m, &s, &mut l1, &mut p1, &mut scale, &mut d1, tolerance, max_rank);
+                    let r2 = pivoted_cholesky_2(&s, &mut l2, &mut p2, &mut d2, tolerance, max_rank);
+                    let case = format!("S = [{a}, {b}; {b}, {c}], cap {max_rank}, tolerance {tolerance}");
+                    assert_eq!(r1, r2, "{case}: rank");
+                    assert_eq!(p1, p2, "{case}: order");
+                    let bits = |x: f64| x.to_bits();
+                    for k in 0..r1 {
+                        assert_eq!(bits(d1[k]), bits(d2[k]), "{case}: 1/L_{k}{k}");
+                        for r in k..2 {
+                            assert_eq!(bits(l1[(r, k)]), bits(l2[(r, k)]), "{case}: L_{r}{k}");
+                        }
+                    }
+                }
+            }
+        }
     }
 }
