@@ -230,10 +230,25 @@ pub fn pivoted_solve(
 ) {
     let (r, y) = (r.as_mut_slice(), y.as_mut_slice());
     match (l.nrows(), rank) {
-        (2, 2) => pivoted_solve_m(2, 2, l, inv_diag, perm, r, y),
+        (2, 2) => pivoted_solve_2(l, inv_diag, perm, r),
         (3, 3) => pivoted_solve_m(3, 3, l, inv_diag, perm, r, y),
         (m, rank) => pivoted_solve_m(m, rank, l, inv_diag, perm, r, y),
     }
+}
+
+/// [`pivoted_solve_m`] for a 2x2 factor of rank 2 written out, the same operations in the same order.
+fn pivoted_solve_2(l: &DMatrix<f64>, inv_diag: &[f64], perm: &[usize], r: &mut [f64]) {
+    let (l10, inv0, inv1) = (l.as_slice()[1], inv_diag[0], inv_diag[1]);
+    let (p0, p1) = (perm[0], perm[1]);
+    let (r0, r1) = (r[p0], r[p1]);
+    let y0 = r0 * inv0;
+    let y1 = mul_add(-l10, y0, r1) * inv1;
+    // The general loop's back substitution: an empty dot product (0.0) for the last row.
+    let y1 = (y1 - 0.0) * inv1;
+    let y0 = (y0 - mul_add(l10, y1, 0.0)) * inv0;
+    r[..2].fill(0.0);
+    r[p0] = y0;
+    r[p1] = y1;
 }
 
 /// [`pivoted_solve`] with the sizes as arguments, copied with constants for the common small cases.
@@ -321,8 +336,8 @@ mod tests {
     use super::*;
     use crate::testing::TestRng;
 
-    /// The written-out 2x2 pivoted factorization gives the general loop's bits: rank, order, factor and
-    /// reciprocals, on random positive-definite, nearly and exactly singular, indefinite and non-finite
+    /// The written-out 2x2 pivoted factorization and solve give the general loops' bits: rank, order, factor,
+    /// reciprocals and solutions, on random positive-definite, nearly and exactly singular, indefinite and non-finite
     /// matrices, for every rank cap and a few tolerances.
     #[test]
     fn pivoted_cholesky_2_is_the_general_one() {
@@ -363,6 +378,16 @@ mod tests {
                         for r in k..2 {
                             assert_eq!(bits(l1[(r, k)]), bits(l2[(r, k)]), "{case}: L_{r}{k}");
                         }
+                    }
+                    if r1 == 2 {
+                        // And the written-out solve gives the general one's bits.
+                        let rhs = [rng.signed(), 1e3 * rng.signed()];
+                        let (mut x1, mut x2) = (DVector::from_column_slice(&rhs), DVector::from_column_slice(&rhs));
+                        let mut y = DVector::zeros(2);
+                        let (m, rank) = (std::hint::black_box(2), std::hint::black_box(2));
+                        pivoted_solve_m(m, rank, &l1, &d1, &p1, x1.as_mut_slice(), y.as_mut_slice());
+                        pivoted_solve(&l2, &d2, &p2, r2, &mut x2, &mut y);
+                        assert_eq!(x1.map(bits), x2.map(bits), "{case}: solve of {rhs:?}");
                     }
                 }
             }
