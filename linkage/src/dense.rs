@@ -209,7 +209,7 @@ fn pivoted_cholesky_2(
         return 1;
     }
     let ratio = c / scale[perm[1]];
-    if ratio.is_nan() || !(ratio > -1.0) || ratio <= tolerance {
+    if ratio.is_nan() || ratio <= -1.0 || ratio <= tolerance {
         return 1;
     }
     let l11 = c.sqrt();
