@@ -16,9 +16,11 @@
 //!
 //! **Why faster.** D costs one dot product per nonzero of U plus the composite inertias, and factoring it
 //! `O(Σ_k depth_k²)` more. Here the factorization *is* the dot products, plus one `DIM×DIM` update per body:
-//! on `chain50_loops5` D and its factorization took 44k instructions a step, this takes 11k; on the testbed
-//! (n = 4, where `ltl_small` factors D in straight-line code) 820 against 600 (callgrind). D itself is then computed only where it is read (`mass_matrix`,
-//! [`crate::local_model::ConfigSpaceTerms::fill_from`]) and for `implicit_mass`, which is added to D.
+//! on `chain50_loops5` D and its factorization took 55k instructions a step, this takes 14k; on the testbed
+//! (n = 4, where `ltl_small` factors D in straight-line code) 820 against 600 (callgrind). D itself is then
+//! computed only where it is read ([`crate::mass_matrix::ensure`], called by
+//! [`crate::local_model::ConfigSpaceTerms::fill_from`]), for `implicit_mass`, which is added to D, and for
+//! callers that set `Data::keep_mass_matrix`.
 
 use crate::data::Data;
 use crate::error::DynamicsError;

@@ -53,6 +53,18 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
+/// `Σ_{i<N} a_i b_i` over the first N entries, N a constant (the loop unrolls): the same sum, in the same
+/// order, as [`dot`] gives for fewer than 8 terms.
+#[inline(always)]
+pub fn dot_fixed<const N: usize>(a: &[f64], b: &[f64]) -> f64 {
+    let (a, b): (&[f64; N], &[f64; N]) = (a[..N].try_into().expect("N entries"), b[..N].try_into().expect("N entries"));
+    let mut s = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        s = mul_add(*x, *y, s);
+    }
+    s
+}
+
 /// `y ← y - alpha x` over the common length.
 #[inline]
 pub fn sub_scaled(y: &mut [f64], alpha: f64, x: &[f64]) {

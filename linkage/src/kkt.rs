@@ -23,7 +23,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::articulated;
 use crate::data::Data;
-use crate::dense::{self, dot, mul_add, sub_scaled};
+use crate::dense::{self, dot, dot_fixed, mul_add, sub_scaled};
 use crate::error::DynamicsError;
 use crate::ltl;
 use crate::ltl_small::by_size;
@@ -135,17 +135,6 @@ pub fn sub_columns_times(a: &DMatrix<f64>, rows: &[usize], r: &[f64], x: &mut [f
             sub_scaled(&mut x[..*rows], *rc, &col[..*rows]);
         }
     })
-}
-
-/// `Σ_{i<N} a_i b_i` in order (as `dense::dot` sums fewer than 8 terms), N a constant.
-#[inline(always)]
-fn dot_fixed<const N: usize>(a: &[f64], b: &[f64]) -> f64 {
-    let (a, b): (&[f64; N], &[f64; N]) = (a[..N].try_into().expect("N entries"), b[..N].try_into().expect("N entries"));
-    let mut s = 0.0;
-    for (x, y) in a.iter().zip(b) {
-        s = mul_add(*x, *y, s);
-    }
-    s
 }
 
 /// Solves `S x = r` in place on the independent rows of the pivoted factor; dependent rows get `x = 0`.

@@ -28,7 +28,7 @@ use crate::model::Model;
 use crate::space::{MatOps, Space};
 
 /// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ, Λ⁻¹ (closed) and Λ⁻¹ (open). Needs
-/// `forward_kinematics`, `forward_velocity` (for J̇q̇), `mass_matrix`, `loop_closure` and `kkt::factorize`
+/// `forward_kinematics`, `forward_velocity` (for J̇q̇), `loop_closure` and `kkt::factorize`
 /// at the same configuration, with no implicit mass in the factor.
 pub fn op_space_inertia<S: Space>(model: &Model<S>, data: &mut Data<S>, op: usize) -> Result<(), DynamicsError> {
     let point = model.ops.get(op).ok_or(DynamicsError::UnknownOp { index: op, count: model.ops.len() })?;
