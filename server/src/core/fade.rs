@@ -23,9 +23,16 @@ impl Fade {
         self.phase = if on { (self.phase + delta).min(1.0) } else { (self.phase - delta).max(0.0) };
     }
 
-    /// The weight in [0, 1].
+    /// The weight in [0, 1]. Fully on or off (nearly every tick of a session) costs no cosine: that library
+    /// call was a sixtieth of a 16-user tick.
     pub fn weight(&self) -> f64 {
-        0.5 * (1.0 - (PI * self.phase).cos())
+        if self.phase >= 1.0 {
+            1.0
+        } else if self.phase <= 0.0 {
+            0.0
+        } else {
+            0.5 * (1.0 - (PI * self.phase).cos())
+        }
     }
 
     /// True when fully off.
@@ -61,5 +68,17 @@ mod tests {
             f.advance(true, dt, fade);
         }
         assert_eq!(f.weight(), 1.0);
+    }
+
+    /// The shortcuts at the ends give what the raised cosine gives there, so the weight stays continuous.
+    #[test]
+    fn the_ends_are_the_raised_cosines_values() {
+        let cosine = |phase: f64| 0.5 * (1.0 - (PI * phase).cos());
+        for (phase, end) in [(1.0, 1.0), (0.0, 0.0)] {
+            assert_eq!(Fade { phase }.weight(), end);
+            assert!((cosine(phase) - end).abs() <= f64::EPSILON);
+            let inside = if end == 1.0 { 1.0 - 1e-9 } else { 1e-9 };
+            assert!((Fade { phase: inside }.weight() - end).abs() <= 1e-15);
+        }
     }
 }

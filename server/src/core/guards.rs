@@ -175,12 +175,14 @@ pub struct CheckedUplink<S: Space> {
     pub clipped: bool,
 }
 
-/// Checks a sample against the scene's dimensions, the user's device and the VE's OP pose.
+/// Checks a sample against the scene's dimensions, the user's device and the VE's OP pose. `pose_memo`
+/// anchors the reading of the model pose's orientation (the user's, from one uplink to the next).
 pub fn check_uplink<S: Space>(
     sample: &UplinkSample,
     ve_op_pose: &OpPose<S>,
     wrench_limits: &WrenchLimits,
     limits: &GuardLimits,
+    pose_memo: &mut S::RotParamsMemo,
 ) -> Result<CheckedUplink<S>, UplinkRejection> {
     let k = S::DIM;
     if usize::from(sample.op_dim) != k {
@@ -201,7 +203,7 @@ pub fn check_uplink<S: Space>(
     }
     let hand_wrench = S::OpVec::from_slice(&sample.hand_wrench[..k]);
     let model_twist = S::OpVec::from_slice(&sample.model_twist[..k]);
-    let model_pose = OpPose::<S>::from_slice(pose_slice).ok_or(UplinkRejection::InvalidOrientation)?;
+    let model_pose = OpPose::<S>::from_slice_memo(pose_slice, pose_memo).ok_or(UplinkRejection::InvalidOrientation)?;
 
     let offset_m = (model_pose.position - ve_op_pose.position).norm();
     if offset_m > limits.max_model_offset_m {

@@ -375,11 +375,13 @@ impl<S: Space> VeCore<S> {
             self.metrics.uplinks_stale += 1;
             return Err(UplinkRejection::Stale { seq: sample.seq, last });
         }
+        let coupling = &mut self.couplings[index];
         let checked = guards::check_uplink::<S>(
             sample,
-            &self.couplings[index].op_pose,
+            &coupling.op_pose,
             &self.users[index].wrench_limits,
             &self.config.guards,
+            &mut coupling.pose_memo,
         );
         let checked = match checked {
             Ok(checked) => checked,

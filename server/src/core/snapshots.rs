@@ -86,6 +86,7 @@ impl<S: Space> VeCore<S> {
             if self.users[index].presence != Presence::Present {
                 continue;
             }
+            let mut pose_memo = self.couplings[index].pose_memo;
             let built = build_one(
                 &self.model,
                 &mut self.data,
@@ -97,7 +98,9 @@ impl<S: Space> VeCore<S> {
                 &mut self.scratch,
                 self.contacts.as_ref().map(|c| (c.stiffness, c.damping)),
                 self.roster_version,
+                &mut pose_memo,
             );
+            self.couplings[index].pose_memo = pose_memo;
             let user = &mut self.users[index];
             let outcome = built.map_err(SnapshotFailure::Dynamics).and_then(|()| {
                 let snapshot = user.slot.snapshot_mut();
@@ -136,7 +139,7 @@ enum SnapshotFailure {
     Wire(kinloop_protocol::codec::DecodeError),
 }
 
-/// Fills user `index`'s snapshot from the evaluated state in `data`.
+/// Fills user `index`'s snapshot from the evaluated state in `data` (`pose_memo`: that user's `Coupling::pose_memo`).
 #[allow(clippy::too_many_arguments)]
 fn build_one<S: Space>(
     model: &Model<S>,
@@ -149,6 +152,7 @@ fn build_one<S: Space>(
     scratch: &mut SnapshotScratch<S>,
     contact_gains: Option<(f64, f64)>,
     roster_version: u64,
+    pose_memo: &mut S::RotParamsMemo,
 ) -> Result<(), DynamicsError> {
     let op = users[index].op;
     // What of this user's wrench the probe applied: its hand (see the module documentation).
@@ -188,7 +192,7 @@ fn build_one<S: Space>(
         kinloop_protocol::Datagram::Snapshot(s) => (s, &mut slot.spare_contacts),
         kinloop_protocol::Datagram::Uplink(_) => unreachable!("a snapshot slot holds a snapshot"),
     };
-    set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| pose.to_slice(out));
+    set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| pose.to_slice_memo(out, pose_memo));
     set(&mut snapshot.op_twist, twist.as_slice());
     set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &terms.inverse_inertia);
     set(&mut snapshot.bias_accel, terms.bias.as_slice());
