@@ -19,7 +19,7 @@
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
 
 use crate::data::Data;
-use crate::dense::{dot, mul_add};
+use crate::dense::{dot, dot_fixed, mul_add};
 use crate::error::DynamicsError;
 use crate::jacobian::{frame_bias_acceleration, frame_jacobian_t};
 use crate::ltl;
@@ -44,7 +44,6 @@ pub fn frame_point_inertia<S: Space>(
     p: &S::Point,
 ) -> Result<(), DynamicsError> {
     let n = model.nq();
-    let k = S::DIM;
     let ws = &mut data.op;
     frame_jacobian_t(model, &data.kin, body, p, &mut ws.jacobian_t);
     ws.jdot_qdot = frame_bias_acceleration(&data.kin, body, p);
@@ -54,14 +53,7 @@ pub fn frame_point_inertia<S: Space>(
     let kkt = &data.kkt;
     ltl::solve_u_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), ws.y.as_mut_slice(), rows);
     let y = ws.y.as_slice();
-    let mut open = S::OpMat::zero();
-    for c in 0..k {
-        for r in 0..=c {
-            let v = dot(&y[r * n..r * n + rows], &y[c * n..c * n + rows]);
-            open[(r, c)] = v;
-            open[(c, r)] = v;
-        }
-    }
+    let open = gram::<S>(y, n, rows);
     ws.inverse_inertia_open = open;
     let mut closed = open;
     let rank = kkt.schur_rank;
@@ -77,19 +69,35 @@ pub fn frame_point_inertia<S: Space>(
         };
         let q = ws.closure_basis.as_mut_slice();
         by_size!(n, N => project_out::<N>(N, &basis, q, y_closed), _ => project_out::<0>(n, &basis, q, y_closed));
-        for c in 0..k {
-            for r in 0..=c {
-                let v = dot(&y_closed[r * n..(r + 1) * n], &y_closed[c * n..(c + 1) * n]);
-                closed[(r, c)] = v;
-                closed[(c, r)] = v;
-            }
-        }
+        closed = gram::<S>(y_closed, n, n);
     }
     if !closed.is_finite() {
         return Err(DynamicsError::NonFiniteResult { what: "inverse operational-space inertia" });
     }
     ws.inverse_inertia = closed;
     Ok(())
+}
+
+/// `Yᵀ Y` for the n×k column-major `y` whose rows from `rows` on are zero. Up to 8 joints over whole
+/// columns with n a constant (the same sums: the rows past `rows` add exact zeros).
+fn gram<S: Space>(y: &[f64], n: usize, rows: usize) -> S::OpMat {
+    // (The slice to its exact length lets the compiler drop the bounds checks of the column products.)
+    by_size!(n, N => { let y = &y[..S::DIM * N]; gram_of::<S>(|r, c| dot_fixed::<N>(&y[r * N..], &y[c * N..])) },
+        _ => gram_of::<S>(|r, c| dot(&y[r * n..r * n + rows], &y[c * n..c * n + rows])))
+}
+
+/// The symmetric k×k matrix of the column products `dot(r, c)`.
+#[inline(always)]
+fn gram_of<S: Space>(dot: impl Fn(usize, usize) -> f64) -> S::OpMat {
+    let mut g = S::OpMat::zero();
+    for c in 0..S::DIM {
+        for r in 0..=c {
+            let v = dot(r, c);
+            g[(r, c)] = v;
+            g[(c, r)] = v;
+        }
+    }
+    g
 }
 
 /// The kept closures' directions in the metric of D: Z's columns, the pivoted factor `S_rr = L Lᵀ` and its
