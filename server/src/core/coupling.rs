@@ -262,24 +262,91 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         tau: &mut DVector<f64>,
     ) -> bool {
         let mut added = false;
+        let n = implicit_mass.nrows();
+        let (mass, tau) = (implicit_mass.as_mut_slice(), tau.as_mut_slice());
         for c in self.couplings.iter().filter(|c| c.is_active()) {
             let coefficient = c.implicit_coefficient(dt);
-            let jt = &c.jacobian_t;
+            // −h Jᵀ (wβK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
+            let mut spring = S::OpVec::zero();
+            for a in 0..S::DIM {
+                spring[a] = dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a];
+            }
+            // Jᵀ is n×k column-major: entry (i, a) at a n + i.
+            let jt = c.jacobian_t.as_slice();
             for i in support(model, Some(c.body)) {
-                // −h Jᵀ (wβK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
                 for a in 0..S::DIM {
-                    tau[i] -= jt[(i, a)] * dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a];
+                    tau[i] -= jt[a * n + i] * spring[a];
                 }
+                // Jᵀ C J is symmetric: each pair once (the support runs from the body toward the root, so the
+                // joints before i are the ones below it), mirrored.
                 for j in support(model, Some(c.body)) {
                     let mut m = 0.0;
                     for a in 0..S::DIM {
-                        m += jt[(i, a)] * coefficient[a] * jt[(j, a)];
+                        m += jt[a * n + i] * coefficient[a] * jt[a * n + j];
                     }
-                    implicit_mass[(i, j)] += m;
+                    mass[j * n + i] += m;
+                    if j == i {
+                        break;
+                    }
+                    mass[i * n + j] += m;
                 }
             }
             added = true;
         }
         added
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
+    use kinloop_linkage::testing::{paper_testbed, random_state};
+    use kinloop_linkage::{Data, Planar};
+    use nalgebra::Vector3;
+
+    /// The implicit terms of two couplings (on links 2 and 4, so their supports overlap and differ) against
+    /// the dense products `Σ Jᵀ diag(c) J` and `−Σ Jᵀ (h wβK ⊙ ẋ)` formed with nalgebra from each Jacobian:
+    /// the symmetric fill adds the same matrix, exactly symmetric.
+    #[test]
+    fn implicit_terms_are_the_dense_products() {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let (q, qd) = random_state(&model, 5);
+        forward_kinematics(&model, &mut data, &q);
+        forward_velocity(&model, &mut data, &qd);
+        let n = model.nq();
+        let mut couplings: Vec<Coupling<Planar>> = [(1, 200.0, 0.7), (3, 3000.0, 0.3)]
+            .into_iter()
+            .map(|(body, k, weight)| {
+                let stiffness = Vector3::new(k, 1.3 * k, 0.01 * k);
+                let mut c = Coupling::new(body, nalgebra::Vector2::new(0.01, -0.002), n, stiffness, stiffness * 0.05);
+                c.pushes = true;
+                c.weight = weight;
+                c.pd_scale = Vector3::new(1.0, 0.5, 0.9);
+                c.evaluate(&model, &data.kin, true);
+                c
+            })
+            .collect();
+        let dt = 1e-3;
+        let (mut expected_mass, mut expected_tau) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        for c in &couplings {
+            let coefficient = c.implicit_coefficient(dt);
+            let spring = Vector3::from_fn(|a, _| dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a]);
+            let jt = &c.jacobian_t;
+            expected_mass +=
+                jt * DMatrix::from_diagonal(&DVector::from_column_slice(coefficient.as_slice())) * jt.transpose();
+            expected_tau -= jt * DVector::from_column_slice(spring.as_slice());
+        }
+        let mut forces =
+            VeForces { couplings: &mut couplings, contacts: None, evaluation: Evaluation::ProbeHands, stage: 0 };
+        let (mut mass, mut tau) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau));
+        assert_eq!(mass, mass.transpose());
+        let scale = expected_mass.amax();
+        assert!((&mass - &expected_mass).amax() <= 1e-13 * scale, "{mass} vs {expected_mass}");
+        assert!((&tau - &expected_tau).amax() <= 1e-13 * expected_tau.amax(), "{tau} vs {expected_tau}");
+        // Link 4's coupling reaches every joint, link 2's only the first two.
+        assert!(mass[(3, 3)] > 0.0 && (mass[(1, 1)] - expected_mass[(1, 1)]).abs() <= 1e-13 * scale);
     }
 }
