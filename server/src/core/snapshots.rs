@@ -228,10 +228,17 @@ fn build_one<S: Space>(
     Ok(())
 }
 
-/// `out ← values`, within `out`'s capacity once warmed up.
+/// `out ← values`, within `out`'s capacity once warmed up; in place when the length is already right (every
+/// snapshot after a user's first: no capacity checks, which cost more than the copy of a few numbers).
 fn set(out: &mut Vec<f64>, values: &[f64]) {
-    out.clear();
-    out.extend_from_slice(values);
+    if out.len() == values.len() {
+        for (o, v) in out.iter_mut().zip(values) {
+            *o = *v;
+        }
+    } else {
+        out.clear();
+        out.extend_from_slice(values);
+    }
 }
 
 /// `out ← len` numbers written by `write`.
@@ -243,21 +250,26 @@ fn set_from(out: &mut Vec<f64>, len: usize, write: impl FnOnce(&mut [f64])) {
 
 /// Upper triangle of a symmetric operational matrix, row-major.
 fn set_upper_triangle<S: Space>(out: &mut Vec<f64>, m: &S::OpMat) {
-    out.clear();
-    for r in 0..S::DIM {
-        for c in r..S::DIM {
-            out.push(m[(r, c)]);
-        }
-    }
+    set_upper_triangle_of(out, S::DIM, |r, c| m[(r, c)]);
 }
 
 /// Upper triangle of a dynamic symmetric matrix, row-major.
 fn set_upper_triangle_dyn(out: &mut Vec<f64>, m: &DMatrix<f64>) {
-    out.clear();
-    for r in 0..m.nrows() {
-        for c in r..m.ncols() {
-            out.push(m[(r, c)]);
+    set_upper_triangle_of(out, m.nrows(), |r, c| m[(r, c)]);
+}
+
+/// `out ←` the upper triangle, row-major, of the k×k matrix with entries `at(r, c)`; in place when the length
+/// is already right (as [`set`]).
+#[inline(always)]
+fn set_upper_triangle_of(out: &mut Vec<f64>, k: usize, at: impl Fn(usize, usize) -> f64) {
+    let entries = (0..k).flat_map(|r| (r..k).map(move |c| (r, c)));
+    if out.len() == k * (k + 1) / 2 {
+        for (o, (r, c)) in out.iter_mut().zip(entries) {
+            *o = at(r, c);
         }
+    } else {
+        out.clear();
+        out.extend(entries.map(|(r, c)| at(r, c)));
     }
 }
 
