@@ -137,6 +137,20 @@ pub struct ContactTerm<S: Space> {
 }
 
 impl<S: Space> ContactTerm<S> {
+    /// A placeholder that pushes with no force (zero stiffness and damping), for fixed-size contact arrays.
+    pub fn none() -> Self {
+        ContactTerm {
+            normal: S::Point::zero(),
+            gap: 0.0,
+            gap_rate: 0.0,
+            coupling: S::OpVec::zero(),
+            mobility: 0.0,
+            bias: 0.0,
+            stiffness: 0.0,
+            damping: 0.0,
+        }
+    }
+
     /// The penalty force this contact pushes with now (≥ 0, along the normal).
     pub fn force(&self) -> f64 {
         if self.gap >= 0.0 {
@@ -178,16 +192,7 @@ pub struct OpSpaceLocalModel<S: Space> {
 impl<S: Space> OpSpaceLocalModel<S> {
     /// A model at `pose` and rest, with the given terms.
     pub fn new(terms: OpSpaceTerms<S>, pose: OpPose<S>) -> Self {
-        let empty = ContactTerm {
-            normal: S::Point::zero(),
-            gap: 0.0,
-            gap_rate: 0.0,
-            coupling: S::OpVec::zero(),
-            mobility: 0.0,
-            bias: 0.0,
-            stiffness: 0.0,
-            damping: 0.0,
-        };
+        let empty = ContactTerm::none();
         OpSpaceLocalModel {
             terms,
             contacts: [empty; MAX_LOCAL_CONTACTS],

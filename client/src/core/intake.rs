@@ -56,19 +56,6 @@ pub(crate) struct SnapshotTerms<S: Space> {
     pub has_config: bool,
 }
 
-fn empty_contact<S: Space>() -> ContactTerm<S> {
-    ContactTerm {
-        normal: S::Point::zero(),
-        gap: 0.0,
-        gap_rate: 0.0,
-        coupling: S::OpVec::zero(),
-        mobility: 0.0,
-        bias: 0.0,
-        stiffness: 0.0,
-        damping: 0.0,
-    }
-}
-
 fn finite_of_len(field: &'static str, v: &[f64], len: usize) -> Result<(), SnapshotRejection> {
     if v.len() != len {
         return Err(SnapshotRejection::WrongLength { field });
@@ -92,7 +79,7 @@ impl<S: Space> SnapshotTerms<S> {
             directions: S::OpMat::identity(),
             singular_values: S::OpVec::zero(),
             constraint_count: 0,
-            contacts: [empty_contact::<S>(); MAX_LOCAL_CONTACTS],
+            contacts: [ContactTerm::<S>::none(); MAX_LOCAL_CONTACTS],
             contact_count: 0,
             config: config_shape.map(|(n, m)| ConfigSpaceTerms::zeros(n, m, S::DIM)),
             has_config: false,
