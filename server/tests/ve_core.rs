@@ -442,3 +442,44 @@ fn a_diverging_linkage_is_restored_with_its_loop_closed() {
     assert!(worst_restored <= limit, "restored to a configuration {worst_restored:.3e} m open (limit {limit:.3e} m)");
     assert!(ve.metrics().max_closure_error <= limit, "a step started {:e} m open", ve.metrics().max_closure_error);
 }
+
+/// Each snapshot lists every other manipulator, never its own user nor an observer: with the graphics
+/// controller's gains at zero the wrench a manipulator applies is its faded-in hand wrench alone, which each
+/// list must carry, beside the position that user's own snapshot reports for its OP at the same tick.
+#[test]
+fn snapshots_list_the_other_manipulators_hands_and_positions() {
+    let mut config = VeConfig::paper();
+    config.coupling_stiffness = AxisGains::Uniform { linear: 0.0, angular: 0.0 };
+    config.coupling_damping = AxisGains::Uniform { linear: 0.0, angular: 0.0 };
+    let mut ve = core(testbed(), config);
+    let joins = [("A", Role::Manipulator, "link2"), ("O", Role::Observer, "link2"), ("B", Role::Manipulator, "link2")];
+    let ids: Vec<u32> =
+        joins.iter().map(|(n, r, op)| ve.join(Duration::ZERO, request(n, *r, op, 3)).unwrap().user_id).collect();
+    let hands = [[-0.5, 0.1, -0.002], [3.0, 3.0, 0.3], [0.2, -0.3, 0.001]];
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
+        seq += 1;
+        for (id, hand) in ids.iter().zip(&hands) {
+            if let Some(Some(s)) = latest.get(*id as usize) {
+                let _ = ve.handle_uplink(now, *id, &following(s, seq, hand));
+            }
+        }
+    });
+    let snapshot = |id: u32| latest[id as usize].as_ref().expect("a snapshot for every user");
+    let tick = snapshot(ids[0]).ve_step;
+    for (me, id) in ids.iter().enumerate() {
+        let others = &snapshot(*id).others;
+        let expected: Vec<usize> = [0, 2].into_iter().filter(|&i| i != me).collect();
+        let listed: Vec<u32> = others.iter().map(|o| o.user_id).collect();
+        assert_eq!(listed, expected.iter().map(|&i| ids[i]).collect::<Vec<_>>(), "user {id}'s list");
+        for (entry, &i) in others.iter().zip(&expected) {
+            let theirs = snapshot(ids[i]);
+            assert_eq!(theirs.ve_step, tick);
+            assert_eq!(entry.op_position, theirs.op_pose[..2], "user {id}'s entry for {}", ids[i]);
+            for (got, want) in entry.wrench.iter().zip(hands[i]) {
+                assert!((got - want).abs() <= 1e-12, "user {id}'s entry for {}: {:?}", ids[i], entry.wrench);
+            }
+        }
+    }
+}

@@ -165,6 +165,20 @@ struct SnapshotScratch<S: Space> {
     contact_y: DVector<f64>,
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
+    /// Every manipulator's entry for the others' lists, in user order, gathered once per snapshot round: each
+    /// snapshot copies it but for its own user (64 users make 4,032 entries a round, and gathering each from
+    /// the users and couplings again cost five times the copy).
+    others: Vec<OtherEntry<S>>,
+}
+
+/// One manipulator as the other users' snapshots list it.
+#[derive(Clone, Copy, Debug)]
+struct OtherEntry<S: Space> {
+    /// Index in `VeCore::users`.
+    index: usize,
+    user_id: u32,
+    position: S::Point,
+    wrench: S::OpVec,
 }
 
 /// The virtual environment (see the module documentation).
@@ -231,12 +245,13 @@ impl<S: Space> VeCore<S> {
             contacts
         });
         let (n, m, k) = (model.nq(), model.nc(), S::DIM);
+        let user_room = 2 * config.max_users;
         let scratch = SnapshotScratch {
             op_y: DMatrix::zeros(n, k),
             contact_y: DVector::zeros(n),
             near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
+            others: Vec::with_capacity(user_room),
         };
-        let user_room = 2 * config.max_users;
         Ok(VeCore {
             shape: SessionShape { kind: S::KIND, n, m },
             snapshot_period: config.snapshot_period(),

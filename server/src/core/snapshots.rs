@@ -49,7 +49,7 @@ use nalgebra::{DMatrix, DVector};
 use super::coupling::{Evaluation, VeForces};
 use super::events::VeEvent;
 use super::users::{Presence, User};
-use super::{Coupling, SnapshotScratch, VeCore};
+use super::{Coupling, OtherEntry, SnapshotScratch, VeCore};
 
 impl<S: Space> VeCore<S> {
     /// Builds every present user's snapshot at the current state (see the module documentation).
@@ -74,14 +74,22 @@ impl<S: Space> VeCore<S> {
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
         let time_s = self.last_tick_at.as_secs_f64();
-        // Every snapshot carries the same entries for the other users: check each once here. If one fails,
-        // each snapshot is checked whole, and those that carry it are withheld.
-        let others_valid = self.users.iter().zip(&self.couplings).all(|(user, coupling)| {
-            user.role != Role::Manipulator || {
-                let (position, wrench) = (coupling.op_pose.position.as_slice(), coupling.wrench.as_slice());
-                validate::other_user(0, position, wrench, &self.shape).is_ok()
-            }
-        });
+        // Every snapshot carries the same entries for the other users: gather and check each once here. If one
+        // fails, each snapshot is checked whole, and those that carry it are withheld.
+        scratch.others.clear();
+        let manipulators = self.users.iter().zip(&self.couplings).enumerate();
+        scratch.others.extend(manipulators.filter(|(_, (user, _))| user.role == Role::Manipulator).map(
+            |(index, (user, coupling))| OtherEntry {
+                index,
+                user_id: user.id,
+                position: coupling.op_pose.position,
+                wrench: coupling.wrench,
+            },
+        ));
+        let others_valid = scratch
+            .others
+            .iter()
+            .all(|o| validate::other_user(0, o.position.as_slice(), o.wrench.as_slice(), &self.shape).is_ok());
         for index in 0..self.users.len() {
             if self.users[index].presence != Presence::Present {
                 continue;
@@ -171,18 +179,11 @@ fn build_one<S: Space>(
     let pose = OpPose::of_op(model, data, op);
     let twist = op_twist(model, data, op);
 
-    let (before, rest) = users.split_at_mut(index);
-    let Some((me, after)) = rest.split_first_mut() else {
-        return Ok(());
-    };
-    let others = || {
-        let before = before.iter().enumerate();
-        let after = after.iter().enumerate().map(|(i, u)| (index + 1 + i, u));
-        before.chain(after).filter(|(_, u)| u.role == Role::Manipulator).take(MAX_LIST_ENTRIES)
-    };
-    let slot = &mut me.slot;
+    let others = || scratch.others.iter().filter(|o| o.index != index);
+    let slot = &mut users[index].slot;
     if slot.roster_version != roster_version {
-        slot.size_others(others().count(), <S::Point as VecOps>::LEN, S::DIM, roster_version);
+        let count = others().take(MAX_LIST_ENTRIES).count();
+        slot.size_others(count, <S::Point as VecOps>::LEN, S::DIM, roster_version);
     }
     if let Some(scratch_terms) = slot.config_scratch.as_mut() {
         scratch_terms.fill_from(model, data, q, qd, &own_wrench, LocalModelTerms::full());
@@ -202,10 +203,11 @@ fn build_one<S: Space>(
     if let (Some(wire), Some(terms)) = (snapshot.config.as_mut(), config_scratch) {
         write_config_terms(wire, terms);
     }
-    for (entry, (other, user)) in snapshot.others.iter_mut().zip(others()) {
-        entry.user_id = user.id;
-        set(&mut entry.op_position, couplings[other].op_pose.position.as_slice());
-        set(&mut entry.wrench, couplings[other].wrench.as_slice());
+    // (Sized to at most MAX_LIST_ENTRIES above: the zip stops there.)
+    for (entry, other) in snapshot.others.iter_mut().zip(others()) {
+        entry.user_id = other.user_id;
+        set(&mut entry.op_position, other.position.as_slice());
+        set(&mut entry.wrench, other.wrench.as_slice());
     }
 
     // Contacts last: frame_point_inertia overwrites data.op.
