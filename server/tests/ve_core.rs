@@ -483,3 +483,32 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
         }
     }
 }
+
+/// Users are found by id after others have joined, left and been removed (the lookup assumes the roster
+/// stays sorted by id): names, uplinks and unknown ids all resolve to the right user or to none.
+#[test]
+fn users_are_found_by_id_across_joins_and_removals() {
+    let mut ve = core(testbed(), VeConfig::paper());
+    let join = |ve: &mut kinloop_server::core::VeCore<_>, name: &str| {
+        ve.join(Duration::ZERO, request(name, Role::Manipulator, "link2", 3)).unwrap().user_id
+    };
+    let mut ids: Vec<(u32, String)> = (0..5).map(|i| format!("u{i}")).map(|n| (join(&mut ve, &n), n)).collect();
+    for (id, _) in ids.iter().filter(|(_, n)| n == "u1" || n == "u3") {
+        ve.leave(Duration::ZERO, *id).unwrap();
+    }
+    // Past the fade, the leavers are removed.
+    let mut latest = Vec::new();
+    run(&mut ve, Duration::from_millis(500), &mut latest, |_, _, _| {});
+    let gone: Vec<u32> = ids.iter().filter(|(_, n)| n == "u1" || n == "u3").map(|(id, _)| *id).collect();
+    ids.retain(|(id, _)| !gone.contains(id));
+    ids.extend((5..7).map(|i| format!("u{i}")).map(|n| (join(&mut ve, &n), n)));
+    for (id, name) in &ids {
+        assert_eq!(ve.user_name(*id), Some(name.as_str()));
+    }
+    for id in gone.iter().chain(&[0, 99]) {
+        assert_eq!(ve.user_name(*id), None, "id {id}");
+        let s = following(latest.iter().flatten().next().unwrap(), 1, &[0.0; 3]);
+        assert!(ve.handle_uplink(Duration::from_millis(500), *id, &s).is_err(), "id {id}");
+    }
+    assert_eq!(ve.present_user_ids().collect::<Vec<_>>(), ids.iter().map(|(id, _)| *id).collect::<Vec<_>>());
+}
