@@ -166,8 +166,8 @@ struct SnapshotScratch<S: Space> {
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
     /// Every manipulator's entry for the others' lists, in user order, gathered once per snapshot round: each
-    /// snapshot copies it but for its own user (64 users make 4,032 entries a round, and gathering each from
-    /// the users and couplings again cost five times the copy).
+    /// snapshot copies it but for its own user (64 users make 4,032 entries a round; gathering each anew from
+    /// the users and couplings cost about as much again as the copy).
     others: Vec<OtherEntry<S>>,
 }
 

@@ -147,7 +147,8 @@ enum SnapshotFailure {
     Wire(kinloop_protocol::codec::DecodeError),
 }
 
-/// Fills user `index`'s snapshot from the evaluated state in `data` (`pose_memo`: that user's `Coupling::pose_memo`).
+/// Fills user `index`'s snapshot from the evaluated state in `data` (`pose_memo`: that user's
+/// `Coupling::pose_memo`).
 #[allow(clippy::too_many_arguments)]
 fn build_one<S: Space>(
     model: &Model<S>,
