@@ -247,8 +247,8 @@ impl TermsMemo {
 
     /// Records that the terms now belong to `(q, q̇)`.
     pub(crate) fn record(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
-        self.q.as_mut_slice().copy_from_slice(q.as_slice());
-        self.qd.as_mut_slice().copy_from_slice(qd.as_slice());
+        crate::dense::copy(self.q.as_mut_slice(), q.as_slice());
+        crate::dense::copy(self.qd.as_mut_slice(), qd.as_slice());
         self.valid = true;
     }
 

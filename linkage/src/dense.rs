@@ -3,6 +3,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::ltl_small::by_size;
 use crate::simd::F64x4;
 
 /// `a * b + c`: one fused instruction with one rounding where the target has FMA (x86-64-v3, as this
@@ -63,6 +64,20 @@ pub fn dot_fixed<const N: usize>(a: &[f64], b: &[f64]) -> f64 {
         s = mul_add(*x, *y, s);
     }
     s
+}
+
+/// `dst ← src` (the same length). Up to 8 numbers (the workspaces of small linkages: q, a closure's
+/// residual, Wᵀ of a planar pin) the copy has a constant length and is done inline, where `copy_from_slice`
+/// of a length known only at run time calls `memcpy`, whose entry costs more than copying a few numbers.
+#[inline(always)]
+pub fn copy(dst: &mut [f64], src: &[f64]) {
+    by_size!(dst.len(), N => dst[..N].copy_from_slice(&src[..N]), _ => dst.copy_from_slice(src))
+}
+
+/// `x ← 0`, inline up to 8 numbers as [`copy`].
+#[inline(always)]
+pub fn zero(x: &mut [f64]) {
+    by_size!(x.len(), N => x[..N].fill(0.0), _ => x.fill(0.0))
 }
 
 /// `y ← y - alpha x` over the common length.

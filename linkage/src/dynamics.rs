@@ -99,7 +99,7 @@ pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
         stabilize(model, data, qd);
         data.terms_at.record(q, qd);
     }
-    data.applied.as_mut_slice().fill(0.0);
+    crate::dense::zero(data.applied.as_mut_slice());
     forces.add_forces(model, &data.kin, &mut data.applied);
 }
 

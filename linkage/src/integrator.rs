@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
-use crate::dense::{dot, sub_scaled};
+use crate::dense::{self, dot, sub_scaled};
 use crate::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::error::DynamicsError;
 use crate::kinematics::forward_poses;
@@ -235,7 +235,7 @@ pub fn project<S: Space>(
     // (`factor_closures` needs tmp_m, `schur_solve` tmp_m2.)
     let mut r_q = std::mem::replace(&mut kkt.tmp_m3, DVector::zeros(0));
     let mut r_v = std::mem::replace(&mut kkt.tmp_m4, DVector::zeros(0));
-    r_q.as_mut_slice().copy_from_slice(data.closure_residual.as_slice());
+    dense::copy(r_q.as_mut_slice(), data.closure_residual.as_slice());
     // W(q) q̇ over whole columns: W(q)'s support is W_s's, but an entry may vanish at one state only.
     let wt = data.closure_jacobian_t.as_slice();
     for (r, col) in r_v.as_mut_slice().iter_mut().zip(wt.chunks_exact(n)) {
@@ -293,11 +293,11 @@ fn correct<S: Space>(
 ) {
     let n = model.nq();
     let kkt = &mut data.kkt;
-    kkt.tmp_n2.as_mut_slice().fill(0.0);
+    dense::zero(kkt.tmp_n2.as_mut_slice());
     // t = -Z S⁺ r per right-hand side (S⁺ on a copy: r is updated below), then U⁻ᵀ t for both together.
     let mut s = std::mem::replace(&mut kkt.tmp_m, DVector::zeros(0));
     for (r, side) in [(&*r_q, 0), (&*r_v, 1)] {
-        s.as_mut_slice().copy_from_slice(r.as_slice());
+        dense::copy(s.as_mut_slice(), r.as_slice());
         kkt::schur_solve(data, &mut s);
         let kkt = &mut data.kkt;
         let t = &mut kkt.tmp_n2.as_mut_slice()[side * n..(side + 1) * n];

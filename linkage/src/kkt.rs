@@ -62,7 +62,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     }
     let n = model.nq();
     let kkt = &mut data.kkt;
-    kkt.z.as_mut_slice().copy_from_slice(data.closure_jacobian_t.as_slice());
+    dense::copy(kkt.z.as_mut_slice(), data.closure_jacobian_t.as_slice());
     let z = kkt.z.as_mut_slice();
     for (rows, col) in kkt.z_rows.iter_mut().zip(z.chunks_exact(n)) {
         *rows = col.iter().rposition(|x| *x != 0.0).map_or(0, |r| r + 1);

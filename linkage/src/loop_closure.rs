@@ -45,7 +45,7 @@ fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, outputs: Outputs) {
     let h = &mut data.closure_residual;
     let w = &mut data.closure_bias;
     if outputs != Outputs::Residual {
-        wt.as_mut_slice().fill(0.0);
+        crate::dense::zero(wt.as_mut_slice());
     }
     for cut in &model.cuts {
         let mut row = cut.row;
