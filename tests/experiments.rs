@@ -188,6 +188,34 @@ fn scale_op_form_is_flat_and_ve_cost_grows_with_links() {
     assert!(f(&large["snapshot_bytes_config"]) > 10.0 * f(&large["snapshot_bytes_op"]));
 }
 
+/// Every point of the pauses experiment is a tick that ran: users, pauses and both ways of waiting, percentiles
+/// in order, and the ratios at the longest pause computed from those points. (How large the ratios come out is
+/// the machine's doing, a measurement, not asserted here.)
+#[test]
+fn pauses_time_each_tick_after_each_kind_of_pause() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Pauses, dir.path());
+    let r = &report.summary["results"];
+    let points = r["points"].as_array().unwrap();
+    // Quick grid: 1 and 4 users; pauses 0 (once), 100 and 900 us slept and spun.
+    assert_eq!(points.len(), 2 * (1 + 2 * 2), "{points:?}");
+    for p in points {
+        let (p10, p50, p90) = (f(&p["tick_us_p10"]), f(&p["tick_us_p50"]), f(&p["tick_us_p90"]));
+        assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90.is_finite(), "{p}");
+        assert!(p["how"] == "sleep" || p["how"] == "spin", "{p}");
+    }
+    let ratios = r["ratios_at_longest_pause"].as_array().unwrap();
+    assert_eq!(ratios.len(), 2);
+    for ratio in ratios {
+        let users = ratio["users"].as_u64().unwrap();
+        let find = |pause: u64, how: &str| {
+            points.iter().find(|p| p["users"] == users && p["pause_us"] == pause && p["how"] == how).unwrap()
+        };
+        let (base, slept) = (f(&find(0, "sleep")["tick_us_p50"]), f(&find(900, "sleep")["tick_us_p50"]));
+        assert!((f(&ratio["sleep_over_back_to_back"]) - slept / base).abs() <= 0.01 + 1e-3 * slept / base, "{ratio}");
+    }
+}
+
 /// Bad command lines are refused with a message, not a panic.
 #[test]
 fn bad_experiment_arguments_are_refused_cleanly() {

@@ -1,8 +1,7 @@
 //! Runs `server/ve_tick_users_N` in a loop for profilers: `profile_tick [USERS] [TICKS]` (defaults 1, 20000).
 //! For instruction counts, which a noisy machine does not disturb:
 //! `valgrind --tool=callgrind profile_tick 1 20000`, then `callgrind_annotate --inclusive=yes` and read the
-//! entries under `ve_tick_users::{{closure}}` (the tick). Toggling collection on `*ve_tick_users*` does not
-//! work: the tick closure matches the pattern too and toggles collection off again.
+//! entries under `TickBench::tick` (the tick; divide by 1.1 × TICKS, the warm-up included).
 
 fn main() {
     let mut args = std::env::args().skip(1);

@@ -2,6 +2,8 @@
 //!
 //! - [`ve_tick_users`]: `server/ve_tick_users_N`, one VE tick with N users on the paper's testbed — every
 //!   user's uplink, the dynamics with every coupling, and every user's snapshot terms — in ns per tick;
+//! - [`ve_tick_after_pauses`]: the same tick timed one by one after pauses, as a real-time loop takes them
+//!   (`kinloop experiment pauses`);
 //! - [`realtime_run`]: the real VE thread (absolute deadlines, spin_sleep, SCHED_FIFO when allowed) with N
 //!   synthetic in-process users for a while: tick-time percentiles and deadline misses.
 
@@ -111,54 +113,110 @@ fn follow(snapshot: &Snapshot, seq: u64, index: usize, users: usize) -> UplinkSa
     sample
 }
 
-/// Mean ns of one VE tick on the testbed with `users` users (spread over the four links' COMs): every
-/// user's uplink, one integrator step with every coupling, and every user's snapshot. `iters` ticks are
-/// measured after `iters / 10` of warm-up.
-pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
-    let model = testbed_with_ops()?;
-    let mut config = VeConfig::paper();
-    config.max_users = users.max(1);
-    let mut core = VeCore::new(model.clone(), config)?;
-    let ids = (0..users)
-        .map(|i| {
-            core.join(Duration::ZERO, join_request(&model, i, 3))
-                .map(|j| j.user_id)
-                .map_err(|reason| BenchError::Refused { index: i, reason })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut samples: Vec<Option<UplinkSample>> = vec![None; users];
-    let mut seq = 0u64;
-    let mut tick = |core: &mut VeCore<Planar>, seq: &mut u64| {
+/// A VE on the testbed with `users` users (spread over the four links' COMs) whose uplinks follow their
+/// newest snapshots: what [`ve_tick_users`] and [`ve_tick_after_pauses`] tick.
+pub struct TickBench {
+    core: VeCore<Planar>,
+    ids: Vec<u32>,
+    samples: Vec<Option<UplinkSample>>,
+    seq: u64,
+}
+
+impl TickBench {
+    /// Joins the users and ticks `warm_up` times.
+    pub fn new(users: usize, warm_up: u64) -> Result<Self, BenchError> {
+        let model = testbed_with_ops()?;
+        let mut config = VeConfig::paper();
+        config.max_users = users.max(1);
+        let mut core = VeCore::new(model.clone(), config)?;
+        let ids = (0..users)
+            .map(|i| {
+                core.join(Duration::ZERO, join_request(&model, i, 3))
+                    .map(|j| j.user_id)
+                    .map_err(|reason| BenchError::Refused { index: i, reason })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut bench = TickBench { core, ids, samples: vec![None; users], seq: 0 };
+        for _ in 0..warm_up {
+            bench.tick();
+        }
+        Ok(bench)
+    }
+
+    /// One tick: every user's uplink, the VE step and every user's snapshot (read back into the next
+    /// uplink).
+    pub fn tick(&mut self) {
+        let core = black_box(&mut self.core);
         let now = core.poll_timeout();
-        *seq += 1;
-        for (i, id) in ids.iter().enumerate() {
-            if let Some(sample) = samples[i].as_mut() {
-                sample.seq = *seq;
+        self.seq += 1;
+        for (sample, id) in self.samples.iter_mut().zip(&self.ids) {
+            if let Some(sample) = sample.as_mut() {
+                sample.seq = self.seq;
                 let _ = core.handle_uplink_sample(now, *id, sample);
             }
         }
         core.handle_timeout(now);
+        let users = self.ids.len();
         while let Some(pending) = core.poll_snapshot() {
-            let index = ids.iter().position(|id| *id == pending.user_id()).unwrap_or(0);
-            match samples[index].as_mut() {
+            let index = self.ids.iter().position(|id| *id == pending.user_id()).unwrap_or(0);
+            match self.samples[index].as_mut() {
                 // Reuse the sample: only the pose and twist change (no allocation in the loop).
                 Some(sample) => {
                     let s = pending.snapshot();
                     sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
                     sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
                 }
-                None => samples[index] = Some(follow(pending.snapshot(), 0, index, users)),
+                None => self.samples[index] = Some(follow(pending.snapshot(), 0, index, users)),
             }
         }
-    };
-    for _ in 0..(iters / 10).max(10) {
-        tick(&mut core, &mut seq);
     }
+}
+
+/// Mean ns of one VE tick on the testbed with `users` users (see [`TickBench`]): every user's uplink, one
+/// integrator step with every coupling, and every user's snapshot. `iters` ticks are measured after
+/// `iters / 10` of warm-up.
+pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
+    let mut bench = TickBench::new(users, (iters / 10).max(10))?;
     let start = Instant::now();
     for _ in 0..iters {
-        tick(black_box(&mut core), &mut seq);
+        bench.tick();
     }
     Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
+}
+
+/// How a real-time loop waits between ticks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Pause {
+    /// The thread sleeps (`std::thread::sleep`): the core may idle or run other work.
+    Sleep,
+    /// The thread busy-waits on the clock: the core stays with it.
+    Spin,
+}
+
+/// The time of each of `ticks` VE ticks (as [`ve_tick_users`] runs them), each after a pause of `pause`
+/// taken the way `how` says, in ns: what a tick costs when the loop has waited before it, as a real-time loop
+/// does, rather than back to back (whatever ran meanwhile has evicted part of its working set).
+pub fn ve_tick_after_pauses(users: usize, pause: Duration, how: Pause, ticks: usize) -> Result<Vec<f64>, BenchError> {
+    let mut bench = TickBench::new(users, 100)?;
+    let mut times = Vec::with_capacity(ticks);
+    for _ in 0..ticks {
+        if !pause.is_zero() {
+            match how {
+                Pause::Sleep => std::thread::sleep(pause),
+                Pause::Spin => {
+                    let until = Instant::now() + pause;
+                    while Instant::now() < until {
+                        std::hint::spin_loop();
+                    }
+                }
+            }
+        }
+        let start = Instant::now();
+        bench.tick();
+        times.push(start.elapsed().as_nanos() as f64);
+    }
+    Ok(times)
 }
 
 /// A real-time run of the VE thread with synthetic users.

@@ -16,13 +16,14 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 7] = [
+const WHICH: [Which; 8] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
     Which::One(Name::Latency),
     Which::One(Name::Users),
     Which::One(Name::Scale),
+    Which::One(Name::Pauses),
     Which::All,
 ];
 

@@ -9,6 +9,7 @@
 //! | [`latency`] | how much network delay, jitter and loss does the coupling take, with and without passivity control? |
 //! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
+//! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
 //! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
@@ -17,6 +18,7 @@
 pub mod common;
 pub mod latency;
 pub mod paper;
+pub mod pauses;
 pub mod scale;
 pub mod speed_accuracy;
 pub mod stability;
@@ -42,12 +44,14 @@ pub enum Name {
     Users,
     /// Cost and snapshot size against links and loops.
     Scale,
+    /// A tick's cost after a real-time loop's pause.
+    Pauses,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 6] =
-        [Name::Paper, Name::SpeedAccuracy, Name::Stability, Name::Latency, Name::Users, Name::Scale];
+    pub const ALL: [Name; 7] =
+        [Name::Paper, Name::SpeedAccuracy, Name::Stability, Name::Latency, Name::Users, Name::Scale, Name::Pauses];
 
     /// What the experiment answers, in a line (the command line's help).
     pub fn about(self) -> &'static str {
@@ -58,6 +62,7 @@ impl Name {
             Name::Latency => "one-way delay, jitter and loss with and without the passivity controller",
             Name::Users => "1 to 16 users on one linkage",
             Name::Scale => "cost and snapshot size against links and loops",
+            Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
         }
     }
 
@@ -70,6 +75,7 @@ impl Name {
             Name::Latency => "latency",
             Name::Users => "users",
             Name::Scale => "scale",
+            Name::Pauses => "pauses",
         }
     }
 }
@@ -83,5 +89,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Latency => latency::run(options),
         Name::Users => users::run(options),
         Name::Scale => scale::run(options),
+        Name::Pauses => pauses::run(options),
     }
 }

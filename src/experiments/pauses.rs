@@ -1,0 +1,158 @@
+//! `pauses`: what a VE tick costs after the pause a real-time loop takes between ticks, against the same tick
+//! run back to back as `kinloop bench` (`server/ve_tick_users_N`) times it.
+//!
+//! A 1 kHz loop works for microseconds and then waits for the rest of the millisecond. Whatever runs on the
+//! core meanwhile (other threads, the host's other tenants) evicts part of the tick's code and data from the
+//! caches, and the next tick fetches them again. Each point here ticks a testbed VE with N users
+//! (`kinloop_server::bench::ve_tick_after_pauses`: every user's uplink, the step, every user's snapshot)
+//! after a pause of P µs, slept (`std::thread::sleep`, as the VE thread's spin_sleep does for most of a
+//! period) or busy-waited (the core stays with the thread), and reports the percentiles of the single tick's
+//! time. P = 0 is the benchmark's back-to-back case.
+//!
+//! Wall-clock, single-threaded, on whatever the machine is doing: the numbers move from run to run, the
+//! ratios between pauses much less.
+
+use std::time::Duration;
+
+use anyhow::{anyhow, Result};
+use kinloop_server::bench::{ve_tick_after_pauses, Pause};
+use serde_json::{json, Value};
+
+use super::common::{round, sweep, Options, Output, Report};
+use crate::charts::{Chart, Legend, Series};
+
+/// One point: users, pause, how, and the tick's percentiles (ns).
+#[derive(Clone, Debug)]
+struct Measured {
+    users: usize,
+    pause_us: u64,
+    how: Pause,
+    p10_ns: f64,
+    p50_ns: f64,
+    p90_ns: f64,
+}
+
+/// The `q`-quantile of sorted `v` (nearest rank).
+fn quantile(v: &[f64], q: f64) -> f64 {
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+fn measure(users: usize, pause_us: u64, how: Pause, ticks: usize) -> Result<Measured> {
+    let mut times = ve_tick_after_pauses(users, Duration::from_micros(pause_us), how, ticks)
+        .map_err(|e| anyhow!("{users} users, {pause_us} us: {e}"))?;
+    times.sort_by(f64::total_cmp);
+    Ok(Measured {
+        users,
+        pause_us,
+        how,
+        p10_ns: quantile(&times, 0.1),
+        p50_ns: quantile(&times, 0.5),
+        p90_ns: quantile(&times, 0.9),
+    })
+}
+
+fn how_name(how: Pause) -> &'static str {
+    match how {
+        Pause::Sleep => "sleep",
+        Pause::Spin => "spin",
+    }
+}
+
+fn point_json(m: &Measured) -> Value {
+    json!({
+        "users": m.users,
+        "pause_us": m.pause_us,
+        "how": how_name(m.how),
+        "tick_us_p10": round(m.p10_ns / 1e3, 3),
+        "tick_us_p50": round(m.p50_ns / 1e3, 3),
+        "tick_us_p90": round(m.p90_ns / 1e3, 3),
+    })
+}
+
+/// Runs the experiment.
+pub fn run(options: &Options) -> Result<Report> {
+    let mut out = Output::new("pauses", options)?;
+    let users: Vec<usize> = options.pick(vec![1, 4, 16], vec![1, 4]);
+    let pauses_us: Vec<u64> = options.pick(vec![0, 20, 50, 100, 200, 500, 900], vec![0, 100, 900]);
+    let ticks = options.pick(2_000, 200);
+    let mut grid = Vec::new();
+    for &n in &users {
+        for &p in &pauses_us {
+            for how in [Pause::Sleep, Pause::Spin] {
+                // Without a pause the two ways are the same measurement.
+                if p > 0 || how == Pause::Sleep {
+                    grid.push((n, p, how));
+                }
+            }
+        }
+    }
+    // One thread: a second one would be the very neighbour whose evictions this measures.
+    let points =
+        sweep("ticks after pauses (1 thread)", &grid, 1, options.progress, |&(n, p, how)| measure(n, p, how, ticks))?;
+
+    let at = |n: usize, p: u64, how: Pause| {
+        points.iter().find(|m| m.users == n && m.pause_us == p && (p == 0 || m.how == how))
+    };
+    let mut chart = Chart::new(
+        "A VE tick after a pause, against the same tick back to back (p50)",
+        "pause before the tick (us)",
+        "tick (us)",
+    )
+    .legend(Legend::UpperLeft);
+    for &n in &users {
+        for how in [Pause::Sleep, Pause::Spin] {
+            let series: Vec<(f64, f64)> =
+                pauses_us.iter().filter_map(|&p| at(n, p, how)).map(|m| (m.pause_us as f64, m.p50_ns / 1e3)).collect();
+            let who = if n == 1 { "1 user".to_string() } else { format!("{n} users") };
+            chart = chart.with(Series::line(format!("{who}, {}", how_name(how)), series));
+        }
+    }
+    out.chart("tick_vs_pause", &chart)?;
+
+    let longest = pauses_us[pauses_us.len() - 1];
+    let ratios: Vec<Value> = users
+        .iter()
+        .filter_map(|&n| {
+            let base = at(n, 0, Pause::Sleep)?.p50_ns;
+            let slept = at(n, longest, Pause::Sleep)?.p50_ns;
+            let spun = at(n, longest, Pause::Spin)?.p50_ns;
+            Some(json!({
+                "users": n,
+                "back_to_back_us": round(base / 1e3, 3),
+                "after_sleep_us": round(slept / 1e3, 3),
+                "after_spin_us": round(spun / 1e3, 3),
+                "sleep_over_back_to_back": round(slept / base, 2),
+                "spin_over_back_to_back": round(spun / base, 2),
+            }))
+        })
+        .collect();
+    let first = ratios.first().cloned().unwrap_or(Value::Null);
+    let answer = format!(
+        "After a {longest} us pause a {}-user tick took {} us (p50) slept and {} us spun, against {} us back to back \
+         ({}x and {}x): a real-time loop pays for refetching its working set on every tick, which the benchmark's \
+         back-to-back ticks never show.",
+        first["users"],
+        first["after_sleep_us"],
+        first["after_spin_us"],
+        first["back_to_back_us"],
+        first["sleep_over_back_to_back"],
+        first["spin_over_back_to_back"],
+    );
+    let results = json!({
+        "answer": answer,
+        "longest_pause_us": longest,
+        "ratios_at_longest_pause": ratios,
+        "setup": {
+            "tick": "kinloop_server::bench::TickBench on the paper's testbed: every user's uplink, the step, every user's snapshot",
+            "ticks_per_point": ticks,
+            "sleep": "std::thread::sleep(pause) before each timed tick",
+            "spin": "busy-wait on Instant::now() for the pause before each timed tick",
+        },
+        "points": points.iter().map(point_json).collect::<Vec<_>>(),
+    });
+    out.finish(
+        "A VE tick after the pause a real-time loop takes, against back-to-back ticks",
+        "about 25 s (39 points of 2,000 ticks; the pauses dominate); --quick about 1 s",
+        results,
+    )
+}
