@@ -54,8 +54,13 @@ pub fn measure_batches<E>(budget: Duration, mut batch: impl FnMut(u64) -> Result
         samples.push(batch(calls)?);
     }
     samples.sort_by(|a, b| a.total_cmp(b));
-    let at = |p: f64| samples[((samples.len() - 1) as f64 * p).round() as usize];
+    let at = |q: f64| quantile(&samples, q);
     Ok(Timing { median_ns: at(0.5), p10_ns: at(0.1), p90_ns: at(0.9), calls: calls * samples.len() as u64 })
+}
+
+/// The `q`-quantile (0 to 1) of sorted, non-empty `sorted`, by nearest rank.
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
 /// A compiled planar benchmark scene with its state and the paper's user wrench.

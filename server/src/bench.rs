@@ -158,7 +158,9 @@ impl TickBench {
         core.handle_timeout(now);
         let users = self.ids.len();
         while let Some(pending) = core.poll_snapshot() {
-            let index = self.ids.iter().position(|id| *id == pending.user_id()).unwrap_or(0);
+            // Ids are handed out in increasing order (see `VeCore::join`): a search, not a scan per snapshot,
+            // so the harness adds no quadratic work to the ticks it times.
+            let index = self.ids.binary_search(&pending.user_id()).unwrap_or(0);
             match self.samples[index].as_mut() {
                 // Reuse the sample: only the pose and twist change (no allocation in the loop).
                 Some(sample) => {
@@ -185,13 +187,22 @@ pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
 }
 
 /// How a real-time loop waits between ticks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pause {
     /// The thread sleeps (`std::thread::sleep`): the core may idle or run other work.
     Sleep,
     /// The thread busy-waits on the clock: the core stays with it.
     Spin,
+}
+
+impl Pause {
+    /// `sleep` or `spin`, for charts and summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pause::Sleep => "sleep",
+            Pause::Spin => "spin",
+        }
+    }
 }
 
 /// The time of each of `ticks` VE ticks (as [`ve_tick_users`] runs them), each after a pause of `pause`

@@ -15,6 +15,7 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, Result};
+use kinloop_linkage::bench::quantile;
 use kinloop_server::bench::{ve_tick_after_pauses, Pause};
 use serde_json::{json, Value};
 
@@ -32,11 +33,6 @@ struct Measured {
     p90_ns: f64,
 }
 
-/// The `q`-quantile of sorted `v` (nearest rank).
-fn quantile(v: &[f64], q: f64) -> f64 {
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
 fn measure(users: usize, pause_us: u64, how: Pause, ticks: usize) -> Result<Measured> {
     let mut times = ve_tick_after_pauses(users, Duration::from_micros(pause_us), how, ticks)
         .map_err(|e| anyhow!("{users} users, {pause_us} us: {e}"))?;
@@ -51,18 +47,11 @@ fn measure(users: usize, pause_us: u64, how: Pause, ticks: usize) -> Result<Meas
     })
 }
 
-fn how_name(how: Pause) -> &'static str {
-    match how {
-        Pause::Sleep => "sleep",
-        Pause::Spin => "spin",
-    }
-}
-
 fn point_json(m: &Measured) -> Value {
     json!({
         "users": m.users,
         "pause_us": m.pause_us,
-        "how": how_name(m.how),
+        "how": m.how.name(),
         "tick_us_p10": round(m.p10_ns / 1e3, 3),
         "tick_us_p50": round(m.p50_ns / 1e3, 3),
         "tick_us_p90": round(m.p90_ns / 1e3, 3),
@@ -104,7 +93,7 @@ pub fn run(options: &Options) -> Result<Report> {
             let series: Vec<(f64, f64)> =
                 pauses_us.iter().filter_map(|&p| at(n, p, how)).map(|m| (m.pause_us as f64, m.p50_ns / 1e3)).collect();
             let who = if n == 1 { "1 user".to_string() } else { format!("{n} users") };
-            chart = chart.with(Series::line(format!("{who}, {}", how_name(how)), series));
+            chart = chart.with(Series::line(format!("{who}, {}", how.name()), series));
         }
     }
     out.chart("tick_vs_pause", &chart)?;
