@@ -145,8 +145,6 @@ pub struct OpSpaceWorkspace<S: Space> {
     pub jdot_qdot: S::OpVec,
     /// Λ⁻¹ with the loops closed (eq 9).
     pub inverse_inertia: S::OpMat,
-    /// Λ⁻¹ with the loops cut open (J D⁻¹ Jᵀ).
-    pub inverse_inertia_open: S::OpMat,
 }
 
 /// Scratch for the integrators.
@@ -309,7 +307,6 @@ impl<S: Space> Data<S> {
                 y_closed: DMatrix::zeros(n, k),
                 jdot_qdot: S::OpVec::zero(),
                 inverse_inertia: S::OpMat::zero(),
-                inverse_inertia_open: S::OpMat::zero(),
             },
             integ: IntegratorWorkspace {
                 q_start: DVector::zeros(n),

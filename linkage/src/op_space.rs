@@ -27,7 +27,8 @@ use crate::ltl_small::by_size;
 use crate::model::Model;
 use crate::space::{MatOps, Space};
 
-/// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ, Λ⁻¹ (closed) and Λ⁻¹ (open). Needs
+/// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ and Λ⁻¹ with the loops closed (the open one
+/// on demand: [`open_inverse_inertia`], which the snapshots do not need). Needs
 /// `forward_kinematics`, `forward_velocity` (for J̇q̇), `loop_closure` and `kkt::factorize`
 /// at the same configuration, with no implicit mass in the factor.
 pub fn op_space_inertia<S: Space>(model: &Model<S>, data: &mut Data<S>, op: usize) -> Result<(), DynamicsError> {
@@ -47,19 +48,16 @@ pub fn frame_point_inertia<S: Space>(
     let ws = &mut data.op;
     frame_jacobian_t(model, &data.kin, body, p, &mut ws.jacobian_t);
     ws.jdot_qdot = frame_bias_acceleration(&data.kin, body, p);
-    ws.y.as_mut_slice().copy_from_slice(ws.jacobian_t.as_slice());
+    copy_op_columns::<S>(ws.y.as_mut_slice(), ws.jacobian_t.as_slice(), n);
     // Jᵀ, and so Y, is nonzero only on the joints that move `body`: rows 0..=body.
     let rows = body + 1;
     let kkt = &data.kkt;
     ltl::solve_u_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), ws.y.as_mut_slice(), rows);
     let y = ws.y.as_slice();
-    let open = gram::<S>(y, n, rows);
-    ws.inverse_inertia_open = open;
-    let mut closed = open;
-    let rank = kkt.schur_rank;
     let y_closed = ws.y_closed.as_mut_slice();
-    y_closed.copy_from_slice(y);
-    if model.nc() > 0 && rank > 0 {
+    copy_op_columns::<S>(y_closed, y, n);
+    let rank = kkt.schur_rank;
+    let closed = if model.nc() > 0 && rank > 0 {
         let basis = Closures {
             z: kkt.z.as_slice(),
             l: kkt.schur_factor.as_slice(),
@@ -69,13 +67,29 @@ pub fn frame_point_inertia<S: Space>(
         };
         let q = ws.closure_basis.as_mut_slice();
         by_size!(n, N => project_out::<N>(N, &basis, q, y_closed), _ => project_out::<0>(n, &basis, q, y_closed));
-        closed = gram::<S>(y_closed, n, n);
-    }
+        gram::<S>(y_closed, n, n)
+    } else {
+        gram::<S>(y, n, rows)
+    };
     if !closed.is_finite() {
         return Err(DynamicsError::NonFiniteResult { what: "inverse operational-space inertia" });
     }
     ws.inverse_inertia = closed;
     Ok(())
+}
+
+/// Λ⁻¹ with the loops cut open, `J D⁻¹ Jᵀ = Yᵀ Y`, from the Y of the last [`op_space_inertia`] or
+/// [`frame_point_inertia`].
+pub fn open_inverse_inertia<S: Space>(model: &Model<S>, data: &Data<S>) -> S::OpMat {
+    let n = model.nq();
+    gram::<S>(data.op.y.as_slice(), n, n)
+}
+
+/// `dst ← src` for n×k column-major workspaces (Jᵀ, Y, Ỹ): with n a constant up to 8 the copy is inline,
+/// where a length known only at run time calls `memcpy` (see `dense::copy`).
+#[inline(always)]
+fn copy_op_columns<S: Space>(dst: &mut [f64], src: &[f64], n: usize) {
+    by_size!(n, N => dst[..S::DIM * N].copy_from_slice(&src[..S::DIM * N]), _ => dst.copy_from_slice(src))
 }
 
 /// `Yᵀ Y` for the n×k column-major `y` whose rows from `rows` on are zero. Up to 8 joints over whole

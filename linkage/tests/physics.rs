@@ -8,7 +8,7 @@ use kinloop_linkage::bias::bias_forces;
 use kinloop_linkage::gravity::{gravity_forces, kinetic_energy, potential_energy};
 use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::mass_matrix::mass_matrix;
-use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::op_space::{op_space_inertia, open_inverse_inertia};
 use kinloop_linkage::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Space, StepConfig};
 use nalgebra::{DMatrix, DVector};
 
@@ -175,7 +175,7 @@ fn check_op_space<S: Space>(name: &str, model: &Model<S>) {
             op_space_inertia(model, &mut data, op).unwrap();
             let j = data.op.jacobian_t.transpose();
             let closed = DMatrix::from_column_slice(S::DIM, S::DIM, data.op.inverse_inertia.as_slice());
-            let open = DMatrix::from_column_slice(S::DIM, S::DIM, data.op.inverse_inertia_open.as_slice());
+            let open = DMatrix::from_column_slice(S::DIM, S::DIM, open_inverse_inertia(model, &data).as_slice());
             let d_inv = data.mass_matrix.clone().try_inverse().unwrap();
             assert_close(&format!("{name} op {op}: open Λ⁻¹"), &open, &(&j * d_inv * j.transpose()), 1e-10);
             let w = data.closure_jacobian();

@@ -3,7 +3,7 @@
 use anyhow::{bail, ensure, Context, Result};
 use kinloop_linkage::assemble::assemble;
 use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::op_space::{op_space_inertia, open_inverse_inertia};
 use kinloop_linkage::{forward_dynamics, Data, MatOps, Model, OpWrench, Planar, SceneKind, Space, Spatial, VecOps};
 use nalgebra::DVector;
 use serde_json::json;
@@ -120,7 +120,7 @@ fn inspect<S: Space>(args: &InspectArgs, scene: &kinloop_linkage::Scene, label: 
         "qdd": data.qdd.as_slice(),
         "lambda": data.lambda.as_slice(),
         "inverse_inertia": rows(&data.op.inverse_inertia),
-        "inverse_inertia_open": rows(&data.op.inverse_inertia_open),
+        "inverse_inertia_open": rows(&open_inverse_inertia(&model, &data)),
         "singular_values": cd.singular_values.as_slice(),
         "directions": rows(&cd.directions),
         "constraint_count": cd.count,
