@@ -47,18 +47,14 @@ pub enum BenchError {
     Thread(&'static str),
 }
 
-/// The testbed with one operational point at the COM of each link (`link1`..`link4`; `link2` is the
-/// paper's), so benchmark users can spread over the linkage.
-pub fn testbed_with_ops() -> Result<Model<Planar>, BenchError> {
+/// The paper's testbed, compiled. All benchmark users hold its one operational point, `link2`: the couplings'
+/// angular gains (the paper's 10⁴ N m/rad and N m s/rad) hold the orientation of the link each grips, so
+/// users on two different links take both of this 2-DOF linkage's freedoms and all but lock it (measured:
+/// |q̇| below 1e-3 rad/s with users spread over links 2 and 3, or with one on link 1 or 4, against about
+/// 1 rad/s on link 2 alone), and a tick of a still linkage is not the tick to time.
+pub fn testbed() -> Result<Model<Planar>, BenchError> {
     let scene = builtin::scene("paper-testbed").ok_or(BenchError::MissingScene("paper-testbed"))??;
-    let mut model = Model::<Planar>::compile(&scene, "paper-testbed")?;
-    for name in ["link1", "link3", "link4"] {
-        if let Some(body) = model.body_index(name) {
-            let com = model.bodies[body].com;
-            model = model.with_op(name, body, com);
-        }
-    }
-    Ok(model)
+    Ok(Model::<Planar>::compile(&scene, "paper-testbed")?)
 }
 
 /// Names of the operational points users are spread over, round robin.
@@ -90,11 +86,11 @@ fn join_request(model: &Model<impl Space>, index: usize, k: usize) -> JoinReques
     }
 }
 
-/// An uplink sample "following" a snapshot: the local model where the VE put the OP, and a share of the
-/// paper's hand wrench (users alternate its sign, pulling against each other).
-fn follow(snapshot: &Snapshot, seq: u64, index: usize, users: usize) -> UplinkSample {
+/// An uplink sample "following" a snapshot: the local model where the VE put the OP, and an equal share of
+/// the paper's hand wrench, so that together the users push as the paper's one user does and the linkage
+/// moves. (Shares of alternating sign cancelled exactly on one OP: the real-time runs' linkage stood still.)
+fn follow(snapshot: &Snapshot, seq: u64, users: usize) -> UplinkSample {
     let k = snapshot.op_twist.len();
-    let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
     let mut sample = UplinkSample {
         seq,
         client_time_s: 0.0,
@@ -106,14 +102,14 @@ fn follow(snapshot: &Snapshot, seq: u64, index: usize, users: usize) -> UplinkSa
         pose_len: snapshot.op_pose.len() as u8,
     };
     for (a, w) in PAPER_WRENCH.iter().enumerate().take(k) {
-        sample.hand_wrench[a] = sign * w / users as f64;
+        sample.hand_wrench[a] = w / users as f64;
     }
     sample.model_pose[..snapshot.op_pose.len()].copy_from_slice(&snapshot.op_pose);
     sample.model_twist[..k].copy_from_slice(&snapshot.op_twist);
     sample
 }
 
-/// A VE on the testbed with `users` users (spread over the four links' COMs) whose uplinks follow their
+/// A VE on the testbed with `users` users (all on `link2`, see [`testbed`]) whose uplinks follow their
 /// newest snapshots: what [`ve_tick_users`] and [`ve_tick_after_pauses`] tick.
 pub struct TickBench {
     core: VeCore<Planar>,
@@ -125,7 +121,7 @@ pub struct TickBench {
 impl TickBench {
     /// Joins the users and ticks `warm_up` times.
     pub fn new(users: usize, warm_up: u64) -> Result<Self, BenchError> {
-        let model = testbed_with_ops()?;
+        let model = testbed()?;
         let mut config = VeConfig::paper();
         config.max_users = users.max(1);
         let mut core = VeCore::new(model.clone(), config)?;
@@ -141,6 +137,11 @@ impl TickBench {
             bench.tick();
         }
         Ok(bench)
+    }
+
+    /// The VE being ticked.
+    pub fn core(&self) -> &VeCore<Planar> {
+        &self.core
     }
 
     /// One tick: every user's uplink, the VE step and every user's snapshot (read back into the next
@@ -168,7 +169,7 @@ impl TickBench {
                     sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
                     sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
                 }
-                None => self.samples[index] = Some(follow(pending.snapshot(), 0, index, users)),
+                None => self.samples[index] = Some(follow(pending.snapshot(), 0, users)),
             }
         }
     }
@@ -316,7 +317,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun) -> Result<RealtimeReport, BenchEr
                     }
                     received += 1;
                     if let Ok(Datagram::Snapshot(s)) = codec::decode_datagram(&frame, &shape) {
-                        let _ = uplinks.push(follow(&s, seq, i, users));
+                        let _ = uplinks.push(follow(&s, seq, users));
                     }
                 }
                 std::thread::sleep(Duration::from_millis(1));
