@@ -46,9 +46,11 @@ pub fn frame_point_inertia<S: Space>(
 ) -> Result<(), DynamicsError> {
     let n = model.nq();
     let ws = &mut data.op;
-    frame_jacobian_t(model, &data.kin, body, p, &mut ws.jacobian_t);
+    // Jᵀ is built in Y, which the solve then overwrites, and copied to `jacobian_t` beside the solve: the other
+    // way round the solve waited for a copy that reloads the Jacobian's just-written entries.
+    frame_jacobian_t(model, &data.kin, body, p, &mut ws.y);
     ws.jdot_qdot = frame_bias_acceleration(&data.kin, body, p);
-    copy_op_columns::<S>(ws.y.as_mut_slice(), ws.jacobian_t.as_slice(), n);
+    copy_op_columns::<S>(ws.jacobian_t.as_mut_slice(), ws.y.as_slice(), n);
     // Jᵀ, and so Y, is nonzero only on the joints that move `body`: rows 0..=body.
     let rows = body + 1;
     let kkt = &data.kkt;
