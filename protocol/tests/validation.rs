@@ -42,6 +42,18 @@ fn nan_is_refused_with_its_index() {
     assert_eq!(error.to_string(), "snapshot.bias_accel[2] is not finite");
 }
 
+/// Infinities are refused as not finite too, with their index, whatever their sign.
+#[test]
+fn infinity_is_refused_with_its_index() {
+    for (index, value) in [(0, f64::INFINITY), (1, f64::NEG_INFINITY)] {
+        let mut s = testbed_snapshot();
+        s.op_twist[index] = value;
+        let error = decode_snapshot(s).unwrap_err();
+        assert!(matches!(error, DecodeError::NonFinite { index: Some(i), .. } if i == index), "{error:?}");
+        assert_eq!(error.to_string(), format!("snapshot.op_twist[{index}] is not finite"));
+    }
+}
+
 #[test]
 fn absurd_wrench_is_out_of_range() {
     let mut s = testbed_snapshot();
