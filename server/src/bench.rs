@@ -42,6 +42,12 @@ pub enum BenchError {
     /// A built-in scene is missing from this build.
     #[error("the built-in scene {0} is missing")]
     MissingScene(&'static str),
+    /// Synthetic users need an operational point to hold.
+    #[error("{scene} defines no operational point ([[op]]) for the synthetic users to hold")]
+    NoOperationalPoint {
+        /// The scene's label.
+        scene: String,
+    },
     /// A thread failed.
     #[error("the {0} thread failed")]
     Thread(&'static str),
@@ -57,9 +63,10 @@ pub fn testbed() -> Result<Model<Planar>, BenchError> {
     Ok(Model::<Planar>::compile(&scene, "paper-testbed")?)
 }
 
-/// Names of the operational points users are spread over, round robin.
-fn op_for(model: &Model<impl Space>, index: usize) -> String {
-    model.ops[index % model.ops.len()].name.clone()
+/// The operational point every synthetic user holds: the scene's first (not spread over several: see
+/// [`testbed`]). Callers check that there is one.
+fn first_op(model: &Model<impl Space>) -> String {
+    model.ops.first().map(|op| op.name.clone()).unwrap_or_default()
 }
 
 fn bench_device(k: usize) -> DeviceCaps {
@@ -80,7 +87,7 @@ fn join_request(model: &Model<impl Space>, index: usize, k: usize) -> JoinReques
     JoinRequest {
         name: format!("bench-{index}"),
         role: Role::Manipulator,
-        op: op_for(model, index),
+        op: first_op(model),
         form: LocalModelForm::OpSpace,
         device: Some(bench_device(k)),
     }
@@ -238,7 +245,7 @@ pub struct RealtimeRun {
     pub scene: Scene,
     /// Where it came from.
     pub scene_label: String,
-    /// Synthetic users (spread over the scene's operational points).
+    /// Synthetic users, all on the scene's first operational point, sharing the paper's push.
     pub users: usize,
     /// How long to run.
     pub duration: Duration,
@@ -270,6 +277,9 @@ pub fn realtime_run(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
 
 fn realtime_run_in<S: Space>(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
     let model = Model::<S>::compile(&run.scene, &run.scene_label)?;
+    if model.ops.is_empty() && run.users > 0 {
+        return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
+    }
     let (n, m) = (model.nq(), model.nc());
     let shape = SessionShape { kind: S::KIND, n, m };
     let mut ve = run.ve.clone();

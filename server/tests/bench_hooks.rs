@@ -54,3 +54,21 @@ fn realtime_run_reports_ticks_and_snapshots() {
     assert!(report.snapshots_received > 0);
     assert_eq!(report.ve.core.state_restores, 0);
 }
+
+/// A scene without an operational point gives synthetic users nothing to hold: a typed error that names the
+/// scene (it divided by the number of OPs and panicked).
+#[test]
+fn realtime_run_without_an_op_is_refused() {
+    let mut scene = kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap();
+    scene.ops.clear();
+    let run = RealtimeRun {
+        scene,
+        scene_label: "no-op-testbed".into(),
+        users: 2,
+        duration: Duration::from_millis(100),
+        ve: VeConfig::paper(),
+    };
+    let error = realtime_run(run).unwrap_err();
+    assert!(matches!(error, kinloop_server::bench::BenchError::NoOperationalPoint { .. }), "{error:?}");
+    assert!(error.to_string().contains("no-op-testbed"), "{error}");
+}
