@@ -53,11 +53,13 @@ pub enum BenchError {
     Thread(&'static str),
 }
 
-/// The paper's testbed, compiled. All benchmark users hold its one operational point, `link2`: the couplings'
-/// angular gains (the paper's 10⁴ N m/rad and N m s/rad) hold the orientation of the link each grips, so
-/// users on two different links take both of this 2-DOF linkage's freedoms and all but lock it (measured:
-/// |q̇| below 1e-3 rad/s with users spread over links 2 and 3, or with one on link 1 or 4, against about
-/// 1 rad/s on link 2 alone), and a tick of a still linkage is not the tick to time.
+/// The paper's testbed, compiled. All benchmark users hold its one operational point, `link2`. A synthetic
+/// user only follows the VE (its target is where the VE's OP just was), so its coupling acts as a brake, and
+/// the couplings' angular gains (the paper's 10⁴ N m/rad and N m s/rad) make that brake stiff on the gripped
+/// link's orientation: followers on two different links take both of this 2-DOF linkage's freedoms and all
+/// but lock it (measured: |q̇| below 1e-3 rad/s with users spread over links 2 and 3, or with one on link 1
+/// or 4, against about 1 rad/s on link 2 alone), and a tick of a still linkage is not the tick to time. Real
+/// users lead the VE with their local models and move it however they are spread (`experiment users`).
 pub fn testbed() -> Result<Model<Planar>, BenchError> {
     let scene = builtin::scene("paper-testbed").ok_or(BenchError::MissingScene("paper-testbed"))??;
     Ok(Model::<Planar>::compile(&scene, "paper-testbed")?)

@@ -16,8 +16,8 @@ fn ve_tick_hook_measures_every_user_count() {
 
 /// The ticks the benchmark times are those of a linkage in motion, whatever the number of users: their shares
 /// of the paper's push add up to it and all hold `link2`. (Shares of alternating sign cancelled on one OP,
-/// and users spread over the links locked the testbed through the couplings' angular gains: both left the
-/// linkage still, at |q̇| ≤ 6e-4 rad/s, and its ticks cheaper.) Measured in the second second: |q̇|∞ at least
+/// and followers spread over the links braked the testbed still through the couplings' angular gains, at
+/// |q̇| ≤ 6e-4 rad/s, its ticks cheaper.) Measured in the second second: |q̇|∞ at least
 /// 1.4 rad/s with 1 and 4 users, 0.97 with 16, 0.27 with 64.
 #[test]
 fn benchmark_users_keep_the_linkage_moving() {
