@@ -4,6 +4,8 @@
 //! round trip. Demos run one at a time (each is a VE thread and a 1 kHz thread per user on two cores) and
 //! each is bounded in time.
 
+mod common;
+
 use std::path::Path;
 use std::sync::{mpsc, Mutex};
 use std::time::Duration;
@@ -55,38 +57,13 @@ const VE_MISS_SHARE: f64 = 0.05;
 /// Attempts [`run_on_time`] makes at most.
 const ATTEMPTS: u32 = 8;
 
-/// Largest share of an idle 1 kHz loop's deadlines missed (by more than 500 µs) in one second that counts as
-/// a calm host. In calm minutes the idle loop has read 0.5-1.4 %; in a spell where it read 9-25 %, eight demo
-/// runs in a row missed 9-16 % of their VE deadlines, none on time.
-const CALM_MISS_SHARE: f64 = 0.02;
-
 /// How long [`run_on_time`] may wait, in all, for calm seconds before its attempts (bad spells of this host
 /// have lasted minutes; a cold CI run is about 10 minutes, so this keeps it well under 20).
 const CALM_WAIT: Duration = Duration::from_secs(300);
 
-/// Times an idle 1 kHz loop (as `kinloop timer-floor` does) for a second at a time until one second misses
-/// at most [`CALM_MISS_SHARE`] of its deadlines or `budget` is spent; returns the shares seen. The probe
-/// spins under SCHED_FIFO, so it takes its turn with the demos.
-fn wait_for_calm(budget: &mut Duration) -> Vec<f64> {
-    let mut seen = Vec::new();
-    loop {
-        let started = std::time::Instant::now();
-        let (lateness, _) = {
-            let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            kinloop_client::driver::rt_loop::timer_floor(1000.0, Duration::from_secs(1), true)
-        };
-        let share = lateness.misses as f64 / lateness.ticks.max(1) as f64;
-        seen.push(share);
-        *budget = budget.saturating_sub(started.elapsed());
-        if share <= CALM_MISS_SHARE || budget.is_zero() {
-            return seen;
-        }
-    }
-}
-
 /// Runs a demo of `users` for `seconds` until one run is on time (no client ticked on a stale snapshot, no
 /// loop later than [`STALL_US`], VE misses within [`VE_MISS_SHARE`]), at most [`ATTEMPTS`] times, each
-/// started in a calm second of the host ([`wait_for_calm`], within [`CALM_WAIT`] in all): this VM's host
+/// started in a calm second of the host (`common::wait_for_calm`, within [`CALM_WAIT`] in all): this VM's host
 /// sometimes stalls it for minutes (an idle 1 kHz loop has missed 10-33 % of its deadlines in a bad hour), and
 /// the claims checked on the result (tracking, the harness's path) are claims about a session that ran.
 /// Every run, stalled or not, must be sane: device limits, closure, files.
@@ -94,7 +71,10 @@ fn run_on_time(dir: &Path, users: usize, seconds: f64) -> DemoReport {
     let mut stalled = Vec::new();
     let mut calm_budget = CALM_WAIT;
     for attempt in 0..ATTEMPTS {
-        let probes = wait_for_calm(&mut calm_budget);
+        let probes = {
+            let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            common::wait_for_calm(&mut calm_budget)
+        };
         if probes.len() > 1 {
             let worst = probes.iter().copied().fold(0.0, f64::max);
             stalled.push(format!(

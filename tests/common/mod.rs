@@ -38,6 +38,29 @@ pub fn bounded(name: &'static str, limit: Duration) -> Bounded {
     Bounded { _serial: serial, _disarm: disarm }
 }
 
+/// Largest share of an idle 1 kHz loop's deadlines missed (by more than 500 µs) in one second that counts as
+/// a calm host. In calm minutes the idle loop has read 0.5-1.4 %; in spells where it read 9-27 %, eight demo
+/// runs in a row missed 9-16 % of their VE deadlines, and a junk flood's VE 18 %.
+pub const CALM_MISS_SHARE: f64 = 0.02;
+
+/// Times an idle 1 kHz loop (as `kinloop timer-floor` does) for a second at a time until one second misses at
+/// most [`CALM_MISS_SHARE`] of its deadlines or `budget` is spent; returns the shares seen. A real-time test
+/// starts in a calm second: this VM's host stalls it for minutes at a time, and a session run in such a spell
+/// measures the host. The probe spins under SCHED_FIFO: call it while holding the test's serial lock.
+pub fn wait_for_calm(budget: &mut Duration) -> Vec<f64> {
+    let mut seen = Vec::new();
+    loop {
+        let started = Instant::now();
+        let (lateness, _) = kinloop_client::driver::rt_loop::timer_floor(1000.0, Duration::from_secs(1), true);
+        let share = lateness.misses as f64 / lateness.ticks.max(1) as f64;
+        seen.push(share);
+        *budget = budget.saturating_sub(started.elapsed());
+        if share <= CALM_MISS_SHARE || budget.is_zero() {
+            return seen;
+        }
+    }
+}
+
 /// Polls `done` every 10 ms until it holds; panics naming `what` after `limit`. Returns the time it took.
 pub fn wait_until(what: &str, limit: Duration, mut done: impl FnMut() -> bool) -> Duration {
     let start = Instant::now();
