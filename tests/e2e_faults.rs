@@ -390,10 +390,7 @@ fn a_junk_flood_from_an_authenticated_client_changes_nothing_for_the_others() {
     );
     // Its VE's pace is asserted: start in a calm second of the host (a flood run while an idle loop missed
     // 27 % of its deadlines missed 18 % of its VE ticks).
-    let probes = common::wait_for_calm(&mut CALM_WAIT.clone());
-    if probes.len() > 1 {
-        println!("junk flood: waited {} s for a calm second (idle loop: {probes:.3?})", probes.len() - 1);
-    }
+    common::start_when_calm("junk flood", &mut { CALM_WAIT });
     let dir = common::temp_dir();
     let rt = live::runtime();
     let mut config = live::server_config();

@@ -93,10 +93,7 @@ fn latency_sweep_over_real_quic() {
     let points: Vec<Point> = DELAYS_MS
         .iter()
         .map(|&d| {
-            let probes = common::wait_for_calm(&mut calm_budget);
-            if probes.len() > 1 {
-                println!("delay {d} ms: waited {} s for a calm second (idle loop: {probes:.3?})", probes.len() - 1);
-            }
+            common::start_when_calm(&format!("delay {d} ms"), &mut calm_budget);
             run_point(d)
         })
         .collect();

@@ -61,6 +61,15 @@ pub fn wait_for_calm(budget: &mut Duration) -> Vec<f64> {
     }
 }
 
+/// [`wait_for_calm`] before a real-time test (or a part of one) named `what`, saying in the test's output how
+/// long it waited and what the idle loop read meanwhile.
+pub fn start_when_calm(what: &str, budget: &mut Duration) {
+    let probes = wait_for_calm(budget);
+    if probes.len() > 1 {
+        println!("{what}: waited {} s for a calm second (idle loop missed: {probes:.3?})", probes.len() - 1);
+    }
+}
+
 /// Polls `done` every 10 ms until it holds; panics naming `what` after `limit`. Returns the time it took.
 pub fn wait_until(what: &str, limit: Duration, mut done: impl FnMut() -> bool) -> Duration {
     let start = Instant::now();
