@@ -233,16 +233,20 @@ impl<S: Space> OpSpaceLocalModel<S> {
 /// Needs `forward_dynamics` (with the user's wrench applied) and `op_space_inertia(op)`.
 pub fn op_space_terms<S: Space>(data: &Data<S>, user_wrench: &S::OpVec, terms: LocalModelTerms) -> OpSpaceTerms<S> {
     let ws = &data.op;
-    let bias = if terms.bias {
-        let mut acc = ws.jdot_qdot;
-        for c in 0..S::DIM {
-            acc[c] += ws.jacobian_t.column(c).dot(&data.qdd);
-        }
-        acc - ws.inverse_inertia * *user_wrench
-    } else {
-        S::OpVec::zero()
-    };
+    let bias = if terms.bias { op_acceleration(data) - ws.inverse_inertia * *user_wrench } else { S::OpVec::zero() };
     OpSpaceTerms { inverse_inertia: ws.inverse_inertia, bias }
+}
+
+/// `J q̈ + J̇q̇`: the acceleration of the operational point of the last `op_space_inertia` under the solved
+/// `q̈`, every applied force included. The part of [`op_space_terms`]' b̂ that does not depend on the user,
+/// so users holding the same OP can share it.
+pub fn op_acceleration<S: Space>(data: &Data<S>) -> S::OpVec {
+    let ws = &data.op;
+    let mut acc = ws.jdot_qdot;
+    for c in 0..S::DIM {
+        acc[c] += ws.jacobian_t.column(c).dot(&data.qdd);
+    }
+    acc
 }
 
 /// The frozen terms of the paper's configuration-space form (eq 11), as sent over the wire.

@@ -484,6 +484,74 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
     }
 }
 
+/// Users holding the same OP share its op-space terms within a snapshot round, and only those: with A and C
+/// on link 2 and B between them (in join order) on link 3, A's and C's Λ⁻¹, directions, singular values, pose
+/// and twist are the same numbers and are those a fresh workspace computes at the VE's state, B's are link
+/// 3's, and A's and C's b̂ differ by exactly the part of their own hands, `Λ⁻¹ (F_C − F_A)`.
+#[test]
+fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
+    use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+    use kinloop_linkage::op_space::op_space_inertia;
+    use kinloop_linkage::{forward_dynamics, Data, Model, Planar};
+    use nalgebra::{Matrix3, Vector2, Vector3};
+
+    let base = testbed();
+    let link3 = base.body_index("link3").unwrap();
+    let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
+    let mut ve = core(model.clone(), VeConfig::paper());
+    let joins = [("A", "link2"), ("B", "link3"), ("C", "link2")];
+    let ids: Vec<u32> = joins
+        .iter()
+        .map(|(name, op)| ve.join(Duration::ZERO, request(name, Role::Manipulator, op, 3)).unwrap().user_id)
+        .collect();
+    let hands = [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]];
+    let mut latest = Vec::new();
+    let mut seq = 0;
+    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
+        seq += 1;
+        for (id, hand) in ids.iter().zip(&hands) {
+            if let Some(Some(s)) = latest.get(*id as usize) {
+                ve.handle_uplink(now, *id, &following(s, seq, hand)).unwrap();
+            }
+        }
+    });
+    let snapshot = |i: usize| latest[ids[i] as usize].as_ref().expect("a snapshot for every user");
+    let (a, b, c) = (snapshot(0), snapshot(1), snapshot(2));
+    assert!(a.ve_step == b.ve_step && b.ve_step == c.ve_step, "one round");
+    assert_eq!(
+        (&a.inverse_inertia, &a.directions, &a.singular_values, &a.op_pose, &a.op_twist),
+        (&c.inverse_inertia, &c.directions, &c.singular_values, &c.op_pose, &c.op_twist)
+    );
+    assert_eq!(a.constraint_count, c.constraint_count);
+
+    // A fresh workspace at the VE's state (Λ⁻¹ does not depend on the forces).
+    let state = ve.state();
+    let mut data = Data::new(&model);
+    forward_dynamics(&model, &mut data, state.q, state.qd, &mut ()).unwrap();
+    let unpack = |t: &[f64]| Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
+    for (snapshot, op) in [(a, 0), (b, 1)] {
+        op_space_inertia(&model, &mut data, op).unwrap();
+        let fresh = data.op.inverse_inertia;
+        let sent = unpack(&snapshot.inverse_inertia);
+        assert!((sent - fresh).amax() <= 1e-9 * fresh.amax(), "OP {op}: sent {sent} against fresh {fresh}");
+        let svd = constraint_directions::<Planar>(&fresh, model.length_scale, DEFAULT_THRESHOLD);
+        for (sent, fresh) in snapshot.singular_values.iter().zip(svd.singular_values.iter()) {
+            assert!((sent - fresh).abs() <= 1e-9 * svd.singular_values[0], "OP {op}: σ {sent} against {fresh}");
+        }
+        assert_eq!(usize::from(snapshot.constraint_count), svd.count, "OP {op}");
+    }
+    let (lambda_a, lambda_b) = (unpack(&a.inverse_inertia), unpack(&b.inverse_inertia));
+    assert!((lambda_a - lambda_b).amax() > 1e-3 * lambda_a.amax(), "link 3's Λ⁻¹ is not link 2's");
+
+    let own = Vector3::from(hands[2]) - Vector3::from(hands[0]);
+    let expected = lambda_a * own;
+    let difference = Vector3::from_column_slice(&a.bias_accel) - Vector3::from_column_slice(&c.bias_accel);
+    assert!(
+        (difference - expected).amax() <= 1e-9 * expected.amax(),
+        "b̂_A − b̂_C = {difference} against Λ⁻¹ (F_C − F_A) = {expected}"
+    );
+}
+
 /// Users are found by id after others have joined, left and been removed (the lookup assumes the roster
 /// stays sorted by id): names, uplinks and unknown ids all resolve to the right user or to none.
 #[test]

@@ -169,6 +169,11 @@ struct SnapshotScratch<S: Space> {
     /// snapshot copies it but for its own user (64 users make 4,032 entries a round; gathering each anew from
     /// the users and couplings cost about as much again as the copy).
     others: Vec<OtherEntry<S>>,
+    /// The op-space terms of the OP whose users are being built (see `snapshots`).
+    at_op: Option<snapshots::AtOp<S>>,
+    /// User indices grouped by OP (then in join order), for `roster_version` `order_version`.
+    order: Vec<usize>,
+    order_version: u64,
 }
 
 /// One manipulator as the other users' snapshots list it.
@@ -251,6 +256,9 @@ impl<S: Space> VeCore<S> {
             contact_y: DVector::zeros(n),
             near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
             others: Vec::with_capacity(user_room),
+            at_op: None,
+            order: Vec::with_capacity(user_room),
+            order_version: u64::MAX,
         };
         Ok(VeCore {
             shape: SessionShape { kind: S::KIND, n, m },

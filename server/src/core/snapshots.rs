@@ -6,6 +6,12 @@
 //! the KKT factor of D *without* the implicit coupling mass (what eq 9 needs), that q̈ and every coupling's
 //! full wrench at that state. All users share it.
 //!
+//! **Per operational point**, shared by every user holding it (users are visited grouped by OP): Λ̂⁻¹, the
+//! OP's acceleration `J q̈ + J̇q̇`, the SVD, the OP's pose and twist. Only b̂'s own-wrench part and the lists
+//! are a user's own, so a session of many users on few OPs (the testbed has one) pays the op-space algebra
+//! once per OP, not per user. Contacts overwrite the op-space workspace, so a user with contact terms ends
+//! the sharing and the next user on that OP computes afresh.
+//!
 //! **Per user** at its operational point h:
 //! - Λ̂⁻¹ with the loops closed (eq 9), `op_space_inertia`; sent as its upper triangle, row-major;
 //! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own hand wrench F_u (the
@@ -34,11 +40,11 @@
 //!   contacts' forces stay frozen in each contact's `bias_accel` (the local model has no contact-contact
 //!   cross inertia); contacts beyond the nearest `MAX_LOCAL_CONTACTS` stay frozen in b̂.
 
-use kinloop_linkage::constraint_directions::{constraint_directions_from, DEFAULT_THRESHOLD};
+use kinloop_linkage::constraint_directions::{constraint_directions_from, ConstraintDirections, DEFAULT_THRESHOLD};
 use kinloop_linkage::contact::detect_contacts;
 use kinloop_linkage::data::Data;
 use kinloop_linkage::error::DynamicsError;
-use kinloop_linkage::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::local_model::{op_acceleration, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::op_space::{frame_point_inertia, op_space_inertia};
 use kinloop_linkage::{forward_dynamics, MatOps, Model, Space, VecOps};
 use kinloop_protocol::codec::limits::MAX_LIST_ENTRIES;
@@ -68,6 +74,15 @@ impl<S: Space> VeCore<S> {
             return;
         }
         let scratch = &mut self.scratch;
+        // A new state: nothing computed at any OP yet.
+        scratch.at_op = None;
+        if scratch.order_version != self.roster_version {
+            scratch.order.clear();
+            scratch.order.extend(0..self.users.len());
+            let users = &self.users;
+            scratch.order.sort_unstable_by_key(|&index| (users[index].op, index));
+            scratch.order_version = self.roster_version;
+        }
         if self.contacts.is_some() {
             detect_contacts(&self.model, &self.data.kin, self.config.contact_margin_m, &mut scratch.near);
             scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
@@ -90,7 +105,8 @@ impl<S: Space> VeCore<S> {
             .others
             .iter()
             .all(|o| validate::other_user(0, o.position.as_slice(), o.wrench.as_slice(), &self.shape).is_ok());
-        for index in 0..self.users.len() {
+        for position in 0..self.scratch.order.len() {
+            let index = self.scratch.order[position];
             if self.users[index].presence != Presence::Present {
                 continue;
             }
@@ -142,6 +158,57 @@ impl<S: Space> VeCore<S> {
     }
 }
 
+/// What a snapshot round computed at one operational point, for every user holding it (see the module
+/// documentation). Valid while `data.op` holds that OP's op-space factors.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct AtOp<S: Space> {
+    /// Index of the OP in the model.
+    op: usize,
+    /// Λ̂⁻¹ with the loops closed (eq 9).
+    inverse_inertia: S::OpMat,
+    /// `J q̈ + J̇q̇` under the probe's forces.
+    acceleration: S::OpVec,
+    /// The SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12).
+    directions: ConstraintDirections<S>,
+    pose: OpPose<S>,
+    twist: S::OpVec,
+}
+
+/// The op-space terms at `op` for user `index`: those of the round's last OP when it is the same one, else
+/// computed (warm-started from this user's last directions: Λ⁻¹ moves little between snapshots) and kept
+/// for the next user.
+fn at_op<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    user: &User,
+    shared: &mut Option<AtOp<S>>,
+) -> Result<AtOp<S>, DynamicsError> {
+    let op = user.op;
+    if let Some(terms) = shared.filter(|terms| terms.op == op) {
+        return Ok(terms);
+    }
+    // `data.op` is about to change: whatever happens, it no longer holds the kept OP's factors.
+    *shared = None;
+    op_space_inertia(model, data, op)?;
+    let inverse_inertia = data.op.inverse_inertia;
+    let mut previous = S::OpMat::zero();
+    let last = &user.slot.snapshot().directions;
+    let warm = (last.len() == S::DIM * S::DIM).then(|| {
+        previous.as_mut_slice().copy_from_slice(last);
+        &previous
+    });
+    let terms = AtOp {
+        op,
+        inverse_inertia,
+        acceleration: op_acceleration(data),
+        directions: constraint_directions_from::<S>(&inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm),
+        pose: OpPose::of_op(model, data, op),
+        twist: op_twist(model, data, op),
+    };
+    *shared = Some(terms);
+    Ok(terms)
+}
+
 enum SnapshotFailure {
     Dynamics(DynamicsError),
     Wire(kinloop_protocol::codec::DecodeError),
@@ -163,22 +230,12 @@ fn build_one<S: Space>(
     roster_version: u64,
     pose_memo: &mut S::RotParamsMemo,
 ) -> Result<(), DynamicsError> {
-    let op = users[index].op;
     // What of this user's wrench the probe applied: its hand (see the module documentation).
     let own_wrench = couplings[index].hand_part();
-    op_space_inertia(model, data, op)?;
-    let terms = op_space_terms(data, &own_wrench, LocalModelTerms::full());
-    // Warm start from this user's last directions (Λ⁻¹ moves little between snapshots).
-    let mut previous = S::OpMat::zero();
-    let last = &users[index].slot.snapshot().directions;
-    let warm = (last.len() == S::DIM * S::DIM).then(|| {
-        previous.as_mut_slice().copy_from_slice(last);
-        &previous
-    });
-    let directions =
-        constraint_directions_from::<S>(&terms.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm);
-    let pose = OpPose::of_op(model, data, op);
-    let twist = op_twist(model, data, op);
+    let AtOp { inverse_inertia, acceleration, directions, pose, twist, .. } =
+        at_op(model, data, &users[index], &mut scratch.at_op)?;
+    // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand.
+    let bias = acceleration - inverse_inertia * own_wrench;
 
     let others = || scratch.others.iter().filter(|o| o.index != index);
     let slot = &mut users[index].slot;
@@ -196,8 +253,8 @@ fn build_one<S: Space>(
     };
     set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| pose.to_slice_memo(out, pose_memo));
     set(&mut snapshot.op_twist, twist.as_slice());
-    set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &terms.inverse_inertia);
-    set(&mut snapshot.bias_accel, terms.bias.as_slice());
+    set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &inverse_inertia);
+    set(&mut snapshot.bias_accel, bias.as_slice());
     set(&mut snapshot.directions, directions.directions.as_slice());
     set(&mut snapshot.singular_values, directions.singular_values.as_slice());
     snapshot.constraint_count = directions.count as u8;
@@ -215,6 +272,8 @@ fn build_one<S: Space>(
     spare.append(&mut snapshot.contacts);
     if let Some((stiffness, damping)) = contact_gains.filter(|_| !scratch.near.is_empty()) {
         scratch.op_y.copy_from(&data.op.y_closed);
+        // `frame_point_inertia` at the contacts overwrites `data.op`.
+        scratch.at_op = None;
         for near_index in 0..scratch.near.len() {
             let Some(mut term) = spare.pop() else { break };
             let contact = scratch.near[near_index];
