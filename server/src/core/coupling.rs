@@ -16,6 +16,12 @@
 //! which moves `Jᵀ (wβ(hB + h²K)) J` to the left of eq 4 and adds `−h Jᵀ (wβK ⊙ ẋ_op)` on the right
 //! ([`Forces::add_implicit`]). The step is then stable for any gains; the wrench it effectively applied is
 //! `F − h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈` ([`Coupling::implicit_correction`]).
+//!
+//! **Users on one OP.** Consecutive couplings at the same body and point (several users on a scene's one
+//! OP, the common case) form a *run*: its first coupling evaluates the OP's pose, twist and Jacobian, the
+//! others copy them, and the run enters eq 4 once, as `Jᵀ Σ F` and `Jᵀ (Σ C) J`, the same sums as per user
+//! but with one pass over the supporting joints. Couplings are kept in join order, so users of one OP who
+//! joined between users of another form several runs, each still correct.
 
 use kinloop_linkage::contact::PenaltyContacts;
 use kinloop_linkage::data::Kinematics;
@@ -48,7 +54,7 @@ pub struct Coupling<S: Space> {
     pub damping: S::OpVec,
     /// β per axis, the passivity controller's scale on the PD for the current tick (ones when it is off).
     pub pd_scale: S::OpVec,
-    /// Jᵀ at the OP (n×k) at the last evaluation.
+    /// Jᵀ at the OP (n×k) at the last evaluation that needed it (see [`Coupling::evaluate`]).
     pub jacobian_t: DMatrix<f64>,
     /// x_op at the last evaluation.
     pub op_pose: OpPose<S>,
@@ -96,16 +102,34 @@ impl<S: Space> Coupling<S> {
     /// Updates pose, twist and wrench at the kinematic state `kin` (positions and velocities), and the
     /// Jacobian when `with_jacobian`: a step needs it (implicit mass, the passivity books after the step),
     /// the snapshot probe does not (it applies hand wrenches through `apply_wrench`, and the next step
-    /// evaluates again at the same state).
+    /// evaluates again at the same state). The Jacobian is computed even for a coupling that does not push,
+    /// so that the users after it on the same OP can copy it ([`Coupling::evaluate_as`]).
     pub fn evaluate(&mut self, model: &Model<S>, kin: &Kinematics<S>, with_jacobian: bool) {
         let rotation = kin.body_rot[self.body];
         let position = kin.body_pos[self.body] + S::rotate(&rotation, &self.point);
         self.op_pose = OpPose { position, rotation };
         self.op_twist = frame_velocity(kin, self.body, &position);
-        if with_jacobian && self.is_active() {
+        if with_jacobian {
             frame_jacobian_t(model, kin, self.body, &position, &mut self.jacobian_t);
         }
         self.wrench = self.explicit_wrench();
+    }
+
+    /// As [`Coupling::evaluate`], taking the OP's pose, twist and (`with_jacobian`) Jacobian from `first`,
+    /// a coupling at the same body and point just evaluated at the same state with the same flag.
+    pub fn evaluate_as(&mut self, first: &Coupling<S>, with_jacobian: bool) {
+        debug_assert!(self.at_same_point(first));
+        self.op_pose = first.op_pose;
+        self.op_twist = first.op_twist;
+        if with_jacobian && self.is_active() {
+            self.jacobian_t.copy_from(&first.jacobian_t);
+        }
+        self.wrench = self.explicit_wrench();
+    }
+
+    /// True when `other` holds the same point of the same body.
+    pub fn at_same_point(&self, other: &Coupling<S>) -> bool {
+        self.body == other.body && self.point == other.point
     }
 
     /// `F` of the module documentation at the last evaluated pose and twist.
@@ -146,6 +170,16 @@ impl<S: Space> Coupling<S> {
         c
     }
 
+    /// `h wβK ⊙ ẋ_op`: the spring's response to a step's motion at the current velocity, which the implicit
+    /// treatment adds to eq 4's right side as `−Jᵀ` of it.
+    fn implicit_spring(&self, dt: f64) -> S::OpVec {
+        let mut spring = S::OpVec::zero();
+        for a in 0..S::DIM {
+            spring[a] = dt * self.pd_weight(a) * self.stiffness[a] * self.op_twist[a];
+        }
+        spring
+    }
+
     /// `J v` for a joint-space vector `v`, touching only the joints that move the OP.
     pub fn op_space_image(&self, model: &Model<S>, v: &DVector<f64>) -> S::OpVec {
         let mut out = S::OpVec::zero();
@@ -162,9 +196,10 @@ impl<S: Space> Coupling<S> {
     pub fn implicit_correction(&self, model: &Model<S>, qdd: &DVector<f64>, dt: f64) -> S::OpVec {
         let coefficient = self.implicit_coefficient(dt);
         let accel = self.op_space_image(model, qdd);
+        let spring = self.implicit_spring(dt);
         let mut out = S::OpVec::zero();
         for a in 0..S::DIM {
-            out[a] = -dt * self.pd_weight(a) * self.stiffness[a] * self.op_twist[a] - coefficient[a] * accel[a];
+            out[a] = -spring[a] - coefficient[a] * accel[a];
         }
         out
     }
@@ -236,15 +271,32 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
             Evaluation::Probe | Evaluation::ProbeHands => None,
         };
         let hands_only = self.evaluation == Evaluation::ProbeHands;
-        for c in self.couplings.iter_mut() {
-            c.evaluate(model, kin, !hands_only);
-            if c.is_active() {
-                let applied = if hands_only { c.hand_part() } else { c.wrench };
-                apply_wrench(model, kin, c.body, &c.op_pose.position, &applied, tau);
+        // The current run (see the module documentation): its first coupling and the sum of its wrenches.
+        let mut run: Option<(usize, S::OpVec)> = None;
+        for i in 0..self.couplings.len() {
+            let (before, rest) = self.couplings.split_at_mut(i);
+            let c = &mut rest[0];
+            match run.as_mut().filter(|(first, _)| c.at_same_point(&before[*first])) {
+                Some((first, _)) => c.evaluate_as(&before[*first], !hands_only),
+                None => {
+                    if let Some((first, sum)) = run.take() {
+                        let first = &before[first];
+                        apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
+                    }
+                    c.evaluate(model, kin, !hands_only);
+                    run = Some((i, S::OpVec::zero()));
+                }
+            }
+            if let (true, Some((_, sum))) = (c.is_active(), run.as_mut()) {
+                *sum += if hands_only { c.hand_part() } else { c.wrench };
             }
             if let Some(weight) = stage_weight {
                 c.step_wrench += c.wrench * weight;
             }
+        }
+        if let Some((first, sum)) = run {
+            let first = &self.couplings[first];
+            apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
         }
         self.stage += 1;
         if let Some(contacts) = self.contacts.as_deref_mut() {
@@ -264,12 +316,14 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         let mut added = false;
         let n = implicit_mass.nrows();
         let (mass, tau) = (implicit_mass.as_mut_slice(), tau.as_mut_slice());
-        for c in self.couplings.iter().filter(|c| c.is_active()) {
-            let coefficient = c.implicit_coefficient(dt);
-            // −h Jᵀ (wβK ⊙ ẋ_op): the spring's response to this step's motion at the current velocity.
-            let mut spring = S::OpVec::zero();
-            for a in 0..S::DIM {
-                spring[a] = dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a];
+        let mut active = self.couplings.iter().filter(|c| c.is_active()).peekable();
+        while let Some(c) = active.next() {
+            // The run of active couplings at this OP (module documentation): Σ C and Σ spring, one pass.
+            let mut coefficient = c.implicit_coefficient(dt);
+            let mut spring = c.implicit_spring(dt);
+            while let Some(next) = active.next_if(|next| next.at_same_point(c)) {
+                coefficient += next.implicit_coefficient(dt);
+                spring += next.implicit_spring(dt);
             }
             // Jᵀ is n×k column-major: entry (i, a) at a n + i.
             let jt = c.jacobian_t.as_slice();
@@ -304,6 +358,74 @@ mod tests {
     use kinloop_linkage::testing::{paper_testbed, random_state};
     use kinloop_linkage::{Data, Planar};
     use nalgebra::Vector3;
+
+    /// Users on one OP evaluated as runs (module documentation) add exactly the per-user sums: with couplings
+    /// on links 2, 2, 2, 4, 2 (a run of three whose middle one does not push, then two runs of one),
+    /// `τ` and the implicit terms equal `Σ Jᵀ F` and `Σ Jᵀ diag(c) J` formed densely from Jacobians evaluated
+    /// afresh for each coupling, and every coupling holds its own OP's pose, twist and Jacobian.
+    #[test]
+    fn users_on_one_op_add_the_per_user_sums() {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let (q, qd) = random_state(&model, 8);
+        forward_kinematics(&model, &mut data, &q);
+        forward_velocity(&model, &mut data, &qd);
+        let n = model.nq();
+        let point = nalgebra::Vector2::new(0.01, -0.002);
+        let mut couplings: Vec<Coupling<Planar>> =
+            [(1, 0.7, true), (1, 1.0, false), (1, 0.5, true), (3, 0.4, true), (1, 0.9, true)]
+                .into_iter()
+                .enumerate()
+                .map(|(i, (body, weight, pushes))| {
+                    let k = 300.0 * (i + 1) as f64;
+                    let stiffness = Vector3::new(k, 0.8 * k, 0.02 * k);
+                    let mut c = Coupling::new(body, point, n, stiffness, stiffness * 0.05);
+                    c.pushes = pushes;
+                    c.weight = weight;
+                    c.hand_wrench = Vector3::new(0.3 - 0.1 * i as f64, 0.2 * i as f64, 0.001);
+                    c.target_pose =
+                        OpPose { position: nalgebra::Point2::new(0.02, 0.03 * i as f64).coords, ..OpPose::identity() };
+                    c
+                })
+                .collect();
+        let dt = 1e-3;
+        let mut forces =
+            VeForces { couplings: &mut couplings, contacts: None, evaluation: Evaluation::Step(&[1.0]), stage: 0 };
+        let mut tau = DVector::zeros(n);
+        forces.add_forces(&model, &data.kin, &mut tau);
+        let (mut mass, mut tau_implicit) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau_implicit));
+
+        let (mut expected_tau, mut expected_mass, mut expected_implicit) =
+            (DVector::zeros(n), DMatrix::zeros(n, n), DVector::zeros(n));
+        for c in &couplings {
+            let mut fresh = c.clone();
+            fresh.jacobian_t.fill(f64::NAN);
+            fresh.evaluate(&model, &data.kin, true);
+            assert_eq!((c.op_pose, c.op_twist, c.wrench), (fresh.op_pose, fresh.op_twist, fresh.wrench));
+            if !c.is_active() {
+                continue;
+            }
+            assert_eq!(c.jacobian_t, fresh.jacobian_t);
+            let jt = &fresh.jacobian_t;
+            expected_tau += jt * DVector::from_column_slice(fresh.wrench.as_slice());
+            let coefficient = DVector::from_column_slice(fresh.implicit_coefficient(dt).as_slice());
+            expected_mass += jt * DMatrix::from_diagonal(&coefficient) * jt.transpose();
+            expected_implicit -= jt * DVector::from_column_slice(fresh.implicit_spring(dt).as_slice());
+        }
+        let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() <= 1e-13 * b.amax();
+        assert!(
+            close(
+                &DMatrix::from_column_slice(n, 1, tau.as_slice()),
+                &DMatrix::from_column_slice(n, 1, expected_tau.as_slice())
+            ),
+            "{tau} vs {expected_tau}"
+        );
+        assert!(close(&mass, &expected_mass), "{mass} vs {expected_mass}");
+        assert_eq!(mass, mass.transpose());
+        let (got, want) = (&tau_implicit, &expected_implicit);
+        assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
+    }
 
     /// The implicit terms of two couplings (on links 2 and 4, so their supports overlap and differ) against
     /// the dense products `Σ Jᵀ diag(c) J` and `−Σ Jᵀ (h wβK ⊙ ẋ)` formed with nalgebra from each Jacobian:
