@@ -11,7 +11,7 @@ use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRE
 use kinloop_linkage::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose};
 use kinloop_linkage::op_space::op_space_inertia;
 use kinloop_linkage::{builtin, forward_dynamics, Data, Model, Planar, SceneKind};
-use kinloop_protocol::{RecommendedGains, SceneSummary, Snapshot, Welcome};
+use kinloop_protocol::{OtherUsers, RecommendedGains, SceneSummary, Snapshot, Welcome};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
 use crate::core::{CoreConfig, GainChoice, HapticCore};
@@ -78,7 +78,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         singular_values: directions.singular_values.as_slice().to_vec(),
         constraint_count: directions.count as u8,
         contacts: Vec::new(),
-        others: Vec::new(),
+        others: OtherUsers::default(),
         config: None,
     };
     Ok((welcome, snapshot))

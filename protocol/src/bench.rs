@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use bytes::Bytes;
 
 use crate::codec::{self, DecodeError, EncodeError};
-use crate::messages::{Datagram, Snapshot};
+use crate::messages::{Datagram, OtherUsers, Snapshot};
 use crate::quic::{
     client_endpoint, server_endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity, Trust,
 };
@@ -34,7 +34,7 @@ pub fn testbed_snapshot() -> Snapshot {
         singular_values: vec![12.83, 2.41, 0.0017],
         constraint_count: 1,
         contacts: Vec::new(),
-        others: Vec::new(),
+        others: OtherUsers::default(),
         config: None,
     }
 }

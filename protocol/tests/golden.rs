@@ -1,4 +1,5 @@
-//! Golden byte vectors freeze the wire format of protocol version 1.
+//! Golden byte vectors freeze the wire format of protocol version 2 (version 1 sent the other users as a list
+//! of entries, each with its own position and wrench vectors).
 //!
 //! The bytes below were written by hand from the format (bincode 2 standard config: varint integers and
 //! lengths, `u64` ≥ 251 as `fb` + u16 LE, enum variants as varint indices, `Option` as 0/1, `f64` as 8 LE
@@ -17,7 +18,7 @@ const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 
 
 fn hello() -> Control {
     Control::Hello(Hello {
-        version: 1,
+        version: 2,
         token: "tok".into(),
         client_name: "c1".into(),
         role: Role::Manipulator,
@@ -39,7 +40,7 @@ fn hello() -> Control {
 
 const HELLO_BYTES: &[&str] = &[
     "00",               // Control::Hello
-    "01",               // version 1
+    "02",               // version 2
     "03 746f6b",        // token "tok"
     "02 6331",          // client_name "c1"
     "00",               // role Manipulator
@@ -120,7 +121,7 @@ fn snapshot() -> Datagram {
         singular_values: vec![16.0, 4.0, 0.0],
         constraint_count: 1,
         contacts: vec![],
-        others: vec![],
+        others: OtherUsers { user_ids: vec![7], op_positions: vec![0.25, -0.5], wrenches: vec![1.0, 0.0, -0.25] },
         config: None,
     })
 }
@@ -160,7 +161,14 @@ const SNAPSHOT_BYTES: &[&str] = &[
     "0000000000000000", // 0.0
     "01",               // constraint_count 1
     "00",               // contacts: none
-    "00",               // others: none
+    "01 07",            // others.user_ids: 1 id, 7
+    "02",               // others.op_positions: 2 values (one planar row)
+    "000000000000d03f", // 0.25
+    "000000000000e0bf", // -0.5
+    "03",               // others.wrenches: 3 values (one planar row)
+    "000000000000f03f", // 1.0
+    "0000000000000000", // 0.0
+    "000000000000d0bf", // -0.25
     "00",               // config: None
 ];
 
@@ -217,7 +225,11 @@ fn welcome_matches_golden_bytes() {
 #[test]
 fn planar_testbed_snapshot_matches_golden_bytes() {
     let golden = unhex(SNAPSHOT_BYTES);
-    assert_eq!(golden.len(), 242, "a planar snapshot without contacts is 27 doubles plus small headers");
+    assert_eq!(
+        golden.len(),
+        285,
+        "a planar snapshot without contacts is 27 doubles, one other user's row 5, plus small headers"
+    );
     assert_eq!(encode_datagram(&snapshot()).unwrap(), golden);
     assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), snapshot());
 }
@@ -232,8 +244,8 @@ fn uplink_matches_golden_bytes() {
 #[test]
 fn hello_variant_and_version_lead_the_frame_so_other_versions_can_be_refused() {
     let mut future = unhex(HELLO_BYTES);
-    future[1] = 0x02; // version 2; the rest may be anything a future version sends
+    future[1] = 0x03; // version 3; the rest may be anything a future version sends
     future.truncate(5);
-    assert_eq!(codec::peek_hello_version(&future), Some(2));
+    assert_eq!(codec::peek_hello_version(&future), Some(3));
     assert_eq!(codec::peek_hello_version(&unhex(WELCOME_BYTES)), None);
 }

@@ -57,10 +57,12 @@ fn infinity_is_refused_with_its_index() {
 #[test]
 fn absurd_wrench_is_out_of_range() {
     let mut s = testbed_snapshot();
-    s.others.push(OtherUser { user_id: 2, op_position: vec![0.0, 0.0], wrench: vec![0.0, 2e4, 0.0] });
+    s.others.push(2, &[0.0, 0.0], &[0.0, 0.0, 0.0]);
+    s.others.push(3, &[0.0, 0.0], &[0.0, 2e4, 0.0]);
     let error = decode_snapshot(s).unwrap_err();
-    assert!(matches!(error, DecodeError::OutOfRange { value, .. } if value == 2e4), "{error:?}");
-    assert_eq!(field_of(&error), "snapshot.others[0].wrench");
+    assert!(matches!(error, DecodeError::OutOfRange { value, index: Some(1), .. } if value == 2e4), "{error:?}");
+    assert_eq!(field_of(&error), "snapshot.others[1].wrench");
+    assert_eq!(error.to_string().split(' ').next(), Some("snapshot.others[1].wrench[1]"));
 }
 
 #[test]
@@ -179,24 +181,35 @@ fn refusals_read_well() {
     );
 }
 
-/// A sender that checks the other users' entries once (`other_user`) and each snapshot without them
-/// (`snapshot_but_others`) refuses exactly what the full check refuses: a bad entry is caught by the first,
-/// a bad own field by the second, and the count of entries by both.
+/// A sender that checks the other users' table once (`other_users`) and each snapshot without its values
+/// (`snapshot_but_others`) refuses exactly what the full check refuses: a bad value is caught by the first,
+/// a bad own field by the second, and the row count and the table's lengths by both.
 #[test]
 fn split_snapshot_check_covers_what_the_whole_check_does() {
     use kinloop_protocol::codec::validate;
     let shape = testbed_shape();
     let mut s = testbed_snapshot();
-    s.others = vec![OtherUser { user_id: 2, op_position: vec![0.1, 0.2], wrench: vec![0.5, f64::INFINITY, 0.0] }];
+    s.others.push(2, &[0.1, 0.2], &[0.5, f64::INFINITY, 0.0]);
     assert!(validate::snapshot(&s, &shape).is_err());
     assert!(validate::snapshot_but_others(&s, &shape).is_ok());
-    let error = validate::other_user(0, &s.others[0].op_position, &s.others[0].wrench, &shape).unwrap_err();
+    let error = validate::other_users(&s.others, &shape).unwrap_err();
+    assert!(matches!(error, DecodeError::NonFinite { index: Some(1), .. }), "{error:?}");
     assert_eq!(field_of(&error), "snapshot.others[0].wrench");
-    s.others[0].wrench[1] = 0.0;
+    s.others.wrenches[1] = 0.0;
     assert!(validate::snapshot(&s, &shape).is_ok());
     s.op_twist[0] = f64::NAN;
     assert!(validate::snapshot_but_others(&s, &shape).is_err());
     s.op_twist[0] = 0.0;
-    s.others = vec![s.others[0].clone(); MAX_LIST_ENTRIES + 1];
+    // A table whose columns disagree: a wrench short.
+    s.others.wrenches.pop();
+    for check in [validate::snapshot_but_others(&s, &shape), validate::other_users(&s.others, &shape)] {
+        let error = check.unwrap_err();
+        assert!(matches!(error, DecodeError::WrongLength { got: 2, expected: 3, .. }), "{error:?}");
+        assert_eq!(field_of(&error), "snapshot.others.wrenches");
+    }
+    s.others.clear();
+    for id in 0..=MAX_LIST_ENTRIES as u32 {
+        s.others.push(id, &[0.1, 0.2], &[0.5, 0.0, 0.0]);
+    }
     assert!(matches!(validate::snapshot_but_others(&s, &shape), Err(DecodeError::TooMany { .. })));
 }

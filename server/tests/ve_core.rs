@@ -471,14 +471,15 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
     for (me, id) in ids.iter().enumerate() {
         let others = &snapshot(*id).others;
         let expected: Vec<usize> = [0, 2].into_iter().filter(|&i| i != me).collect();
-        let listed: Vec<u32> = others.iter().map(|o| o.user_id).collect();
-        assert_eq!(listed, expected.iter().map(|&i| ids[i]).collect::<Vec<_>>(), "user {id}'s list");
-        for (entry, &i) in others.iter().zip(&expected) {
+        assert_eq!(others.user_ids, expected.iter().map(|&i| ids[i]).collect::<Vec<_>>(), "user {id}'s list");
+        assert_eq!((others.op_positions.len(), others.wrenches.len()), (2 * expected.len(), 3 * expected.len()));
+        for (row, &i) in expected.iter().enumerate() {
+            let (_, position, wrench) = others.row(row, 2, 3).expect("a row per other manipulator");
             let theirs = snapshot(ids[i]);
             assert_eq!(theirs.ve_step, tick);
-            assert_eq!(entry.op_position, theirs.op_pose[..2], "user {id}'s entry for {}", ids[i]);
-            for (got, want) in entry.wrench.iter().zip(hands[i]) {
-                assert!((got - want).abs() <= 1e-12, "user {id}'s entry for {}: {:?}", ids[i], entry.wrench);
+            assert_eq!(position, &theirs.op_pose[..2], "user {id}'s row for {}", ids[i]);
+            for (got, want) in wrench.iter().zip(hands[i]) {
+                assert!((got - want).abs() <= 1e-12, "user {id}'s row for {}: {wrench:?}", ids[i]);
             }
         }
     }

@@ -15,7 +15,7 @@ use kinloop_linkage::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
 use kinloop_linkage::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms, OpPose};
 use kinloop_linkage::op_space::op_space_inertia;
 use kinloop_linkage::{builtin, forward_dynamics, step, Data, Forces, Model, Planar, SceneKind, Space, StepConfig};
-use kinloop_protocol::{ConfigTerms, RecommendedGains, SceneSummary, Snapshot, Uplink, Welcome};
+use kinloop_protocol::{ConfigTerms, OtherUsers, RecommendedGains, SceneSummary, Snapshot, Uplink, Welcome};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// The paper's graphics-controller gains (section VI).
@@ -242,7 +242,7 @@ impl TestbedVe {
             singular_values: directions.singular_values.as_slice().to_vec(),
             constraint_count: directions.count as u8,
             contacts: Vec::new(),
-            others: Vec::new(),
+            others: OtherUsers::default(),
             config,
         }
     }

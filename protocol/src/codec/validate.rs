@@ -4,8 +4,8 @@
 use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
-    uplink_flags, ConfigTerms, ContactTerm, Control, Datagram, DeviceCaps, Hello, RecommendedGains, RefusalReason,
-    Refused, SceneSummary, Snapshot, Uplink, Welcome,
+    uplink_flags, ConfigTerms, ContactTerm, Control, Datagram, DeviceCaps, Hello, OtherUsers, RecommendedGains,
+    RefusalReason, Refused, SceneSummary, Snapshot, Uplink, Welcome,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -113,15 +113,12 @@ fn refused(r: &Refused) -> Result<(), DecodeError> {
 /// Checks a snapshot against the session shape.
 pub fn snapshot(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     snapshot_but_others(s, shape)?;
-    for (i, o) in s.others.iter().enumerate() {
-        other_user(i, &o.op_position, &o.wrench, shape)?;
-    }
-    Ok(())
+    other_users(&s.others, shape)
 }
 
-/// [`snapshot`] without the entries of `others` (their count is checked): for a sender that builds the
-/// same entries into every user's snapshot and checks each once with [`other_user`] instead of once per
-/// receiver (64 users make 4032 entries a tick).
+/// [`snapshot`] without the values of `others` (its row count and lengths are checked): for a sender that
+/// builds every user's table from the rows of one and checks that one with [`other_users`] instead of each
+/// (64 users make 4032 rows a tick).
 pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = shape.op_dim();
     scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
@@ -142,7 +139,7 @@ pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
     for (i, c) in s.contacts.iter().enumerate() {
         contact(i, c, shape)?;
     }
-    count(Field::at("snapshot.others"), s.others.len(), MAX_LIST_ENTRIES)?;
+    other_users_shape(&s.others, shape)?;
     match &s.config {
         Some(config) => config_terms(config, shape),
         None => Ok(()),
@@ -172,11 +169,33 @@ fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), Decode
     scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_GAIN)
 }
 
-/// Checks entry `i` of a snapshot's `others`: that user's OP position and wrench.
-pub fn other_user(i: usize, op_position: &[f64], wrench: &[f64], shape: &SessionShape) -> Result<(), DecodeError> {
-    const LIST: &str = "snapshot.others";
-    vector(Field::in_item(LIST, i, "op_position"), op_position, shape.point_dim(), MAX_POSITION)?;
-    vector(Field::in_item(LIST, i, "wrench"), wrench, shape.op_dim(), MAX_WRENCH)
+const OTHERS: &str = "snapshot.others";
+
+/// Checks a table of other users: its shape (as [`snapshot_but_others`] does) and every row's OP position
+/// and wrench; a bad value is named by row, e.g. `snapshot.others[3].wrench[1]`.
+pub fn other_users(o: &OtherUsers, shape: &SessionShape) -> Result<(), DecodeError> {
+    other_users_shape(o, shape)?;
+    rows(OTHERS, "op_position", &o.op_positions, shape.point_dim(), MAX_POSITION)?;
+    rows(OTHERS, "wrench", &o.wrenches, shape.op_dim(), MAX_WRENCH)
+}
+
+/// At most [`MAX_LIST_ENTRIES`] rows, and d positions and k wrench numbers for each.
+fn other_users_shape(o: &OtherUsers, shape: &SessionShape) -> Result<(), DecodeError> {
+    let rows = o.len();
+    count(Field::at(OTHERS), rows, MAX_LIST_ENTRIES)?;
+    length(Field::at("snapshot.others.op_positions"), o.op_positions.len(), rows * shape.point_dim())?;
+    length(Field::at("snapshot.others.wrenches"), o.wrenches.len(), rows * shape.op_dim())
+}
+
+/// Every number of a flat table of rows of `width` within `±bound`, an error naming the row and element.
+fn rows(list: &'static str, member: &'static str, v: &[f64], width: usize, bound: f64) -> Result<(), DecodeError> {
+    if v.iter().all(|&value| value >= -bound && value <= bound) {
+        return Ok(());
+    }
+    for (i, &value) in v.iter().enumerate() {
+        in_range(Field::in_item(list, i / width, member), Some(i % width), value, -bound, bound)?;
+    }
+    Ok(())
 }
 
 fn config_terms(c: &ConfigTerms, shape: &SessionShape) -> Result<(), DecodeError> {

@@ -55,9 +55,17 @@ fn contact(shape: SessionShape) -> impl Strategy<Value = ContactTerm> {
         })
 }
 
-fn other_user(shape: SessionShape) -> impl Strategy<Value = OtherUser> {
+fn other_user(shape: SessionShape) -> impl Strategy<Value = (u32, Vec<f64>, Vec<f64>)> {
     (any::<u32>(), values(shape.point_dim(), 100.0), values(shape.op_dim(), 1e3))
-        .prop_map(|(user_id, op_position, wrench)| OtherUser { user_id, op_position, wrench })
+}
+
+/// A table of other users built row by row from `rows`.
+fn other_users(rows: Vec<(u32, Vec<f64>, Vec<f64>)>) -> OtherUsers {
+    let mut table = OtherUsers::default();
+    for (user_id, op_position, wrench) in &rows {
+        table.push(*user_id, op_position, wrench);
+    }
+    table
 }
 
 fn config_terms(shape: SessionShape) -> impl Strategy<Value = ConfigTerms> {
@@ -108,8 +116,11 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
         decreasing(k),
         0..=k as u8,
     );
-    let surroundings =
-        (vec(contact(shape), 0..4), vec(other_user(shape), 0..4), proptest::option::of(config_terms(shape)));
+    let surroundings = (
+        vec(contact(shape), 0..4),
+        vec(other_user(shape), 0..4).prop_map(other_users),
+        proptest::option::of(config_terms(shape)),
+    );
     (header, local_model, surroundings).prop_map(
         |(
             (seq, server_time_s, ve_step, user_id),
@@ -294,11 +305,11 @@ pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
             stiffness: 1e4,
             damping: 10.0,
         }],
-        others: vec![OtherUser {
-            user_id: 3,
-            op_position: vec![0.5, 0.0, 0.2],
-            wrench: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1],
-        }],
+        others: OtherUsers {
+            user_ids: vec![3],
+            op_positions: vec![0.5, 0.0, 0.2],
+            wrenches: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1],
+        },
         config: Some(ConfigTerms {
             q: vec![0.1, 0.2, 0.3],
             qd: vec![0.0; 3],

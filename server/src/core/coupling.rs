@@ -133,6 +133,7 @@ impl<S: Space> Coupling<S> {
     }
 
     /// `F` of the module documentation at the last evaluated pose and twist.
+    #[inline(always)]
     fn explicit_wrench(&self) -> S::OpVec {
         let mut f = S::OpVec::zero();
         if !self.pushes {

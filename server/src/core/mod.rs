@@ -39,7 +39,7 @@ use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{step, Data, Model, Space, StepConfig, VecOps};
 use kinloop_protocol::{
-    Datagram, RecommendedGains, RefusalReason, Role, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
+    Datagram, OtherUsers, RecommendedGains, RefusalReason, Role, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -165,25 +165,16 @@ struct SnapshotScratch<S: Space> {
     contact_y: DVector<f64>,
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
-    /// Every manipulator's entry for the others' lists, in user order, gathered once per snapshot round: each
-    /// snapshot copies it but for its own user (64 users make 4,032 entries a round; gathering each anew from
-    /// the users and couplings cost about as much again as the copy).
-    others: Vec<OtherEntry<S>>,
+    /// Every manipulator's row for the others' tables, in user order, gathered and checked once per snapshot
+    /// round: each snapshot copies it as blocks but for its own row (64 users make 4,032 rows a round).
+    others: OtherUsers,
+    /// The user index of each row of `others`, ascending.
+    others_rows: Vec<usize>,
     /// The op-space terms of the OP whose users are being built (see `snapshots`).
-    at_op: Option<snapshots::AtOp<S>>,
+    at_op: snapshots::AtOp<S>,
     /// User indices grouped by OP (then in join order), for `roster_version` `order_version`.
     order: Vec<usize>,
     order_version: u64,
-}
-
-/// One manipulator as the other users' snapshots list it.
-#[derive(Clone, Copy, Debug)]
-struct OtherEntry<S: Space> {
-    /// Index in `VeCore::users`.
-    index: usize,
-    user_id: u32,
-    position: S::Point,
-    wrench: S::OpVec,
 }
 
 /// The virtual environment (see the module documentation).
@@ -255,8 +246,13 @@ impl<S: Space> VeCore<S> {
             op_y: DMatrix::zeros(n, k),
             contact_y: DVector::zeros(n),
             near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
-            others: Vec::with_capacity(user_room),
-            at_op: None,
+            others: {
+                let mut table = OtherUsers::default();
+                table.reserve(user_room, <S::Point as VecOps>::LEN, S::DIM);
+                table
+            },
+            others_rows: Vec::with_capacity(user_room),
+            at_op: snapshots::AtOp::none(),
             order: Vec::with_capacity(user_room),
             order_version: u64::MAX,
         };

@@ -55,7 +55,7 @@ use nalgebra::{DMatrix, DVector};
 use super::coupling::{Evaluation, VeForces};
 use super::events::VeEvent;
 use super::users::{Presence, User};
-use super::{Coupling, OtherEntry, SnapshotScratch, VeCore};
+use super::{Coupling, SnapshotScratch, VeCore};
 
 impl<S: Space> VeCore<S> {
     /// Builds every present user's snapshot at the current state (see the module documentation).
@@ -75,7 +75,7 @@ impl<S: Space> VeCore<S> {
         }
         let scratch = &mut self.scratch;
         // A new state: nothing computed at any OP yet.
-        scratch.at_op = None;
+        scratch.at_op.forget();
         if scratch.order_version != self.roster_version {
             scratch.order.clear();
             scratch.order.extend(0..self.users.len());
@@ -89,22 +89,16 @@ impl<S: Space> VeCore<S> {
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
         let time_s = self.last_tick_at.as_secs_f64();
-        // Every snapshot carries the same entries for the other users: gather and check each once here. If one
-        // fails, each snapshot is checked whole, and those that carry it are withheld.
+        // Every snapshot carries rows of the same table of the other users: gather and check it once here. If
+        // it fails, each snapshot is checked whole, and those that carry a bad row are withheld.
         scratch.others.clear();
+        scratch.others_rows.clear();
         let manipulators = self.users.iter().zip(&self.couplings).enumerate();
-        scratch.others.extend(manipulators.filter(|(_, (user, _))| user.role == Role::Manipulator).map(
-            |(index, (user, coupling))| OtherEntry {
-                index,
-                user_id: user.id,
-                position: coupling.op_pose.position,
-                wrench: coupling.wrench,
-            },
-        ));
-        let others_valid = scratch
-            .others
-            .iter()
-            .all(|o| validate::other_user(0, o.position.as_slice(), o.wrench.as_slice(), &self.shape).is_ok());
+        for (index, (user, coupling)) in manipulators.filter(|(_, (user, _))| user.role == Role::Manipulator) {
+            scratch.others.push(user.id, coupling.op_pose.position.as_slice(), coupling.wrench.as_slice());
+            scratch.others_rows.push(index);
+        }
+        let others_valid = validate::other_users(&scratch.others, &self.shape).is_ok();
         for position in 0..self.scratch.order.len() {
             let index = self.scratch.order[position];
             if self.users[index].presence != Presence::Present {
@@ -162,8 +156,8 @@ impl<S: Space> VeCore<S> {
 /// documentation). Valid while `data.op` holds that OP's op-space factors.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct AtOp<S: Space> {
-    /// Index of the OP in the model.
-    op: usize,
+    /// Index of the OP in the model; `None` when nothing valid is held.
+    op: Option<usize>,
     /// Λ̂⁻¹ with the loops closed (eq 9).
     inverse_inertia: S::OpMat,
     /// `J q̈ + J̇q̇` under the probe's forces.
@@ -174,21 +168,44 @@ pub(super) struct AtOp<S: Space> {
     twist: S::OpVec,
 }
 
-/// The op-space terms at `op` for user `index`: those of the round's last OP when it is the same one, else
-/// computed (warm-started from this user's last directions: Λ⁻¹ moves little between snapshots) and kept
-/// for the next user.
-fn at_op<S: Space>(
+impl<S: Space> AtOp<S> {
+    /// Nothing held.
+    pub(super) fn none() -> Self {
+        AtOp {
+            op: None,
+            inverse_inertia: S::OpMat::zero(),
+            acceleration: S::OpVec::zero(),
+            directions: ConstraintDirections {
+                singular_values: S::OpVec::zero(),
+                directions: S::OpMat::zero(),
+                count: 0,
+                length_scale: 1.0,
+            },
+            pose: OpPose::identity(),
+            twist: S::OpVec::zero(),
+        }
+    }
+
+    /// Forgets what is held (a new state, or `data.op` overwritten).
+    pub(super) fn forget(&mut self) {
+        self.op = None;
+    }
+}
+
+/// The op-space terms at `user`'s OP: those held in `shared` when they are that OP's, else computed there
+/// (warm-started from this user's last directions: Λ⁻¹ moves little between snapshots) for the next user.
+fn at_op<'a, S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
     user: &User,
-    shared: &mut Option<AtOp<S>>,
-) -> Result<AtOp<S>, DynamicsError> {
+    shared: &'a mut AtOp<S>,
+) -> Result<&'a AtOp<S>, DynamicsError> {
     let op = user.op;
-    if let Some(terms) = shared.filter(|terms| terms.op == op) {
-        return Ok(terms);
+    if shared.op == Some(op) {
+        return Ok(shared);
     }
     // `data.op` is about to change: whatever happens, it no longer holds the kept OP's factors.
-    *shared = None;
+    shared.op = None;
     op_space_inertia(model, data, op)?;
     let inverse_inertia = data.op.inverse_inertia;
     let mut previous = S::OpMat::zero();
@@ -197,16 +214,13 @@ fn at_op<S: Space>(
         previous.as_mut_slice().copy_from_slice(last);
         &previous
     });
-    let terms = AtOp {
-        op,
-        inverse_inertia,
-        acceleration: op_acceleration(data),
-        directions: constraint_directions_from::<S>(&inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm),
-        pose: OpPose::of_op(model, data, op),
-        twist: op_twist(model, data, op),
-    };
-    *shared = Some(terms);
-    Ok(terms)
+    shared.inverse_inertia = inverse_inertia;
+    shared.acceleration = op_acceleration(data);
+    shared.directions = constraint_directions_from::<S>(&inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm);
+    shared.pose = OpPose::of_op(model, data, op);
+    shared.twist = op_twist(model, data, op);
+    shared.op = Some(op);
+    Ok(shared)
 }
 
 enum SnapshotFailure {
@@ -232,16 +246,14 @@ fn build_one<S: Space>(
 ) -> Result<(), DynamicsError> {
     // What of this user's wrench the probe applied: its hand (see the module documentation).
     let own_wrench = couplings[index].hand_part();
-    let AtOp { inverse_inertia, acceleration, directions, pose, twist, .. } =
-        at_op(model, data, &users[index], &mut scratch.at_op)?;
+    let shared = at_op(model, data, &users[index], &mut scratch.at_op)?;
     // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand.
-    let bias = acceleration - inverse_inertia * own_wrench;
+    let bias = shared.acceleration - shared.inverse_inertia * own_wrench;
 
-    let others = || scratch.others.iter().filter(|o| o.index != index);
+    let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
     let slot = &mut users[index].slot;
     if slot.roster_version != roster_version {
-        let count = others().take(MAX_LIST_ENTRIES).count();
-        slot.size_others(count, <S::Point as VecOps>::LEN, S::DIM, roster_version);
+        slot.size_others(scratch.others.len().min(MAX_LIST_ENTRIES), d, k, roster_version);
     }
     if let Some(scratch_terms) = slot.config_scratch.as_mut() {
         scratch_terms.fill_from(model, data, q, qd, &own_wrench, LocalModelTerms::full());
@@ -251,29 +263,32 @@ fn build_one<S: Space>(
         kinloop_protocol::Datagram::Snapshot(s) => (s, &mut slot.spare_contacts),
         kinloop_protocol::Datagram::Uplink(_) => unreachable!("a snapshot slot holds a snapshot"),
     };
-    set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| pose.to_slice_memo(out, pose_memo));
-    set(&mut snapshot.op_twist, twist.as_slice());
-    set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &inverse_inertia);
+    set_from(&mut snapshot.op_pose, OpPose::<S>::wire_len(), |out| shared.pose.to_slice_memo(out, pose_memo));
+    set(&mut snapshot.op_twist, shared.twist.as_slice());
+    set_upper_triangle::<S>(&mut snapshot.inverse_inertia, &shared.inverse_inertia);
     set(&mut snapshot.bias_accel, bias.as_slice());
-    set(&mut snapshot.directions, directions.directions.as_slice());
-    set(&mut snapshot.singular_values, directions.singular_values.as_slice());
-    snapshot.constraint_count = directions.count as u8;
+    set(&mut snapshot.directions, shared.directions.directions.as_slice());
+    set(&mut snapshot.singular_values, shared.directions.singular_values.as_slice());
+    snapshot.constraint_count = shared.directions.count as u8;
     if let (Some(wire), Some(terms)) = (snapshot.config.as_mut(), config_scratch) {
         write_config_terms(wire, terms);
     }
-    // (Sized to at most MAX_LIST_ENTRIES above: the zip stops there.)
-    for (entry, other) in snapshot.others.iter_mut().zip(others()) {
-        entry.user_id = other.user_id;
-        set(&mut entry.op_position, other.position.as_slice());
-        set(&mut entry.wrench, other.wrench.as_slice());
-    }
+    // Every manipulator's row but this user's own, as two blocks, and no more than the codec's limit.
+    let table = &scratch.others;
+    let rows = table.len();
+    let own = scratch.others_rows.binary_search(&index).map_or(rows..rows, |row| row..row + 1);
+    let before = 0..own.start.min(MAX_LIST_ENTRIES);
+    let after = own.end..rows.min(own.end + MAX_LIST_ENTRIES - before.end);
+    snapshot.others.clear();
+    snapshot.others.extend_from_rows(table, before, d, k);
+    snapshot.others.extend_from_rows(table, after, d, k);
 
     // Contacts last: frame_point_inertia overwrites data.op.
     spare.append(&mut snapshot.contacts);
     if let Some((stiffness, damping)) = contact_gains.filter(|_| !scratch.near.is_empty()) {
         scratch.op_y.copy_from(&data.op.y_closed);
         // `frame_point_inertia` at the contacts overwrites `data.op`.
-        scratch.at_op = None;
+        scratch.at_op.forget();
         for near_index in 0..scratch.near.len() {
             let Some(mut term) = spare.pop() else { break };
             let contact = scratch.near[near_index];

@@ -6,7 +6,7 @@ use std::time::Duration;
 use kinloop_linkage::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::{Model, Space};
 use kinloop_protocol::{
-    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, LocalModelForm, OtherUser, Role, Snapshot,
+    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, LocalModelForm, OtherUsers, Role, Snapshot,
 };
 
 use super::fade::Fade;
@@ -107,7 +107,7 @@ impl SnapshotSlot {
             singular_values: Vec::with_capacity(k),
             constraint_count: 0,
             contacts: Vec::with_capacity(if model.obstacles.is_empty() { 0 } else { MAX_LOCAL_CONTACTS }),
-            others: Vec::new(),
+            others: OtherUsers::default(),
             config,
         };
         let spare_contacts = if model.obstacles.is_empty() {
@@ -153,14 +153,9 @@ impl SnapshotSlot {
         }
     }
 
-    /// Resizes the list of other users to `count` entries (allocates; only after the roster changed).
-    pub fn size_others(&mut self, count: usize, point_dim: usize, op_dim: usize, version: u64) {
-        let others = &mut self.snapshot_mut().others;
-        others.resize_with(count, || OtherUser {
-            user_id: 0,
-            op_position: Vec::with_capacity(point_dim),
-            wrench: Vec::with_capacity(op_dim),
-        });
+    /// Makes room for `rows` other users (allocates; only after the roster changed).
+    pub fn size_others(&mut self, rows: usize, point_dim: usize, op_dim: usize, version: u64) {
+        self.snapshot_mut().others.reserve(rows, point_dim, op_dim);
         self.roster_version = version;
     }
 }
