@@ -182,8 +182,9 @@ fn refusals_read_well() {
 }
 
 /// A sender that checks the other users' table once (`other_users`) and each snapshot without its values
-/// (`snapshot_but_others`) refuses exactly what the full check refuses: a bad value is caught by the first,
-/// a bad own field by the second, and the row count and the table's lengths by both.
+/// (`snapshot_but_others`, itself the OP's terms and the user's) refuses exactly what the full check
+/// refuses: a bad value is caught by the first, a bad own field by the second, and the row count and the
+/// table's lengths by both.
 #[test]
 fn split_snapshot_check_covers_what_the_whole_check_does() {
     use kinloop_protocol::codec::validate;
@@ -197,9 +198,17 @@ fn split_snapshot_check_covers_what_the_whole_check_does() {
     assert_eq!(field_of(&error), "snapshot.others[0].wrench");
     s.others.wrenches[1] = 0.0;
     assert!(validate::snapshot(&s, &shape).is_ok());
+    // The OP's terms and the user's: each half catches its own fields and only those.
     s.op_twist[0] = f64::NAN;
     assert!(validate::snapshot_but_others(&s, &shape).is_err());
+    assert!(validate::snapshot_op_terms(&s, &shape).is_err());
+    assert!(validate::snapshot_user_terms(&s, &shape).is_ok());
     s.op_twist[0] = 0.0;
+    s.bias_accel[2] = f64::INFINITY;
+    assert!(validate::snapshot_but_others(&s, &shape).is_err());
+    assert!(validate::snapshot_op_terms(&s, &shape).is_ok());
+    assert!(validate::snapshot_user_terms(&s, &shape).is_err());
+    s.bias_accel[2] = 0.0;
     // A table whose columns disagree: a wrench short.
     s.others.wrenches.pop();
     for check in [validate::snapshot_but_others(&s, &shape), validate::other_users(&s.others, &shape)] {

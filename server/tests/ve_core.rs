@@ -553,6 +553,54 @@ fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     );
 }
 
+/// A snapshot that fails the wire checks is withheld, with an event naming the field, for every user on that
+/// OP (the OP's terms are checked once for users sharing them: a failed check must not pass for the next
+/// user), while a user on another OP is served and the VE carries on. The serial arm with its hand at 1e-10 kg
+/// and 1e-12 kg m² puts Λ̂⁻¹ at the hand's tip near 1e12, beyond the codec's 1e9; at the upper arm's middle
+/// the heavier links bound it.
+#[test]
+fn snapshots_failing_the_wire_checks_are_withheld_for_every_user_of_their_op() {
+    use kinloop_linkage::Scene;
+    use kinloop_server::core::VeEvent;
+    use nalgebra::Vector2;
+
+    let text = include_str!("../../scenes/serial-arm.toml");
+    let hand = "mass = 0.5\ncom = [0.1, 0.0]\ninertia = 1.6666666666666667e-3";
+    assert!(text.contains(hand), "the serial arm's hand as this test knows it");
+    let wrist_damping = "q0 = -0.9\ndamping = 0.02";
+    assert!(text.contains(wrist_damping), "the serial arm's wrist as this test knows it");
+    // Without the wrist's damping, which on the light hand (b/I = 2e10 /s) no 1 ms step could integrate.
+    let light =
+        text.replace(hand, "mass = 1e-10\ncom = [0.1, 0.0]\ninertia = 1e-12").replace(wrist_damping, "q0 = -0.9");
+    let scene = Scene::from_toml_str(&light, "light-hand").expect("a valid scene");
+    let base: kinloop_linkage::Model<kinloop_linkage::Planar> =
+        kinloop_linkage::Model::compile(&scene, "light-hand").expect("compiles");
+    let model = base.with_op("upper", 0, Vector2::new(0.15, 0.0));
+    let mut ve = core(model, VeConfig::paper());
+    let joins = [("A", "tip"), ("B", "upper"), ("C", "tip")];
+    let ids: Vec<u32> = joins
+        .iter()
+        .map(|(name, op)| ve.join(Duration::ZERO, request(name, Role::Observer, op, 3)).unwrap().user_id)
+        .collect();
+    let mut latest = Vec::new();
+    run(&mut ve, Duration::from_millis(20), &mut latest, |_, _, _| {});
+    let metrics = ve.metrics();
+    assert_eq!(metrics.ticks, 20);
+    assert_eq!(metrics.state_restores, 0);
+    assert_eq!(metrics.snapshots_built, metrics.snapshot_ticks, "B's snapshots, one a round");
+    assert_eq!(metrics.snapshots_withheld, 2 * metrics.snapshot_ticks, "A's and C's, every round");
+    let received = |i: usize| latest.get(ids[i] as usize).is_some_and(|s| s.is_some());
+    assert!(!received(0) && received(1) && !received(2));
+    let mut invalid = std::collections::BTreeMap::new();
+    while let Some(event) = ve.poll_event() {
+        if let VeEvent::SnapshotInvalid { user, error } = event {
+            assert!(error.to_string().starts_with("snapshot.inverse_inertia"), "{error}");
+            *invalid.entry(user).or_insert(0) += 1;
+        }
+    }
+    assert_eq!(invalid.keys().copied().collect::<Vec<_>>(), vec![ids[0], ids[2]]);
+}
+
 /// Users are found by id after others have joined, left and been removed (the lookup assumes the roster
 /// stays sorted by id): names, uplinks and unknown ids all resolve to the right user or to none.
 #[test]

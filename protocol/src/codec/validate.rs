@@ -120,12 +120,18 @@ pub fn snapshot(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
 /// builds every user's table from the rows of one and checks that one with [`other_users`] instead of each
 /// (64 users make 4032 rows a tick).
 pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
+    snapshot_user_terms(s, shape)?;
+    snapshot_op_terms(s, shape)
+}
+
+/// The fields of [`snapshot_but_others`] that describe the operational point rather than the user: twist,
+/// Λ̂⁻¹, directions, singular values and constraint count. A sender that writes the same values into the
+/// snapshots of every user holding one OP checks them once, and each snapshot with
+/// [`snapshot_user_terms`].
+pub fn snapshot_op_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = shape.op_dim();
-    scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
-    pose(Field::at("snapshot.op_pose"), &s.op_pose, shape)?;
     vector(Field::at("snapshot.op_twist"), &s.op_twist, k, MAX_SPEED)?;
     vector(Field::at("snapshot.inverse_inertia"), &s.inverse_inertia, shape.op_triangle_len(), MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.bias_accel"), &s.bias_accel, k, MAX_ACCEL)?;
     vector(Field::at("snapshot.directions"), &s.directions, k * k, MAX_ORTHONORMAL_ENTRY)?;
     singular_values(&s.singular_values, k)?;
     if usize::from(s.constraint_count) > k {
@@ -135,6 +141,15 @@ pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
             max: k,
         });
     }
+    Ok(())
+}
+
+/// The rest of [`snapshot_but_others`]: time, pose (each user's wire angle has its own anchor), b̂, contacts,
+/// the shape of the others' table and the configuration-space terms.
+pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
+    scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
+    pose(Field::at("snapshot.op_pose"), &s.op_pose, shape)?;
+    vector(Field::at("snapshot.bias_accel"), &s.bias_accel, shape.op_dim(), MAX_ACCEL)?;
     count(Field::at("snapshot.contacts"), s.contacts.len(), MAX_LIST_ENTRIES)?;
     for (i, c) in s.contacts.iter().enumerate() {
         contact(i, c, shape)?;

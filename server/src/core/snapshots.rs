@@ -120,15 +120,21 @@ impl<S: Space> VeCore<S> {
             );
             self.couplings[index].pose_memo = pose_memo;
             let user = &mut self.users[index];
+            let at_op = &mut self.scratch.at_op;
             let outcome = built.map_err(SnapshotFailure::Dynamics).and_then(|()| {
                 let snapshot = user.slot.snapshot_mut();
                 snapshot.seq += 1;
                 snapshot.server_time_s = time_s;
                 snapshot.ve_step = self.step;
-                let checked = if others_valid {
-                    validate::snapshot_but_others(snapshot, &self.shape)
-                } else {
+                // The OP's terms are the same numbers in every snapshot built from `at_op`: checked once.
+                let checked = if !others_valid {
                     validate::snapshot(snapshot, &self.shape)
+                } else if at_op.checked {
+                    validate::snapshot_user_terms(snapshot, &self.shape)
+                } else {
+                    let op_terms = validate::snapshot_op_terms(snapshot, &self.shape);
+                    at_op.checked = op_terms.is_ok() && at_op.op.is_some();
+                    op_terms.and_then(|()| validate::snapshot_user_terms(snapshot, &self.shape))
                 };
                 checked.map_err(SnapshotFailure::Wire)
             });
@@ -158,6 +164,8 @@ impl<S: Space> VeCore<S> {
 pub(super) struct AtOp<S: Space> {
     /// Index of the OP in the model; `None` when nothing valid is held.
     op: Option<usize>,
+    /// The terms passed the wire checks (`validate::snapshot_op_terms`) in a snapshot built from them.
+    checked: bool,
     /// Λ̂⁻¹ with the loops closed (eq 9).
     inverse_inertia: S::OpMat,
     /// `J q̈ + J̇q̇` under the probe's forces.
@@ -173,6 +181,7 @@ impl<S: Space> AtOp<S> {
     pub(super) fn none() -> Self {
         AtOp {
             op: None,
+            checked: false,
             inverse_inertia: S::OpMat::zero(),
             acceleration: S::OpVec::zero(),
             directions: ConstraintDirections {
@@ -189,6 +198,7 @@ impl<S: Space> AtOp<S> {
     /// Forgets what is held (a new state, or `data.op` overwritten).
     pub(super) fn forget(&mut self) {
         self.op = None;
+        self.checked = false;
     }
 }
 
@@ -205,7 +215,7 @@ fn at_op<'a, S: Space>(
         return Ok(shared);
     }
     // `data.op` is about to change: whatever happens, it no longer holds the kept OP's factors.
-    shared.op = None;
+    shared.forget();
     op_space_inertia(model, data, op)?;
     let inverse_inertia = data.op.inverse_inertia;
     let mut previous = S::OpMat::zero();
