@@ -17,11 +17,11 @@
 //! ([`Forces::add_implicit`]). The step is then stable for any gains; the wrench it effectively applied is
 //! `F − h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈` ([`Coupling::implicit_correction`]).
 //!
-//! **Users on one OP.** Consecutive couplings at the same body and point (several users on a scene's one
-//! OP, the common case) form a *run*: its first coupling evaluates the OP's pose, twist and Jacobian, the
-//! others copy them, and the run enters eq 4 once, as `Jᵀ Σ F` and `Jᵀ (Σ C) J`, the same sums as per user
-//! but with one pass over the supporting joints. Couplings are kept in join order, so users of one OP who
-//! joined between users of another form several runs, each still correct.
+//! **Users on one OP.** The couplings are visited in an order that groups users by OP ([`VeForces::order`]),
+//! and neighbours at the same body and point (several users on a scene's one OP, the common case) form a
+//! *run*: its first coupling evaluates the OP's pose, twist and Jacobian, the others copy them, and the run
+//! enters eq 4 once, as `Jᵀ Σ F` and `Jᵀ (Σ C) J`, the same sums as per user but with one pass over the
+//! supporting joints, whatever order the users joined in.
 
 use kinloop_linkage::contact::PenaltyContacts;
 use kinloop_linkage::data::Kinematics;
@@ -252,11 +252,25 @@ pub fn stage_weights(integrator: kinloop_linkage::Integrator) -> &'static [f64] 
     }
 }
 
+/// `(&items[first], &mut items[other])` for two different indices.
+fn first_and_other<T>(items: &mut [T], first: usize, other: usize) -> (&T, &mut T) {
+    if first < other {
+        let (low, high) = items.split_at_mut(other);
+        (&low[first], &mut high[0])
+    } else {
+        let (low, high) = items.split_at_mut(first);
+        (&high[0], &mut low[other])
+    }
+}
+
 /// Every external force of the VE: the users' couplings and, when the scene has obstacles, the penalty
 /// contacts. One value per integrator call.
 pub struct VeForces<'a, S: Space> {
     /// The couplings, one per user.
     pub couplings: &'a mut [Coupling<S>],
+    /// Every index of `couplings` once, users of one OP next to each other (any order is correct; this one
+    /// makes each OP one run).
+    pub order: &'a [usize],
     /// Penalty contacts, when the scene has obstacles.
     pub contacts: Option<&'a mut PenaltyContacts<S>>,
     /// What to record.
@@ -274,20 +288,22 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         let hands_only = self.evaluation == Evaluation::ProbeHands;
         // The current run (see the module documentation): its first coupling and the sum of its wrenches.
         let mut run: Option<(usize, S::OpVec)> = None;
-        for i in 0..self.couplings.len() {
-            let (before, rest) = self.couplings.split_at_mut(i);
-            let c = &mut rest[0];
-            match run.as_mut().filter(|(first, _)| c.at_same_point(&before[*first])) {
-                Some((first, _)) => c.evaluate_as(&before[*first], !hands_only),
+        for &i in self.order {
+            match run.as_mut().filter(|(first, _)| self.couplings[i].at_same_point(&self.couplings[*first])) {
+                Some((first, _)) => {
+                    let (first, c) = first_and_other(self.couplings, *first, i);
+                    c.evaluate_as(first, !hands_only);
+                }
                 None => {
                     if let Some((first, sum)) = run.take() {
-                        let first = &before[first];
+                        let first = &self.couplings[first];
                         apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
                     }
-                    c.evaluate(model, kin, !hands_only);
+                    self.couplings[i].evaluate(model, kin, !hands_only);
                     run = Some((i, S::OpVec::zero()));
                 }
             }
+            let c = &mut self.couplings[i];
             if let (true, Some((_, sum))) = (c.is_active(), run.as_mut()) {
                 *sum += if hands_only { c.hand_part() } else { c.wrench };
             }
@@ -317,7 +333,8 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         let mut added = false;
         let n = implicit_mass.nrows();
         let (mass, tau) = (implicit_mass.as_mut_slice(), tau.as_mut_slice());
-        let mut active = self.couplings.iter().filter(|c| c.is_active()).peekable();
+        let couplings = &*self.couplings;
+        let mut active = self.order.iter().map(|&i| &couplings[i]).filter(|c| c.is_active()).peekable();
         while let Some(c) = active.next() {
             // The run of active couplings at this OP (module documentation): Σ C and Σ spring, one pass.
             let mut coefficient = c.implicit_coefficient(dt);
@@ -360,10 +377,12 @@ mod tests {
     use kinloop_linkage::{Data, Planar};
     use nalgebra::Vector3;
 
-    /// Users on one OP evaluated as runs (module documentation) add exactly the per-user sums: with couplings
-    /// on links 2, 2, 2, 4, 2 (a run of three whose middle one does not push, then two runs of one),
-    /// `τ` and the implicit terms equal `Σ Jᵀ F` and `Σ Jᵀ diag(c) J` formed densely from Jacobians evaluated
-    /// afresh for each coupling, and every coupling holds its own OP's pose, twist and Jacobian.
+    /// Users on one OP evaluated as runs (module documentation) add exactly the per-user sums, in any order:
+    /// with couplings on links 2, 2, 2, 4, 2 (one of them not pushing), visited in join order (a run of three,
+    /// then two runs of one) or grouped by OP with the last one first (a run of four led by the last index,
+    /// then link 4), `τ` and the implicit terms equal `Σ Jᵀ F` and `Σ Jᵀ diag(c) J` formed densely from
+    /// Jacobians evaluated afresh for each coupling, and every coupling holds its own OP's pose, twist and
+    /// Jacobian.
     #[test]
     fn users_on_one_op_add_the_per_user_sums() {
         let model = paper_testbed();
@@ -373,7 +392,7 @@ mod tests {
         forward_velocity(&model, &mut data, &qd);
         let n = model.nq();
         let point = nalgebra::Vector2::new(0.01, -0.002);
-        let mut couplings: Vec<Coupling<Planar>> =
+        let joined: Vec<Coupling<Planar>> =
             [(1, 0.7, true), (1, 1.0, false), (1, 0.5, true), (3, 0.4, true), (1, 0.9, true)]
                 .into_iter()
                 .enumerate()
@@ -390,42 +409,50 @@ mod tests {
                 })
                 .collect();
         let dt = 1e-3;
-        let mut forces =
-            VeForces { couplings: &mut couplings, contacts: None, evaluation: Evaluation::Step(&[1.0]), stage: 0 };
-        let mut tau = DVector::zeros(n);
-        forces.add_forces(&model, &data.kin, &mut tau);
-        let (mut mass, mut tau_implicit) = (DMatrix::zeros(n, n), DVector::zeros(n));
-        assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau_implicit));
+        for order in [[0, 1, 2, 3, 4], [4, 0, 1, 2, 3]] {
+            let mut couplings = joined.clone();
+            let mut forces = VeForces {
+                couplings: &mut couplings,
+                order: &order,
+                contacts: None,
+                evaluation: Evaluation::Step(&[1.0]),
+                stage: 0,
+            };
+            let mut tau = DVector::zeros(n);
+            forces.add_forces(&model, &data.kin, &mut tau);
+            let (mut mass, mut tau_implicit) = (DMatrix::zeros(n, n), DVector::zeros(n));
+            assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau_implicit));
 
-        let (mut expected_tau, mut expected_mass, mut expected_implicit) =
-            (DVector::zeros(n), DMatrix::zeros(n, n), DVector::zeros(n));
-        for c in &couplings {
-            let mut fresh = c.clone();
-            fresh.jacobian_t.fill(f64::NAN);
-            fresh.evaluate(&model, &data.kin, true);
-            assert_eq!((c.op_pose, c.op_twist, c.wrench), (fresh.op_pose, fresh.op_twist, fresh.wrench));
-            if !c.is_active() {
-                continue;
+            let (mut expected_tau, mut expected_mass, mut expected_implicit) =
+                (DVector::zeros(n), DMatrix::zeros(n, n), DVector::zeros(n));
+            for c in &couplings {
+                let mut fresh = c.clone();
+                fresh.jacobian_t.fill(f64::NAN);
+                fresh.evaluate(&model, &data.kin, true);
+                assert_eq!((c.op_pose, c.op_twist, c.wrench), (fresh.op_pose, fresh.op_twist, fresh.wrench));
+                if !c.is_active() {
+                    continue;
+                }
+                assert_eq!(c.jacobian_t, fresh.jacobian_t);
+                let jt = &fresh.jacobian_t;
+                expected_tau += jt * DVector::from_column_slice(fresh.wrench.as_slice());
+                let coefficient = DVector::from_column_slice(fresh.implicit_coefficient(dt).as_slice());
+                expected_mass += jt * DMatrix::from_diagonal(&coefficient) * jt.transpose();
+                expected_implicit -= jt * DVector::from_column_slice(fresh.implicit_spring(dt).as_slice());
             }
-            assert_eq!(c.jacobian_t, fresh.jacobian_t);
-            let jt = &fresh.jacobian_t;
-            expected_tau += jt * DVector::from_column_slice(fresh.wrench.as_slice());
-            let coefficient = DVector::from_column_slice(fresh.implicit_coefficient(dt).as_slice());
-            expected_mass += jt * DMatrix::from_diagonal(&coefficient) * jt.transpose();
-            expected_implicit -= jt * DVector::from_column_slice(fresh.implicit_spring(dt).as_slice());
+            let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() <= 1e-13 * b.amax();
+            assert!(
+                close(
+                    &DMatrix::from_column_slice(n, 1, tau.as_slice()),
+                    &DMatrix::from_column_slice(n, 1, expected_tau.as_slice())
+                ),
+                "{tau} vs {expected_tau}"
+            );
+            assert!(close(&mass, &expected_mass), "{mass} vs {expected_mass}");
+            assert_eq!(mass, mass.transpose());
+            let (got, want) = (&tau_implicit, &expected_implicit);
+            assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
         }
-        let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() <= 1e-13 * b.amax();
-        assert!(
-            close(
-                &DMatrix::from_column_slice(n, 1, tau.as_slice()),
-                &DMatrix::from_column_slice(n, 1, expected_tau.as_slice())
-            ),
-            "{tau} vs {expected_tau}"
-        );
-        assert!(close(&mass, &expected_mass), "{mass} vs {expected_mass}");
-        assert_eq!(mass, mass.transpose());
-        let (got, want) = (&tau_implicit, &expected_implicit);
-        assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
     }
 
     /// The implicit terms of two couplings (on links 2 and 4, so their supports overlap and differ) against
@@ -461,8 +488,13 @@ mod tests {
                 jt * DMatrix::from_diagonal(&DVector::from_column_slice(coefficient.as_slice())) * jt.transpose();
             expected_tau -= jt * DVector::from_column_slice(spring.as_slice());
         }
-        let mut forces =
-            VeForces { couplings: &mut couplings, contacts: None, evaluation: Evaluation::ProbeHands, stage: 0 };
+        let mut forces = VeForces {
+            couplings: &mut couplings,
+            order: &[0, 1],
+            contacts: None,
+            evaluation: Evaluation::ProbeHands,
+            stage: 0,
+        };
         let (mut mass, mut tau) = (DMatrix::zeros(n, n), DVector::zeros(n));
         assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau));
         assert_eq!(mass, mass.transpose());

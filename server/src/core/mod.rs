@@ -484,8 +484,10 @@ impl<S: Space> VeCore<S> {
         let dt = self.step_config.dt;
         self.update_couplings(at, dt);
         self.step_start_q.as_mut_slice().copy_from_slice(self.q.as_slice());
+        self.refresh_op_order();
         let mut forces = VeForces {
             couplings: &mut self.couplings,
+            order: &self.scratch.order,
             contacts: self.contacts.as_mut(),
             evaluation: Evaluation::Step(stage_weights(self.step_config.integrator)),
             stage: 0,

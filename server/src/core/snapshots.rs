@@ -61,8 +61,11 @@ impl<S: Space> VeCore<S> {
     /// Builds every present user's snapshot at the current state (see the module documentation).
     pub(super) fn build_snapshots(&mut self) {
         self.metrics.snapshot_ticks += 1;
+        // The step may have removed users since the tick began.
+        self.refresh_op_order();
         let mut forces = VeForces {
             couplings: &mut self.couplings,
+            order: &self.scratch.order,
             contacts: self.contacts.as_mut(),
             evaluation: Evaluation::ProbeHands,
             stage: 0,
@@ -76,13 +79,6 @@ impl<S: Space> VeCore<S> {
         let scratch = &mut self.scratch;
         // A new state: nothing computed at any OP yet.
         scratch.at_op.forget();
-        if scratch.order_version != self.roster_version {
-            scratch.order.clear();
-            scratch.order.extend(0..self.users.len());
-            let users = &self.users;
-            scratch.order.sort_unstable_by_key(|&index| (users[index].op, index));
-            scratch.order_version = self.roster_version;
-        }
         if self.contacts.is_some() {
             detect_contacts(&self.model, &self.data.kin, self.config.contact_margin_m, &mut scratch.near);
             scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
@@ -231,6 +227,20 @@ fn at_op<'a, S: Space>(
     shared.twist = op_twist(model, data, op);
     shared.op = Some(op);
     Ok(shared)
+}
+
+impl<S: Space> VeCore<S> {
+    /// Brings `scratch.order` (every user's index, grouped by OP, then in join order) up to the roster.
+    pub(super) fn refresh_op_order(&mut self) {
+        let scratch = &mut self.scratch;
+        if scratch.order_version != self.roster_version {
+            scratch.order.clear();
+            scratch.order.extend(0..self.users.len());
+            let users = &self.users;
+            scratch.order.sort_unstable_by_key(|&index| (users[index].op, index));
+            scratch.order_version = self.roster_version;
+        }
+    }
 }
 
 enum SnapshotFailure {
