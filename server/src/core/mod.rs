@@ -172,7 +172,8 @@ struct SnapshotScratch<S: Space> {
     others_rows: Vec<usize>,
     /// The op-space terms of the OP whose users are being built (see `snapshots`).
     at_op: snapshots::AtOp<S>,
-    /// User indices grouped by OP (then in join order), for `roster_version` `order_version`.
+    /// User indices grouped by OP (then in join order), for `roster_version` `order_version`: the order of
+    /// the snapshots and of the couplings' evaluation (`VeCore::refresh_op_order`).
     order: Vec<usize>,
     order_version: u64,
 }

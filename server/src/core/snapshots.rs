@@ -152,6 +152,19 @@ impl<S: Space> VeCore<S> {
         }
         self.snapshot_cursor = 0;
     }
+
+    /// Brings `scratch.order` (every user's index, grouped by OP, then in join order) up to the roster: the
+    /// order the snapshots are built in and the couplings evaluated in (see `coupling`).
+    pub(super) fn refresh_op_order(&mut self) {
+        let scratch = &mut self.scratch;
+        if scratch.order_version != self.roster_version {
+            scratch.order.clear();
+            scratch.order.extend(0..self.users.len());
+            let users = &self.users;
+            scratch.order.sort_unstable_by_key(|&index| (users[index].op, index));
+            scratch.order_version = self.roster_version;
+        }
+    }
 }
 
 /// What a snapshot round computed at one operational point, for every user holding it (see the module
@@ -227,20 +240,6 @@ fn at_op<'a, S: Space>(
     shared.twist = op_twist(model, data, op);
     shared.op = Some(op);
     Ok(shared)
-}
-
-impl<S: Space> VeCore<S> {
-    /// Brings `scratch.order` (every user's index, grouped by OP, then in join order) up to the roster.
-    pub(super) fn refresh_op_order(&mut self) {
-        let scratch = &mut self.scratch;
-        if scratch.order_version != self.roster_version {
-            scratch.order.clear();
-            scratch.order.extend(0..self.users.len());
-            let users = &self.users;
-            scratch.order.sort_unstable_by_key(|&index| (users[index].op, index));
-            scratch.order_version = self.roster_version;
-        }
-    }
 }
 
 enum SnapshotFailure {
