@@ -463,7 +463,7 @@ pub mod uplink_flags {
     pub const DEADBAND_SKIPPED: u32 = 1 << 4;
     /// A safety check disabled the device output.
     pub const SAFETY_STOP: u32 = 1 << 5;
-    /// Every bit version 1 defines; the codec refuses others.
+    /// Every bit the protocol defines (versions 1 and 2 alike); the codec refuses others.
     pub const KNOWN: u32 = FADING | CLAMPED | STALE_SNAPSHOT | IMPEDANCE_MODE | DEADBAND_SKIPPED | SAFETY_STOP;
 }
 
