@@ -453,19 +453,9 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
     config.coupling_damping = AxisGains::Uniform { linear: 0.0, angular: 0.0 };
     let mut ve = core(testbed(), config);
     let joins = [("A", Role::Manipulator, "link2"), ("O", Role::Observer, "link2"), ("B", Role::Manipulator, "link2")];
-    let ids: Vec<u32> =
-        joins.iter().map(|(n, r, op)| ve.join(Duration::ZERO, request(n, *r, op, 3)).unwrap().user_id).collect();
+    let ids = join_all(&mut ve, &joins);
     let hands = [[-0.5, 0.1, -0.002], [3.0, 3.0, 0.3], [0.2, -0.3, 0.001]];
-    let mut latest = Vec::new();
-    let mut seq = 0;
-    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
-        seq += 1;
-        for (id, hand) in ids.iter().zip(&hands) {
-            if let Some(Some(s)) = latest.get(*id as usize) {
-                let _ = ve.handle_uplink(now, *id, &following(s, seq, hand));
-            }
-        }
-    });
+    let (latest, _) = run_following(&mut ve, Duration::from_millis(400), &ids, &hands);
     let snapshot = |id: u32| latest[id as usize].as_ref().expect("a snapshot for every user");
     let tick = snapshot(ids[0]).ve_step;
     for (me, id) in ids.iter().enumerate() {
@@ -500,22 +490,12 @@ fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     let link3 = base.body_index("link3").unwrap();
     let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
     let mut ve = core(model.clone(), VeConfig::paper());
-    let joins = [("A", "link2"), ("B", "link3"), ("C", "link2")];
-    let ids: Vec<u32> = joins
-        .iter()
-        .map(|(name, op)| ve.join(Duration::ZERO, request(name, Role::Manipulator, op, 3)).unwrap().user_id)
-        .collect();
+    let manipulator = Role::Manipulator;
+    let ids =
+        join_all(&mut ve, &[("A", manipulator, "link2"), ("B", manipulator, "link3"), ("C", manipulator, "link2")]);
     let hands = [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]];
-    let mut latest = Vec::new();
-    let mut seq = 0;
-    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
-        seq += 1;
-        for (id, hand) in ids.iter().zip(&hands) {
-            if let Some(Some(s)) = latest.get(*id as usize) {
-                ve.handle_uplink(now, *id, &following(s, seq, hand)).unwrap();
-            }
-        }
-    });
+    let (latest, refused) = run_following(&mut ve, Duration::from_millis(400), &ids, &hands);
+    assert_eq!(refused, 0, "every uplink accepted");
     let snapshot = |i: usize| latest[ids[i] as usize].as_ref().expect("a snapshot for every user");
     let (a, b, c) = (snapshot(0), snapshot(1), snapshot(2));
     assert!(a.ve_step == b.ve_step && b.ve_step == c.ve_step, "one round");
@@ -577,11 +557,8 @@ fn snapshots_failing_the_wire_checks_are_withheld_for_every_user_of_their_op() {
         kinloop_linkage::Model::compile(&scene, "light-hand").expect("compiles");
     let model = base.with_op("upper", 0, Vector2::new(0.15, 0.0));
     let mut ve = core(model, VeConfig::paper());
-    let joins = [("A", "tip"), ("B", "upper"), ("C", "tip")];
-    let ids: Vec<u32> = joins
-        .iter()
-        .map(|(name, op)| ve.join(Duration::ZERO, request(name, Role::Observer, op, 3)).unwrap().user_id)
-        .collect();
+    let observer = Role::Observer;
+    let ids = join_all(&mut ve, &[("A", observer, "tip"), ("B", observer, "upper"), ("C", observer, "tip")]);
     let mut latest = Vec::new();
     run(&mut ve, Duration::from_millis(20), &mut latest, |_, _, _| {});
     let metrics = ve.metrics();

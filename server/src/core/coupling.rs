@@ -286,8 +286,13 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
             Evaluation::Probe | Evaluation::ProbeHands => None,
         };
         let hands_only = self.evaluation == Evaluation::ProbeHands;
-        // The current run (see the module documentation): its first coupling and the sum of its wrenches.
+        // The current run (see the module documentation): its first coupling and the sum of its wrenches,
+        // applied once the run ends.
         let mut run: Option<(usize, S::OpVec)> = None;
+        let apply_run = |couplings: &[Coupling<S>], (first, sum): (usize, S::OpVec), tau: &mut DVector<f64>| {
+            let first = &couplings[first];
+            apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
+        };
         for &i in self.order {
             match run.as_mut().filter(|(first, _)| self.couplings[i].at_same_point(&self.couplings[*first])) {
                 Some((first, _)) => {
@@ -295,9 +300,8 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
                     c.evaluate_as(first, !hands_only);
                 }
                 None => {
-                    if let Some((first, sum)) = run.take() {
-                        let first = &self.couplings[first];
-                        apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
+                    if let Some(ended) = run.take() {
+                        apply_run(self.couplings, ended, tau);
                     }
                     self.couplings[i].evaluate(model, kin, !hands_only);
                     run = Some((i, S::OpVec::zero()));
@@ -311,9 +315,8 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
                 c.step_wrench += c.wrench * weight;
             }
         }
-        if let Some((first, sum)) = run {
-            let first = &self.couplings[first];
-            apply_wrench(model, kin, first.body, &first.op_pose.position, &sum, tau);
+        if let Some(ended) = run {
+            apply_run(self.couplings, ended, tau);
         }
         self.stage += 1;
         if let Some(contacts) = self.contacts.as_deref_mut() {
@@ -377,6 +380,16 @@ mod tests {
     use kinloop_linkage::{Data, Planar};
     use nalgebra::Vector3;
 
+    /// The testbed at random state `seed`, with its kinematics (positions and velocities) evaluated.
+    fn testbed_in_motion(seed: u64) -> (Model<Planar>, Data<Planar>, DVector<f64>) {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let (q, qd) = random_state(&model, seed);
+        forward_kinematics(&model, &mut data, &q);
+        forward_velocity(&model, &mut data, &qd);
+        (model, data, qd)
+    }
+
     /// Users on one OP evaluated as runs (module documentation) add exactly the per-user sums, in any order:
     /// with couplings on links 2, 2, 2, 4, 2 (one of them not pushing), visited in join order (a run of three,
     /// then two runs of one) or grouped by OP with the last one first (a run of four led by the last index,
@@ -385,11 +398,7 @@ mod tests {
     /// Jacobian.
     #[test]
     fn users_on_one_op_add_the_per_user_sums() {
-        let model = paper_testbed();
-        let mut data = Data::new(&model);
-        let (q, qd) = random_state(&model, 8);
-        forward_kinematics(&model, &mut data, &q);
-        forward_velocity(&model, &mut data, &qd);
+        let (model, data, qd) = testbed_in_motion(8);
         let n = model.nq();
         let point = nalgebra::Vector2::new(0.01, -0.002);
         let joined: Vec<Coupling<Planar>> =
@@ -460,11 +469,7 @@ mod tests {
     /// the symmetric fill adds the same matrix, exactly symmetric.
     #[test]
     fn implicit_terms_are_the_dense_products() {
-        let model = paper_testbed();
-        let mut data = Data::new(&model);
-        let (q, qd) = random_state(&model, 5);
-        forward_kinematics(&model, &mut data, &q);
-        forward_velocity(&model, &mut data, &qd);
+        let (model, data, qd) = testbed_in_motion(5);
         let n = model.nq();
         let mut couplings: Vec<Coupling<Planar>> = [(1, 200.0, 0.7), (3, 3000.0, 0.3)]
             .into_iter()

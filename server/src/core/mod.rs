@@ -165,11 +165,10 @@ struct SnapshotScratch<S: Space> {
     contact_y: DVector<f64>,
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
-    /// Every manipulator's row for the others' tables, in user order, gathered and checked once per snapshot
-    /// round: each snapshot copies it as blocks but for its own row (64 users make 4,032 rows a round).
+    /// Every manipulator's row for the others' tables, in user order (so by ascending id), gathered and checked
+    /// once per snapshot round: each snapshot copies it as blocks but for its own row (64 users make 4,032 rows
+    /// a round).
     others: OtherUsers,
-    /// The user index of each row of `others`, ascending.
-    others_rows: Vec<usize>,
     /// The op-space terms of the OP whose users are being built (see `snapshots`).
     at_op: snapshots::AtOp<S>,
     /// User indices grouped by OP (then in join order), for `roster_version` `order_version`: the order of
@@ -252,7 +251,6 @@ impl<S: Space> VeCore<S> {
                 table.reserve(user_room, <S::Point as VecOps>::LEN, S::DIM);
                 table
             },
-            others_rows: Vec::with_capacity(user_room),
             at_op: snapshots::AtOp::none(),
             order: Vec::with_capacity(user_room),
             order_version: u64::MAX,

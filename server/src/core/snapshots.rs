@@ -88,11 +88,9 @@ impl<S: Space> VeCore<S> {
         // Every snapshot carries rows of the same table of the other users: gather and check it once here. If
         // it fails, each snapshot is checked whole, and those that carry a bad row are withheld.
         scratch.others.clear();
-        scratch.others_rows.clear();
-        let manipulators = self.users.iter().zip(&self.couplings).enumerate();
-        for (index, (user, coupling)) in manipulators.filter(|(_, (user, _))| user.role == Role::Manipulator) {
+        let manipulators = self.users.iter().zip(&self.couplings);
+        for (user, coupling) in manipulators.filter(|(user, _)| user.role == Role::Manipulator) {
             scratch.others.push(user.id, coupling.op_pose.position.as_slice(), coupling.wrench.as_slice());
-            scratch.others_rows.push(index);
         }
         let others_valid = validate::other_users(&scratch.others, &self.shape).is_ok();
         for position in 0..self.scratch.order.len() {
@@ -270,6 +268,7 @@ fn build_one<S: Space>(
     let bias = shared.acceleration - shared.inverse_inertia * own_wrench;
 
     let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
+    let user_id = users[index].id;
     let slot = &mut users[index].slot;
     if slot.roster_version != roster_version {
         slot.size_others(scratch.others.len().min(MAX_LIST_ENTRIES), d, k, roster_version);
@@ -295,7 +294,8 @@ fn build_one<S: Space>(
     // Every manipulator's row but this user's own, as two blocks, and no more than the codec's limit.
     let table = &scratch.others;
     let rows = table.len();
-    let own = scratch.others_rows.binary_search(&index).map_or(rows..rows, |row| row..row + 1);
+    // The roster, and so the table, is sorted by user id.
+    let own = table.user_ids.binary_search(&user_id).map_or(rows..rows, |row| row..row + 1);
     let before = 0..own.start.min(MAX_LIST_ENTRIES);
     let after = own.end..rows.min(own.end + MAX_LIST_ENTRIES - before.end);
     snapshot.others.clear();

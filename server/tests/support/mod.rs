@@ -86,3 +86,34 @@ pub fn run<S: Space>(
         }
     }
 }
+
+/// Joins each `(name, role, op)` at time zero; their ids, in order.
+pub fn join_all<S: Space>(core: &mut VeCore<S>, joins: &[(&str, Role, &str)]) -> Vec<u32> {
+    let k = S::DIM;
+    joins
+        .iter()
+        .map(|(name, role, op)| core.join(Duration::ZERO, request(name, *role, op, k)).unwrap().user_id)
+        .collect()
+}
+
+/// Runs until `until` (as [`run`]) with user `ids[i]` pushing `hands[i]` while its local model follows its
+/// newest snapshot; returns each user's newest snapshot (indexed by user id) and how many uplinks the VE
+/// refused.
+pub fn run_following<S: Space>(
+    core: &mut VeCore<S>,
+    until: Duration,
+    ids: &[u32],
+    hands: &[[f64; 3]],
+) -> (Vec<Option<Snapshot>>, usize) {
+    let mut latest = Vec::new();
+    let (mut seq, mut refused) = (0, 0);
+    run(core, until, &mut latest, |core, now, latest| {
+        seq += 1;
+        for (id, hand) in ids.iter().zip(hands) {
+            if let Some(Some(s)) = latest.get(*id as usize) {
+                refused += core.handle_uplink(now, *id, &following(s, seq, hand)).is_err() as usize;
+            }
+        }
+    });
+    (latest, refused)
+}
