@@ -97,6 +97,9 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
 ) -> Result<StepReport, DynamicsError> {
     check_state(model, q, qd)?;
     let dt = cfg.dt;
+    // Kept to restore the state should the step end non-finite (RK4 keeps it anyway for its stages).
+    data.integ.q_start.copy_from(q);
+    data.integ.qd_start.copy_from(qd);
     let report;
     match cfg.integrator {
         Integrator::SemiImplicitEuler | Integrator::ExplicitEuler => {
@@ -119,9 +122,6 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
         }
         Integrator::Rk4 => {
             drop_implicit_mass(data);
-            let ws = &mut data.integ;
-            ws.q_start.copy_from(q);
-            ws.qd_start.copy_from(qd);
             let mut closure_error = 0.0;
             for stage in 0..4 {
                 // Stage state: start + c·dt·k_{stage-1}, c = 0, ½, ½, 1.
@@ -160,6 +160,8 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
         project(model, data, q, qd);
     }
     if q.as_slice().iter().chain(qd.as_slice()).any(|x| !x.is_finite()) {
+        q.copy_from(&data.integ.q_start);
+        qd.copy_from(&data.integ.qd_start);
         return Err(DynamicsError::NonFiniteResult { what: "state after the step" });
     }
     Ok(report)
@@ -401,6 +403,28 @@ mod tests {
             assert!(max_actual <= 1.1 * tolerance, "{scene}: left {max_actual:.3e} m");
             assert_eq!(refactored, 0, "{scene}: {iterations} chord iterations");
             assert!(iterations > 3000, "{scene}: the chain should move fast enough to need a second iteration");
+        }
+    }
+
+    /// A step whose result is not finite (here a step of 1e300 s from joint rates of 1e10 rad/s, which
+    /// overflows) returns the error and leaves q and q̇ as they were, with every integrator: the caller can
+    /// carry on from its last state.
+    #[test]
+    fn a_step_that_ends_non_finite_leaves_the_state_as_it_was() {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let mut push = crate::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
+        for integrator in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler, Integrator::Rk4] {
+            let (mut q, mut qd) = crate::testing::random_state(&model, 5);
+            qd *= 1e10;
+            let before = (q.clone(), qd.clone());
+            let cfg = StepConfig { integrator, ..StepConfig::euler(1e300) };
+            // The Euler steps overflow at the end, RK4 within its stages (D of a non-finite q is not factored).
+            assert!(step(&model, &mut data, &mut q, &mut qd, &mut push, &cfg).is_err(), "{integrator:?}");
+            assert_eq!((q, qd), before, "{integrator:?}");
+            // And the workspace still serves a sound step.
+            let mut state = before.clone();
+            step(&model, &mut data, &mut state.0, &mut state.1, &mut push, &StepConfig::euler(1e-3)).unwrap();
         }
     }
 }
