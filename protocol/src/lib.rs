@@ -5,6 +5,7 @@
 //! - [`quic`]: QUIC endpoints, certificates and trust, the handshake, control framing and datagrams;
 //! - [`emulator`]: a seeded, sans-IO link emulator (delay, jitter, loss, bursts, reordering, duplication,
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
+//! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
@@ -12,6 +13,7 @@ pub mod codec;
 pub mod emulator;
 pub mod messages;
 pub mod quic;
+pub mod realtime;
 mod shape;
 
 pub use messages::*;

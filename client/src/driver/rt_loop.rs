@@ -9,6 +9,7 @@ use std::thread::Thread;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::space::Space;
+use kinloop_protocol::realtime::try_realtime_priority;
 use kinloop_protocol::{Snapshot, Uplink};
 
 use super::record::TickRecord;
@@ -94,29 +95,6 @@ pub struct LoopSettings {
     pub realtime_priority: bool,
     /// Ticks between reports.
     pub report_every: u64,
-}
-
-/// Asks for SCHED_FIFO; returns why not when refused (no permission, not Linux...).
-pub fn try_realtime_priority() -> Result<(), String> {
-    #[cfg(unix)]
-    {
-        use thread_priority::unix::{
-            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
-        };
-        let priority = thread_priority::ThreadPriority::Crossplatform(
-            80u8.try_into().map_err(|e| format!("priority value: {e:?}"))?,
-        );
-        set_thread_priority_and_policy(
-            thread_native_id(),
-            priority,
-            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
-        )
-        .map_err(|e| format!("{e:?}"))
-    }
-    #[cfg(not(unix))]
-    {
-        Err("SCHED_FIFO is a POSIX policy".into())
-    }
 }
 
 /// Runs the loop until `shared.stop`, the duration, or a lost device; returns the last core's counters.

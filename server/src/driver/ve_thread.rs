@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use kinloop_linkage::{Space, VecOps};
 use kinloop_protocol::codec;
+use kinloop_protocol::realtime::try_realtime_priority;
 use kinloop_protocol::RefusalReason;
 use rtrb::{Consumer, Producer};
 use tokio::sync::{oneshot, Notify};
@@ -70,34 +71,14 @@ pub struct VeThreadIo {
     pub stop: Arc<AtomicBool>,
 }
 
-/// Tries to run the calling thread under SCHED_FIFO; false when not permitted.
-pub fn try_realtime_priority() -> bool {
-    #[cfg(unix)]
-    {
-        use thread_priority::{
-            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadPriority,
-            ThreadPriorityValue, ThreadSchedulePolicy,
-        };
-        let Ok(value) = ThreadPriorityValue::try_from(80u8) else { return false };
-        set_thread_priority_and_policy(
-            thread_native_id(),
-            ThreadPriority::Crossplatform(value),
-            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
-        )
-        .is_ok()
-    }
-    #[cfg(not(unix))]
-    {
-        false
-    }
-}
-
 /// Runs the VE loop until `io.stop` is set; returns the final statistics.
 pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) -> VeLoopStats {
-    let mut stats = VeLoopStats { realtime_priority: realtime && try_realtime_priority(), ..Default::default() };
-    if realtime && !stats.realtime_priority {
-        tracing::warn!("SCHED_FIFO not permitted (needs root or CAP_SYS_NICE); the VE thread runs at normal priority");
-    }
+    let granted = if realtime {
+        try_realtime_priority().inspect_err(|why| tracing::warn!(%why, "the VE thread runs at normal priority")).is_ok()
+    } else {
+        false
+    };
+    let mut stats = VeLoopStats { realtime_priority: granted, ..Default::default() };
     let period = core.config().ve_period();
     let half_period = period / 2;
     let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;

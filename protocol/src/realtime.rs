@@ -1,0 +1,72 @@
+//! What the two real-time loops (the server's VE thread and the client's haptic thread) ask of the operating
+//! system. It lives here, in the one crate both drivers depend on, so that they ask the same way.
+
+/// Why the calling thread could not be switched to SCHED_FIFO.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RealtimePriorityError {
+    /// The platform has no POSIX real-time policies.
+    #[error("SCHED_FIFO is a POSIX policy, not available on this platform")]
+    NotPosix,
+    /// The operating system refused (usually: neither root nor CAP_SYS_NICE, or no real-time budget).
+    #[error("the operating system refused SCHED_FIFO (needs root or CAP_SYS_NICE): {0}")]
+    Refused(String),
+}
+
+/// Priority asked for: high among real-time threads, below the kernel's own (99).
+pub const REALTIME_PRIORITY: u8 = 80;
+
+/// Runs the calling thread under SCHED_FIFO at [`REALTIME_PRIORITY`].
+pub fn try_realtime_priority() -> Result<(), RealtimePriorityError> {
+    #[cfg(unix)]
+    {
+        use thread_priority::unix::{
+            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
+        };
+        use thread_priority::{ThreadPriority, ThreadPriorityValue};
+        let value = ThreadPriorityValue::try_from(REALTIME_PRIORITY)
+            .map_err(|e| RealtimePriorityError::Refused(format!("priority {REALTIME_PRIORITY}: {e:?}")))?;
+        set_thread_priority_and_policy(
+            thread_native_id(),
+            ThreadPriority::Crossplatform(value),
+            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+        )
+        .map_err(|e| RealtimePriorityError::Refused(format!("{e:?}")))
+    }
+    #[cfg(not(unix))]
+    {
+        Err(RealtimePriorityError::NotPosix)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Granted or refused, the answer is one of the typed ones: when granted, the policy the operating system
+    /// reports back for the thread is SCHED_FIFO; a refusal says why.
+    #[test]
+    fn the_thread_gets_fifo_or_a_reason() {
+        std::thread::spawn(|| match try_realtime_priority() {
+            Ok(()) => {
+                #[cfg(unix)]
+                {
+                    let policy = thread_priority::unix::thread_schedule_policy().expect("policy");
+                    assert_eq!(
+                        policy,
+                        thread_priority::unix::ThreadSchedulePolicy::Realtime(
+                            thread_priority::unix::RealtimeThreadSchedulePolicy::Fifo
+                        )
+                    );
+                }
+            }
+            Err(RealtimePriorityError::Refused(why)) => assert!(!why.is_empty()),
+            Err(RealtimePriorityError::NotPosix) => {
+                if cfg!(unix) {
+                    panic!("a POSIX platform answered NotPosix")
+                }
+            }
+        })
+        .join()
+        .expect("the probe thread");
+    }
+}
