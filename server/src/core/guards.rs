@@ -149,10 +149,12 @@ pub struct WrenchLimits {
 }
 
 impl WrenchLimits {
-    /// From the device's announced peaks (with slack), or the defaults where it announced none.
+    /// From the device's announced peaks (with slack), or the defaults where it announced none or no
+    /// positive, finite one.
     pub fn for_device(device: Option<&DeviceCaps>, limits: &GuardLimits) -> Self {
         let pick = |announced: Option<f64>, default: f64| match announced {
-            Some(peak) if peak > 0.0 => peak * (1.0 + limits.device_cap_slack),
+            // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
+            Some(peak) if peak > 0.0 && peak.is_finite() => peak * (1.0 + limits.device_cap_slack),
             _ => default,
         };
         WrenchLimits {

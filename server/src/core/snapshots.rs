@@ -47,7 +47,7 @@ use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::local_model::{op_acceleration, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::op_space::{frame_point_inertia, op_space_inertia};
 use kinloop_linkage::{forward_dynamics, MatOps, Model, Space, VecOps};
-use kinloop_protocol::codec::limits::MAX_LIST_ENTRIES;
+use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_WRENCH};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
 use nalgebra::{DMatrix, DVector};
@@ -90,7 +90,8 @@ impl<S: Space> VeCore<S> {
         scratch.others.clear();
         let manipulators = self.users.iter().zip(&self.couplings);
         for (user, coupling) in manipulators.filter(|(user, _)| user.role == Role::Manipulator) {
-            scratch.others.push(user.id, coupling.op_pose.position.as_slice(), coupling.wrench.as_slice());
+            let wrench = within_wire_range::<S>(&coupling.wrench);
+            scratch.others.push(user.id, coupling.op_pose.position.as_slice(), wrench.as_slice());
         }
         let others_valid = validate::other_users(&scratch.others, &self.shape).is_ok();
         for position in 0..self.scratch.order.len() {
@@ -423,4 +424,42 @@ fn fill_contact_term<S: Space>(
     term.stiffness = stiffness;
     term.damping = damping;
     Ok(penalty)
+}
+
+/// A user's wrench as the others' table carries it: scaled down, its direction kept, until no component
+/// exceeds the wire's `MAX_WRENCH`. The coupling's PD may legitimately go past it for a moment (a user
+/// yanking the local model far from the VE), and one row out of range would fail the table, and with it
+/// every other user's snapshot. A non-finite component stays non-finite, for the checks to withhold.
+fn within_wire_range<S: Space>(wrench: &S::OpVec) -> S::OpVec {
+    let largest = wrench.as_slice().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let mut fitted = *wrench;
+    if largest > MAX_WRENCH && largest.is_finite() {
+        let scale = MAX_WRENCH / largest;
+        for x in fitted.as_mut_slice() {
+            // The clamp only catches the rounding of the largest component's product.
+            *x = (*x * scale).clamp(-MAX_WRENCH, MAX_WRENCH);
+        }
+    }
+    fitted
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::Planar;
+    use nalgebra::Vector3;
+
+    /// A wrench past the wire's range is scaled into it with its direction kept and its largest component on
+    /// the limit; one within range is left as it is, and a non-finite component stays non-finite.
+    #[test]
+    fn the_others_wrenches_are_fitted_to_the_wire_range() {
+        let yank = Vector3::new(-3.0 * MAX_WRENCH, 0.5 * MAX_WRENCH, 7.0);
+        let fitted = within_wire_range::<Planar>(&yank);
+        assert_eq!(fitted.amax(), MAX_WRENCH);
+        assert!((fitted.normalize() - yank.normalize()).amax() <= 1e-15, "{fitted}");
+        let calm = Vector3::new(MAX_WRENCH, -0.3, 0.002);
+        assert_eq!(within_wire_range::<Planar>(&calm), calm);
+        let bad = Vector3::new(f64::NAN, 2.0 * MAX_WRENCH, 0.0);
+        assert!(within_wire_range::<Planar>(&bad)[0].is_nan());
+    }
 }
