@@ -22,7 +22,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::shape::SceneKind;
+use crate::shape::{SceneKind, SessionShape};
 
 /// Version carried in [`Hello::version`]; bumped whenever the wire format changes.
 pub const PROTOCOL_VERSION: u16 = 2;
@@ -109,6 +109,13 @@ pub struct SceneSummary {
     /// The scene's characteristic length L (m): constraint directions and singular values in snapshots are
     /// expressed in the unit-consistent coordinates `(v, L ω)`.
     pub length_scale: f64,
+}
+
+impl SceneSummary {
+    /// The dimensions a session on this scene checks its snapshots and uplinks against.
+    pub fn shape(&self) -> SessionShape {
+        SessionShape { kind: self.kind, n: self.n as usize, m: self.m as usize }
+    }
 }
 
 /// Controller gains the server recommends for this scene and device.

@@ -25,9 +25,7 @@ use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, DatagramReceiver, DatagramSender, Endpoint,
     EndpointError, EndpointOptions, Trust,
 };
-use kinloop_protocol::{
-    Control, Datagram, Hello, LocalModelForm, Role, SessionShape, Uplink, Welcome, PROTOCOL_VERSION,
-};
+use kinloop_protocol::{Control, Datagram, Hello, LocalModelForm, Role, Uplink, Welcome, PROTOCOL_VERSION};
 
 use crate::core::{
     ConstraintMode, CoreConfig, CoreError, CoreStats, GainChoice, HapticCore, ModelForm, UplinkDeadband,
@@ -748,7 +746,7 @@ async fn serve_session<S: Space>(
     net: &NetShared,
 ) -> String {
     let scene = &session.welcome.scene;
-    let shape = SessionShape { kind: scene.kind, n: scene.n as usize, m: scene.m as usize };
+    let shape = scene.shape();
     let mut receiver = DatagramReceiver::new(session.connection.clone(), shape);
     let mut ping = tokio::time::interval(Duration::from_millis(250));
     let mut housekeeping = tokio::time::interval(Duration::from_millis(50));
