@@ -108,7 +108,12 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
     let stats = core.stats();
     assert!(stats.max_force_ratio <= 1.0, "{}", stats.max_force_ratio);
     assert!(stats.max_force_ratio > 0.99, "the hostile terms should have pushed to the limit");
-    assert_eq!(rejected, 3 * 6, "NaN pose, infinite bias, negative and huge Λ⁻¹, bad count, short Λ⁻¹");
+    assert_eq!(
+        rejected,
+        3 * 8,
+        "NaN pose, twist past the wire's 1e3, infinite bias, negative and huge Λ⁻¹, directions past unit length, \
+         bad count, short Λ⁻¹"
+    );
     assert_eq!(stats.snapshots_rejected, rejected);
 }
 

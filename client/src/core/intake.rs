@@ -1,30 +1,25 @@
 //! Snapshot intake: a wire [`Snapshot`] (vectors) is checked and copied into fixed-size, preallocated terms
-//! the tick can use without allocating. The wire codec already validated the shape of network input; the
-//! core checks again because in-process callers hand it snapshots directly, and a corrupt Λ̂⁻¹ must never
-//! reach the device.
+//! the tick can use without allocating. The checks are the wire's own (`validate::snapshot_but_others`:
+//! lengths, finiteness and the protocol's ranges; the others' table, which the core does not read, is left
+//! to the decoder), then the core's stricter ones (its own bound on Λ̂⁻¹, non-negative diagonal, a pose it
+//! can read). The codec already ran the wire's checks on network input; the core runs them again because
+//! in-process callers hand it snapshots directly, and a corrupt term must never reach the device or the
+//! uplink (a pose of 1e300 m accepted here once sent the local model, and the uplinks, off to 1e298 m).
 
 use std::time::Duration;
 
 use kinloop_linkage::local_model::{ConfigSpaceTerms, ContactTerm, OpPose, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::space::{MatOps, Space, VecOps};
-use kinloop_protocol::{ConfigTerms, Snapshot};
+use kinloop_protocol::codec::{validate, DecodeError};
+use kinloop_protocol::{ConfigTerms, SessionShape, Snapshot};
 
-/// Why a snapshot was refused (no allocation: the field names are static).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+/// Why a snapshot was refused (no allocation: the wire's checks name fields by static paths).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SnapshotRejection {
-    /// A field has the wrong length for the session.
-    #[error("snapshot field {field} has the wrong length")]
-    WrongLength {
-        /// Which field.
-        field: &'static str,
-    },
-    /// A field holds NaN or infinity.
-    #[error("snapshot field {field} is not finite")]
-    NonFinite {
-        /// Which field.
-        field: &'static str,
-    },
-    /// A field is finite but physically implausible.
+    /// The wire's own checks refuse it (a length, a non-finite number, a value outside the protocol's range).
+    #[error("snapshot refused by the wire's checks: {0}")]
+    Wire(DecodeError),
+    /// A field passes the wire's checks but not the core's stricter ones.
     #[error("snapshot field {field} is implausible")]
     Implausible {
         /// Which field.
@@ -56,16 +51,6 @@ pub(crate) struct SnapshotTerms<S: Space> {
     pub has_config: bool,
 }
 
-fn finite_of_len(field: &'static str, v: &[f64], len: usize) -> Result<(), SnapshotRejection> {
-    if v.len() != len {
-        return Err(SnapshotRejection::WrongLength { field });
-    }
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err(SnapshotRejection::NonFinite { field });
-    }
-    Ok(())
-}
-
 impl<S: Space> SnapshotTerms<S> {
     /// Empty terms; `config_shape` = `Some((n, m))` preallocates configuration terms.
     pub fn new(config_shape: Option<(usize, usize)>) -> Self {
@@ -90,17 +75,16 @@ impl<S: Space> SnapshotTerms<S> {
     pub fn fill_from(
         &mut self,
         snap: &Snapshot,
+        shape: &SessionShape,
         received_at: Duration,
         max_inverse_inertia: f64,
         pose_memo: &mut S::RotParamsMemo,
     ) -> Result<(), SnapshotRejection> {
+        validate::snapshot_but_others(snap, shape).map_err(SnapshotRejection::Wire)?;
         let k = S::DIM;
-        finite_of_len("op_pose", &snap.op_pose, OpPose::<S>::wire_len())?;
         self.op_pose = OpPose::from_slice_memo(&snap.op_pose, pose_memo)
             .ok_or(SnapshotRejection::Implausible { field: "op_pose" })?;
-        finite_of_len("op_twist", &snap.op_twist, k)?;
         self.op_twist = S::OpVec::from_slice(&snap.op_twist);
-        finite_of_len("inverse_inertia", &snap.inverse_inertia, k * (k + 1) / 2)?;
         let mut index = 0;
         for r in 0..k {
             for c in r..k {
@@ -113,23 +97,14 @@ impl<S: Space> SnapshotTerms<S> {
                 self.inverse_inertia[(c, r)] = v;
             }
         }
-        finite_of_len("bias_accel", &snap.bias_accel, k)?;
         self.bias = S::OpVec::from_slice(&snap.bias_accel);
-        finite_of_len("directions", &snap.directions, k * k)?;
         self.directions.as_mut_slice().copy_from_slice(&snap.directions);
-        finite_of_len("singular_values", &snap.singular_values, k)?;
-        if snap.singular_values.iter().any(|s| *s < 0.0) {
-            return Err(SnapshotRejection::Implausible { field: "singular_values" });
-        }
         self.singular_values = S::OpVec::from_slice(&snap.singular_values);
-        if usize::from(snap.constraint_count) > k {
-            return Err(SnapshotRejection::Implausible { field: "constraint_count" });
-        }
         self.constraint_count = snap.constraint_count;
-        self.fill_contacts(snap)?;
+        self.fill_contacts(snap);
         self.has_config = false;
         if let (Some(terms), Some(wire)) = (self.config.as_mut(), snap.config.as_ref()) {
-            fill_config(terms, wire)?;
+            fill_config(terms, wire);
             self.has_config = true;
         }
         self.seq = snap.seq;
@@ -139,19 +114,9 @@ impl<S: Space> SnapshotTerms<S> {
 
     /// The nearest contacts (the server lists them nearest first) in the local model's convention: the gap
     /// is minus the penetration depth, the gap rate the separating normal velocity.
-    fn fill_contacts(&mut self, snap: &Snapshot) -> Result<(), SnapshotRejection> {
-        let point_dim = <S::Point as VecOps>::LEN;
+    fn fill_contacts(&mut self, snap: &Snapshot) {
         self.contact_count = snap.contacts.len().min(MAX_LOCAL_CONTACTS);
         for (slot, c) in self.contacts.iter_mut().zip(&snap.contacts) {
-            finite_of_len("contacts.normal", &c.normal, point_dim)?;
-            finite_of_len("contacts.op_coupling", &c.op_coupling, S::DIM)?;
-            let scalars = [c.depth, c.normal_velocity, c.mobility, c.bias_accel, c.stiffness, c.damping];
-            if scalars.iter().any(|x| !x.is_finite()) {
-                return Err(SnapshotRejection::NonFinite { field: "contacts" });
-            }
-            if c.stiffness < 0.0 || c.damping < 0.0 || c.mobility < 0.0 {
-                return Err(SnapshotRejection::Implausible { field: "contacts" });
-            }
             *slot = ContactTerm {
                 normal: S::Point::from_slice(&c.normal),
                 gap: -c.depth,
@@ -163,23 +128,13 @@ impl<S: Space> SnapshotTerms<S> {
                 damping: c.damping,
             };
         }
-        Ok(())
     }
 }
 
-/// Copies wire configuration terms into preallocated ones (mass matrix from its packed upper triangle).
-fn fill_config(terms: &mut ConfigSpaceTerms, wire: &ConfigTerms) -> Result<(), SnapshotRejection> {
+/// Copies wire configuration terms, of the lengths the wire's checks found for the session, into
+/// preallocated ones (mass matrix from its packed upper triangle).
+fn fill_config(terms: &mut ConfigSpaceTerms, wire: &ConfigTerms) {
     let n = terms.q.len();
-    let m = terms.closure_bias_stab.len();
-    let k = terms.op_bias.len();
-    finite_of_len("config.q", &wire.q, n)?;
-    finite_of_len("config.qd", &wire.qd, n)?;
-    finite_of_len("config.mass_matrix", &wire.mass_matrix, n * (n + 1) / 2)?;
-    finite_of_len("config.closure_jacobian", &wire.closure_jacobian, m * n)?;
-    finite_of_len("config.closure_bias_stab", &wire.closure_bias_stab, m)?;
-    finite_of_len("config.generalized_bias", &wire.generalized_bias, n)?;
-    finite_of_len("config.op_jacobian", &wire.op_jacobian, k * n)?;
-    finite_of_len("config.op_bias", &wire.op_bias, k)?;
     terms.q.copy_from_slice(&wire.q);
     terms.qd.copy_from_slice(&wire.qd);
     let mut index = 0;
@@ -197,5 +152,4 @@ fn fill_config(terms: &mut ConfigSpaceTerms, wire: &ConfigTerms) -> Result<(), S
     terms.generalized_bias.copy_from_slice(&wire.generalized_bias);
     terms.op_jacobian.as_mut_slice().copy_from_slice(&wire.op_jacobian);
     terms.op_bias.copy_from_slice(&wire.op_bias);
-    Ok(())
 }

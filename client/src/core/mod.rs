@@ -38,7 +38,8 @@ use std::time::Duration;
 
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::space::{SceneKind, Space, VecOps};
-use kinloop_protocol::{uplink_flags, Snapshot, Uplink, Welcome};
+use kinloop_protocol::codec::limits::MAX_WRENCH;
+use kinloop_protocol::{uplink_flags, SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
     ConstraintMode, ConstraintWeighting, ControllerGains, CoreConfig, GainChoice, ModelForm, SafetyConfig,
@@ -54,7 +55,7 @@ use deadband::Deadband;
 use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
-use safety::{force_ratio, limit_wrench, mask_unactuated, OutputGate, WrenchLimits};
+use safety::{force_ratio, limit_wrench, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
@@ -209,7 +210,7 @@ pub struct CoreStats {
     pub snapshots_superseded: u64,
     /// Snapshots refused as corrupt.
     pub snapshots_rejected: u64,
-    /// Ticks whose output was non-finite (zero was commanded instead).
+    /// Ticks whose device reading or output was non-finite or absurd (zero was commanded instead).
     pub non_finite_events: u64,
     /// Ticks whose command was clamped to the device limits.
     pub clamped_ticks: u64,
@@ -309,6 +310,8 @@ pub struct HapticCore<S: Space> {
     device_mass: S::OpVec,
     length_scale: f64,
     user_id: u32,
+    /// The session's dimensions, for the wire's checks on incoming snapshots.
+    shape: SessionShape,
     // Boxed: a snapshot moves from incoming to pending to active by swapping pointers, not ~1 kB structs.
     incoming: Box<SnapshotTerms<S>>,
     pending: Box<SnapshotTerms<S>>,
@@ -386,6 +389,7 @@ impl<S: Space> HapticCore<S> {
             device_mass,
             length_scale: scene.length_scale,
             user_id: welcome.user_id,
+            shape: scene.shape(),
             incoming: Box::new(SnapshotTerms::new(config_shape)),
             pending: Box::new(SnapshotTerms::new(config_shape)),
             pending_fresh: false,
@@ -491,6 +495,7 @@ impl<S: Space> HapticCore<S> {
         }
         if let Err(rejection) = self.incoming.fill_from(
             snapshot,
+            &self.shape,
             now,
             self.config.safety.max_inverse_inertia,
             &mut self.pose_memos.snapshot_op,
@@ -544,13 +549,12 @@ impl<S: Space> HapticCore<S> {
         };
         self.last_now = Some(now);
         self.stats.ticks += 1;
-        let device_finite =
-            device.pose.position.is_finite() && S::rot_is_finite(&device.pose.rotation) && device.twist.is_finite();
-        if self.pending_fresh && device_finite {
+        let device_usable = usable_state::<S>(&device.pose, &device.twist);
+        if self.pending_fresh && device_usable {
             self.apply_pending(now, &device.pose);
         }
-        if !self.has_snapshot || !device_finite {
-            return self.idle_tick(now, device_finite);
+        if !self.has_snapshot || !device_usable {
+            return self.idle_tick(now, device_usable);
         }
         self.stats.active_ticks += 1;
         let mut flags = 0;
@@ -579,7 +583,8 @@ impl<S: Space> HapticCore<S> {
         self.model.set_inverse_inertia(&self.frame.inverse_inertia);
 
         // 3. Step the local model under the user's wrench.
-        let sensed = device.hand_wrench.filter(|w| w.is_finite());
+        // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
+        let sensed = device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH));
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
         let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
@@ -621,7 +626,7 @@ impl<S: Space> HapticCore<S> {
         let mut command = S::OpVec::zero();
         let mut clamp_scale = 1.0;
         let gain;
-        if !requested.is_finite() || !self.model.is_finite() {
+        if !requested.is_finite() || !usable_state::<S>(&self.model.pose(), &self.model.twist()) {
             self.recover_from_non_finite(now);
             flags |= uplink_flags::SAFETY_STOP;
             gain = 0.0;
@@ -690,9 +695,9 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// Zero output before the first snapshot or with an unusable device reading.
-    fn idle_tick(&mut self, now: Duration, device_finite: bool) -> TickOutput<'_, S> {
+    fn idle_tick(&mut self, now: Duration, device_usable: bool) -> TickOutput<'_, S> {
         self.report = TickReport::idle(now);
-        if !device_finite {
+        if !device_usable {
             self.stats.non_finite_events += 1;
             self.report.flags = uplink_flags::SAFETY_STOP;
             self.gate.close();

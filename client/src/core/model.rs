@@ -126,10 +126,4 @@ impl<S: Space> LocalModel<S> {
         let live = if self.using_config { 0 } else { self.reduced.contact_count };
         (&self.reduced.contacts, live)
     }
-
-    /// True when the OP state is finite.
-    pub fn is_finite(&self) -> bool {
-        let pose = self.pose();
-        pose.position.is_finite() && S::rot_is_finite(&pose.rotation) && self.twist().is_finite()
-    }
 }

@@ -6,9 +6,13 @@
 //!   `fade_out` while the newest snapshot is stale; the gain applied is the smoothstep of that level, so the
 //!   force starts and stops without a step in value or slope, and a stale link reaches exactly zero within
 //!   `fade_out`;
-//! - **non-finite values** are never commanded: the caller sends zero, counts and flags it (see `HapticCore`).
+//! - **non-finite values** are never commanded: the caller sends zero, counts and flags it (see `HapticCore`);
+//!   nor are absurd ones: a device reading or a local-model state outside the protocol's ranges
+//!   ([`usable_state`]) is treated as non-finite.
 
+use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::space::{Space, VecOps};
+use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
 
 use super::config::SafetyConfig;
 use crate::device::DeviceSpec;
@@ -106,4 +110,19 @@ impl OutputGate {
     pub fn close(&mut self) {
         self.level = 0.0;
     }
+}
+
+/// Every number within `±bound` (false for NaN).
+pub fn within(values: &[f64], bound: f64) -> bool {
+    values.iter().all(|x| x.abs() <= bound)
+}
+
+/// A pose and twist a device can read or a local model can hold: finite, the position within 1 km and the
+/// twist within 1 km/s or rad/s (the protocol's ranges, beyond which the server refuses the uplink that
+/// carries them). A corrupt device reading, or a local model driven off by terms at the edge of their own
+/// ranges (b̂ = 1e6 rad/s² spun one to 1,500 rad/s in 2 ms), fails it.
+pub fn usable_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool {
+    within(pose.position.as_slice(), MAX_POSITION)
+        && S::rot_is_finite(&pose.rotation)
+        && within(twist.as_slice(), MAX_SPEED)
 }
