@@ -22,24 +22,9 @@ use nalgebra::{UnitComplex, Vector2, Vector3};
 use support::{paper_config, TestbedVe};
 
 const TICKS: usize = 4000;
-const ODD: &[f64] = &[f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300, -1e300, 1e-300, 0.0, -0.0, 1e6, -3.0];
-
-struct Rng(TestRng);
-
-impl Rng {
-    fn below(&mut self, n: usize) -> usize {
-        ((self.0.signed() + 1.0) * 0.5 * n as f64) as usize % n
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        (self.0.signed() + 1.0) * 0.5 < p
-    }
-    fn odd(&mut self) -> f64 {
-        ODD[self.below(ODD.len())]
-    }
-}
 
 /// Sets one number of one field to an odd value, or resizes one field.
-fn corrupt(s: &mut Snapshot, rng: &mut Rng) {
+fn corrupt(s: &mut Snapshot, rng: &mut TestRng) {
     let odd = rng.odd();
     let field: &mut Vec<f64> = match rng.below(7) {
         0 => &mut s.op_pose,
@@ -67,7 +52,7 @@ fn corrupt(s: &mut Snapshot, rng: &mut Rng) {
 }
 
 /// A reading no device should give.
-fn odd_reading(rng: &mut Rng) -> DeviceState<Planar> {
+fn odd_reading(rng: &mut TestRng) -> DeviceState<Planar> {
     let (a, b) = (rng.odd(), rng.odd());
     DeviceState {
         pose: OpPose { position: Vector2::new(a, 0.01), rotation: UnitComplex::new(0.1) },
@@ -78,7 +63,7 @@ fn odd_reading(rng: &mut Rng) -> DeviceState<Planar> {
 
 fn session(seed: u64, mode: ConstraintMode, form: ModelForm, preset: DevicePreset) {
     let context = format!("seed {seed}, {mode:?}, {form:?}, {preset:?}");
-    let mut rng = Rng(TestRng(seed));
+    let mut rng = TestRng(seed);
     // The VE moves under the paper's wrench alone (the server's guards, which would refuse the uplinks of a
     // local model sent astray by in-range but false terms, are not this test's subject).
     let mut ve = TestbedVe::new(form == ModelForm::Config);

@@ -20,7 +20,25 @@ impl TestRng {
         z ^= z >> 31;
         (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
     }
+
+    /// An index in `0..n` (n > 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        ((self.signed() + 1.0) * 0.5 * n as f64) as usize % n
+    }
+
+    /// True with probability `p`.
+    pub fn chance(&mut self, p: f64) -> bool {
+        (self.signed() + 1.0) * 0.5 < p
+    }
+
+    /// One of [`ODD_NUMBERS`].
+    pub fn odd(&mut self) -> f64 {
+        ODD_NUMBERS[self.below(ODD_NUMBERS.len())]
+    }
 }
+
+/// Numbers the random-input tests put where a sane one belongs: not finite, huge, tiny, zero, negative.
+pub const ODD_NUMBERS: &[f64] = &[f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300, -1e300, 1e-300, 0.0, -0.0, 1e6, -3.0];
 
 /// A built-in scene file, parsed (panics if it is missing or broken: tests only).
 pub fn builtin_scene(name: &str) -> crate::Scene {

@@ -30,10 +30,6 @@ enum Outcome {
     Simulated,
 }
 
-fn below(rng: &mut Rng, n: usize) -> usize {
-    ((rng.signed() + 1.0) * 0.5 * n as f64) as usize % n
-}
-
 /// The byte ranges of the number literals on a line.
 fn numbers(line: &str) -> Vec<(usize, usize)> {
     let b = line.as_bytes();
@@ -59,30 +55,30 @@ fn numbers(line: &str) -> Vec<(usize, usize)> {
 fn mutate(text: &str, rng: &mut Rng) -> String {
     let names: Vec<&str> = text.split('"').skip(1).step_by(2).collect();
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
-    for _ in 0..1 + below(rng, 3) {
-        let i = below(rng, lines.len());
+    for _ in 0..1 + rng.below(3) {
+        let i = rng.below(lines.len());
         let line = lines[i].clone();
-        match below(rng, 6) {
+        match rng.below(6) {
             0 => drop(lines.remove(i)),
             1 => lines.insert(i, line),
             2 | 3 => {
                 let spans = numbers(&line);
                 if !spans.is_empty() {
-                    let (start, end) = spans[below(rng, spans.len())];
-                    let odd = ODD_NUMBERS[below(rng, ODD_NUMBERS.len())];
+                    let (start, end) = spans[rng.below(spans.len())];
+                    let odd = ODD_NUMBERS[rng.below(ODD_NUMBERS.len())];
                     lines[i] = format!("{}{odd}{}", &line[..start], &line[end..]);
                 }
             }
             4 => {
                 if let (Some(name), false) = (line.split('"').nth(1), names.is_empty()) {
-                    lines[i] = line.replacen(name, names[below(rng, names.len())], 1);
+                    lines[i] = line.replacen(name, names[rng.below(names.len())], 1);
                 }
             }
             _ => {
                 // A vector one element shorter (from its second element to the bracket) or longer.
                 if let Some(comma) = line.find(", ") {
                     let close = line[comma..].find(']').map_or(line.len(), |x| comma + x);
-                    lines[i] = if below(rng, 2) == 0 {
+                    lines[i] = if rng.below(2) == 0 {
                         format!("{}{}", &line[..comma], &line[close..])
                     } else {
                         format!("{}, 0.1{}", &line[..comma], &line[comma..])

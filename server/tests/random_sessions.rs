@@ -18,24 +18,9 @@ use kinloop_server::core::{JoinRequest, VeConfig, VeCore, VeEvent};
 use support::{core, device, model, uplink};
 
 const OPERATIONS: usize = 6000;
-const ODD: &[f64] = &[f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300, -1e300, 1e-300, 0.0, -0.0, 1e6, -3.0];
-
-struct Rng(TestRng);
-
-impl Rng {
-    fn below(&mut self, n: usize) -> usize {
-        ((self.0.signed() + 1.0) * 0.5 * n as f64) as usize % n
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        (self.0.signed() + 1.0) * 0.5 < p
-    }
-    fn odd(&mut self) -> f64 {
-        ODD[self.below(ODD.len())]
-    }
-}
 
 /// A device description, now and then with odd limits.
-fn some_device(rng: &mut Rng, dof: usize) -> Option<DeviceCaps> {
+fn some_device(rng: &mut TestRng, dof: usize) -> Option<DeviceCaps> {
     let mut caps = device(dof);
     match rng.below(6) {
         0 => None,
@@ -59,7 +44,7 @@ fn session<S: Space>(scene: &str, seed: u64) {
     let length_scale = model.length_scale;
     let mut ve: VeCore<S> = core(model, VeConfig::paper());
     let shape = ve.session_shape();
-    let mut rng = Rng(TestRng(seed));
+    let mut rng = TestRng(seed);
     let mut now = Duration::ZERO;
     // Per user id: present, the next sequence number, the newest snapshot.
     let mut present: Vec<bool> = Vec::new();
@@ -119,12 +104,12 @@ fn session<S: Space>(scene: &str, seed: u64) {
                     let Some(snapshot) = &latest[id] else { continue };
                     let mut hand = vec![0.0; S::DIM];
                     for h in &mut hand {
-                        *h = 2.0 * rng.0.signed();
+                        *h = 2.0 * rng.signed();
                     }
                     let mut pose = snapshot.op_pose.clone();
                     let mut twist = snapshot.op_twist.clone();
                     let seq = if rng.chance(0.05) { seqs[id].saturating_sub(rng.below(3) as u64) } else { seqs[id] };
-                    let (i, odd, off) = (rng.below(S::DIM), rng.odd(), 0.05 * rng.0.signed());
+                    let (i, odd, off) = (rng.below(S::DIM), rng.odd(), 0.05 * rng.signed());
                     let (p, t) = (i % pose.len(), i % twist.len());
                     match rng.below(25) {
                         0 => hand[i] = odd,
