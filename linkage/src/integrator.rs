@@ -227,8 +227,8 @@ pub const CHORD_ITERATIONS: usize = 3;
 /// to [`MAX_PROJECTION_PASSES`] passes (in ordinary motion, the paper's manipulation included, one pass).
 ///
 /// Needs [`kkt::factorize`] at a nearby state (the step's dynamics). Leaves h and Wᵀ at the q the last pass
-/// began from (before its correction) and the body poses there. Both corrections are `U⁻ᵀ Z S⁺ r`, so they go through the
-/// triangular solve together.
+/// began from (before its correction) and the body poses there. Both corrections are `U⁻ᵀ Z S⁺ r`, so they
+/// go through the triangular solve together.
 pub fn project<S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
@@ -385,10 +385,6 @@ mod tests {
         (data.closure_residual.norm(), w_qd.sum::<f64>().sqrt())
     }
 
-    /// The projection, with the factors of a solve one step back, takes the position and velocity residuals
-    /// of a step down by at least the factor its documentation promises, from slow to fast motion of the
-    /// testbed (the faster, the more W moves in a step and the less the stale factors help), and never leaves
-    /// more than its tolerance, evaluated afresh.
     /// The testbed at q0 with joint rates of `speed` times a fixed pattern (made consistent with the loop),
     /// after one semi-implicit Euler step of 1 ms without projection: a drift of order dt² q̇². The workspace
     /// holds the factors of the step's solve.
@@ -405,6 +401,10 @@ mod tests {
         (data, q, qd)
     }
 
+    /// The projection, with the factors of a solve one step back, takes the position and velocity residuals
+    /// of a step down by at least the factor its documentation promises, from slow to fast (single-pass)
+    /// motion of the testbed (the faster, the more W moves in a step and the less the stale factors help),
+    /// and never leaves more than its tolerance, evaluated afresh.
     #[test]
     fn chord_projection_contracts_the_residuals_of_a_step() {
         let model = paper_testbed();
