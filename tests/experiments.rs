@@ -238,3 +238,25 @@ fn bad_experiment_arguments_are_refused_cleanly() {
     let threads = Command::new(bin).args(["experiment", "paper", "--threads", "0"]).output().unwrap();
     assert!(!threads.status.success() && String::from_utf8_lossy(&threads.stderr).contains("--threads"));
 }
+
+/// The other commands' numeric flags are checked too: a NaN, infinite, zero or overlong measurement time is
+/// refused with a message naming the flag, not a panic (`bench --seconds nan` once panicked in `Duration`).
+#[test]
+fn bad_bench_and_timer_floor_arguments_are_refused_cleanly() {
+    let bin = env!("CARGO_BIN_EXE_kinloop");
+    let cases: [&[&str]; 6] = [
+        &["bench", "--seconds", "nan"],
+        &["bench", "--seconds", "inf"],
+        &["bench", "--seconds", "0"],
+        &["bench", "--seconds", "1e6"],
+        &["timer-floor", "--duration", "nan"],
+        &["timer-floor", "--rate", "0"],
+    ];
+    for args in cases {
+        let out = Command::new(bin).args(args).env("RUST_BACKTRACE", "0").output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let flag = args[1];
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains(flag) && !stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}

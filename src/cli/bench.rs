@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{ensure, Context, Result};
 use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, Timing};
 use kinloop_linkage::Integrator;
 use serde_json::{json, Value};
@@ -79,10 +79,18 @@ fn ve_tick_goal_ns(users: usize) -> f64 {
 /// Issue 5's goal for one haptic tick on the testbed.
 const CLIENT_TICK_GOAL_NS: f64 = 500.0;
 
+/// Longest measurement per case `--seconds` accepts.
+const MAX_SECONDS: f64 = 30.0;
+
 /// Runs the suite.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    ensure!(
+        args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= MAX_SECONDS,
+        "--seconds: must be in (0, {MAX_SECONDS}] s per case, got {}",
+        args.seconds
+    );
     let r = Reporter { args };
-    let budget = Duration::from_secs_f64(args.seconds.clamp(0.05, 30.0));
+    let budget = Duration::from_secs_f64(args.seconds.max(0.05));
 
     for scene in ["testbed", "chain20_loops1", "chain20_loops5", "chain50_loops1", "chain50_loops5"] {
         let name = format!("ve_step/{scene}");
