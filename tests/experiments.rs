@@ -240,16 +240,18 @@ fn bad_experiment_arguments_are_refused_cleanly() {
 }
 
 /// The other commands' numeric flags are checked too: a NaN, infinite, zero or overlong measurement time is
-/// refused with a message naming the flag, not a panic (`bench --seconds nan` once panicked in `Duration`).
+/// refused with a message naming the flag, not a panic (`bench --seconds nan` and `timer-floor --duration
+/// 1e300` once panicked in `Duration`).
 #[test]
 fn bad_bench_and_timer_floor_arguments_are_refused_cleanly() {
     let bin = env!("CARGO_BIN_EXE_kinloop");
-    let cases: [&[&str]; 6] = [
+    let cases: [&[&str]; 7] = [
         &["bench", "--seconds", "nan"],
         &["bench", "--seconds", "inf"],
         &["bench", "--seconds", "0"],
         &["bench", "--seconds", "1e6"],
         &["timer-floor", "--duration", "nan"],
+        &["timer-floor", "--duration", "1e300"],
         &["timer-floor", "--rate", "0"],
     ];
     for args in cases {

@@ -84,7 +84,11 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
         _ => bail!("say how to trust the server: --ca FILE or --fingerprint HEX"),
     };
     let duration = match args.duration {
-        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        // try_from: a finite but huge value (1e300 s) does not fit a Duration, which would panic.
+        Some(s) if s > 0.0 => match Duration::try_from_secs_f64(s) {
+            Ok(d) => Some(d),
+            Err(_) => bail!("--duration {s}: must be a positive number of seconds that fits a clock"),
+        },
         Some(s) => bail!("--duration {s}: must be a positive number of seconds"),
         None => None,
     };

@@ -20,6 +20,8 @@ fn bad_flags_addresses_and_trust_fail_cleanly() {
         (&["--server", "not an address", fp], "server address"),
         (&["--server", "127.0.0.1:1", "--fingerprint", "xyz"], "fingerprint"),
         (&["--server", "127.0.0.1:1", fp, "--duration=-1"], "positive"),
+        (&["--server", "127.0.0.1:1", fp, "--duration=nan"], "positive"),
+        (&["--server", "127.0.0.1:1", fp, "--duration=1e300"], "fits a clock"),
         (&["--server", "127.0.0.1:1", fp, "--rate", "5"], "between 10 and 20000"),
         (&["--server", "127.0.0.1:1", fp, "--loss", "150%"], "probability"),
     ];

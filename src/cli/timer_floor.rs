@@ -27,9 +27,16 @@ pub struct TimerFloorArgs {
     pub json: bool,
 }
 
+/// Longest idle loop `--duration` accepts: a day.
+const MAX_DURATION_S: f64 = 86_400.0;
+
 /// Runs the idle loop and prints its lateness.
 pub fn run(args: &TimerFloorArgs) -> Result<()> {
-    ensure!(args.duration.is_finite() && args.duration > 0.0, "--duration: must be positive, got {}", args.duration);
+    ensure!(
+        args.duration.is_finite() && args.duration > 0.0 && args.duration <= MAX_DURATION_S,
+        "--duration: must be in (0, {MAX_DURATION_S}] s, got {}",
+        args.duration
+    );
     ensure!(
         args.rate.is_finite() && (1.0..=100_000.0).contains(&args.rate),
         "--rate: 1 to 100000 Hz, got {}",
