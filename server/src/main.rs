@@ -8,6 +8,7 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
+use kinloop_server::core::AxisGains;
 use kinloop_server::driver::load_scene;
 use kinloop_server::{Access, Identity, Server, ServerConfig, VeConfig};
 
@@ -50,6 +51,13 @@ struct Cli {
     /// Write one CSV row per VE step to this file.
     #[arg(long, value_name = "FILE")]
     record: Option<PathBuf>,
+    /// Graphics-controller stiffness K_g as `LINEAR,ANGULAR` (N/m, N·m/rad); default the paper's 1000,10000,
+    /// the largest stable on its testbed (softer angular gains suit OPs that turn about a fixed point).
+    #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
+    coupling_stiffness: Option<AxisGains>,
+    /// Graphics-controller damping B_g as `LINEAR,ANGULAR` (N·s/m, N·m·s/rad); default the paper's 100,10000.
+    #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
+    coupling_damping: Option<AxisGains>,
     /// Time-domain passivity observer/controller on each coupling.
     #[arg(long, value_name = "on|off", default_value = "off")]
     passivity: Switch,
@@ -66,6 +74,22 @@ struct Cli {
     /// tick times and deadline misses (the real-time check).
     #[arg(long, value_name = "N")]
     synthetic_users: Option<usize>,
+}
+
+/// `LINEAR,ANGULAR`: two finite, non-negative gains.
+fn parse_gains(s: &str) -> Result<AxisGains, String> {
+    let values: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not two comma-separated numbers LINEAR,ANGULAR"))?;
+    match values[..] {
+        [linear, angular] if [linear, angular].iter().all(|g| g.is_finite() && *g >= 0.0) => {
+            Ok(AxisGains::Uniform { linear, angular })
+        }
+        [_, _] => Err(format!("{s:?}: gains must be finite and non-negative")),
+        _ => Err(format!("{s:?} is not two comma-separated numbers LINEAR,ANGULAR")),
+    }
 }
 
 fn parse_integrator(s: &str) -> Result<Integrator, String> {
@@ -92,6 +116,12 @@ fn main() -> anyhow::Result<()> {
     ve.integrator = cli.integrator;
     ve.max_users = cli.max_users;
     ve.passivity = cli.passivity == Switch::On;
+    if let Some(gains) = cli.coupling_stiffness.clone() {
+        ve.coupling_stiffness = gains;
+    }
+    if let Some(gains) = cli.coupling_damping.clone() {
+        ve.coupling_damping = gains;
+    }
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
     if let Some(users) = cli.synthetic_users {
@@ -157,4 +187,20 @@ fn main() -> anyhow::Result<()> {
         }
         anyhow::Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gains parse as `LINEAR,ANGULAR`; anything else, or a negative or non-finite gain, is refused with a
+    /// message saying what was expected.
+    #[test]
+    fn coupling_gains_parse_or_say_why_not() {
+        assert_eq!(parse_gains("1000, 100"), Ok(AxisGains::Uniform { linear: 1000.0, angular: 100.0 }));
+        for bad in ["1000", "1,2,3", "a,b", "", "1,nan", "-1,5", "1,inf"] {
+            let why = parse_gains(bad).unwrap_err();
+            assert!(why.contains("LINEAR,ANGULAR") || why.contains("finite and non-negative"), "{bad:?}: {why}");
+        }
+    }
 }
