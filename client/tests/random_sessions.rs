@@ -76,15 +76,8 @@ fn session(seed: u64, mode: ConstraintMode, form: ModelForm, preset: DevicePrese
     let user = ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values");
     let mut rig = SimulatedRig::new(preset.build::<Planar>().expect("device"), Box::new(user));
     let mut now = Duration::from_millis(1);
-    let mut uplink = None;
     let (mut delivered, mut odd_readings, mut backwards) = (0, 0, 0);
     for tick in 0..TICKS {
-        if let Some(u) = uplink.take() {
-            // What the server's decoder checks before its VE sees an uplink.
-            if let Err(e) = validate::uplink(&u, &shape) {
-                panic!("{context}, tick {tick}: an uplink the server refuses: {e}");
-            }
-        }
         ve.step();
         let mut snapshot = ve.snapshot();
         if rng.chance(0.85) {
@@ -105,7 +98,10 @@ fn session(seed: u64, mode: ConstraintMode, form: ModelForm, preset: DevicePrese
         assert!(command.iter().all(|x| x.is_finite()), "{context}, tick {tick}: command {command}");
         let ratio = force_ratio::<Planar>(&command, &limits);
         assert!(ratio <= 1.0 + 1e-12, "{context}, tick {tick}: command {command} is {ratio} of the limits");
-        uplink = out.uplink.cloned();
+        // What the server's decoder checks before its VE sees an uplink.
+        if let Some(Err(e)) = out.uplink.map(|u| validate::uplink(u, &shape)) {
+            panic!("{context}, tick {tick}: an uplink the server refuses: {e}");
+        }
         rig.command(now, &command).unwrap_or_else(|e| panic!("{context}, tick {tick}: the device refused: {e}"));
         now = match rng.below(200) {
             0 => now + Duration::from_millis(100 + rng.below(400) as u64),

@@ -379,7 +379,8 @@ impl<S: Space> HapticCore<S> {
         }
         let device_mass = S::OpVec::from_slice(&device.mass);
         let gains = Self::resolve_gains(&config, welcome)?;
-        let config_shape = (config.form == ModelForm::Config).then_some((scene.n as usize, scene.m as usize));
+        let shape = scene.shape();
+        let config_shape = (config.form == ModelForm::Config).then_some((shape.n, shape.m));
         let pose_len = OpPose::<S>::wire_len();
         let k = S::DIM;
         let uplink = Uplink::at_rest(0, k, pose_len);
@@ -389,7 +390,7 @@ impl<S: Space> HapticCore<S> {
             device_mass,
             length_scale: scene.length_scale,
             user_id: welcome.user_id,
-            shape: scene.shape(),
+            shape,
             incoming: Box::new(SnapshotTerms::new(config_shape)),
             pending: Box::new(SnapshotTerms::new(config_shape)),
             pending_fresh: false,
