@@ -103,6 +103,8 @@ pub struct KktWorkspace {
     /// Z = U⁻¹ Wᵀ, n×m.
     pub z: DMatrix<f64>,
     /// Support of each column c of Wᵀ and Z: rows `z_rows[c]..n` of the column are zero.
+    /// The fixed-size kernels (`kkt_small`, n ≤ 8) never narrow it: they leave the
+    /// initial `n` (full support), which is always a valid, merely less sparse, bound.
     pub z_rows: Vec<usize>,
     /// The Schur complement S = W D⁻¹ Wᵀ = Zᵀ Z, m×m.
     pub schur: DMatrix<f64>,

@@ -255,8 +255,21 @@ pub fn pivoted_solve(
     r: &mut DVector<f64>,
     y: &mut DVector<f64>,
 ) {
-    let (r, y) = (r.as_mut_slice(), y.as_mut_slice());
-    match (l.nrows(), rank) {
+    pivoted_solve_slices(l.as_slice(), l.nrows(), inv_diag, perm, rank, r.as_mut_slice(), y.as_mut_slice());
+}
+
+/// [`pivoted_solve`] on slices: `l` is the m×m factor (column-major), `r` has m entries.
+#[inline]
+pub fn pivoted_solve_slices(
+    l: &[f64],
+    m: usize,
+    inv_diag: &[f64],
+    perm: &[usize],
+    rank: usize,
+    r: &mut [f64],
+    y: &mut [f64],
+) {
+    match (m, rank) {
         (2, 2) => pivoted_solve_2(l, inv_diag, perm, r),
         (3, 3) => pivoted_solve_m(3, 3, l, inv_diag, perm, r, y),
         (m, rank) => pivoted_solve_m(m, rank, l, inv_diag, perm, r, y),
@@ -264,8 +277,9 @@ pub fn pivoted_solve(
 }
 
 /// [`pivoted_solve_m`] for a 2x2 factor of rank 2 written out, the same operations in the same order.
-fn pivoted_solve_2(l: &DMatrix<f64>, inv_diag: &[f64], perm: &[usize], r: &mut [f64]) {
-    let (l10, inv0, inv1) = (l.as_slice()[1], inv_diag[0], inv_diag[1]);
+#[inline(always)]
+fn pivoted_solve_2(l: &[f64], inv_diag: &[f64], perm: &[usize], r: &mut [f64]) {
+    let (l10, inv0, inv1) = (l[1], inv_diag[0], inv_diag[1]);
     let (p0, p1) = (perm[0], perm[1]);
     let (r0, r1) = (r[p0], r[p1]);
     let y0 = r0 * inv0;
@@ -280,16 +294,8 @@ fn pivoted_solve_2(l: &DMatrix<f64>, inv_diag: &[f64], perm: &[usize], r: &mut [
 
 /// [`pivoted_solve`] with the sizes as arguments, copied with constants for the common small cases.
 #[inline(always)]
-fn pivoted_solve_m(
-    m: usize,
-    rank: usize,
-    l: &DMatrix<f64>,
-    inv_diag: &[f64],
-    perm: &[usize],
-    r: &mut [f64],
-    y: &mut [f64],
-) {
-    let a = &l.as_slice()[..m * m];
+fn pivoted_solve_m(m: usize, rank: usize, l: &[f64], inv_diag: &[f64], perm: &[usize], r: &mut [f64], y: &mut [f64]) {
+    let a = &l[..m * m];
     let r = &mut r[..m];
     let y = &mut y[..rank];
     for k in 0..rank {
@@ -412,7 +418,7 @@ mod tests {
                         let (mut x1, mut x2) = (DVector::from_column_slice(&rhs), DVector::from_column_slice(&rhs));
                         let mut y = DVector::zeros(2);
                         let (m, rank) = (std::hint::black_box(2), std::hint::black_box(2));
-                        pivoted_solve_m(m, rank, &l1, &d1, &p1, x1.as_mut_slice(), y.as_mut_slice());
+                        pivoted_solve_m(m, rank, l1.as_slice(), &d1, &p1, x1.as_mut_slice(), y.as_mut_slice());
                         pivoted_solve(&l2, &d2, &p2, r2, &mut x2, &mut y);
                         assert_eq!(x1.map(bits), x2.map(bits), "{case}: solve of {rhs:?}");
                     }

@@ -9,8 +9,10 @@ use crate::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::error::DynamicsError;
 use crate::kinematics::forward_poses;
 use crate::kkt;
+use crate::kkt_small;
 use crate::loop_closure::closure_residual_and_jacobian;
 use crate::ltl;
+use crate::ltl_small::by_size;
 use crate::model::Model;
 use crate::space::Space;
 
@@ -334,7 +336,24 @@ pub struct Projection {
 
 /// Applies one correction with the current factors to `q` and `q̇` and updates the predicted residuals:
 /// `δ = -U⁻ᵀ Z S⁺ r`, `r ← r + W(q) δ` for both pairs, W(q) from `closure_jacobian_t`.
-fn correct<S: Space>(
+pub(crate) fn correct<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    r_q: &mut DVector<f64>,
+    r_v: &mut DVector<f64>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) {
+    by_size!(model.nq(), N => {
+        let mut s = std::mem::replace(&mut data.kkt.tmp_m, DVector::zeros(0));
+        let (r, x) = ([r_q.as_mut_slice(), r_v.as_mut_slice()], [q.as_mut_slice(), qd.as_mut_slice()]);
+        kkt_small::correct::<N>(&data.kkt, data.closure_jacobian_t.as_slice(), r, x, s.as_mut_slice());
+        data.kkt.tmp_m = s;
+    }, _ => correct_general(model, data, r_q, r_v, q, qd))
+}
+
+/// [`correct`] for any n (models of at most 8 joints take `kkt_small`, with the same results).
+pub(crate) fn correct_general<S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
     r_q: &mut DVector<f64>,

@@ -25,6 +25,7 @@ use crate::articulated;
 use crate::data::Data;
 use crate::dense::{self, dot, dot_fixed, mul_add, sub_scaled};
 use crate::error::DynamicsError;
+use crate::kkt_small;
 use crate::ltl;
 use crate::ltl_small::by_size;
 use crate::mass_matrix;
@@ -61,6 +62,24 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         return;
     }
     let n = model.nq();
+    by_size!(n, N => kkt_small::z_and_schur::<N>(&mut data.kkt, data.closure_jacobian_t.as_slice(), m),
+        _ => z_and_schur_general(model, data));
+    let kkt = &mut data.kkt;
+    kkt.schur_rank = dense::pivoted_cholesky(
+        &kkt.schur,
+        &mut kkt.schur_factor,
+        &mut kkt.schur_perm,
+        &mut kkt.tmp_m,
+        kkt.schur_inv_diag.as_mut_slice(),
+        RANK_TOLERANCE,
+        model.closure_rank,
+    );
+}
+
+/// `Z = U⁻¹ Wᵀ` and `S = Zᵀ Z` for any n (models of at most 8 joints take `kkt_small`, with the same
+/// results), with the supports `z_rows`.
+pub(crate) fn z_and_schur_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
+    let (n, m) = (model.nq(), model.nc());
     let kkt = &mut data.kkt;
     dense::copy(kkt.z.as_mut_slice(), data.closure_jacobian_t.as_slice());
     let z = kkt.z.as_mut_slice();
@@ -89,15 +108,6 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
             s[i * m + j] = v;
         }
     }
-    kkt.schur_rank = dense::pivoted_cholesky(
-        &kkt.schur,
-        &mut kkt.schur_factor,
-        &mut kkt.schur_perm,
-        &mut kkt.tmp_m,
-        kkt.schur_inv_diag.as_mut_slice(),
-        RANK_TOLERANCE,
-        model.closure_rank,
-    );
 }
 
 /// `out[c] = a[:, c] · x` for the columns of `a` (Wᵀ or Z, n×m), each over its support `rows[c]`
@@ -149,6 +159,22 @@ pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
 /// With `y = U⁻¹ τ`: `λ = S⁺ (Zᵀ y + w_stab)` (= `S⁺ (W q̈_free + w_stab)`) and `q̈ = U⁻ᵀ (y - Z λ)`
 /// (= `q̈_free - D⁻¹ Wᵀ λ`): one solve with U and one with Uᵀ.
 pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
+    by_size!(model.nq(), N => {
+        let column = |v: &DVector<f64>| -> [f64; N] { v.as_slice()[..N].try_into().expect("n entries") };
+        let (a, f, b, g) = (column(&data.applied), column(&data.joint_force), column(&data.bias), column(&data.gravity));
+        let tau = std::array::from_fn(|i| a[i] + f[i] - b[i] - g[i]);
+        let lambda = data.lambda.as_mut_slice();
+        let qdd = kkt_small::solve::<N>(&data.kkt, tau, data.closure_bias_stab.as_slice(), lambda);
+        data.qdd.as_mut_slice()[..N].copy_from_slice(&qdd);
+    }, _ => solve_general(model, data));
+    if data.qdd.as_slice().iter().any(|x| !x.is_finite()) {
+        return Err(DynamicsError::NonFiniteResult { what: "joint accelerations" });
+    }
+    Ok(())
+}
+
+/// [`solve`] for any n (models of at most 8 joints take `kkt_small`, with the same results).
+pub(crate) fn solve_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let n = model.nq();
     let tau = data.applied.as_slice().iter().zip(data.joint_force.as_slice()).zip(data.bias.as_slice());
     for ((x, ((a, f), b)), g) in data.qdd.as_mut_slice().iter_mut().zip(tau).zip(data.gravity.as_slice()) {
@@ -167,8 +193,4 @@ pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dynam
     }
     let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
     ltl::solve_ut_columns(model, factor, inv, data.qdd.as_mut_slice());
-    if data.qdd.as_slice().iter().any(|x| !x.is_finite()) {
-        return Err(DynamicsError::NonFiniteResult { what: "joint accelerations" });
-    }
-    Ok(())
 }

@@ -51,6 +51,7 @@ pub mod jacobian;
 pub mod joint_forces;
 pub mod kinematics;
 pub mod kkt;
+mod kkt_small;
 pub mod local_model;
 pub mod loop_closure;
 pub mod ltl;

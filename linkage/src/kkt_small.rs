@@ -1,0 +1,167 @@
+//! The loop-closure part of the KKT solve of eq 4 (`Z = U⁻¹ Wᵀ`, `S = Zᵀ Z`, then q̈ and λ) and the
+//! projection's chord correction, for models of at most 8 joints, with n a constant
+//! ([`by_size`](crate::ltl_small)). `kkt` and `integrator` dispatch here; nothing else calls these.
+//!
+//! **Why.** On the paper's testbed (n = 4, m = 2) these three do about 150 floating-point operations a
+//! step, but their general forms (`kkt::z_and_schur_general`, `kkt::solve_general`,
+//! `integrator::correct_general`) are chains of small calls over run-time lengths: a support per column,
+//! groups of columns, a Schur solve on a vector moved out of the workspace and back. Those spent about
+//! 1,900 instructions a step on the testbed. Here each is one function whose columns are `[f64; N]`
+//! arrays held in registers; only m, the closure rows, is still a loop bound.
+//!
+//! **Same results.** The same operations in the same order as the general forms, which for n ≤ 8 also
+//! take whole columns (`ltl_small`, `dense::dot_fixed`); a test compares the two on every test scene.
+
+use crate::data::KktWorkspace;
+use crate::dense::{self, dot, dot_fixed, mul_add};
+use crate::ltl_small;
+
+/// Column c of an n×m column-major matrix, n = N.
+#[inline(always)]
+fn column<const N: usize>(a: &[f64], c: usize) -> &[f64; N] {
+    a[c * N..(c + 1) * N].try_into().expect("an N-row column")
+}
+
+/// `x ← x - Σ_c r_c a_c` over the columns of `a` (Z), in column order.
+#[inline(always)]
+fn sub_columns_times<const N: usize>(a: &[f64], r: &[f64], x: &mut [f64; N]) {
+    for (c, rc) in r.iter().enumerate() {
+        for (x, a) in x.iter_mut().zip(column::<N>(a, c)) {
+            *x = mul_add(-rc, *a, *x);
+        }
+    }
+}
+
+/// `Z = U⁻¹ Wᵀ` from the closure Jacobian `wt` (n×m), and `S = Zᵀ Z` (both triangles). Needs U.
+pub(crate) fn z_and_schur<const N: usize>(kkt: &mut KktWorkspace, wt: &[f64], m: usize) {
+    let (u, inv) = (kkt.factor.as_slice(), &kkt.factor_inv_diag.as_slice()[..N]);
+    let z = &mut kkt.z.as_mut_slice()[..N * m];
+    for (c, out) in z.chunks_exact_mut(N).enumerate() {
+        let mut col = *column::<N>(wt, c);
+        ltl_small::solve_u_columns::<N>(u, inv, &mut col);
+        out.copy_from_slice(&col);
+    }
+    let s = kkt.schur.as_mut_slice();
+    for j in 0..m {
+        for i in 0..=j {
+            let v = dot_fixed::<N>(column::<N>(z, i), column::<N>(z, j));
+            s[j * m + i] = v;
+            s[i * m + j] = v;
+        }
+    }
+}
+
+/// The solve of eq 4 (see `kkt::solve`) from `tau`: `y = U⁻¹ τ`, `λ = S⁺ (Zᵀ y + w_stab)`,
+/// `q̈ = U⁻ᵀ (y - Z λ)`. Needs the factors of `kkt::factorize`; `lambda` and `w_stab` have m entries.
+pub(crate) fn solve<const N: usize>(kkt: &KktWorkspace, tau: [f64; N], w_stab: &[f64], lambda: &mut [f64]) -> [f64; N] {
+    let (u, inv) = (kkt.factor.as_slice(), &kkt.factor_inv_diag.as_slice()[..N]);
+    let mut x = tau;
+    ltl_small::solve_u_columns::<N>(u, inv, &mut x);
+    if !lambda.is_empty() {
+        let z = kkt.z.as_slice();
+        for (c, (rhs, w)) in lambda.iter_mut().zip(w_stab).enumerate() {
+            *rhs = dot_fixed::<N>(column::<N>(z, c), &x) + w;
+        }
+        schur_solve::<N>(kkt, lambda);
+        sub_columns_times::<N>(z, lambda, &mut x);
+    }
+    ltl_small::solve_ut_columns::<N>(u, inv, &mut x);
+    x
+}
+
+/// `S x = r` in place with the pivoted factor (dependent rows get 0). The factor's rank is at most
+/// `Model::closure_rank`, the rank of the n×m matrix Wᵀ, so at most n = N: the scratch fits on the stack.
+#[inline(always)]
+fn schur_solve<const N: usize>(kkt: &KktWorkspace, r: &mut [f64]) {
+    let (l, m, mut y) = (kkt.schur_factor.as_slice(), r.len(), [0.0; N]);
+    let (inv, perm, rank) = (kkt.schur_inv_diag.as_slice(), &kkt.schur_perm, kkt.schur_rank.min(N));
+    dense::pivoted_solve_slices(l, m, inv, perm, rank, r, &mut y);
+}
+
+/// One chord correction of the projection (see `integrator::project`) for the pairs `(r_q, q)` and
+/// `(r_v, q̇)`: `δ = -U⁻ᵀ Z S⁺ r`, `x ← x + δ`, `r ← r + W(q) δ`, W(q) from `wt` (n×m). `s` is scratch of
+/// m entries.
+pub(crate) fn correct<const N: usize>(
+    kkt: &KktWorkspace,
+    wt: &[f64],
+    [r_q, r_v]: [&mut [f64]; 2],
+    [q, qd]: [&mut [f64]; 2],
+    s: &mut [f64],
+) {
+    let (u, inv) = (kkt.factor.as_slice(), &kkt.factor_inv_diag.as_slice()[..N]);
+    let z = kkt.z.as_slice();
+    for (r, x) in [(r_q, q), (r_v, qd)] {
+        // S⁺ r on a copy: r is updated below.
+        dense::copy(s, r);
+        schur_solve::<N>(kkt, s);
+        let mut t = [0.0; N];
+        sub_columns_times::<N>(z, s, &mut t);
+        ltl_small::solve_ut_columns::<N>(u, inv, &mut t);
+        let x: &mut [f64; N] = (&mut x[..N]).try_into().expect("n entries");
+        for (x, t) in x.iter_mut().zip(&t) {
+            *x += t;
+        }
+        for (c, r) in r.iter_mut().enumerate() {
+            *r += dot(column::<N>(wt, c), &t);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::data::Data;
+    use crate::dynamics::dynamics_terms;
+    use crate::integrator::{correct, correct_general};
+    use crate::kinematics::forward_poses;
+    use crate::kkt::{self, solve_general, z_and_schur_general};
+    use crate::loop_closure::closure_residual_and_jacobian;
+    use crate::testing::{for_each_model, random_state};
+    use nalgebra::DVector;
+
+    /// On every test scene of at most 8 joints with loops (redundant ones included), the fixed-size kernels
+    /// give the general forms' Z, S, q̈, λ and chord corrections bit for bit, at random states; one of the
+    /// scenes has more than 8 joints and takes the general form either way.
+    #[test]
+    fn fixed_size_kernels_give_the_general_forms_bits() {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut compared = 0;
+        for_each_model!(name, model => {
+            if model.nq() <= 8 && model.nc() > 0 {
+                for seed in 0..5 {
+                    let (q, qd) = random_state(model, seed);
+                    let mut small = Data::new(model);
+                    dynamics_terms(model, &mut small, &q, &qd, &mut ());
+                    kkt::factorize(model, &mut small).unwrap();
+                    let mut general = small.clone();
+                    general.kkt.z.fill(f64::NAN);
+                    general.kkt.schur.fill(f64::NAN);
+                    z_and_schur_general(model, &mut general);
+                    let case = format!("{name}, seed {seed}");
+                    assert_eq!(bits(small.kkt.z.as_slice()), bits(general.kkt.z.as_slice()), "{case}: Z");
+                    assert_eq!(bits(small.kkt.schur.as_slice()), bits(general.kkt.schur.as_slice()), "{case}: S");
+                    kkt::solve(model, &mut small).unwrap();
+                    solve_general(model, &mut general);
+                    assert_eq!(bits(small.qdd.as_slice()), bits(general.qdd.as_slice()), "{case}: q̈");
+                    assert_eq!(bits(small.lambda.as_slice()), bits(general.lambda.as_slice()), "{case}: λ");
+                    // A chord correction at a configuration off the manifold, with the factors above.
+                    let off = q.map(|x| x + 1e-4);
+                    forward_poses(model, &mut small, &off);
+                    closure_residual_and_jacobian(model, &mut small);
+                    let mut general = small.clone();
+                    let r_q = small.closure_residual.clone();
+                    let r_v = DVector::from_fn(model.nc(), |i, _| 1e-3 * (i as f64 + 1.0));
+                    let mut a = (r_q.clone(), r_v.clone(), off.clone(), qd.clone());
+                    let mut b = (r_q, r_v, off.clone(), qd.clone());
+                    correct(model, &mut small, &mut a.0, &mut a.1, &mut a.2, &mut a.3);
+                    correct_general(model, &mut general, &mut b.0, &mut b.1, &mut b.2, &mut b.3);
+                    for (what, x, y) in [("r_q", &a.0, &b.0), ("r_v", &a.1, &b.1), ("q", &a.2, &b.2), ("q̇", &a.3, &b.3)] {
+                        assert_eq!(bits(x.as_slice()), bits(y.as_slice()), "{case}: corrected {what}");
+                    }
+                    assert_ne!(a.2, off, "{case}: the correction should move q");
+                    compared += 1;
+                }
+            }
+        });
+        assert!(compared >= 5 * 6, "only {compared} cases compared");
+    }
+}
