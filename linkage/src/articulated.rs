@@ -49,9 +49,12 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
         if pivot.is_nan() || pivot <= 0.0 {
             return Err(DynamicsError::MassNotPositive { joint: k, pivot });
         }
-        // sqrt(p) and 1/p side by side rather than 1/sqrt(p) in sequence (as in `ltl`).
+        // sqrt(p) and 1/p side by side rather than 1/sqrt(p) in sequence (as in `ltl`). What the parent
+        // carries needs only 1/p (f fᵀ/p below), not the square root: the recursion from leaf to root, a
+        // chain of dependent operations, waits for one division per joint, and sqrt runs beside it.
+        let inv_pivot = 1.0 / pivot;
         let ukk = pivot.sqrt();
-        let inv = ukk * (1.0 / pivot);
+        let inv = ukk * inv_pivot;
         inv_diag[k] = inv;
         let g = f * inv;
         let column = &mut u[k * n..k * n + k + 1];
@@ -67,12 +70,13 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
         }
         let parent = model.joints[k].parent;
         if parent != NO_PARENT {
-            // I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk² = I^A_k - g gᵀ, what the parent carries of body k.
+            // I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk² = I^A_k - (f fᵀ)/p, what the parent carries of body k
+            // (f_r f_c, then 1/p: bit-for-bit symmetric).
             let mut carried = articulated[k];
-            let (g, m) = (g.as_slice(), carried.as_mut_slice());
-            for (c, gc) in g.iter().enumerate() {
-                for (r, gr) in g.iter().enumerate() {
-                    m[c * g.len() + r] -= gr * gc;
+            let (f, m) = (f.as_slice(), carried.as_mut_slice());
+            for (c, fc) in f.iter().enumerate() {
+                for (r, fr) in f.iter().enumerate() {
+                    m[c * f.len() + r] -= fr * fc * inv_pivot;
                 }
             }
             articulated[parent] += carried;
