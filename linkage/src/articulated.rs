@@ -43,8 +43,18 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
     }
     let inv_diag = data.kkt.factor_inv_diag.as_mut_slice();
     let s = &kin.motion_subspace;
+    // What joint k + 1 hands to its parent k, kept in registers: through memory, the next joint's loads of
+    // its inertia straddle the stores just made (the write of a 3x3 or 6x6 matrix is not the shape of its
+    // reads) and wait for them to retire, on the recursion's critical path. Joint k + 1 is the last of k's
+    // children to be processed (children come after their parent), so adding its part last keeps the
+    // order of the sums: the factor is bit for bit what accumulating in memory gives.
+    let mut from_next: Option<S::Inertia> = None;
     for k in (0..n).rev() {
-        let f = S::inertia_mul(&articulated[k], &s[k]);
+        let mut inertia = articulated[k];
+        if let Some(carried) = from_next.take() {
+            inertia += carried;
+        }
+        let f = S::inertia_mul(&inertia, &s[k]);
         let pivot = s[k].dot(&f);
         if pivot.is_nan() || pivot <= 0.0 {
             return Err(DynamicsError::MassNotPositive { joint: k, pivot });
@@ -72,14 +82,18 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
         if parent != NO_PARENT {
             // I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk² = I^A_k - (f fᵀ)/p, what the parent carries of body k
             // (f_r f_c, then 1/p: bit-for-bit symmetric).
-            let mut carried = articulated[k];
+            let mut carried = inertia;
             let (f, m) = (f.as_slice(), carried.as_mut_slice());
             for (c, fc) in f.iter().enumerate() {
                 for (r, fr) in f.iter().enumerate() {
                     m[c * f.len() + r] -= fr * fc * inv_pivot;
                 }
             }
-            articulated[parent] += carried;
+            if parent + 1 == k {
+                from_next = Some(carried);
+            } else {
+                articulated[parent] += carried;
+            }
         }
     }
     Ok(())
