@@ -2,8 +2,9 @@
 
 use nalgebra::DVector;
 
+use crate::bias::subtree_force_projections;
 use crate::data::Data;
-use crate::model::{Model, NO_PARENT};
+use crate::model::Model;
 use crate::space::{Space, VecOps};
 
 /// Fills `data.gravity` with G(q) (so that `D q̈ + B + G = τ`). Needs `forward_kinematics`.
@@ -15,13 +16,11 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
             let weight = model.gravity * model.bodies[i].mass;
             data.body_force[i] = S::spatial(S::point_cross_point(&data.kin.com[i], &weight), weight);
         }
-        for i in (0..n).rev() {
-            data.gravity[i] = -data.kin.motion_subspace[i].dot(&data.body_force[i]);
-            let parent = model.joints[i].parent;
-            if parent != NO_PARENT {
-                let f = data.body_force[i];
-                data.body_force[parent] += f;
-            }
+        let g = data.gravity.as_mut_slice();
+        subtree_force_projections(model, &data.kin.motion_subspace, &mut data.body_force, g);
+        // G = -Sᵀ F (the weights push; G is what the joints must supply).
+        for x in g {
+            *x = -*x;
         }
     } else {
         data.gravity.as_mut_slice().fill(0.0);
