@@ -27,8 +27,13 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
     data.mass_matrix_fresh = false;
     let kin = &mut data.kin;
     let q = q.as_slice();
+    // The pose of joint i - 1's body, kept in registers for a child that follows its parent (as in a chain):
+    // reading it back from memory just after storing it would put a store-to-load wait on the path.
+    let mut previous = (S::rot_identity(), S::Point::zero());
     for (i, joint) in model.joints.iter().enumerate() {
-        let (parent_rot, parent_pos) = if joint.parent == NO_PARENT {
+        let (parent_rot, parent_pos) = if joint.parent.wrapping_add(1) == i && i > 0 {
+            previous
+        } else if joint.parent == NO_PARENT {
             (S::rot_identity(), S::Point::zero())
         } else {
             (kin.body_rot[joint.parent], kin.body_pos[joint.parent])
@@ -39,15 +44,19 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
         match joint.kind {
             JointKind::Revolute => {
                 let (sin, cos) = kin.sin_cos[i].eval(q[i]);
-                kin.body_rot[i] = S::rot_mul(&frame_rot, &S::rot_about_axis(&joint.axis, cos, sin));
+                let rot = S::rot_mul(&frame_rot, &S::rot_about_axis(&joint.axis, cos, sin));
+                kin.body_rot[i] = rot;
                 kin.body_pos[i] = origin;
+                previous = (rot, origin);
                 // A unit rotation about an axis through `origin` moves the world origin at -ω × origin.
                 let w = S::axis_as_angular(&axis_world);
                 kin.motion_subspace[i] = S::spatial(w, -S::ang_cross_point(&w, &origin));
             }
             JointKind::Prismatic => {
+                let pos = origin + axis_world * q[i];
                 kin.body_rot[i] = frame_rot;
-                kin.body_pos[i] = origin + axis_world * q[i];
+                kin.body_pos[i] = pos;
+                previous = (frame_rot, pos);
                 kin.motion_subspace[i] = S::spatial(S::Angular::zero(), axis_world);
             }
         }
@@ -60,17 +69,23 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
     data.terms_at.clear();
     let kin = &mut data.kin;
     let qd = qd.as_slice();
+    // Joint i - 1's values in registers for a child that follows its parent (see `forward_poses`).
+    let mut previous = (S::Spatial::zero(), S::Spatial::zero());
     for (i, joint) in model.joints.iter().enumerate() {
-        let (v_parent, a_parent) = if joint.parent == NO_PARENT {
+        let (v_parent, a_parent) = if joint.parent.wrapping_add(1) == i && i > 0 {
+            previous
+        } else if joint.parent == NO_PARENT {
             (S::Spatial::zero(), S::Spatial::zero())
         } else {
             (kin.body_velocity[joint.parent], kin.bias_acceleration[joint.parent])
         };
         let s_qd = kin.motion_subspace[i] * qd[i];
         let v = v_parent + s_qd;
-        kin.body_velocity[i] = v;
         // In the world frame Ṡ_i = v_i × S_i (the axis moves with the body that carries it).
-        kin.bias_acceleration[i] = a_parent + S::cross_motion(&v, &s_qd);
+        let a = a_parent + S::cross_motion(&v, &s_qd);
+        kin.body_velocity[i] = v;
+        kin.bias_acceleration[i] = a;
+        previous = (v, a);
     }
 }
 

@@ -18,12 +18,21 @@ pub fn ensure<S: Space>(model: &Model<S>, data: &mut Data<S>) {
 /// Fills `data.mass_matrix` (symmetric, n×n). Needs `forward_kinematics`.
 pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let n = model.nq();
-    data.composite_inertia.copy_from_slice(&data.kin.body_inertia);
+    let composite = &mut data.composite_inertia;
+    composite.copy_from_slice(&data.kin.body_inertia);
+    // Joint i + 1's subtree reaches its parent i in registers (see `articulated::factor`: the same sums in
+    // the same order, without a store-to-load wait on the recursion's path).
+    let mut from_next = None;
     for i in (0..n).rev() {
+        if let Some(child) = from_next.take() {
+            composite[i] += child;
+        }
         let parent = model.joints[i].parent;
-        if parent != NO_PARENT {
-            let child = data.composite_inertia[i];
-            data.composite_inertia[parent] += child;
+        if parent.wrapping_add(1) == i {
+            from_next = Some(composite[i]);
+        } else if parent != NO_PARENT {
+            let child = composite[i];
+            composite[parent] += child;
         }
     }
     let d = &mut data.mass_matrix;
