@@ -5,6 +5,7 @@
 
 use crate::data::Data;
 use crate::jacobian::support;
+use crate::ltl_small::by_size;
 use crate::model::{Model, NO_PARENT};
 use crate::space::{Space, VecOps};
 
@@ -42,6 +43,15 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     }
     let s = &data.kin.motion_subspace;
     let a = d.as_mut_slice();
+    // For a small chain the loop bounds are constants and each entry is mirrored as it is made: no bounds
+    // checks, no second pass (the same dot products, so the same D bit for bit).
+    if model.is_chain() {
+        by_size!(n, N => {
+            chain_small::<S, N>(&s[..N], &composite[..N], &mut a[..N * N]);
+            data.mass_matrix_fresh = true;
+            return;
+        }, _ => ());
+    }
     for i in 0..n {
         let f = S::inertia_mul(&data.composite_inertia[i], &s[i]);
         // Column i above the diagonal (contiguous), then mirrored below.
@@ -63,4 +73,17 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         }
     }
     data.mass_matrix_fresh = true;
+}
+
+/// D of a chain of N joints from the composite inertias (see [`mass_matrix`]), both triangles.
+#[inline(always)]
+fn chain_small<S: Space, const N: usize>(s: &[S::Spatial], composite: &[S::Inertia], a: &mut [f64]) {
+    for i in 0..N {
+        let f = S::inertia_mul(&composite[i], &s[i]);
+        for j in 0..=i {
+            let v = s[j].dot(&f);
+            a[i * N + j] = v;
+            a[j * N + i] = v;
+        }
+    }
 }
