@@ -122,7 +122,8 @@ pub fn forward_dynamics<S: Space, F: Forces<S> + ?Sized>(
 /// `Forces::add_implicit` adds to it).
 pub fn drop_implicit_mass<S: Space>(data: &mut Data<S>) {
     if data.use_implicit_mass {
-        data.implicit_mass.fill(0.0);
+        // (A slice's fill: nalgebra's `fill` steps an iterator per entry.)
+        data.implicit_mass.as_mut_slice().fill(0.0);
         data.use_implicit_mass = false;
     }
 }
