@@ -14,13 +14,7 @@
 
 use crate::data::KktWorkspace;
 use crate::dense::{self, dot, dot_fixed, mul_add};
-use crate::ltl_small;
-
-/// Column c of an n×m column-major matrix, n = N.
-#[inline(always)]
-fn column<const N: usize>(a: &[f64], c: usize) -> &[f64; N] {
-    a[c * N..(c + 1) * N].try_into().expect("an N-row column")
-}
+use crate::ltl_small::{self, column};
 
 /// `x ← x - Σ_c r_c a_c` over the columns of `a` (Z), in column order.
 #[inline(always)]

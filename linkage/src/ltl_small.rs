@@ -37,10 +37,10 @@ macro_rules! by_size {
 }
 pub(crate) use by_size;
 
-/// Column k of an N×N column-major matrix.
+/// Column k of a column-major matrix of N rows (N×N here, N×m in `kkt_small`).
 #[inline(always)]
-fn column<const N: usize>(a: &[f64], k: usize) -> &[f64; N] {
-    a[k * N..(k + 1) * N].try_into().expect("an N×N matrix")
+pub(crate) fn column<const N: usize>(a: &[f64], k: usize) -> &[f64; N] {
+    a[k * N..(k + 1) * N].try_into().expect("an N-row column")
 }
 
 /// The columns of `x` (whole columns of N rows).
