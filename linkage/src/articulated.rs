@@ -25,7 +25,7 @@
 use crate::data::Data;
 use crate::error::DynamicsError;
 use crate::jacobian::support;
-use crate::model::{Model, NO_PARENT};
+use crate::model::{follows_parent, Model, NO_PARENT};
 use crate::space::{MatOps, Space, VecOps};
 
 /// Fills `data.kkt.factor` (upper triangle: U) and `data.kkt.factor_inv_diag` (`1/U_kk`) for D(q).
@@ -43,11 +43,10 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
     }
     let inv_diag = data.kkt.factor_inv_diag.as_mut_slice();
     let s = &kin.motion_subspace;
-    // What joint k + 1 hands to its parent k, kept in registers: through memory, the next joint's loads of
-    // its inertia straddle the stores just made (the write of a 3x3 or 6x6 matrix is not the shape of its
-    // reads) and wait for them to retire, on the recursion's critical path. Joint k + 1 is the last of k's
-    // children to be processed (children come after their parent), so adding its part last keeps the
-    // order of the sums: the factor is bit for bit what accumulating in memory gives.
+    // What joint k + 1 hands to its parent k, kept in registers (see `model::follows_parent`; as in
+    // `model::subtree_sums`, adding it last keeps the order of the sums: the factor is bit for bit what
+    // accumulating in memory gives). Through memory, the next joint's loads of its inertia straddled the
+    // stores just made (a 3x3 or 6x6 matrix is not written in the shape it is read).
     let mut from_next: Option<S::Inertia> = None;
     for k in (0..n).rev() {
         let mut inertia = articulated[k];
@@ -89,7 +88,7 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
                     m[c * f.len() + r] -= fr * fc * inv_pivot;
                 }
             }
-            if parent + 1 == k {
+            if follows_parent(parent, k) {
                 from_next = Some(carried);
             } else {
                 articulated[parent] += carried;

@@ -2,9 +2,8 @@
 
 use nalgebra::DVector;
 
-use crate::bias::subtree_force_projections;
 use crate::data::Data;
-use crate::model::Model;
+use crate::model::{subtree_sums, Model};
 use crate::space::{Space, VecOps};
 
 /// Fills `data.gravity` with G(q) (so that `D q̈ + B + G = τ`). Needs `forward_kinematics`.
@@ -16,12 +15,8 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
             let weight = model.gravity * model.bodies[i].mass;
             data.body_force[i] = S::spatial(S::point_cross_point(&data.kin.com[i], &weight), weight);
         }
-        let g = data.gravity.as_mut_slice();
-        subtree_force_projections(model, &data.kin.motion_subspace, &mut data.body_force, g);
-        // G = -Sᵀ F (the weights push; G is what the joints must supply).
-        for x in g {
-            *x = -*x;
-        }
+        let (g, s) = (data.gravity.as_mut_slice(), &data.kin.motion_subspace);
+        subtree_sums(model, &mut data.body_force, |i, f| g[i] = -s[i].dot(f));
     } else {
         data.gravity.as_mut_slice().fill(0.0);
     }

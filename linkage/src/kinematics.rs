@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
-use crate::model::{JointKind, Model, NO_PARENT};
+use crate::model::{follows_parent, JointKind, Model, NO_PARENT};
 use crate::space::{Space, VecOps};
 
 /// Computes body poses, the motion subspace S_i of every joint and every body's spatial inertia, all in the
@@ -31,7 +31,7 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
     // reading it back from memory just after storing it would put a store-to-load wait on the path.
     let mut previous = (S::rot_identity(), S::Point::zero());
     for (i, joint) in model.joints.iter().enumerate() {
-        let (parent_rot, parent_pos) = if joint.parent.wrapping_add(1) == i && i > 0 {
+        let (parent_rot, parent_pos) = if follows_parent(joint.parent, i) {
             previous
         } else if joint.parent == NO_PARENT {
             (S::rot_identity(), S::Point::zero())
@@ -72,7 +72,7 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
     // Joint i - 1's values in registers for a child that follows its parent (see `forward_poses`).
     let mut previous = (S::Spatial::zero(), S::Spatial::zero());
     for (i, joint) in model.joints.iter().enumerate() {
-        let (v_parent, a_parent) = if joint.parent.wrapping_add(1) == i && i > 0 {
+        let (v_parent, a_parent) = if follows_parent(joint.parent, i) {
             previous
         } else if joint.parent == NO_PARENT {
             (S::Spatial::zero(), S::Spatial::zero())

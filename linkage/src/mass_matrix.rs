@@ -6,7 +6,7 @@
 use crate::data::Data;
 use crate::jacobian::support;
 use crate::ltl_small::by_size;
-use crate::model::{Model, NO_PARENT};
+use crate::model::{subtree_sums, Model};
 use crate::space::{Space, VecOps};
 
 /// Fills `data.mass_matrix` unless it already belongs to the current kinematics. Needs `forward_kinematics`.
@@ -21,21 +21,7 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let n = model.nq();
     let composite = &mut data.composite_inertia;
     composite.copy_from_slice(&data.kin.body_inertia);
-    // Joint i + 1's subtree reaches its parent i in registers (see `articulated::factor`: the same sums in
-    // the same order, without a store-to-load wait on the recursion's path).
-    let mut from_next = None;
-    for i in (0..n).rev() {
-        if let Some(child) = from_next.take() {
-            composite[i] += child;
-        }
-        let parent = model.joints[i].parent;
-        if parent.wrapping_add(1) == i {
-            from_next = Some(composite[i]);
-        } else if parent != NO_PARENT {
-            let child = composite[i];
-            composite[parent] += child;
-        }
-    }
+    subtree_sums(model, composite, |_, _| ());
     let d = &mut data.mass_matrix;
     if !model.is_chain() {
         // Entries between joints on different branches are structural zeros, never written below.
