@@ -26,6 +26,7 @@
 //! | [`local_model`] | configuration-space and reduced operational-space local models | eq 11, 13 |
 //! | [`contact`] | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
 //! | [`assemble`] | the nearest closed configuration | |
+//! | [`reach`] | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
 //!
 //! Planar scenes use 3-D spatial algebra and a 3-DOF operational space (x, y, θ); spatial scenes 6-D
 //! (see [`space`]). A scene without loops takes the plain path (no KKT, no multipliers); a scene without
@@ -59,6 +60,7 @@ mod ltl_small;
 pub mod mass_matrix;
 pub mod model;
 pub mod op_space;
+pub mod reach;
 pub mod scene;
 mod simd;
 pub mod space;
