@@ -511,3 +511,87 @@ mod tests {
         assert!(std::fs::read(&files[1]).unwrap().len() > 5_000);
     }
 }
+
+/// A table of values as coloured cells: rows and columns are categories, each cell carries a value printed
+/// in it and whether it meets its bound (green) or not (red); a missing cell is grey.
+#[derive(Clone, Debug)]
+pub struct HeatMap {
+    /// Title.
+    pub title: String,
+    /// Row names, top to bottom.
+    pub rows: Vec<String>,
+    /// Column names, left to right.
+    pub columns: Vec<String>,
+    /// `cells[row][column]`: (value, meets its bound).
+    pub cells: Vec<Vec<Option<(f64, bool)>>>,
+}
+
+impl HeatMap {
+    /// An empty map.
+    pub fn new(title: impl Into<String>, rows: Vec<String>, columns: Vec<String>) -> Self {
+        let cells = vec![vec![None; columns.len()]; rows.len()];
+        HeatMap { title: title.into(), rows, columns, cells }
+    }
+
+    /// Sets a cell (out-of-range indices are ignored).
+    pub fn set(&mut self, row: usize, column: usize, value: f64, ok: bool) {
+        if let Some(cell) = self.cells.get_mut(row).and_then(|r| r.get_mut(column)) {
+            *cell = Some((value, ok));
+        }
+    }
+}
+
+/// Writes a heat map as `stem.svg` and `stem.png`.
+pub fn save_heat_map(map: &HeatMap, stem: &Path) -> Result<Vec<PathBuf>> {
+    ensure_font();
+    if let Some(dir) = stem.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let label_width = 12 + 7 * map.rows.iter().map(|r| r.chars().count()).max().unwrap_or(10) as u32;
+    let size = (label_width + 110 * map.columns.len().max(1) as u32 + 20, 80 + 22 * map.rows.len().max(1) as u32);
+    let svg = stem.with_extension("svg");
+    let png = stem.with_extension("png");
+    draw_heat_map(map, label_width, SVGBackend::new(&svg, size).into_drawing_area())?;
+    draw_heat_map(map, label_width, BitMapBackend::new(&png, size).into_drawing_area())?;
+    Ok(vec![svg, png])
+}
+
+fn draw_heat_map<DB: DrawingBackend>(map: &HeatMap, label_width: u32, area: DrawingArea<DB, Shift>) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
+    area.fill(&WHITE).map_err(err)?;
+    let (cell_w, cell_h, top) = (110i32, 22i32, 56i32);
+    let left = label_width as i32;
+    area.draw(&Text::new(map.title.clone(), (10, 8), ("sans-serif", 17))).map_err(err)?;
+    for (c, name) in map.columns.iter().enumerate() {
+        let x = left + c as i32 * cell_w + 4;
+        area.draw(&Text::new(name.clone(), (x, top - 18), ("sans-serif", 12))).map_err(err)?;
+    }
+    let (good, bad, none) = (RGBColor(150, 215, 150), RGBColor(235, 130, 120), RGBColor(225, 225, 225));
+    for (r, name) in map.rows.iter().enumerate() {
+        let y = top + r as i32 * cell_h;
+        area.draw(&Text::new(name.clone(), (6, y + 5), ("sans-serif", 12))).map_err(err)?;
+        for c in 0..map.columns.len() {
+            let x = left + c as i32 * cell_w;
+            let cell = map.cells[r][c];
+            let colour = match cell {
+                Some((_, true)) => good,
+                Some((_, false)) => bad,
+                None => none,
+            };
+            area.draw(&Rectangle::new([(x, y), (x + cell_w - 2, y + cell_h - 2)], colour.filled())).map_err(err)?;
+            if let Some((value, _)) = cell {
+                let text = if value.is_finite() {
+                    format!("{:.3}", crate::experiments::common::significant(value, 3))
+                } else {
+                    "n/a".into()
+                };
+                area.draw(&Text::new(text, (x + 6, y + 4), ("sans-serif", 12))).map_err(err)?;
+            }
+        }
+    }
+    area.present().map_err(err)?;
+    Ok(())
+}

@@ -11,7 +11,7 @@ use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRE
 use kinloop_linkage::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose};
 use kinloop_linkage::op_space::op_space_inertia;
 use kinloop_linkage::{builtin, forward_dynamics, Data, Model, Planar, SceneKind};
-use kinloop_protocol::{OtherUsers, RecommendedGains, SceneSummary, Snapshot, Welcome};
+use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Welcome};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
 use crate::core::{CoreConfig, GainChoice, HapticCore};
@@ -31,7 +31,7 @@ pub enum BenchError {
     Thread(String),
 }
 
-/// The paper's testbed at q0, as a server would describe it: the welcome (paper gains for a 1 kg device)
+/// The paper's testbed at q0, as a server would describe it: the welcome (one-to-one mapping, the surveyed OP)
 /// and a snapshot of the OP `link2` at rest.
 pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
     let err = |e: &dyn std::fmt::Display| BenchError::Testbed(e.to_string());
@@ -44,6 +44,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
     forward_dynamics(&model, &mut data, &model.q0, &model.qd0, &mut ()).map_err(|e| err(&e))?;
     op_space_inertia(&model, &mut data, op).map_err(|e| err(&e))?;
     let inverse = data.op.inverse_inertia;
+    let reach = kinloop_linkage::reach::survey_op(&model, op, &Default::default()).map_err(|e| err(&e))?;
     let directions = constraint_directions::<Planar>(&inverse, model.length_scale, DEFAULT_THRESHOLD);
     let terms = op_space_terms(&data, &Vector3::zeros(), LocalModelTerms::full());
     let mut op_pose = vec![0.0; 3];
@@ -63,7 +64,9 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 1000.0,
-        gains: RecommendedGains { k_j: 200.0, b_j: 50.0, k_pc: vec![100.0, 100.0, 0.5], b_pc: vec![70.0, 70.0, 0.375] },
+        mapping: Mapping::identity(),
+        coupling: CouplingGains { stiffness: vec![1000.0, 1000.0, 1e4], damping: vec![100.0, 100.0, 1e4] },
+        op: OpSummary::from_reach(&reach, &OpPose::of_op(&model, &data, op)),
     };
     let snapshot = Snapshot {
         seq: 1,
@@ -126,7 +129,7 @@ pub fn realtime_loop_sim(
     let (welcome, snapshot) = testbed_session()?;
     let built = |e: &dyn std::fmt::Display| BenchError::Testbed(e.to_string());
     let device = DevicePreset::Paper.build::<Planar>().map_err(|e| built(&e))?;
-    let user = UserSpec::paper().build::<Planar>().map_err(|e| built(&e))?;
+    let user = UserSpec::paper().build::<Planar>(&Default::default()).map_err(|e| built(&e))?;
     let spec = DevicePreset::Paper.spec(SceneKind::Planar).map_err(|e| built(&e))?;
     let mut config = CoreConfig::new(spec);
     config.period = Duration::from_secs_f64(1.0 / rate_hz);

@@ -12,6 +12,7 @@ use kinloop_client::driver::{Client, ClientConfig};
 use kinloop_client::user::UserSpec;
 use kinloop_protocol::emulator::LinkArgs;
 use kinloop_protocol::quic::Trust;
+use kinloop_protocol::MappingRequest;
 
 /// Connects to a kinloop server and renders the linkage at an operational point on a simulated device.
 #[derive(Debug, Parser)]
@@ -32,15 +33,29 @@ struct Args {
     /// Name the server's certificate must carry (with --ca).
     #[arg(long, default_value = "localhost")]
     server_name: String,
-    /// Operational point to hold.
-    #[arg(long, default_value = "link2")]
-    op: String,
-    /// Simulated device: sim:paper, sim:falcon or sim:touch.
-    #[arg(long, default_value = "sim:paper")]
-    device: DevicePreset,
-    /// Simulated user: constant:FX,FY,TZ | path:line:X0,Y0,X1,Y1,T | path:circle:R,T | path:waypoints:T:X,Y;... | replay:FILE.
-    #[arg(long, default_value = "constant:-0.5,0,-0.0025")]
+    /// Operational point to hold (default: the scene's first).
+    #[arg(long)]
+    op: Option<String>,
+    /// Simulated device: sim:paper (planar), sim:falcon or sim:touch (default: sim:paper for planar scenes,
+    /// sim:touch for spatial ones).
+    #[arg(long)]
+    device: Option<DevicePreset>,
+    /// Simulated user: a hand soft|firm|release|poke (touring the OP's reach; KIND:PATH or KIND:hold for a
+    /// scripted one), path:line:X0,Y0,X1,Y1,T | path:circle:R,T | path:waypoints:T:X,Y;... (a soft hand),
+    /// constant:FX,FY,TZ (planar: forces x, y then torque z) or constant:FX,FY,FZ,TX,TY,TZ (spatial: forces
+    /// then torques, world axes), paper (the paper's constant wrench), replay:FILE.
+    #[arg(long, default_value = "soft")]
     user: UserSpec,
+    /// Device metres per VE metre (default: the server fits the OP's reach into the device's workspace).
+    #[arg(long, value_name = "SCALE")]
+    position_scale: Option<f64>,
+    /// Device newtons per VE newton (default: the server maps the OP's static load to about a third of the
+    /// device's continuous force).
+    #[arg(long, value_name = "SCALE")]
+    force_scale: Option<f64>,
+    /// The VE holds the linkage's weight at this user's OP: feel its inertia and its loops, not its weight.
+    #[arg(long)]
+    gravity_compensation: bool,
     /// Haptic loop rate (Hz).
     #[arg(long, default_value_t = 1000.0)]
     rate: f64,
@@ -67,6 +82,13 @@ struct Args {
     no_realtime: bool,
     #[command(flatten)]
     link: LinkArgs,
+}
+
+/// Fraction of ticks at the force limit above which the client warns.
+const CLAMPED_WARNING: f64 = 0.03;
+
+fn rounded(values: &[f64]) -> Vec<f64> {
+    values.iter().map(|v| (v * 1e4).round() / 1e4).collect()
 }
 
 fn parse_mode(s: &str) -> Result<ConstraintMode, String> {
@@ -103,6 +125,18 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
     config.constraint_mode = args.constraint_mode;
     config.form = args.form;
     config.record = args.record;
+    for (flag, scale) in [("--position-scale", args.position_scale), ("--force-scale", args.force_scale)] {
+        if let Some(value) = scale {
+            if !(value.is_finite() && value > 0.0) {
+                bail!("{flag} {value}: must be a positive number (device units per VE unit)");
+            }
+        }
+    }
+    config.mapping = MappingRequest {
+        position_scale: args.position_scale,
+        force_scale: args.force_scale,
+        gravity_compensation: args.gravity_compensation,
+    };
     config.realtime_priority = !args.no_realtime;
     config.deadband = args.deadband.then(Default::default);
     config.link = args.link.emulated_link().context("link emulation")?;
@@ -113,7 +147,28 @@ fn run() -> anyhow::Result<()> {
     let (config, json) = config(Args::parse())?;
     let server = config.server.clone();
     let bounded = config.duration.is_some();
+    let user = config.user.label();
     let client = Client::start(config).with_context(|| format!("kinloop-client could not start against {server}"))?;
+    let (w, g) = (client.welcome(), client.gains());
+    eprintln!(
+        "kinloop-client: holding {} of {} with {}, user {user}; mapping: position ×{:.4}, force ×{:.4}{}",
+        w.scene.op_name,
+        w.scene.name,
+        client.device().name(),
+        w.mapping.position_scale,
+        w.mapping.force_scale,
+        if w.mapping.gravity_compensation { ", gravity compensated" } else { "" },
+    );
+    eprintln!(
+        "kinloop-client: gains (device units) k_j {:.1} N/m, b_j {:.2} N s/m, K_pc {:?}, B_pc {:?}; server coupling K_g {:?}, B_g {:?}",
+        g.joint_stiffness,
+        g.joint_damping,
+        rounded(&g.position_stiffness),
+        rounded(&g.position_damping),
+        rounded(&w.coupling.stiffness),
+        rounded(&w.coupling.damping),
+    );
+    let session = client.session_json();
     let stats = if bounded {
         client.wait()
     } else {
@@ -128,8 +183,27 @@ fn run() -> anyhow::Result<()> {
         });
         client.shutdown()
     };
+    let core = stats.core.unwrap_or_default();
+    let clamped = if core.active_ticks > 0 { core.clamped_ticks as f64 / core.active_ticks as f64 } else { 0.0 };
+    let warning = (clamped > CLAMPED_WARNING).then(|| {
+        format!(
+            "the device sat at its force limit on {:.1} % of its ticks: the linkage's loads exceed what it renders at \
+             this mapping; try a smaller --force-scale, --gravity-compensation, a stronger --device, or a firmer \
+             --user that moves less abruptly",
+            clamped * 100.0
+        )
+    });
+    if let Some(w) = &warning {
+        tracing::warn!("{w}");
+    }
     if json {
-        println!("{}", serde_json::to_string_pretty(&stats.to_json())?);
+        let mut out = stats.to_json();
+        if let Some(map) = out.as_object_mut() {
+            map.insert("session".into(), session);
+            map.insert("clamped_fraction".into(), clamped.into());
+            map.insert("warning".into(), warning.into());
+        }
+        println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
         let s = &stats;
         println!(

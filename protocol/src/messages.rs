@@ -20,12 +20,17 @@
 
 use std::fmt;
 
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::reach::OpReach;
+use kinloop_linkage::{Space, VecOps};
 use serde::{Deserialize, Serialize};
 
 use crate::shape::{SceneKind, SessionShape};
 
-/// Version carried in [`Hello::version`]; bumped whenever the wire format changes.
-pub const PROTOCOL_VERSION: u16 = 2;
+/// Version carried in [`Hello::version`]; bumped whenever the wire format changes. Version 3: the handshake
+/// takes two steps (the client learns the scene, then joins with its device), the device describes itself
+/// fully, and the welcome carries the mapping, the coupling gains and the OP's reach.
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// TLS application protocol name both sides offer; a peer offering anything else fails the QUIC handshake.
 pub const ALPN: &[u8] = b"kinloop/1";
@@ -39,8 +44,9 @@ pub enum Role {
     Observer,
 }
 
-/// Capabilities of the client's haptic device, in the spirit of the IEEE 1918.1.1 handshake: the server uses
-/// them to recommend gains the device can render.
+/// A haptic device as the server needs to know it to design the couplings and the mapping (in the spirit
+/// of the IEEE 1918.1.1 handshake). Per-axis lists follow the scene's operational axes (linear first), so
+/// the client describes its device in the scene's space, which it learned from [`SceneInfo`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DeviceCaps {
     /// Human-readable device model.
@@ -53,14 +59,52 @@ pub struct DeviceCaps {
     pub workspace_max: Vec<f64>,
     /// Peak force the device can render (N).
     pub max_force_n: f64,
-    /// Peak torque the device can render (N·m).
+    /// Force the device can hold indefinitely (N), at most the peak.
+    pub continuous_force_n: f64,
+    /// Peak torque the device can render (N·m); 0: its angular axes are sensed, not actuated.
     pub max_torque_nm: f64,
-    /// Highest stable rendering stiffness (N/m).
+    /// Highest stable rendering stiffness on the linear axes (N/m).
     pub max_stiffness_n_per_m: f64,
-    /// Highest stable rendering damping (N·s/m).
+    /// Highest stable rendering damping on the linear axes (N·s/m).
     pub max_damping_ns_per_m: f64,
+    /// Highest stable rendering stiffness on the angular axes (N·m/rad).
+    pub max_angular_stiffness_nm_per_rad: f64,
+    /// Highest stable rendering damping on the angular axes (N·m·s/rad).
+    pub max_angular_damping_nms_per_rad: f64,
+    /// The mechanism's own viscous damping per axis (N·s/m, N·m·s/rad): what passivity bounds are made of.
+    pub damping: Vec<f64>,
+    /// Moving mass per linear axis (kg) and inertia per angular axis (kg·m²) at the handle.
+    pub mass: Vec<f64>,
     /// The device's own servo rate (Hz).
     pub native_rate_hz: f64,
+    /// True when the device measures the hand's wrench.
+    pub has_force_sensor: bool,
+}
+
+impl DeviceCaps {
+    /// A generous device of `k` operational axes (±1 m and ±π rad of travel, 100 N and 10 N·m, 5000 N/m,
+    /// 1 kg, 1 kHz): for benchmarks, tests and tools whose point is not the device.
+    pub fn generous(name: &str, k: usize) -> Self {
+        let linear = if k == 6 { 3 } else { 2 };
+        let per_axis = |lin: f64, ang: f64| (0..k).map(|a| if a < linear { lin } else { ang }).collect::<Vec<_>>();
+        DeviceCaps {
+            name: name.into(),
+            dof: k as u8,
+            workspace_min: per_axis(-1.0, -std::f64::consts::PI),
+            workspace_max: per_axis(1.0, std::f64::consts::PI),
+            max_force_n: 100.0,
+            continuous_force_n: 50.0,
+            max_torque_nm: 10.0,
+            max_stiffness_n_per_m: 5000.0,
+            max_damping_ns_per_m: 100.0,
+            max_angular_stiffness_nm_per_rad: 50.0,
+            max_angular_damping_nms_per_rad: 1.0,
+            damping: per_axis(1.0, 0.01),
+            mass: per_axis(1.0, 0.01),
+            native_rate_hz: 1000.0,
+            has_force_sensor: true,
+        }
+    }
 }
 
 /// Which local model the client wants in its snapshots.
@@ -72,7 +116,7 @@ pub enum LocalModelForm {
     ConfigSpace,
 }
 
-/// First control message, client → server.
+/// First control message, client → server. The server answers [`SceneInfo`] (or [`Refused`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hello {
     /// The client's [`PROTOCOL_VERSION`]. First field, so a server can refuse other versions politely.
@@ -83,12 +127,43 @@ pub struct Hello {
     pub client_name: String,
     /// Manipulator or observer.
     pub role: Role,
-    /// Name of the operational point the client wants to hold.
+}
+
+/// The scene, server → client after an accepted [`Hello`]: what the client needs to choose a device in the
+/// scene's space and an operational point before it joins.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneInfo {
+    /// Scene name.
+    pub name: String,
+    /// Planar or spatial: the space the device must describe itself in.
+    pub kind: SceneKind,
+    /// The scene's operational points, in declaration order.
+    pub ops: Vec<String>,
+}
+
+/// What a client asks of the mapping between its device and the VE; `None` lets the server choose.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MappingRequest {
+    /// Device metres per VE metre on the linear axes.
+    pub position_scale: Option<f64>,
+    /// Device newtons per VE newton.
+    pub force_scale: Option<f64>,
+    /// The VE holds the linkage's weight at the user's OP: the user feels inertia and the loops, not weight.
+    pub gravity_compensation: bool,
+}
+
+/// Second control message, client → server: the operational point, the device, the local model and the
+/// mapping. The server answers [`Welcome`] (or [`Refused`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Join {
+    /// Name of the operational point to hold; empty: the scene's first.
     pub op: String,
-    /// Device capabilities.
+    /// The device, in the scene's space.
     pub device: DeviceCaps,
     /// Which local model to send.
     pub form: LocalModelForm,
+    /// What the client asks of the mapping.
+    pub mapping: MappingRequest,
 }
 
 /// What the client needs to know about the scene to size its local model.
@@ -118,17 +193,80 @@ impl SceneSummary {
     }
 }
 
-/// Controller gains the server recommends for this scene and device.
+/// How device and VE map onto each other for this user. A device displacement `Δx_d` is the VE displacement
+/// `Δx_d / position_scale`; a VE force `F` is the device force `force_scale · F`. Angles map one to one, and
+/// torques by `force_scale · position_scale`, so every axis scales power by the same factor and the mapping
+/// creates no energy on any axis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RecommendedGains {
-    /// Joint-constraint stiffness along constrained directions (N/m).
-    pub k_j: f64,
-    /// Joint-constraint damping along constrained directions (N·s/m).
-    pub b_j: f64,
-    /// Position-channel stiffness per operational axis, length `k`.
-    pub k_pc: Vec<f64>,
-    /// Position-channel damping per operational axis, length `k`.
-    pub b_pc: Vec<f64>,
+pub struct Mapping {
+    /// Device metres per VE metre.
+    pub position_scale: f64,
+    /// Device newtons per VE newton.
+    pub force_scale: f64,
+    /// The VE holds the linkage's weight at this user's OP.
+    pub gravity_compensation: bool,
+}
+
+impl Mapping {
+    /// One to one, no compensation.
+    pub fn identity() -> Self {
+        Mapping { position_scale: 1.0, force_scale: 1.0, gravity_compensation: false }
+    }
+
+    /// Device N·m per VE N·m.
+    pub fn torque_scale(&self) -> f64 {
+        self.force_scale * self.position_scale
+    }
+}
+
+/// The graphics controller's gains the server chose for this user (paper section IV, Fig 3), per
+/// operational axis: `K_g` (N/m, N·m/rad) and `B_g` (N·s/m, N·m·s/rad).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CouplingGains {
+    /// K_g, length `k`.
+    pub stiffness: Vec<f64>,
+    /// B_g, length `k`.
+    pub damping: Vec<f64>,
+}
+
+/// What the server's survey found at the granted operational point (VE units), for the client's own gain
+/// design and for an intended motion that stays inside the reach.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OpSummary {
+    /// Smallest world coordinates the OP reaches (m), point dimension.
+    pub reach_min: Vec<f64>,
+    /// Largest world coordinates the OP reaches (m), point dimension.
+    pub reach_max: Vec<f64>,
+    /// Reachable poses in order, as displacements (linear, rotation vector; `k` numbers each) from the OP's
+    /// pose when the welcome was made.
+    pub tour: Vec<f64>,
+    /// Static force a hand needs to hold the OP against gravity (90th percentile over the reach, N).
+    pub static_force_n: f64,
+    /// The same for torque (N·m).
+    pub static_torque_nm: f64,
+    /// Largest inverse translational effective mass over the reach (1/kg).
+    pub inverse_mass_max: f64,
+    /// Largest inverse rotational effective inertia over the reach (1/(kg·m²)).
+    pub inverse_rotational_inertia_max: f64,
+}
+
+impl OpSummary {
+    /// What a survey found, its tour as displacements from `now` (the OP's pose when the welcome is made).
+    pub fn from_reach<S: Space>(reach: &OpReach<S>, now: &OpPose<S>) -> Self {
+        let mut tour = Vec::with_capacity(reach.tour.len() * S::DIM);
+        for pose in &reach.tour {
+            tour.extend_from_slice(pose.difference(now).as_slice());
+        }
+        OpSummary {
+            reach_min: reach.position_min.as_slice().to_vec(),
+            reach_max: reach.position_max.as_slice().to_vec(),
+            tour,
+            static_force_n: reach.static_force_n,
+            static_torque_nm: reach.static_torque_nm,
+            inverse_mass_max: reach.inverse_mass_max,
+            inverse_rotational_inertia_max: reach.inverse_rotational_inertia_max,
+        }
+    }
 }
 
 /// Successful handshake reply, server → client.
@@ -144,8 +282,12 @@ pub struct Welcome {
     pub ve_rate_hz: f64,
     /// Rate at which snapshots are sent (Hz).
     pub snapshot_rate_hz: f64,
-    /// Recommended controller gains.
-    pub gains: RecommendedGains,
+    /// The mapping between the device and the VE.
+    pub mapping: Mapping,
+    /// The graphics controller's gains for this user.
+    pub coupling: CouplingGains,
+    /// The operational point's reach and inertia.
+    pub op: OpSummary,
 }
 
 /// Why a server refused a client.
@@ -174,6 +316,11 @@ pub enum RefusalReason {
     },
     /// The requested role is not allowed on this server.
     RoleNotAllowed,
+    /// The device or the mapping asked for cannot serve this scene.
+    Device {
+        /// What is wrong, naming the device's value and the scene's need.
+        what: String,
+    },
     /// The hello made no sense.
     Malformed {
         /// What was wrong with it.
@@ -198,6 +345,7 @@ impl fmt::Display for RefusalReason {
                 }
             }
             RefusalReason::RoleNotAllowed => f.write_str("that role is not allowed on this server"),
+            RefusalReason::Device { what } => write!(f, "the device cannot join: {what}"),
             RefusalReason::Malformed { what } => write!(f, "the hello was malformed: {what}"),
         }
     }
@@ -286,6 +434,10 @@ pub enum Control {
         /// The ping's `t_s`, echoed so the pinger needs no state.
         t_s: f64,
     },
+    /// Server → client, after an accepted hello.
+    SceneInfo(SceneInfo),
+    /// Client → server, after the scene info.
+    Join(Join),
 }
 
 impl Control {
@@ -299,6 +451,8 @@ impl Control {
             Control::Error { .. } => "Error",
             Control::Ping { .. } => "Ping",
             Control::Pong { .. } => "Pong",
+            Control::SceneInfo(_) => "SceneInfo",
+            Control::Join(_) => "Join",
         }
     }
 }

@@ -71,27 +71,14 @@ fn first_op(model: &Model<impl Space>) -> String {
     model.ops.first().map(|op| op.name.clone()).unwrap_or_default()
 }
 
-fn bench_device(k: usize) -> DeviceCaps {
-    DeviceCaps {
-        name: "bench".into(),
-        dof: k as u8,
-        workspace_min: vec![-1.0; k],
-        workspace_max: vec![1.0; k],
-        max_force_n: 100.0,
-        max_torque_nm: 10.0,
-        max_stiffness_n_per_m: 5000.0,
-        max_damping_ns_per_m: 100.0,
-        native_rate_hz: 1000.0,
-    }
-}
-
 fn join_request(model: &Model<impl Space>, index: usize, k: usize) -> JoinRequest {
     JoinRequest {
         name: format!("bench-{index}"),
         role: Role::Manipulator,
         op: first_op(model),
         form: LocalModelForm::OpSpace,
-        device: Some(bench_device(k)),
+        device: Some(DeviceCaps::generous("bench", k)),
+        mapping: Default::default(),
     }
 }
 

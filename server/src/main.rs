@@ -51,11 +51,13 @@ struct Cli {
     /// Write one CSV row per VE step to this file.
     #[arg(long, value_name = "FILE")]
     record: Option<PathBuf>,
-    /// Graphics-controller stiffness K_g as `LINEAR,ANGULAR` (N/m, N·m/rad); default the paper's 1000,10000,
-    /// the largest stable on its testbed (softer angular gains suit OPs that turn about a fixed point).
+    /// Graphics-controller stiffness K_g as `LINEAR,ANGULAR` (N/m, N·m/rad) for every user; default: each
+    /// user's designed from its OP's lightest effective mass (4 Hz, critically damped; printed at join). The
+    /// paper's testbed values are 1000,10000 (with --coupling-damping 100,10000).
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_stiffness: Option<AxisGains>,
-    /// Graphics-controller damping B_g as `LINEAR,ANGULAR` (N·s/m, N·m·s/rad); default the paper's 100,10000.
+    /// Graphics-controller damping B_g as `LINEAR,ANGULAR` (N·s/m, N·m·s/rad) for every user; default designed
+    /// (given alone, the stiffness is the paper's).
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_damping: Option<AxisGains>,
     /// Time-domain passivity observer/controller on each coupling.
@@ -110,18 +112,14 @@ fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
-    let mut ve = VeConfig::paper();
+    let mut ve = VeConfig::default();
     ve.ve_rate_hz = cli.ve_rate;
     ve.snapshot_rate_hz = cli.snapshot_rate.unwrap_or(cli.ve_rate);
     ve.integrator = cli.integrator;
     ve.max_users = cli.max_users;
     ve.passivity = cli.passivity == Switch::On;
-    if let Some(gains) = cli.coupling_stiffness.clone() {
-        ve.coupling_stiffness = gains;
-    }
-    if let Some(gains) = cli.coupling_damping.clone() {
-        ve.coupling_damping = gains;
-    }
+    ve.coupling_stiffness = cli.coupling_stiffness.clone();
+    ve.coupling_damping = cli.coupling_damping.clone();
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
     if let Some(users) = cli.synthetic_users {

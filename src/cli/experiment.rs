@@ -16,7 +16,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 8] = [
+const WHICH: [Which; 9] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -24,6 +24,7 @@ const WHICH: [Which; 8] = [
     Which::One(Name::Users),
     Which::One(Name::Scale),
     Which::One(Name::Pauses),
+    Which::One(Name::Renderability),
     Which::All,
 ];
 

@@ -21,7 +21,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::UserSpec;
 use kinloop_linkage::builtin::PAPER_WRENCH;
@@ -185,14 +184,6 @@ fn user_wrench(kind: SceneKind, users: usize) -> Vec<f64> {
     full.into_iter().map(|w| w / users as f64).collect()
 }
 
-/// The simulated device: the paper's planar device, or (it has no spatial form) the Falcon preset.
-fn device_for(kind: SceneKind) -> DevicePreset {
-    match kind {
-        SceneKind::Planar => DevicePreset::Paper,
-        SceneKind::Spatial => DevicePreset::Falcon,
-    }
-}
-
 /// The link one side emulates: `side` 0 is the server, `i + 1` client `i`, each with its own seed so the
 /// sides' losses and delays are independent but repeatable.
 fn side_link(link: &LinkConfig, side: u64) -> Option<LinkConfig> {
@@ -301,8 +292,7 @@ fn start_clients(
         let name = format!("demo-user{}", i + 1);
         let mut config =
             ClientConfig::new(server.local_addr().to_string(), Trust::Fingerprint(server.fingerprint().to_string()));
-        config.op = op.to_string();
-        config.device = device_for(options.scene.kind);
+        config.op = Some(op.to_string());
         config.user = UserSpec::Constant(user_wrench(options.scene.kind, options.users));
         config.duration = Some(options.duration);
         config.link = side_link(&options.link, i as u64 + 1);

@@ -189,6 +189,7 @@ pub fn read_ve(file: &Path, kind: SceneKind) -> Result<Vec<VeSample>, RecordRead
                 closure_error: row[closure],
                 users,
                 kinetic_energy: f64::NAN,
+                potential_energy: f64::NAN,
             })
         })
         .collect()

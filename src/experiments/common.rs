@@ -16,7 +16,7 @@ use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Data, Model, Planar};
 use nalgebra::DVector;
 
-use crate::charts::{self, Chart, StabilityMap};
+use crate::charts::{self, Chart, HeatMap, StabilityMap};
 use crate::harness::{self, Recording, SessionPlan, SessionSummary};
 
 /// How an experiment runs.
@@ -108,6 +108,13 @@ impl Output {
     /// Writes a stability map as `stem.svg` and `stem.png`.
     pub fn map(&mut self, stem: &str, map: &StabilityMap) -> Result<()> {
         let written = charts::save_map(map, &self.dir.join(stem)).with_context(|| format!("map {stem}"))?;
+        self.record(written);
+        Ok(())
+    }
+
+    /// Writes a heat map as `stem.svg` and `stem.png`.
+    pub fn heat_map(&mut self, stem: &str, map: &HeatMap) -> Result<()> {
+        let written = charts::save_heat_map(map, &self.dir.join(stem)).with_context(|| format!("heat map {stem}"))?;
         self.record(written);
         Ok(())
     }

@@ -10,6 +10,7 @@
 //! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
+//! | [`renderability`] | does every shipped linkage render with default settings, on every device? |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
 //! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
@@ -19,6 +20,7 @@ pub mod common;
 pub mod latency;
 pub mod paper;
 pub mod pauses;
+pub mod renderability;
 pub mod scale;
 pub mod speed_accuracy;
 pub mod stability;
@@ -46,12 +48,22 @@ pub enum Name {
     Scale,
     /// A tick's cost after a real-time loop's pause.
     Pauses,
+    /// Every shipped linkage with default settings.
+    Renderability,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 7] =
-        [Name::Paper, Name::SpeedAccuracy, Name::Stability, Name::Latency, Name::Users, Name::Scale, Name::Pauses];
+    pub const ALL: [Name; 8] = [
+        Name::Paper,
+        Name::SpeedAccuracy,
+        Name::Stability,
+        Name::Latency,
+        Name::Users,
+        Name::Scale,
+        Name::Pauses,
+        Name::Renderability,
+    ];
 
     /// What the experiment answers, in a line (the command line's help).
     pub fn about(self) -> &'static str {
@@ -63,6 +75,7 @@ impl Name {
             Name::Users => "1 to 16 users on one linkage",
             Name::Scale => "cost and snapshot size against links and loops",
             Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
+            Name::Renderability => "every scene x OP x device x network x hand with default settings",
         }
     }
 
@@ -76,6 +89,7 @@ impl Name {
             Name::Users => "users",
             Name::Scale => "scale",
             Name::Pauses => "pauses",
+            Name::Renderability => "renderability",
         }
     }
 }
@@ -90,5 +104,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Users => users::run(options),
         Name::Scale => scale::run(options),
         Name::Pauses => pauses::run(options),
+        Name::Renderability => renderability::run(options),
     }
 }

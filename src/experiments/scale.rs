@@ -53,7 +53,14 @@ fn ve_with_user(scene: &str, form: LocalModelForm) -> Result<(VeCore<Planar>, us
     let scene = kinloop_linkage::builtin::scene(scene).ok_or_else(|| anyhow!("no scene {scene}"))??;
     let model: Model<Planar> = Model::compile(&scene, &scene.name)?;
     let mut ve = VeCore::new(model, VeConfig::paper()).map_err(|e| anyhow!("{e}"))?;
-    let request = JoinRequest { name: "probe".into(), role: Role::Manipulator, op: "link2".into(), form, device: None };
+    let request = JoinRequest {
+        name: "probe".into(),
+        role: Role::Manipulator,
+        op: "link2".into(),
+        form,
+        device: None,
+        mapping: Default::default(),
+    };
     ve.join(Duration::ZERO, request).map_err(|e| anyhow!("join: {e:?}"))?;
     let period = ve.config().ve_period();
     ve.handle_timeout(period);

@@ -74,8 +74,8 @@ fn plan(c: &Config, seconds: f64, length_scale: f64) -> Result<SessionPlan> {
     plan.ve.ve_rate_hz = c.ve_rate_hz;
     plan.ve.snapshot_rate_hz = c.snapshot_rate_hz;
     let l2 = length_scale * length_scale;
-    plan.ve.coupling_stiffness = AxisGains::Uniform { linear: PAPER_KG, angular: PAPER_KG * l2 };
-    plan.ve.coupling_damping = AxisGains::Uniform { linear: PAPER_BG, angular: PAPER_BG * l2 };
+    plan.ve.coupling_stiffness = Some(AxisGains::Uniform { linear: PAPER_KG, angular: PAPER_KG * l2 });
+    plan.ve.coupling_damping = Some(AxisGains::Uniform { linear: PAPER_BG, angular: PAPER_BG * l2 });
     plan.clients[0].form = c.form;
     Ok(plan)
 }

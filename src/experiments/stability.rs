@@ -94,8 +94,8 @@ fn plan(part: Part, x: f64, y: f64) -> Result<SessionPlan> {
             let l2 = length_scale(&plan)?.powi(2);
             let (k_ang, b_ang) = if paper_angular { (PAPER_KG_ANGULAR, PAPER_BG_ANGULAR) } else { (x * l2, y * l2) };
             plan.ve.implicit_coupling = implicit;
-            plan.ve.coupling_stiffness = AxisGains::Uniform { linear: x, angular: k_ang };
-            plan.ve.coupling_damping = AxisGains::Uniform { linear: y, angular: b_ang };
+            plan.ve.coupling_stiffness = Some(AxisGains::Uniform { linear: x, angular: k_ang });
+            plan.ve.coupling_damping = Some(AxisGains::Uniform { linear: y, angular: b_ang });
         }
     }
     Ok(plan)

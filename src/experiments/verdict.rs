@@ -7,15 +7,17 @@
 //! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
 //!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
-//! 3. **energy growth** — at some instant the linkage holds more kinetic energy than all hands together
-//!    have done work on their devices, by more than [`ENERGY_FRACTION`] (half) of the largest work done so
-//!    far plus [`ENERGY_FLOOR_J`] (5 mJ): the system made energy nobody put in. (A passive chain from hand to
-//!    linkage keeps `E_kin(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy and the
-//!    springs of the couplings.)
+//! 3. **energy growth** — at some instant the linkage has gained more mechanical energy (kinetic, plus
+//!    the change of its potential energy since the start) than all hands together have done work on their
+//!    devices, by more than [`ENERGY_FRACTION`] (half) of the largest work done so far plus
+//!    [`ENERGY_FLOOR_J`] (5 mJ): the system made energy nobody put in. (A passive chain from hand to
+//!    linkage keeps `E_kin(t) + ΔE_pot(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy
+//!    and the springs of the couplings.)
 //!
 //! The hand's work is `W(t) = Σ_k F_h(k) · ẋ_d(k) Δt` over haptic ticks (force and torque, the device's
-//! measured twist), the linkage's kinetic energy `½ q̇ᵀ D q̇` after every VE tick. The verdict needs a
-//! recording of every tick (`record_every = 1`).
+//! measured twist, both in VE units: a device mapped with scales does `c_f c_p` times this work itself),
+//! the linkage's kinetic energy `½ q̇ᵀ D q̇` and potential energy after every VE tick. Device-OP distances
+//! are in the device's space. The verdict needs a recording of every tick (`record_every = 1`).
 
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -41,8 +43,8 @@ pub const ENERGY_FLOOR_J: f64 = 0.005;
 pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, a device more than 5 cm \
 from its OP in the VE, or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
 ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
-linkage's kinetic energy exceeds the work all hands have done on their devices by more than half the largest work \
-done so far plus 5 mJ); stable otherwise";
+linkage's kinetic energy plus the change of its potential energy exceeds the work all hands have done on their \
+devices by more than half the largest work done so far plus 5 mJ); stable otherwise";
 
 /// The criterion as a JSON object (the sentence and its thresholds).
 pub fn criterion_json() -> Value {
@@ -178,6 +180,7 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
         .collect();
     let mut cursors = vec![0usize; work.len()];
     let (mut excess, mut work_max, mut ke_max) = (f64::NEG_INFINITY, 0.0f64, 0.0f64);
+    let potential_start = rec.ve.first().map_or(0.0, |v| v.potential_energy);
     for v in &rec.ve {
         let mut w_total = 0.0;
         for (series, cursor) in work.iter().zip(cursors.iter_mut()) {
@@ -193,7 +196,10 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
         work_max = work_max.max(w_total);
         let ke = if v.kinetic_energy.is_finite() { v.kinetic_energy } else { f64::INFINITY };
         ke_max = ke_max.max(ke);
-        excess = excess.max(ke - w_total);
+        // What the linkage gained beyond what gravity and its springs gave back: kinetic plus the change of
+        // potential energy.
+        let gained = ke + (v.potential_energy - potential_start);
+        excess = excess.max(gained - w_total);
     }
     (if excess == f64::NEG_INFINITY { 0.0 } else { excess }, work_max, ke_max)
 }

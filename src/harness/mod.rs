@@ -14,12 +14,12 @@ use anyhow::{anyhow, Context, Result};
 use kinloop_client::core::{ConstraintMode, CoreConfig, HapticCore, ModelForm};
 use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::device::rig::SimulatedRig;
-use kinloop_client::device::HapticDevice;
-use kinloop_client::user::UserSpec;
+use kinloop_client::device::{HapticDevice, SimulatedDevice};
+use kinloop_client::user::{UserContext, UserSpec};
 use kinloop_linkage::{Model, Planar, Scene, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
 use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
-use kinloop_protocol::{Datagram, LocalModelForm, Role, SessionShape};
+use kinloop_protocol::{Datagram, LocalModelForm, MappingRequest, Role, SessionShape};
 use kinloop_server::core::{JoinRequest, PassivityObserver, UserId, VeConfig, VeCore};
 
 pub use record::{ClientSample, Recording, VeSample};
@@ -37,6 +37,8 @@ pub struct ClientPlan {
     pub device: DevicePreset,
     /// Simulated user.
     pub user: UserSpec,
+    /// What the client asks of the mapping (the server chooses what is left `None`).
+    pub mapping: MappingRequest,
     /// Stiffness or impedance rendering of the constrained directions.
     pub constraint_mode: ConstraintMode,
     /// Local-model form.
@@ -82,15 +84,26 @@ impl std::fmt::Debug for CoreEdit {
 }
 
 impl ClientPlan {
-    /// The paper's user: the `paper` device at OP `link2`, the constant wrench (−0.5 N, 0, −0.0025 N m),
-    /// stiffness mode, 1 kHz, a perfect network.
+    /// The paper's user: the `paper` device mapped one to one at OP `link2`, the constant wrench
+    /// (−0.5 N, 0, −0.0025 N m), stiffness mode, 1 kHz, a perfect network.
     pub fn paper(name: &str) -> Self {
         ClientPlan {
-            name: name.to_string(),
-            op: "link2".into(),
-            role: Role::Manipulator,
-            device: DevicePreset::Paper,
             user: UserSpec::paper(),
+            mapping: MappingRequest { position_scale: Some(1.0), force_scale: Some(1.0), gravity_compensation: false },
+            ..ClientPlan::new(name, "link2", DevicePreset::Paper)
+        }
+    }
+
+    /// A user as `kinloop-client` makes one by default: `device` at `op` with a relaxed hand touring the
+    /// OP's reach, the server's mapping and the designed gains, stiffness mode, 1 kHz, a perfect network.
+    pub fn new(name: &str, op: &str, device: DevicePreset) -> Self {
+        ClientPlan {
+            name: name.to_string(),
+            op: op.into(),
+            role: Role::Manipulator,
+            device,
+            user: UserSpec::soft_hand(),
+            mapping: MappingRequest::default(),
             constraint_mode: ConstraintMode::Stiffness,
             form: ModelForm::Op,
             rate_hz: 1000.0,
@@ -169,12 +182,12 @@ pub struct ClientSummary {
     pub ticks: u64,
     /// Largest commanded force or torque over the device's limit (≤ 1 always).
     pub max_force_ratio: f64,
-    /// RMS distance between the device (mapped into the VE by the client's indexing) and the VE's operational
-    /// point (m), over active ticks.
+    /// RMS distance between the device and the VE's operational point, in the device's space (what the hand
+    /// feels: the VE distance times the mapping's position scale), m, over active ticks.
     pub device_op_rms_m: f64,
-    /// Largest device–OP distance (m).
+    /// Largest device–OP distance, device space (m).
     pub device_op_max_m: f64,
-    /// RMS distance between the device and the local model's OP (the client's tracking error), m.
+    /// RMS distance between the device and the local model's OP (the client's tracking error), device space, m.
     pub device_model_rms_m: f64,
     /// Fraction of active ticks with the command clamped at the device limit.
     pub saturated_fraction: f64,
@@ -195,11 +208,21 @@ pub struct ClientSummary {
     pub passivity_absorbed_j: f64,
     /// VE ticks in which the passivity controller scaled this user's PD down.
     pub passivity_activations: u64,
+    /// The mapping the server chose (device metres per VE metre, device newtons per VE newton).
+    pub position_scale: f64,
+    /// See `position_scale`.
+    pub force_scale: f64,
+    /// The graphics controller's gains the server chose for this user, K_g then B_g per axis.
+    pub coupling: Vec<f64>,
+    /// The client's gains (device units): k_j, b_j, then K_pc and B_pc per axis.
+    pub gains: Vec<f64>,
 }
 
 struct Participant<S: Space> {
     plan: ClientPlan,
-    rig: SimulatedRig<S>,
+    /// The device until the participant joins; then it is in the rig, with the user the welcome shaped.
+    device: Option<SimulatedDevice<S>>,
+    rig: Option<SimulatedRig<S>>,
     core: Option<HapticCore<S>>,
     user_id: Option<UserId>,
     up: LinkEmulator<Vec<u8>>,
@@ -217,6 +240,8 @@ struct Participant<S: Space> {
     uplinks_refused: u64,
     snapshots_refused: u64,
     passivity: PassivityObserver,
+    /// Scales, coupling and gains chosen at the join, for the summary.
+    chosen: (f64, f64, Vec<f64>, Vec<f64>),
 }
 
 /// Runs a session to its end; `progress` is called with the simulated time from time to time.
@@ -250,11 +275,11 @@ impl<S: Space> Session<S> {
         let mut participants = Vec::with_capacity(plan.clients.len());
         for c in &plan.clients {
             let device = c.device.build::<S>().map_err(|e| anyhow!("{}: device: {e}", c.name))?;
-            let user = c.user.build::<S>().map_err(|e| anyhow!("{}: user: {e}", c.name))?;
             anyhow::ensure!(c.rate_hz > 0.0 && c.rate_hz <= 100_000.0, "{}: haptic rate {} Hz", c.name, c.rate_hz);
             let period = Duration::from_secs_f64(1.0 / c.rate_hz);
             participants.push(Participant {
-                rig: SimulatedRig::new(device, user),
+                device: Some(device),
+                rig: None,
                 core: None,
                 user_id: None,
                 up: LinkEmulator::new(c.uplink.clone()).map_err(|e| anyhow!("{}: uplink: {e}", c.name))?,
@@ -272,6 +297,7 @@ impl<S: Space> Session<S> {
                 uplinks_refused: 0,
                 snapshots_refused: 0,
                 passivity: PassivityObserver::default(),
+                chosen: (1.0, 1.0, Vec::new(), Vec::new()),
                 plan: c.clone(),
             });
         }
@@ -305,10 +331,16 @@ impl<S: Space> Session<S> {
                 ModelForm::Op => LocalModelForm::OpSpace,
                 ModelForm::Config => LocalModelForm::ConfigSpace,
             },
-            device: Some(p.rig.spec().caps()),
+            device: p.device.as_ref().map(|d| d.spec().caps()),
+            mapping: p.plan.mapping.clone(),
         };
         let joined = self.ve.join(now, request).map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
-        let mut config = CoreConfig::new(p.rig.spec().clone());
+        let device = p.device.take().context("a participant joins once")?;
+        let spec = device.spec().clone();
+        let context = UserContext::from_welcome(&joined.welcome);
+        let user = p.plan.user.build::<S>(&context).map_err(|e| anyhow!("{}: user: {e}", p.plan.name))?;
+        p.rig = Some(SimulatedRig::new(device, user));
+        let mut config = CoreConfig::new(spec);
         config.constraint_mode = p.plan.constraint_mode;
         config.form = p.plan.form;
         config.period = p.period;
@@ -319,6 +351,11 @@ impl<S: Space> Session<S> {
             edit.apply(&mut config);
         }
         let mut core = HapticCore::new(config, &joined.welcome).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        let (w, g) = (&joined.welcome, &core.gains().device);
+        let mut gains = vec![g.joint_stiffness, g.joint_damping];
+        gains.extend(g.position_stiffness.iter().chain(&g.position_damping));
+        let coupling = w.coupling.stiffness.iter().chain(&w.coupling.damping).copied().collect();
+        p.chosen = (w.mapping.position_scale, w.mapping.force_scale, coupling, gains);
         core.set_one_way_delay(p.plan.downlink.delay);
         p.core = Some(core);
         p.user_id = Some(joined.user_id);
@@ -403,7 +440,7 @@ impl<S: Space> Session<S> {
         self.ve_ticks_seen += 1;
         if self.record_every > 0 && self.ve_ticks_seen % self.record_every as u64 == 0 {
             let mut sample = VeSample::from_state(now, &state);
-            sample.kinetic_energy = self.ve.kinetic_energy();
+            (sample.kinetic_energy, sample.potential_energy) = self.ve.mechanical_energy();
             self.recording.push_ve(sample);
         }
     }
@@ -436,11 +473,11 @@ impl<S: Space> Session<S> {
                 return Ok(());
             }
         }
-        let state = p.rig.read(now).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
-        let Some(core) = p.core.as_mut() else {
+        let (Some(core), Some(rig)) = (p.core.as_mut(), p.rig.as_mut()) else {
             p.next_tick += p.period;
             return Ok(());
         };
+        let state = rig.read(now).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         let t = Instant::now();
         let out = core.tick(now, &state);
         p.compute += t.elapsed();
@@ -452,20 +489,21 @@ impl<S: Space> Session<S> {
                 p.up.send(now, self.encode_buf.clone());
             }
         }
-        p.rig.command(now, &command).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        rig.command(now, &command).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         p.ticks += 1;
         p.next_tick += p.period;
         if report.active {
             p.active_ticks += 1;
-            let model = report.device_pose.difference(&report.model_pose);
-            p.model_sum_sq += S::op_lin(&model).dot(&S::op_lin(&model));
+            let scale = core.scales().position;
+            let model = S::op_lin(&report.device_pose.difference(&report.model_pose)).norm() * scale;
+            p.model_sum_sq += model * model;
             if report.clamp_scale < 1.0 {
                 p.saturated += 1;
             }
             if let Some(user) = p.user_id {
                 if let Some(u) = self.ve.state().users().find(|u| u.user_id == user) {
                     p.passivity = u.passivity;
-                    let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm();
+                    let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
                     p.op_sum_sq += d * d;
                     p.op_max = p.op_max.max(d);
                 }
@@ -474,7 +512,10 @@ impl<S: Space> Session<S> {
         if self.record_every > 0 && p.ticks % self.record_every as u64 == 0 {
             let ve_op =
                 p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user).map(|u| u.op_pose));
-            self.recording.push_client(i, ClientSample::from_report(&report, report.device_pose, ve_op, &command));
+            let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
+            // The true hand (a sensorless device's report carries the observer's estimate).
+            sample.hand = core.scales().wrench_to_ve::<S>(&rig.hand_wrench()).as_slice().to_vec();
+            self.recording.push_client(i, sample);
         }
         Ok(())
     }
@@ -506,6 +547,10 @@ impl<S: Space> Session<S> {
                     snapshots_refused: p.snapshots_refused,
                     passivity_absorbed_j: p.passivity.absorbed_j,
                     passivity_activations: p.passivity.activations,
+                    position_scale: p.chosen.0,
+                    force_scale: p.chosen.1,
+                    coupling: p.chosen.2.clone(),
+                    gains: p.chosen.3.clone(),
                 }
             })
             .collect();

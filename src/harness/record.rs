@@ -14,7 +14,7 @@ pub struct ClientSample {
     pub t: f64,
     /// Device handle position, mapped into the VE's frame by the client's indexing.
     pub device: Vec<f64>,
-    /// Device twist (linear first) as the core measured it.
+    /// Device twist (linear first) as the core measured it, VE units.
     pub device_twist: Vec<f64>,
     /// Local-model OP position.
     pub model: Vec<f64>,
@@ -30,7 +30,7 @@ pub struct ClientSample {
     pub impedance: Vec<f64>,
     /// The wrench sent to the device (after safety).
     pub command: Vec<f64>,
-    /// Hand wrench.
+    /// The hand's wrench on the handle, VE units (the harness knows the simulated hand's true wrench).
     pub hand: Vec<f64>,
     /// Constraint count the controllers used (with hysteresis).
     pub constraint_count: usize,
@@ -90,6 +90,8 @@ pub struct VeSample {
     pub users: Vec<(u32, Vec<f64>, Vec<f64>, u8)>,
     /// Kinetic energy of the linkage after the tick, J.
     pub kinetic_energy: f64,
+    /// Potential energy (gravity, springs) of the linkage after the tick, J.
+    pub potential_energy: f64,
 }
 
 impl VeSample {
@@ -101,6 +103,7 @@ impl VeSample {
             closure_error: s.closure_error,
             users: s.users().map(|u| (u.user_id, v(&u.op_pose.position), v(&u.wrench), u.constraint_count)).collect(),
             kinetic_energy: 0.0,
+            potential_energy: 0.0,
         }
     }
 }

@@ -3,8 +3,6 @@
 
 use std::time::Duration;
 
-use kinloop_protocol::RecommendedGains;
-
 use crate::device::DeviceSpec;
 
 /// How the joint-constraint controller renders the constrained directions (paper section VI).
@@ -53,7 +51,8 @@ impl ModelForm {
     }
 }
 
-/// Controller gains in absolute units (the paper's testbed values in [`ControllerGains::paper`]).
+/// Controller gains in device units, what the hand feels (the paper's testbed values in
+/// [`ControllerGains::paper`]; the core converts them through the session's mapping).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ControllerGains {
     /// Joint-constraint stiffness `k_j` along constrained directions, in scaled coordinates (N/m).
@@ -85,24 +84,14 @@ impl ControllerGains {
             position_damping: per_axis(70.0, 0.375),
         }
     }
-
-    /// The gains a server recommended in its `Welcome`.
-    pub fn from_recommended(g: &RecommendedGains) -> Self {
-        ControllerGains {
-            joint_stiffness: g.k_j,
-            joint_damping: g.b_j,
-            position_stiffness: g.k_pc.clone(),
-            position_damping: g.b_pc.clone(),
-        }
-    }
 }
 
 /// Where the controller gains come from.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum GainChoice {
-    /// The server's recommendation in the `Welcome`.
+    /// Designed from the device and the operational point the `Welcome` describes (`design`).
     #[default]
-    Recommended,
+    Designed,
     /// The paper's values scaled by this device's linear mass ([`ControllerGains::paper`]).
     Paper,
     /// Exactly these.
@@ -225,13 +214,13 @@ pub struct CoreConfig {
 }
 
 impl CoreConfig {
-    /// Defaults for `device`: stiffness mode, reduced form, the server's gains, 1 kHz.
+    /// Defaults for `device`: stiffness mode, reduced form, designed gains, 1 kHz.
     pub fn new(device: DeviceSpec) -> Self {
         CoreConfig {
             device,
             constraint_mode: ConstraintMode::Stiffness,
             form: ModelForm::Op,
-            gains: GainChoice::Recommended,
+            gains: GainChoice::Designed,
             weighting: ConstraintWeighting::default(),
             period: Duration::from_millis(1),
             blend_time_constant: Duration::from_millis(20),

@@ -27,6 +27,7 @@
 
 pub mod config;
 pub mod controllers;
+pub mod design;
 pub mod safety;
 
 mod deadband;
@@ -39,7 +40,7 @@ use std::time::Duration;
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::space::{SceneKind, Space, VecOps};
 use kinloop_protocol::codec::limits::MAX_WRENCH;
-use kinloop_protocol::{uplink_flags, SessionShape, Snapshot, Uplink, Welcome};
+use kinloop_protocol::{uplink_flags, Mapping, SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
     ConstraintMode, ConstraintWeighting, ControllerGains, CoreConfig, GainChoice, ModelForm, SafetyConfig,
@@ -97,6 +98,14 @@ pub enum CoreError {
     /// Gains that cannot be used.
     #[error("controller gains: {0}")]
     Gains(String),
+    /// A mapping whose scales are not positive.
+    #[error("the welcome's mapping (position scale {position}, force scale {force}) is not usable")]
+    Mapping {
+        /// Position scale.
+        position: f64,
+        /// Force scale.
+        force: f64,
+    },
     /// A tick period that is not positive.
     #[error("the tick period must be positive")]
     Period,
@@ -115,7 +124,8 @@ pub struct ControllerWrenches<S: Space> {
     pub contact: S::OpVec,
     /// Their sum.
     pub requested: S::OpVec,
-    /// What the device is commanded after the output gate and the limits.
+    /// What the device is commanded after the output gate, the mapping and the limits (device units; the
+    /// other wrenches here are in VE units).
     pub command: S::OpVec,
 }
 
@@ -252,7 +262,7 @@ impl CoreStats {
 /// message: a tick allocates nothing), and the report.
 #[derive(Debug)]
 pub struct TickOutput<'a, S: Space> {
-    /// The wrench to command.
+    /// The wrench to command (device units).
     pub command: S::OpVec,
     /// The uplink to send this tick, if any.
     pub uplink: Option<&'a Uplink>,
@@ -260,45 +270,120 @@ pub struct TickOutput<'a, S: Space> {
     pub report: &'a TickReport<S>,
 }
 
-/// Gains after resolution and capping to the device.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Gains after resolution and capping to the device: in VE units for the controllers, which compute on the
+/// VE side of the mapping, and as the device feels them.
+#[derive(Clone, Debug, PartialEq)]
 pub struct ResolvedGains<S: Space> {
-    /// k_j (N/m, scaled coordinates).
+    /// k_j (N/m, scaled coordinates), VE units.
     pub joint_stiffness: f64,
-    /// b_j (N s/m).
+    /// b_j (N s/m), VE units.
     pub joint_damping: f64,
-    /// K_pc.
+    /// K_pc, VE units.
     pub position_stiffness: S::OpVec,
-    /// B_pc.
+    /// B_pc, VE units.
     pub position_damping: S::OpVec,
+    /// The same gains as the device renders them (device units), after the caps.
+    pub device: ControllerGains,
     /// Factor applied to every stiffness so that k_j + K_pc stays within the device's stable stiffness.
     pub stiffness_cap: f64,
     /// Factor applied to every damping likewise.
     pub damping_cap: f64,
 }
 
-/// Maps device poses into the VE: a position offset and a handle-frame orientation offset
-/// (`R_ve = R_device R_offset`), so world-frame twists and wrenches are the same on both sides.
+/// How device and VE map onto each other (`protocol::Mapping`): positions by `position` (device metres per VE
+/// metre), forces by `force`, torques by `torque = force · position`; angles one to one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scales {
+    /// Device metres per VE metre.
+    pub position: f64,
+    /// Device newtons per VE newton.
+    pub force: f64,
+    /// Device newton-metres per VE newton-metre.
+    pub torque: f64,
+}
+
+impl Scales {
+    /// From the welcome's mapping.
+    pub fn of(mapping: &Mapping) -> Self {
+        Scales { position: mapping.position_scale, force: mapping.force_scale, torque: mapping.torque_scale() }
+    }
+
+    /// A device twist in the VE.
+    pub fn twist_to_ve<S: Space>(&self, twist: &S::OpVec) -> S::OpVec {
+        self.per_group::<S>(twist, 1.0 / self.position, 1.0)
+    }
+
+    /// A device wrench (the hand's) in the VE.
+    pub fn wrench_to_ve<S: Space>(&self, wrench: &S::OpVec) -> S::OpVec {
+        self.per_group::<S>(wrench, 1.0 / self.force, 1.0 / self.torque)
+    }
+
+    /// A VE wrench on the device.
+    pub fn wrench_to_device<S: Space>(&self, wrench: &S::OpVec) -> S::OpVec {
+        self.per_group::<S>(wrench, self.force, self.torque)
+    }
+
+    /// A device gain (stiffness or damping, per axis) in VE units: `F_ve = F_d / c_f` for a device
+    /// displacement `c_p Δx_ve`, so `K_ve = K_d c_p / c_f`; on angular axes `K_ve = K_d / c_τ`.
+    fn gain_to_ve<S: Space>(&self, gain: &S::OpVec) -> S::OpVec {
+        self.per_group::<S>(gain, self.position / self.force, 1.0 / self.torque)
+    }
+
+    /// Device masses in VE units (the mass the VE side must give a wrench to move the device as it moves).
+    fn mass_to_ve<S: Space>(&self, mass: &S::OpVec) -> S::OpVec {
+        self.gain_to_ve::<S>(mass)
+    }
+
+    fn per_group<S: Space>(&self, v: &S::OpVec, linear: f64, angular: f64) -> S::OpVec {
+        let lin = <S::Point as VecOps>::LEN;
+        let mut out = *v;
+        for i in 0..S::DIM {
+            out[i] *= if i < lin { linear } else { angular };
+        }
+        out
+    }
+}
+
+/// Maps device poses into the VE: the device's displacement from where it was indexed, divided by the
+/// position scale, from the OP's position then, and a handle-frame orientation offset
+/// (`R_ve = R_device R_offset`), so world-frame angular velocities are the same on both sides.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct DeviceIndex<S: Space> {
-    position: S::Point,
+    device_origin: S::Point,
+    ve_origin: S::Point,
     rotation: S::Rot,
+    position_scale: f64,
 }
 
 impl<S: Space> DeviceIndex<S> {
-    fn identity() -> Self {
-        DeviceIndex { position: S::Point::zero(), rotation: S::rot_identity() }
+    fn identity(position_scale: f64) -> Self {
+        DeviceIndex {
+            device_origin: S::Point::zero(),
+            ve_origin: S::Point::zero(),
+            rotation: S::rot_identity(),
+            position_scale,
+        }
     }
 
-    fn between(device: &OpPose<S>, op: &OpPose<S>) -> Self {
+    fn between(device: &OpPose<S>, op: &OpPose<S>, position_scale: f64) -> Self {
         DeviceIndex {
-            position: op.position - device.position,
+            device_origin: device.position,
+            ve_origin: op.position,
             rotation: S::rot_mul(&S::rot_inverse(&device.rotation), &op.rotation),
+            position_scale,
         }
     }
 
     fn apply(&self, pose: &OpPose<S>) -> OpPose<S> {
-        OpPose { position: pose.position + self.position, rotation: S::rot_mul(&pose.rotation, &self.rotation) }
+        OpPose {
+            position: self.ve_origin + (pose.position - self.device_origin) * (1.0 / self.position_scale),
+            rotation: S::rot_mul(&pose.rotation, &self.rotation),
+        }
+    }
+
+    /// Where a VE position lies on the device (the inverse of `apply`'s position part).
+    fn to_device(&self, ve: &S::Point) -> S::Point {
+        self.device_origin + (*ve - self.ve_origin) * self.position_scale
     }
 }
 
@@ -307,6 +392,8 @@ pub struct HapticCore<S: Space> {
     config: CoreConfig,
     gains: ResolvedGains<S>,
     limits: WrenchLimits,
+    scales: Scales,
+    /// The device's masses in VE units.
     device_mass: S::OpVec,
     length_scale: f64,
     user_id: u32,
@@ -377,8 +464,12 @@ impl<S: Space> HapticCore<S> {
                 expected: S::DIM,
             });
         }
-        let device_mass = S::OpVec::from_slice(&device.mass);
-        let gains = Self::resolve_gains(&config, welcome)?;
+        let scales = Scales::of(&welcome.mapping);
+        if ![scales.position, scales.force, scales.torque].iter().all(|x| x.is_finite() && *x > 0.0) {
+            return Err(CoreError::Mapping { position: scales.position, force: scales.force });
+        }
+        let device_mass = scales.mass_to_ve::<S>(&S::OpVec::from_slice(&device.mass));
+        let gains = Self::resolve_gains(&config, welcome, &scales)?;
         let shape = scene.shape();
         let config_shape = (config.form == ModelForm::Config).then_some((shape.n, shape.m));
         let pose_len = OpPose::<S>::wire_len();
@@ -387,6 +478,7 @@ impl<S: Space> HapticCore<S> {
         Ok(HapticCore {
             gains,
             limits: WrenchLimits::of(device),
+            scales,
             device_mass,
             length_scale: scene.length_scale,
             user_id: welcome.user_id,
@@ -399,7 +491,7 @@ impl<S: Space> HapticCore<S> {
             has_snapshot: false,
             model: LocalModel::new(config_shape),
             frame: ConstraintFrame::new(),
-            index: DeviceIndex::identity(),
+            index: DeviceIndex::identity(scales.position),
             gate: OutputGate::new(&config.safety),
             observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
             reaction: S::OpVec::zero(),
@@ -415,11 +507,19 @@ impl<S: Space> HapticCore<S> {
         })
     }
 
-    /// Picks the gains and scales them into what the device renders stably: `k_j + K_pc ≤ max_stiffness`
-    /// and `b_j + B_pc ≤ max_damping` on the linear axes (angular gains scale by the same factors).
-    fn resolve_gains(config: &CoreConfig, welcome: &Welcome) -> Result<ResolvedGains<S>, CoreError> {
+    /// Picks the gains (device units), caps them to what the device renders stably (`k_j + K_pc ≤
+    /// max_stiffness` and `b_j + B_pc ≤ max_damping` on the linear axes; angular gains scale by the same
+    /// factors) and converts them to VE units through the mapping.
+    fn resolve_gains(config: &CoreConfig, welcome: &Welcome, scales: &Scales) -> Result<ResolvedGains<S>, CoreError> {
+        let period_s = config.period.as_secs_f64();
         let chosen = match &config.gains {
-            GainChoice::Recommended => ControllerGains::from_recommended(&welcome.gains),
+            GainChoice::Designed => design::designed_gains::<S>(
+                &config.device,
+                &welcome.mapping,
+                &welcome.op,
+                welcome.scene.length_scale,
+                period_s,
+            ),
             GainChoice::Paper => ControllerGains::paper(config.device.linear_mass(), S::DIM),
             GainChoice::Custom(g) => g.clone(),
         };
@@ -442,14 +542,33 @@ impl<S: Space> HapticCore<S> {
         };
         let stiffness_cap = cap(chosen.joint_stiffness + linear_max(&position_stiffness), config.device.max_stiffness);
         let damping_cap = cap(chosen.joint_damping + linear_max(&position_damping), config.device.max_damping);
-        Ok(ResolvedGains {
+        let device = ControllerGains {
             joint_stiffness: chosen.joint_stiffness * stiffness_cap,
             joint_damping: chosen.joint_damping * damping_cap,
-            position_stiffness: position_stiffness * stiffness_cap,
-            position_damping: position_damping * damping_cap,
+            position_stiffness: (position_stiffness * stiffness_cap).as_slice().to_vec(),
+            position_damping: (position_damping * damping_cap).as_slice().to_vec(),
+        };
+        // k_j and b_j act along the constrained directions, linear first: they scale as a linear gain.
+        let joint = scales.position / scales.force;
+        Ok(ResolvedGains {
+            joint_stiffness: device.joint_stiffness * joint,
+            joint_damping: device.joint_damping * joint,
+            position_stiffness: scales.gain_to_ve::<S>(&(position_stiffness * stiffness_cap)),
+            position_damping: scales.gain_to_ve::<S>(&(position_damping * damping_cap)),
+            device,
             stiffness_cap,
             damping_cap,
         })
+    }
+
+    /// The mapping's scales.
+    pub fn scales(&self) -> Scales {
+        self.scales
+    }
+
+    /// Where VE position `ve` lies on the device, once the device is indexed to the OP (first snapshot).
+    pub fn ve_to_device(&self, ve: &S::Point) -> S::Point {
+        self.index.to_device(ve)
     }
 
     /// The gains in use.
@@ -537,7 +656,7 @@ impl<S: Space> HapticCore<S> {
             self.reaction = S::OpVec::zero();
         }
         if first && self.config.index_at_first_snapshot {
-            self.index = DeviceIndex::between(device, &self.active.op_pose);
+            self.index = DeviceIndex::between(device, &self.active.op_pose, self.scales.position);
         }
         self.has_snapshot = true;
     }
@@ -563,7 +682,7 @@ impl<S: Space> HapticCore<S> {
             flags |= uplink_flags::IMPEDANCE_MODE;
         }
         let device_pose = self.index.apply(&device.pose);
-        let device_twist = device.twist;
+        let device_twist = self.scales.twist_to_ve::<S>(&device.twist);
         let age = now.saturating_sub(self.active.received_at);
         let stale = age > self.config.safety.max_snapshot_age;
 
@@ -585,7 +704,8 @@ impl<S: Space> HapticCore<S> {
 
         // 3. Step the local model under the user's wrench.
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
-        let sensed = device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH));
+        let sensed =
+            device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH)).map(|w| self.scales.wrench_to_ve::<S>(&w));
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
         let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
@@ -633,7 +753,8 @@ impl<S: Space> HapticCore<S> {
             gain = 0.0;
         } else {
             gain = self.gate.update(dt_s, !stale);
-            (command, clamp_scale) = limit_wrench::<S>(&(requested * gain), &self.limits);
+            let on_device = self.scales.wrench_to_device::<S>(&(requested * gain));
+            (command, clamp_scale) = limit_wrench::<S>(&on_device, &self.limits);
             self.reaction = -mask_unactuated::<S>(&pc_felt, &self.limits) * (gain * clamp_scale);
         }
         if clamp_scale < 1.0 {
@@ -644,9 +765,11 @@ impl<S: Space> HapticCore<S> {
             flags |= uplink_flags::STALE_SNAPSHOT | uplink_flags::FADING;
             self.stats.stale_ticks += 1;
         }
-        self.last_command = command;
+        // The observer and the report work on the VE side.
+        self.last_command = self.scales.wrench_to_ve::<S>(&command);
         self.stats.max_force_ratio = self.stats.max_force_ratio.max(force_ratio::<S>(&command, &self.limits));
-        let distance = S::op_lin(&error).norm();
+        // Tracking as the hand feels it: in device space.
+        let distance = S::op_lin(&error).norm() * self.scales.position;
         if distance.is_finite() {
             self.stats.tracking_error_sum_sq += distance * distance;
             self.stats.tracking_error_max = self.stats.tracking_error_max.max(distance);

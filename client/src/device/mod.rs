@@ -36,12 +36,20 @@ pub struct DeviceSpec {
     pub workspace_max: Vec<f64>,
     /// Peak force (N); 0 means no force actuation.
     pub max_force_n: f64,
+    /// Force the device holds indefinitely (N), at most the peak: what scales are fitted to.
+    pub continuous_force_n: f64,
     /// Peak torque (N m); 0 means the angular axes are sensed but not actuated.
     pub max_torque_nm: f64,
     /// Highest stiffness the device renders stably (N/m).
     pub max_stiffness: f64,
     /// Highest damping the device renders stably (N s/m).
     pub max_damping: f64,
+    /// Highest stiffness the device renders stably on its angular axes (N m/rad; 0 without torque).
+    pub max_angular_stiffness: f64,
+    /// Highest damping the device renders stably on its angular axes (N m s/rad).
+    pub max_angular_damping: f64,
+    /// The mechanism's own viscous damping per axis (N s/m, N m s/rad): passivity bounds are made of it.
+    pub damping: Vec<f64>,
     /// The device's own servo rate (Hz).
     pub native_rate_hz: f64,
     /// True when the device measures the hand wrench.
@@ -51,7 +59,7 @@ pub struct DeviceSpec {
 }
 
 impl DeviceSpec {
-    /// The capabilities sent in the `Hello`.
+    /// The capabilities sent in the `Join`.
     pub fn caps(&self) -> DeviceCaps {
         DeviceCaps {
             name: self.name.clone(),
@@ -59,10 +67,16 @@ impl DeviceSpec {
             workspace_min: self.workspace_min.clone(),
             workspace_max: self.workspace_max.clone(),
             max_force_n: self.max_force_n,
+            continuous_force_n: self.continuous_force_n,
             max_torque_nm: self.max_torque_nm,
             max_stiffness_n_per_m: self.max_stiffness,
             max_damping_ns_per_m: self.max_damping,
+            max_angular_stiffness_nm_per_rad: self.max_angular_stiffness,
+            max_angular_damping_nms_per_rad: self.max_angular_damping,
+            damping: self.damping.clone(),
+            mass: self.mass.clone(),
             native_rate_hz: self.native_rate_hz,
+            has_force_sensor: self.has_force_sensor,
         }
     }
 

@@ -28,7 +28,7 @@ pub enum PresetError {
     #[error("unknown device {0:?}; expected sim:paper, sim:falcon or sim:touch")]
     Unknown(String),
     /// The device has no such operational space.
-    #[error("device {device} is planar only and cannot render a {kind:?} scene")]
+    #[error("device {device} is planar only (axes x, y, θ) and cannot render a {kind:?} scene")]
     Unsupported {
         /// The preset.
         device: &'static str,
@@ -64,6 +64,15 @@ fn axes(kind: SceneKind, linear: [f64; 3], ang: f64) -> Vec<f64> {
 }
 
 impl DevicePreset {
+    /// The device a scene's space gets when none is asked for: the paper's planar device for planar
+    /// scenes, a Touch (3 translations actuated, the stylus's rotations sensed) for spatial ones.
+    pub fn for_kind(kind: SceneKind) -> Self {
+        match kind {
+            SceneKind::Planar => DevicePreset::Paper,
+            SceneKind::Spatial => DevicePreset::Touch,
+        }
+    }
+
     /// Name as written on the command line.
     pub fn name(self) -> &'static str {
         match self {
@@ -92,9 +101,15 @@ impl DevicePreset {
                     workspace_min: vec![-0.15, -0.15, -2.0 * PI],
                     workspace_max: vec![0.15, 0.15, 2.0 * PI],
                     max_force_n: 10.0,
+                    // Linear motors hold about half their peak without overheating.
+                    continuous_force_n: 5.0,
                     max_torque_nm: 0.2,
                     max_stiffness: 2000.0,
                     max_damping: 200.0,
+                    // The linear figures through the handle's 5 cm lever (K r², B r²).
+                    max_angular_stiffness: 5.0,
+                    max_angular_damping: 0.5,
+                    damping: self.damping(kind),
                     native_rate_hz: 1000.0,
                     has_force_sensor: true,
                     mass: vec![1.0, 1.0, 0.005],
@@ -110,9 +125,14 @@ impl DevicePreset {
                 workspace_min: axes(kind, [-0.0508, -0.0508, -0.0508], 0.0),
                 workspace_max: axes(kind, [0.0508, 0.0508, 0.0508], 0.0),
                 max_force_n: 8.9,
+                // Not published; the peak is a short-term figure for its small motors: taken as 45 %.
+                continuous_force_n: 4.0,
                 max_torque_nm: 0.0,
                 max_stiffness: 3000.0,
                 max_damping: 20.0,
+                max_angular_stiffness: 0.0,
+                max_angular_damping: 0.0,
+                damping: self.damping(kind),
                 native_rate_hz: 1000.0,
                 has_force_sensor: false,
                 mass: per_axis(kind, 0.15, 1e-3),
@@ -128,9 +148,14 @@ impl DevicePreset {
                 workspace_min: axes(kind, [-0.08, -0.06, -0.035], -2.0),
                 workspace_max: axes(kind, [0.08, 0.06, 0.035], 2.0),
                 max_force_n: 3.3,
+                // OpenHaptics' continuous figure (CHAI3D's device file, shared/haptics-facts.md).
+                continuous_force_n: 0.88,
                 max_torque_nm: 0.0,
                 max_stiffness: 400.0,
                 max_damping: 4.0,
+                max_angular_stiffness: 0.0,
+                max_angular_damping: 0.0,
+                damping: self.damping(kind),
                 native_rate_hz: 1000.0,
                 has_force_sensor: false,
                 mass: per_axis(kind, 0.045, 2e-5),
@@ -139,18 +164,24 @@ impl DevicePreset {
         Ok(spec)
     }
 
+    /// The mechanism's own viscous damping per axis (the spec advertises it, the plant has it).
+    pub fn damping(self, kind: SceneKind) -> Vec<f64> {
+        match self {
+            DevicePreset::Paper => per_axis(kind, 0.02, 2e-5),
+            DevicePreset::Falcon => per_axis(kind, 0.5, 0.0),
+            DevicePreset::Touch => per_axis(kind, 0.05, 1e-5),
+        }
+    }
+
     /// Plant parameters of the simulation.
     pub fn params(self, kind: SceneKind) -> SimulatedDeviceParams {
         // Velocity from encoder differences is filtered as vendor SDKs do: one count per millisecond is
         // 1 mm/s on the paper's 1 µm encoder and 60 mm/s on the Falcon's, noise the damping gains would
         // turn into force ripple.
-        let common = |damping: (f64, f64),
-                      coulomb: (f64, f64),
-                      resolution: (f64, f64),
-                      wall: (f64, f64),
-                      velocity_filter_hz: f64| {
+        let damping = self.damping(kind);
+        let common = |coulomb: (f64, f64), resolution: (f64, f64), wall: (f64, f64), velocity_filter_hz: f64| {
             SimulatedDeviceParams {
-                damping: per_axis(kind, damping.0, damping.1),
+                damping: damping.clone(),
                 coulomb: per_axis(kind, coulomb.0, coulomb.1),
                 coulomb_velocity: 2e-3,
                 encoder_resolution: per_axis(kind, resolution.0, resolution.1),
@@ -163,11 +194,11 @@ impl DevicePreset {
         match self {
             // Direct-drive linear motors with 1 µm optical encoders: little friction (an impedance device whose
             // friction would otherwise mask the linkage's inertia, the very thing the experiment renders).
-            DevicePreset::Paper => common((0.02, 2e-5), (0.002, 1e-5), (1e-6, 1e-5), (5000.0, 5.0), 50.0),
+            DevicePreset::Paper => common((0.002, 1e-5), (1e-6, 1e-5), (5000.0, 5.0), 50.0),
             // 400 dpi encoders through the delta arms ≈ 60 µm; capstan friction ≈ 0.05 N.
-            DevicePreset::Falcon => common((0.5, 0.0), (0.05, 0.0), (6e-5, 0.0), (3000.0, 1.0), 30.0),
+            DevicePreset::Falcon => common((0.05, 0.0), (6e-5, 0.0), (3000.0, 1.0), 30.0),
             // 450 dpi ≈ 55 µm; gimbal pots ≈ 2 mrad.
-            DevicePreset::Touch => common((0.05, 1e-5), (0.03, 1e-5), (5.5e-5, 2e-3), (2000.0, 0.5), 30.0),
+            DevicePreset::Touch => common((0.03, 1e-5), (5.5e-5, 2e-3), (2000.0, 0.5), 30.0),
         }
     }
 

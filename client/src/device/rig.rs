@@ -11,7 +11,7 @@ use crate::user::SimulatedUser;
 /// A [`SimulatedDevice`] and the [`SimulatedUser`] holding it. Each `read(now)` integrates the plant from
 /// the previous read to `now` under the held command and the hand wrench of the previous read, then samples
 /// the encoders and asks the user for the hand wrench of the coming period (the force sensor, when the
-/// device has one, reports that wrench).
+/// device has one, reports that wrench) and for the mass its hand adds to the handle.
 pub struct SimulatedRig<S: Space> {
     device: SimulatedDevice<S>,
     user: Box<dyn SimulatedUser<S>>,
@@ -53,7 +53,10 @@ impl<S: Space> HapticDevice<S> for SimulatedRig<S> {
         self.last_read = Some(now);
         let (pose, twist) = self.device.sample();
         let mut state = DeviceState { pose, twist, hand_wrench: None };
-        self.hand = self.user.wrench(now, &state);
+        // The hand feels the handle itself, not its encoders.
+        let held = DeviceState { pose: self.device.true_pose(), twist: self.device.true_twist(), hand_wrench: None };
+        self.hand = self.user.wrench(now, &held);
+        self.device.attach_mass(&self.user.attached_mass(now));
         if self.device.spec().has_force_sensor {
             state.hand_wrench = Some(self.hand);
         }

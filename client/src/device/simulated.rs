@@ -91,6 +91,9 @@ const MAX_SUBSTEPS: usize = 10_000;
 pub struct SimulatedDevice<S: Space> {
     spec: DeviceSpec,
     limits: WrenchLimits,
+    mass: S::OpVec,
+    /// Mass a hand adds to the handle (see `attach_mass`).
+    attached: S::OpVec,
     inverse_mass: S::OpVec,
     damping: S::OpVec,
     coulomb: S::OpVec,
@@ -174,6 +177,8 @@ impl<S: Space> SimulatedDevice<S> {
         let mut device = SimulatedDevice {
             spec,
             limits,
+            mass,
+            attached: S::OpVec::zero(),
             inverse_mass,
             damping,
             coulomb,
@@ -198,6 +203,20 @@ impl<S: Space> SimulatedDevice<S> {
         device.hold_locked_axes();
         device.measured = device.quantized_pose();
         Ok(device)
+    }
+
+    /// A hand holding the handle adds `mass` per axis (kg, kg m²) to the plant; zero when it lets go.
+    /// Negative or non-finite values count as zero.
+    pub fn attach_mass(&mut self, mass: &S::OpVec) {
+        if *mass == self.attached {
+            return;
+        }
+        self.attached = *mass;
+        for i in 0..S::DIM {
+            let extra = mass[i];
+            let extra = if extra.is_finite() && extra > 0.0 { extra } else { 0.0 };
+            self.inverse_mass[i] = 1.0 / (self.mass[i] + extra);
+        }
     }
 
     /// The spec this device was built from.

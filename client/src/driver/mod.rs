@@ -25,14 +25,17 @@ use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, DatagramReceiver, DatagramSender, Endpoint,
     EndpointError, EndpointOptions, Trust,
 };
-use kinloop_protocol::{Control, Datagram, Hello, LocalModelForm, Role, Uplink, Welcome, PROTOCOL_VERSION};
+use kinloop_protocol::{
+    Control, Datagram, Hello, Join, LocalModelForm, MappingRequest, Role, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION,
+};
 
 use crate::core::{
-    ConstraintMode, CoreConfig, CoreError, CoreStats, GainChoice, HapticCore, ModelForm, UplinkDeadband,
+    ConstraintMode, ControllerGains, CoreConfig, CoreError, CoreStats, GainChoice, HapticCore, ModelForm,
+    UplinkDeadband,
 };
 use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::{DevicePreset, SimulatedRig};
-use crate::user::{UserError, UserSpec};
+use crate::user::{UserContext, UserError, UserSpec};
 use rt_loop::{LoopReport, LoopRings, LoopSettings, LoopShared};
 use timing::LatenessSummary;
 
@@ -47,12 +50,14 @@ pub struct ClientConfig {
     pub token: String,
     /// How the server is trusted.
     pub trust: Trust,
-    /// Operational point to hold.
-    pub op: String,
-    /// The simulated device.
-    pub device: DevicePreset,
+    /// Operational point to hold; `None`: the scene's first.
+    pub op: Option<String>,
+    /// The simulated device; `None`: the one for the scene's space ([`DevicePreset::for_kind`]).
+    pub device: Option<DevicePreset>,
     /// The simulated user.
     pub user: UserSpec,
+    /// What to ask of the mapping between device and VE (scales, gravity compensation).
+    pub mapping: MappingRequest,
     /// Loop rate (Hz).
     pub rate_hz: f64,
     /// Stop after this long (None: until shutdown).
@@ -78,21 +83,23 @@ pub struct ClientConfig {
 }
 
 impl ClientConfig {
-    /// Defaults: `sim:paper` with the paper's user, 1 kHz, stiffness mode, reduced local model.
+    /// Defaults: the scene's first operational point, the device for the scene's space, a relaxed hand
+    /// touring the reach, the server's mapping, 1 kHz, stiffness mode, reduced local model, designed gains.
     pub fn new(server: impl Into<String>, trust: Trust) -> Self {
         ClientConfig {
             server: server.into(),
             server_name: "localhost".into(),
             token: String::new(),
             trust,
-            op: "link2".into(),
-            device: DevicePreset::Paper,
-            user: UserSpec::paper(),
+            op: None,
+            device: None,
+            user: UserSpec::soft_hand(),
+            mapping: MappingRequest::default(),
             rate_hz: 1000.0,
             duration: None,
             constraint_mode: ConstraintMode::Stiffness,
             form: ModelForm::Op,
-            gains: GainChoice::Recommended,
+            gains: GainChoice::Designed,
             deadband: None,
             link: None,
             record: None,
@@ -216,6 +223,8 @@ pub struct ClientHandle {
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
     welcome: Welcome,
+    device: DevicePreset,
+    gains: ControllerGains,
 }
 
 /// A client: see [`Client::start`].
@@ -246,6 +255,8 @@ impl Client {
                 helper_threads: started.helpers,
                 started: Instant::now(),
                 welcome: started.welcome,
+                device: started.device,
+                gains: started.gains,
             }),
             Ok(Err(e)) => {
                 let _ = net_thread.join();
@@ -263,6 +274,37 @@ impl ClientHandle {
     /// What the server granted.
     pub fn welcome(&self) -> &Welcome {
         &self.welcome
+    }
+
+    /// The device in use (the one asked for, or the scene's default).
+    pub fn device(&self) -> DevicePreset {
+        self.device
+    }
+
+    /// The controller gains in use, as the device renders them.
+    pub fn gains(&self) -> &ControllerGains {
+        &self.gains
+    }
+
+    /// What this client chose and was granted, as JSON: operational point, device, mapping, the server's
+    /// coupling gains and the client's own.
+    pub fn session_json(&self) -> serde_json::Value {
+        let w = &self.welcome;
+        serde_json::json!({
+            "scene": w.scene.name,
+            "op": w.scene.op_name,
+            "device": self.device.name(),
+            "position_scale": w.mapping.position_scale,
+            "force_scale": w.mapping.force_scale,
+            "torque_scale": w.mapping.torque_scale(),
+            "gravity_compensation": w.mapping.gravity_compensation,
+            "coupling_stiffness": w.coupling.stiffness,
+            "coupling_damping": w.coupling.damping,
+            "joint_stiffness": self.gains.joint_stiffness,
+            "joint_damping": self.gains.joint_damping,
+            "position_stiffness": self.gains.position_stiffness,
+            "position_damping": self.gains.position_damping,
+        })
     }
 
     /// Measurements so far.
@@ -369,6 +411,8 @@ struct Started {
     loop_thread: JoinHandle<CoreStats>,
     helpers: Vec<JoinHandle<()>>,
     welcome: Welcome,
+    device: DevicePreset,
+    gains: ControllerGains,
 }
 
 /// The network side's ends of the rings.
@@ -407,13 +451,17 @@ fn network_thread(
                 return;
             }
         };
-        let session = match open_session(&endpoint, address, &config).await {
+        let mut chosen = None;
+        let session = match open_session(&endpoint, address, &config, &mut chosen).await {
             Ok(s) => s,
             Err(source) => {
                 let _ = started.send(Err(ClientError::Connect { server: config.server.clone(), source }));
                 return;
             }
         };
+        // The session opened, so the chooser ran.
+        let Some(device) = chosen else { return };
+        let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
         match session.welcome.scene.kind {
             SceneKind::Planar => run::<Planar>(config, address, endpoint, session, shared, net, started).await,
             SceneKind::Spatial => run::<Spatial>(config, address, endpoint, session, shared, net, started).await,
@@ -421,36 +469,38 @@ fn network_thread(
     });
 }
 
-fn hello(config: &ClientConfig, kind: Option<SceneKind>) -> Hello {
-    // The device's capabilities depend on the scene's space; before the first welcome, announce the planar
-    // (or only) form of the device.
-    let kind = kind.unwrap_or(SceneKind::Planar);
-    let spec = config.device.spec(kind).or_else(|_| config.device.spec(SceneKind::Planar));
+fn hello(config: &ClientConfig) -> Hello {
     Hello {
         version: PROTOCOL_VERSION,
         token: config.token.clone(),
         client_name: config.client_name.clone(),
         role: Role::Manipulator,
-        op: config.op.clone(),
-        device: spec.map(|s| s.caps()).unwrap_or_else(|_| unreachable_caps()),
-        form: match config.form {
-            ModelForm::Op => LocalModelForm::OpSpace,
-            ModelForm::Config => LocalModelForm::ConfigSpace,
-        },
     }
 }
 
-fn unreachable_caps() -> kinloop_protocol::DeviceCaps {
-    kinloop_protocol::DeviceCaps {
-        name: "unknown".into(),
-        dof: 0,
-        workspace_min: Vec::new(),
-        workspace_max: Vec::new(),
-        max_force_n: 0.0,
-        max_torque_nm: 0.0,
-        max_stiffness_n_per_m: 0.0,
-        max_damping_ns_per_m: 0.0,
-        native_rate_hz: 0.0,
+/// The join for the scene the server described: the operational point asked for (or the scene's first)
+/// and the device asked for (or the scene's default), described in the scene's space. A device that cannot
+/// serve the scene's space is an error naming both.
+pub fn choose(config: &ClientConfig, scene: &SceneInfo) -> Result<(Join, DevicePreset), String> {
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(scene.kind));
+    let spec =
+        device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?;
+    let op = match &config.op {
+        Some(op) => op.clone(),
+        None => scene.ops.first().cloned().ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
+    };
+    let form = match config.form {
+        ModelForm::Op => LocalModelForm::OpSpace,
+        ModelForm::Config => LocalModelForm::ConfigSpace,
+    };
+    Ok((Join { op, device: spec.caps(), form, mapping: config.mapping.clone() }, device))
+}
+
+/// A space and its axes, for messages.
+fn kind_axes(kind: SceneKind) -> &'static str {
+    match kind {
+        SceneKind::Planar => "planar (axes x, y, θ)",
+        SceneKind::Spatial => "spatial (axes x, y, z, rx, ry, rz)",
     }
 }
 
@@ -458,12 +508,19 @@ async fn open_session(
     endpoint: &Endpoint,
     address: SocketAddr,
     config: &ClientConfig,
+    chosen: &mut Option<DevicePreset>,
 ) -> Result<ConnectedSession, ConnectError> {
-    connect(endpoint, address, &config.server_name, &hello(config, None)).await
+    connect(endpoint, address, &config.server_name, &hello(config), |scene| {
+        let (join, device) = choose(config, scene)?;
+        *chosen = Some(device);
+        Ok(join)
+    })
+    .await
 }
 
 fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<HapticCore<S>>, ClientError> {
-    let mut core_config = CoreConfig::new(config.device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?);
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
+    let mut core_config = CoreConfig::new(device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?);
     core_config.constraint_mode = config.constraint_mode;
     core_config.form = config.form;
     core_config.gains = config.gains.clone();
@@ -471,6 +528,13 @@ fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<Ha
     core_config.period = Duration::from_secs_f64(1.0 / config.rate_hz);
     let core = HapticCore::<S>::new(core_config, welcome)?;
     let g = core.gains();
+    tracing::info!(
+        k_j = g.device.joint_stiffness,
+        b_j = g.device.joint_damping,
+        k_pc = ?g.device.position_stiffness,
+        b_pc = ?g.device.position_damping,
+        "controller gains (device units)"
+    );
     if g.stiffness_cap < 1.0 || g.damping_cap < 1.0 {
         tracing::warn!(
             stiffness = g.stiffness_cap,
@@ -507,12 +571,15 @@ async fn run<S: Space>(
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
     let setup = || -> Result<_, ClientError> {
-        let device = config.device.build::<S>()?;
-        let user = config.user.build::<S>()?;
+        let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build::<S>()?;
+        let user = config.user.build::<S>(&UserContext::from_welcome(&session.welcome))?;
         let core = core_for::<S>(&config, &session.welcome)?;
         Ok((SimulatedRig::new(device, user), core))
     };
-    let (rig, core) = match setup() {
+    let (rig, core, gains) = match setup().map(|(rig, core)| {
+        let gains = core.gains().device.clone();
+        (rig, core, gains)
+    }) {
         Ok(parts) => parts,
         Err(e) => {
             session.connection.close(kinloop_protocol::quic::close_codes::NORMAL, b"client cannot render");
@@ -602,8 +669,9 @@ async fn run<S: Space>(
     };
     helpers.push(uplink_thread);
     let welcome = session.welcome.clone();
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
     let mut session = Session::adopt(session);
-    let _ = started.send(Ok(Started { loop_thread, helpers, welcome }));
+    let _ = started.send(Ok(Started { loop_thread, helpers, welcome, device, gains }));
     let mut rings = NetRings {
         snapshots: snapshots_tx,
         spent_snapshots: spent_snapshots_rx,
@@ -630,7 +698,7 @@ async fn run<S: Space>(
             drain_reports(&mut rings, &net);
             tokio::time::sleep(backoff).await;
             backoff = (backoff * 2).min(Duration::from_secs(5));
-            match open_session(&endpoint, address, &config).await {
+            match open_session(&endpoint, address, &config, &mut None).await {
                 Ok(s) => break Some(s),
                 Err(
                     e @ (ConnectError::Refused(_) | ConnectError::UntrustedCertificate { .. } | ConnectError::Alpn),
@@ -709,7 +777,7 @@ impl Session {
     /// Takes over a connected session; its control stream is read by a task of its own so that a frame
     /// half-read when another event wins a `select!` is never lost.
     fn adopt(connected: ConnectedSession) -> Self {
-        let ConnectedSession { connection, send, mut recv, welcome } = connected;
+        let ConnectedSession { connection, send, mut recv, welcome, .. } = connected;
         let (tx, control) = tokio::sync::mpsc::channel(16);
         let reader = tokio::spawn(async move {
             loop {

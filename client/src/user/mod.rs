@@ -2,30 +2,42 @@
 //! the time (sans-IO); [`crate::device::SimulatedRig`] applies it to a simulated device.
 //!
 //! On the command line (`--user`):
-//! - `constant:FX,FY,TZ` (planar) or `constant:FX,FY,FZ,TX,TY,TZ` (spatial): the paper's user, a constant
-//!   wrench in world axes (section VI: `constant:-0.5,0,-0.0025`);
-//! - `path:...`: a spring-damper hand whose set-point follows a scripted path, see [`path`];
+//! - `soft`, `firm`, `release`, `poke` (default `soft`): a hand that pushes and yields, a mass-spring-damper
+//!   grasp on an intended motion, touring the operational point's reach; `KIND:PATH` gives it a scripted
+//!   path instead (`soft:circle:0.01,2`), `KIND:hold` holds still. See [`hand`];
+//! - `path:...`: the `soft` hand on a scripted path, see [`path`];
+//! - `constant:FX,FY,TZ` (planar) or `constant:FX,FY,FZ,TX,TY,TZ` (spatial; forces then torques, world
+//!   axes): a constant wrench, which never yields; `paper` is the paper's (section VI:
+//!   `constant:-0.5,0,-0.0025` at the testbed's link 2);
 //! - `replay:FILE`: a recorded hand wrench replayed against time, see [`replay`].
 
 pub mod constant;
+pub mod hand;
 pub mod path;
 pub mod replay;
 
 use std::path::PathBuf;
 use std::time::Duration;
 
-use kinloop_linkage::space::Space;
+use kinloop_linkage::space::{Space, VecOps};
 
 use crate::device::DeviceState;
 
 pub use constant::ConstantWrench;
-pub use path::{HandImpedance, PathFollower, PathSpec};
+pub use hand::{Hand, HandImpedance, HandKind, HandSpec, Intent, UserContext};
+pub use path::PathSpec;
 pub use replay::{ReplayError, ReplayedWrench};
 
 /// A simulated hand.
 pub trait SimulatedUser<S: Space>: Send {
-    /// The wrench the hand applies to the handle at `now`, given what the device reads.
+    /// The wrench the hand applies to the handle at `now`, given the device's state (the rig passes the
+    /// handle's true pose and twist: a hand feels the handle, not its encoders).
     fn wrench(&mut self, now: Duration, device: &DeviceState<S>) -> S::OpVec;
+
+    /// Mass (and inertia) the hand adds to the handle per axis at `now`: a hand that holds it moves with it.
+    fn attached_mass(&self, _now: Duration) -> S::OpVec {
+        S::OpVec::zero()
+    }
 }
 
 /// A user as given on the command line, before the scene's space is known.
@@ -33,8 +45,8 @@ pub trait SimulatedUser<S: Space>: Send {
 pub enum UserSpec {
     /// A constant wrench (components in operational order).
     Constant(Vec<f64>),
-    /// A spring-damper hand on a path.
-    Path(PathSpec),
+    /// A hand.
+    Hand(HandSpec),
     /// A wrench replayed from a CSV file.
     Replay(PathBuf),
 }
@@ -43,7 +55,7 @@ pub enum UserSpec {
 #[derive(Debug, thiserror::Error)]
 pub enum UserError {
     /// Unknown kind of user.
-    #[error("unknown user {0:?}; expected constant:FX,FY,TZ, path:line|circle|waypoints:..., or replay:FILE")]
+    #[error("unknown user {0:?}; expected soft|firm|release|poke[:PATH|:hold], path:line|circle|waypoints:..., constant:FX,FY,TZ (spatial: FX,FY,FZ,TX,TY,TZ), paper, or replay:FILE")]
     Unknown(String),
     /// A number list that does not parse.
     #[error("{what}: {input:?} is not a comma-separated list of numbers")]
@@ -86,8 +98,20 @@ impl std::str::FromStr for UserSpec {
         if let Some(rest) = s.strip_prefix("constant:") {
             return Ok(UserSpec::Constant(parse_numbers("constant wrench", rest)?));
         }
+        if s == "paper" {
+            return Ok(UserSpec::paper());
+        }
         if let Some(rest) = s.strip_prefix("path:") {
-            return Ok(UserSpec::Path(rest.parse()?));
+            return Ok(UserSpec::Hand(HandSpec { kind: HandKind::Soft, intent: Intent::Path(rest.parse()?) }));
+        }
+        let (kind, rest) = s.split_once(':').map_or((s, None), |(k, r)| (k, Some(r)));
+        if let Some(kind) = HandKind::parse(kind) {
+            let intent = match rest {
+                None | Some("tour") => Intent::Tour,
+                Some("hold") => Intent::Hold,
+                Some(path) => Intent::Path(path.parse()?),
+            };
+            return Ok(UserSpec::Hand(HandSpec { kind, intent }));
         }
         if let Some(rest) = s.strip_prefix("replay:") {
             if rest.is_empty() {
@@ -105,11 +129,32 @@ impl UserSpec {
         UserSpec::Constant(kinloop_linkage::builtin::PAPER_WRENCH.to_vec())
     }
 
-    /// Builds the user for a scene of space `S` (reads the replay file now, not per tick).
-    pub fn build<S: Space>(&self) -> Result<Box<dyn SimulatedUser<S>>, UserError> {
+    /// The default user: a relaxed hand touring the operational point's reach.
+    pub fn soft_hand() -> Self {
+        UserSpec::Hand(HandSpec::touring(HandKind::Soft))
+    }
+
+    /// The name as written on the command line (the path, for a hand on one, is summarized).
+    pub fn label(&self) -> String {
+        match self {
+            UserSpec::Constant(values) => {
+                format!("constant:{}", values.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","))
+            }
+            UserSpec::Hand(HandSpec { kind, intent }) => match intent {
+                Intent::Tour => format!("{} (touring the reach)", kind.name()),
+                Intent::Hold => format!("{}:hold", kind.name()),
+                Intent::Path(_) => format!("{}:path", kind.name()),
+            },
+            UserSpec::Replay(file) => format!("replay:{}", file.display()),
+        }
+    }
+
+    /// Builds the user for a scene of space `S` (reads the replay file now, not per tick); a touring hand
+    /// tours `context`'s waypoints.
+    pub fn build<S: Space>(&self, context: &UserContext<S>) -> Result<Box<dyn SimulatedUser<S>>, UserError> {
         Ok(match self {
             UserSpec::Constant(values) => Box::new(ConstantWrench::<S>::from_values(values)?),
-            UserSpec::Path(spec) => Box::new(PathFollower::<S>::new(spec.clone(), HandImpedance::default())?),
+            UserSpec::Hand(spec) => Box::new(Hand::<S>::new(spec, context)?),
             UserSpec::Replay(file) => Box::new(ReplayedWrench::<S>::load(file)?),
         })
     }

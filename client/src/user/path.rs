@@ -1,20 +1,14 @@
-//! A spring-damper hand whose set-point follows a scripted path.
+//! Scripted paths for a simulated hand's intended motion (see `hand`).
 //!
 //! Paths are offsets (m) in the device's x-y plane from where the hand grasped the handle (its pose at the
-//! first call); the hand holds the grasp orientation. Syntax after `path:`:
+//! first call); the hand holds the grasp orientation. Syntax after `path:` (or a hand's `KIND:`):
 //! - `line:X0,Y0,X1,Y1,T` — from offset (X0, Y0) to (X1, Y1) in T seconds (minimum-jerk), then hold;
 //! - `circle:R,T` — a counter-clockwise circle of radius R through the grasp point (centre at −R along x),
 //!   one turn every T seconds, repeated;
 //! - `waypoints:T:X,Y;X,Y;...` — from the grasp point through each offset, T seconds per segment
 //!   (minimum-jerk), then hold the last.
 
-use std::time::Duration;
-
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{Space, VecOps};
-
-use super::{parse_numbers, SimulatedUser, UserError};
-use crate::device::DeviceState;
+use super::{parse_numbers, UserError};
 
 /// A scripted path (see the module documentation for the syntax).
 #[derive(Clone, Debug, PartialEq)]
@@ -92,7 +86,7 @@ impl std::str::FromStr for PathSpec {
 }
 
 /// Minimum-jerk progress `10τ³ − 15τ⁴ + 6τ⁵` for τ clamped to [0, 1].
-fn minimum_jerk(tau: f64) -> f64 {
+pub(crate) fn minimum_jerk(tau: f64) -> f64 {
     let t = tau.clamp(0.0, 1.0);
     t * t * t * (10.0 - 15.0 * t + 6.0 * t * t)
 }
@@ -122,66 +116,5 @@ impl PathSpec {
                 lerp(start, points[segment], minimum_jerk(t_s / segment_s - segment as f64))
             }
         }
-    }
-}
-
-/// The hand's impedance: a spring-damper on position and a gentle one on orientation (a relaxed wrist).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HandImpedance {
-    /// N/m.
-    pub stiffness: f64,
-    /// N s/m.
-    pub damping: f64,
-    /// N m/rad.
-    pub angular_stiffness: f64,
-    /// N m s/rad.
-    pub angular_damping: f64,
-}
-
-impl Default for HandImpedance {
-    /// A relaxed grasp: 300 N/m, 10 N s/m, 0.01 N m/rad, 2e-4 N m s/rad (arm impedance at low co-contraction).
-    fn default() -> Self {
-        HandImpedance { stiffness: 300.0, damping: 10.0, angular_stiffness: 0.01, angular_damping: 2e-4 }
-    }
-}
-
-/// A hand following a [`PathSpec`] through a spring-damper.
-#[derive(Clone, Debug)]
-pub struct PathFollower<S: Space> {
-    path: PathSpec,
-    stiffness: S::OpVec,
-    damping: S::OpVec,
-    grasp: Option<(Duration, OpPose<S>)>,
-}
-
-impl<S: Space> PathFollower<S> {
-    /// A hand on `path` with impedance `hand`.
-    pub fn new(path: PathSpec, hand: HandImpedance) -> Result<Self, UserError> {
-        let linear = <S::Point as VecOps>::LEN;
-        let mut stiffness = S::OpVec::zero();
-        let mut damping = S::OpVec::zero();
-        for i in 0..S::DIM {
-            let angular = i >= linear;
-            stiffness[i] = if angular { hand.angular_stiffness } else { hand.stiffness };
-            damping[i] = if angular { hand.angular_damping } else { hand.damping };
-        }
-        Ok(PathFollower { path, stiffness, damping, grasp: None })
-    }
-}
-
-impl<S: Space> SimulatedUser<S> for PathFollower<S> {
-    fn wrench(&mut self, now: Duration, device: &DeviceState<S>) -> S::OpVec {
-        let (t0, grasp) = *self.grasp.get_or_insert((now, device.pose));
-        let offset = self.path.offset(now.saturating_sub(t0).as_secs_f64());
-        let mut target = grasp;
-        let position = target.position.as_mut_slice();
-        position[0] += offset[0];
-        position[1] += offset[1];
-        let error = target.difference(&device.pose);
-        let mut w = S::OpVec::zero();
-        for i in 0..S::DIM {
-            w[i] = self.stiffness[i] * error[i] - self.damping[i] * device.twist[i];
-        }
-        w
     }
 }

@@ -61,6 +61,10 @@ pub mod limits {
     pub const MIN_RATE_HZ: f64 = 1.0;
     /// Highest loop or device rate (Hz).
     pub const MAX_RATE_HZ: f64 = 100_000.0;
+    /// Smallest position or force scale of a mapping (device units per VE unit).
+    pub const MIN_SCALE: f64 = 1e-4;
+    /// Largest position or force scale of a mapping.
+    pub const MAX_SCALE: f64 = 1e4;
 }
 
 use limits::{MAX_CONTROL_FRAME_BYTES, MAX_DATAGRAM_MESSAGE_BYTES};

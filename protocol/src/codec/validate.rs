@@ -4,8 +4,8 @@
 use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
-    uplink_flags, ConfigTerms, ContactTerm, Control, Datagram, DeviceCaps, Hello, OtherUsers, RecommendedGains,
-    RefusalReason, Refused, SceneSummary, Snapshot, Uplink, Welcome,
+    uplink_flags, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram, DeviceCaps, Hello, Join, Mapping,
+    MappingRequest, OpSummary, OtherUsers, RefusalReason, Refused, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -19,6 +19,8 @@ pub fn control(msg: &Control) -> Result<(), DecodeError> {
         Control::Error { message, .. } => text(Field::at("error.message"), message),
         Control::Ping { t_s, .. } => scalar(Field::at("ping.t_s"), *t_s, 0.0, MAX_TIME_S),
         Control::Pong { t_s, .. } => scalar(Field::at("pong.t_s"), *t_s, 0.0, MAX_TIME_S),
+        Control::SceneInfo(info) => self::scene_info(info),
+        Control::Join(join) => self::join(join),
     }
 }
 
@@ -33,32 +35,77 @@ pub fn datagram(msg: &Datagram, shape: &SessionShape) -> Result<(), DecodeError>
 /// Checks a hello. Any version passes, so that the server can answer an old client with a polite refusal.
 pub fn hello(h: &Hello) -> Result<(), DecodeError> {
     text(Field::at("hello.token"), &h.token)?;
-    text(Field::at("hello.client_name"), &h.client_name)?;
-    text(Field::at("hello.op"), &h.op)?;
-    device(&h.device)
+    text(Field::at("hello.client_name"), &h.client_name)
+}
+
+/// Checks a scene info.
+pub fn scene_info(info: &SceneInfo) -> Result<(), DecodeError> {
+    text(Field::at("scene_info.name"), &info.name)?;
+    count(Field::at("scene_info.ops"), info.ops.len(), MAX_LIST_ENTRIES)?;
+    for (i, name) in info.ops.iter().enumerate() {
+        text(Field::in_item("scene_info.ops", i, "name"), name)?;
+    }
+    Ok(())
+}
+
+/// Checks a join: the device's numbers and the mapping asked for. Whether the device's axes fit the scene
+/// is the server's decision (it knows the scene), not the codec's.
+pub fn join(j: &Join) -> Result<(), DecodeError> {
+    text(Field::at("join.op"), &j.op)?;
+    device(&j.device)?;
+    mapping_request(&j.mapping)
 }
 
 fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
-    text(Field::at("hello.device.name"), &d.name)?;
+    text(Field::at("join.device.name"), &d.name)?;
     if usize::from(d.dof) > MAX_DEVICE_DOF {
         return Err(DecodeError::TooMany {
-            field: Field::at("hello.device.dof"),
+            field: Field::at("join.device.dof"),
             got: d.dof.into(),
             max: MAX_DEVICE_DOF,
         });
     }
-    let min_field = Field::at("hello.device.workspace_min");
-    count(min_field, d.workspace_min.len(), MAX_OP_DIM)?;
-    vector(min_field, &d.workspace_min, d.workspace_min.len(), MAX_POSITION)?;
-    vector(Field::at("hello.device.workspace_max"), &d.workspace_max, d.workspace_min.len(), MAX_POSITION)?;
+    let min_field = Field::at("join.device.workspace_min");
+    let axes = d.workspace_min.len();
+    count(min_field, axes, MAX_OP_DIM)?;
+    vector(min_field, &d.workspace_min, axes, MAX_POSITION)?;
+    vector(Field::at("join.device.workspace_max"), &d.workspace_max, axes, MAX_POSITION)?;
     if d.workspace_min.iter().zip(&d.workspace_max).any(|(lo, hi)| lo > hi) {
         return Err(DecodeError::Inconsistent { field: min_field, what: "workspace_min exceeds workspace_max" });
     }
-    scalar(Field::at("hello.device.max_force_n"), d.max_force_n, 0.0, MAX_WRENCH)?;
-    scalar(Field::at("hello.device.max_torque_nm"), d.max_torque_nm, 0.0, MAX_WRENCH)?;
-    scalar(Field::at("hello.device.max_stiffness_n_per_m"), d.max_stiffness_n_per_m, 0.0, MAX_GAIN)?;
-    scalar(Field::at("hello.device.max_damping_ns_per_m"), d.max_damping_ns_per_m, 0.0, MAX_GAIN)?;
-    scalar(Field::at("hello.device.native_rate_hz"), d.native_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)
+    non_negative_vector(Field::at("join.device.damping"), &d.damping, axes, MAX_GAIN)?;
+    vector(Field::at("join.device.mass"), &d.mass, axes, MAX_GAIN)?;
+    if d.mass.iter().any(|m| !(*m > 0.0)) {
+        return Err(DecodeError::Inconsistent {
+            field: Field::at("join.device.mass"),
+            what: "masses must be positive",
+        });
+    }
+    scalar(Field::at("join.device.max_force_n"), d.max_force_n, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("join.device.continuous_force_n"), d.continuous_force_n, 0.0, d.max_force_n)?;
+    scalar(Field::at("join.device.max_torque_nm"), d.max_torque_nm, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("join.device.max_stiffness_n_per_m"), d.max_stiffness_n_per_m, 0.0, MAX_GAIN)?;
+    scalar(Field::at("join.device.max_damping_ns_per_m"), d.max_damping_ns_per_m, 0.0, MAX_GAIN)?;
+    scalar(
+        Field::at("join.device.max_angular_stiffness_nm_per_rad"),
+        d.max_angular_stiffness_nm_per_rad,
+        0.0,
+        MAX_GAIN,
+    )?;
+    scalar(Field::at("join.device.max_angular_damping_nms_per_rad"), d.max_angular_damping_nms_per_rad, 0.0, MAX_GAIN)?;
+    scalar(Field::at("join.device.native_rate_hz"), d.native_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)
+}
+
+fn mapping_request(m: &MappingRequest) -> Result<(), DecodeError> {
+    for (field, scale) in [
+        (Field::at("join.mapping.position_scale"), m.position_scale),
+        (Field::at("join.mapping.force_scale"), m.force_scale),
+    ] {
+        if let Some(value) = scale {
+            scalar(field, value, MIN_SCALE, MAX_SCALE)?;
+        }
+    }
+    Ok(())
 }
 
 /// Checks a welcome; its scene summary becomes the session shape, so it must be self-consistent.
@@ -66,7 +113,10 @@ pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
     scene(&w.scene)?;
     scalar(Field::at("welcome.ve_rate_hz"), w.ve_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)?;
     scalar(Field::at("welcome.snapshot_rate_hz"), w.snapshot_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)?;
-    gains(&w.gains, w.scene.kind.op_dim())
+    mapping(&w.mapping)?;
+    let k = w.scene.kind.op_dim();
+    coupling(&w.coupling, k)?;
+    op_summary(&w.op, w.scene.kind)
 }
 
 fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
@@ -84,11 +134,39 @@ fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
     Ok(())
 }
 
-fn gains(g: &RecommendedGains, k: usize) -> Result<(), DecodeError> {
-    scalar(Field::at("welcome.gains.k_j"), g.k_j, 0.0, MAX_GAIN)?;
-    scalar(Field::at("welcome.gains.b_j"), g.b_j, 0.0, MAX_GAIN)?;
-    non_negative_vector(Field::at("welcome.gains.k_pc"), &g.k_pc, k, MAX_GAIN)?;
-    non_negative_vector(Field::at("welcome.gains.b_pc"), &g.b_pc, k, MAX_GAIN)
+fn mapping(m: &Mapping) -> Result<(), DecodeError> {
+    scalar(Field::at("welcome.mapping.position_scale"), m.position_scale, MIN_SCALE, MAX_SCALE)?;
+    scalar(Field::at("welcome.mapping.force_scale"), m.force_scale, MIN_SCALE, MAX_SCALE)
+}
+
+fn coupling(g: &CouplingGains, k: usize) -> Result<(), DecodeError> {
+    non_negative_vector(Field::at("welcome.coupling.stiffness"), &g.stiffness, k, MAX_GAIN)?;
+    non_negative_vector(Field::at("welcome.coupling.damping"), &g.damping, k, MAX_GAIN)
+}
+
+fn op_summary(o: &OpSummary, kind: SceneKind) -> Result<(), DecodeError> {
+    let d = kind.point_dim();
+    vector(Field::at("welcome.op.reach_min"), &o.reach_min, d, MAX_POSITION)?;
+    vector(Field::at("welcome.op.reach_max"), &o.reach_max, d, MAX_POSITION)?;
+    if o.reach_min.iter().zip(&o.reach_max).any(|(lo, hi)| lo > hi) {
+        return Err(DecodeError::Inconsistent {
+            field: Field::at("welcome.op.reach_min"),
+            what: "reach_min exceeds reach_max",
+        });
+    }
+    let k = kind.op_dim();
+    let points = o.tour.len() / k;
+    count(Field::at("welcome.op.tour"), points, MAX_LIST_ENTRIES)?;
+    vector(Field::at("welcome.op.tour"), &o.tour, points * k, MAX_POSITION)?;
+    scalar(Field::at("welcome.op.static_force_n"), o.static_force_n, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("welcome.op.static_torque_nm"), o.static_torque_nm, 0.0, MAX_WRENCH)?;
+    scalar(Field::at("welcome.op.inverse_mass_max"), o.inverse_mass_max, 0.0, MAX_MATRIX_ENTRY)?;
+    scalar(
+        Field::at("welcome.op.inverse_rotational_inertia_max"),
+        o.inverse_rotational_inertia_max,
+        0.0,
+        MAX_MATRIX_ENTRY,
+    )
 }
 
 fn refused(r: &Refused) -> Result<(), DecodeError> {
@@ -103,6 +181,7 @@ fn refused(r: &Refused) -> Result<(), DecodeError> {
             Ok(())
         }
         RefusalReason::Malformed { what } => text(Field::at("refused.reason.what"), what),
+        RefusalReason::Device { what } => text(Field::at("refused.reason.what"), what),
         RefusalReason::UnsupportedVersion { .. }
         | RefusalReason::BadToken
         | RefusalReason::ServerFull { .. }

@@ -1,5 +1,8 @@
-//! Session set-up on top of QUIC: the client sends `Hello` on a new bidirectional stream (which stays the
-//! session's control stream), the server answers `Welcome` or `Refused`.
+//! Session set-up on top of QUIC, in two steps on a new bidirectional stream (which stays the session's
+//! control stream): the client sends `Hello` (version, token, role), the server answers `SceneInfo` (the
+//! scene's space and operational points) or `Refused`; the client, now able to describe its device in the
+//! scene's space and to pick an operational point, sends `Join`, and the server answers `Welcome` or
+//! `Refused`.
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -9,7 +12,7 @@ use quinn::{Connection, ConnectionError, Endpoint, Incoming, RecvStream, SendStr
 use super::framing::{recv_control, recv_frame, send_control, ControlStreamError};
 use super::trust::FingerprintMismatch;
 use crate::codec::{self, validate, DecodeError};
-use crate::messages::{Control, ErrorCode, Hello, RefusalReason, Refused, Welcome, PROTOCOL_VERSION};
+use crate::messages::{Control, ErrorCode, Hello, Join, RefusalReason, Refused, SceneInfo, Welcome, PROTOCOL_VERSION};
 
 /// Longest a handshake (QUIC and Hello/Welcome) may take on either side.
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -45,6 +48,10 @@ pub struct ConnectedSession {
     pub send: SendStream,
     /// Receiving half of the control stream.
     pub recv: RecvStream,
+    /// The scene the server hosts.
+    pub scene: SceneInfo,
+    /// What the client asked for.
+    pub join: Join,
     /// What the server granted.
     pub welcome: Welcome,
 }
@@ -78,12 +85,17 @@ pub enum ConnectError {
     /// The control stream failed.
     #[error(transparent)]
     Control(#[from] ControlStreamError),
-    /// The server answered the hello with something else than `Welcome` or `Refused`.
-    #[error("the server answered the hello with {got}")]
+    /// The server answered with something else than the handshake's next message or `Refused`.
+    #[error("the server answered the {step} with {got}")]
     UnexpectedReply {
+        /// Which client message was answered.
+        step: &'static str,
         /// Which message.
         got: &'static str,
     },
+    /// The client could not join the scene the server hosts (its device cannot serve the scene's space, say).
+    #[error("{0}")]
+    Declined(String),
 }
 
 impl From<ConnectionError> for ConnectError {
@@ -117,35 +129,62 @@ impl From<ConnectionError> for ConnectError {
     }
 }
 
-/// Connects to a kinloop server and performs the Hello/Welcome handshake.
+/// Connects to a kinloop server and performs the handshake: `hello`, then the [`Join`] that `choose` makes
+/// from the server's [`SceneInfo`] (an `Err` from it closes the connection and becomes
+/// [`ConnectError::Declined`]).
 pub async fn connect(
     endpoint: &Endpoint,
     addr: SocketAddr,
     server_name: &str,
     hello: &Hello,
+    choose: impl FnOnce(&SceneInfo) -> Result<Join, String>,
 ) -> Result<ConnectedSession, ConnectError> {
     let attempt = async {
         let connection = endpoint.connect(addr, server_name)?.await?;
         let (mut send, mut recv) = connection.open_bi().await?;
+        // A control-stream failure is usually the connection failing: report the connection's reason.
+        let failed = |e: ControlStreamError| connection.close_reason().map_or(e.into(), ConnectError::from);
         let reply = async {
             send_control(&mut send, &Control::Hello(hello.clone())).await?;
             recv_control(&mut recv).await
         };
-        // A control-stream failure is usually the connection failing: report the connection's reason.
-        let reply = reply.await.map_err(|e| connection.close_reason().map_or(e.into(), ConnectError::from))?;
-        match reply {
-            Control::Welcome(welcome) => Ok(ConnectedSession { connection, send, recv, welcome }),
-            Control::Refused(refused) => {
-                connection.close(close_codes::REFUSED, b"refused");
-                Err(ConnectError::Refused(refused))
+        let scene = match reply.await.map_err(failed)? {
+            Control::SceneInfo(scene) => scene,
+            other => return Err(unexpected(&connection, "hello", other)),
+        };
+        let join = match choose(&scene) {
+            Ok(join) => join,
+            Err(why) => {
+                let leave = Control::Leave { reason: why.clone() };
+                let _ = send_control(&mut send, &leave).await;
+                connection.close(close_codes::NORMAL, b"declined");
+                return Err(ConnectError::Declined(why));
             }
-            other => {
-                connection.close(close_codes::PROTOCOL, b"expected Welcome or Refused");
-                Err(ConnectError::UnexpectedReply { got: other.kind_name() })
-            }
+        };
+        let reply = async {
+            send_control(&mut send, &Control::Join(join.clone())).await?;
+            recv_control(&mut recv).await
+        };
+        match reply.await.map_err(failed)? {
+            Control::Welcome(welcome) => Ok(ConnectedSession { connection, send, recv, scene, join, welcome }),
+            other => Err(unexpected(&connection, "join", other)),
         }
     };
     tokio::time::timeout(HANDSHAKE_TIMEOUT, attempt).await.unwrap_or(Err(ConnectError::Timeout))
+}
+
+/// A refusal, or a reply out of place: closes the connection and says which.
+fn unexpected(connection: &Connection, step: &'static str, reply: Control) -> ConnectError {
+    match reply {
+        Control::Refused(refused) => {
+            connection.close(close_codes::REFUSED, b"refused");
+            ConnectError::Refused(refused)
+        }
+        other => {
+            connection.close(close_codes::PROTOCOL, b"unexpected reply");
+            ConnectError::UnexpectedReply { step, got: other.kind_name() }
+        }
+    }
 }
 
 /// A server session after a successful handshake.
@@ -157,8 +196,10 @@ pub struct AcceptedSession {
     pub send: SendStream,
     /// Receiving half of the control stream.
     pub recv: RecvStream,
-    /// What the client asked for.
+    /// Who the client is.
     pub hello: Hello,
+    /// What the client asked for.
+    pub join: Join,
     /// What the server granted.
     pub welcome: Welcome,
 }
@@ -175,12 +216,17 @@ pub enum AcceptError {
     /// The control stream failed.
     #[error(transparent)]
     Control(#[from] ControlStreamError),
-    /// The client opened with something else than `Hello`.
-    #[error("the client opened with {got} instead of Hello")]
+    /// The client sent something else than the handshake's next message (`Hello`, then `Join`).
+    #[error("the client sent {got} instead of {expected}")]
     UnexpectedMessage {
+        /// What the handshake expected.
+        expected: &'static str,
         /// Which message.
         got: &'static str,
     },
+    /// The client left after seeing the scene (it could not serve it, and said why).
+    #[error("the client declined to join: {0}")]
+    Declined(String),
     /// The client was refused (and told why).
     #[error("refused the client: {0}")]
     Refused(Refused),
@@ -189,21 +235,24 @@ pub enum AcceptError {
     InvalidWelcome(DecodeError),
 }
 
-/// Accepts an incoming connection and runs the handshake. The protocol version is checked here; everything
-/// else (token, role, operational point, capacity) is `validate`'s decision.
+/// Accepts an incoming connection and runs the handshake. The protocol version is checked here; the rest is
+/// the server's: `admit` decides on the hello (token, role, capacity) and describes the scene, `decide` on
+/// the join (operational point, device, mapping).
 pub async fn accept(
     incoming: Incoming,
-    validate: impl FnOnce(&Hello) -> Result<Welcome, Refused>,
+    admit: impl FnOnce(&Hello) -> Result<SceneInfo, Refused>,
+    decide: impl FnOnce(&Hello, &Join) -> Result<Welcome, Refused>,
 ) -> Result<AcceptedSession, AcceptError> {
-    accept_with(incoming, |hello| std::future::ready(validate(&hello))).await
+    accept_with(incoming, admit, |hello, join| std::future::ready(decide(&hello, &join))).await
 }
 
-/// [`accept`] with an asynchronous decision, for servers whose admission lives elsewhere (the VE server asks
-/// its simulation thread, which owns the users). `validate` gets a copy of the hello; the whole handshake,
-/// decision included, is bounded by [`HANDSHAKE_TIMEOUT`].
-pub async fn accept_with<F, Fut>(incoming: Incoming, validate: F) -> Result<AcceptedSession, AcceptError>
+/// [`accept`] with an asynchronous decision on the join, for servers whose admission lives elsewhere (the
+/// VE server asks its simulation thread, which owns the users). `decide` gets copies of the hello and the
+/// join; the whole handshake, decisions included, is bounded by [`HANDSHAKE_TIMEOUT`].
+pub async fn accept_with<A, F, Fut>(incoming: Incoming, admit: A, decide: F) -> Result<AcceptedSession, AcceptError>
 where
-    F: FnOnce(Hello) -> Fut,
+    A: FnOnce(&Hello) -> Result<SceneInfo, Refused>,
+    F: FnOnce(Hello, Join) -> Fut,
     Fut: std::future::Future<Output = Result<Welcome, Refused>>,
 {
     let handshake = async {
@@ -217,7 +266,23 @@ where
                 return Err(error);
             }
         };
-        let welcome = match validate(hello.clone()).await {
+        let scene = match admit(&hello) {
+            Ok(scene) => scene,
+            Err(refused) => return Err(refuse(&connection, send, refused).await),
+        };
+        send_control(&mut send, &Control::SceneInfo(scene)).await?;
+        let join = match recv_control(&mut recv).await? {
+            Control::Join(join) => join,
+            Control::Leave { reason } => {
+                connection.close(close_codes::NORMAL, b"declined");
+                return Err(AcceptError::Declined(reason));
+            }
+            other => {
+                connection.close(close_codes::PROTOCOL, b"expected Join");
+                return Err(AcceptError::UnexpectedMessage { expected: "Join", got: other.kind_name() });
+            }
+        };
+        let welcome = match decide(hello.clone(), join.clone()).await {
             Ok(welcome) => welcome,
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
@@ -230,7 +295,7 @@ where
             return Err(AcceptError::InvalidWelcome(error));
         }
         send_control(&mut send, &Control::Welcome(welcome.clone())).await?;
-        Ok(AcceptedSession { connection, send, recv, hello, welcome })
+        Ok(AcceptedSession { connection, send, recv, hello, join, welcome })
     };
     tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await.unwrap_or(Err(AcceptError::Timeout))
 }
@@ -252,7 +317,9 @@ async fn read_hello(recv: &mut RecvStream) -> Result<Hello, HelloProblem> {
     }
     match codec::decode_control(&body) {
         Ok(Control::Hello(hello)) => Ok(hello),
-        Ok(other) => Err(HelloProblem::Fail(AcceptError::UnexpectedMessage { got: other.kind_name() })),
+        Ok(other) => {
+            Err(HelloProblem::Fail(AcceptError::UnexpectedMessage { expected: "Hello", got: other.kind_name() }))
+        }
         Err(error) => {
             let reason = RefusalReason::Malformed { what: error.to_string() };
             Err(HelloProblem::Refuse(Refused { reason, message: String::new() }))

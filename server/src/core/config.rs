@@ -4,7 +4,6 @@
 use std::time::Duration;
 
 use kinloop_linkage::{Integrator, Space, VecOps};
-use kinloop_protocol::RecommendedGains;
 
 /// Gains along the operational axes: the same value on every linear axis and on every angular axis, or one
 /// value per axis (`k` of them, linear axes first).
@@ -97,10 +96,12 @@ pub struct VeConfig {
     /// Treat the graphics-controller PD linearly implicitly (semi-implicit Euler only): stable for any gains.
     /// Off reproduces the explicit coupling of the stability experiment.
     pub implicit_coupling: bool,
-    /// Graphics-controller stiffness K_g per operational axis (paper: 1000 N/m, 1000 N/m, 10000 N·m/rad).
-    pub coupling_stiffness: AxisGains,
-    /// Graphics-controller damping B_g per operational axis (paper: 100 N·s/m, 100 N·s/m, 10000 N·m·s/rad).
-    pub coupling_damping: AxisGains,
+    /// Graphics-controller stiffness K_g per operational axis for every user (paper: 1000 N/m, 1000 N/m,
+    /// 10000 N·m/rad); `None` designs each user's from its OP's inertia (`design`).
+    pub coupling_stiffness: Option<AxisGains>,
+    /// Graphics-controller damping B_g per operational axis for every user (paper: 100 N·s/m, 100 N·s/m,
+    /// 10000 N·m·s/rad); `None` designs each user's.
+    pub coupling_damping: Option<AxisGains>,
     /// Penalty contact stiffness (N/m); `None` takes the scene's (paper: 15,000 N/m).
     pub contact_stiffness: Option<f64>,
     /// Penalty contact damping (N·s/m); `None` takes the scene's (paper: 300 N·s/m).
@@ -119,8 +120,6 @@ pub struct VeConfig {
     pub silent_timeout: Duration,
     /// Most users at once (leaving users still fading out do not count).
     pub max_users: usize,
-    /// Controller gains recommended to clients (clamped to each device's capabilities).
-    pub recommended_gains: RecommendedGains,
     /// Limits on what clients may report.
     pub guards: GuardLimits,
     /// Most overdue ticks one `handle_timeout` runs; beyond that the VE skips ahead (and counts it) instead
@@ -131,8 +130,9 @@ pub struct VeConfig {
 }
 
 impl VeConfig {
-    /// The paper's VE for a scene of space `S`: 1 kHz, semi-implicit Euler with projection and implicit
-    /// coupling, K_g = (1000, 1000, 10000), B_g = (100, 100, 10000), the scene's contacts.
+    /// The paper's VE: 1 kHz, semi-implicit Euler with projection and implicit coupling, the paper's
+    /// K_g = (1000, 1000, 10000), B_g = (100, 100, 10000) for every user, the scene's contacts. The default
+    /// ([`VeConfig::default`]) is the same VE with each user's gains designed from its OP's inertia.
     pub fn paper() -> Self {
         VeConfig {
             ve_rate_hz: 1000.0,
@@ -140,8 +140,8 @@ impl VeConfig {
             integrator: Integrator::SemiImplicitEuler,
             projection: true,
             implicit_coupling: true,
-            coupling_stiffness: AxisGains::Uniform { linear: 1000.0, angular: 10_000.0 },
-            coupling_damping: AxisGains::Uniform { linear: 100.0, angular: 10_000.0 },
+            coupling_stiffness: Some(AxisGains::Uniform { linear: 1000.0, angular: 10_000.0 }),
+            coupling_damping: Some(AxisGains::Uniform { linear: 100.0, angular: 10_000.0 }),
             contact_stiffness: None,
             contact_damping: None,
             contact_margin_m: 0.005,
@@ -152,7 +152,6 @@ impl VeConfig {
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
             max_users: 16,
-            recommended_gains: RecommendedGains { k_j: 3000.0, b_j: 30.0, k_pc: Vec::new(), b_pc: Vec::new() },
             guards: GuardLimits::default(),
             max_catch_up_ticks: 10,
             session_seed: 0x006b_696e_6c6f_6f70,
@@ -210,8 +209,9 @@ impl VeConfig {
 }
 
 impl Default for VeConfig {
+    /// The paper's VE with each user's graphics-controller gains designed from its device and its OP.
     fn default() -> Self {
-        VeConfig::paper()
+        VeConfig { coupling_stiffness: None, coupling_damping: None, ..VeConfig::paper() }
     }
 }
 
@@ -252,6 +252,9 @@ pub enum VeConfigError {
         /// The value.
         value: f64,
     },
+    /// An operational point's reach could not be surveyed.
+    #[error("surveying the operational points: {0}")]
+    Survey(String),
     /// `max_users` of 0 or more than a snapshot can list.
     #[error("max_users = {value} must be between 1 and {}", kinloop_protocol::codec::limits::MAX_LIST_ENTRIES)]
     MaxUsers {

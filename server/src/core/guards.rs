@@ -11,7 +11,7 @@
 
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Space, VecOps};
-use kinloop_protocol::{DeviceCaps, Uplink};
+use kinloop_protocol::{DeviceCaps, Mapping, Uplink};
 
 use super::config::GuardLimits;
 
@@ -149,17 +149,19 @@ pub struct WrenchLimits {
 }
 
 impl WrenchLimits {
-    /// From the device's announced peaks (with slack), or the defaults where it announced none or no
-    /// positive, finite one.
-    pub fn for_device(device: Option<&DeviceCaps>, limits: &GuardLimits) -> Self {
-        let pick = |announced: Option<f64>, default: f64| match announced {
+    /// From the device's announced peaks (with slack) in VE units (divided by the mapping's force and torque
+    /// scales: uplinks carry VE wrenches), or the defaults where it announced none or no positive, finite one.
+    pub fn for_device(device: Option<&DeviceCaps>, mapping: &Mapping, limits: &GuardLimits) -> Self {
+        let pick = |announced: Option<f64>, scale: f64, default: f64| match announced {
             // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
-            Some(peak) if peak > 0.0 && peak.is_finite() => peak * (1.0 + limits.device_cap_slack),
+            Some(peak) if peak > 0.0 && peak.is_finite() && scale > 0.0 => {
+                peak * (1.0 + limits.device_cap_slack) / scale
+            }
             _ => default,
         };
         WrenchLimits {
-            max_force_n: pick(device.map(|d| d.max_force_n), limits.default_max_force_n),
-            max_torque_nm: pick(device.map(|d| d.max_torque_nm), limits.default_max_torque_nm),
+            max_force_n: pick(device.map(|d| d.max_force_n), mapping.force_scale, limits.default_max_force_n),
+            max_torque_nm: pick(device.map(|d| d.max_torque_nm), mapping.torque_scale(), limits.default_max_torque_nm),
         }
     }
 }

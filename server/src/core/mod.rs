@@ -23,6 +23,7 @@
 
 pub mod config;
 pub mod coupling;
+pub mod design;
 pub mod events;
 pub mod fade;
 pub mod guards;
@@ -37,9 +38,11 @@ use kinloop_linkage::contact::{Contact, PenaltyContacts};
 use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::reach::{survey_op, OpReach, SurveyConfig};
 use kinloop_linkage::{step, Data, Model, Space, StepConfig, VecOps};
 use kinloop_protocol::{
-    Datagram, OtherUsers, RecommendedGains, RefusalReason, Role, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
+    Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
+    Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -187,8 +190,10 @@ pub struct VeCore<S: Space> {
     shape: SessionShape,
     period: Duration,
     snapshot_period: Duration,
-    stiffness: S::OpVec,
-    damping: S::OpVec,
+    /// K_g and B_g every user gets when the configuration fixes them (else each user's are designed).
+    fixed_gains: Option<(S::OpVec, S::OpVec)>,
+    /// Each operational point's surveyed reach, by OP index (`design` fits devices and gains to it).
+    reaches: Vec<OpReach<S>>,
     q: DVector<f64>,
     qd: DVector<f64>,
     /// Restore point: q at the start of the last step that began with the loop closed (see `tick`).
@@ -217,8 +222,26 @@ impl<S: Space> VeCore<S> {
     /// epoch.
     pub fn new(model: Model<S>, config: VeConfig) -> Result<Self, VeConfigError> {
         config.validate()?;
-        let stiffness = config.coupling_stiffness.resolve::<S>("coupling_stiffness")?;
-        let damping = config.coupling_damping.resolve::<S>("coupling_damping")?;
+        let fixed_gains = match (&config.coupling_stiffness, &config.coupling_damping) {
+            (None, None) => None,
+            (stiffness, damping) => {
+                // One given alone: the other is designed... for every user alike it cannot be, so it is the
+                // paper's.
+                let paper = VeConfig::paper();
+                let k = stiffness.as_ref().or(paper.coupling_stiffness.as_ref());
+                let b = damping.as_ref().or(paper.coupling_damping.as_ref());
+                match (k, b) {
+                    (Some(k), Some(b)) => {
+                        Some((k.resolve::<S>("coupling_stiffness")?, b.resolve::<S>("coupling_damping")?))
+                    }
+                    _ => None,
+                }
+            }
+        };
+        let reaches = (0..model.ops.len())
+            .map(|op| survey_op(&model, op, &SurveyConfig::default()))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| VeConfigError::Survey(e.to_string()))?;
         let period = config.ve_period();
         let step_config = StepConfig {
             integrator: config.integrator,
@@ -260,8 +283,8 @@ impl<S: Space> VeCore<S> {
             snapshot_period: config.snapshot_period(),
             period,
             step_config,
-            stiffness,
-            damping,
+            fixed_gains,
+            reaches,
             checkpoint_q: q.clone(),
             step_start_q: q.clone(),
             lambda: DVector::zeros(m),
@@ -302,34 +325,78 @@ impl<S: Space> VeCore<S> {
         self.shape
     }
 
-    /// Admits a user. Refuses when `max_users` are present or the scene has no operational point of that
-    /// name. A manipulator's coupling fades in from its first accepted uplink.
+    /// What a client learns before it joins: the scene's space and operational points.
+    pub fn scene_info(&self) -> SceneInfo {
+        SceneInfo {
+            name: self.model.name.clone(),
+            kind: S::KIND,
+            ops: self.model.ops.iter().map(|o| o.name.clone()).collect(),
+        }
+    }
+
+    /// The surveyed reach of operational point `op`.
+    pub fn reach(&self, op: usize) -> Option<&OpReach<S>> {
+        self.reaches.get(op)
+    }
+
+    /// Admits a user. Refuses when `max_users` are present, when the scene has no operational point of that
+    /// name (an empty name asks for the first), or when the device cannot serve the scene (`design`). Its
+    /// mapping and coupling gains are chosen here (`design`); a manipulator's coupling fades in from its first
+    /// accepted uplink.
     pub fn join(&mut self, _now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
         let present = self.present_users();
         if present >= self.config.max_users {
             self.metrics.joins_refused += 1;
             return Err(RefusalReason::ServerFull { max_users: self.config.max_users as u32 });
         }
-        let Some(op) = self.model.op_index(&request.op) else {
+        let found = if request.op.is_empty() {
+            (!self.model.ops.is_empty()).then_some(0)
+        } else {
+            self.model.op_index(&request.op)
+        };
+        let Some(op) = found else {
             self.metrics.joins_refused += 1;
             return Err(RefusalReason::UnknownOp {
                 requested: request.op,
                 available: self.model.ops.iter().map(|o| o.name.clone()).collect(),
             });
         };
+        let reach = &self.reaches[op];
+        let designed = match &request.device {
+            Some(device) => design::check_device::<S>(device)
+                .and_then(|()| design::choose_mapping(reach, device, &request.mapping))
+                .map(|mapping| (mapping, device.native_rate_hz)),
+            // A user without a device (a view, a test) is mapped one to one and moves its reference as fast as
+            // the VE.
+            None => Ok((
+                Mapping { gravity_compensation: request.mapping.gravity_compensation, ..Mapping::identity() },
+                self.config.ve_rate_hz,
+            )),
+        };
+        let (mapping, device_rate) = match designed {
+            Ok(designed) => designed,
+            Err(error) => {
+                self.metrics.joins_refused += 1;
+                return Err(RefusalReason::Device { what: error.to_string() });
+            }
+        };
+        let (stiffness, damping) = self.fixed_gains.unwrap_or_else(|| {
+            design::coupling_gains(reach, design::coupling_frequency(self.config.ve_rate_hz, device_rate))
+        });
         let user_id = self.next_user_id;
         self.next_user_id += 1;
         let point = &self.model.ops[op];
-        let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), self.stiffness, self.damping);
+        let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), stiffness, damping);
         coupling.evaluate(&self.model, &self.data.kin, true);
-        let welcome = self.welcome(user_id, &request, op);
+        let welcome = self.welcome(user_id, op, &mapping, &coupling);
         self.users.push(User {
             id: user_id,
             name: request.name,
             role: request.role,
             op,
             form: request.form,
-            wrench_limits: WrenchLimits::for_device(request.device.as_ref(), &self.config.guards),
+            wrench_limits: WrenchLimits::for_device(request.device.as_ref(), &mapping, &self.config.guards),
+            mapping,
             presence: Presence::Present,
             last_seq: None,
             last_uplink_at: None,
@@ -636,12 +703,15 @@ impl<S: Space> VeCore<S> {
         }
     }
 
-    /// Kinetic energy of the linkage at the current state (J). Recomputes kinematics into the workspace,
-    /// which every step recomputes anyway.
-    pub fn kinetic_energy(&mut self) -> f64 {
+    /// Kinetic and potential (gravity, springs) energy of the linkage at the current state (J). Recomputes
+    /// kinematics into the workspace, which every step recomputes anyway.
+    pub fn mechanical_energy(&mut self) -> (f64, f64) {
         forward_kinematics(&self.model, &mut self.data, &self.q);
         forward_velocity(&self.model, &mut self.data, &self.qd);
-        kinloop_linkage::gravity::kinetic_energy(&self.model, &self.data)
+        (
+            kinloop_linkage::gravity::kinetic_energy(&self.model, &self.data),
+            kinloop_linkage::gravity::potential_energy(&self.model, &self.data, &self.q),
+        )
     }
 
     /// Ids of the users present (not leaving), in join order.
@@ -666,7 +736,7 @@ impl<S: Space> VeCore<S> {
         self.users.binary_search_by_key(&user, |u| u.id).ok()
     }
 
-    fn welcome(&self, user_id: UserId, request: &JoinRequest, op: usize) -> Welcome {
+    fn welcome(&self, user_id: UserId, op: usize, mapping: &Mapping, coupling: &Coupling<S>) -> Welcome {
         Welcome {
             session_id: splitmix64(self.config.session_seed ^ u64::from(user_id)),
             user_id,
@@ -681,43 +751,10 @@ impl<S: Space> VeCore<S> {
             },
             ve_rate_hz: self.config.ve_rate_hz,
             snapshot_rate_hz: self.config.snapshot_rate_hz,
-            gains: self.recommended_gains(request),
+            mapping: mapping.clone(),
+            coupling: design::coupling_message::<S>(&coupling.stiffness, &coupling.damping),
+            op: OpSummary::from_reach(&self.reaches[op], &coupling.op_pose),
         }
-    }
-
-    /// The configured gains, with the position channel defaulted per axis when not configured
-    /// (1000 N/m and 10 N·s/m linear, times L² angular) and everything clamped to what the device can render.
-    fn recommended_gains(&self, request: &JoinRequest) -> RecommendedGains {
-        let base = &self.config.recommended_gains;
-        let lin = <S::Point as VecOps>::LEN;
-        let l2 = self.model.length_scale * self.model.length_scale;
-        let per_axis = |given: &Vec<f64>, linear: f64| -> Vec<f64> {
-            if given.len() == S::DIM {
-                given.clone()
-            } else {
-                (0..S::DIM).map(|a| if a < lin { linear } else { linear * l2 }).collect()
-            }
-        };
-        let mut gains = RecommendedGains {
-            k_j: base.k_j,
-            b_j: base.b_j,
-            k_pc: per_axis(&base.k_pc, 1000.0),
-            b_pc: per_axis(&base.b_pc, 10.0),
-        };
-        if let Some(device) = &request.device {
-            let clamp = |value: &mut f64, cap: f64| {
-                if cap > 0.0 {
-                    *value = value.min(cap);
-                }
-            };
-            clamp(&mut gains.k_j, device.max_stiffness_n_per_m);
-            clamp(&mut gains.b_j, device.max_damping_ns_per_m);
-            for a in 0..lin {
-                clamp(&mut gains.k_pc[a], device.max_stiffness_n_per_m);
-                clamp(&mut gains.b_pc[a], device.max_damping_ns_per_m);
-            }
-        }
-        gains
     }
 }
 

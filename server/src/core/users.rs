@@ -6,7 +6,8 @@ use std::time::Duration;
 use kinloop_linkage::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::{Model, Space};
 use kinloop_protocol::{
-    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, LocalModelForm, OtherUsers, Role, Snapshot,
+    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Mapping, MappingRequest, OtherUsers,
+    Role, Snapshot,
 };
 
 use super::fade::Fade;
@@ -23,23 +24,28 @@ pub struct JoinRequest {
     pub name: String,
     /// Manipulator or observer.
     pub role: Role,
-    /// Name of an operational point of the scene. Several users may hold the same one.
+    /// Name of an operational point of the scene (several users may hold the same one); empty: the scene's
+    /// first.
     pub op: String,
     /// Which local model the user's snapshots carry.
     pub form: LocalModelForm,
-    /// The user's device, if it described one (limits hand wrenches and recommended gains).
+    /// The user's device, if it described one (its limits bound hand wrenches; with the OP's reach it sets
+    /// the mapping and the coupling gains).
     pub device: Option<DeviceCaps>,
+    /// What the user asked of the mapping.
+    pub mapping: MappingRequest,
 }
 
 impl JoinRequest {
-    /// The request a handshake's hello makes.
-    pub fn from_hello(hello: &Hello) -> Self {
+    /// The request a handshake's hello and join make.
+    pub fn from_handshake(hello: &Hello, join: &Join) -> Self {
         JoinRequest {
             name: hello.client_name.clone(),
             role: hello.role,
-            op: hello.op.clone(),
-            form: hello.form,
-            device: Some(hello.device.clone()),
+            op: join.op.clone(),
+            form: join.form,
+            device: Some(join.device.clone()),
+            mapping: join.mapping.clone(),
         }
     }
 }
@@ -173,8 +179,10 @@ pub struct User {
     pub op: usize,
     /// Requested local-model form.
     pub form: LocalModelForm,
-    /// Limits on the hand wrench.
+    /// Limits on the hand wrench (VE units: the device's rating divided by the mapping's scales).
     pub wrench_limits: WrenchLimits,
+    /// The mapping between the user's device and the VE.
+    pub mapping: Mapping,
     /// Present or leaving.
     pub presence: Presence,
     /// Sequence number of the newest uplink used.

@@ -24,7 +24,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial};
+use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     close_codes, server_endpoint, Endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity,
@@ -94,7 +94,7 @@ impl ServerConfig {
             scene,
             scene_label: scene_label.into(),
             listen,
-            ve: VeConfig::paper(),
+            ve: VeConfig::default(),
             access: Access::open(),
             identity: Identity::Ephemeral,
             link: None,
@@ -146,6 +146,8 @@ pub(crate) struct Shared {
     shape: SessionShape,
     snapshot_ring_bytes: usize,
     access: Access,
+    /// What a client learns before joining.
+    scene_info: kinloop_protocol::SceneInfo,
     shutdown: watch::Sender<bool>,
 }
 
@@ -315,6 +317,12 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
     let model = Model::<S>::compile(&config.scene, &config.scene_label)?;
     let (n, m) = (model.nq(), model.nc());
     let core = VeCore::new(model, config.ve.clone())?;
+    let scene_info = core.scene_info();
+    for op in 0..core.model().ops.len() {
+        if let Some(reach) = core.reach(op) {
+            tracing::info!(op = %core.model().ops[op].name, reach_m = ?reach.extent().as_slice(), static_force_n = reach.static_force_n, lightest_mass_kg = 1.0 / reach.inverse_mass_max, "operational point surveyed");
+        }
+    }
     let identity = match &config.identity {
         Identity::CertDir(dir) => ServerIdentity::load_or_create(dir)?,
         Identity::Ephemeral => ServerIdentity::generate(&kinloop_protocol::quic::DEFAULT_NAMES)?,
@@ -360,6 +368,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         shape: SessionShape { kind: S::KIND, n, m },
         snapshot_ring_bytes: 4 * (ve_thread::FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
         access: config.access.clone(),
+        scene_info,
         shutdown,
     });
     let accept = tokio::spawn(accept_loop(endpoint.clone(), shared.clone()));

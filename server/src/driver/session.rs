@@ -54,15 +54,18 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
     let remote = incoming.remote_address();
     let mut ends = None;
     let (slot, shared_ref) = (&mut ends, &shared);
-    let handshake = accept_with(incoming, move |hello| async move {
+    let admit = |hello: &kinloop_protocol::Hello| {
+        shared_ref.access.admit(&hello.token, hello.role).map_err(refused)?;
+        Ok(shared_ref.scene_info.clone())
+    };
+    let handshake = accept_with(incoming, admit, move |hello, join| async move {
         let shared = shared_ref;
-        shared.access.admit(&hello.token, hello.role).map_err(refused)?;
         let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
         let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.snapshot_ring_bytes);
         let notify = Arc::new(Notify::new());
         let (reply_tx, reply_rx) = oneshot::channel();
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
-        let command = Command::Join { request: JoinRequest::from_hello(&hello), link, reply: reply_tx };
+        let command = Command::Join { request: JoinRequest::from_handshake(&hello, &join), link, reply: reply_tx };
         let shutting_down = || refused(RefusalReason::Malformed { what: "the server is shutting down".into() });
         shared.send_command(command).await.map_err(|_| shutting_down())?;
         let joined = reply_rx.await.map_err(|_| shutting_down())?.map_err(refused)?;
@@ -88,7 +91,7 @@ async fn run_session(
     mut snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
 ) {
-    let AcceptedSession { connection, mut send, mut recv, hello, welcome } = session;
+    let AcceptedSession { connection, mut send, mut recv, hello, join: _, welcome } = session;
     let user = welcome.user_id;
     let counters = Arc::new(UserCounters::default());
     counters.connected.store(true, Ordering::Relaxed);
@@ -99,7 +102,7 @@ async fn run_session(
         connection: connection.clone(),
         counters: counters.clone(),
     });
-    tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %hello.op, remote = %connection.remote_address(), "session started");
+    tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %welcome.scene.op_name, position_scale = welcome.mapping.position_scale, force_scale = welcome.mapping.force_scale, coupling_stiffness = ?welcome.coupling.stiffness, coupling_damping = ?welcome.coupling.damping, remote = %connection.remote_address(), "session started");
 
     let receive = {
         let counters = counters.clone();

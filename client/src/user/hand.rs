@@ -1,0 +1,377 @@
+//! A simulated hand that behaves like one: a grasp modelled as a mass-spring-damper attached to an intended
+//! motion. The hand's mass moves with the handle (the rig adds it to the device's plant); the arm pulls the
+//! hand toward where it intends to be through a spring and a damper, and moves its own mass along that
+//! intention (the feedforward a person learns for their own arm):
+//! ```text
+//! F_h = K (x_d ⊖ x) + B (ẋ_d − ẋ) + M ẍ_d
+//! ```
+//! So it pushes where the linkage yields and yields where the linkage pushes back — unlike a constant force,
+//! which never yields and was "a worst case approximation of the user for stability" in the paper.
+//!
+//! **Presets** (per linear axis; per angular axis for the wrist):
+//! - `soft`: a relaxed grasp, the arm-and-hand impedance one participant showed on a HapticMaster —
+//!   M 0.554 kg, B 6.45 N s/m, K 135 N/m (Sci. Rep. 5:18004, 2015, Fig 3).
+//! - `firm`: a tight, co-contracted grasp. Stiffness and damping rise with grip force (Hasser & Cutkosky,
+//!   2002; Fu & Çavuşoğlu, IEEE TSMC-B 2012, for stylus devices at 1-3 N of grip); taken here at about five
+//!   times the relaxed values and within the ranges commonly simulated for a firm grasp (0.5-2 kg,
+//!   10-30 N s/m, 500-2000 N/m): M 0.8 kg, B 25 N s/m, K 700 N/m.
+//! - The wrist, on a device's angular axes: a relaxed 1e-3 kg m², 0.02 N m s/rad, 0.3 N m/rad and a firm
+//!   2e-3 kg m², 0.08 N m s/rad, 2 N m/rad (values of the order Kuchenbecker, Park & Niemeyer report for
+//!   the wrist holding a stylus, IEEE Haptics Symposium 2003).
+//!
+//! **Events**: `release` lets go at [`RELEASE_AT_S`] (the hand's wrench and mass leave the handle at once:
+//! the device is left alone with whatever the controllers command), `poke` steps the intended position by
+//! [`POKE_STEP_M`] along x for [`POKE_DURATION_S`] at [`POKE_AT_S`] (an abrupt jab).
+//!
+//! **Intended motion**: by default a tour of the operational point's reach, as the server surveyed it
+//! (`Welcome::op::tour`), mapped into the device's space: waypoints that the linkage can reach, visited in
+//! order and back on minimum-jerk segments (Flash & Hogan 1985) at a relaxed pace of at most
+//! [`TOUR_SPEED_M_S`]; or a scripted `path` (see [`PathSpec`]); or holding still where it grasped.
+
+use std::time::Duration;
+
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::space::{Space, VecOps};
+use kinloop_protocol::Welcome;
+
+use super::path::{minimum_jerk, PathSpec};
+use super::{SimulatedUser, UserError};
+use crate::device::DeviceState;
+
+/// When a `release` hand lets go, after its grasp (s).
+pub const RELEASE_AT_S: f64 = 2.0;
+/// When a `poke` hand jabs, after its grasp (s).
+pub const POKE_AT_S: f64 = 1.5;
+/// How far a poke steps the intended position, device space (m).
+pub const POKE_STEP_M: f64 = 0.01;
+/// How long the poke's step lasts (s).
+pub const POKE_DURATION_S: f64 = 0.2;
+/// Fastest pace of a tour between waypoints, device space (m/s).
+pub const TOUR_SPEED_M_S: f64 = 0.04;
+/// Shortest tour segment (s).
+const TOUR_SEGMENT_MIN_S: f64 = 0.6;
+
+/// The hand's impedance: mass, damping and stiffness per linear axis, and the wrist's per angular axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HandImpedance {
+    /// kg.
+    pub mass: f64,
+    /// N s/m.
+    pub damping: f64,
+    /// N/m.
+    pub stiffness: f64,
+    /// kg m².
+    pub inertia: f64,
+    /// N m s/rad.
+    pub angular_damping: f64,
+    /// N m/rad.
+    pub angular_stiffness: f64,
+}
+
+impl HandImpedance {
+    /// A relaxed grasp (see the module documentation for the source).
+    pub fn soft() -> Self {
+        HandImpedance {
+            mass: 0.554,
+            damping: 6.45,
+            stiffness: 135.0,
+            inertia: 1e-3,
+            angular_damping: 0.02,
+            angular_stiffness: 0.3,
+        }
+    }
+
+    /// A firm grasp (see the module documentation).
+    pub fn firm() -> Self {
+        HandImpedance {
+            mass: 0.8,
+            damping: 25.0,
+            stiffness: 700.0,
+            inertia: 2e-3,
+            angular_damping: 0.08,
+            angular_stiffness: 2.0,
+        }
+    }
+}
+
+/// Which hand (the `--user` names).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HandKind {
+    /// A relaxed grasp.
+    Soft,
+    /// A firm grasp.
+    Firm,
+    /// A firm grasp that lets go at [`RELEASE_AT_S`].
+    Release,
+    /// A firm grasp that jabs at [`POKE_AT_S`].
+    Poke,
+}
+
+impl HandKind {
+    /// Every kind, in order.
+    pub const ALL: [HandKind; 4] = [HandKind::Soft, HandKind::Firm, HandKind::Release, HandKind::Poke];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            HandKind::Soft => "soft",
+            HandKind::Firm => "firm",
+            HandKind::Release => "release",
+            HandKind::Poke => "poke",
+        }
+    }
+
+    /// Parses a name.
+    pub fn parse(s: &str) -> Option<Self> {
+        HandKind::ALL.into_iter().find(|k| k.name() == s)
+    }
+
+    /// The impedance of this kind.
+    pub fn impedance(self) -> HandImpedance {
+        match self {
+            HandKind::Soft => HandImpedance::soft(),
+            _ => HandImpedance::firm(),
+        }
+    }
+}
+
+/// What the hand intends to do.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Intent {
+    /// Tour the operational point's reach (its waypoints are given at build time).
+    Tour,
+    /// A scripted path from the grasp point.
+    Path(PathSpec),
+    /// Hold still where it grasped.
+    Hold,
+}
+
+/// A hand as named on the command line: `KIND[:PATH]`, e.g. `soft`, `firm:circle:0.01,2`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HandSpec {
+    /// Which hand.
+    pub kind: HandKind,
+    /// What it intends.
+    pub intent: Intent,
+}
+
+impl HandSpec {
+    /// A hand of `kind` touring the reach.
+    pub fn touring(kind: HandKind) -> Self {
+        HandSpec { kind, intent: Intent::Tour }
+    }
+}
+
+/// The waypoints of an intended tour, as displacements from the grasp pose in the device's space (linear,
+/// rotation vector).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct UserContext<S: Space> {
+    /// Displacements, in order.
+    pub tour: Vec<S::OpVec>,
+}
+
+impl<S: Space> UserContext<S> {
+    /// The welcome's tour (VE displacements from the OP's pose at the join) in the device's space: linear
+    /// parts times the position scale, rotations one to one.
+    pub fn from_welcome(welcome: &Welcome) -> Self {
+        let k = S::DIM;
+        let lin = <S::Point as VecOps>::LEN;
+        let scale = welcome.mapping.position_scale;
+        let tour = welcome
+            .op
+            .tour
+            .chunks_exact(k)
+            .map(|w| {
+                let mut v = S::OpVec::from_slice(w);
+                for i in 0..lin {
+                    v[i] *= scale;
+                }
+                v
+            })
+            .collect();
+        UserContext { tour }
+    }
+}
+
+/// The intended motion as a function of time: minimum-jerk segments between displacements.
+#[derive(Clone, Debug)]
+struct Plan<S: Space> {
+    /// (start time, displacement) of each knot; the motion goes from knot i to knot i + 1.
+    knots: Vec<(f64, S::OpVec)>,
+    /// Repeat from the start after the last knot (a tour back and forth).
+    period_s: Option<f64>,
+}
+
+impl<S: Space> Plan<S> {
+    fn hold() -> Self {
+        Plan { knots: vec![(0.0, S::OpVec::zero())], period_s: None }
+    }
+
+    /// From the grasp to the nearest waypoint, then through the tour and back, repeated.
+    fn tour(waypoints: &[S::OpVec]) -> Self {
+        if waypoints.is_empty() {
+            return Self::hold();
+        }
+        let distance = |a: &S::OpVec, b: &S::OpVec| S::op_lin(&(*a - *b)).norm();
+        let nearest = (0..waypoints.len())
+            .min_by(|&i, &j| {
+                distance(&waypoints[i], &S::OpVec::zero()).total_cmp(&distance(&waypoints[j], &S::OpVec::zero()))
+            })
+            .unwrap_or(0);
+        // Forth from the nearest point around the list, then back.
+        let mut order: Vec<S::OpVec> =
+            (0..waypoints.len()).map(|k| waypoints[(nearest + k) % waypoints.len()]).collect();
+        let back: Vec<S::OpVec> = order.iter().rev().skip(1).copied().collect();
+        order.extend(back);
+        let mut knots = vec![(0.0, S::OpVec::zero())];
+        let mut t = 0.0;
+        let mut last = S::OpVec::zero();
+        for w in order {
+            t += (distance(&w, &last) / TOUR_SPEED_M_S).max(TOUR_SEGMENT_MIN_S);
+            knots.push((t, w));
+            last = w;
+        }
+        // The repeat starts at the first waypoint (knot 1), not at the grasp.
+        let start = knots.get(1).map_or(0.0, |k| k.0);
+        Plan { period_s: Some(t - start).filter(|p| *p > 0.0), knots }
+    }
+
+    /// The displacement at `t_s` after the grasp.
+    fn at(&self, t_s: f64) -> S::OpVec {
+        let mut t = t_s.max(0.0);
+        let last = self.knots[self.knots.len() - 1];
+        if t >= last.0 {
+            match self.period_s {
+                Some(period) => {
+                    let start = self.knots[1].0;
+                    t = start + (t - start) % period;
+                }
+                None => return last.1,
+            }
+        }
+        let i = self.knots.iter().rposition(|k| k.0 <= t).unwrap_or(0).min(self.knots.len() - 2);
+        let (t0, a) = self.knots[i];
+        let (t1, b) = self.knots[i + 1];
+        a + (b - a) * minimum_jerk((t - t0) / (t1 - t0).max(1e-9))
+    }
+}
+
+/// A scripted path as a plan (its offsets are in the device's x-y plane).
+#[derive(Clone, Debug)]
+struct PathPlan(PathSpec);
+
+enum Motion<S: Space> {
+    Knots(Plan<S>),
+    Path(PathPlan),
+}
+
+impl<S: Space> Motion<S> {
+    fn at(&self, t_s: f64) -> S::OpVec {
+        match self {
+            Motion::Knots(plan) => plan.at(t_s),
+            Motion::Path(PathPlan(spec)) => {
+                let offset = spec.offset(t_s.max(0.0));
+                let mut v = S::OpVec::zero();
+                v[0] = offset[0];
+                v[1] = offset[1];
+                v
+            }
+        }
+    }
+}
+
+/// The hand (see the module documentation).
+pub struct Hand<S: Space> {
+    kind: HandKind,
+    motion: Motion<S>,
+    stiffness: S::OpVec,
+    damping: S::OpVec,
+    mass: S::OpVec,
+    grasp: Option<(Duration, OpPose<S>)>,
+}
+
+/// The finite-difference step of the intended motion's velocity and acceleration (s).
+const DIFFERENCE_S: f64 = 1e-3;
+
+impl<S: Space> Hand<S> {
+    /// A hand as `spec` says, touring `context`'s waypoints when it tours.
+    pub fn new(spec: &HandSpec, context: &UserContext<S>) -> Result<Self, UserError> {
+        let impedance = spec.kind.impedance();
+        let linear = <S::Point as VecOps>::LEN;
+        let mut stiffness = S::OpVec::zero();
+        let mut damping = S::OpVec::zero();
+        let mut mass = S::OpVec::zero();
+        for i in 0..S::DIM {
+            let angular = i >= linear;
+            stiffness[i] = if angular { impedance.angular_stiffness } else { impedance.stiffness };
+            damping[i] = if angular { impedance.angular_damping } else { impedance.damping };
+            mass[i] = if angular { impedance.inertia } else { impedance.mass };
+        }
+        if context.tour.iter().any(|w| !w.is_finite()) {
+            return Err(UserError::Path("the tour has a non-finite waypoint".into()));
+        }
+        let motion = match &spec.intent {
+            Intent::Tour => Motion::Knots(Plan::tour(&context.tour)),
+            Intent::Path(path) => Motion::Path(PathPlan(path.clone())),
+            Intent::Hold => Motion::Knots(Plan::hold()),
+        };
+        Ok(Hand { kind: spec.kind, motion, stiffness, damping, mass, grasp: None })
+    }
+
+    /// Seconds since the grasp (0 before it).
+    fn since_grasp(&self, now: Duration) -> f64 {
+        self.grasp.map_or(0.0, |(t0, _)| now.saturating_sub(t0).as_secs_f64())
+    }
+
+    fn released(&self, t_s: f64) -> bool {
+        self.kind == HandKind::Release && t_s >= RELEASE_AT_S
+    }
+
+    /// The intended displacement at `t_s`, with the poke's step.
+    fn intended(&self, t_s: f64) -> S::OpVec {
+        let mut d = self.motion.at(t_s);
+        if self.kind == HandKind::Poke && (POKE_AT_S..POKE_AT_S + POKE_DURATION_S).contains(&t_s) {
+            d[0] += POKE_STEP_M;
+        }
+        d
+    }
+}
+
+impl<S: Space> SimulatedUser<S> for Hand<S> {
+    fn wrench(&mut self, now: Duration, device: &DeviceState<S>) -> S::OpVec {
+        let (_, grasp) = *self.grasp.get_or_insert((now, device.pose));
+        let t = self.since_grasp(now);
+        if self.released(t) {
+            return S::OpVec::zero();
+        }
+        let h = DIFFERENCE_S;
+        let (before, here, after) = (self.intended(t - h), self.intended(t), self.intended(t + h));
+        // The poke is a step: no feedforward spike on its edges.
+        let at_edge = |edge: f64| (t - edge).abs() < 2.0 * h;
+        let (velocity, acceleration) =
+            if self.kind == HandKind::Poke && (at_edge(POKE_AT_S) || at_edge(POKE_AT_S + POKE_DURATION_S)) {
+                (S::OpVec::zero(), S::OpVec::zero())
+            } else {
+                ((after - before) * (0.5 / h), (after - here * 2.0 + before) * (1.0 / (h * h)))
+            };
+        let mut target = grasp;
+        target.integrate(&here, 1.0);
+        let error = target.difference(&device.pose);
+        let mut w = S::OpVec::zero();
+        for i in 0..S::DIM {
+            w[i] = self.stiffness[i] * error[i]
+                + self.damping[i] * (velocity[i] - device.twist[i])
+                + self.mass[i] * acceleration[i];
+        }
+        w
+    }
+
+    fn attached_mass(&self, now: Duration) -> S::OpVec {
+        if self.released(self.since_grasp(now)) {
+            S::OpVec::zero()
+        } else {
+            self.mass
+        }
+    }
+}

@@ -1,0 +1,220 @@
+//! What the server decides for each user at join, from the user's device and the surveyed reach of the
+//! operational point it holds (`kinloop_linkage::reach`): the mapping between device and VE (a position
+//! scale and a force scale) and the graphics controller's gains K_g, B_g (paper section IV, Fig 3).
+//!
+//! **The mapping.** A device is small and weak beside most linkages (a Touch's workspace is 16 × 12 cm
+//! and its continuous force 0.88 N; the crank-rocker's coupler sweeps 18 × 14 cm and weighs 13 N at the
+//! hand). The position scale `c_p` (device metres per VE metre) fits the OP's reach into
+//! [`WORKSPACE_FILL`] of the device's workspace along the axis that binds, so the hand moves through the
+//! linkage's whole motion without reaching the device's walls. The force scale `c_f` (device newtons per VE
+//! newton) maps the static load at the OP (gravity through the closed loops, 90th percentile over the
+//! reach) to [`LOAD_FRACTION`] of the device's continuous force: the hand still feels the weight, with room
+//! to feel the inertia and the loops on top of it. A scene without gravity has no static load; then the
+//! load that sets the scale is the force that moves the OP's lightest direction across its reach in a
+//! second on a minimum-jerk path (peak acceleration `5.77 d / T²`, Flash & Hogan 1985). Angles map one to
+//! one and torques by `c_f c_p`, so every axis scales power alike (`protocol::Mapping`).
+//!
+//! **The coupling.** The graphics controller ties the VE's OP to the user's local model (eq 4 applies it
+//! beside the force channel). It is a spring-damper on the OP's effective mass, and what makes it stable
+//! or not is its natural frequency against the rates and delays of the loop it closes (VE → snapshot →
+//! local model → uplink → VE), not its stiffness in N/m. So the gains are designed per group of axes from
+//! the OP's lightest effective mass over the reach: translation `m = 1 / max λ(Λ⁻¹_vv)`, rotation
+//! `I = 1 / max λ(Λ⁻¹_ωω)` (the blocks of eq 9's Λ⁻¹), `K = m ω_g²`, `B = 2 ζ m ω_g`, critically damped.
+//! Since Λ⁻¹ is positive semi-definite, its largest eigenvalue is at most the sum of its blocks' largest,
+//! so along every direction of the coupled OP (rotation and translation tied by the loops) the coupling's
+//! frequency is at most `√2 ω_g`. `ω_g` is [`COUPLING_HZ`] and at most a fiftieth of the VE rate and of the
+//! device's rate (the uplinks that move its reference), far below both. The paper's gains
+//! (K_g = 1000 N/m, 10⁴ N·m/rad) put the testbed's link 2 at 2.6 Hz in translation but, on OPs that turn
+//! about a nearly fixed point, the angular 10⁴ N·m/rad made a loop with the local model that the VE could
+//! not hold (README, Known limits of earlier versions): designed from the inertia, no OP gets a coupling
+//! stiffer than its own mass can follow.
+
+use kinloop_linkage::reach::OpReach;
+use kinloop_linkage::{Space, VecOps};
+use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
+
+/// Fraction of the device's workspace the OP's reach spans along the binding axis.
+pub const WORKSPACE_FILL: f64 = 0.8;
+/// Fraction of the device's continuous force the static load at the OP maps to (the issue's 25-50 %).
+pub const LOAD_FRACTION: f64 = 0.35;
+/// Natural frequency of the graphics controller on the OP's lightest effective mass (Hz).
+pub const COUPLING_HZ: f64 = 4.0;
+/// Damping ratio of the graphics controller.
+pub const COUPLING_DAMPING_RATIO: f64 = 1.0;
+/// The coupling's frequency stays below the VE rate and the device rate divided by this.
+pub const RATE_MARGIN: f64 = 50.0;
+/// Time a minimum-jerk motion across the reach takes when no gravity sets the force scale (s).
+const CROSSING_S: f64 = 1.0;
+/// Reach extents below this fraction of the largest are not fitted (a slider moves on one axis only).
+const DEGENERATE_EXTENT: f64 = 0.01;
+
+/// Why a device or a mapping request cannot serve an OP (becomes a `RefusalReason::Device`).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DesignError {
+    /// The device describes another number of axes than the scene's operational space has.
+    #[error("device {device} describes {got} axes; this {kind} scene's operational space has {expected} ({axes})")]
+    Axes {
+        /// The device's name.
+        device: String,
+        /// Axes it described.
+        got: usize,
+        /// Axes the scene needs.
+        expected: usize,
+        /// `planar` or `spatial`.
+        kind: &'static str,
+        /// The scene's axis names.
+        axes: &'static str,
+    },
+    /// A device whose numbers cannot describe a real device.
+    #[error("device {device}: {what}")]
+    Impossible {
+        /// The device's name.
+        device: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// A scale the client asked for that would take the device past its limits.
+    #[error("{what}")]
+    Scale {
+        /// What is wrong, with the largest scale allowed.
+        what: String,
+    },
+}
+
+/// The scene's axes, for messages.
+fn axis_names<S: Space>() -> (&'static str, &'static str) {
+    match S::DIM {
+        3 => ("planar", "x, y, θ"),
+        _ => ("spatial", "x, y, z, rx, ry, rz"),
+    }
+}
+
+/// Checks that `device` describes a real device in the scene's operational space.
+pub fn check_device<S: Space>(device: &DeviceCaps) -> Result<(), DesignError> {
+    let (kind, axes) = axis_names::<S>();
+    let lists = [device.workspace_min.len(), device.workspace_max.len(), device.damping.len(), device.mass.len()];
+    if let Some(&got) = lists.iter().find(|&&len| len != S::DIM) {
+        return Err(DesignError::Axes { device: device.name.clone(), got, expected: S::DIM, kind, axes });
+    }
+    let impossible = |what: String| DesignError::Impossible { device: device.name.clone(), what };
+    let lin = <S::Point as VecOps>::LEN;
+    for a in 0..lin {
+        let extent = device.workspace_max[a] - device.workspace_min[a];
+        if !(extent > 0.0) {
+            return Err(impossible(format!("its workspace has no extent on linear axis {a} ({extent} m)")));
+        }
+    }
+    if !(device.max_force_n > 0.0) {
+        return Err(impossible(format!("a peak force of {} N renders nothing", device.max_force_n)));
+    }
+    if !(device.continuous_force_n > 0.0 && device.continuous_force_n <= device.max_force_n) {
+        return Err(impossible(format!(
+            "continuous force {} N must be positive and at most the peak {} N",
+            device.continuous_force_n, device.max_force_n
+        )));
+    }
+    if !(device.max_stiffness_n_per_m > 0.0) {
+        return Err(impossible(format!("a stable stiffness of {} N/m renders nothing", device.max_stiffness_n_per_m)));
+    }
+    Ok(())
+}
+
+/// The lightest effective masses of the reach: translational (kg) and rotational (kg m²); infinite where
+/// the OP does not move at all.
+fn lightest<S: Space>(reach: &OpReach<S>) -> (f64, f64) {
+    let inverse = |x: f64| if x > 0.0 { 1.0 / x } else { f64::INFINITY };
+    (inverse(reach.inverse_mass_max), inverse(reach.inverse_rotational_inertia_max))
+}
+
+/// The mapping for `device` at the OP of `reach` (see the module documentation), with what the client
+/// asked for taking precedence; a requested scale that would push the device past its peak force (static
+/// load) or its reach past the workspace is refused with the largest that would not.
+pub fn choose_mapping<S: Space>(
+    reach: &OpReach<S>,
+    device: &DeviceCaps,
+    request: &MappingRequest,
+) -> Result<Mapping, DesignError> {
+    let lin = <S::Point as VecOps>::LEN;
+    let extent = reach.extent();
+    let largest = reach.largest_extent();
+    // The binding axis: the smallest ratio of device workspace to reach.
+    let fit = (0..lin)
+        .filter(|&a| extent.as_slice()[a] > DEGENERATE_EXTENT * largest)
+        .map(|a| (device.workspace_max[a] - device.workspace_min[a]) / extent.as_slice()[a])
+        .fold(f64::INFINITY, f64::min);
+    let position_scale = match request.position_scale {
+        Some(asked) => {
+            if fit.is_finite() && asked > fit {
+                return Err(DesignError::Scale {
+                    what: format!(
+                        "position scale {asked} would take the OP's reach ({largest:.3} m) past device {}'s \
+                         workspace; at most {fit:.3}",
+                        device.name
+                    ),
+                });
+            }
+            asked
+        }
+        None if fit.is_finite() => WORKSPACE_FILL * fit,
+        None => 1.0,
+    };
+    let (mass, _) = lightest(reach);
+    // Without gravity: the force to carry the lightest direction across the reach in CROSSING_S.
+    let dynamic = if mass.is_finite() { mass * 5.77 * largest / (CROSSING_S * CROSSING_S) } else { 0.0 };
+    let load = reach.static_force_n.max(dynamic);
+    let mut force_scale = if load > 0.0 { LOAD_FRACTION * device.continuous_force_n / load } else { 1.0 };
+    // Devices that render torque: the static torque must fit too (torques scale by c_f c_p).
+    let torque_load = reach.static_torque_nm * position_scale;
+    if device.max_torque_nm > 0.0 && torque_load > 0.0 {
+        force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
+    }
+    if let Some(asked) = request.force_scale {
+        let most = device.max_force_n / reach.static_force_n.max(1e-12);
+        if asked * reach.static_force_n > device.max_force_n {
+            return Err(DesignError::Scale {
+                what: format!(
+                    "force scale {asked} would need {:.2} N of device {} to hold the OP's static load of {:.2} N \
+                     (peak {} N); at most {most:.4}",
+                    asked * reach.static_force_n,
+                    device.name,
+                    reach.static_force_n,
+                    device.max_force_n
+                ),
+            });
+        }
+        force_scale = asked;
+    }
+    Ok(Mapping {
+        position_scale: position_scale.clamp(1e-4, 1e4),
+        force_scale: force_scale.clamp(1e-4, 1e4),
+        gravity_compensation: request.gravity_compensation,
+    })
+}
+
+/// The graphics controller's natural frequency (rad/s) for a VE at `ve_rate_hz` and a device at
+/// `device_rate_hz`.
+pub fn coupling_frequency(ve_rate_hz: f64, device_rate_hz: f64) -> f64 {
+    let hz = COUPLING_HZ.min(ve_rate_hz / RATE_MARGIN).min(device_rate_hz / RATE_MARGIN);
+    std::f64::consts::TAU * hz
+}
+
+/// K_g and B_g per operational axis for the OP of `reach` (see the module documentation).
+pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64) -> (S::OpVec, S::OpVec) {
+    let (mass, inertia) = lightest(reach);
+    let lin = <S::Point as VecOps>::LEN;
+    let mut stiffness = S::OpVec::zero();
+    let mut damping = S::OpVec::zero();
+    for a in 0..S::DIM {
+        let m = if a < lin { mass } else { inertia };
+        // An OP that does not move in a group needs no coupling there: the joints hold it.
+        let m = if m.is_finite() { m } else { 0.0 };
+        stiffness[a] = m * omega * omega;
+        damping[a] = 2.0 * COUPLING_DAMPING_RATIO * m * omega;
+    }
+    (stiffness, damping)
+}
+
+/// The gains as the welcome carries them.
+pub fn coupling_message<S: Space>(stiffness: &S::OpVec, damping: &S::OpVec) -> CouplingGains {
+    CouplingGains { stiffness: stiffness.as_slice().to_vec(), damping: damping.as_slice().to_vec() }
+}

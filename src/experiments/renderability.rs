@@ -1,0 +1,279 @@
+//! `renderability`: does every shipped linkage feel right with default settings? Every scene × every
+//! operational point × device {sim:paper, sim:falcon, sim:touch} × network {perfect, 50 ms one-way with
+//! 5 ms jitter} × hand {soft, firm}, each a session of a simulated hand touring the OP's reach, with what
+//! `kinloop-client` does by default (the server's mapping and coupling gains, the client's designed gains).
+//!
+//! A pair **renders** when it is stable by the one criterion ([`verdict`], which includes VE restores), its
+//! loops stay closed (≤ [`CLOSURE_BOUND_M`]), no value goes non-finite, the device is clamped on at most
+//! [`CLAMPED_BOUND`] of its ticks, and the device follows the VE's OP within [`RMS_PERFECT_M`] RMS on a
+//! perfect network and [`RMS_DELAYED_M`] at 50 ms (device space: what the hand feels). Spatial scenes skip
+//! `sim:paper`, which is planar.
+//!
+//! [`verdict`]: super::verdict
+
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use serde_json::json;
+
+use kinloop_client::device::presets::DevicePreset;
+use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_linkage::{builtin, SceneKind};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::core::VeConfig;
+
+use super::common::{num, round, session, sweep, Options, Output};
+use super::verdict::judge;
+use crate::charts::HeatMap;
+use crate::harness::{ClientPlan, SessionPlan};
+
+/// Largest closure error of a rendering pair (m).
+pub const CLOSURE_BOUND_M: f64 = 1e-6;
+/// Largest fraction of ticks at the device's force limit.
+pub const CLAMPED_BOUND: f64 = 0.05;
+/// Largest device-OP RMS on a perfect network (m, device space).
+pub const RMS_PERFECT_M: f64 = 0.005;
+/// Largest device-OP RMS at 50 ms one-way (m, device space).
+pub const RMS_DELAYED_M: f64 = 0.010;
+/// The devices of the matrix.
+pub const DEVICES: [DevicePreset; 3] = [DevicePreset::Paper, DevicePreset::Falcon, DevicePreset::Touch];
+
+/// The network of a point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Network {
+    /// No delay, no loss.
+    Perfect,
+    /// 50 ms one-way delay with 5 ms of jitter, each way.
+    Delayed50,
+}
+
+impl Network {
+    /// Both, in order.
+    pub const ALL: [Network; 2] = [Network::Perfect, Network::Delayed50];
+
+    /// Name in summaries and charts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Network::Perfect => "perfect",
+            Network::Delayed50 => "50ms+5ms",
+        }
+    }
+
+    /// The emulated link (each direction).
+    pub fn link(self, seed: u64) -> LinkConfig {
+        match self {
+            Network::Perfect => LinkConfig::default(),
+            Network::Delayed50 => LinkConfig {
+                delay: Duration::from_millis(50),
+                jitter: Duration::from_millis(5),
+                seed,
+                ..LinkConfig::default()
+            },
+        }
+    }
+
+    /// The RMS bound of this network.
+    pub fn rms_bound(self) -> f64 {
+        match self {
+            Network::Perfect => RMS_PERFECT_M,
+            Network::Delayed50 => RMS_DELAYED_M,
+        }
+    }
+}
+
+/// One pair of the matrix.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Point {
+    /// Built-in scene name.
+    pub scene: String,
+    /// Operational point.
+    pub op: String,
+    /// Device.
+    pub device: DevicePreset,
+    /// Network.
+    pub network: Network,
+    /// Hand.
+    pub hand: HandKind,
+}
+
+/// What one pair measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct PointResult {
+    /// The pair.
+    pub point: Point,
+    /// Renders by every bound.
+    pub renders: bool,
+    /// Which bounds failed.
+    pub failures: Vec<String>,
+    /// Stable by the criterion.
+    pub stable: bool,
+    /// VE state restores.
+    pub ve_restores: u64,
+    /// Fraction of active ticks clamped at the device limit.
+    pub clamped_fraction: f64,
+    /// Device-OP RMS, device space (m).
+    pub device_op_rms_m: f64,
+    /// Largest closure error (m).
+    pub max_closure_error_m: f64,
+    /// Position scale chosen.
+    pub position_scale: f64,
+    /// Force scale chosen.
+    pub force_scale: f64,
+    /// K_g then B_g per axis.
+    pub coupling: Vec<f64>,
+    /// k_j, b_j, K_pc per axis, B_pc per axis (device units).
+    pub gains: Vec<f64>,
+}
+
+/// Every pair of the matrix for `scenes` (all built-in scenes with an operational point when empty).
+pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<Point>> {
+    let names: Vec<&str> =
+        if scenes.is_empty() { builtin::SCENE_FILES.iter().map(|(n, _)| *n).collect() } else { scenes.to_vec() };
+    let mut out = Vec::new();
+    for name in names {
+        let scene = builtin::scene(name).context("built in")??;
+        for op in &scene.ops {
+            for device in DEVICES {
+                if scene.kind == SceneKind::Spatial && device == DevicePreset::Paper {
+                    continue;
+                }
+                for network in Network::ALL {
+                    for &hand in hands {
+                        out.push(Point { scene: name.into(), op: op.name.clone(), device, network, hand });
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Runs one pair for `seconds` and judges it.
+pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
+    let scene = builtin::scene(&point.scene).context("built in")??;
+    let mut client = ClientPlan::new("user", &point.op, point.device);
+    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
+    let client = client.with_link(point.network.link(0x5eed));
+    let plan = SessionPlan {
+        scene,
+        ve: VeConfig::default(),
+        clients: vec![client],
+        duration: Duration::from_secs_f64(seconds),
+        record_every: 1,
+    };
+    let (summary, rec) = session(&plan)?;
+    let verdict = judge(&summary, &rec);
+    let c = &summary.clients[0];
+    let mut failures = Vec::new();
+    if !verdict.stable {
+        failures.extend(verdict.reasons.iter().map(|r| r.to_string()));
+    }
+    if !(summary.max_closure_error <= CLOSURE_BOUND_M) {
+        failures.push(format!("closure {:.1e} m", summary.max_closure_error));
+    }
+    if c.non_finite > 0 {
+        failures.push("non-finite value".into());
+    }
+    if !(c.saturated_fraction <= CLAMPED_BOUND) {
+        failures.push(format!("clamped {:.1} %", c.saturated_fraction * 100.0));
+    }
+    if !(c.device_op_rms_m <= point.network.rms_bound()) {
+        failures.push(format!("RMS {:.1} mm", c.device_op_rms_m * 1e3));
+    }
+    Ok(PointResult {
+        point: point.clone(),
+        renders: failures.is_empty(),
+        failures,
+        stable: verdict.stable,
+        ve_restores: summary.ve_restores,
+        clamped_fraction: c.saturated_fraction,
+        device_op_rms_m: c.device_op_rms_m,
+        max_closure_error_m: summary.max_closure_error,
+        position_scale: c.position_scale,
+        force_scale: c.force_scale,
+        coupling: c.coupling.clone(),
+        gains: c.gains.clone(),
+    })
+}
+
+/// Runs the experiment (see the module documentation).
+pub fn run(options: &Options) -> Result<super::Report> {
+    let mut out = Output::new("renderability", options)?;
+    let hands = [HandKind::Soft, HandKind::Firm];
+    let all = points(&[], &hands)?;
+    let seconds = options.pick(6.0, 3.0);
+    let results = sweep("renderability", &all, options.threads, options.progress, |p| evaluate(p, seconds))?;
+    let rows: Vec<String> = {
+        let mut rows: Vec<String> = Vec::new();
+        for r in &results {
+            let label = row_label(&r.point);
+            if !rows.contains(&label) {
+                rows.push(label);
+            }
+        }
+        rows
+    };
+    let columns: Vec<String> =
+        Network::ALL.iter().flat_map(|n| hands.iter().map(move |h| format!("{} {}", n.name(), h.name()))).collect();
+    let cell = |r: &PointResult| {
+        let row = rows.iter().position(|l| *l == row_label(&r.point)).unwrap_or(0);
+        let column = columns.iter().position(|c| *c == format!("{} {}", r.point.network.name(), r.point.hand.name()));
+        (row, column.unwrap_or(0))
+    };
+    let mut clamped =
+        HeatMap::new("Ticks clamped at the device limit (%), default settings", rows.clone(), columns.clone());
+    let mut tracking =
+        HeatMap::new("Device-OP RMS (mm, device space), default settings", rows.clone(), columns.clone());
+    for r in &results {
+        let (row, column) = cell(r);
+        clamped.set(row, column, r.clamped_fraction * 100.0, r.clamped_fraction <= CLAMPED_BOUND);
+        tracking.set(
+            row,
+            column,
+            r.device_op_rms_m * 1e3,
+            r.device_op_rms_m <= r.point.network.rms_bound() && r.stable,
+        );
+    }
+    out.heat_map("clamped_fraction", &clamped)?;
+    out.heat_map("tracking_rms", &tracking)?;
+    let rendering = results.iter().filter(|r| r.renders).count();
+    let failing: Vec<_> = results
+        .iter()
+        .filter(|r| !r.renders)
+        .map(|r| json!({"pair": row_label(&r.point), "network": r.point.network.name(), "hand": r.point.hand.name(), "failures": r.failures}))
+        .collect();
+    let worst_rms = results.iter().map(|r| r.device_op_rms_m).fold(0.0, f64::max);
+    let worst_clamped = results.iter().map(|r| r.clamped_fraction).fold(0.0, f64::max);
+    let answer = format!(
+        "{rendering} of {} pairs render with default settings (stable, closure <= 1e-6 m, clamped <= 5 %, RMS <= 5 mm \
+         perfect / 10 mm at 50 ms); worst clamped {} %, worst RMS {} mm",
+        results.len(),
+        num(worst_clamped * 100.0),
+        num(worst_rms * 1e3)
+    );
+    out.finish(
+        "Every shipped linkage with default settings",
+        "about 2 minutes on 2 cores",
+        json!({
+            "answer": answer,
+            "seconds_per_pair": seconds,
+            "pairs": results.len(),
+            "rendering": rendering,
+            "failing": failing,
+            "bounds": {"closure_m": CLOSURE_BOUND_M, "clamped_fraction": CLAMPED_BOUND, "rms_perfect_m": RMS_PERFECT_M, "rms_50ms_m": RMS_DELAYED_M},
+            "points": results.iter().map(|r| json!({
+                "scene": r.point.scene, "op": r.point.op, "device": r.point.device.name(),
+                "network": r.point.network.name(), "hand": r.point.hand.name(),
+                "renders": r.renders, "failures": r.failures, "stable": r.stable, "ve_restores": r.ve_restores,
+                "clamped_fraction": round(r.clamped_fraction, 4), "device_op_rms_mm": round(r.device_op_rms_m * 1e3, 3),
+                "max_closure_error_m": r.max_closure_error_m, "position_scale": r.position_scale,
+                "force_scale": r.force_scale, "coupling_kg_bg": r.coupling, "gains_kj_bj_kpc_bpc": r.gains,
+            })).collect::<Vec<_>>(),
+        }),
+    )
+}
+
+fn row_label(p: &Point) -> String {
+    format!("{}:{} {}", p.scene, p.op, p.device.name())
+}
