@@ -31,6 +31,11 @@ use crate::model::{JointKind, Model};
 use crate::op_space::op_space_inertia;
 use crate::space::{Space, VecOps};
 
+/// A group of axes (linear or angular) whose largest inverse inertia is below this fraction of the other
+/// group's (unit-consistent coordinates) does not move at all: what is left is round-off of eq 9's
+/// cancellation, some 1e-16 relative.
+pub const IMMOBILE_GROUP: f64 = 1e-9;
+
 /// How far and how often a survey walks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurveyConfig {
@@ -384,6 +389,17 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         values.sort_by(f64::total_cmp);
         values[((values.len() - 1) as f64 * 0.9).round() as usize]
     };
+    // A group the OP does not move in at all (a parallelogram's coupler never turns) shows an inverse
+    // inertia of round-off size, 1e-23 where the other group's is 1; read it as zero (an infinite inertia),
+    // comparing the groups in the unit-consistent coordinates `(v, L ω)`.
+    let l2 = model.length_scale * model.length_scale;
+    let scaled_largest = reach.inverse_mass_max.max(reach.inverse_rotational_inertia_max * l2);
+    if reach.inverse_mass_max <= IMMOBILE_GROUP * scaled_largest {
+        reach.inverse_mass_max = 0.0;
+    }
+    if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
+        reach.inverse_rotational_inertia_max = 0.0;
+    }
     reach.static_force_max_n = forces.iter().fold(0.0, |a: f64, b| a.max(*b));
     reach.static_force_n = percentile(&mut forces);
     reach.static_torque_nm = percentile(&mut torques);

@@ -233,6 +233,8 @@ pub struct CouplingGains {
 /// design and for an intended motion that stays inside the reach.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OpSummary {
+    /// Where the OP was when the welcome was made (world, m), point dimension.
+    pub position: Vec<f64>,
     /// Smallest world coordinates the OP reaches (m), point dimension.
     pub reach_min: Vec<f64>,
     /// Largest world coordinates the OP reaches (m), point dimension.
@@ -258,6 +260,7 @@ impl OpSummary {
             tour.extend_from_slice(pose.difference(now).as_slice());
         }
         OpSummary {
+            position: now.position.as_slice().to_vec(),
             reach_min: reach.position_min.as_slice().to_vec(),
             reach_max: reach.position_max.as_slice().to_vec(),
             tour,

@@ -113,7 +113,7 @@ fn point_json(m: &Measured) -> Value {
         "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
         "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
         "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
-        "hand_work_max_j": significant(m.verdict.hand_work_max_j, 3),
+        "energy_flow_max_j": significant(m.verdict.energy_flow_max_j, 3),
         "linkage_kinetic_energy_max_j": significant(m.verdict.kinetic_energy_max_j, 3),
         "worst_saturation": round(m.verdict.worst_saturation, 3),
         "passivity_absorbed_j": significant(m.passivity_absorbed_j, 3),
@@ -188,7 +188,7 @@ fn charts(out: &mut Output, variable: Variable, points: &[Measured]) -> Result<(
         points
             .iter()
             .filter(|m| !m.point.passivity)
-            .map(|m| (m.point.value, verdict::ENERGY_FRACTION * m.verdict.hand_work_max_j + verdict::ENERGY_FLOOR_J))
+            .map(|m| (m.point.value, verdict::ENERGY_FRACTION * m.verdict.energy_flow_max_j + verdict::ENERGY_FLOOR_J))
             .collect(),
     ));
     energy = energy.with(Series::reference(

@@ -9,8 +9,9 @@
 //!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
 //! 3. **energy growth** — at some instant the linkage has gained more mechanical energy (kinetic, plus
 //!    the change of its potential energy since the start) than all hands together have done work on their
-//!    devices, by more than [`ENERGY_FRACTION`] (half) of the largest work done so far plus
-//!    [`ENERGY_FLOOR_J`] (5 mJ): the system made energy nobody put in. (A passive chain from hand to
+//!    devices, by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
+//!    hands' work or the potential energy's change, in absolute value) plus [`ENERGY_FLOOR_J`] (5 mJ): the
+//!    system made energy nobody put in. (A passive chain from hand to
 //!    linkage keeps `E_kin(t) + ΔE_pot(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy
 //!    and the springs of the couplings.)
 //!
@@ -44,7 +45,8 @@ pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE s
 from its OP in the VE, or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
 ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
 linkage's kinetic energy plus the change of its potential energy exceeds the work all hands have done on their \
-devices by more than half the largest work done so far plus 5 mJ); stable otherwise";
+devices by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
+absolute value) plus 5 mJ); stable otherwise";
 
 /// The criterion as a JSON object (the sentence and its thresholds).
 pub fn criterion_json() -> Value {
@@ -75,8 +77,9 @@ pub struct Verdict {
     pub worst_saturation: f64,
     /// Largest `E_kin(t) − W(t)` (J).
     pub energy_excess_j: f64,
-    /// Largest total work the hands had done at any instant (J).
-    pub hand_work_max_j: f64,
+    /// Largest energy that had flowed at any instant: the hands' total work or the potential energy's change,
+    /// in absolute value (J).
+    pub energy_flow_max_j: f64,
     /// Largest kinetic energy of the linkage (J).
     pub kinetic_energy_max_j: f64,
 }
@@ -102,8 +105,8 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     if worst_saturation > SATURATION_FRACTION {
         reasons.push("sustained saturation");
     }
-    let (energy_excess_j, hand_work_max_j, kinetic_energy_max_j) = energy_balance(rec);
-    if exceeds(energy_excess_j, ENERGY_FRACTION * hand_work_max_j + ENERGY_FLOOR_J) {
+    let (energy_excess_j, energy_flow_max_j, kinetic_energy_max_j) = energy_balance(rec);
+    if exceeds(energy_excess_j, ENERGY_FRACTION * energy_flow_max_j + ENERGY_FLOOR_J) {
         reasons.push("energy growth");
     }
     Verdict {
@@ -113,7 +116,7 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         max_closure_error_m: summary.max_closure_error,
         worst_saturation,
         energy_excess_j,
-        hand_work_max_j,
+        energy_flow_max_j,
         kinetic_energy_max_j,
     }
 }
@@ -193,7 +196,9 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
                 }
             }
         }
-        work_max = work_max.max(w_total);
+        // The energy that has flowed: the hands' work or what gravity gave or took, whichever is larger (a hand
+        // lowering a heavy linkage does negative work; the tolerance scales with the flow, not the balance).
+        work_max = work_max.max(w_total.abs()).max((v.potential_energy - potential_start).abs());
         let ke = if v.kinetic_energy.is_finite() { v.kinetic_energy } else { f64::INFINITY };
         ke_max = ke_max.max(ke);
         // What the linkage gained beyond what gravity and its springs gave back: kinetic plus the change of
@@ -237,7 +242,7 @@ mod tests {
         let (s, r) = recording(10.0, 0.02);
         let v = judge(&s, &r);
         assert!(v.stable, "{v:?}");
-        assert!((v.hand_work_max_j - 0.03).abs() < 1e-3);
+        assert!((v.energy_flow_max_j - 0.03).abs() < 1e-3);
     }
 
     #[test]

@@ -335,11 +335,7 @@ impl<S: Space> Session<S> {
             mapping: p.plan.mapping.clone(),
         };
         let joined = self.ve.join(now, request).map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
-        let device = p.device.take().context("a participant joins once")?;
-        let spec = device.spec().clone();
-        let context = UserContext::from_welcome(&joined.welcome);
-        let user = p.plan.user.build::<S>(&context).map_err(|e| anyhow!("{}: user: {e}", p.plan.name))?;
-        p.rig = Some(SimulatedRig::new(device, user));
+        let spec = p.device.take().context("a participant joins once")?.spec().clone();
         let mut config = CoreConfig::new(spec);
         config.constraint_mode = p.plan.constraint_mode;
         config.form = p.plan.form;
@@ -351,6 +347,14 @@ impl<S: Space> Session<S> {
             edit.apply(&mut config);
         }
         let mut core = HapticCore::new(config, &joined.welcome).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        // The hand grasps the handle where the linkage is: the device starts at the OP's place in its
+        // workspace, and the user tours the reach the welcome describes.
+        let op_position = S::Point::from_slice(&joined.welcome.op.position);
+        let device =
+            p.plan.device.build_at::<S>(core.home(&op_position)).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
+        let context = UserContext::from_welcome(&joined.welcome);
+        let user = p.plan.user.build::<S>(&context).map_err(|e| anyhow!("{}: user: {e}", p.plan.name))?;
+        p.rig = Some(SimulatedRig::new(device, user));
         let (w, g) = (&joined.welcome, &core.gains().device);
         let mut gains = vec![g.joint_stiffness, g.joint_damping];
         gains.extend(g.position_stiffness.iter().chain(&g.position_damping));

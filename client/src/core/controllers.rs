@@ -12,7 +12,7 @@
 //! singular values get equal weights, so a swap in the SVD's order changes nothing. The free-direction
 //! projector is `I − P̃_c = Σ (1 − wᵢ) ũᵢ ũᵢᵀ`.
 
-use kinloop_linkage::constraint_directions::scale_op;
+use kinloop_linkage::constraint_directions::{constraint_directions, scale_op, DEFAULT_THRESHOLD};
 use kinloop_linkage::local_model::{ContactTerm, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::space::{MatOps, Space, VecOps};
 
@@ -71,29 +71,61 @@ impl<S: Space> ConstraintFrame<S> {
     }
 
     /// Takes a snapshot's directions as the new target; `jump` adopts it at once (first snapshot, resume).
+    ///
+    /// `pinned`: the device renders no torque, so the hand holds the OP as through a pin: it pushes with forces
+    /// only and the linkage turns the OP as it must. The directions are then those of the linear block of
+    /// Λ⁻¹ (the OP's response to forces), and the angular axes are neither constrained nor free (no
+    /// controller acts on them). Taking the snapshot's full-space directions instead would let an angle the
+    /// device cannot show leak, through directions that mix turning and moving, into linear forces.
     pub fn set_target(
         &mut self,
         terms: &SnapshotTerms<S>,
         weighting: &ConstraintWeighting,
         length_scale: f64,
         jump: bool,
+        pinned: bool,
     ) {
-        let sigma_max = terms.singular_values[0];
+        let lin = <S::Point as VecOps>::LEN;
+        let (values, vectors) = if pinned {
+            let mut block = terms.inverse_inertia;
+            for r in 0..S::DIM {
+                for c in 0..S::DIM {
+                    if r >= lin || c >= lin {
+                        block[(r, c)] = 0.0;
+                    }
+                }
+            }
+            let d = constraint_directions::<S>(&block, length_scale, DEFAULT_THRESHOLD);
+            (d.singular_values, d.directions)
+        } else {
+            (terms.singular_values, terms.directions)
+        };
+        // A direction with no linear part is one the pinned hand does not render.
+        let angular_only = |u: &S::OpVec| pinned && S::op_lin(u).norm() < std::f64::consts::FRAC_1_SQRT_2;
+        let column = |i: usize| {
+            let mut u = S::OpVec::zero();
+            for row in 0..S::DIM {
+                u[row] = vectors[(row, i)];
+            }
+            u
+        };
+        let sigma_max = (0..S::DIM).filter(|&i| !angular_only(&column(i))).map(|i| values[i]).fold(0.0, f64::max);
         let mut projector = S::OpMat::zero();
         let mut free_scaled = S::OpMat::zero();
         let mut count = 0;
         for i in 0..S::DIM {
-            // An immobile OP (σ₁ = 0) is constrained in every direction.
-            let r = if sigma_max > 0.0 { terms.singular_values[i] / sigma_max } else { 0.0 };
-            let w = constraint_weight(r, weighting);
-            let mut u = S::OpVec::zero();
-            for row in 0..S::DIM {
-                u[row] = terms.directions[(row, i)];
+            let u = column(i);
+            if angular_only(&u) {
+                self.counted[i] = false;
+                continue;
             }
+            // An immobile OP (σ₁ = 0) is constrained in every direction.
+            let r = if sigma_max > 0.0 { values[i] / sigma_max } else { 0.0 };
+            let w = constraint_weight(r, weighting);
             let outer = S::op_outer(&u, &u);
             projector += outer * w;
-            if terms.singular_values[i] > 0.0 && w < 1.0 {
-                free_scaled += outer * ((1.0 - w) / terms.singular_values[i]);
+            if values[i] > 0.0 && w < 1.0 {
+                free_scaled += outer * ((1.0 - w) / values[i]);
             }
             if r <= weighting.count_enter {
                 self.counted[i] = true;
@@ -201,6 +233,13 @@ pub fn joint_constraint_impedance<S: Space>(
     -project_wrench::<S>(projector, length_scale, &(*hand + *other))
 }
 
+/// How much lighter than itself the impedance controller may make the device feel, per axis. Rendering a
+/// mass `m` on a device of mass `M` feeds the sensed hand wrench back with gain `M/m − 1`; a sampled force
+/// sensor with a hand on it tolerates only a small such gain (the serial arm's hand OP, 0.004 kg m² against
+/// the paper device's 0.005 kg m² mapped to 1.6 VE units, asked for a gain of 360 and chattered at the
+/// device's torque limit every tick). Past this ratio the OP is rendered as `M / MAX_MASS_REDUCTION`.
+pub const MAX_MASS_REDUCTION: f64 = 4.0;
+
 /// Impedance control with Λ̂⁻¹ in the free directions: the device (mass M) under the hand wrench plus this
 /// wrench accelerates as the linkage's OP would (eq 5 with the local model's bias, `ẍ = Λ̂⁻¹ F_h + b̂`),
 /// `M⁻¹ (F_h + F) = Λ̂⁻¹ F_h + b̂`, i.e. `F = M (Λ̂⁻¹ F_h + b̂) − F_h`, applied only in the free directions:
@@ -209,7 +248,8 @@ pub fn joint_constraint_impedance<S: Space>(
 /// linkage as if its own hand alone pushed it, and the others' pushes reach it only through the position
 /// channels, which then drag the device's own mass along. (Exact when M is isotropic within the linear and
 /// within the angular axes, as on the paper's device; otherwise the projection mixes a little of M's
-/// anisotropy into the constrained directions, where the joint-constraint controller dominates.)
+/// anisotropy into the constrained directions, where the joint-constraint controller dominates.) Axis by
+/// axis, the mass reduction is bounded by [`MAX_MASS_REDUCTION`].
 pub fn impedance_free<S: Space>(
     projector: &S::OpMat,
     length_scale: f64,
@@ -218,7 +258,14 @@ pub fn impedance_free<S: Space>(
     bias: &S::OpVec,
     hand: &S::OpVec,
 ) -> S::OpVec {
-    let shaped = hadamard::<S>(device_mass, &(*inverse_inertia * *hand + *bias)) - *hand;
+    let mut accel = *inverse_inertia * *hand + *bias;
+    for i in 0..S::DIM {
+        let reduction = device_mass[i] * inverse_inertia[(i, i)];
+        if reduction > MAX_MASS_REDUCTION {
+            accel[i] *= MAX_MASS_REDUCTION / reduction;
+        }
+    }
+    let shaped = hadamard::<S>(device_mass, &accel) - *hand;
     shaped - project_wrench::<S>(projector, length_scale, &shaped)
 }
 

@@ -37,6 +37,8 @@ pub const DEVICE_DAMPING_RATIO: f64 = 0.7;
 pub const PASSIVITY_MARGIN: f64 = 0.5;
 /// Share of the stiffness and damping budget given to the joint-constraint controller.
 pub const JOINT_SHARE: f64 = 2.0 / 3.0;
+/// Fraction of the local model's stability bounds (`K T² / m ≤ 1`, `B T / m ≤ 1`) the position channels use.
+pub const LOCAL_MODEL_MARGIN: f64 = 0.25;
 
 /// One group's budget: (stiffness, damping) in device units.
 fn budget(max_stiffness: f64, max_damping: f64, mass: f64, own_damping: f64, period_s: f64) -> (f64, f64) {
@@ -86,10 +88,10 @@ pub fn designed_gains<S: Space>(
     let lightest = |inverse: f64| if inverse > 0.0 { 1.0 / inverse } else { f64::INFINITY };
     let (m_op, i_op) = (lightest(op.inverse_mass_max), lightest(op.inverse_rotational_inertia_max));
     let t = period_s;
-    let channel_lin = ((1.0 - JOINT_SHARE) * k_lin).min(c_f / c_p * m_op / (t * t));
-    let channel_lin_damping = ((1.0 - JOINT_SHARE) * b_lin).min(c_f / c_p * m_op / t);
-    let channel_ang = ((1.0 - JOINT_SHARE) * k_ang).min(c_t * i_op / (t * t));
-    let channel_ang_damping = ((1.0 - JOINT_SHARE) * b_ang).min(c_t * i_op / t);
+    let channel_lin = ((1.0 - JOINT_SHARE) * k_lin).min(LOCAL_MODEL_MARGIN * c_f / c_p * m_op / (t * t));
+    let channel_lin_damping = ((1.0 - JOINT_SHARE) * b_lin).min(LOCAL_MODEL_MARGIN * c_f / c_p * m_op / t);
+    let channel_ang = ((1.0 - JOINT_SHARE) * k_ang).min(LOCAL_MODEL_MARGIN * c_t * i_op / (t * t));
+    let channel_ang_damping = ((1.0 - JOINT_SHARE) * b_ang).min(LOCAL_MODEL_MARGIN * c_t * i_op / t);
     let per_axis = |l: f64, a: f64| (0..S::DIM).map(|i| if i < lin { l } else { a }).collect();
     ControllerGains {
         joint_stiffness,

@@ -374,6 +374,13 @@ impl<S: Space> DeviceIndex<S> {
         }
     }
 
+    /// The workspace's centre onto the reach's centre: the whole reach then fits the workspace (the scale was
+    /// chosen for it), wherever the OP is when the session starts. The orientation is indexed as in
+    /// `between`.
+    fn centred(device: &OpPose<S>, op: &OpPose<S>, frames: &(S::Point, S::Point), position_scale: f64) -> Self {
+        DeviceIndex { device_origin: frames.0, ve_origin: frames.1, ..Self::between(device, op, position_scale) }
+    }
+
     fn apply(&self, pose: &OpPose<S>) -> OpPose<S> {
         OpPose {
             position: self.ve_origin + (pose.position - self.device_origin) * (1.0 / self.position_scale),
@@ -393,6 +400,9 @@ pub struct HapticCore<S: Space> {
     gains: ResolvedGains<S>,
     limits: WrenchLimits,
     scales: Scales,
+    /// The device workspace's centre and the OP reach's centre, when the reach has extent (see
+    /// `DeviceIndex::centred`).
+    centres: Option<(S::Point, S::Point)>,
     /// The device's masses in VE units.
     device_mass: S::OpVec,
     length_scale: f64,
@@ -439,6 +449,29 @@ fn per_axis<S: Space>(what: &str, values: &[f64]) -> Result<S::OpVec, CoreError>
     Ok(S::OpVec::from_slice(values))
 }
 
+/// The centres of the device's workspace and of the OP's reach (linear axes), `None` when the welcome's
+/// reach has no extent or does not fit the space.
+fn centres<S: Space>(
+    device: &crate::device::DeviceSpec,
+    op: &kinloop_protocol::OpSummary,
+) -> Option<(S::Point, S::Point)> {
+    let lin = <S::Point as VecOps>::LEN;
+    if op.reach_min.len() != lin || op.reach_max.len() != lin || device.workspace_min.len() < lin {
+        return None;
+    }
+    let extent = (0..lin).map(|a| op.reach_max[a] - op.reach_min[a]).fold(0.0, f64::max);
+    if !(extent > 0.0) {
+        return None;
+    }
+    let mut workspace = S::Point::zero();
+    let mut reach = S::Point::zero();
+    for a in 0..lin {
+        workspace.as_mut_slice()[a] = 0.5 * (device.workspace_min[a] + device.workspace_max[a]);
+        reach.as_mut_slice()[a] = 0.5 * (op.reach_min[a] + op.reach_max[a]);
+    }
+    Some((workspace, reach))
+}
+
 impl<S: Space> HapticCore<S> {
     /// A core for the session `welcome` opened, driving `config.device`.
     pub fn new(config: CoreConfig, welcome: &Welcome) -> Result<Self, CoreError> {
@@ -478,6 +511,7 @@ impl<S: Space> HapticCore<S> {
         Ok(HapticCore {
             gains,
             limits: WrenchLimits::of(device),
+            centres: centres::<S>(device, &welcome.op),
             scales,
             device_mass,
             length_scale: scene.length_scale,
@@ -566,9 +600,13 @@ impl<S: Space> HapticCore<S> {
         self.scales
     }
 
-    /// Where VE position `ve` lies on the device, once the device is indexed to the OP (first snapshot).
-    pub fn ve_to_device(&self, ve: &S::Point) -> S::Point {
-        self.index.to_device(ve)
+    /// Where the device's handle belongs for the OP at VE position `op` under this session's mapping (a
+    /// simulated device starts there, as a hand would grasp the handle where the linkage is).
+    pub fn home(&self, op: &S::Point) -> S::Point {
+        match &self.centres {
+            Some((workspace, reach)) => *workspace + (*op - *reach) * self.scales.position,
+            None => self.index.to_device(op),
+        }
     }
 
     /// The gains in use.
@@ -649,14 +687,18 @@ impl<S: Space> HapticCore<S> {
         // onto the VE instead of being pulled there.
         let restart = first || self.gate.gain() == 0.0;
         self.model.update(&self.active);
-        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart);
+        let pinned = self.limits.max_torque_nm == 0.0;
+        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, pinned);
         if restart {
             self.model.set_state(self.predicted_op(now), self.active.op_twist);
             self.model.set_inverse_inertia(&self.frame.inverse_inertia);
             self.reaction = S::OpVec::zero();
         }
         if first && self.config.index_at_first_snapshot {
-            self.index = DeviceIndex::between(device, &self.active.op_pose, self.scales.position);
+            self.index = match &self.centres {
+                Some(centres) => DeviceIndex::centred(device, &self.active.op_pose, centres, self.scales.position),
+                None => DeviceIndex::between(device, &self.active.op_pose, self.scales.position),
+            };
         }
         self.has_snapshot = true;
     }
@@ -714,8 +756,17 @@ impl<S: Space> HapticCore<S> {
         // 4. Controllers.
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
-        let error = device_pose.difference(&model_pose);
-        let error_rate = device_twist - model_twist;
+        let mut error = device_pose.difference(&model_pose);
+        let mut error_rate = device_twist - model_twist;
+        if self.limits.max_torque_nm == 0.0 {
+            // Held as through a pin (see `ConstraintFrame::set_target`): no controller acts on angles the
+            // device can neither show nor push.
+            let lin = <S::Point as VecOps>::LEN;
+            for i in lin..S::DIM {
+                error[i] = 0.0;
+                error_rate[i] = 0.0;
+            }
+        }
         let g = &self.gains;
         let (l, p) = (self.length_scale, &self.frame.projector);
         let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);

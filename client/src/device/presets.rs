@@ -205,13 +205,23 @@ impl DevicePreset {
     /// A simulated device at the centre of its workspace, handle orientation at identity.
     pub fn build<S: Space>(self) -> Result<SimulatedDevice<S>, SimulatedDeviceBuildError> {
         let spec = self.spec(S::KIND)?;
-        let params = self.params(S::KIND);
         let mut centre = S::OpVec::zero();
         let linear = <S::Point as VecOps>::LEN;
         for i in 0..linear {
             centre[i] = 0.5 * (spec.workspace_min[i] + spec.workspace_max[i]);
         }
-        let start = OpPose { position: S::op_lin(&centre), rotation: S::rot_identity() };
+        self.build_at(S::op_lin(&centre))
+    }
+
+    /// A simulated device with its handle at `position` (clamped into the workspace), orientation identity.
+    pub fn build_at<S: Space>(self, position: S::Point) -> Result<SimulatedDevice<S>, SimulatedDeviceBuildError> {
+        let spec = self.spec(S::KIND)?;
+        let params = self.params(S::KIND);
+        let mut position = position;
+        for (i, x) in position.as_mut_slice().iter_mut().enumerate() {
+            *x = if x.is_finite() { x.clamp(spec.workspace_min[i], spec.workspace_max[i]) } else { 0.0 };
+        }
+        let start = OpPose { position, rotation: S::rot_identity() };
         Ok(SimulatedDevice::new(spec, &params, start)?)
     }
 }

@@ -19,7 +19,7 @@ use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::space::{Planar, SceneKind, Space, Spatial};
+use kinloop_linkage::space::{Planar, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, DatagramReceiver, DatagramSender, Endpoint,
@@ -571,9 +571,11 @@ async fn run<S: Space>(
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
     let setup = || -> Result<_, ClientError> {
-        let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build::<S>()?;
-        let user = config.user.build::<S>(&UserContext::from_welcome(&session.welcome))?;
         let core = core_for::<S>(&config, &session.welcome)?;
+        // The simulated hand grasps the handle where the linkage is.
+        let op = S::Point::from_slice(&session.welcome.op.position);
+        let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build_at::<S>(core.home(&op))?;
+        let user = config.user.build::<S>(&UserContext::from_welcome(&session.welcome))?;
         Ok((SimulatedRig::new(device, user), core))
     };
     let (rig, core, gains) = match setup().map(|(rig, core)| {

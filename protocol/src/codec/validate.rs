@@ -146,6 +146,7 @@ fn coupling(g: &CouplingGains, k: usize) -> Result<(), DecodeError> {
 
 fn op_summary(o: &OpSummary, kind: SceneKind) -> Result<(), DecodeError> {
     let d = kind.point_dim();
+    vector(Field::at("welcome.op.position"), &o.position, d, MAX_POSITION)?;
     vector(Field::at("welcome.op.reach_min"), &o.reach_min, d, MAX_POSITION)?;
     vector(Field::at("welcome.op.reach_max"), &o.reach_max, d, MAX_POSITION)?;
     if o.reach_min.iter().zip(&o.reach_max).any(|(lo, hi)| lo > hi) {

@@ -198,14 +198,22 @@ pub fn coupling_frequency(ve_rate_hz: f64, device_rate_hz: f64) -> f64 {
     std::f64::consts::TAU * hz
 }
 
-/// K_g and B_g per operational axis for the OP of `reach` (see the module documentation).
-pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64) -> (S::OpVec, S::OpVec) {
+/// K_g and B_g per operational axis for the OP of `reach` (see the module documentation). `torque`: the
+/// user's device renders torque; without it the user holds the OP as through a pin, and the coupling
+/// leaves the OP's orientation to the linkage (no angular gains).
+pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64, torque: bool) -> (S::OpVec, S::OpVec) {
     let (mass, inertia) = lightest(reach);
     let lin = <S::Point as VecOps>::LEN;
     let mut stiffness = S::OpVec::zero();
     let mut damping = S::OpVec::zero();
     for a in 0..S::DIM {
-        let m = if a < lin { mass } else { inertia };
+        let m = if a < lin {
+            mass
+        } else if torque {
+            inertia
+        } else {
+            0.0
+        };
         // An OP that does not move in a group needs no coupling there: the joints hold it.
         let m = if m.is_finite() { m } else { 0.0 };
         stiffness[a] = m * omega * omega;

@@ -341,9 +341,13 @@ impl<S: Space> VeCore<S> {
 
     /// Admits a user. Refuses when `max_users` are present, when the scene has no operational point of that
     /// name (an empty name asks for the first), or when the device cannot serve the scene (`design`). Its
-    /// mapping and coupling gains are chosen here (`design`); a manipulator's coupling fades in from its first
-    /// accepted uplink.
-    pub fn join(&mut self, _now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
+    /// mapping and coupling gains are chosen here (`design`).
+    ///
+    /// A manipulator grasps its OP at the join: its coupling fades in at once, holding the OP where it is
+    /// (no hand wrench, the OP's pose as the reference) until the user's first uplink takes over, and fades
+    /// out again if none comes within `silent_timeout`. Otherwise a linkage under gravity would fall for the
+    /// network's round trip and the fade-in, and the user's first moments would be spent catching it.
+    pub fn join(&mut self, now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
         let present = self.present_users();
         if present >= self.config.max_users {
             self.metrics.joins_refused += 1;
@@ -365,15 +369,16 @@ impl<S: Space> VeCore<S> {
         let designed = match &request.device {
             Some(device) => design::check_device::<S>(device)
                 .and_then(|()| design::choose_mapping(reach, device, &request.mapping))
-                .map(|mapping| (mapping, device.native_rate_hz)),
+                .map(|mapping| (mapping, device.native_rate_hz, device.max_torque_nm > 0.0)),
             // A user without a device (a view, a test) is mapped one to one and moves its reference as fast as
             // the VE.
             None => Ok((
                 Mapping { gravity_compensation: request.mapping.gravity_compensation, ..Mapping::identity() },
                 self.config.ve_rate_hz,
+                true,
             )),
         };
-        let (mapping, device_rate) = match designed {
+        let (mapping, device_rate, torque) = match designed {
             Ok(designed) => designed,
             Err(error) => {
                 self.metrics.joins_refused += 1;
@@ -381,13 +386,18 @@ impl<S: Space> VeCore<S> {
             }
         };
         let (stiffness, damping) = self.fixed_gains.unwrap_or_else(|| {
-            design::coupling_gains(reach, design::coupling_frequency(self.config.ve_rate_hz, device_rate))
+            design::coupling_gains(reach, design::coupling_frequency(self.config.ve_rate_hz, device_rate), torque)
         });
         let user_id = self.next_user_id;
         self.next_user_id += 1;
         let point = &self.model.ops[op];
         let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), stiffness, damping);
         coupling.evaluate(&self.model, &self.data.kin, true);
+        let manipulator = request.role == Role::Manipulator;
+        if manipulator {
+            coupling.pushes = true;
+            coupling.target_pose = coupling.op_pose;
+        }
         let welcome = self.welcome(user_id, op, &mapping, &coupling);
         self.users.push(User {
             id: user_id,
@@ -399,8 +409,9 @@ impl<S: Space> VeCore<S> {
             mapping,
             presence: Presence::Present,
             last_seq: None,
-            last_uplink_at: None,
-            silent: true,
+            // The grasp counts as the user's first word (see above).
+            last_uplink_at: manipulator.then_some(now),
+            silent: !manipulator,
             fade: Fade::off(),
             passivity: PassivityObserver::default(),
             rejections: RejectionBurst::default(),
