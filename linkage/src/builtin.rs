@@ -14,6 +14,10 @@ pub const SCENE_FILES: &[(&str, &str)] = &[
     ("parallelogram", include_str!("../../scenes/parallelogram.toml")),
     ("serial-arm", include_str!("../../scenes/serial-arm.toml")),
     ("spherical-four-bar", include_str!("../../scenes/spherical-four-bar.toml")),
+    ("stephenson-six-bar", include_str!("../../scenes/stephenson-six-bar.toml")),
+    ("five-bar-robot", include_str!("../../scenes/five-bar-robot.toml")),
+    ("bennett-linkage", include_str!("../../scenes/bennett-linkage.toml")),
+    ("rssr-four-bar", include_str!("../../scenes/rssr-four-bar.toml")),
 ];
 
 /// The paper's user wrench on the testbed: (−0.5 N, 0 N, −0.0025 N m) at the COM of link 2.

@@ -5,7 +5,7 @@ use nalgebra::DVector;
 
 use crate::builtin;
 use crate::model::Model;
-use crate::space::{Planar, Space, Spatial};
+use crate::space::{Planar, SceneKind, Space, Spatial};
 
 /// A small deterministic generator (SplitMix64) so tests need no extra dependency.
 pub struct TestRng(pub u64);
@@ -65,20 +65,22 @@ pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVe
 
 /// Every planar test scene: the built-in files plus generated chains (with and without loops).
 pub fn planar_models() -> Vec<(String, Model<Planar>)> {
-    let mut out: Vec<(String, Model<Planar>)> = builtin::SCENE_FILES
-        .iter()
-        .filter(|(n, _)| *n != "spherical-four-bar")
-        .map(|(n, _)| (n.to_string(), compile(&builtin_scene(n))))
-        .collect();
+    let mut out: Vec<(String, Model<Planar>)> =
+        builtin_files_of_kind(SceneKind::Planar).map(|(n, scene)| (n.to_string(), compile(&scene))).collect();
     for (links, loops) in [(8, 2), (6, 0), (12, 3)] {
         out.push((format!("chain{links}_loops{loops}"), compile(&builtin::chain(links, loops))));
     }
     out
 }
 
-/// Every spatial test scene.
+/// Every spatial test scene: the built-in spatial files.
 pub fn spatial_models() -> Vec<(String, Model<Spatial>)> {
-    vec![("spherical-four-bar".into(), compile(&builtin_scene("spherical-four-bar")))]
+    builtin_files_of_kind(SceneKind::Spatial).map(|(n, scene)| (n.to_string(), compile(&scene))).collect()
+}
+
+/// The built-in scene files of one kind, parsed, in the order of [`builtin::SCENE_FILES`].
+fn builtin_files_of_kind(kind: SceneKind) -> impl Iterator<Item = (&'static str, crate::Scene)> {
+    builtin::SCENE_FILES.iter().map(|(n, _)| (*n, builtin_scene(n))).filter(move |(_, scene)| scene.kind == kind)
 }
 
 /// Runs `$body` with `$name: &str` and `$model: &Model<_>` bound, for every planar and spatial test model.
