@@ -222,6 +222,7 @@ struct Grab {
     snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
     grip: Grip,
+    snapshot_period_s: f64,
 }
 
 impl Drop for Grab {
@@ -398,7 +399,8 @@ impl Page {
             });
         }
         let grip = Grip::new(shape.kind.op_dim(), self.view.config.grab_reach_m);
-        self.grab = Some(Grab { server, user, op, uplinks, snapshots, notify, grip });
+        let snapshot_period_s = 1.0 / joined.welcome.snapshot_rate_hz.max(1.0);
+        self.grab = Some(Grab { server, user, op, uplinks, snapshots, notify, grip, snapshot_period_s });
         let op = self.grab.as_ref().map(|g| g.op.clone()).unwrap_or_default();
         self.reply(ToPage::Grabbed { user, op: &op });
     }
@@ -411,7 +413,7 @@ impl Page {
             return;
         }
         let Ok(Datagram::Snapshot(snapshot)) = codec::decode_datagram(&self.frame, shape) else { return };
-        let Some(sample) = g.grip.uplink(self.epoch.elapsed(), &snapshot.op_pose, &snapshot.op_twist) else { return };
+        let Some(sample) = g.grip.uplink(self.epoch.elapsed(), &snapshot, g.snapshot_period_s) else { return };
         if g.uplinks.push(sample).is_err() {
             self.view.counters.bump(Counter::UplinksDropped);
         }
