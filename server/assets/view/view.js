@@ -13,7 +13,7 @@ const GRAB_RADIUS_PX = 18;
 
 const view = {
   ws: null, hello: null, welcome: null, scene: null, planar: true, frame: null,
-  frames: 0, frameTimes: [], firstFrameMs: null, drawPending: false, panelAt: 0,
+  frames: 0, frameTimes: [], firstFrameMs: null, drawPending: false, panelAt: -Infinity,
   cam2: { cx: 0, cy: 0, scale: 1 },
   cam3: { yaw: -0.9, pitch: 0.45, dist: 1, target: [0, 0, 0] },
   grab: null, // { op, user, target, dragging }

@@ -101,21 +101,24 @@ impl Replay {
             what,
             scene: scene_label.into(),
         };
+        let server = columns.starts_with(&["t_s", "step"]);
+        let client = columns.first() == Some(&"time_s") && columns.get(1).is_some_and(|c| c.starts_with("device_"));
+        if !server && !client {
+            return Err(ReplayError::UnknownFormat { file: file.into() });
+        }
         let recorded_kind = if columns.iter().any(|c| c.ends_with("_theta")) { SceneKind::Planar } else { SceneKind::Spatial };
         if recorded_kind != scene.kind {
             return Err(mismatch(format!("it was recorded on a {recorded_kind:?} scene")));
         }
-        let (source, rows) = if columns.starts_with(&["t_s", "step"]) {
+        let (source, rows) = if server {
             let n = columns.iter().filter(|c| c.starts_with("q_")).count();
             let m = columns.iter().filter(|c| c.starts_with("lambda_")).count();
             if n != geometry.info().n {
                 return Err(mismatch(format!("it has {n} coordinates, the scene {}", geometry.info().n)));
             }
             ("server", server_rows(lines, file, scene.kind, n, m)?)
-        } else if columns.first() == Some(&"time_s") && columns.get(1).is_some_and(|c| c.starts_with("device_")) {
-            ("client", client_rows(lines, file, scene.kind, geometry.as_mut())?)
         } else {
-            return Err(ReplayError::UnknownFormat { file: file.into() });
+            ("client", client_rows(lines, file, scene.kind, geometry.as_mut())?)
         };
         let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
             return Err(ReplayError::Empty { file: file.into() });
@@ -268,4 +271,72 @@ fn client_rows<'a>(
         });
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use kinloop_linkage::assemble::assemble;
+    use kinloop_linkage::kinematics::forward_kinematics;
+    use kinloop_linkage::local_model::OpPose;
+    use kinloop_linkage::{builtin, Data, Model, Planar};
+
+    use super::*;
+
+    fn testbed() -> Scene {
+        builtin::scene("paper-testbed").unwrap().unwrap()
+    }
+
+    /// link2's OP at the closed configuration nearest `q`.
+    fn op_near(model: &Model<Planar>, q: &[f64]) -> [f64; 2] {
+        let closed = assemble(model, &nalgebra::DVector::from_column_slice(q), 1e-12).unwrap().q;
+        let mut data = Data::new(model);
+        forward_kinematics(model, &mut data, &closed);
+        let p = OpPose::<Planar>::of_op(model, &data, 0).position;
+        [p.x, p.y]
+    }
+
+    fn client_row(t: f64, op: [f64; 2]) -> String {
+        let pose = format!("{},{},0.1", op[0], op[1]);
+        format!("{t},{pose},{pose},{},2,0.001,1\n", ["0.5,0,0"; 6].join(","))
+    }
+
+    #[test]
+    fn a_client_recording_is_drawn_with_the_linkage_posed_on_its_op() {
+        let scene = testbed();
+        let model = Model::<Planar>::compile(&scene, "t").unwrap();
+        let a = op_near(&model, model.q0.as_slice());
+        let moved: Vec<f64> = model.q0.iter().enumerate().map(|(i, q)| q + if i == 0 { 0.1 } else { 0.0 }).collect();
+        let b = op_near(&model, &moved);
+        let header = "time_s,device_x,device_y,device_theta,model_x,model_y,model_theta,hand_fx,hand_fy,hand_tz,\
+                      pc_fx,pc_fy,pc_tz,jc_fx,jc_fy,jc_tz,imp_fx,imp_fy,imp_tz,contact_fx,contact_fy,contact_tz,\
+                      cmd_fx,cmd_fy,cmd_tz,constraint_count,snapshot_age_s,gain\n";
+        let text = format!("{header}{}{}", client_row(0.0, a), client_row(0.5, b));
+        let mut replay = Replay::parse(&text, "user1.csv", &scene, "paper-testbed").unwrap();
+        assert_eq!((replay.info().source, replay.info().rows, replay.info().t1), ("client", 2, 0.5));
+        let frame: serde_json::Value = serde_json::from_str(&replay.frame_text(0.7)).unwrap();
+        let drawn = &frame["linkage"]["ops"][0];
+        let error = (drawn[0].as_f64().unwrap() - b[0]).hypot(drawn[1].as_f64().unwrap() - b[1]);
+        assert!(error < 1e-6, "the drawn OP {drawn} is the recorded {b:?}");
+        assert_eq!(frame["users"][0]["count"], 2);
+        // serde_json reads floats to within an ulp.
+        assert!((frame["users"][0]["device_pose"][0].as_f64().unwrap() - b[0]).abs() < 1e-15);
+        assert_eq!(replay.index_at(-1.0), 0, "before the start: the first row");
+    }
+
+    #[test]
+    fn recordings_that_do_not_fit_say_why() {
+        let scene = testbed();
+        let other = |text: &str| Replay::parse(text, "x.csv", &scene, "paper-testbed").unwrap_err().to_string();
+        assert!(other("").contains("no rows"));
+        assert!(other("a,b,c\n1,2,3\n").contains("not a kinloop recording"));
+        let six = "t_s,step,q_0,q_1,q_2,q_3,q_4,q_5,op_x,op_y,op_theta\n";
+        assert!(other(six).contains("6 coordinates"), "{}", other(six));
+        let spatial = "time_s,device_x,device_y,device_z,device_qw\n";
+        assert!(other(spatial).contains("Spatial"), "{}", other(spatial));
+        let header = "t_s,step,q_0,q_1,q_2,q_3,qd_0,qd_1,qd_2,qd_3,lambda_0,lambda_1,closure_error_m,users,op_theta\n";
+        let bad = other(&format!("{header}0,1,0,0,0,0,0,0,0,0,0,0,0,0\n0,2,x\n"));
+        assert!(bad.starts_with("x.csv:3: not a number"), "{bad}");
+        let short = other(&format!("{header}0,1,0,0,0,0,0,0,0,0,0,0,0,1\n"));
+        assert!(short.contains("for 1 users"), "{short}");
+    }
 }
