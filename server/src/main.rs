@@ -8,9 +8,9 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
+use kinloop_server::bench::RealtimeRun;
 use kinloop_server::core::AxisGains;
 use kinloop_server::driver::load_scene;
-use kinloop_server::bench::RealtimeRun;
 use kinloop_server::view::{LiveSource, ViewConfig};
 use kinloop_server::{Access, Identity, Server, ServerConfig, VeConfig};
 
@@ -101,7 +101,8 @@ fn synthetic_run(
     let Some(view) = view else { return Ok((kinloop_server::bench::realtime_run(run)?, None)) };
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let users = run.ve.max_users.max(run.users);
-    let (tap, reader) = kinloop_server::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
+    let (tap, reader) =
+        kinloop_server::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
     let source = LiveSource { scene: run.scene.clone(), scene_label: run.scene_label.clone(), reader, access };
     let handle = runtime.block_on(async { kinloop_server::view::start_live(&view, source) })?;
     println!("view: http://{}/", handle.local_addr());
@@ -168,13 +169,8 @@ fn main() -> anyhow::Result<()> {
         ..ViewConfig::new(listen)
     });
     if let Some(users) = cli.synthetic_users {
-        let run = RealtimeRun {
-            scene,
-            scene_label: label,
-            users,
-            duration: duration.unwrap_or(Duration::from_secs(10)),
-            ve,
-        };
+        let run =
+            RealtimeRun { scene, scene_label: label, users, duration: duration.unwrap_or(Duration::from_secs(10)), ve };
         let (report, view_stats) = synthetic_run(run, view, access)?;
         if cli.json {
             let mut json = serde_json::to_value(&report)?;

@@ -3,6 +3,7 @@
 //! nothing but a refusal, an observer watches, and a recorded session replays at the slider's time.
 //! Screenshots go to `target/tmp/view/`.
 
+mod support;
 mod view_support;
 
 use std::net::SocketAddr;
@@ -15,9 +16,14 @@ use kinloop_linkage::builtin;
 use kinloop_server::view::replay::Replay;
 use kinloop_server::view::{self, ViewConfig};
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
-use view_support::{exclusive, num, output_dir, Browser, Pusher};
+use view_support::{exclusive, num, Browser, Pusher};
 
 const TOKENS: &str = "hands-token manipulator\nwatch-token observer\n";
+
+/// Where the screenshots go.
+fn output_dir() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("view")
+}
 
 fn loopback() -> SocketAddr {
     SocketAddr::from(([127, 0, 0, 1], 0))
@@ -48,16 +54,15 @@ async fn bounded<T>(test: impl std::future::Future<Output = T>) -> T {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
-    let _one = exclusive();
+    let _one = exclusive().await;
     bounded(async {
         let server = start_server(None);
-        let pusher = Pusher::start(&server, "hands-token").await;
+        let pusher = Pusher::start(&server, "hands-token", support::device(3)).await;
         let browser = Browser::start().await;
         let page = format!("http://{}/#token=hands-token", server.view_addr().unwrap());
         browser.client.goto(&page).await.unwrap();
-        let first = browser
-            .wait_for("ten frames", Duration::from_secs(15), |s| s["frames"].as_u64().unwrap_or(0) >= 10)
-            .await;
+        let first =
+            browser.wait_for("ten frames", Duration::from_secs(15), |s| s["frames"].as_u64().unwrap_or(0) >= 10).await;
         assert_eq!(first["role"], "manipulator");
         assert_eq!(first["scene"], "paper-testbed");
         assert!(first["first_frame_ms"].as_f64().is_some(), "{first}");
@@ -87,7 +92,8 @@ async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
         tokio::time::sleep(Duration::from_millis(400)).await;
         let before = browser.status().await;
         let (w, h) = (num(&before, &["size", "0"]).unwrap(), num(&before, &["size", "1"]).unwrap());
-        let (px, py) = (num(&before, &["ops_px", "link2", "0"]).unwrap(), num(&before, &["ops_px", "link2", "1"]).unwrap());
+        let (px, py) =
+            (num(&before, &["ops_px", "link2", "0"]).unwrap(), num(&before, &["ops_px", "link2", "1"]).unwrap());
         let (from_x, from_y) = (px - w / 2.0, py - h / 2.0);
         let towards = (-from_x, -from_y);
         let scale = 60.0 / towards.0.hypot(towards.1).max(1.0);
@@ -106,9 +112,8 @@ async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
             });
         }
         browser.client.perform_actions(mouse).await.unwrap();
-        let grabbed = browser
-            .wait_for("the grab admitted", Duration::from_secs(5), |s| s["grabbed"].as_u64().is_some())
-            .await;
+        let grabbed =
+            browser.wait_for("the grab admitted", Duration::from_secs(5), |s| s["grabbed"].as_u64().is_some()).await;
         let target = [num(&grabbed, &["target", "0"]).unwrap(), num(&grabbed, &["target", "1"]).unwrap()];
         tokio::time::sleep(Duration::from_millis(1500)).await;
         let held = browser.status().await;
@@ -138,7 +143,7 @@ async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_wrong_token_sees_only_a_refusal_and_an_observer_only_watches() {
-    let _one = exclusive();
+    let _one = exclusive().await;
     bounded(async {
         let server = start_server(None);
         let browser = Browser::start().await;
@@ -147,9 +152,7 @@ async fn a_wrong_token_sees_only_a_refusal_and_an_observer_only_watches() {
         let token = browser.client.wait().for_element(Locator::Id("token")).await.unwrap();
         token.send_keys("not-a-token").await.unwrap();
         browser.client.find(Locator::Css("#auth button")).await.unwrap().click().await.unwrap();
-        let refused = browser
-            .wait_for("the refusal", Duration::from_secs(5), |s| s["refused"].is_string())
-            .await;
+        let refused = browser.wait_for("the refusal", Duration::from_secs(5), |s| s["refused"].is_string()).await;
         assert!(refused["refused"].as_str().unwrap().contains("unknown token"), "{refused}");
         assert_eq!(refused["frames"], 0, "a refused page gets no frame");
         assert!(refused["scene"].is_null(), "nor the scene: {refused}");
@@ -191,12 +194,12 @@ fn recorded_op_at(rows: &[(f64, Option<[f64; 2]>)], t: f64) -> Option<[f64; 2]> 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_recorded_session_replays_at_the_sliders_time() {
-    let _one = exclusive();
+    let _one = exclusive().await;
     bounded(async {
         let dir = tempfile::tempdir().unwrap();
         let csv_path = dir.path().join("ve.csv");
         let server = start_server(Some(&csv_path));
-        let pusher = Pusher::start(&server, "hands-token").await;
+        let pusher = Pusher::start(&server, "hands-token", support::device(3)).await;
         tokio::time::sleep(Duration::from_millis(1500)).await;
         pusher.leave().await;
         server.shutdown().await.unwrap();

@@ -3,6 +3,7 @@
 //! message beyond the transport's limit are closed, another site's origin is refused, and through all of it
 //! the VE keeps ticking and its QUIC user keeps getting snapshots.
 
+mod support;
 mod view_support;
 
 use std::net::SocketAddr;
@@ -83,12 +84,17 @@ async fn snapshots_keep_coming(pusher: &Pusher) {
 async fn bad_messages_get_errors_floods_are_cut_and_the_ve_carries_on() {
     tokio::time::timeout(Duration::from_secs(60), async {
         let server = start_server();
-        let pusher = Pusher::start(&server, "any").await;
+        let pusher = Pusher::start(&server, "any", support::device(3)).await;
         let mut page = admitted(&server).await;
 
         expect_error(&mut page, Message::text("not json"), "malformed message").await;
         expect_error(&mut page, Message::text(r#"{"type":"jump"}"#), "malformed message").await;
-        expect_error(&mut page, Message::text(r#"{"type":"grab","op":"link9"}"#), "unknown operational point \"link9\"").await;
+        expect_error(
+            &mut page,
+            Message::text(r#"{"type":"grab","op":"link9"}"#),
+            "unknown operational point \"link9\"",
+        )
+        .await;
         expect_error(&mut page, Message::text("x".repeat(8 * 1024)), "bytes not read").await;
         expect_error(&mut page, Message::binary(vec![1u8, 2, 3]), "binary").await;
         expect_error(&mut page, Message::text(r#"{"type":"drag","target":[0.0,0.0]}"#), "without a grab").await;

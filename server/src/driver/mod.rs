@@ -38,8 +38,8 @@ pub use record::RecordError;
 pub use stats::{LatencyHistogram, Percentiles, ServerStats, UserStats, VeLoopStats};
 
 use crate::access::Access;
-use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use session::UserEntry;
 use ve_thread::{Command, VeThreadIo};
 

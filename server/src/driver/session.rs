@@ -63,7 +63,8 @@ impl PoseTap {
     /// `(device pose, model pose)` of the newest uplink, if any came.
     pub fn load(&self) -> Option<(Vec<f64>, Vec<f64>)> {
         let len = self.len.load(Ordering::Acquire) as usize;
-        let read = |slots: &[AtomicU64; 7]| slots[..len].iter().map(|s| f64::from_bits(s.load(Ordering::Relaxed))).collect();
+        let read =
+            |slots: &[AtomicU64; 7]| slots[..len].iter().map(|s| f64::from_bits(s.load(Ordering::Relaxed))).collect();
         (len > 0).then(|| (read(&self.device), read(&self.model)))
     }
 }

@@ -4,8 +4,8 @@
 
 use kinloop_linkage::jacobian::frame_jacobian_t;
 use kinloop_linkage::kinematics::forward_kinematics;
-use kinloop_linkage::loop_closure::closure_residual_and_jacobian;
 use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::loop_closure::closure_residual_and_jacobian;
 use kinloop_linkage::model::{Obstacle, Shape};
 use kinloop_linkage::{Data, Model, SceneKind, Space, VecOps};
 use nalgebra::{DMatrix, DVector};

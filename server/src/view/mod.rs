@@ -365,7 +365,10 @@ pub(crate) fn start_live_with(
         shutdown: watch::channel(false).0,
     });
     let (addr, serve) = http::serve(config.listen, shared.clone())?;
-    let hub = tokio::spawn(hub::run(hub::Hub { geometry, reader: source.reader, kind, frames: frames_tx, server }, shared.clone()));
+    let hub = tokio::spawn(hub::run(
+        hub::Hub { geometry, reader: source.reader, kind, frames: frames_tx, server },
+        shared.clone(),
+    ));
     tracing::info!(%addr, "view: http://{addr}/");
     Ok(ViewHandle { addr, shared, serve, hub: Some(hub) })
 }

@@ -96,17 +96,14 @@ impl Replay {
         let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
         let Some((_, header)) = lines.next() else { return Err(ReplayError::Empty { file: file.into() }) };
         let columns: Vec<&str> = header.split(',').map(str::trim).collect();
-        let mismatch = |what: String| ReplayError::SceneMismatch {
-            file: file.into(),
-            what,
-            scene: scene_label.into(),
-        };
+        let mismatch = |what: String| ReplayError::SceneMismatch { file: file.into(), what, scene: scene_label.into() };
         let server = columns.starts_with(&["t_s", "step"]);
         let client = columns.first() == Some(&"time_s") && columns.get(1).is_some_and(|c| c.starts_with("device_"));
         if !server && !client {
             return Err(ReplayError::UnknownFormat { file: file.into() });
         }
-        let recorded_kind = if columns.iter().any(|c| c.ends_with("_theta")) { SceneKind::Planar } else { SceneKind::Spatial };
+        let recorded_kind =
+            if columns.iter().any(|c| c.ends_with("_theta")) { SceneKind::Planar } else { SceneKind::Spatial };
         if recorded_kind != scene.kind {
             return Err(mismatch(format!("it was recorded on a {recorded_kind:?} scene")));
         }
@@ -177,10 +174,11 @@ fn thin(rows: Vec<Sample>) -> Vec<Sample> {
 }
 
 fn numbers(line: &str, file: &str, index: usize) -> Result<Vec<f64>, ReplayError> {
-    line.split(',')
-        .map(|v| v.trim().parse::<f64>())
-        .collect::<Result<Vec<f64>, _>>()
-        .map_err(|e| ReplayError::BadRow { file: file.into(), line: index + 1, what: format!("not a number: {e}") })
+    line.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<Vec<f64>, _>>().map_err(|e| ReplayError::BadRow {
+        file: file.into(),
+        line: index + 1,
+        what: format!("not a number: {e}"),
+    })
 }
 
 fn server_rows<'a>(

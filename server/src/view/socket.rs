@@ -379,7 +379,8 @@ impl Page {
             Ok(Ok(Ok(joined))) => joined,
             Ok(Ok(Err(refusal))) => {
                 self.view.counters.bump(Counter::GrabsRefused);
-                return self.reply(ToPage::Error { message: short(format_args!("the VE refused the grab: {refusal}")) });
+                return self
+                    .reply(ToPage::Error { message: short(format_args!("the VE refused the grab: {refusal}")) });
             }
             _ => {
                 self.view.counters.bump(Counter::GrabsRefused);

@@ -8,7 +8,7 @@ use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use fantoccini::{Client, ClientBuilder, Locator};
@@ -36,12 +36,13 @@ const CHROMIUM_FLAGS: &[&str] = &[
     "--window-size=1200,800",
 ];
 
-/// One browser at a time: the machine has two cores, and a VE thread to keep on time.
-static ONE_BROWSER: Mutex<()> = Mutex::new(());
+/// One browser at a time: the machine has two cores, and a VE thread to keep on time. (A tokio mutex: each
+/// test holds it across its awaits, on its own runtime.)
+static ONE_BROWSER: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// Holds the browser lock for a test.
-pub fn exclusive() -> MutexGuard<'static, ()> {
-    ONE_BROWSER.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+pub async fn exclusive() -> tokio::sync::MutexGuard<'static, ()> {
+    ONE_BROWSER.lock().await
 }
 
 fn find(env: &str, names: &[&str]) -> Option<PathBuf> {
@@ -151,11 +152,6 @@ impl Drop for Browser {
     }
 }
 
-/// Where the tests write screenshots.
-pub fn output_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("view")
-}
-
 /// A number at a JSON path, e.g. `num(&s, &["ops", "link2", "0"])`.
 pub fn num(v: &Value, path: &[&str]) -> Option<f64> {
     let mut at = v;
@@ -178,8 +174,9 @@ pub struct Pusher {
 }
 
 impl Pusher {
-    pub async fn start(server: &ServerHandle, token: &str) -> Pusher {
-        let options = EndpointOptions { client_bind: SocketAddr::from(([127, 0, 0, 1], 0)), ..EndpointOptions::default() };
+    pub async fn start(server: &ServerHandle, token: &str, device: DeviceCaps) -> Pusher {
+        let options =
+            EndpointOptions { client_bind: SocketAddr::from(([127, 0, 0, 1], 0)), ..EndpointOptions::default() };
         let endpoint = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
         let hello = Hello {
             version: PROTOCOL_VERSION,
@@ -187,17 +184,7 @@ impl Pusher {
             client_name: "test pusher".into(),
             role: Role::Manipulator,
             op: "link2".into(),
-            device: DeviceCaps {
-                name: "test device".into(),
-                dof: 3,
-                workspace_min: vec![-0.2; 3],
-                workspace_max: vec![0.2; 3],
-                max_force_n: 20.0,
-                max_torque_nm: 2.0,
-                max_stiffness_n_per_m: 3000.0,
-                max_damping_ns_per_m: 40.0,
-                native_rate_hz: 1000.0,
-            },
+            device,
             form: LocalModelForm::OpSpace,
         };
         let mut session = connect(&endpoint, server.local_addr(), "localhost", &hello).await.expect("joined");
