@@ -125,7 +125,11 @@ async fn bad_messages_get_errors_floods_are_cut_and_the_ve_carries_on() {
 
         // Past the transport's limit the socket closes; the grab it held leaves the VE.
         page.send(Message::text("y".repeat(200 * 1024))).await.unwrap();
-        assert!(reply(&mut page).await.is_none(), "closed after 200 KB");
+        // Notices of the flood (one a second) may still be on their way, and the grab's release comes last.
+        while let Some(r) = reply(&mut page).await {
+            let flood = r["message"].as_str().is_some_and(|m| m.contains("dropped"));
+            assert!(flood || r["type"] == "released", "closed after 200 KB, not {r}");
+        }
         let until = Instant::now() + Duration::from_secs(5);
         while server.stats().users != 1 {
             assert!(Instant::now() < until, "the page's grab left the VE: {} users", server.stats().users);

@@ -240,6 +240,28 @@ function drawObstacles(b) {
   }
 }
 
+// Planar: keeps the linkage in view (it may travel far from where it started): when its drawing leaves the
+// canvas, the camera recentres on it, zooming out if it no longer fits.
+function keepInView(f) {
+  if (!view.planar || view.grab || !f.linkage.capsules.length) return;
+  const [w, h] = size();
+  const margin = 20;
+  let lo = [Infinity, Infinity], hi = [-Infinity, -Infinity];
+  for (const c of f.linkage.capsules) {
+    for (const p of [c.slice(0, 2), c.slice(2, 4)]) {
+      lo = [Math.min(lo[0], p[0] - c[4]), Math.min(lo[1], p[1] - c[4])];
+      hi = [Math.max(hi[0], p[0] + c[4]), Math.max(hi[1], p[1] + c[4])];
+    }
+  }
+  const a = project(lo, null), z = project(hi, null);
+  const inside = a[0] >= margin && z[0] <= w - margin && z[1] >= margin && a[1] <= h - margin;
+  if (inside) return;
+  const c = view.cam2;
+  c.cx = 0.5 * (lo[0] + hi[0]);
+  c.cy = 0.5 * (lo[1] + hi[1]);
+  c.scale = Math.min(c.scale, (w - 2 * margin) / Math.max(hi[0] - lo[0], 1e-6), (h - 2 * margin) / Math.max(hi[1] - lo[1], 1e-6));
+}
+
 function drawLinkage(f, b) {
   const d = dim();
   const parts = [];
@@ -333,6 +355,7 @@ function draw() {
   drawAxes(b);
   const f = view.frame;
   if (!f) return;
+  keepInView(f);
   drawLinkage(f, b);
   drawUsers(f, b);
   ctx.fillStyle = "#333";
@@ -350,7 +373,7 @@ function updatePanel() {
   const rows = [
     ["VE time", `${f.t.toFixed(3)} s (step ${f.step})`],
     ["closure error", f.closure_error == null ? "–" : `${f.closure_error.toExponential(2)} m`],
-    ["frames/s", fps().toFixed(1)],
+    ["frames/s", view.frameTimes.length < 2 ? "–" : fps().toFixed(1)],
   ];
   if (f.loop) rows.push(["VE tick p50 / p99", `${f.loop.p50_us.toFixed(1)} / ${f.loop.p99_us.toFixed(1)} µs`], ["VE deadline misses", `${f.loop.misses}`]);
   $("summary").innerHTML = "";
