@@ -167,7 +167,7 @@ fn the_view_tap_allocates_nothing_per_tick() {
     // A frame every tick: the ring (8 frames) fills during the count, so both paths run.
     let (mut tap, _reader) = kinloop_server::view::tap::<Planar>(n, 4, 1000.0, 1000.0);
     let stats = kinloop_server::driver::VeLoopStats::default();
-    let mut tick = |core: &mut VeCore<Planar>, tap: &mut kinloop_server::view::ViewTap| {
+    let tick = |core: &mut VeCore<Planar>, tap: &mut kinloop_server::view::ViewTap| {
         core.handle_timeout(core.poll_timeout());
         while let Some(pending) = core.poll_snapshot() {
             tap.note_snapshot(pending.snapshot());

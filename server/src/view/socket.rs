@@ -125,7 +125,7 @@ async fn run(mut sink: Sink, mut stream: Stream, view: &Arc<ViewShared>, role: R
         return;
     }
     let (outbox, replies) = mpsc::channel(OUTBOX);
-    let writer = tokio::spawn(write(sink, replies, view.clone()));
+    let mut writer = tokio::spawn(write(sink, replies, view.clone()));
     let mut page = Page {
         view: view.clone(),
         outbox,
@@ -165,8 +165,10 @@ async fn run(mut sink: Sink, mut stream: Stream, view: &Arc<ViewShared>, role: R
     }
     page.release("the page closed");
     drop(page);
-    // The writer ends once the outbox is closed and drained.
-    let _ = tokio::time::timeout(Duration::from_secs(1), writer).await;
+    // The writer ends once the outbox is closed and drained, unless the page stopped reading.
+    if tokio::time::timeout(Duration::from_secs(1), &mut writer).await.is_err() {
+        writer.abort();
+    }
 }
 
 async fn wait(notify: Option<Arc<Notify>>) {
