@@ -250,3 +250,49 @@ async fn a_recorded_session_replays_at_the_sliders_time() {
     })
     .await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_spatial_scene_is_drawn_in_perspective_and_the_camera_orbits() {
+    let _one = exclusive().await;
+    bounded(async {
+        let scene = builtin::scene("spherical-four-bar").unwrap().unwrap();
+        let mut config = ServerConfig::new(scene, "spherical-four-bar", loopback());
+        config.realtime = false;
+        config.view = Some(ViewConfig::new(loopback()));
+        let server = Server::start(config).unwrap();
+        let browser = Browser::start().await;
+        browser.client.goto(&format!("http://{}/", server.view_addr().unwrap())).await.unwrap();
+        let before = browser
+            .wait_for("frames of the spatial scene", Duration::from_secs(10), |s| s["frames"].as_u64() >= Some(5))
+            .await;
+        assert_eq!((before["role"].as_str(), before["can_grab"].as_bool()), (Some("observer"), Some(false)));
+        assert_eq!(before["ops"]["coupler"].as_array().map(Vec::len), Some(3), "a 3-D point: {before}");
+        let (w, h) = (num(&before, &["size", "0"]).unwrap(), num(&before, &["size", "1"]).unwrap());
+        let (px, py) =
+            (num(&before, &["ops_px", "coupler", "0"]).unwrap(), num(&before, &["ops_px", "coupler", "1"]).unwrap());
+        assert!((0.0..w).contains(&px) && (0.0..h).contains(&py), "the OP is on the canvas: {px}, {py} in {w}x{h}");
+
+        // Dragging on empty canvas orbits the camera (the OP is far from the drag's start).
+        let canvas = browser.client.find(Locator::Id("canvas")).await.unwrap();
+        let (x0, y0) = (if px > w / 2.0 { -w / 3.0 } else { w / 3.0 }, h / 3.0);
+        let orbit = MouseActions::new("mouse".into())
+            .then(PointerAction::MoveToElement { element: canvas.clone(), duration: None, x: x0, y: y0 })
+            .then(PointerAction::Down { button: MOUSE_BUTTON_LEFT })
+            .then(PointerAction::MoveToElement {
+                element: canvas,
+                duration: Some(Duration::from_millis(200)),
+                x: x0 + 120.0,
+                y: y0 - 40.0,
+            })
+            .then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
+        browser.client.perform_actions(orbit).await.unwrap();
+        let after = browser.status().await;
+        let (yaw0, yaw1) = (num(&before, &["camera", "0"]).unwrap(), num(&after, &["camera", "0"]).unwrap());
+        assert!((yaw1 - (yaw0 - 1.2)).abs() < 1e-6, "120 px to the right turn the camera by 1.2 rad: {yaw0} -> {yaw1}");
+        browser.screenshot(&output_dir(), "spatial.png").await;
+        assert_eq!(server.stats().view.unwrap().grabs, 0);
+        browser.close().await;
+        server.shutdown().await.unwrap();
+    })
+    .await;
+}

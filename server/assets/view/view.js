@@ -413,7 +413,7 @@ function updateStatus() {
     frames: view.frames, fps: fps(), first_frame_ms: view.firstFrameMs, refused: view.refused, error: view.error,
     role: view.welcome ? view.welcome.role : null, can_grab: view.welcome ? view.welcome.can_grab : false,
     size: size(), grabbed: view.grab ? view.grab.user : null, target: view.grab ? view.grab.target : null,
-    scene: view.scene ? view.scene.name : null, replay_t: view.welcome && view.welcome.replay ? view.replay.t : null,
+    scene: view.scene ? view.scene.name : null, camera: view.planar ? null : [view.cam3.yaw, view.cam3.pitch], replay_t: view.welcome && view.welcome.replay ? view.replay.t : null,
   };
   if (f) {
     const b = view.planar ? null : basis();
