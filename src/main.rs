@@ -1,4 +1,5 @@
-//! `kinloop`: run the demo; inspect, simulate and benchmark linkages with kinematic loops; run experiments.
+//! `kinloop`: run the demo; inspect, simulate and benchmark linkages with kinematic loops; run experiments;
+//! replay recordings in a web page.
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -31,6 +32,8 @@ enum Command {
     Experiment(cli::experiment::ExperimentArgs),
     /// The lateness of an idle 1 kHz loop timed as the haptic loop is: the machine's floor under real time.
     TimerFloor(cli::timer_floor::TimerFloorArgs),
+    /// Replay a recording (a server's or a client's --record CSV) in a web page with a timeline slider.
+    View(cli::view::ViewArgs),
 }
 
 fn main() -> Result<()> {
@@ -46,5 +49,6 @@ fn main() -> Result<()> {
         Command::Bench(a) => cli::bench::run(a),
         Command::Experiment(a) => cli::experiment::run(a),
         Command::TimerFloor(a) => cli::timer_floor::run(a),
+        Command::View(a) => cli::view::run(a),
     }
 }

@@ -21,6 +21,7 @@ use serde::Serialize;
 use crate::core::{JoinRequest, UplinkSample, VeConfig, VeConfigError, VeCore};
 use crate::driver::ve_thread::{self, Command, UserLink, VeThreadIo};
 use crate::driver::VeLoopStats;
+use crate::view::ViewTap;
 
 /// Why a measurement could not run.
 #[derive(Debug, thiserror::Error)]
@@ -258,13 +259,19 @@ pub struct RealtimeReport {
 /// Runs the VE thread for `run.duration` with `run.users` synthetic users fed from a helper thread at
 /// about 1 kHz (uplinks following each user's newest snapshot), and reports its timing.
 pub fn realtime_run(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
+    realtime_run_with_view(run, None)
+}
+
+/// [`realtime_run`], with the VE thread also feeding a web view's tap (`--synthetic-users N --view ADDR`:
+/// what many open pages cost the VE).
+pub fn realtime_run_with_view(run: RealtimeRun, view: Option<ViewTap>) -> Result<RealtimeReport, BenchError> {
     match run.scene.kind {
-        SceneKind::Planar => realtime_run_in::<Planar>(run),
-        SceneKind::Spatial => realtime_run_in::<Spatial>(run),
+        SceneKind::Planar => realtime_run_in::<Planar>(run, view),
+        SceneKind::Spatial => realtime_run_in::<Spatial>(run, view),
     }
 }
 
-fn realtime_run_in<S: Space>(run: RealtimeRun) -> Result<RealtimeReport, BenchError> {
+fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<RealtimeReport, BenchError> {
     let model = Model::<S>::compile(&run.scene, &run.scene_label)?;
     if model.ops.is_empty() && run.users > 0 {
         return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
@@ -293,7 +300,8 @@ fn realtime_run_in<S: Space>(run: RealtimeRun) -> Result<RealtimeReport, BenchEr
         clients.push((uplink_tx, snapshot_rx));
         replies.push(reply_rx);
     }
-    let io = VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: None, stop: stop.clone() };
+    let io =
+        VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: None, view, stop: stop.clone() };
     let ve_thread = std::thread::Builder::new()
         .name("kinloop-ve".into())
         .spawn(move || ve_thread::run(core, io, true))

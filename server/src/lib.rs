@@ -8,6 +8,7 @@
 //! - [`access`]: tokens and roles, compared in constant time;
 //! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
+//! - [`view`]: the web page that draws the linkage live (and lets a visitor grab it) or replays a recording;
 //! - [`bench`](mod@bench): the numbers `kinloop bench` reports.
 
 pub mod bench;
@@ -18,6 +19,7 @@ pub use crate::core::{
 };
 pub mod access;
 pub mod driver;
+pub mod view;
 
 pub use crate::access::Access;
 pub use crate::driver::{Identity, Server, ServerConfig, ServerError, ServerHandle, ServerStats};

@@ -8,8 +8,10 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
+use kinloop_server::bench::RealtimeRun;
 use kinloop_server::core::AxisGains;
 use kinloop_server::driver::load_scene;
+use kinloop_server::view::{LiveSource, ViewConfig};
 use kinloop_server::{Access, Identity, Server, ServerConfig, VeConfig};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -76,6 +78,39 @@ struct Cli {
     /// tick times and deadline misses (the real-time check).
     #[arg(long, value_name = "N")]
     synthetic_users: Option<usize>,
+    /// Serve a web page on this TCP address (e.g. 127.0.0.1:8080) that draws the linkage live: bodies,
+    /// obstacles, each user's OP, device and coupling force, the constraint directions, the closure error
+    /// and a panel of users, RTT and VE timing. With --token-file the page asks for a token (observer tokens
+    /// watch, manipulator tokens may also drag an OP with the mouse). No TLS: serve on loopback or a trusted
+    /// network.
+    #[arg(long, value_name = "ADDR")]
+    view: Option<SocketAddr>,
+    /// Without --token-file, let any page grab an OP with the mouse (default: pages only watch).
+    #[arg(long, requires = "view")]
+    view_grab: bool,
+    /// Frames per second the view sends (1-240).
+    #[arg(long, value_name = "HZ", default_value_t = kinloop_server::view::DEFAULT_FRAME_RATE_HZ, requires = "view")]
+    view_rate: f64,
+}
+
+/// `--synthetic-users`, with a watch-only view of the VE when `view` is given: the VE thread feeds the
+/// view's tap as the server's does, so the run measures what pages cost the VE.
+fn synthetic_run(
+    run: RealtimeRun,
+    view: Option<ViewConfig>,
+    access: Access,
+) -> anyhow::Result<(kinloop_server::bench::RealtimeReport, Option<kinloop_server::view::ViewStats>)> {
+    let Some(view) = view else { return Ok((kinloop_server::bench::realtime_run(run)?, None)) };
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let users = run.ve.max_users.max(run.users);
+    let (tap, reader) =
+        kinloop_server::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
+    let source = LiveSource { scene: run.scene.clone(), scene_label: run.scene_label.clone(), reader, access };
+    let handle = runtime.block_on(async { kinloop_server::view::start_live(&view, source) })?;
+    println!("view: http://{}/", handle.local_addr());
+    let report = kinloop_server::bench::realtime_run_with_view(run, Some(tap));
+    let stats = runtime.block_on(handle.shutdown());
+    Ok((report?, Some(stats)))
 }
 
 /// `LINEAR,ANGULAR`: two finite, non-negative gains.
@@ -122,17 +157,25 @@ fn main() -> anyhow::Result<()> {
     ve.coupling_damping = cli.coupling_damping.clone();
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
+    let access = match &cli.token_file {
+        Some(path) => Access::from_file(path)?,
+        None => Access::open(),
+    };
+    let view = cli.view.map(|listen| ViewConfig {
+        grab_without_token: cli.view_grab,
+        frame_rate_hz: cli.view_rate,
+        ..ViewConfig::new(listen)
+    });
     if let Some(users) = cli.synthetic_users {
-        let run = kinloop_server::bench::RealtimeRun {
-            scene,
-            scene_label: label,
-            users,
-            duration: duration.unwrap_or(Duration::from_secs(10)),
-            ve,
-        };
-        let report = kinloop_server::bench::realtime_run(run)?;
+        let run =
+            RealtimeRun { scene, scene_label: label, users, duration: duration.unwrap_or(Duration::from_secs(10)), ve };
+        let (report, view_stats) = synthetic_run(run, view, access)?;
         if cli.json {
-            println!("{}", serde_json::to_string_pretty(&report)?);
+            let mut json = serde_json::to_value(&report)?;
+            if let (Some(stats), Some(object)) = (view_stats, json.as_object_mut()) {
+                object.insert("view".into(), serde_json::to_value(stats)?);
+            }
+            println!("{}", serde_json::to_string_pretty(&json)?);
         } else {
             println!(
                 "{} users, {} ticks: step p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; {} deadline misses; SCHED_FIFO {}",
@@ -148,10 +191,6 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
 
-    let access = match &cli.token_file {
-        Some(path) => Access::from_file(path)?,
-        None => Access::open(),
-    };
     let config = ServerConfig {
         scene,
         scene_label: label,
@@ -163,12 +202,16 @@ fn main() -> anyhow::Result<()> {
         record: cli.record.clone(),
         stats_every: Some(seconds("--stats-every", cli.stats_every)?),
         realtime: true,
+        view,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     runtime.block_on(async move {
         let server = Server::start(config)?;
         println!("kinloop-server listening on {}", server.local_addr());
         println!("certificate fingerprint (sha-256): {}", server.fingerprint());
+        if let Some(addr) = server.view_addr() {
+            println!("view: http://{addr}/");
+        }
         let stop = async {
             match duration {
                 Some(d) => tokio::time::sleep(d).await,

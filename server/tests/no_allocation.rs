@@ -146,3 +146,41 @@ fn ticks_and_snapshots_allocate_nothing_for_a_fixed_set_of_users() {
     let spatial = Model::<kinloop_linkage::Spatial>::compile(&scene("spherical-four-bar"), "spherical").unwrap();
     assert_eq!(calls_per_run(spatial, &[OpSpace, OpSpace], false, 500), 0, "spatial");
 }
+
+/// The VE thread's side of the web view (`--view`): copying each snapshot's directions and writing a frame
+/// into the view's ring, whether the ring takes it or is full, allocates nothing.
+#[test]
+fn the_view_tap_allocates_nothing_per_tick() {
+    let model = Model::<Planar>::compile(&scene("paper-testbed"), "paper-testbed").unwrap();
+    let n = model.nq();
+    let mut core = VeCore::new(model, VeConfig::paper()).unwrap();
+    for (i, role) in [Role::Manipulator, Role::Observer].into_iter().enumerate() {
+        let request = JoinRequest {
+            name: format!("u{i}"),
+            role,
+            op: "link2".into(),
+            form: LocalModelForm::OpSpace,
+            device: Some(device()),
+        };
+        core.join(Duration::ZERO, request).unwrap();
+    }
+    // A frame every tick: the ring (8 frames) fills during the count, so both paths run.
+    let (mut tap, _reader) = kinloop_server::view::tap::<Planar>(n, 4, 1000.0, 1000.0);
+    let stats = kinloop_server::driver::VeLoopStats::default();
+    let tick = |core: &mut VeCore<Planar>, tap: &mut kinloop_server::view::ViewTap| {
+        core.handle_timeout(core.poll_timeout());
+        while let Some(pending) = core.poll_snapshot() {
+            tap.note_snapshot(pending.snapshot());
+        }
+        while core.poll_event().is_some() {}
+        tap.after_tick(core, &stats);
+    };
+    tick(&mut core, &mut tap);
+    let calls = allocator_calls(|| {
+        for _ in 0..200 {
+            tick(&mut core, &mut tap);
+        }
+    });
+    assert_eq!(calls, 0);
+    assert!(tap.published >= 8 && tap.dropped > 0, "published {}, dropped {}", tap.published, tap.dropped);
+}

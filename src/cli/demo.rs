@@ -1,5 +1,5 @@
 //! `kinloop demo [--users N] [--duration S] [--delay D] [--jitter J] [--loss L] [--seed N] [--scene FILE]
-//! [--json] [--out DIR]`: a server and N simulated-device clients over loopback QUIC in this process, in
+//! [--json] [--out DIR] [--view ADDR [--view-grab]]`: a server and N simulated-device clients over loopback QUIC in this process, in
 //! real time (see [`crate::demo`]); prints a summary (one JSON object on stdout with `--json`) and writes
 //! the charts, the records and `summary.json` into `DIR/demo/`.
 
@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
+
+use kinloop_server::view::ViewConfig;
 
 use crate::demo::{self, DemoOptions, DemoSummary, MAX_DURATION, MAX_USERS};
 use crate::scene_arg::load_scene;
@@ -37,6 +39,13 @@ pub struct DemoArgs {
     /// Do not ask for SCHED_FIFO for the VE and haptic threads.
     #[arg(long)]
     pub no_realtime: bool,
+    /// Serve a web page on this TCP address that draws the session live (see `kinloop-server --view`);
+    /// pass a longer --duration to watch it.
+    #[arg(long, value_name = "ADDR")]
+    pub view: Option<std::net::SocketAddr>,
+    /// With --view, let the page grab an OP with the mouse.
+    #[arg(long, requires = "view")]
+    pub view_grab: bool,
 }
 
 fn parse_users(s: &str) -> Result<usize, String> {
@@ -72,6 +81,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         progress: true,
         ctrl_c: true,
         realtime: !args.no_realtime,
+        view: args.view.map(|listen| ViewConfig { grab_without_token: args.view_grab, ..ViewConfig::new(listen) }),
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {

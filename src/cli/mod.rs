@@ -6,3 +6,4 @@ pub mod experiment;
 pub mod inspect;
 pub mod simulate;
 pub mod timer_floor;
+pub mod view;

@@ -28,6 +28,7 @@ use kinloop_linkage::{Scene, SceneKind};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::Trust;
 use kinloop_server::driver::UserStats;
+use kinloop_server::view::ViewConfig;
 use kinloop_server::{Server, ServerConfig, ServerHandle, ServerStats};
 use serde::Serialize;
 
@@ -65,6 +66,8 @@ pub struct DemoOptions {
     pub ctrl_c: bool,
     /// Ask for SCHED_FIFO for the VE and haptic threads.
     pub realtime: bool,
+    /// Serve the web view of the session (`--view ADDR`).
+    pub view: Option<ViewConfig>,
 }
 
 impl DemoOptions {
@@ -81,6 +84,7 @@ impl DemoOptions {
             progress: true,
             ctrl_c: false,
             realtime: true,
+            view: None,
         })
     }
 }
@@ -224,10 +228,14 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     config.link = side_link(&options.link, 0);
     config.record = Some(dir.join("ve.csv"));
     config.realtime = options.realtime;
+    config.view = options.view.clone();
     let server = {
         let _inside = runtime.enter();
         Server::start(config).context("starting the server")?
     };
+    if let Some(addr) = server.view_addr() {
+        eprintln!("kinloop demo: watch it at http://{addr}/");
+    }
     // The VE's clock starts with the server (its uptime counts from the same moment, to well under 1 ms).
     let ve_epoch = Instant::now() - Duration::from_secs_f64(server.stats().uptime_s);
 

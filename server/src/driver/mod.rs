@@ -39,6 +39,7 @@ pub use stats::{LatencyHistogram, Percentiles, ServerStats, UserStats, VeLoopSta
 
 use crate::access::Access;
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use session::UserEntry;
 use ve_thread::{Command, VeThreadIo};
 
@@ -85,6 +86,8 @@ pub struct ServerConfig {
     pub stats_every: Option<Duration>,
     /// Try SCHED_FIFO for the VE thread.
     pub realtime: bool,
+    /// Serve the web view (`--view`).
+    pub view: Option<ViewConfig>,
 }
 
 impl ServerConfig {
@@ -101,6 +104,7 @@ impl ServerConfig {
             record: None,
             stats_every: None,
             realtime: true,
+            view: None,
         }
     }
 }
@@ -131,6 +135,9 @@ pub enum ServerError {
         /// What went wrong.
         what: String,
     },
+    /// The web view could not start.
+    #[error(transparent)]
+    View(#[from] ViewError),
     /// The server was started outside a tokio runtime.
     #[error("the server must be started inside a tokio runtime")]
     NoRuntime,
@@ -143,12 +150,14 @@ pub(crate) struct Shared {
     ve_stats: Mutex<VeLoopStats>,
     started: Instant,
     ve_rate_hz: f64,
-    shape: SessionShape,
-    snapshot_ring_bytes: usize,
+    pub(crate) shape: SessionShape,
+    pub(crate) snapshot_ring_bytes: usize,
     access: Access,
     /// What a client learns before joining.
     scene_info: kinloop_protocol::SceneInfo,
     shutdown: watch::Sender<bool>,
+    /// The view's counters, once it runs.
+    view: std::sync::OnceLock<Arc<crate::view::Counters>>,
 }
 
 /// A full command ring for this long means the VE thread is gone.
@@ -156,7 +165,7 @@ const COMMAND_PATIENCE: Duration = Duration::from_secs(2);
 
 impl Shared {
     /// Hands a command to the VE thread, waiting (on the network side) while its ring is full.
-    async fn send_command(&self, mut command: Command) -> Result<(), ()> {
+    pub(crate) async fn send_command(&self, mut command: Command) -> Result<(), ()> {
         let give_up = Instant::now() + COMMAND_PATIENCE;
         loop {
             let pushed = match self.commands.lock() {
@@ -171,6 +180,43 @@ impl Shared {
                 }
                 Err(_) => return Err(()),
             }
+        }
+    }
+
+    /// Tells the VE thread that `user` left, from code that cannot wait (a drop): at once if the command
+    /// ring has room, else from a task.
+    pub(crate) fn leave_soon(self: &Arc<Self>, user: u32) {
+        let pushed = match self.commands.lock() {
+            Ok(mut ring) => ring.push(Command::Leave { user }).is_ok(),
+            Err(_) => return,
+        };
+        if !pushed {
+            if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+                let shared = self.clone();
+                runtime.spawn(async move { shared.send_command(Command::Leave { user }).await });
+            }
+        }
+    }
+
+    /// What the sessions know of each connected user, for the view's panel.
+    pub(crate) fn user_infos(&self, out: &mut Vec<crate::view::compose::UserInfo>) {
+        let Ok(users) = self.users.lock() else { return };
+        for e in users.iter().filter(|e| e.counters.connected.load(Ordering::Relaxed)) {
+            let c = &e.counters;
+            let received = c.uplinks_received.load(Ordering::Relaxed);
+            let clamped = c.uplinks_clamped.load(Ordering::Relaxed);
+            let poses = c.poses.load();
+            out.push(crate::view::compose::UserInfo {
+                id: e.user_id,
+                name: e.name.clone(),
+                device: e.device.clone(),
+                op: e.op.clone(),
+                browser: false,
+                rtt_ms: Some(e.connection.rtt().as_secs_f64() * 1e3),
+                clamped: (received > 0).then(|| clamped as f64 / received as f64),
+                device_pose: poses.as_ref().map(|p| p.0.clone()),
+                model_pose: poses.map(|p| p.1),
+            });
         }
     }
 
@@ -209,6 +255,7 @@ impl Shared {
                             snapshots_sent: load(&c.snapshots_sent),
                             snapshot_bytes: load(&c.snapshot_bytes),
                             snapshots_oversize: load(&c.snapshots_oversize),
+                            uplinks_clamped: load(&c.uplinks_clamped),
                             connected: c.connected.load(Ordering::Relaxed),
                         }
                     })
@@ -221,6 +268,7 @@ impl Shared {
             users: ve.core.users,
             ve,
             per_user,
+            view: self.view.get().map(|v| v.snapshot()),
         }
     }
 }
@@ -251,6 +299,7 @@ pub struct ServerHandle {
     stop: Arc<AtomicBool>,
     ve_thread: Option<std::thread::JoinHandle<VeLoopStats>>,
     recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
+    view: Option<ViewHandle>,
 }
 
 impl ServerHandle {
@@ -264,6 +313,11 @@ impl ServerHandle {
         &self.fingerprint
     }
 
+    /// Where the web view is served (`--view`), if it is.
+    pub fn view_addr(&self) -> Option<SocketAddr> {
+        self.view.as_ref().map(ViewHandle::local_addr)
+    }
+
     /// Statistics so far.
     pub fn stats(&self) -> ServerStats {
         self.shared.stats()
@@ -272,6 +326,10 @@ impl ServerHandle {
     /// Tells every client (`Leave`), waits for them to close, closes the endpoint, stops the VE thread and
     /// the recorder, and returns the final statistics.
     pub async fn shutdown(mut self) -> Result<ServerStats, ServerError> {
+        if let Some(view) = self.view.take() {
+            // Pages first: their grabs leave while the VE still runs.
+            view.shutdown().await;
+        }
         self.shared.shutdown.send_replace(true);
         if tokio::time::timeout(SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
             self.accept.abort();
@@ -351,7 +409,21 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         Some((tx, handle)) => (Some(tx), Some(handle)),
         None => (None, None),
     };
-    let io = VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: row_tx, stop: stop.clone() };
+    let (view_tap, view_reader) = match &config.view {
+        Some(v) => {
+            let (tap, reader) = crate::view::tap::<S>(n, config.ve.max_users, config.ve.ve_rate_hz, v.frame_rate_hz);
+            (Some(tap), Some(reader))
+        }
+        None => (None, None),
+    };
+    let io = VeThreadIo {
+        commands: command_rx,
+        events: event_tx,
+        stats: stats_tx,
+        record: row_tx,
+        view: view_tap,
+        stop: stop.clone(),
+    };
     let realtime = config.realtime;
     let ve_thread = std::thread::Builder::new()
         .name("kinloop-ve".into())
@@ -370,7 +442,29 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         access: config.access.clone(),
         scene_info,
         shutdown,
+        view: std::sync::OnceLock::new(),
     });
+    let view = match (&config.view, view_reader) {
+        (Some(view), Some(reader)) => {
+            let source = LiveSource {
+                scene: config.scene.clone(),
+                scene_label: config.scene_label.clone(),
+                reader,
+                access: config.access.clone(),
+            };
+            match crate::view::start_live_with(view, source, Some(shared.clone())) {
+                Ok(handle) => {
+                    let _ = shared.view.set(handle.counters());
+                    Some(handle)
+                }
+                Err(error) => {
+                    stop.store(true, Ordering::Relaxed);
+                    return Err(error.into());
+                }
+            }
+        }
+        _ => None,
+    };
     let accept = tokio::spawn(accept_loop(endpoint.clone(), shared.clone()));
     let collector = tokio::spawn(collect(shared.clone(), stats_rx, event_rx, config.stats_every));
     Ok(ServerHandle {
@@ -383,6 +477,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         stop,
         ve_thread: Some(ve_thread),
         recorder,
+        view,
     })
 }
 

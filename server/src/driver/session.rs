@@ -10,7 +10,7 @@ use kinloop_protocol::quic::{
     accept_with, close_codes, recv_control, send_control, AcceptedSession, Connection, DatagramReceiver,
     DatagramSender, Incoming, Route,
 };
-use kinloop_protocol::{Control, Datagram, RefusalReason, Refused, Role};
+use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused, Role};
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
@@ -33,7 +33,40 @@ pub struct UserCounters {
     pub snapshots_sent: AtomicU64,
     pub snapshot_bytes: AtomicU64,
     pub snapshots_oversize: AtomicU64,
+    pub uplinks_clamped: AtomicU64,
     pub connected: AtomicBool,
+    /// The newest uplink's device and model poses, for the view.
+    pub poses: PoseTap,
+}
+
+/// The device and local-model poses of a user's newest uplink, as `f64` bits in atomics: the receive task
+/// writes them per uplink without a lock, the view's hub reads them a few dozen times per second (a read
+/// that straddles a write mixes two neighbouring uplinks, which a picture cannot show).
+#[derive(Debug, Default)]
+pub struct PoseTap {
+    len: AtomicU64,
+    device: [AtomicU64; 7],
+    model: [AtomicU64; 7],
+}
+
+impl PoseTap {
+    fn store(&self, device: &[f64], model: &[f64]) {
+        if device.len() != model.len() || device.len() > 7 {
+            return;
+        }
+        for (slot, v) in self.device.iter().zip(device).chain(self.model.iter().zip(model)) {
+            slot.store(v.to_bits(), Ordering::Relaxed);
+        }
+        self.len.store(device.len() as u64, Ordering::Release);
+    }
+
+    /// `(device pose, model pose)` of the newest uplink, if any came.
+    pub fn load(&self) -> Option<(Vec<f64>, Vec<f64>)> {
+        let len = self.len.load(Ordering::Acquire) as usize;
+        let read =
+            |slots: &[AtomicU64; 7]| slots[..len].iter().map(|s| f64::from_bits(s.load(Ordering::Relaxed))).collect();
+        (len > 0).then(|| (read(&self.device), read(&self.model)))
+    }
 }
 
 /// A user as the stats see it.
@@ -41,6 +74,8 @@ pub struct UserEntry {
     pub user_id: u32,
     pub name: String,
     pub role: Role,
+    pub device: String,
+    pub op: String,
     pub connection: Connection,
     pub counters: Arc<UserCounters>,
 }
@@ -99,6 +134,8 @@ async fn run_session(
         user_id: user,
         name: hello.client_name.clone(),
         role: hello.role,
+        device: hello.device.name.clone(),
+        op: hello.op.clone(),
         connection: connection.clone(),
         counters: counters.clone(),
     });
@@ -120,6 +157,10 @@ async fn run_session(
                             _ => {}
                         }
                         last_seq = Some(last_seq.map_or(uplink.seq, |last| last.max(uplink.seq)));
+                        if uplink.flags & uplink_flags::CLAMPED != 0 {
+                            counters.uplinks_clamped.fetch_add(1, Ordering::Relaxed);
+                        }
+                        counters.poses.store(&uplink.device_pose, &uplink.model_pose);
                         let counter = match UplinkSample::from_uplink(&uplink) {
                             Ok(sample) if uplinks.push(sample).is_ok() => None,
                             Ok(_) => Some(&counters.uplinks_dropped),

@@ -108,6 +108,10 @@ pub struct VeLoopStats {
     pub record_rows_dropped: u64,
     /// Rows handed to the recorder.
     pub record_rows: u64,
+    /// Frames handed to the view's hub.
+    pub view_frames: u64,
+    /// Frames the view's ring had no room for (its hub is not keeping up).
+    pub view_frames_dropped: u64,
     /// The core's counters.
     pub core: VeMetrics,
 }
@@ -137,6 +141,8 @@ pub struct UserStats {
     pub snapshot_bytes: u64,
     /// Snapshots that went on a stream because they exceeded the datagram size.
     pub snapshots_oversize: u64,
+    /// Uplinks flagged `CLAMPED` (the client clamped its command to the device's limits).
+    pub uplinks_clamped: u64,
     /// Still connected.
     pub connected: bool,
 }
@@ -154,6 +160,9 @@ pub struct ServerStats {
     pub users: u32,
     /// Every user since start.
     pub per_user: Vec<UserStats>,
+    /// The web view (`--view`), when served.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub view: Option<crate::view::ViewStats>,
 }
 
 #[cfg(test)]

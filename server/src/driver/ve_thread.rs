@@ -18,6 +18,7 @@ use tokio::sync::{oneshot, Notify};
 
 use super::stats::{LatencyHistogram, VeLoopStats};
 use crate::core::{JoinRequest, Joined, UplinkSample, UserId, VeCore, VeEvent};
+use crate::view::ViewTap;
 
 /// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
 pub const FRAME_HEADER: usize = 4;
@@ -67,6 +68,8 @@ pub struct VeThreadIo {
     pub stats: Producer<VeLoopStats>,
     /// Recorded rows (see `record`), when recording.
     pub record: Option<Producer<f64>>,
+    /// Frames for the view's hub (see `crate::view::tap`), when a view is served.
+    pub view: Option<ViewTap>,
     /// Set to stop the loop.
     pub stop: Arc<AtomicBool>,
 }
@@ -108,6 +111,9 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
         core.handle_timeout(now);
         while let Some(pending) = core.poll_snapshot() {
             let user = pending.user_id();
+            if let Some(view) = io.view.as_mut() {
+                view.note_snapshot(pending.snapshot());
+            }
             let Some(l) = links.iter_mut().find(|l| l.user == user) else { continue };
             let sent = codec::encode_datagram_into(pending.datagram(), &mut encoded).is_ok()
                 && push_frame(&mut l.link.snapshots, &encoded);
@@ -127,6 +133,11 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
             } else {
                 stats.record_rows_dropped += 1;
             }
+        }
+        if let Some(view) = io.view.as_mut() {
+            view.after_tick(&core, &stats);
+            stats.view_frames = view.published;
+            stats.view_frames_dropped = view.dropped;
         }
         histogram.record(woke.elapsed().as_nanos() as u64);
         iterations += 1;
