@@ -126,7 +126,7 @@ async fn run_session(
     mut snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
 ) {
-    let AcceptedSession { connection, mut send, mut recv, hello, join: _, welcome } = session;
+    let AcceptedSession { connection, mut send, mut recv, hello, join, welcome } = session;
     let user = welcome.user_id;
     let counters = Arc::new(UserCounters::default());
     counters.connected.store(true, Ordering::Relaxed);
@@ -134,8 +134,8 @@ async fn run_session(
         user_id: user,
         name: hello.client_name.clone(),
         role: hello.role,
-        device: hello.device.name.clone(),
-        op: hello.op.clone(),
+        device: join.device.name.clone(),
+        op: welcome.scene.op_name.clone(),
         connection: connection.clone(),
         counters: counters.clone(),
     });

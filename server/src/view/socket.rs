@@ -370,6 +370,7 @@ impl Page {
             op: op.clone(),
             form: LocalModelForm::OpSpace,
             device: None,
+            mapping: Default::default(),
         };
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
         let name = request.name.clone();
