@@ -25,8 +25,9 @@
 use crate::data::Data;
 use crate::error::DynamicsError;
 use crate::jacobian::support;
-use crate::model::{follows_parent, Model, NO_PARENT};
+use crate::model::{Model, NO_PARENT};
 use crate::space::{MatOps, Space, VecOps};
+use crate::tree::follows_parent;
 
 /// Fills `data.kkt.factor` (upper triangle: U) and `data.kkt.factor_inv_diag` (`1/U_kk`) for D(q).
 /// Needs `forward_kinematics` (body inertias and motion subspaces). Errors when a pivot is not positive

@@ -2,8 +2,9 @@
 //! algorithm in the world frame with q̈ = 0 and no gravity.
 
 use crate::data::Data;
-use crate::model::{subtree_sums, Model};
+use crate::model::Model;
 use crate::space::{Space, VecOps};
+use crate::tree::subtree_sums;
 
 /// Fills `data.bias`. Needs `forward_kinematics` and `forward_velocity`.
 pub fn bias_forces<S: Space>(model: &Model<S>, data: &mut Data<S>) {

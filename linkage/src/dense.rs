@@ -3,24 +3,26 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::ltl_small::by_size;
+pub use crate::simd::mul_add;
 use crate::simd::F64x4;
 
-/// `a * b + c`: one fused instruction with one rounding where the target has FMA (x86-64-v3, as this
-/// workspace builds, and every aarch64). Without FMA hardware `f64::mul_add` becomes a libm call that is
-/// far slower than the rounding it saves, so it falls back to the unfused form. Rust never contracts
-/// `a * b + c` by itself, hence this helper in every kernel.
-#[inline(always)]
-pub fn mul_add(a: f64, b: f64, c: f64) -> f64 {
-    #[cfg(target_feature = "fma")]
-    {
-        a.mul_add(b, c)
-    }
-    #[cfg(not(target_feature = "fma"))]
-    {
-        a * b + c
-    }
+/// Evaluates `$fixed` with the constant `$N` equal to `$n` when `1 ≤ n ≤ 8`, else `$general`. Eight covers
+/// every built-in closed-loop scene; the `chainN` benchmarks take `ltl`'s tree-sparse path.
+macro_rules! by_size {
+    ($n:expr, $N:ident => $fixed:expr, _ => $general:expr) => {
+        by_size!(@arms $n, $N, $fixed, $general, [1 2 3 4 5 6 7 8])
+    };
+    (@arms $n:expr, $N:ident, $fixed:expr, $general:expr, [$($size:literal)*]) => {
+        match $n {
+            $($size => {
+                const $N: usize = $size;
+                $fixed
+            })*
+            _ => $general,
+        }
+    };
 }
+pub(crate) use by_size;
 
 /// `Σ a_i b_i` over the common length, in eight interleaved partial sums: a serial sum is one long chain of
 /// dependent additions (Rust keeps the written order of floating-point operations), this vectorizes. Short
@@ -367,7 +369,7 @@ pub fn solve_lower_t(l: &DMatrix<f64>, x: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::TestRng;
+    use crate::rng::TestRng;
 
     /// The written-out 2x2 pivoted factorization and solve give the general loops' bits: rank, order, factor,
     /// reciprocals and solutions, on random positive-definite, nearly and exactly singular, indefinite and non-finite

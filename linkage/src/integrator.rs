@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 
 use crate::data::Data;
-use crate::dense::{self, dot, sub_scaled};
+use crate::dense::{self, by_size, dot, sub_scaled};
 use crate::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::error::DynamicsError;
 use crate::kinematics::forward_poses;
@@ -12,7 +12,6 @@ use crate::kkt;
 use crate::kkt_small;
 use crate::loop_closure::closure_residual_and_jacobian;
 use crate::ltl;
-use crate::ltl_small::by_size;
 use crate::model::Model;
 use crate::space::Space;
 
@@ -392,7 +391,8 @@ pub(crate) fn correct_general<S: Space>(
 mod tests {
     use super::*;
     use crate::dynamics::forward_dynamics;
-    use crate::testing::paper_testbed;
+    use crate::kkt::{solve_general, z_and_schur_general};
+    use crate::testing::{for_each_model, paper_testbed, random_state};
 
     /// `(‖h(q)‖, ‖W(q) q̇‖)` evaluated afresh.
     fn residuals(model: &Model<crate::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
@@ -527,5 +527,52 @@ mod tests {
             assert!(h_after <= tolerance, "speed {speed}: left {h_after:.2e} m after {projection:?}");
         }
         assert!(one_pass_left_too_much, "the fastest case should need the further passes");
+    }
+
+    /// On every test scene of at most 8 joints with loops (redundant ones included), the fixed-size kernels
+    /// give the general forms' Z, S, q̈, λ and chord corrections bit for bit, at random states; one of the
+    /// scenes has more than 8 joints and takes the general form either way.
+    #[test]
+    fn fixed_size_kernels_give_the_general_forms_bits() {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut compared = 0;
+        for_each_model!(name, model => {
+            if model.nq() <= 8 && model.nc() > 0 {
+                for seed in 0..5 {
+                    let (q, qd) = random_state(model, seed);
+                    let mut small = Data::new(model);
+                    dynamics_terms(model, &mut small, &q, &qd, &mut ());
+                    kkt::factorize(model, &mut small).unwrap();
+                    let mut general = small.clone();
+                    general.kkt.z.fill(f64::NAN);
+                    general.kkt.schur.fill(f64::NAN);
+                    z_and_schur_general(model, &mut general);
+                    let case = format!("{name}, seed {seed}");
+                    assert_eq!(bits(small.kkt.z.as_slice()), bits(general.kkt.z.as_slice()), "{case}: Z");
+                    assert_eq!(bits(small.kkt.schur.as_slice()), bits(general.kkt.schur.as_slice()), "{case}: S");
+                    kkt::solve(model, &mut small).unwrap();
+                    solve_general(model, &mut general);
+                    assert_eq!(bits(small.qdd.as_slice()), bits(general.qdd.as_slice()), "{case}: q̈");
+                    assert_eq!(bits(small.lambda.as_slice()), bits(general.lambda.as_slice()), "{case}: λ");
+                    // A chord correction at a configuration off the manifold, with the factors above.
+                    let off = q.map(|x| x + 1e-4);
+                    forward_poses(model, &mut small, &off);
+                    closure_residual_and_jacobian(model, &mut small);
+                    let mut general = small.clone();
+                    let r_q = small.closure_residual.clone();
+                    let r_v = DVector::from_fn(model.nc(), |i, _| 1e-3 * (i as f64 + 1.0));
+                    let mut a = (r_q.clone(), r_v.clone(), off.clone(), qd.clone());
+                    let mut b = (r_q, r_v, off.clone(), qd.clone());
+                    correct(model, &mut small, &mut a.0, &mut a.1, &mut a.2, &mut a.3);
+                    correct_general(model, &mut general, &mut b.0, &mut b.1, &mut b.2, &mut b.3);
+                    for (what, x, y) in [("r_q", &a.0, &b.0), ("r_v", &a.1, &b.1), ("q", &a.2, &b.2), ("q̇", &a.3, &b.3)] {
+                        assert_eq!(bits(x.as_slice()), bits(y.as_slice()), "{case}: corrected {what}");
+                    }
+                    assert_ne!(a.2, off, "{case}: the correction should move q");
+                    compared += 1;
+                }
+            }
+        });
+        assert!(compared >= 5 * 6, "only {compared} cases compared");
     }
 }

@@ -23,11 +23,10 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::articulated;
 use crate::data::Data;
-use crate::dense::{self, dot, dot_fixed, mul_add, sub_scaled};
+use crate::dense::{self, by_size, dot, dot_fixed, mul_add, sub_scaled};
 use crate::error::DynamicsError;
 use crate::kkt_small;
 use crate::ltl;
-use crate::ltl_small::by_size;
 use crate::mass_matrix;
 use crate::model::Model;
 use crate::space::Space;

@@ -1,6 +1,6 @@
 //! The loop-closure part of the KKT solve of eq 4 (`Z = U⁻¹ Wᵀ`, `S = Zᵀ Z`, then q̈ and λ) and the
 //! projection's chord correction, for models of at most 8 joints, with n a constant
-//! ([`by_size`](crate::ltl_small)). `kkt` and `integrator` dispatch here; nothing else calls these.
+//! ([`by_size`](crate::dense)). `kkt` and `integrator` dispatch here; nothing else calls these.
 //!
 //! **Why.** On the paper's testbed (n = 4, m = 2) these three do about 150 floating-point operations a
 //! step, but their general forms (`kkt::z_and_schur_general`, `kkt::solve_general`,
@@ -10,10 +10,11 @@
 //! arrays held in registers; only m, the closure rows, is still a loop bound.
 //!
 //! **Same results.** The same operations in the same order as the general forms, which for n ≤ 8 also
-//! take whole columns (`ltl_small`, `dense::dot_fixed`); a test compares the two on every test scene.
+//! take whole columns (`ltl_small`, `dense::dot_fixed`); a test in `integrator` (the top of the stack that
+//! dispatches here) compares the two on every test scene.
 
-use crate::data::KktWorkspace;
 use crate::dense::{self, dot, dot_fixed, mul_add};
+use crate::kkt_factors::KktWorkspace;
 use crate::ltl_small::{self, column};
 
 /// `x ← x - Σ_c r_c a_c` over the columns of `a` (Z), in column order.
@@ -98,64 +99,5 @@ pub(crate) fn correct<const N: usize>(
         for (c, r) in r.iter_mut().enumerate() {
             *r += dot(column::<N>(wt, c), &t);
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use crate::data::Data;
-    use crate::dynamics::dynamics_terms;
-    use crate::integrator::{correct, correct_general};
-    use crate::kinematics::forward_poses;
-    use crate::kkt::{self, solve_general, z_and_schur_general};
-    use crate::loop_closure::closure_residual_and_jacobian;
-    use crate::testing::{for_each_model, random_state};
-    use nalgebra::DVector;
-
-    /// On every test scene of at most 8 joints with loops (redundant ones included), the fixed-size kernels
-    /// give the general forms' Z, S, q̈, λ and chord corrections bit for bit, at random states; one of the
-    /// scenes has more than 8 joints and takes the general form either way.
-    #[test]
-    fn fixed_size_kernels_give_the_general_forms_bits() {
-        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        let mut compared = 0;
-        for_each_model!(name, model => {
-            if model.nq() <= 8 && model.nc() > 0 {
-                for seed in 0..5 {
-                    let (q, qd) = random_state(model, seed);
-                    let mut small = Data::new(model);
-                    dynamics_terms(model, &mut small, &q, &qd, &mut ());
-                    kkt::factorize(model, &mut small).unwrap();
-                    let mut general = small.clone();
-                    general.kkt.z.fill(f64::NAN);
-                    general.kkt.schur.fill(f64::NAN);
-                    z_and_schur_general(model, &mut general);
-                    let case = format!("{name}, seed {seed}");
-                    assert_eq!(bits(small.kkt.z.as_slice()), bits(general.kkt.z.as_slice()), "{case}: Z");
-                    assert_eq!(bits(small.kkt.schur.as_slice()), bits(general.kkt.schur.as_slice()), "{case}: S");
-                    kkt::solve(model, &mut small).unwrap();
-                    solve_general(model, &mut general);
-                    assert_eq!(bits(small.qdd.as_slice()), bits(general.qdd.as_slice()), "{case}: q̈");
-                    assert_eq!(bits(small.lambda.as_slice()), bits(general.lambda.as_slice()), "{case}: λ");
-                    // A chord correction at a configuration off the manifold, with the factors above.
-                    let off = q.map(|x| x + 1e-4);
-                    forward_poses(model, &mut small, &off);
-                    closure_residual_and_jacobian(model, &mut small);
-                    let mut general = small.clone();
-                    let r_q = small.closure_residual.clone();
-                    let r_v = DVector::from_fn(model.nc(), |i, _| 1e-3 * (i as f64 + 1.0));
-                    let mut a = (r_q.clone(), r_v.clone(), off.clone(), qd.clone());
-                    let mut b = (r_q, r_v, off.clone(), qd.clone());
-                    correct(model, &mut small, &mut a.0, &mut a.1, &mut a.2, &mut a.3);
-                    correct_general(model, &mut general, &mut b.0, &mut b.1, &mut b.2, &mut b.3);
-                    for (what, x, y) in [("r_q", &a.0, &b.0), ("r_v", &a.1, &b.1), ("q", &a.2, &b.2), ("q̇", &a.3, &b.3)] {
-                        assert_eq!(bits(x.as_slice()), bits(y.as_slice()), "{case}: corrected {what}");
-                    }
-                    assert_ne!(a.2, off, "{case}: the correction should move q");
-                    compared += 1;
-                }
-            }
-        });
-        assert!(compared >= 5 * 6, "only {compared} cases compared");
     }
 }

@@ -38,6 +38,7 @@ pub mod assemble;
 pub mod bench;
 pub mod bias;
 pub mod builtin;
+mod compile;
 pub mod constraint_directions;
 pub mod contact;
 pub mod data;
@@ -51,6 +52,7 @@ pub mod jacobian;
 pub mod joint_forces;
 pub mod kinematics;
 pub mod kkt;
+mod kkt_factors;
 mod kkt_small;
 pub mod local_model;
 pub mod loop_closure;
@@ -59,9 +61,12 @@ mod ltl_small;
 pub mod mass_matrix;
 pub mod model;
 pub mod op_space;
+#[doc(hidden)]
+pub mod rng;
 pub mod scene;
 mod simd;
 pub mod space;
+mod tree;
 pub mod trig;
 
 /// Test fixtures shared by the unit tests and the integration tests (not part of the API).

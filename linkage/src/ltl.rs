@@ -16,9 +16,9 @@
 
 use nalgebra::DMatrix;
 
-use crate::dense::{dot, mul_add, sub_scaled};
+use crate::dense::{by_size, dot, mul_add, sub_scaled};
 use crate::error::DynamicsError;
-use crate::ltl_small::{self, by_size};
+use crate::ltl_small::{self, finish_contiguous, finish_pivot};
 use crate::model::{Model, NO_PARENT};
 use crate::simd::F64x4;
 use crate::space::Space;
@@ -112,31 +112,6 @@ fn factor_columns<S: Space>(
         }
     }
     Ok(())
-}
-
-/// `U_kk = sqrt(pivot)` into place, failing on a pivot that is not positive; returns `1/U_kk`, computed as
-/// `sqrt(p) · (1/p)`: the square root and the division run side by side instead of one after the other
-/// (the factorization is a chain of such pivots), with the same two roundings as `1/sqrt(p)`. A pivot below
-/// 1/f64::MAX (~5.6e-309) gives an infinite reciprocal, which the solves report as a non-finite result.
-#[inline]
-fn finish_pivot(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
-    let pivot = col[k];
-    if pivot.is_nan() || pivot <= 0.0 {
-        return Err(DynamicsError::MassNotPositive { joint: k, pivot });
-    }
-    let ukk = pivot.sqrt();
-    col[k] = ukk;
-    Ok(ukk * (1.0 / pivot))
-}
-
-/// Pivot and scaling of a column with contiguous rows `0..=k`; returns `1/U_kk`.
-#[inline]
-pub(crate) fn finish_contiguous(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
-    let inv = finish_pivot(col, k)?;
-    for x in &mut col[..k] {
-        *x *= inv;
-    }
-    Ok(inv)
 }
 
 /// `col_k[0..=k] -= Σ_j U_kj U_{0..=k, j}` and `col_p[0..k] -= Σ_j U_{k-1,j} U_{0..k, j}` over the finished

@@ -1,5 +1,5 @@
 //! `ltl`'s factorization `D = U Uᵀ` and its triangular solves for models of at most 8 joints, on
-//! fixed-size arrays. `ltl`'s public functions dispatch here by n ([`by_size`]); nothing else calls these.
+//! fixed-size arrays. `ltl`'s public functions dispatch here by n ([`by_size`](crate::dense)); nothing else calls these.
 //!
 //! **Why.** The tree-sparse loops of `ltl` pay, per row, for what a small matrix does not need: walking the
 //! parent array off the chain prefix, blocks of 16/8/4/2/1 rows, bounds checks on run-time lengths. With n a
@@ -17,25 +17,31 @@
 
 use crate::dense::mul_add;
 use crate::error::DynamicsError;
-use crate::ltl::finish_contiguous;
 
-/// Evaluates `$fixed` with the constant `$N` equal to `$n` when `1 ≤ n ≤ 8`, else `$general`. Eight covers
-/// every built-in closed-loop scene; the `chainN` benchmarks take `ltl`'s tree-sparse path.
-macro_rules! by_size {
-    ($n:expr, $N:ident => $fixed:expr, _ => $general:expr) => {
-        by_size!(@arms $n, $N, $fixed, $general, [1 2 3 4 5 6 7 8])
-    };
-    (@arms $n:expr, $N:ident, $fixed:expr, $general:expr, [$($size:literal)*]) => {
-        match $n {
-            $($size => {
-                const $N: usize = $size;
-                $fixed
-            })*
-            _ => $general,
-        }
-    };
+/// `U_kk = sqrt(pivot)` into place, failing on a pivot that is not positive; returns `1/U_kk`, computed as
+/// `sqrt(p) · (1/p)`: the square root and the division run side by side instead of one after the other
+/// (the factorization is a chain of such pivots), with the same two roundings as `1/sqrt(p)`. A pivot below
+/// 1/f64::MAX (~5.6e-309) gives an infinite reciprocal, which the solves report as a non-finite result.
+#[inline]
+pub(crate) fn finish_pivot(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
+    let pivot = col[k];
+    if pivot.is_nan() || pivot <= 0.0 {
+        return Err(DynamicsError::MassNotPositive { joint: k, pivot });
+    }
+    let ukk = pivot.sqrt();
+    col[k] = ukk;
+    Ok(ukk * (1.0 / pivot))
 }
-pub(crate) use by_size;
+
+/// Pivot and scaling of a column with contiguous rows `0..=k`; returns `1/U_kk`.
+#[inline]
+pub(crate) fn finish_contiguous(col: &mut [f64], k: usize) -> Result<f64, DynamicsError> {
+    let inv = finish_pivot(col, k)?;
+    for x in &mut col[..k] {
+        *x *= inv;
+    }
+    Ok(inv)
+}
 
 /// Column k of a column-major matrix of N rows (N×N here, N×m in `kkt_small`).
 #[inline(always)]
@@ -51,7 +57,7 @@ fn columns_mut<const N: usize>(x: &mut [f64]) -> impl Iterator<Item = &mut [f64;
 
 /// `U Uᵀ = D + extra` (see `ltl::factor_sum`): reads the upper triangles of `d` and `extra`, writes the
 /// upper triangle of `u` and the reciprocals of U's diagonal. Column k, from the last: D's column k minus
-/// `Σ_{j>k} U_kj U_{·j}`, then the pivot and the scaling of `ltl::finish_contiguous`.
+/// `Σ_{j>k} U_kj U_{·j}`, then the pivot and the scaling of [`finish_contiguous`].
 pub(crate) fn factor_sum<const N: usize>(
     d: &[f64],
     extra: Option<&[f64]>,
@@ -113,6 +119,8 @@ pub(crate) fn solve_ut_columns<const N: usize>(u: &[f64], inv: &[f64], x: &mut [
 
 #[cfg(test)]
 mod tests {
+    use crate::dense::by_size;
+
     /// The fixed-size kernels serve exactly 1 to 8 joints, each with its own N.
     #[test]
     fn by_size_gives_n_itself_up_to_eight() {

@@ -4,10 +4,11 @@
 //! spatial inertias and `D_ji = S_jᵀ I^c_i S_i` for each joint j supporting body i: no transforms at all.
 
 use crate::data::Data;
+use crate::dense::by_size;
 use crate::jacobian::support;
-use crate::ltl_small::by_size;
-use crate::model::{subtree_sums, Model};
+use crate::model::Model;
 use crate::space::{Space, VecOps};
+use crate::tree::subtree_sums;
 
 /// Fills `data.mass_matrix` unless it already belongs to the current kinematics. Needs `forward_kinematics`.
 pub fn ensure<S: Space>(model: &Model<S>, data: &mut Data<S>) {

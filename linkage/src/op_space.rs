@@ -19,11 +19,10 @@
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
 
 use crate::data::Data;
-use crate::dense::{dot, dot_fixed, mul_add};
+use crate::dense::{by_size, dot, dot_fixed, mul_add};
 use crate::error::DynamicsError;
 use crate::jacobian::{frame_bias_acceleration, frame_jacobian_t};
 use crate::ltl;
-use crate::ltl_small::by_size;
 use crate::model::Model;
 use crate::space::{MatOps, Space};
 

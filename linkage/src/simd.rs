@@ -1,4 +1,5 @@
-//! Four-lane `f64` vectors for the dense kernels of `ltl` and `dense`.
+//! Four-lane `f64` vectors for the dense kernels of `ltl` and `dense`, and the scalar fused multiply-add
+//! ([`mul_add`]) that they and every other kernel use.
 //!
 //! Why not plain loops: LLVM's loop vectorizer turns a loop into a wide main loop (16 lanes here) plus a
 //! scalar epilogue, and the rows our kernels sweep are mostly shorter than that (a chain of 50 bodies
@@ -76,7 +77,7 @@ mod imp {
 
 #[cfg(not(all(target_arch = "x86_64", target_feature = "avx", target_feature = "fma")))]
 mod imp {
-    use crate::dense::mul_add;
+    use super::mul_add;
 
     /// Four `f64` lanes.
     #[derive(Clone, Copy, Debug)]
@@ -127,6 +128,22 @@ mod imp {
 }
 
 pub use imp::F64x4;
+
+/// `a * b + c`: one fused instruction with one rounding where the target has FMA (x86-64-v3, as this
+/// workspace builds, and every aarch64). Without FMA hardware `f64::mul_add` becomes a libm call that is
+/// far slower than the rounding it saves, so it falls back to the unfused form. Rust never contracts
+/// `a * b + c` by itself, hence this helper in every kernel.
+#[inline(always)]
+pub fn mul_add(a: f64, b: f64, c: f64) -> f64 {
+    #[cfg(target_feature = "fma")]
+    {
+        a.mul_add(b, c)
+    }
+    #[cfg(not(target_feature = "fma"))]
+    {
+        a * b + c
+    }
+}
 
 #[cfg(test)]
 mod tests {
