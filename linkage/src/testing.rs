@@ -4,10 +4,10 @@
 
 use nalgebra::DVector;
 
-use crate::builtin;
+pub use crate::math::rng::{TestRng, ODD_NUMBERS};
+use crate::math::space::{Planar, Space, Spatial};
+use crate::model::builtin;
 use crate::model::Model;
-pub use crate::rng::{TestRng, ODD_NUMBERS};
-use crate::space::{Planar, Space, Spatial};
 
 /// A built-in scene file, parsed (panics if it is missing or broken: tests only).
 pub fn builtin_scene(name: &str) -> crate::Scene {

@@ -1,10 +1,10 @@
 //! B(q, q̇), the Coriolis and centripetal generalized forces of eq 1, by the recursive Newton-Euler
 //! algorithm in the world frame with q̈ = 0 and no gravity.
 
-use crate::data::Data;
+use crate::algorithms::tree::subtree_sums;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::{Space, VecOps};
-use crate::tree::subtree_sums;
 
 /// Fills `data.bias`. Needs `forward_kinematics` and `forward_velocity`.
 pub fn bias_forces<S: Space>(model: &Model<S>, data: &mut Data<S>) {

@@ -3,8 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
-pub use crate::simd::mul_add;
-use crate::simd::F64x4;
+pub use crate::math::simd::mul_add;
+use crate::math::simd::F64x4;
 
 /// Evaluates `$fixed` with the constant `$N` equal to `$n` when `1 ≤ n ≤ 8`, else `$general`. Eight covers
 /// every built-in closed-loop scene; the `chainN` benchmarks take `ltl`'s tree-sparse path.
@@ -369,7 +369,7 @@ pub fn solve_lower_t(l: &DMatrix<f64>, x: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::TestRng;
+    use crate::math::rng::TestRng;
 
     /// The written-out 2x2 pivoted factorization and solve give the general loops' bits: rank, order, factor,
     /// reciprocals and solutions, on random positive-definite, nearly and exactly singular, indefinite and non-finite

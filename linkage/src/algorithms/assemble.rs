@@ -5,11 +5,11 @@
 use nalgebra::DVector;
 use thiserror::Error;
 
-use crate::data::Data;
-use crate::kinematics::{forward_kinematics, forward_velocity};
-use crate::loop_closure::loop_closure;
+use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use crate::algorithms::loop_closure::loop_closure;
+use crate::math::space::Space;
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::Space;
 
 /// Result of an assembly.
 #[derive(Clone, Debug, PartialEq)]

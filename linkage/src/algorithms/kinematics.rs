@@ -3,10 +3,10 @@
 
 use nalgebra::DVector;
 
-use crate::data::Data;
+use crate::algorithms::tree::follows_parent;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
 use crate::model::{JointKind, Model, NO_PARENT};
-use crate::space::{Space, VecOps};
-use crate::tree::follows_parent;
 
 /// Computes body poses, the motion subspace S_i of every joint and every body's spatial inertia, all in the
 /// world frame, at configuration `q`.

@@ -2,9 +2,9 @@
 
 use nalgebra::DMatrix;
 
-use crate::data::Kinematics;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Kinematics;
 use crate::model::{Model, NO_PARENT};
-use crate::space::{Space, VecOps};
 
 /// The joints that move `body`: the body's own joint and its ancestors', from the body down to the root.
 pub fn support<S: Space>(model: &Model<S>, body: Option<usize>) -> Support<'_, S> {
@@ -98,8 +98,8 @@ pub fn apply_wrench<S: Space>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::Data;
-    use crate::kinematics::{forward_kinematics, forward_velocity};
+    use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+    use crate::model::data::Data;
     use crate::testing::{for_each_model, random_state};
     use nalgebra::DVector;
 

@@ -10,7 +10,7 @@
 //!
 //! **Gram form.** We build Q (from Z and the factor, no new factorization), compute `Ỹ = Y - Q (Qᵀ Y)` and
 //! take `Λ⁻¹ = Ỹᵀ Ỹ`, not the shorter `Yᵀ Y - Gᵀ G` with `G = Qᵀ Y = R⁻¹ (Zᵀ Y)_r`: near a configuration
-//! where the closures lose rank, a kept row can have a relative pivot near [`crate::kkt::RANK_TOLERANCE`],
+//! where the closures lose rank, a kept row can have a relative pivot near [`crate::algorithms::kkt::RANK_TOLERANCE`],
 //! R a condition number up to 1e5, and the difference of two large Gram matrices lost its small eigenvalues
 //! to round-off: random linkages built at such a configuration gave an eigenvalue of -1.7e-6 (not positive
 //! semi-definite, so not an inverse inertia).
@@ -18,13 +18,13 @@
 //! the small columns of Ỹ rather than from a cancellation.
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
 
-use crate::data::Data;
-use crate::dense::{by_size, dot, dot_fixed, mul_add};
+use crate::algorithms::jacobian::{frame_bias_acceleration, frame_jacobian_t};
+use crate::algorithms::ltl;
 use crate::error::DynamicsError;
-use crate::jacobian::{frame_bias_acceleration, frame_jacobian_t};
-use crate::ltl;
+use crate::math::dense::{by_size, dot, dot_fixed, mul_add};
+use crate::math::space::{MatOps, Space};
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::{MatOps, Space};
 
 /// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ and Λ⁻¹ with the loops closed (the open one
 /// on demand: [`open_inverse_inertia`], which the snapshots do not need). Needs

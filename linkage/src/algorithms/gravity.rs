@@ -2,10 +2,10 @@
 
 use nalgebra::DVector;
 
-use crate::data::Data;
+use crate::algorithms::tree::subtree_sums;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::{Space, VecOps};
-use crate::tree::subtree_sums;
 
 /// Fills `data.gravity` with G(q) (so that `D q̈ + B + G = τ`). Needs `forward_kinematics`.
 pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {

@@ -6,10 +6,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-pub use crate::kkt_factors::KktWorkspace;
+pub use crate::math::kkt_factors::KktWorkspace;
+use crate::math::space::{MatOps, Space, VecOps};
+use crate::math::trig::AnchoredSinCos;
 use crate::model::{Attachment, Model};
-use crate::space::{MatOps, Space, VecOps};
-use crate::trig::AnchoredSinCos;
 
 /// Body poses, motion subspaces and velocities in the world frame.
 #[derive(Clone, Debug)]
@@ -210,8 +210,8 @@ impl TermsMemo {
 
     /// Records that the terms now belong to `(q, q̇)`.
     pub(crate) fn record(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
-        crate::dense::copy(self.q.as_mut_slice(), q.as_slice());
-        crate::dense::copy(self.qd.as_mut_slice(), qd.as_slice());
+        crate::math::dense::copy(self.q.as_mut_slice(), q.as_slice());
+        crate::math::dense::copy(self.qd.as_mut_slice(), qd.as_slice());
         self.valid = true;
     }
 

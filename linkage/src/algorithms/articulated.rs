@@ -18,16 +18,16 @@
 //! `O(Σ_k depth_k²)` more. Here the factorization *is* the dot products, plus one `DIM×DIM` update per body:
 //! on `chain50_loops5` D and its factorization took 55k instructions a step, this takes 14k; on the testbed
 //! (n = 4, where `ltl_small` factors D in straight-line code) 820 against 600 (callgrind). D itself is then
-//! computed only where it is read ([`crate::mass_matrix::ensure`], called by
-//! [`crate::local_model::ConfigSpaceTerms::fill_from`]), for `implicit_mass`, which is added to D, and for
+//! computed only where it is read ([`crate::algorithms::mass_matrix::ensure`], called by
+//! [`crate::algorithms::local_model::ConfigSpaceTerms::fill_from`]), for `implicit_mass`, which is added to D, and for
 //! callers that set `Data::keep_mass_matrix`.
 
-use crate::data::Data;
+use crate::algorithms::jacobian::support;
+use crate::algorithms::tree::follows_parent;
 use crate::error::DynamicsError;
-use crate::jacobian::support;
+use crate::math::space::{MatOps, Space, VecOps};
+use crate::model::data::Data;
 use crate::model::{Model, NO_PARENT};
-use crate::space::{MatOps, Space, VecOps};
-use crate::tree::follows_parent;
 
 /// Fills `data.kkt.factor` (upper triangle: U) and `data.kkt.factor_inv_diag` (`1/U_kk`) for D(q).
 /// Needs `forward_kinematics` (body inertias and motion subspaces). Errors when a pivot is not positive
@@ -102,8 +102,8 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::forward_kinematics;
-    use crate::mass_matrix::mass_matrix;
+    use crate::algorithms::kinematics::forward_kinematics;
+    use crate::algorithms::mass_matrix::mass_matrix;
     use crate::testing::{for_each_model, random_state};
 
     /// U Uᵀ reproduces D from `mass_matrix`, U equals `ltl`'s factor of that D to round-off with the same
@@ -119,7 +119,7 @@ mod tests {
                 mass_matrix(model, &mut data);
                 let d = data.mass_matrix.clone();
                 let mut ltl_u = d.clone();
-                crate::ltl::factor(model, &mut ltl_u).unwrap();
+                crate::algorithms::ltl::factor(model, &mut ltl_u).unwrap();
                 data.kkt.factor.fill(f64::NAN);
                 factor(model, &mut data).unwrap();
                 let u = data.kkt.factor.upper_triangle();

@@ -1,8 +1,8 @@
 //! What the recursive algorithms (kinematics, D, B, G, the articulated factor) share about walking the
 //! tree: a parent handed on in registers, and the backward pass that turns per-body terms into subtree sums.
 
+use crate::math::space::Space;
 use crate::model::{Model, NO_PARENT};
-use crate::space::Space;
 
 /// True when joint i's parent is joint i - 1 (every link of a chain; the first child of a branch). The
 /// recursions hand such a parent's or child's values on in registers: read back from memory just after

@@ -7,8 +7,8 @@
 //! `SymmetricEigen` in the tests). A planar OP needs the 3x3 one per snapshot, so its cost is a chain of
 //! dependent square roots and divisions: the closed form is written to keep that chain short.
 
-use crate::dense::mul_add;
-use crate::space::{MatOps, Space, VecOps};
+use crate::math::dense::mul_add;
+use crate::math::space::{MatOps, Space, VecOps};
 
 /// `(t, c, s)` of the Jacobi rotation that zeroes `a_pq` given `d = a_qq - a_pp`: `t = tan φ` is the smaller
 /// root of `t² + 2θt - 1 = 0` with `θ = d / (2 a_pq)` (Golub & Van Loan, Matrix Computations, §8.5.2), and
@@ -368,7 +368,7 @@ fn jacobi<const N: usize>(mut a: [[f64; N]; N], mut v: [[f64; N]; N], values: &m
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Planar, Spatial};
+    use crate::math::space::{Planar, Spatial};
     use nalgebra::{Matrix3, Matrix6};
 
     /// The three regimes of `rotation` agree with the textbook formula to round-off, and zero a_pq.

@@ -5,17 +5,19 @@
 
 use nalgebra::DVector;
 
-use crate::assemble::assemble;
-use crate::data::Data;
+use crate::algorithms::assemble::assemble;
+use crate::algorithms::kinematics::forward_kinematics;
+use crate::algorithms::loop_closure::closure_residual_and_jacobian;
 use crate::error::SceneError;
-use crate::kinematics::forward_kinematics;
-use crate::loop_closure::closure_residual_and_jacobian;
+use crate::math::space::{SceneKind, Space, VecOps};
+use crate::model::data::Data;
+use crate::model::scene::{
+    Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND,
+};
 use crate::model::{
     Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, Spring,
     NO_PARENT,
 };
-use crate::scene::{Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND};
-use crate::space::{SceneKind, Space, VecOps};
 
 impl<S: Space> Model<S> {
     /// Validates and compiles a scene; `file` names the source in errors.

@@ -1,5 +1,8 @@
-//! The immutable [`Model`]: a scene compiled once (by [`Model::compile`], in `compile`) into the arrays the
-//! algorithms read.
+//! The multibody model: what a linkage is, apart from anything computed on it. The scene file as written
+//! ([`scene`]) and the built-in scenes ([`builtin`]); the immutable [`Model`], a scene compiled once (by
+//! [`Model::compile`], in `algorithms::compile`, since compiling needs the algorithms) into the arrays the
+//! algorithms read; and the [`Data`](data::Data) workspace they write. This layer uses only `math` (and
+//! `error`).
 //!
 //! Bodies are stored in topological order (every parent before its children); body `i` is moved by tree
 //! joint `i`, so `q[i]` is the position of the joint that carries body `i`. The order follows the file's
@@ -7,8 +10,12 @@
 
 use nalgebra::DVector;
 
-use crate::scene::{Baumgarte, ContactParams, CutKindSpec};
-use crate::space::{SceneKind, Space, VecOps};
+pub mod builtin;
+pub mod data;
+pub mod scene;
+
+use crate::math::space::{SceneKind, Space, VecOps};
+use crate::model::scene::{Baumgarte, ContactParams, CutKindSpec};
 
 /// Marks "no parent" (the body hangs from ground).
 pub const NO_PARENT: usize = usize::MAX;

@@ -13,12 +13,12 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::data::Data;
-use crate::dense;
-use crate::jacobian::frame_velocity;
-use crate::kkt::RANK_TOLERANCE;
+use crate::algorithms::jacobian::frame_velocity;
+use crate::algorithms::kkt::RANK_TOLERANCE;
+use crate::math::dense;
+use crate::math::space::{MatOps, Space, VecOps};
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::{MatOps, Space, VecOps};
 
 /// Which frozen terms the local model keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -300,7 +300,7 @@ impl ConfigSpaceTerms {
     ) {
         self.q.copy_from(q);
         self.qd.copy_from(qd);
-        crate::mass_matrix::ensure(model, data);
+        crate::algorithms::mass_matrix::ensure(model, data);
         self.mass_matrix.copy_from(&data.mass_matrix);
         data.closure_jacobian_t.transpose_to(&mut self.closure_jacobian);
         data.op.jacobian_t.transpose_to(&mut self.op_jacobian);

@@ -19,7 +19,7 @@ use std::ops::{Add, AddAssign, Index, IndexMut, Mul, Neg, Sub, SubAssign};
 
 use nalgebra::{Matrix3, Matrix6, Rotation3, UnitComplex, Vector2, Vector3, Vector6};
 
-use crate::trig;
+use crate::math::trig;
 
 /// Which kind of space a scene lives in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]

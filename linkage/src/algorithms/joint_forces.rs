@@ -3,9 +3,9 @@
 
 use nalgebra::DVector;
 
-use crate::data::Data;
+use crate::math::space::Space;
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::Space;
 
 /// Fills `data.joint_force` with `-b q̇ + clamp(kp (target - q) - kd q̇)` for every joint.
 pub fn joint_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>, qd: &DVector<f64>) {

@@ -3,11 +3,11 @@
 
 use nalgebra::DVector;
 
-use crate::data::Kinematics;
-use crate::dynamics::Forces;
-use crate::jacobian::apply_wrench;
+use crate::algorithms::dynamics::Forces;
+use crate::algorithms::jacobian::apply_wrench;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Kinematics;
 use crate::model::{Model, Obstacle, Shape};
-use crate::space::{Space, VecOps};
 
 /// A contact (or near-contact) between one body's geometry and one obstacle.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -21,15 +21,15 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::articulated;
-use crate::data::Data;
-use crate::dense::{self, by_size, dot, dot_fixed, mul_add, sub_scaled};
+use crate::algorithms::articulated;
+use crate::algorithms::ltl;
+use crate::algorithms::mass_matrix;
 use crate::error::DynamicsError;
-use crate::kkt_small;
-use crate::ltl;
-use crate::mass_matrix;
+use crate::math::dense::{self, by_size, dot, dot_fixed, mul_add, sub_scaled};
+use crate::math::kkt_small;
+use crate::math::space::Space;
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::Space;
 
 /// A closure row is dependent when its remaining pivot is below this fraction of its own `S_ii`
 /// (relative pivot 1e-10 ↔ about 1e-5 rad between constraint normals).

@@ -1,6 +1,6 @@
 //! The loop-closure part of the KKT solve of eq 4 (`Z = U⁻¹ Wᵀ`, `S = Zᵀ Z`, then q̈ and λ) and the
 //! projection's chord correction, for models of at most 8 joints, with n a constant
-//! ([`by_size`](crate::dense)). `kkt` and `integrator` dispatch here; nothing else calls these.
+//! ([`by_size`](crate::math::dense)). `kkt` and `integrator` dispatch here; nothing else calls these.
 //!
 //! **Why.** On the paper's testbed (n = 4, m = 2) these three do about 150 floating-point operations a
 //! step, but their general forms (`kkt::z_and_schur_general`, `kkt::solve_general`,
@@ -13,9 +13,9 @@
 //! take whole columns (`ltl_small`, `dense::dot_fixed`); a test in `integrator` (the top of the stack that
 //! dispatches here) compares the two on every test scene.
 
-use crate::dense::{self, dot, dot_fixed, mul_add};
-use crate::kkt_factors::KktWorkspace;
-use crate::ltl_small::{self, column};
+use crate::math::dense::{self, dot, dot_fixed, mul_add};
+use crate::math::kkt_factors::KktWorkspace;
+use crate::math::ltl_small::{self, column};
 
 /// `x ← x - Σ_c r_c a_c` over the columns of `a` (Z), in column order.
 #[inline(always)]

@@ -6,11 +6,11 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::data::{Data, Kinematics};
-use crate::dense::{dot, mul_add};
-use crate::jacobian::{point_column, support};
+use crate::algorithms::jacobian::{point_column, support};
+use crate::math::dense::{dot, mul_add};
+use crate::math::space::{Space, VecOps};
+use crate::model::data::{Data, Kinematics};
 use crate::model::{Attachment, ClosurePrimitive, Model};
-use crate::space::{Space, VecOps};
 
 /// Fills `closure_residual` (h), `closure_jacobian_t` (Wᵀ) and `closure_bias` (w). Needs
 /// `forward_kinematics` and `forward_velocity`.
@@ -45,7 +45,7 @@ fn evaluate<S: Space>(model: &Model<S>, data: &mut Data<S>, outputs: Outputs) {
     let h = &mut data.closure_residual;
     let w = &mut data.closure_bias;
     if outputs != Outputs::Residual {
-        crate::dense::zero(wt.as_mut_slice());
+        crate::math::dense::zero(wt.as_mut_slice());
     }
     for cut in &model.cuts {
         let mut row = cut.row;
@@ -274,7 +274,7 @@ fn same_angle<S: Space>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::{forward_kinematics, forward_velocity};
+    use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
     use crate::testing::{for_each_model, random_state};
 
     /// W is the derivative of h (central differences along random directions) and w = Ẇ q̇ the derivative

@@ -3,12 +3,12 @@
 //! With every quantity at the world origin, a subtree's composite inertia is the plain sum of its bodies'
 //! spatial inertias and `D_ji = S_jᵀ I^c_i S_i` for each joint j supporting body i: no transforms at all.
 
-use crate::data::Data;
-use crate::dense::by_size;
-use crate::jacobian::support;
+use crate::algorithms::jacobian::support;
+use crate::algorithms::tree::subtree_sums;
+use crate::math::dense::by_size;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
 use crate::model::Model;
-use crate::space::{Space, VecOps};
-use crate::tree::subtree_sums;
 
 /// Fills `data.mass_matrix` unless it already belongs to the current kinematics. Needs `forward_kinematics`.
 pub fn ensure<S: Space>(model: &Model<S>, data: &mut Data<S>) {

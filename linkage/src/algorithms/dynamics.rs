@@ -3,18 +3,18 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::bias::bias_forces;
-use crate::data::{Data, Kinematics};
+use crate::algorithms::bias::bias_forces;
+use crate::algorithms::gravity::gravity_forces;
+use crate::algorithms::jacobian::apply_wrench;
+use crate::algorithms::joint_forces::joint_forces;
+use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use crate::algorithms::kkt;
+use crate::algorithms::loop_closure::{loop_closure, stabilize};
+use crate::algorithms::mass_matrix::mass_matrix;
 use crate::error::DynamicsError;
-use crate::gravity::gravity_forces;
-use crate::jacobian::apply_wrench;
-use crate::joint_forces::joint_forces;
-use crate::kinematics::{forward_kinematics, forward_velocity};
-use crate::kkt;
-use crate::loop_closure::{loop_closure, stabilize};
-use crate::mass_matrix::mass_matrix;
+use crate::math::space::Space;
+use crate::model::data::{Data, Kinematics};
 use crate::model::Model;
-use crate::space::Space;
 
 /// Generalized forces applied from outside the linkage (users, couplings, contacts). The integrators call
 /// it at every stage, with the stage's kinematics, so state-dependent forces are integrated consistently.
@@ -99,7 +99,7 @@ pub fn dynamics_terms<S: Space, F: Forces<S> + ?Sized>(
         stabilize(model, data, qd);
         data.terms_at.record(q, qd);
     }
-    crate::dense::zero(data.applied.as_mut_slice());
+    crate::math::dense::zero(data.applied.as_mut_slice());
     forces.add_forces(model, &data.kin, &mut data.applied);
 }
 

@@ -1,5 +1,5 @@
 //! `ltl`'s factorization `D = U Uᵀ` and its triangular solves for models of at most 8 joints, on
-//! fixed-size arrays. `ltl`'s public functions dispatch here by n ([`by_size`](crate::dense)); nothing else calls these.
+//! fixed-size arrays. `ltl`'s public functions dispatch here by n ([`by_size`](crate::math::dense)); nothing else calls these.
 //!
 //! **Why.** The tree-sparse loops of `ltl` pay, per row, for what a small matrix does not need: walking the
 //! parent array off the chain prefix, blocks of 16/8/4/2/1 rows, bounds checks on run-time lengths. With n a
@@ -15,8 +15,8 @@
 //! every product has an exact-zero factor. Likewise `U⁻¹ x` adds `U_ik x_k` to row i only from a nonzero
 //! `x_k`, so a column supported on the joints of one body keeps its zeros.
 
-use crate::dense::mul_add;
 use crate::error::DynamicsError;
+use crate::math::dense::mul_add;
 
 /// `U_kk = sqrt(pivot)` into place, failing on a pivot that is not positive; returns `1/U_kk`, computed as
 /// `sqrt(p) · (1/p)`: the square root and the division run side by side instead of one after the other
@@ -119,7 +119,7 @@ pub(crate) fn solve_ut_columns<const N: usize>(u: &[f64], inv: &[f64], x: &mut [
 
 #[cfg(test)]
 mod tests {
-    use crate::dense::by_size;
+    use crate::math::dense::by_size;
 
     /// The fixed-size kernels serve exactly 1 to 8 joints, each with its own N.
     #[test]

@@ -16,12 +16,12 @@
 
 use nalgebra::DMatrix;
 
-use crate::dense::{by_size, dot, mul_add, sub_scaled};
 use crate::error::DynamicsError;
-use crate::ltl_small::{self, finish_contiguous, finish_pivot};
+use crate::math::dense::{by_size, dot, mul_add, sub_scaled};
+use crate::math::ltl_small::{self, finish_contiguous, finish_pivot};
+use crate::math::simd::F64x4;
+use crate::math::space::Space;
 use crate::model::{Model, NO_PARENT};
-use crate::simd::F64x4;
-use crate::space::Space;
 
 /// Factors `u` in place: on entry its upper triangle holds D (as written by `mass_matrix`), on exit U.
 /// The strict lower triangle is neither read nor written.
@@ -448,8 +448,9 @@ fn dot4(u: &[&[f64]; 4], x: &[f64]) -> [f64; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::algorithms::{kinematics::forward_kinematics, mass_matrix::mass_matrix};
+    use crate::model::data::Data;
     use crate::testing::{for_each_model, random_state};
-    use crate::{kinematics::forward_kinematics, mass_matrix::mass_matrix, Data};
     use nalgebra::DVector;
 
     /// U Uᵀ reproduces D (plus an extra term), U keeps the tree's sparsity, and the solves invert U, Uᵀ
@@ -457,7 +458,7 @@ mod tests {
     #[test]
     fn factor_reproduces_the_mass_matrix_and_solves_invert_it() {
         for_each_model!(name, model => { check(name, model) });
-        check("chain30_loops3", &crate::testing::compile::<crate::Planar>(&crate::builtin::chain(30, 3)));
+        check("chain30_loops3", &crate::testing::compile::<crate::Planar>(&crate::model::builtin::chain(30, 3)));
     }
 
     fn check<S: Space>(name: &str, model: &Model<S>) {
@@ -469,8 +470,8 @@ mod tests {
         let d = data.mass_matrix.clone();
         // A symmetric positive semi-definite extra term on the supporting joints of the last body.
         let mut extra = DMatrix::zeros(n, n);
-        for i in crate::jacobian::support(model, Some(n - 1)) {
-            for j in crate::jacobian::support(model, Some(n - 1)) {
+        for i in crate::algorithms::jacobian::support(model, Some(n - 1)) {
+            for j in crate::algorithms::jacobian::support(model, Some(n - 1)) {
                 extra[(i, j)] = 0.01 * (1.0 + (i * j) as f64 * 0.1);
             }
         }

@@ -7,7 +7,7 @@
 
 use std::f64::consts::PI;
 
-use crate::dense::mul_add;
+use crate::math::dense::mul_add;
 
 /// Largest |angle| (and |tan|) the series here take: 1/32 rad, where the first omitted terms are below
 /// 2⁻⁵⁸ relative (sine's d⁹/9!, the largest).

@@ -2,18 +2,20 @@
 //! `chainN_loopsL`.
 
 use crate::error::SceneError;
-use crate::scene::{BodySpec, CutKindSpec, CutSpec, GeometrySpec, JointKindSpec, JointSpec, Numbers, OpSpec, Scene};
-use crate::space::SceneKind;
+use crate::math::space::SceneKind;
+use crate::model::scene::{
+    BodySpec, CutKindSpec, CutSpec, GeometrySpec, JointKindSpec, JointSpec, Numbers, OpSpec, Scene,
+};
 
 /// The scene files in `scenes/`, by name.
 pub const SCENE_FILES: &[(&str, &str)] = &[
-    ("paper-testbed", include_str!("../../scenes/paper-testbed.toml")),
-    ("fourbar-crank-rocker", include_str!("../../scenes/fourbar-crank-rocker.toml")),
-    ("slider-crank", include_str!("../../scenes/slider-crank.toml")),
-    ("watt-six-bar", include_str!("../../scenes/watt-six-bar.toml")),
-    ("parallelogram", include_str!("../../scenes/parallelogram.toml")),
-    ("serial-arm", include_str!("../../scenes/serial-arm.toml")),
-    ("spherical-four-bar", include_str!("../../scenes/spherical-four-bar.toml")),
+    ("paper-testbed", include_str!("../../../scenes/paper-testbed.toml")),
+    ("fourbar-crank-rocker", include_str!("../../../scenes/fourbar-crank-rocker.toml")),
+    ("slider-crank", include_str!("../../../scenes/slider-crank.toml")),
+    ("watt-six-bar", include_str!("../../../scenes/watt-six-bar.toml")),
+    ("parallelogram", include_str!("../../../scenes/parallelogram.toml")),
+    ("serial-arm", include_str!("../../../scenes/serial-arm.toml")),
+    ("spherical-four-bar", include_str!("../../../scenes/spherical-four-bar.toml")),
 ];
 
 /// The paper's user wrench on the testbed: (−0.5 N, 0 N, −0.0025 N m) at the COM of link 2.

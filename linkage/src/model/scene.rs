@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
-use crate::space::SceneKind;
+use crate::math::space::SceneKind;
 
 /// The reserved name of the fixed base.
 pub const GROUND: &str = "ground";

@@ -13,8 +13,8 @@
 //! `threshold · σ_max` ([`DEFAULT_THRESHOLD`] = 0.02: the OP is at least 50 times harder to accelerate
 //! along it than along its easiest direction), or when σ_max itself vanishes (an immobile OP).
 
-use crate::eigen::symmetric_eigen_from;
-use crate::space::{Space, VecOps};
+use crate::math::eigen::symmetric_eigen_from;
+use crate::math::space::{Space, VecOps};
 
 /// Default relative threshold on singular values below which a direction counts as constrained.
 pub const DEFAULT_THRESHOLD: f64 = 0.02;
