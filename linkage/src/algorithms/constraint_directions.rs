@@ -12,6 +12,11 @@
 //! **Count rule.** A direction is constrained when its singular value is at most
 //! `threshold · σ_max` ([`DEFAULT_THRESHOLD`] = 0.02: the OP is at least 50 times harder to accelerate
 //! along it than along its easiest direction), or when σ_max itself vanishes (an immobile OP).
+//!
+//! **Immobile OPs.** "Vanishes" is exact: `op_space` hands over Λ⁻¹ = 0 for an OP the loops pin, deciding
+//! it against the OP's open-loop Λ⁻¹ (`op_space::IMMOBILE_TOLERANCE`, a fraction of the scaled traces, so
+//! unit-invariant like the count). The round-off such an OP's Λ⁻¹ otherwise keeps (~1e-31 of the open
+//! value at a slider-crank's dead centre) has no scale of its own to be told apart by here.
 
 use crate::math::eigen::symmetric_eigen_from;
 use crate::math::space::{Space, VecOps};

@@ -10,21 +10,41 @@
 //!
 //! **Gram form.** We build Q (from Z and the factor, no new factorization), compute `Ỹ = Y - Q (Qᵀ Y)` and
 //! take `Λ⁻¹ = Ỹᵀ Ỹ`, not the shorter `Yᵀ Y - Gᵀ G` with `G = Qᵀ Y = R⁻¹ (Zᵀ Y)_r`: near a configuration
-//! where the closures lose rank, a kept row can have a relative pivot near [`crate::algorithms::kkt::RANK_TOLERANCE`],
-//! R a condition number up to 1e5, and the difference of two large Gram matrices lost its small eigenvalues
-//! to round-off: random linkages built at such a configuration gave an eigenvalue of -1.7e-6 (not positive
-//! semi-definite, so not an inverse inertia).
+//! where the closures lose rank, a kept row can have a relative pivot near
+//! [`crate::algorithms::kkt::RANK_TOLERANCE`], R a condition number up to 1e5, and the difference of two
+//! large Gram matrices lost its small eigenvalues to round-off: random linkages built at such a
+//! configuration gave an eigenvalue of -1.7e-6 (not positive semi-definite, so not an inverse inertia).
 //! A Gram matrix is positive semi-definite whatever the round-off, and its small eigenvalues come from
 //! the small columns of Ỹ rather than from a cancellation.
 //! Y is nonzero only on the joints that support the OP's body (see `ltl`), so an OP near the base is cheap.
+//!
+//! **Immobile points.** Where the loops pin the OP (a slider-crank's slider at a dead centre), Λ⁻¹ is zero,
+//! but Ỹ keeps the round-off of the projection: Λ⁻¹ ~ 1e-31 of the open-loop one, a matrix of noise whose
+//! largest direction would read as free. An OP that keeps at most [`IMMOBILE_TOLERANCE`] of its open-loop
+//! mobility (scaled traces, see there) gets Λ⁻¹ = 0 and Ỹ = 0, so that `constraint_directions` counts
+//! every direction and the couplings through Ỹ vanish, as they do exactly.
 
 use crate::algorithms::jacobian::{frame_bias_acceleration, frame_jacobian_t};
 use crate::algorithms::ltl;
 use crate::error::DynamicsError;
-use crate::math::dense::{by_size, dot, dot_fixed, mul_add};
-use crate::math::space::{MatOps, Space};
+use crate::math::dense::{self, by_size, dot, dot_fixed, mul_add};
+use crate::math::space::{MatOps, Space, VecOps};
 use crate::model::data::Data;
 use crate::model::Model;
+
+/// The fraction of its open-loop mobility below which an OP counts as immobile: Λ⁻¹ is set to zero when
+/// `tr(T Λ⁻¹ T) ≤ IMMOBILE_TOLERANCE · tr(T Λ⁻¹_open T)`, `T = diag(1 linear, L angular)` as in
+/// `constraint_directions` (so the rule, like the count, does not depend on units).
+///
+/// **Why 1e-10.** What round-off leaves of a pinned OP is tiny: Ỹ's columns keep about ε_mach of Y's, so the
+/// ratio is ~1e-32 (1e-31 measured at slider-crank dead centres). It grows where the kept closures are
+/// nearly dependent: the projection's basis Q loses orthogonality as ε_mach·cond(R)², and with
+/// `kkt::RANK_TOLERANCE` = 1e-10 on the Schur pivots, cond(R) reaches 1e5, so up to ~1e-6 of Y survives,
+/// a ratio of ~1e-12. 1e-10 stays a hundred times above that. A genuinely mobile OP falls below it only
+/// within about 1e-5 rad of a dead centre (the ratio grows as the square of the distance: 2.3e-12 at 1e-6
+/// rad on the slider-crank), where moving it takes 1e10 times its open-loop force, which no haptic device
+/// renders; or with a mass ratio of 1e10 between its body and what the loops tie it to.
+pub const IMMOBILE_TOLERANCE: f64 = 1e-10;
 
 /// Computes `data.op` for operational point `op`: Jᵀ, J̇q̇, Y, Ỹ and Λ⁻¹ with the loops closed (the open one
 /// on demand: [`open_inverse_inertia`], which the snapshots do not need). Needs
@@ -67,8 +87,18 @@ pub fn frame_point_inertia<S: Space>(
             m: model.nc(),
         };
         let q = ws.closure_basis.as_mut_slice();
-        by_size!(n, N => project_out::<N>(N, &basis, q, y_closed), _ => project_out::<0>(n, &basis, q, y_closed));
-        gram::<S>(y_closed, n, n)
+        let angular = model.length_scale * model.length_scale;
+        let removed = by_size!(n, N => project_out::<S, N>(N, &basis, q, y_closed, angular),
+            _ => project_out::<S, 0>(n, &basis, q, y_closed, angular));
+        let closed = gram::<S>(y_closed, n, n);
+        let kept = scaled_trace::<S>(&closed, angular);
+        // `kept + removed` is the open-loop trace: projecting out a unit vector takes g² off the squared norm.
+        if kept <= IMMOBILE_TOLERANCE * (kept + removed) {
+            dense::zero(y_closed);
+            S::OpMat::zero()
+        } else {
+            closed
+        }
     } else {
         gram::<S>(y, n, rows)
     };
@@ -127,10 +157,19 @@ struct Closures<'a> {
 
 /// Builds the orthonormal basis `Q = Z_r L⁻ᵀ` (n×rank, into `q`: column i is Z's column `perm[i]` minus
 /// its components along the columns before it, scaled, as in Gram-Schmidt but with the coefficients taken
-/// from the factor) and projects it out of every column of `y`: `y ← y - Q (Qᵀ y)`. Called with the
-/// constant `N = n` for small linkages, so that the loops over rows unroll, and with `N = 0` otherwise.
+/// from the factor) and projects it out of every column of `y`: `y ← y - Q (Qᵀ y)`. Returns what was
+/// projected out, `Σ_c w_c Σ_i (q_iᵀ y_c)²` with `w_c` = 1 on linear and `angular` (L²) on angular columns:
+/// the scaled trace of `Λ⁻¹_open - Λ⁻¹`, the reference for [`IMMOBILE_TOLERANCE`] at the cost of one
+/// multiply-add per product already formed. Called with the constant `N = n` for small linkages, so that
+/// the loops over rows unroll, and with `N = 0` otherwise.
 #[inline(always)]
-fn project_out<const N: usize>(n: usize, c: &Closures<'_>, q: &mut [f64], y: &mut [f64]) {
+fn project_out<S: Space, const N: usize>(
+    n: usize,
+    c: &Closures<'_>,
+    q: &mut [f64],
+    y: &mut [f64],
+    angular: f64,
+) -> f64 {
     let n = if N > 0 { N } else { n };
     let rank = c.perm.len();
     for (i, &zi) in c.perm.iter().enumerate() {
@@ -150,12 +189,28 @@ fn project_out<const N: usize>(n: usize, c: &Closures<'_>, q: &mut [f64], y: &mu
         }
     }
     let q = &q[..rank * n];
+    let (linear, rotational) = y.split_at_mut(<S::Point as VecOps>::LEN * n);
+    let removed_linear = project_columns(n, q, linear);
+    mul_add(angular, project_columns(n, q, rotational), removed_linear)
+}
+
+/// `y ← y - Q (Qᵀ y)` for the columns of `y`, returning `Σ (q_iᵀ y_c)²` (see [`project_out`]).
+#[inline(always)]
+fn project_columns(n: usize, q: &[f64], y: &mut [f64]) -> f64 {
+    let mut removed = 0.0;
     for yc in y.chunks_exact_mut(n) {
         for qi in q.chunks_exact(n) {
             let g = dot(qi, yc);
+            removed = mul_add(g, g, removed);
             for (x, v) in yc.iter_mut().zip(qi) {
                 *x = mul_add(-g, *v, *x);
             }
         }
     }
+    removed
+}
+
+/// `tr(T A T)` with `T = diag(1 linear, L angular)`: `angular` is L².
+fn scaled_trace<S: Space>(a: &S::OpMat, angular: f64) -> f64 {
+    (0..S::DIM).map(|i| if i < <S::Point as VecOps>::LEN { a[(i, i)] } else { angular * a[(i, i)] }).sum()
 }
