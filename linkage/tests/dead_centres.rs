@@ -145,53 +145,21 @@ fn change_point_four_bar_frees_the_coupler() {
         name = "change-point-four-bar"
         kind = "planar"
         gravity = [0.0, 0.0]
-        [[body]]
-        name = "crank"
-        mass = 0.1
-        com = [-0.05, 0.0]
-        inertia = 1e-4
-        [[body]]
-        name = "coupler"
-        mass = 0.2
-        com = [0.125, 0.0]
-        inertia = 1e-3
-        [[body]]
-        name = "rocker"
-        mass = 0.15
-        com = [-0.075, 0.0]
-        inertia = 3e-4
-        [[joint]]
-        name = "crank"
-        kind = "revolute"
-        parent = "ground"
-        child = "crank"
-        [[joint]]
-        name = "crank-coupler"
-        kind = "revolute"
-        parent = "crank"
-        child = "coupler"
-        origin = [-0.1, 0.0]
-        [[joint]]
-        name = "rocker"
-        kind = "revolute"
-        parent = "ground"
-        child = "rocker"
-        origin = [0.3, 0.0]
-        [[cut]]
-        name = "coupler-rocker"
-        kind = "pin"
-        body_a = "coupler"
-        point_a = [0.25, 0.0]
-        body_b = "rocker"
-        point_b = [-0.15, 0.0]
-        [[op]]
-        name = "coupler-middle"
-        body = "coupler"
-        point = [0.125, 0.0]
-        [[op]]
-        name = "rocker-tip"
-        body = "rocker"
-        point = [-0.15, 0.0]
+        body = [
+            { name = "crank", mass = 0.1, com = [-0.05, 0.0], inertia = 1e-4 },
+            { name = "coupler", mass = 0.2, com = [0.125, 0.0], inertia = 1e-3 },
+            { name = "rocker", mass = 0.15, com = [-0.075, 0.0], inertia = 3e-4 },
+        ]
+        joint = [
+            { name = "crank", kind = "revolute", parent = "ground", child = "crank" },
+            { name = "crank-coupler", kind = "revolute", parent = "crank", child = "coupler", origin = [-0.1, 0.0] },
+            { name = "rocker", kind = "revolute", parent = "ground", child = "rocker", origin = [0.3, 0.0] },
+        ]
+        cut = [{ name = "coupler-rocker", kind = "pin", body_a = "coupler", point_a = [0.25, 0.0], body_b = "rocker", point_b = [-0.15, 0.0] }]
+        op = [
+            { name = "coupler-middle", body = "coupler", point = [0.125, 0.0] },
+            { name = "rocker-tip", body = "rocker", point = [-0.15, 0.0] },
+        ]
         "#,
         "change-point-four-bar",
     )

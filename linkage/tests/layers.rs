@@ -24,6 +24,7 @@ fn rank(module: &[String]) -> usize {
 }
 
 /// One source file: its module path (`["math", "dense"]`; `[]` for lib.rs) and its text.
+#[derive(Clone)]
 struct Source {
     module: Vec<String>,
     file: String,
@@ -196,6 +197,16 @@ fn root_reexports(lib_rs: &str) -> BTreeMap<String, Vec<String>> {
     map
 }
 
+/// True when nothing of an identifier runs into position `i` from the left.
+fn word_start(s: &str, i: usize) -> bool {
+    i == 0 || !(s.as_bytes()[i - 1].is_ascii_alphanumeric() || s.as_bytes()[i - 1] == b'_')
+}
+
+/// Where `keyword` (with its trailing space) starts a word in `s`.
+fn keyword_positions(s: &str, keyword: &str) -> Vec<usize> {
+    s.match_indices(keyword).map(|(at, _)| at).filter(|&at| word_start(s, at)).collect()
+}
+
 /// Every edge from file `from`'s text to the crate's module files.
 fn edges_of(from: usize, sources: &[Source], reexports: &BTreeMap<String, Vec<String>>) -> Vec<Edge> {
     let text = strip(&sources[from].text);
@@ -208,18 +219,13 @@ fn edges_of(from: usize, sources: &[Source], reexports: &BTreeMap<String, Vec<St
     // Where each path starts, and the inline modules enclosing each position.
     let mut found: Vec<(usize, String)> = Vec::new();
     let mut use_spans: Vec<(usize, usize)> = Vec::new();
-    let word_start = |i: usize| i == 0 || !(s.as_bytes()[i - 1].is_ascii_alphanumeric() || s.as_bytes()[i - 1] == b'_');
-    let mut i = 0;
-    while let Some(k) = s[i..].find("use ") {
-        let at = i + k;
-        i = at + 4;
-        if !word_start(at) {
+    for at in keyword_positions(&s, "use ") {
+        if use_spans.last().is_some_and(|&(_, end)| at < end) {
             continue;
         }
         let end = at + s[at..].find(';').unwrap_or(s.len() - at);
         found.push((at, s[at + 4..end].to_string()));
         use_spans.push((at, end));
-        i = end;
     }
     for anchor in ["crate::", "super::"] {
         let mut i = 0;
@@ -228,7 +234,7 @@ fn edges_of(from: usize, sources: &[Source], reexports: &BTreeMap<String, Vec<St
             i = at + anchor.len();
             if at > 0 && s.as_bytes()[at - 1] == b'$' {
                 at -= 1;
-            } else if !word_start(at) || s[..at].ends_with("super::") {
+            } else if !word_start(&s, at) || s[..at].ends_with("super::") {
                 continue;
             }
             if use_spans.iter().any(|&(a, b)| at >= a && at < b) {
@@ -245,13 +251,7 @@ fn edges_of(from: usize, sources: &[Source], reexports: &BTreeMap<String, Vec<St
 
     // Inline modules: the stack at each found position.
     let mut opens: BTreeMap<usize, String> = BTreeMap::new();
-    let mut j = 0;
-    while let Some(k) = s[j..].find("mod ") {
-        let at = j + k;
-        j = at + 4;
-        if !word_start(at) {
-            continue;
-        }
+    for at in keyword_positions(&s, "mod ") {
         let rest = &s[at + 4..];
         let name: String = rest.chars().take_while(|ch| ch.is_alphanumeric() || *ch == '_').collect();
         let after = rest[name.len()..].trim_start();
@@ -503,8 +503,13 @@ fn the_checker_catches_every_way_of_writing_an_upward_use() {
         src("algorithms::kinematics", "use crate::model::{data, Model};"),
         src("algorithms::dynamics", "use super::kinematics; pub fn forward_dynamics() {}"),
     ];
-    let clean: Vec<Source> = fixed.iter().map(|s| src(&s.module.join("::"), &s.text)).collect();
-    assert_eq!(analyze(&clean), (vec![], vec![]), "the clean fake crate");
+    assert_eq!(analyze(&fixed), (vec![], vec![]), "the clean fake crate");
+    // The fake crate with one more file, math/dense.rs, holding `text`.
+    let with_dense = |text: &str| {
+        let mut sources = fixed.to_vec();
+        sources.push(src("math::dense", text));
+        analyze(&sources)
+    };
     let upward = [
         "use crate::model::Model;",
         "use crate::{math::space, model::data::{self}};",
@@ -517,9 +522,7 @@ fn the_checker_catches_every_way_of_writing_an_upward_use() {
         "macro_rules! m { () => { $crate::model::Model } }",
     ];
     for text in upward {
-        let mut sources: Vec<Source> = fixed.iter().map(|s| src(&s.module.join("::"), &s.text)).collect();
-        sources.push(src("math::dense", text));
-        let (violations, _) = analyze(&sources);
+        let (violations, _) = with_dense(text);
         assert_eq!(violations.len(), 1, "{text}: {violations:?}");
     }
     let harmless = [
@@ -530,12 +533,10 @@ fn the_checker_catches_every_way_of_writing_an_upward_use() {
         "mod tests { use super::*; use crate::math::space; }",
     ];
     for text in harmless {
-        let mut sources: Vec<Source> = fixed.iter().map(|s| src(&s.module.join("::"), &s.text)).collect();
-        sources.push(src("math::dense", text));
-        assert_eq!(analyze(&sources), (vec![], vec![]), "{text}");
+        assert_eq!(with_dense(text), (vec![], vec![]), "{text}");
     }
     // A circle within one layer.
-    let mut sources: Vec<Source> = fixed.iter().map(|s| src(&s.module.join("::"), &s.text)).collect();
+    let mut sources = fixed.to_vec();
     sources[8] = src("algorithms::dynamics", "use super::kinematics;");
     sources[7] = src("algorithms::kinematics", "fn f() { crate::algorithms::dynamics::g() }");
     let (_, circles) = analyze(&sources);
