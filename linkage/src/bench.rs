@@ -6,10 +6,10 @@ use std::time::{Duration, Instant};
 
 use nalgebra::{DVector, Vector3};
 
-use crate::builtin::{self, PAPER_WRENCH};
-use crate::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use crate::local_model::{op_space_terms, LocalModelTerms, OpPose, OpSpaceLocalModel};
-use crate::op_space::op_space_inertia;
+use crate::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpPose, OpSpaceLocalModel};
+use crate::algorithms::op_space::op_space_inertia;
+use crate::model::builtin::{self, PAPER_WRENCH};
 use crate::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
 
 /// Timing of one benchmark case.

@@ -5,7 +5,21 @@
 //!
 //! Following Pinocchio and MuJoCo, an immutable [`Model`] is compiled once from a [`Scene`] and every
 //! algorithm writes into a preallocated [`Data`]; hot paths take `(&Model, &mut Data)` and allocate nothing.
-//! One algorithm per module, named for what it computes, each citing the paper's equation:
+//!
+//! **Layers.** As Pinocchio separates spatial algebra, the multibody model and the algorithms, the sources
+//! sit in three folders whose uses point one way (`tests/layers.rs` checks it, and that no files import
+//! each other in a circle):
+//! - [`math`]: spatial algebra ([`space`]), trigonometry ([`trig`]), dense kernels and their SIMD lanes
+//!   ([`dense`]), the fixed-size factorizations and KKT kernels for small linkages, a symmetric
+//!   eigensolver ([`eigen`]). Uses nothing of the layers above.
+//! - [`model`]: the scene file ([`scene`]), the built-in scenes ([`builtin`]), the [`Model`] and the
+//!   [`Data`] workspace ([`data`]). Uses only `math`.
+//! - [`algorithms`]: one algorithm per module, named for what it computes, each citing the paper's
+//!   equation (table below), and the compilation of a scene into a [`Model`] ([`Model::compile`]), which
+//!   needs poses at q0 and assembly. Uses `math` and `model`.
+//!
+//! [`error`] is a leaf every layer reports through; [`bench`](mod@bench) (the benchmark cases) sits on top. Every
+//! module is also re-exported at the crate root (`kinloop_linkage::kinematics`, `::space`, `::data`, ...).
 //!
 //! | module | computes | paper |
 //! |---|---|---|
@@ -27,6 +41,7 @@
 //! | [`contact`] | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
 //! | [`assemble`] | the nearest closed configuration | |
 //! | [`reach`] | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
+//! | `algorithms::compile` | scene → [`Model`]: validation, topological order, cut primitives, closure rank | |
 //!
 //! Planar scenes use 3-D spatial algebra and a 3-DOF operational space (x, y, θ); spatial scenes 6-D
 //! (see [`space`]). A scene without loops takes the plain path (no KKT, no multipliers); a scene without
@@ -34,46 +49,28 @@
 
 #![warn(missing_docs)]
 
-pub mod articulated;
-pub mod assemble;
+pub mod algorithms;
 pub mod bench;
-pub mod bias;
-pub mod builtin;
-pub mod constraint_directions;
-pub mod contact;
-pub mod data;
-pub mod dense;
-pub mod dynamics;
-pub mod eigen;
 pub mod error;
-pub mod gravity;
-pub mod integrator;
-pub mod jacobian;
-pub mod joint_forces;
-pub mod kinematics;
-pub mod kkt;
-mod kkt_small;
-pub mod local_model;
-pub mod loop_closure;
-pub mod ltl;
-mod ltl_small;
-pub mod mass_matrix;
+pub mod math;
 pub mod model;
-pub mod op_space;
-pub mod reach;
-pub mod scene;
-mod simd;
-pub mod space;
-pub mod trig;
 
 /// Test fixtures shared by the unit tests and the integration tests (not part of the API).
 #[doc(hidden)]
 pub mod testing;
 
-pub use data::Data;
-pub use dynamics::{forward_dynamics, Forces, OpWrench};
+// Every module keeps its path from before the layers (`kinloop_linkage::kinematics`, `::space`, ...).
+pub use algorithms::{
+    articulated, assemble, bias, constraint_directions, contact, dynamics, gravity, integrator, jacobian, joint_forces,
+    kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_space, reach,
+};
+pub use math::{dense, eigen, space, trig};
+pub use model::{builtin, data, scene};
+
+pub use algorithms::dynamics::{forward_dynamics, Forces, OpWrench};
+pub use algorithms::integrator::{step, Integrator, StepConfig, StepReport};
 pub use error::{DynamicsError, SceneError};
-pub use integrator::{step, Integrator, StepConfig, StepReport};
+pub use math::space::{MatOps, Planar, SceneKind, Space, Spatial, VecOps};
+pub use model::data::Data;
+pub use model::scene::Scene;
 pub use model::Model;
-pub use scene::Scene;
-pub use space::{MatOps, Planar, SceneKind, Space, Spatial, VecOps};

@@ -1,0 +1,612 @@
+//! Scene → [`Model`]: validation (every error names the file and the key), the bodies in topological
+//! order, the cut joints' closure primitives completed so the loops close at q0, and the generic rank of
+//! the closure Jacobian. It needs the algorithms (poses at q0, assembly near q0), so it lives above them,
+//! apart from the model's definition.
+
+use nalgebra::DVector;
+
+use crate::algorithms::assemble::assemble;
+use crate::algorithms::kinematics::forward_kinematics;
+use crate::algorithms::loop_closure::closure_residual_and_jacobian;
+use crate::error::SceneError;
+use crate::math::space::{SceneKind, Space, VecOps};
+use crate::model::data::Data;
+use crate::model::scene::{
+    Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND,
+};
+use crate::model::{
+    Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, Spring,
+    NO_PARENT,
+};
+
+impl<S: Space> Model<S> {
+    /// Validates and compiles a scene; `file` names the source in errors.
+    pub fn compile(scene: &Scene, file: &str) -> Result<Model<S>, SceneError> {
+        Compiler::<S> { scene, file, check_closure: true, _s: std::marker::PhantomData }.compile()
+    }
+
+    /// As [`Model::compile`] but accepts loops that are not closed at q0 (for `inspect --assemble`).
+    pub fn compile_unclosed(scene: &Scene, file: &str) -> Result<Model<S>, SceneError> {
+        Compiler::<S> { scene, file, check_closure: false, _s: std::marker::PhantomData }.compile()
+    }
+}
+
+struct Compiler<'a, S: Space> {
+    scene: &'a Scene,
+    file: &'a str,
+    check_closure: bool,
+    _s: std::marker::PhantomData<S>,
+}
+
+impl<S: Space> Compiler<'_, S> {
+    fn invalid(&self, key: String, problem: impl Into<String>) -> SceneError {
+        SceneError::Invalid { file: self.file.to_string(), key, problem: problem.into() }
+    }
+
+    fn finite(&self, key: &str, v: f64) -> Result<f64, SceneError> {
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.invalid(key.to_string(), format!("must be a finite number, got {v}")))
+        }
+    }
+
+    fn non_negative(&self, key: &str, v: f64) -> Result<f64, SceneError> {
+        let v = self.finite(key, v)?;
+        if v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(self.invalid(key.to_string(), format!("must be ≥ 0, got {v}")))
+        }
+    }
+
+    fn point(&self, key: &str, v: &[f64], default_zero: bool) -> Result<S::Point, SceneError> {
+        let n = <S::Point as VecOps>::LEN;
+        if v.is_empty() && default_zero {
+            return Ok(S::Point::zero());
+        }
+        if v.len() != n {
+            return Err(self.invalid(
+                key.to_string(),
+                format!("expected {n} numbers for a {:?} scene, got {}", S::KIND, v.len()).to_lowercase(),
+            ));
+        }
+        for (i, x) in v.iter().enumerate() {
+            self.finite(&format!("{key}[{i}]"), *x)?;
+        }
+        Ok(S::Point::from_slice(v))
+    }
+
+    fn unit(&self, key: &str, v: &[f64]) -> Result<S::Point, SceneError> {
+        let p = self.point(key, v, false)?;
+        let n = p.norm();
+        if n < 1e-12 {
+            return Err(self.invalid(key.to_string(), "must be a non-zero direction"));
+        }
+        Ok(p * (1.0 / n))
+    }
+
+    fn body_ref(&self, key: &str, name: &str, names: &[&str]) -> Result<Option<usize>, SceneError> {
+        if name == GROUND {
+            return Ok(None);
+        }
+        names.iter().position(|n| *n == name).map(Some).ok_or_else(|| SceneError::UnknownName {
+            file: self.file.to_string(),
+            key: key.to_string(),
+            what: "body",
+            name: name.to_string(),
+            known: std::iter::once(GROUND).chain(names.iter().copied()).collect::<Vec<_>>().join(", "),
+        })
+    }
+
+    fn check_unique<'n>(&self, section: &str, names: impl Iterator<Item = &'n str>) -> Result<(), SceneError> {
+        let mut seen: Vec<&str> = Vec::new();
+        for (i, n) in names.enumerate() {
+            if n.is_empty() {
+                return Err(self.invalid(format!("{section}[{i}].name"), "must not be empty"));
+            }
+            if seen.contains(&n) || (section == "body" && n == GROUND) {
+                return Err(SceneError::Duplicate {
+                    file: self.file.to_string(),
+                    key: format!("{section}[{i}].name"),
+                    name: n.to_string(),
+                });
+            }
+            seen.push(n);
+        }
+        Ok(())
+    }
+
+    fn compile(&self) -> Result<Model<S>, SceneError> {
+        let sc = self.scene;
+        if sc.kind != S::KIND {
+            return Err(self.invalid("kind".into(), format!("expected a {:?} scene, got {:?}", S::KIND, sc.kind)));
+        }
+        self.check_unique("body", sc.bodies.iter().map(|b| b.name.as_str()))?;
+        self.check_unique("joint", sc.joints.iter().map(|j| j.name.as_str()))?;
+        self.check_unique("cut", sc.cuts.iter().map(|c| c.name.as_str()))?;
+        self.check_unique("op", sc.ops.iter().map(|o| o.name.as_str()))?;
+        self.check_unique("obstacle", sc.obstacles.iter().map(|o| o.name()))?;
+        if sc.bodies.is_empty() {
+            return Err(self.invalid("body".into(), "a scene needs at least one body"));
+        }
+
+        let file_names: Vec<&str> = sc.bodies.iter().map(|b| b.name.as_str()).collect();
+
+        // Which joint carries each body (exactly one), and its parent.
+        let mut carrier: Vec<Option<usize>> = vec![None; sc.bodies.len()];
+        let mut parent_of: Vec<Option<usize>> = vec![None; sc.bodies.len()];
+        for (ji, j) in sc.joints.iter().enumerate() {
+            let key = format!("joint[{ji}] ({})", j.name);
+            let child = self
+                .body_ref(&format!("{key}.child"), &j.child, &file_names)?
+                .ok_or_else(|| self.invalid(format!("{key}.child"), "ground cannot be a child"))?;
+            let parent = self.body_ref(&format!("{key}.parent"), &j.parent, &file_names)?;
+            if parent == Some(child) {
+                return Err(SceneError::Cycle { file: self.file.into(), key, body: j.child.clone() });
+            }
+            if let Some(prev) = carrier[child] {
+                return Err(self.invalid(
+                    format!("{key}.child"),
+                    format!("body '{}' is already the child of joint '{}'", j.child, sc.joints[prev].name),
+                ));
+            }
+            carrier[child] = Some(ji);
+            parent_of[child] = parent;
+        }
+        for (bi, c) in carrier.iter().enumerate() {
+            if c.is_none() {
+                return Err(self.invalid(
+                    format!("body[{bi}] ({})", sc.bodies[bi].name),
+                    "no [[joint]] has this body as child; every body hangs from ground or another body by one joint",
+                ));
+            }
+        }
+        // Cycle detection: walking parents from any body must reach ground within n steps.
+        for start in 0..sc.bodies.len() {
+            let mut b = start;
+            for _ in 0..=sc.bodies.len() {
+                match parent_of[b] {
+                    None => break,
+                    Some(p) => b = p,
+                }
+            }
+            if parent_of[b].is_some() {
+                let ji = carrier[b].unwrap_or(0);
+                return Err(SceneError::Cycle {
+                    file: self.file.into(),
+                    key: format!("joint[{ji}] ({})", sc.joints[ji].name),
+                    body: sc.bodies[b].name.clone(),
+                });
+            }
+        }
+        // Stable topological order following the file's joint order.
+        let mut order: Vec<usize> = Vec::with_capacity(sc.bodies.len()); // file body indices
+        let mut placed = vec![false; sc.bodies.len()];
+        while order.len() < sc.bodies.len() {
+            for j in &sc.joints {
+                let child = file_names.iter().position(|n| *n == j.child).unwrap_or(0);
+                if placed[child] {
+                    continue;
+                }
+                if parent_of[child].is_none_or(|p| placed[p]) {
+                    placed[child] = true;
+                    order.push(child);
+                }
+            }
+        }
+        let new_index = |file_body: usize| order.iter().position(|&b| b == file_body).unwrap_or(0);
+
+        let mut bodies = Vec::with_capacity(order.len());
+        let mut joints = Vec::with_capacity(order.len());
+        let mut q0 = DVector::zeros(order.len());
+        let mut qd0 = DVector::zeros(order.len());
+        for (i, &fb) in order.iter().enumerate() {
+            let b = &sc.bodies[fb];
+            let bkey = format!("body[{fb}] ({})", b.name);
+            let mass = self.finite(&format!("{bkey}.mass"), b.mass)?;
+            if mass <= 0.0 {
+                return Err(self.invalid(format!("{bkey}.mass"), format!("must be positive, got {mass}")));
+            }
+            for (k, x) in b.inertia.as_slice().iter().enumerate() {
+                self.finite(&format!("{bkey}.inertia[{k}]"), *x)?;
+            }
+            let inertia = S::rot_inertia_from_scene(b.inertia.as_slice())
+                .map_err(|p| self.invalid(format!("{bkey}.inertia"), p))?;
+            let com = self.point(&format!("{bkey}.com"), &b.com, true)?;
+            let mut geometry = Vec::with_capacity(b.geometry.len());
+            for (gi, g) in b.geometry.iter().enumerate() {
+                let gkey = format!("{bkey}.geometry[{gi}]");
+                geometry.push(match g {
+                    GeometrySpec::Capsule { from, to, radius } => Shape::Capsule {
+                        from: self.point(&format!("{gkey}.from"), from, false)?,
+                        to: self.point(&format!("{gkey}.to"), to, false)?,
+                        radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
+                    },
+                    GeometrySpec::Ball { center, radius } => Shape::Ball {
+                        center: self.point(&format!("{gkey}.center"), center, false)?,
+                        radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
+                    },
+                });
+            }
+            bodies.push(Body { name: b.name.clone(), mass, com, inertia, geometry });
+
+            let ji = carrier[fb].unwrap_or(0);
+            let j = &sc.joints[ji];
+            let jkey = format!("joint[{ji}] ({})", j.name);
+            let kind = match j.kind {
+                JointKindSpec::Revolute => JointKind::Revolute,
+                JointKindSpec::Prismatic => JointKind::Prismatic,
+            };
+            let placement_pos = self.point(&format!("{jkey}.origin"), &j.origin, true)?;
+            let placement_rot = match &j.rotation {
+                None => S::rot_identity(),
+                Some(r) => {
+                    for (k, x) in r.as_slice().iter().enumerate() {
+                        self.finite(&format!("{jkey}.rotation[{k}]"), *x)?;
+                    }
+                    S::rot_from_scene(r.as_slice()).map_err(|p| self.invalid(format!("{jkey}.rotation"), p))?
+                }
+            };
+            let axis = match (&j.axis, S::KIND, kind) {
+                (Some(_), SceneKind::Planar, JointKind::Revolute) => {
+                    return Err(self
+                        .invalid(format!("{jkey}.axis"), "planar revolute joints always turn about z; remove `axis`"))
+                }
+                (Some(a), _, _) => self.unit(&format!("{jkey}.axis"), a)?,
+                (None, _, _) => S::default_axis(),
+            };
+            let spring = match &j.spring {
+                None => None,
+                Some(s) => Some(Spring {
+                    stiffness: self.non_negative(&format!("{jkey}.spring.stiffness"), s.stiffness)?,
+                    rest: self.finite(&format!("{jkey}.spring.rest"), s.rest)?,
+                }),
+            };
+            let actuator = match &j.actuator {
+                None => None,
+                Some(a) => {
+                    let max_effort = match a.max_effort {
+                        None => f64::INFINITY,
+                        Some(e) => {
+                            let e = self.finite(&format!("{jkey}.actuator.max_effort"), e)?;
+                            if e <= 0.0 {
+                                return Err(self.invalid(format!("{jkey}.actuator.max_effort"), "must be positive"));
+                            }
+                            e
+                        }
+                    };
+                    Some(Actuator {
+                        kp: self.non_negative(&format!("{jkey}.actuator.kp"), a.kp)?,
+                        kd: self.non_negative(&format!("{jkey}.actuator.kd"), a.kd)?,
+                        target: self.finite(&format!("{jkey}.actuator.target"), a.target)?,
+                        max_effort,
+                    })
+                }
+            };
+            q0[i] = self.finite(&format!("{jkey}.q0"), j.q0)?;
+            qd0[i] = self.finite(&format!("{jkey}.qd0"), j.qd0)?;
+            joints.push(Joint {
+                name: j.name.clone(),
+                kind,
+                parent: parent_of[fb].map_or(NO_PARENT, new_index),
+                placement_rot,
+                placement_pos,
+                axis,
+                spring,
+                damping: self.non_negative(&format!("{jkey}.damping"), j.damping)?,
+                actuator,
+            });
+        }
+
+        let gravity = self.point("gravity", &sc.gravity, true)?;
+        let baumgarte = Baumgarte {
+            alpha: self.non_negative("baumgarte.alpha", sc.baumgarte.alpha)?,
+            beta: self.non_negative("baumgarte.beta", sc.baumgarte.beta)?,
+        };
+        let contact = ContactParams {
+            stiffness: self.non_negative("contact.stiffness", sc.contact.stiffness)?,
+            damping: self.non_negative("contact.damping", sc.contact.damping)?,
+        };
+        let length_scale = match sc.length_scale {
+            Some(l) => {
+                let l = self.finite("length_scale", l)?;
+                if l <= 0.0 {
+                    return Err(self.invalid("length_scale".into(), format!("must be positive, got {l}")));
+                }
+                l
+            }
+            None => default_length_scale::<S>(&bodies),
+        };
+        let new_names: Vec<String> = bodies.iter().map(|b| b.name.clone()).collect();
+        let new_names: Vec<&str> = new_names.iter().map(|s| s.as_str()).collect();
+
+        let mut ops = Vec::with_capacity(sc.ops.len());
+        for (oi, o) in sc.ops.iter().enumerate() {
+            let key = format!("op[{oi}] ({})", o.name);
+            let body = self
+                .body_ref(&format!("{key}.body"), &o.body, &new_names)?
+                .ok_or_else(|| self.invalid(format!("{key}.body"), "an operational point must be on a moving body"))?;
+            ops.push(OpPoint {
+                name: o.name.clone(),
+                body,
+                point: self.point(&format!("{key}.point"), &o.point, true)?,
+            });
+        }
+
+        let mut obstacles = Vec::with_capacity(sc.obstacles.len());
+        for (oi, o) in sc.obstacles.iter().enumerate() {
+            let key = format!("obstacle[{oi}] ({})", o.name());
+            let wrong_kind = || self.invalid(format!("{key}.shape"), format!("not available in a {:?} scene", S::KIND));
+            obstacles.push(match o {
+                ObstacleSpec::HalfPlane { name, normal, offset } | ObstacleSpec::Plane { name, normal, offset } => {
+                    let planar_shape = matches!(o, ObstacleSpec::HalfPlane { .. });
+                    if planar_shape != (S::KIND == SceneKind::Planar) {
+                        return Err(wrong_kind());
+                    }
+                    Obstacle::HalfSpace {
+                        name: name.clone(),
+                        normal: self.unit(&format!("{key}.normal"), normal)?,
+                        offset: self.finite(&format!("{key}.offset"), *offset)?,
+                    }
+                }
+                ObstacleSpec::Circle { name, center, radius } | ObstacleSpec::Sphere { name, center, radius } => {
+                    let planar_shape = matches!(o, ObstacleSpec::Circle { .. });
+                    if planar_shape != (S::KIND == SceneKind::Planar) {
+                        return Err(wrong_kind());
+                    }
+                    let r = self.non_negative(&format!("{key}.radius"), *radius)?;
+                    Obstacle::Ball {
+                        name: name.clone(),
+                        center: self.point(&format!("{key}.center"), center, false)?,
+                        radius: r,
+                    }
+                }
+            });
+        }
+
+        let chain_prefix: Vec<bool> = (0..joints.len())
+            .map(|k| {
+                let mut expect = k;
+                let mut b = joints[k].parent;
+                while b != NO_PARENT {
+                    if expect == 0 || b != expect - 1 {
+                        return false;
+                    }
+                    expect -= 1;
+                    b = joints[b].parent;
+                }
+                expect == 0
+            })
+            .collect();
+
+        let mut model = Model {
+            name: if sc.name.is_empty() { self.file.to_string() } else { sc.name.clone() },
+            has_springs: joints.iter().any(|j| j.spring.is_some_and(|s| s.stiffness > 0.0)),
+            has_joint_forces: joints.iter().any(|j| j.damping > 0.0 || j.actuator.is_some()),
+            has_gravity: gravity.norm() > 0.0,
+            bodies,
+            joints,
+            chain_prefix_len: chain_prefix.iter().take_while(|c| **c).count(),
+            chain_prefix,
+            cuts: Vec::new(),
+            closure_rows: 0,
+            closure_rank: 0,
+            ops,
+            obstacles,
+            gravity,
+            baumgarte,
+            contact,
+            length_scale,
+            q0,
+            qd0,
+        };
+        self.compile_cuts(&mut model, &new_names)?;
+        model.closure_rank = generic_closure_rank(&model);
+        Ok(model)
+    }
+
+    /// Builds the closure primitives of every cut from the tree's kinematics at q0, filling in omitted
+    /// reference data (point b, axis and angle offsets) so the loop is closed there, and rejecting explicit
+    /// data that leaves a residual.
+    fn compile_cuts(&self, model: &mut Model<S>, names: &[&str]) -> Result<(), SceneError> {
+        let sc = self.scene;
+        let mut data = Data::new(model);
+        forward_kinematics(model, &mut data, &model.q0.clone());
+        let pose = |body: Option<usize>| match body {
+            None => (S::rot_identity(), S::Point::zero()),
+            Some(b) => (data.kin.body_rot[b], data.kin.body_pos[b]),
+        };
+        let to_world = |body: Option<usize>, p: &S::Point| {
+            let (r, o) = pose(body);
+            o + S::rotate(&r, p)
+        };
+        let to_local = |body: Option<usize>, p: &S::Point| {
+            let (r, o) = pose(body);
+            S::rotate(&S::rot_inverse(&r), &(*p - o))
+        };
+        let dir_to_local = |body: Option<usize>, d: &S::Point| S::rotate(&S::rot_inverse(&pose(body).0), d);
+        let dir_to_world = |body: Option<usize>, d: &S::Point| S::rotate(&pose(body).0, d);
+        let tolerance = sc.closure_tolerance.unwrap_or(1e-6) * model.length_scale;
+
+        let mut row = 0;
+        let mut cuts = Vec::with_capacity(sc.cuts.len());
+        for (ci, c) in sc.cuts.iter().enumerate() {
+            let key = format!("cut[{ci}] ({})", c.name);
+            if c.kind.equations(S::KIND).is_none() {
+                return Err(self.invalid(
+                    format!("{key}.kind"),
+                    format!(
+                        "a {:?} cut is not available in a {:?} scene (planar: pin, slider, weld; spatial: spherical, revolute, weld)",
+                        c.kind, S::KIND
+                    )
+                    .to_lowercase(),
+                ));
+            }
+            let body_a = self.body_ref(&format!("{key}.body_a"), &c.body_a, names)?;
+            let body_b = self.body_ref(&format!("{key}.body_b"), &c.body_b, names)?;
+            if body_a == body_b {
+                return Err(self.invalid(format!("{key}.body_b"), "a cut joint must connect two different bodies"));
+            }
+            let point_a = self.point(&format!("{key}.point_a"), &c.point_a, true)?;
+            let world_a = to_world(body_a, &point_a);
+            let (point_b, explicit_b) = match &c.point_b {
+                Some(p) => (self.point(&format!("{key}.point_b"), p, false)?, true),
+                None => (to_local(body_b, &world_a), false),
+            };
+            let a = Attachment { body: body_a, point: point_a };
+            let b = Attachment { body: body_b, point: point_b };
+            let axis_a = match (&c.axis, c.kind) {
+                (Some(ax), CutKindSpec::Slider | CutKindSpec::Revolute) => Some(self.unit(&format!("{key}.axis"), ax)?),
+                (Some(_), _) => {
+                    return Err(self.invalid(format!("{key}.axis"), "only slider and revolute cuts take an axis"))
+                }
+                (None, CutKindSpec::Slider | CutKindSpec::Revolute) => {
+                    return Err(self.invalid(format!("{key}.axis"), "this cut needs an axis (in body a's frame)"))
+                }
+                (None, _) => None,
+            };
+            let (rot_a, _) = pose(body_a);
+            let (rot_b, _) = pose(body_b);
+            let relative = S::rot_mul(&S::rot_inverse(&rot_b), &rot_a);
+            let mut primitives = Vec::new();
+            match c.kind {
+                CutKindSpec::Pin | CutKindSpec::Spherical => primitives.push(ClosurePrimitive::Coincident { a, b }),
+                CutKindSpec::Weld if S::KIND == SceneKind::Planar => {
+                    primitives.push(ClosurePrimitive::Coincident { a, b });
+                    primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
+                }
+                CutKindSpec::Slider => {
+                    let u = axis_a.unwrap_or_else(S::default_axis);
+                    // Planar normal: u turned by +90°.
+                    let n = S::ang_cross_point(&S::axis_as_angular(&u), &u);
+                    primitives.push(ClosurePrimitive::OnPlane { a, normal_a: n, b });
+                    primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
+                }
+                CutKindSpec::Weld | CutKindSpec::Revolute => {
+                    primitives.push(ClosurePrimitive::Coincident { a, b });
+                    // Directions fixed in a, and the matching directions in b at q0.
+                    let basis = orthonormal_basis::<S>(axis_a.as_ref());
+                    let in_b = |d: &S::Point| dir_to_local(body_b, &dir_to_world(body_a, d));
+                    if c.kind == CutKindSpec::Revolute {
+                        // The axis (basis[0]) stays perpendicular to the two directions normal to it in b.
+                        for e in &basis[1..] {
+                            primitives.push(ClosurePrimitive::Perpendicular {
+                                body_a,
+                                dir_a: basis[0],
+                                body_b,
+                                dir_b: in_b(e),
+                            });
+                        }
+                    } else {
+                        // x_a ⟂ y_b, y_a ⟂ z_b, z_a ⟂ x_b: independent rows near alignment.
+                        for k in 0..3 {
+                            primitives.push(ClosurePrimitive::Perpendicular {
+                                body_a,
+                                dir_a: basis[k],
+                                body_b,
+                                dir_b: in_b(&basis[(k + 1) % 3]),
+                            });
+                        }
+                    }
+                }
+            }
+            if explicit_b && self.check_closure {
+                let gap = to_world(body_b, &point_b) - world_a;
+                let residual = match c.kind {
+                    CutKindSpec::Slider => {
+                        let n = match &primitives[0] {
+                            ClosurePrimitive::OnPlane { normal_a, .. } => dir_to_world(body_a, normal_a),
+                            _ => S::Point::zero(),
+                        };
+                        n.dot(&gap).abs()
+                    }
+                    _ => gap.norm(),
+                };
+                if residual > tolerance || !residual.is_finite() {
+                    return Err(SceneError::NotClosed {
+                        file: self.file.to_string(),
+                        key,
+                        cut: c.name.clone(),
+                        residual,
+                        tolerance,
+                    });
+                }
+            }
+            let rows = primitives.iter().map(|p| p.rows()).sum();
+            cuts.push(Cut { name: c.name.clone(), kind: c.kind, primitives, row, rows });
+            row += rows;
+        }
+        model.cuts = cuts;
+        model.closure_rows = row;
+        Ok(())
+    }
+}
+
+/// The generic rank of W on the constraint manifold: the largest numerical rank (SVD, relative tolerance
+/// 1e-8) at q0 and at a few closed configurations near it (q0 may sit at a singular configuration).
+fn generic_closure_rank<S: Space>(model: &Model<S>) -> usize {
+    let m = model.closure_rows;
+    if m == 0 {
+        return 0;
+    }
+    let rank_at = |q: &DVector<f64>| {
+        let mut data = Data::new(model);
+        forward_kinematics(model, &mut data, q);
+        closure_residual_and_jacobian(model, &mut data);
+        let sv = data.closure_jacobian_t.clone().svd(false, false).singular_values;
+        let max = sv.max();
+        sv.iter().filter(|s| **s > 1e-8 * max).count()
+    };
+    let mut rank = rank_at(&model.q0);
+    for k in 1..=3 {
+        let perturbed =
+            DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.02 * ((i * 7 + k * 13) % 11) as f64 / 11.0 - 0.01);
+        if let Ok(a) = assemble(model, &perturbed, 1e-12 * model.length_scale) {
+            rank = rank.max(rank_at(&a.q));
+        }
+    }
+    rank.min(m)
+}
+
+/// An orthonormal basis whose first vector is `first` (or the standard basis).
+fn orthonormal_basis<S: Space>(first: Option<&S::Point>) -> Vec<S::Point> {
+    let n = <S::Point as VecOps>::LEN;
+    let mut basis: Vec<S::Point> = Vec::with_capacity(n);
+    if let Some(f) = first {
+        basis.push(*f);
+    }
+    for k in 0..n {
+        if basis.len() == n {
+            break;
+        }
+        let mut e = S::Point::zero();
+        e.as_mut_slice()[k] = 1.0;
+        for b in &basis {
+            e -= *b * e.dot(b);
+        }
+        if e.norm() > 1e-6 {
+            let len = e.norm();
+            basis.push(e * (1.0 / len));
+        }
+    }
+    basis
+}
+
+/// The default characteristic length: the mass-weighted radius of gyration of the links about their own
+/// centres of mass, `sqrt(Σ I_i / Σ m_i)`. It scales with the scene's unit of length, which is what makes
+/// constraint counting unit-consistent. Falls back to the largest COM offset, then to 1.
+fn default_length_scale<S: Space>(bodies: &[Body<S>]) -> f64 {
+    let total_mass: f64 = bodies.iter().map(|b| b.mass).sum();
+    let total_inertia: f64 = bodies.iter().map(|b| S::rot_inertia_size(&b.inertia)).sum();
+    let gyration = (total_inertia / total_mass).sqrt();
+    if gyration.is_finite() && gyration > 0.0 {
+        return gyration;
+    }
+    let offset = bodies.iter().map(|b| b.com.norm()).fold(0.0, f64::max);
+    if offset > 0.0 {
+        offset
+    } else {
+        1.0
+    }
+}

@@ -1,0 +1,55 @@
+//! G(q) of eq 1: gravity and joint springs ("joint flexibility and gravitational effects").
+
+use nalgebra::DVector;
+
+use crate::algorithms::tree::subtree_sums;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
+use crate::model::Model;
+
+/// Fills `data.gravity` with G(q) (so that `D q̈ + B + G = τ`). Needs `forward_kinematics`.
+pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
+    let n = model.nq();
+    if model.has_gravity {
+        for i in 0..n {
+            // The weight m g acting at the COM, as a spatial force about the world origin.
+            let weight = model.gravity * model.bodies[i].mass;
+            data.body_force[i] = S::spatial(S::point_cross_point(&data.kin.com[i], &weight), weight);
+        }
+        let (g, s) = (data.gravity.as_mut_slice(), &data.kin.motion_subspace);
+        subtree_sums(model, &mut data.body_force, |i, f| g[i] = -s[i].dot(f));
+    } else {
+        data.gravity.as_mut_slice().fill(0.0);
+    }
+    if model.has_springs {
+        for (i, joint) in model.joints.iter().enumerate() {
+            if let Some(spring) = joint.spring {
+                data.gravity[i] += spring.stiffness * (q[i] - spring.rest);
+            }
+        }
+    }
+}
+
+/// Potential energy of gravity and springs at the configuration of the last `forward_kinematics`.
+pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<f64>) -> f64 {
+    let mut e = 0.0;
+    for (i, body) in model.bodies.iter().enumerate() {
+        e -= body.mass * model.gravity.dot(&data.kin.com[i]);
+    }
+    for (i, joint) in model.joints.iter().enumerate() {
+        if let Some(s) = joint.spring {
+            e += 0.5 * s.stiffness * (q[i] - s.rest).powi(2);
+        }
+    }
+    e
+}
+
+/// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ` at the state of the last `forward_velocity`.
+pub fn kinetic_energy<S: Space>(model: &Model<S>, data: &Data<S>) -> f64 {
+    (0..model.nq())
+        .map(|i| {
+            let v = &data.kin.body_velocity[i];
+            0.5 * v.dot(&S::inertia_mul(&data.kin.body_inertia[i], v))
+        })
+        .sum()
+}

@@ -1,0 +1,545 @@
+//! Time integration of the constrained dynamics, selectable at run time, with optional projection of q and
+//! q̇ back onto the constraint manifold.
+
+use nalgebra::DVector;
+
+use crate::algorithms::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
+use crate::algorithms::kinematics::forward_poses;
+use crate::algorithms::kkt;
+use crate::algorithms::loop_closure::closure_residual_and_jacobian;
+use crate::algorithms::ltl;
+use crate::error::DynamicsError;
+use crate::math::dense::{self, by_size, dot, sub_scaled};
+use crate::math::kkt_small;
+use crate::math::space::Space;
+use crate::model::data::Data;
+use crate::model::Model;
+
+/// Which integration scheme.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Explicit (forward) Euler: q and q̇ both from the start of the step. Included to show where it fails.
+    ExplicitEuler,
+    /// Semi-implicit (symplectic) Euler: q̇ first, then q with the new q̇. One dynamics evaluation per step;
+    /// supports linearly-implicit couplings.
+    SemiImplicitEuler,
+    /// Classical fourth-order Runge-Kutta: four evaluations per step.
+    Rk4,
+}
+
+impl Integrator {
+    /// All schemes, for sweeps.
+    pub const ALL: [Integrator; 3] = [Integrator::ExplicitEuler, Integrator::SemiImplicitEuler, Integrator::Rk4];
+
+    /// Short name used on command lines and in charts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::ExplicitEuler => "explicit-euler",
+            Integrator::SemiImplicitEuler => "euler",
+            Integrator::Rk4 => "rk4",
+        }
+    }
+
+    /// Parses `euler` (semi-implicit), `explicit-euler` or `rk4`.
+    pub fn parse(s: &str) -> Option<Integrator> {
+        match s {
+            "euler" | "semi-implicit-euler" | "symplectic-euler" => Some(Integrator::SemiImplicitEuler),
+            "explicit-euler" | "forward-euler" => Some(Integrator::ExplicitEuler),
+            "rk4" => Some(Integrator::Rk4),
+            _ => None,
+        }
+    }
+
+    /// Dynamics evaluations per step.
+    pub fn evaluations(self) -> usize {
+        match self {
+            Integrator::Rk4 => 4,
+            _ => 1,
+        }
+    }
+}
+
+/// How to take a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepConfig {
+    /// The scheme.
+    pub integrator: Integrator,
+    /// Step size, s.
+    pub dt: f64,
+    /// Project q and q̇ onto the constraint manifold after the step.
+    pub project: bool,
+    /// Let the forces add linearly-implicit terms (semi-implicit Euler only).
+    pub implicit_forces: bool,
+}
+
+impl StepConfig {
+    /// Semi-implicit Euler with projection and implicit couplings: the VE's default.
+    pub fn euler(dt: f64) -> Self {
+        StepConfig { integrator: Integrator::SemiImplicitEuler, dt, project: true, implicit_forces: true }
+    }
+}
+
+/// What a step observed.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct StepReport {
+    /// Norm of the closure residual h at the start of the step (after the previous step's projection).
+    pub closure_error: f64,
+}
+
+/// Advances `(q, q̇)` by one step of `cfg.dt` under `forces`. On error the state is left unchanged.
+pub fn step<S: Space, F: Forces<S> + ?Sized>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+    forces: &mut F,
+    cfg: &StepConfig,
+) -> Result<StepReport, DynamicsError> {
+    check_state(model, q, qd)?;
+    let dt = cfg.dt;
+    // Kept to restore the state should the step end non-finite (RK4 keeps it anyway for its stages).
+    dense::copy(data.integ.q_start.as_mut_slice(), q.as_slice());
+    dense::copy(data.integ.qd_start.as_mut_slice(), qd.as_slice());
+    let report;
+    match cfg.integrator {
+        Integrator::SemiImplicitEuler | Integrator::ExplicitEuler => {
+            dynamics_terms(model, data, q, qd, forces);
+            report = StepReport { closure_error: data.closure_residual.norm() };
+            // The matrix is zero unless the last step used it: clear it only then (n² writes otherwise wasted).
+            drop_implicit_mass(data);
+            data.use_implicit_mass = cfg.implicit_forces
+                && cfg.integrator == Integrator::SemiImplicitEuler
+                && forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied);
+            kkt::factorize(model, data)?;
+            kkt::solve(model, data)?;
+            if cfg.integrator == Integrator::SemiImplicitEuler {
+                add_scaled(qd, dt, &data.qdd);
+                add_scaled(q, dt, qd);
+            } else {
+                add_scaled(q, dt, qd);
+                add_scaled(qd, dt, &data.qdd);
+            }
+        }
+        Integrator::Rk4 => {
+            drop_implicit_mass(data);
+            let mut closure_error = 0.0;
+            for stage in 0..4 {
+                // Stage state: start + c·dt·k_{stage-1}, c = 0, ½, ½, 1.
+                let c = [0.0, 0.5, 0.5, 1.0][stage];
+                let (mut q_stage, mut qd_stage) = take_stage(data);
+                q_stage.copy_from(&data.integ.q_start);
+                qd_stage.copy_from(&data.integ.qd_start);
+                if stage > 0 {
+                    q_stage.axpy(c * dt, &data.integ.k_q[stage - 1], 1.0);
+                    qd_stage.axpy(c * dt, &data.integ.k_qd[stage - 1], 1.0);
+                }
+                let solved = (|| {
+                    dynamics_terms(model, data, &q_stage, &qd_stage, forces);
+                    if stage == 0 {
+                        closure_error = data.closure_residual.norm();
+                    }
+                    kkt::factorize(model, data)?;
+                    kkt::solve(model, data)
+                })();
+                data.integ.k_q[stage].copy_from(&qd_stage);
+                data.integ.k_qd[stage].copy_from(&data.qdd);
+                put_stage(data, q_stage, qd_stage);
+                solved?;
+            }
+            let ws = &data.integ;
+            for i in 0..model.nq() {
+                q[i] =
+                    ws.q_start[i] + dt / 6.0 * (ws.k_q[0][i] + 2.0 * ws.k_q[1][i] + 2.0 * ws.k_q[2][i] + ws.k_q[3][i]);
+                qd[i] = ws.qd_start[i]
+                    + dt / 6.0 * (ws.k_qd[0][i] + 2.0 * ws.k_qd[1][i] + 2.0 * ws.k_qd[2][i] + ws.k_qd[3][i]);
+            }
+            report = StepReport { closure_error };
+        }
+    }
+    if cfg.project && model.has_loops() {
+        project(model, data, q, qd);
+    }
+    if q.as_slice().iter().chain(qd.as_slice()).any(|x| !x.is_finite()) {
+        q.copy_from(&data.integ.q_start);
+        qd.copy_from(&data.integ.qd_start);
+        return Err(DynamicsError::NonFiniteResult { what: "state after the step" });
+    }
+    Ok(report)
+}
+
+/// `x ← x + h v`.
+fn add_scaled(x: &mut DVector<f64>, h: f64, v: &DVector<f64>) {
+    sub_scaled(x.as_mut_slice(), -h, v.as_slice());
+}
+
+fn take_stage<S: Space>(data: &mut Data<S>) -> (DVector<f64>, DVector<f64>) {
+    (
+        std::mem::replace(&mut data.integ.q_stage, DVector::zeros(0)),
+        std::mem::replace(&mut data.integ.qd_stage, DVector::zeros(0)),
+    )
+}
+
+fn put_stage<S: Space>(data: &mut Data<S>, q: DVector<f64>, qd: DVector<f64>) {
+    data.integ.q_stage = q;
+    data.integ.qd_stage = qd;
+}
+
+/// Largest closure residual the projection may leave, relative to the scene's length scale
+/// `Model::length_scale` (so that the choice does not depend on the unit of length: the testbed, L = 0.046 m,
+/// gets 1e-10 m). The chord iterations of [`project`] stop below it; beyond [`CHORD_ITERATIONS`] the full
+/// Newton step finishes the job.
+pub const CHORD_TOLERANCE: f64 = 2e-9;
+
+/// Chord iterations [`project`] takes at most before it refactors at the new configuration.
+pub const CHORD_ITERATIONS: usize = 3;
+
+/// One projection onto the constraint manifold in the mass metric: h and W are evaluated once, at the new
+/// q, and the correction uses the factors of the step's last KKT solve (`Z = U⁻¹ W_sᵀ`, `S = W_s D⁻¹ W_sᵀ`
+/// at the solve's state s, a stale Jacobian as in the chord form of Newton's method):
+/// `δq = -D⁻¹ W_sᵀ S⁺ r_q`, `δq̇ = -D⁻¹ W_sᵀ S⁺ r_v`, starting from `r_q = h(q)`, `r_v = W(q) q̇`.
+///
+/// **The residual is predicted, not re-evaluated.** After a correction δ the residual is, to first order,
+/// `r ← r + W(q) δ` (m dot products; the second-order term is `O(|δ|²)` times the linkage's curvature, far
+/// below the tolerance: over 3 s of the fast-moving benchmark chains the residual evaluated afresh after the
+/// corrections agrees with the prediction to within 1.7e-12 m, 2 % of the tolerance). While the
+/// predicted `|r_q|` exceeds [`CHORD_TOLERANCE`] times the length scale, the chord is applied again, each time
+/// shrinking the residual by the factor `|I - W(q) D⁻¹ W_sᵀ S⁺|`, of the order of W's relative change
+/// since s: O(dt |q̇|), ~1e-3 at 1 kHz. The iterations thus solve the linearized constraint
+/// `W(q) δ = -h(q)` like the exact Newton step, which leaves the same second-order term. If they have not
+/// converged after [`CHORD_ITERATIONS`], or stop contracting (very fast motion), Z and S are refactored at the
+/// new q and one exact correction takes the remaining predicted residual to zero. **Redundant closures**
+/// (`closure_rank < nc`: the spherical four-bar's revolute cut) always take the exact step: there the
+/// pivoting keeps only some rows, and with the rows and factors of the solve's state the drift of the dropped
+/// rows was not corrected (the spherical four-bar's closure error grew by 3 % a step, to 1e-7 m within 0.1 s
+/// of swinging).
+///
+/// Why this is enough: any positive-definite metric gives a valid projection, and every step corrects what
+/// the last one left (the closure error measured at the start of the steps stays below 1e-10 m over the
+/// paper's 3 s on the testbed). The velocity is made to satisfy the constraint of the configuration it
+/// belongs to (the W of the step's start in place of W(q) would leave an O(dt) velocity error every step).
+/// What this saves: a refactorization costs the triangular solve of Wᵀ, the Schur complement and its
+/// pivoted factorization. With a bound instead of the prediction (`|Δq|∞ · |h|`), 29 % of the testbed's
+/// steps and 86 % of `chain50_loops5`'s refactored; with the prediction and the iterations, none.
+///
+/// **Violent motion.** The second-order term grows as `|δ|²`: a linkage spun at tens of rad/s drifts so far
+/// in a step that one pass leaves it above the tolerance. When the residual a pass starts from exceeds
+/// [`SECOND_ORDER_RESIDUAL`], h and W are evaluated again at the corrected q and the projection repeats, up
+/// to [`MAX_PROJECTION_PASSES`] passes (in ordinary motion, the paper's manipulation included, one pass).
+///
+/// Needs [`kkt::factorize`] at a nearby state (the step's dynamics). Leaves h and Wᵀ at the q the last pass
+/// began from (before its correction) and the body poses there. Both corrections are `U⁻ᵀ Z S⁺ r`, so they
+/// go through the triangular solve together.
+pub fn project<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) -> Projection {
+    let second_order_matters = SECOND_ORDER_RESIDUAL * model.length_scale;
+    let mut projection = project_once(model, data, q, qd);
+    while projection.initial_residual > second_order_matters && projection.passes < MAX_PROJECTION_PASSES {
+        let again = project_once(model, data, q, qd);
+        projection = Projection {
+            chord_iterations: projection.chord_iterations + again.chord_iterations,
+            refactored: projection.refactored || again.refactored,
+            passes: projection.passes + 1,
+            ..again
+        };
+    }
+    projection
+}
+
+/// A closure residual above this fraction of the length scale L (2.0e-6 m on the testbed) is corrected by so
+/// large a δ that the correction's second-order remainder may exceed the tolerance: [`project`] then
+/// evaluates h again at the corrected q and projects again. The remainder of one pass from a residual r is
+/// about `c r²/L`, with c = 0.34 measured on the testbed spun at 30-200 rad/s (r = 5.8e-6 to 2.7e-4 m left
+/// 2.5e-10 to 5.5e-7 m); it stays under `CHORD_TOLERANCE · L` while `r ≤ L √(CHORD_TOLERANCE / c)`, and the
+/// threshold takes c = 1 for linkages curved more tightly than their length scale says. Reached only in
+/// violent motion: on the testbed from about 18 rad/s, a hundred times the paper's manipulation.
+pub const SECOND_ORDER_RESIDUAL: f64 = 4.47e-5; // √CHORD_TOLERANCE
+
+/// Passes [`project`] takes at most (see [`SECOND_ORDER_RESIDUAL`]).
+pub const MAX_PROJECTION_PASSES: usize = 3;
+
+/// One pass of [`project`]: h and W evaluated at q, the chord corrections, and the exact one if needed.
+fn project_once<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) -> Projection {
+    forward_poses(model, data, q);
+    closure_residual_and_jacobian(model, data);
+    let n = model.nq();
+    let kkt = &mut data.kkt;
+    // (`factor_closures` needs tmp_m, `schur_solve` tmp_m2.)
+    let mut r_q = std::mem::replace(&mut kkt.tmp_m3, DVector::zeros(0));
+    let mut r_v = std::mem::replace(&mut kkt.tmp_m4, DVector::zeros(0));
+    dense::copy(r_q.as_mut_slice(), data.closure_residual.as_slice());
+    // W(q) q̇ over whole columns: W(q)'s support is W_s's, but an entry may vanish at one state only.
+    let wt = data.closure_jacobian_t.as_slice();
+    for (r, col) in r_v.as_mut_slice().iter_mut().zip(wt.chunks_exact(n)) {
+        *r = dot(col, qd.as_slice());
+    }
+    let tolerance = CHORD_TOLERANCE * model.length_scale;
+    let initial_residual = r_q.norm();
+    // NaN (a state gone bad) compares false and takes the exact step.
+    let mut converged = false;
+    let mut chord_iterations = 0;
+    if model.closure_rank == model.nc() {
+        let mut before = initial_residual;
+        while chord_iterations < CHORD_ITERATIONS {
+            correct(model, data, &mut r_q, &mut r_v, q, qd);
+            chord_iterations += 1;
+            let after = r_q.norm();
+            converged = after <= tolerance;
+            // Not contracting by at least half (or NaN): W(q) is too far from the factors' W_s for the chord.
+            let contracting = after <= 0.5 * before;
+            if converged || !contracting {
+                break;
+            }
+            before = after;
+        }
+    }
+    if !converged {
+        kkt::factor_closures(model, data);
+        correct(model, data, &mut r_q, &mut r_v, q, qd);
+    }
+    let projection = Projection {
+        chord_iterations,
+        refactored: !converged,
+        predicted_residual: r_q.norm(),
+        initial_residual,
+        passes: 1,
+    };
+    data.kkt.tmp_m3 = r_q;
+    data.kkt.tmp_m4 = r_v;
+    projection
+}
+
+/// What a [`project`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Projection {
+    /// Corrections made with the factors of the step's solve.
+    pub chord_iterations: usize,
+    /// Whether Z and S were refactored at the new configuration for a final, exact correction.
+    pub refactored: bool,
+    /// `|h|` after the corrections as predicted to first order (`h + W δ`), m or rad (of the last pass).
+    pub predicted_residual: f64,
+    /// `|h|` evaluated at the q the last pass began from.
+    pub initial_residual: f64,
+    /// Passes taken, each evaluating h at the q the one before left (see [`SECOND_ORDER_RESIDUAL`]).
+    pub passes: usize,
+}
+
+/// Applies one correction with the current factors to `q` and `q̇` and updates the predicted residuals:
+/// `δ = -U⁻ᵀ Z S⁺ r`, `r ← r + W(q) δ` for both pairs, W(q) from `closure_jacobian_t`.
+pub(crate) fn correct<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    r_q: &mut DVector<f64>,
+    r_v: &mut DVector<f64>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) {
+    by_size!(model.nq(), N => {
+        let mut s = std::mem::replace(&mut data.kkt.tmp_m, DVector::zeros(0));
+        let (r, x) = ([r_q.as_mut_slice(), r_v.as_mut_slice()], [q.as_mut_slice(), qd.as_mut_slice()]);
+        kkt_small::correct::<N>(&data.kkt, data.closure_jacobian_t.as_slice(), r, x, s.as_mut_slice());
+        data.kkt.tmp_m = s;
+    }, _ => correct_general(model, data, r_q, r_v, q, qd))
+}
+
+/// [`correct`] for any n (models of at most 8 joints take `kkt_small`, with the same results).
+pub(crate) fn correct_general<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    r_q: &mut DVector<f64>,
+    r_v: &mut DVector<f64>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) {
+    let n = model.nq();
+    let kkt = &mut data.kkt;
+    dense::zero(kkt.tmp_n2.as_mut_slice());
+    // t = -Z S⁺ r per right-hand side (S⁺ on a copy: r is updated below), then U⁻ᵀ t for both together.
+    let mut s = std::mem::replace(&mut kkt.tmp_m, DVector::zeros(0));
+    for (r, side) in [(&*r_q, 0), (&*r_v, 1)] {
+        dense::copy(s.as_mut_slice(), r.as_slice());
+        kkt::schur_solve(data, &mut s);
+        let kkt = &mut data.kkt;
+        let t = &mut kkt.tmp_n2.as_mut_slice()[side * n..(side + 1) * n];
+        kkt::sub_columns_times(&kkt.z, &kkt.z_rows, s.as_slice(), t);
+    }
+    let kkt = &mut data.kkt;
+    kkt.tmp_m = s;
+    ltl::solve_ut_columns(model, &kkt.factor, kkt.factor_inv_diag.as_slice(), kkt.tmp_n2.as_mut_slice());
+    let (t_q, t_v) = kkt.tmp_n2.as_slice().split_at(n);
+    let wt = data.closure_jacobian_t.as_slice();
+    for (x, r, t) in [(q, r_q, t_q), (qd, r_v, t_v)] {
+        for (x, t) in x.as_mut_slice().iter_mut().zip(t) {
+            *x += t;
+        }
+        for (r, col) in r.as_mut_slice().iter_mut().zip(wt.chunks_exact(n)) {
+            *r += dot(col, t);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algorithms::dynamics::forward_dynamics;
+    use crate::algorithms::kkt::{solve_general, z_and_schur_general};
+    use crate::testing::{for_each_model, paper_testbed, random_state};
+
+    /// `(‖h(q)‖, ‖W(q) q̇‖)` evaluated afresh.
+    fn residuals(model: &Model<crate::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
+        let mut data = Data::new(model);
+        forward_poses(model, &mut data, q);
+        closure_residual_and_jacobian(model, &mut data);
+        let n = model.nq();
+        let w_qd = data.closure_jacobian_t.as_slice().chunks_exact(n).map(|c| dot(c, qd.as_slice()).powi(2));
+        (data.closure_residual.norm(), w_qd.sum::<f64>().sqrt())
+    }
+
+    /// The testbed at q0 with joint rates of `speed` times a fixed pattern (made consistent with the loop),
+    /// after one semi-implicit Euler step of 1 ms without projection: a drift of order dt² q̇². The workspace
+    /// holds the factors of the step's solve.
+    fn drifted(model: &Model<crate::Planar>, speed: f64) -> (Data<crate::Planar>, DVector<f64>, DVector<f64>) {
+        let mut data = Data::new(model);
+        let mut q = model.q0.clone();
+        // A velocity on the manifold: project a raw one at q0 (the exact Newton step, factors at q0).
+        let mut qd = DVector::from_fn(model.nq(), |i, _| speed * [1.0, -0.4, 0.7, 0.2][i]);
+        forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
+        project(model, &mut data, &mut q.clone(), &mut qd);
+        forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
+        qd.axpy(1e-3, &data.qdd, 1.0);
+        q.axpy(1e-3, &qd, 1.0);
+        (data, q, qd)
+    }
+
+    /// The projection, with the factors of a solve one step back, takes the position and velocity residuals
+    /// of a step down by at least the factor its documentation promises, from slow to fast (single-pass)
+    /// motion of the testbed (the faster, the more W moves in a step and the less the stale factors help),
+    /// and never leaves more than its tolerance, evaluated afresh.
+    #[test]
+    fn chord_projection_contracts_the_residuals_of_a_step() {
+        let model = paper_testbed();
+        for speed in [0.5, 5.0, 15.0] {
+            let (mut data, mut q, mut qd) = drifted(&model, speed);
+            let dt = 1e-3;
+            let (h_before, v_before) = residuals(&model, &q, &qd);
+            let q_before = q.clone();
+            let projection = project(&model, &mut data, &mut q, &mut qd);
+            let (h_after, _) = residuals(&model, &q, &qd);
+            assert!(projection.chord_iterations >= 1, "speed {speed}: {projection:?}");
+            // The velocity is made consistent with the configuration the step reached (whose constraint the
+            // step violated); the position correction then moves W by O(|Δq|), a floor far below this.
+            let (_, v_after) = residuals(&model, &q_before, &qd);
+            // W moves by about dt·|q̇| relative in a step: the stale factors leave that fraction.
+            let factor = (5.0 * dt * speed).max(1e-3);
+            assert!(h_before > 1e-10, "speed {speed}: the step should drift ({h_before:.2e})");
+            assert!(h_after <= factor * h_before + 1e-15, "speed {speed}: h {h_before:.2e} -> {h_after:.2e}");
+            let tolerance = CHORD_TOLERANCE * model.length_scale;
+            assert!(h_after <= tolerance, "speed {speed}: h {h_before:.2e} -> {h_after:.2e}");
+            assert!(v_after <= factor * v_before + 1e-13, "speed {speed}: W q̇ {v_before:.2e} -> {v_after:.2e}");
+        }
+    }
+
+    /// A step whose result is not finite (here a step of 1e300 s from joint rates of 1e10 rad/s, which
+    /// overflows) returns the error and leaves q and q̇ as they were, with every integrator: the caller can
+    /// carry on from its last state.
+    #[test]
+    fn a_step_that_ends_non_finite_leaves_the_state_as_it_was() {
+        let model = paper_testbed();
+        let mut data = Data::new(&model);
+        let mut push = crate::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
+        for integrator in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler, Integrator::Rk4] {
+            let (mut q, mut qd) = crate::testing::random_state(&model, 5);
+            qd *= 1e10;
+            let before = (q.clone(), qd.clone());
+            let cfg = StepConfig { integrator, ..StepConfig::euler(1e300) };
+            // The Euler steps overflow at the end, RK4 within its stages (D of a non-finite q is not factored).
+            assert!(step(&model, &mut data, &mut q, &mut qd, &mut push, &cfg).is_err(), "{integrator:?}");
+            assert_eq!((q, qd), before, "{integrator:?}");
+            // And the workspace still serves a sound step.
+            let mut state = before.clone();
+            step(&model, &mut data, &mut state.0, &mut state.1, &mut push, &StepConfig::euler(1e-3)).unwrap();
+        }
+    }
+
+    /// Spun at tens of rad/s, the testbed drifts so far in a step that one pass of the projection leaves
+    /// more than the tolerance (its correction's second-order remainder); the further passes close the loop
+    /// to the tolerance, evaluated afresh. In ordinary motion one pass is taken.
+    #[test]
+    fn violent_motion_takes_further_passes_and_leaves_the_tolerance() {
+        let model = paper_testbed();
+        let tolerance = CHORD_TOLERANCE * model.length_scale;
+        for speed in [0.5, 5.0, 15.0] {
+            let (mut data, mut q, mut qd) = drifted(&model, speed);
+            assert_eq!(project(&model, &mut data, &mut q, &mut qd).passes, 1, "speed {speed}");
+        }
+        let mut one_pass_left_too_much = false;
+        for speed in [30.0, 75.0, 200.0] {
+            let (data, q, qd) = drifted(&model, speed);
+            let (mut once, mut q_once, mut qd_once) = (data.clone(), q.clone(), qd.clone());
+            project_once(&model, &mut once, &mut q_once, &mut qd_once);
+            one_pass_left_too_much |= residuals(&model, &q_once, &qd_once).0 > tolerance;
+            let (mut data, mut q, mut qd) = (data, q, qd);
+            let projection = project(&model, &mut data, &mut q, &mut qd);
+            let (h_after, _) = residuals(&model, &q, &qd);
+            assert!(projection.passes >= 2, "speed {speed}: {projection:?}");
+            assert!(h_after <= tolerance, "speed {speed}: left {h_after:.2e} m after {projection:?}");
+        }
+        assert!(one_pass_left_too_much, "the fastest case should need the further passes");
+    }
+
+    /// On every test scene of at most 8 joints with loops (redundant ones included), the fixed-size kernels
+    /// give the general forms' Z, S, q̈, λ and chord corrections bit for bit, at random states; one of the
+    /// scenes has more than 8 joints and takes the general form either way.
+    #[test]
+    fn fixed_size_kernels_give_the_general_forms_bits() {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut compared = 0;
+        for_each_model!(name, model => {
+            if model.nq() <= 8 && model.nc() > 0 {
+                for seed in 0..5 {
+                    let (q, qd) = random_state(model, seed);
+                    let mut small = Data::new(model);
+                    dynamics_terms(model, &mut small, &q, &qd, &mut ());
+                    kkt::factorize(model, &mut small).unwrap();
+                    let mut general = small.clone();
+                    general.kkt.z.fill(f64::NAN);
+                    general.kkt.schur.fill(f64::NAN);
+                    z_and_schur_general(model, &mut general);
+                    let case = format!("{name}, seed {seed}");
+                    assert_eq!(bits(small.kkt.z.as_slice()), bits(general.kkt.z.as_slice()), "{case}: Z");
+                    assert_eq!(bits(small.kkt.schur.as_slice()), bits(general.kkt.schur.as_slice()), "{case}: S");
+                    kkt::solve(model, &mut small).unwrap();
+                    solve_general(model, &mut general);
+                    assert_eq!(bits(small.qdd.as_slice()), bits(general.qdd.as_slice()), "{case}: q̈");
+                    assert_eq!(bits(small.lambda.as_slice()), bits(general.lambda.as_slice()), "{case}: λ");
+                    // A chord correction at a configuration off the manifold, with the factors above.
+                    let off = q.map(|x| x + 1e-4);
+                    forward_poses(model, &mut small, &off);
+                    closure_residual_and_jacobian(model, &mut small);
+                    let mut general = small.clone();
+                    let r_q = small.closure_residual.clone();
+                    let r_v = DVector::from_fn(model.nc(), |i, _| 1e-3 * (i as f64 + 1.0));
+                    let mut a = (r_q.clone(), r_v.clone(), off.clone(), qd.clone());
+                    let mut b = (r_q, r_v, off.clone(), qd.clone());
+                    correct(model, &mut small, &mut a.0, &mut a.1, &mut a.2, &mut a.3);
+                    correct_general(model, &mut general, &mut b.0, &mut b.1, &mut b.2, &mut b.3);
+                    for (what, x, y) in [("r_q", &a.0, &b.0), ("r_v", &a.1, &b.1), ("q", &a.2, &b.2), ("q̇", &a.3, &b.3)] {
+                        assert_eq!(bits(x.as_slice()), bits(y.as_slice()), "{case}: corrected {what}");
+                    }
+                    assert_ne!(a.2, off, "{case}: the correction should move q");
+                    compared += 1;
+                }
+            }
+        });
+        assert!(compared >= 5 * 6, "only {compared} cases compared");
+    }
+}

@@ -1,0 +1,443 @@
+//! The reach of an operational point: where the closed linkage lets it go, how light it can feel there, and
+//! the static load gravity puts on a hand that holds it still. A VE surveys each OP once, before its loop
+//! starts, to fit a haptic device's workspace and force range to the linkage and to design the couplings
+//! (server: coupling gains and scales; client: its own gains). Not a hot path: it allocates.
+//!
+//! **The walk.** The closed configurations form a manifold `h(q) = 0` of dimension `n − rank W`; the OP's
+//! reach is its image. The survey walks that manifold from `q0` by tangent steps: the walk direction is
+//! projected on the null space of W (eq 2's constraint Jacobian) at every step, so it follows the manifold
+//! around bends, and each step is pulled back onto `h = 0` by Gauss-Newton (`Δq = −W⁺ h`, as `assemble`).
+//! Starting from `q0` keeps the walk on q0's assembly branch: a four-bar's crossed branch, which no motion
+//! reaches, is never visited. A walk that cannot close (a rocker at its dead point, a slider at the end of
+//! its stroke) reverses, as the linkage itself would. Walks leave `q0` in several directions of the null
+//! space (one back and forth on a 1-DOF linkage, a star on a 2-DOF one).
+//!
+//! **Per sample** (at rest, so the loads are static): Λ⁻¹ with the loops closed (eq 9), the OP's
+//! acceleration under gravity alone `a_g = J q̈_g` (eq 4 with q̇ = 0), and the static load: the OP wrench
+//! that cancels `a_g` in the OP's free directions, `F = −(Λ̃⁻¹)⁺ ã_g` in the unit-consistent coordinates of
+//! [`constraint_directions`] (eq 10), restricted to the directions not counted as constrained — along those
+//! the joints carry the load, not the hand.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
+use crate::algorithms::dynamics::forward_dynamics;
+use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use crate::algorithms::local_model::{op_acceleration, OpPose};
+use crate::algorithms::loop_closure::loop_closure;
+use crate::algorithms::op_space::op_space_inertia;
+use crate::error::DynamicsError;
+use crate::math::space::{Space, VecOps};
+use crate::model::data::Data;
+use crate::model::{JointKind, Model};
+
+/// A group of axes (linear or angular) whose largest inverse inertia is below this fraction of the other
+/// group's (unit-consistent coordinates) does not move at all: what is left is round-off of eq 9's
+/// cancellation, some 1e-16 relative.
+pub const IMMOBILE_GROUP: f64 = 1e-9;
+
+/// How far and how often a survey walks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurveyConfig {
+    /// Walks leaving `q0` (each in its own direction of the null space).
+    pub walks: usize,
+    /// Steps per walk.
+    pub steps: usize,
+    /// Length of a step in joint space (rad; prismatic coordinates count in units of the length scale).
+    pub step: f64,
+    /// Λ⁻¹ and the static load are evaluated every this many steps (positions at every step).
+    pub inertia_every: usize,
+    /// Waypoints of the tour (at most).
+    pub tour_points: usize,
+}
+
+impl Default for SurveyConfig {
+    fn default() -> Self {
+        SurveyConfig { walks: 6, steps: 360, step: 0.04, inertia_every: 3, tour_points: 12 }
+    }
+}
+
+/// What a survey found at one operational point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpReach<S: Space> {
+    /// The operational point.
+    pub op: usize,
+    /// Closed configurations visited.
+    pub samples: usize,
+    /// Smallest coordinates the OP's position reached (world, m).
+    pub position_min: S::Point,
+    /// Largest coordinates the OP's position reached (world, m).
+    pub position_max: S::Point,
+    /// Largest rotation of the OP's frame away from its orientation at `q0` (rad).
+    pub rotation_range: f64,
+    /// Reachable poses along the first walks, in order (an intended motion that stays inside the reach).
+    pub tour: Vec<OpPose<S>>,
+    /// Static load at the OP: the 90th percentile over the samples of the force (N) and torque (N m) a hand
+    /// must apply to hold the linkage still against gravity (see the module documentation). The percentile
+    /// rather than the maximum: next to a singular configuration a free direction's inverse inertia tends to
+    /// zero and the load there to infinity, which no device renders and no scale should be set by.
+    pub static_force_n: f64,
+    /// See `static_force_n` (N m).
+    pub static_torque_nm: f64,
+    /// Largest static force over the samples (N).
+    pub static_force_max_n: f64,
+    /// Largest eigenvalue of the linear block of Λ⁻¹ over the samples (1/kg): the inverse of the lightest
+    /// translational effective mass the OP shows.
+    pub inverse_mass_max: f64,
+    /// Largest eigenvalue of the angular block of Λ⁻¹ over the samples (1/(kg m²)).
+    pub inverse_rotational_inertia_max: f64,
+    /// Dimension of the closed configuration manifold at `q0` (the linkage's degrees of freedom).
+    pub dof: usize,
+}
+
+impl<S: Space> OpReach<S> {
+    /// Extent of the reach along each world axis (m).
+    pub fn extent(&self) -> S::Point {
+        self.position_max - self.position_min
+    }
+
+    /// The largest extent (m).
+    pub fn largest_extent(&self) -> f64 {
+        self.extent().as_slice().iter().fold(0.0, |a, b| a.max(*b))
+    }
+}
+
+/// Why a survey failed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SurveyError {
+    /// No such operational point.
+    #[error("no operational point {index} (the scene has {count})")]
+    UnknownOp {
+        /// Index asked for.
+        index: usize,
+        /// How many there are.
+        count: usize,
+    },
+    /// The dynamics failed at the starting configuration.
+    #[error("the dynamics failed at q0: {0}")]
+    Dynamics(#[from] DynamicsError),
+}
+
+/// Joint-space weights: 1 for revolute coordinates, 1/L for prismatic ones, so a step of `step` moves every
+/// joint by a comparable amount.
+fn joint_weights<S: Space>(model: &Model<S>) -> DVector<f64> {
+    DVector::from_iterator(
+        model.nq(),
+        model.joints.iter().map(|j| match j.kind {
+            JointKind::Revolute => 1.0,
+            JointKind::Prismatic => 1.0 / model.length_scale,
+        }),
+    )
+}
+
+/// Rows of W's right singular vectors with a singular value above `tol · σ_max`: W's row space. The null
+/// space is its orthogonal complement.
+fn row_space(w: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    if w.nrows() == 0 {
+        return Some(DMatrix::zeros(0, w.ncols()));
+    }
+    let svd = w.clone().svd(false, true);
+    let v_t = svd.v_t?;
+    let max = svd.singular_values.max();
+    let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&i| svd.singular_values[i] > 1e-9 * max).collect();
+    Some(DMatrix::from_fn(keep.len(), w.ncols(), |r, c| v_t[(keep[r], c)]))
+}
+
+/// `v` with its components in the row space `rows` (orthonormal rows) removed.
+fn project_null(rows: &DMatrix<f64>, v: &DVector<f64>) -> DVector<f64> {
+    if rows.nrows() == 0 {
+        return v.clone();
+    }
+    v - rows.transpose() * (rows * v)
+}
+
+/// Residual norm of the loops at `q` (kinematics into `data`).
+fn residual<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>, zero: &DVector<f64>) -> f64 {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, zero);
+    loop_closure(model, data);
+    data.closure_residual.norm()
+}
+
+/// Pulls `q` back onto the loops by Gauss-Newton; false when it does not converge in a few iterations (a
+/// dead point, or a step too long for the curvature).
+fn close<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, zero: &DVector<f64>) -> bool {
+    let tolerance = 1e-11 * model.length_scale;
+    let mut r = residual(model, data, q, zero);
+    for _ in 0..12 {
+        if r <= tolerance {
+            return true;
+        }
+        let w = data.closure_jacobian();
+        let svd = w.svd(true, true);
+        let Ok(step) = svd.solve(&data.closure_residual, 1e-12 * svd.singular_values.max()) else {
+            return false;
+        };
+        let trial = &*q - step;
+        let r_trial = residual(model, data, &trial, zero);
+        if !(r_trial < r) {
+            return false;
+        }
+        *q = trial;
+        r = r_trial;
+    }
+    r <= tolerance
+}
+
+/// The OP's static load and Λ⁻¹ at the closed configuration `q`, at rest: fills `data` (dynamics at `q`,
+/// q̇ = 0) and returns the static wrench and the constraint directions it was resolved with.
+pub fn static_op_load<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &DVector<f64>,
+    op: usize,
+) -> Result<(S::OpVec, ConstraintDirections<S>), DynamicsError> {
+    let zero = DVector::zeros(model.nq());
+    forward_dynamics(model, data, q, &zero, &mut ())?;
+    op_space_inertia(model, data, op)?;
+    let directions = constraint_directions::<S>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+    let load = static_wrench(&directions, &op_acceleration(data));
+    Ok((load, directions))
+}
+
+/// `−(Λ̃⁻¹)⁺ ã` over the free directions of `directions`, in physical units: the OP wrench that cancels the
+/// OP acceleration `accel` wherever the OP is free to move.
+pub fn static_wrench<S: Space>(directions: &ConstraintDirections<S>, accel: &S::OpVec) -> S::OpVec {
+    let scaled = directions.to_scaled(accel);
+    let free = S::DIM - directions.count;
+    let mut wrench = S::OpVec::zero();
+    for i in 0..free {
+        let sigma = directions.singular_values[i];
+        if sigma > 0.0 {
+            let u = directions.direction(i);
+            wrench -= u * (u.dot(&scaled) / sigma);
+        }
+    }
+    directions.wrench_from_scaled(&wrench)
+}
+
+/// Largest eigenvalue of the symmetric block `range × range` of `m`.
+fn block_max_eigenvalue<S: Space>(m: &S::OpMat, range: std::ops::Range<usize>) -> f64 {
+    let len = range.len();
+    if len == 0 {
+        return 0.0;
+    }
+    let block = DMatrix::from_fn(len, len, |r, c| m[(range.start + r, range.start + c)]);
+    block.symmetric_eigen().eigenvalues.max().max(0.0)
+}
+
+/// One step of a walk, `Some(direction)` on success (the new tangent direction, unit in the weighted norm).
+struct Walker<'a, S: Space> {
+    model: &'a Model<S>,
+    data: Data<S>,
+    weights: DVector<f64>,
+    zero: DVector<f64>,
+}
+
+impl<S: Space> Walker<'_, S> {
+    /// The null-space basis at the configuration of the last `residual` (its W).
+    fn rows(&self) -> Option<DMatrix<f64>> {
+        // Work in weighted coordinates q̃ = diag(weights) q: W̃ = W diag(1/weights).
+        let w = self.data.closure_jacobian();
+        let scaled = DMatrix::from_fn(w.nrows(), w.ncols(), |r, c| w[(r, c)] / self.weights[c]);
+        row_space(&scaled)
+    }
+
+    /// Moves `q` one step along `direction` (weighted coordinates), projected on the tangent space; the new
+    /// direction, or `None` when the step does not close.
+    fn step(&mut self, q: &mut DVector<f64>, direction: &DVector<f64>, length: f64) -> Option<DVector<f64>> {
+        residual(self.model, &mut self.data, q, &self.zero);
+        let rows = self.rows()?;
+        let tangent = project_null(&rows, direction);
+        let norm = tangent.norm();
+        if !(norm > 1e-9) {
+            return None;
+        }
+        let tangent = tangent / norm;
+        let mut trial = q.clone();
+        for i in 0..trial.len() {
+            trial[i] += length * tangent[i] / self.weights[i];
+        }
+        if !close(self.model, &mut self.data, &mut trial, &self.zero) {
+            return None;
+        }
+        *q = trial;
+        Some(tangent)
+    }
+}
+
+/// Surveys operational point `op` of `model` from its `q0` (see the module documentation).
+pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -> Result<OpReach<S>, SurveyError> {
+    if op >= model.ops.len() {
+        return Err(SurveyError::UnknownOp { index: op, count: model.ops.len() });
+    }
+    let n = model.nq();
+    let lin = <S::Point as VecOps>::LEN;
+    let mut walker = Walker { model, data: Data::new(model), weights: joint_weights(model), zero: DVector::zeros(n) };
+    let mut q0 = model.q0.clone();
+    // A q0 that does not quite close (a hand-written scene) is closed first; if it cannot be, walk from it.
+    close(model, &mut walker.data, &mut q0, &walker.zero);
+    residual(model, &mut walker.data, &q0, &walker.zero);
+    let start = OpPose::<S>::of_op(model, &walker.data, op);
+    let null_basis = {
+        let rows = walker.rows().unwrap_or_else(|| DMatrix::zeros(0, n));
+        // An orthonormal basis of the null space: the identity's columns projected and orthonormalized.
+        let mut basis: Vec<DVector<f64>> = Vec::new();
+        for i in 0..n {
+            let mut v = project_null(&rows, &DVector::from_fn(n, |r, _| f64::from(u8::from(r == i))));
+            for b in &basis {
+                v -= b * b.dot(&v);
+            }
+            let norm = v.norm();
+            if norm > 1e-6 {
+                basis.push(v / norm);
+            }
+        }
+        basis
+    };
+    let dof = null_basis.len();
+
+    let mut reach = OpReach {
+        op,
+        samples: 0,
+        position_min: start.position,
+        position_max: start.position,
+        rotation_range: 0.0,
+        tour: Vec::new(),
+        static_force_n: 0.0,
+        static_torque_nm: 0.0,
+        static_force_max_n: 0.0,
+        inverse_mass_max: 0.0,
+        inverse_rotational_inertia_max: 0.0,
+        dof,
+    };
+    let mut forces = Vec::new();
+    let mut torques = Vec::new();
+    let mut dynamics_data = Data::new(model);
+    let mut visit = |q: &DVector<f64>, pose: &OpPose<S>, with_inertia: bool, reach: &mut OpReach<S>| {
+        reach.samples += 1;
+        let p = pose.position.as_slice();
+        for (i, x) in p.iter().enumerate() {
+            let lo = &mut reach.position_min.as_mut_slice()[i];
+            *lo = lo.min(*x);
+            let hi = &mut reach.position_max.as_mut_slice()[i];
+            *hi = hi.max(*x);
+        }
+        reach.rotation_range = reach.rotation_range.max(S::op_ang(&pose.difference(&start)).norm());
+        if !with_inertia {
+            return;
+        }
+        if let Ok((load, _)) = static_op_load(model, &mut dynamics_data, q, op) {
+            let inverse = dynamics_data.op.inverse_inertia;
+            reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
+            reach.inverse_rotational_inertia_max =
+                reach.inverse_rotational_inertia_max.max(block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
+            let (f, t) = (S::op_lin(&load).norm(), S::op_ang(&load).norm());
+            if f.is_finite() && t.is_finite() {
+                forces.push(f);
+                torques.push(t);
+            }
+        }
+    };
+    visit(&q0, &start, true, &mut reach);
+    if dof == 0 {
+        reach.tour.push(start);
+    }
+    // A 1-DOF linkage needs two walks (forth and back); more spread over the first two null directions.
+    let walks = match dof {
+        0 => 0,
+        1 => config.walks.min(2),
+        _ => config.walks,
+    };
+    for walk in 0..walks {
+        let angle = std::f64::consts::TAU * walk as f64 / walks as f64;
+        let mut direction = &null_basis[0] * angle.cos();
+        if dof > 1 {
+            direction += &null_basis[1] * angle.sin();
+        }
+        let mut q = q0.clone();
+        let mut path = vec![start];
+        let mut failures = 0;
+        for step in 1..=config.steps {
+            match walker.step(&mut q, &direction, config.step) {
+                Some(tangent) => {
+                    direction = tangent;
+                    failures = 0;
+                    let pose = OpPose::<S>::of_op(model, &walker.data, op);
+                    visit(&q, &pose, step % config.inertia_every.max(1) == 0, &mut reach);
+                    path.push(pose);
+                }
+                None => {
+                    // A dead point or the end of a stroke: turn back, as the linkage would.
+                    failures += 1;
+                    if failures > 2 {
+                        break;
+                    }
+                    direction = -direction;
+                }
+            }
+        }
+        // The tour: the first walk (and, on a linkage of several DOF, the one leaving at a right angle).
+        if walk == 0 || (dof > 1 && walk * 4 == walks) {
+            reach.tour.extend(waypoints(&path, config.tour_points));
+        }
+    }
+    let percentile = |values: &mut Vec<f64>| {
+        if values.is_empty() {
+            return 0.0;
+        }
+        values.sort_by(f64::total_cmp);
+        values[((values.len() - 1) as f64 * 0.9).round() as usize]
+    };
+    // A group the OP does not move in at all (a parallelogram's coupler never turns) shows an inverse
+    // inertia of round-off size, 1e-23 where the other group's is 1; read it as zero (an infinite inertia),
+    // comparing the groups in the unit-consistent coordinates `(v, L ω)`.
+    let l2 = model.length_scale * model.length_scale;
+    let scaled_largest = reach.inverse_mass_max.max(reach.inverse_rotational_inertia_max * l2);
+    if reach.inverse_mass_max <= IMMOBILE_GROUP * scaled_largest {
+        reach.inverse_mass_max = 0.0;
+    }
+    if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
+        reach.inverse_rotational_inertia_max = 0.0;
+    }
+    reach.static_force_max_n = forces.iter().fold(0.0, |a: f64, b| a.max(*b));
+    reach.static_force_n = percentile(&mut forces);
+    reach.static_torque_nm = percentile(&mut torques);
+    Ok(reach)
+}
+
+/// Up to `count` poses of `path` evenly spaced by the OP's arc length, stopping where a closed path comes
+/// back to its start (a crank-rocker's coupler curve is walked around more than once).
+fn waypoints<S: Space>(path: &[OpPose<S>], count: usize) -> Vec<OpPose<S>> {
+    if path.len() < 2 || count == 0 {
+        return path.iter().take(1).copied().collect();
+    }
+    let mut arc = vec![0.0];
+    let mut far = 0.0f64;
+    let mut end = path.len();
+    for i in 1..path.len() {
+        let d = (path[i].position - path[i - 1].position).norm();
+        arc.push(arc[i - 1] + d);
+        let from_start = (path[i].position - path[0].position).norm();
+        far = far.max(from_start);
+        // Back where it started after having gone away: one lap.
+        if far > 0.0 && from_start < 0.05 * far && arc[i] > 2.0 * far {
+            end = i + 1;
+            break;
+        }
+    }
+    let total = arc[end - 1];
+    if total <= 0.0 {
+        return vec![path[0]];
+    }
+    let mut out = Vec::with_capacity(count);
+    let mut j = 0;
+    for k in 1..=count {
+        let s = total * k as f64 / count as f64;
+        while j + 1 < end && arc[j] < s {
+            j += 1;
+        }
+        out.push(path[j]);
+    }
+    out
+}
