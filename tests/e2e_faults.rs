@@ -399,7 +399,7 @@ fn a_junk_flood_from_an_authenticated_client_changes_nothing_for_the_others() {
     let record = dir.path().join("steady.csv");
     let steady =
         live::start_client(live::recorded_client_of(&server, "steady", OPS[0], &live::paper_share(1), &record));
-    let (endpoint, rogue) = live::raw_session(&rt, &server, &live::paper_hello("rogue", OPS[1], "any"));
+    let (endpoint, rogue) = live::raw_session(&rt, &server, &live::paper_handshake("rogue", OPS[1], "any"));
     let rogue = rogue.expect("the rogue is a user like any other");
     let rogue_id = rogue.welcome.user_id;
     std::thread::sleep(Duration::from_millis(1000));

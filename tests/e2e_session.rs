@@ -41,7 +41,7 @@ fn three_users_manipulate_the_testbed_together_and_leave_cleanly() {
             let name = format!("user{i}");
             let mut config =
                 live::recorded_client_of(&server, &name, op, &share, &dir.path().join(format!("{name}.csv")));
-            config.device = device;
+            config.device = Some(device);
             let client = live::start_client(config);
             assert_eq!(client.welcome().scene.op_name, *op);
             client
@@ -173,8 +173,8 @@ fn wrong_token_certificate_and_version_are_refused_clearly_and_the_server_carrie
     }
 
     let version = PROTOCOL_VERSION + 1;
-    let hello = Hello { version, ..live::paper_hello("from the future", "link2", "right-token") };
-    let (endpoint, refused) = live::raw_session(&rt, &server, &hello);
+    let (hello, join) = live::paper_handshake("from the future", "link2", "right-token");
+    let (endpoint, refused) = live::raw_session(&rt, &server, &(Hello { version, ..hello }, join));
     rt.block_on(endpoint.wait_idle());
     match refused {
         Err(ConnectError::Refused(r)) => {

@@ -6,7 +6,7 @@ use std::time::Duration;
 use kinloop_client::device::{
     DevicePreset, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice, SimulatedDeviceParams, SimulatedRig,
 };
-use kinloop_client::user::{PathSpec, ReplayedWrench, SimulatedUser, UserSpec};
+use kinloop_client::user::{HandKind, HandSpec, Intent, PathSpec, ReplayedWrench, SimulatedUser, UserSpec};
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Planar, SceneKind, Spatial};
 use nalgebra::{UnitComplex, Vector2, Vector3, Vector6};
@@ -19,9 +19,13 @@ fn unit_spec(max_force: f64) -> DeviceSpec {
         workspace_min: vec![-10.0, -10.0, -10.0],
         workspace_max: vec![10.0, 10.0, 10.0],
         max_force_n: max_force,
+        continuous_force_n: max_force,
         max_torque_nm: max_force,
         max_stiffness: 1000.0,
         max_damping: 100.0,
+        max_angular_stiffness: 10.0,
+        max_angular_damping: 1.0,
+        damping: vec![0.0; 3],
         native_rate_hz: 1000.0,
         has_force_sensor: true,
         mass: vec![2.0, 2.0, 0.5],
@@ -111,7 +115,21 @@ fn presets_and_users_parse_with_clear_errors() {
     for bad in ["constant:1,x", "path:line:0,0,1", "path:circle:-1,2", "path:waypoints:1", "wave:1", "replay:"] {
         assert!(bad.parse::<UserSpec>().is_err(), "{bad} should be refused");
     }
-    let err = match UserSpec::Constant(vec![1.0, 2.0]).build::<Planar>() {
+    for (name, kind) in
+        [("soft", HandKind::Soft), ("firm", HandKind::Firm), ("release", HandKind::Release), ("poke", HandKind::Poke)]
+    {
+        assert_eq!(name.parse::<UserSpec>().unwrap(), UserSpec::Hand(HandSpec::touring(kind)));
+    }
+    assert!(matches!(
+        "firm:circle:0.01,2".parse::<UserSpec>().unwrap(),
+        UserSpec::Hand(HandSpec { kind: HandKind::Firm, intent: Intent::Path(_) })
+    ));
+    assert!(matches!("soft:hold".parse::<UserSpec>().unwrap(), UserSpec::Hand(HandSpec { intent: Intent::Hold, .. })));
+    assert_eq!("paper".parse::<UserSpec>().unwrap(), UserSpec::paper());
+    for bad in ["soft:circle:x", "tense", "firm:spiral:1"] {
+        assert!(bad.parse::<UserSpec>().is_err(), "{bad} should be refused");
+    }
+    let err = match UserSpec::Constant(vec![1.0, 2.0]).build::<Planar>(&Default::default()) {
         Err(e) => e.to_string(),
         Ok(_) => panic!("two values for a planar wrench"),
     };
@@ -129,7 +147,9 @@ fn a_path_hand_pulls_the_handle_along_the_path() {
     let waypoints: PathSpec = "waypoints:0.5:0.01,0;0.01,0.01".parse().unwrap();
     assert_eq!(waypoints.offset(0.5), [0.01, 0.0]);
     assert_eq!(waypoints.offset(3.0), [0.01, 0.01]);
-    let user = UserSpec::Path(spec).build::<Planar>().unwrap();
+    let user = UserSpec::Hand(HandSpec { kind: HandKind::Soft, intent: Intent::Path(spec) })
+        .build::<Planar>(&Default::default())
+        .unwrap();
     let device = DevicePreset::Paper.build::<Planar>().unwrap();
     let mut rig = SimulatedRig::new(device, user);
     let start = rig.true_pose().position;

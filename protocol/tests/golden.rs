@@ -1,5 +1,6 @@
-//! Golden byte vectors freeze the wire format of protocol version 2 (version 1 sent the other users as a list
-//! of entries, each with its own position and wrench vectors).
+//! Golden byte vectors freeze the wire format of protocol version 3 (version 2 joined in one step, with a
+//! shorter device description and the server's recommended gains in the welcome; version 1 sent the other
+//! users as a list of entries, each with its own position and wrench vectors).
 //!
 //! The bytes below were written by hand from the format (bincode 2 standard config: varint integers and
 //! lengths, `u64` ≥ 251 as `fb` + u16 LE, enum variants as varint indices, `Option` as 0/1, `f64` as 8 LE
@@ -17,11 +18,32 @@ fn unhex(parts: &[&str]) -> Vec<u8> {
 const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
 
 fn hello() -> Control {
-    Control::Hello(Hello {
-        version: 2,
-        token: "tok".into(),
-        client_name: "c1".into(),
-        role: Role::Manipulator,
+    Control::Hello(Hello { version: 3, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
+}
+
+const HELLO_BYTES: &[&str] = &[
+    "00",        // Control::Hello
+    "03",        // version 3
+    "03 746f6b", // token "tok"
+    "02 6331",   // client_name "c1"
+    "00",        // role Manipulator
+];
+
+fn scene_info() -> Control {
+    Control::SceneInfo(SceneInfo { name: "tb".into(), kind: SceneKind::Planar, ops: vec!["ee".into(), "knee".into()] })
+}
+
+const SCENE_INFO_BYTES: &[&str] = &[
+    "07",          // Control::SceneInfo
+    "02 7462",     // name "tb"
+    "00",          // kind Planar
+    "02",          // ops: 2 names
+    "02 6565",     // "ee"
+    "04 6b6e6565", // "knee"
+];
+
+fn join() -> Control {
+    Control::Join(Join {
         op: "ee".into(),
         device: DeviceCaps {
             name: "sim".into(),
@@ -29,38 +51,56 @@ fn hello() -> Control {
             workspace_min: vec![-0.5, -0.5, -2.0],
             workspace_max: vec![0.5, 0.5, 2.0],
             max_force_n: 8.0,
+            continuous_force_n: 4.0,
             max_torque_nm: 0.5,
             max_stiffness_n_per_m: 2048.0,
             max_damping_ns_per_m: 16.0,
+            max_angular_stiffness_nm_per_rad: 2.0,
+            max_angular_damping_nms_per_rad: 0.25,
+            damping: vec![0.5, 0.5, 0.0],
+            mass: vec![1.0, 1.0, 0.0625],
             native_rate_hz: 1024.0,
+            has_force_sensor: true,
         },
         form: LocalModelForm::OpSpace,
+        mapping: MappingRequest { position_scale: Some(0.5), force_scale: None, gravity_compensation: false },
     })
 }
 
-const HELLO_BYTES: &[&str] = &[
-    "00",               // Control::Hello
-    "02",               // version 2
-    "03 746f6b",        // token "tok"
-    "02 6331",          // client_name "c1"
-    "00",               // role Manipulator
-    "02 6565",          // op "ee"
-    "03 73696d",        // device.name "sim"
-    "03",               // device.dof 3
-    "03",               // workspace_min: 3 values
-    "000000000000e0bf", // -0.5
-    "000000000000e0bf", // -0.5
-    "00000000000000c0", // -2.0
-    "03",               // workspace_max: 3 values
-    "000000000000e03f", // 0.5
-    "000000000000e03f", // 0.5
-    "0000000000000040", // 2.0
-    "0000000000002040", // max_force_n 8.0
-    "000000000000e03f", // max_torque_nm 0.5
-    "000000000000a040", // max_stiffness_n_per_m 2048.0
-    "0000000000003040", // max_damping_ns_per_m 16.0
-    "0000000000009040", // native_rate_hz 1024.0
-    "00",               // form OpSpace
+const JOIN_BYTES: &[&str] = &[
+    "08",                  // Control::Join
+    "02 6565",             // op "ee"
+    "03 73696d",           // device.name "sim"
+    "03",                  // device.dof 3
+    "03",                  // workspace_min: 3 values
+    "000000000000e0bf",    // -0.5
+    "000000000000e0bf",    // -0.5
+    "00000000000000c0",    // -2.0
+    "03",                  // workspace_max: 3 values
+    "000000000000e03f",    // 0.5
+    "000000000000e03f",    // 0.5
+    "0000000000000040",    // 2.0
+    "0000000000002040",    // max_force_n 8.0
+    "0000000000001040",    // continuous_force_n 4.0
+    "000000000000e03f",    // max_torque_nm 0.5
+    "000000000000a040",    // max_stiffness_n_per_m 2048.0
+    "0000000000003040",    // max_damping_ns_per_m 16.0
+    "0000000000000040",    // max_angular_stiffness_nm_per_rad 2.0
+    "000000000000d03f",    // max_angular_damping_nms_per_rad 0.25
+    "03",                  // damping: 3 values
+    "000000000000e03f",    // 0.5
+    "000000000000e03f",    // 0.5
+    "0000000000000000",    // 0.0
+    "03",                  // mass: 3 values
+    "000000000000f03f",    // 1.0
+    "000000000000f03f",    // 1.0
+    "000000000000b03f",    // 0.0625
+    "0000000000009040",    // native_rate_hz 1024.0
+    "01",                  // has_force_sensor true
+    "00",                  // form OpSpace
+    "01 000000000000e03f", // mapping.position_scale Some(0.5)
+    "00",                  // mapping.force_scale None
+    "00",                  // mapping.gravity_compensation false
 ];
 
 fn welcome() -> Control {
@@ -78,7 +118,18 @@ fn welcome() -> Control {
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 500.0,
-        gains: RecommendedGains { k_j: 2048.0, b_j: 16.0, k_pc: vec![512.0, 512.0, 4.0], b_pc: vec![2.0, 2.0, 0.25] },
+        mapping: Mapping { position_scale: 0.5, force_scale: 0.25, gravity_compensation: true },
+        coupling: CouplingGains { stiffness: vec![512.0, 512.0, 4.0], damping: vec![2.0, 2.0, 0.25] },
+        op: OpSummary {
+            position: vec![0.25, 0.5],
+            reach_min: vec![0.0, 0.0],
+            reach_max: vec![1.0, 0.5],
+            tour: vec![0.25, -0.25, 0.0],
+            static_force_n: 2.0,
+            static_torque_nm: 0.0,
+            inverse_mass_max: 4.0,
+            inverse_rotational_inertia_max: 16.0,
+        },
     })
 }
 
@@ -95,16 +146,33 @@ const WELCOME_BYTES: &[&str] = &[
     "000000000000b03f", // scene.length_scale 0.0625
     "0000000000408f40", // ve_rate_hz 1000.0
     "0000000000407f40", // snapshot_rate_hz 500.0
-    "000000000000a040", // gains.k_j 2048.0
-    "0000000000003040", // gains.b_j 16.0
-    "03",               // k_pc: 3 values
+    "000000000000e03f", // mapping.position_scale 0.5
+    "000000000000d03f", // mapping.force_scale 0.25
+    "01",               // mapping.gravity_compensation true
+    "03",               // coupling.stiffness: 3 values
     "0000000000008040", // 512.0
     "0000000000008040", // 512.0
     "0000000000001040", // 4.0
-    "03",               // b_pc: 3 values
+    "03",               // coupling.damping: 3 values
     "0000000000000040", // 2.0
     "0000000000000040", // 2.0
     "000000000000d03f", // 0.25
+    "02",               // op.position: 2 values
+    "000000000000d03f", // 0.25
+    "000000000000e03f", // 0.5
+    "02",               // op.reach_min: 2 values
+    "0000000000000000 0000000000000000",
+    "02",               // op.reach_max: 2 values
+    "000000000000f03f", // 1.0
+    "000000000000e03f", // 0.5
+    "03",               // op.tour: 3 values (one planar displacement)
+    "000000000000d03f", // 0.25
+    "000000000000d0bf", // -0.25
+    "0000000000000000", // 0.0
+    "0000000000000040", // op.static_force_n 2.0
+    "0000000000000000", // op.static_torque_nm 0.0
+    "0000000000001040", // op.inverse_mass_max 4.0
+    "0000000000003040", // op.inverse_rotational_inertia_max 16.0
 ];
 
 fn snapshot() -> Datagram {
@@ -216,6 +284,20 @@ fn hello_matches_golden_bytes() {
 }
 
 #[test]
+fn scene_info_matches_golden_bytes() {
+    let golden = unhex(SCENE_INFO_BYTES);
+    assert_eq!(encode_control(&scene_info()).unwrap(), golden);
+    assert_eq!(decode_control(&golden).unwrap(), scene_info());
+}
+
+#[test]
+fn join_matches_golden_bytes() {
+    let golden = unhex(JOIN_BYTES);
+    assert_eq!(encode_control(&join()).unwrap(), golden);
+    assert_eq!(decode_control(&golden).unwrap(), join());
+}
+
+#[test]
 fn welcome_matches_golden_bytes() {
     let golden = unhex(WELCOME_BYTES);
     assert_eq!(encode_control(&welcome()).unwrap(), golden);
@@ -244,8 +326,8 @@ fn uplink_matches_golden_bytes() {
 #[test]
 fn hello_variant_and_version_lead_the_frame_so_other_versions_can_be_refused() {
     let mut future = unhex(HELLO_BYTES);
-    future[1] = 0x03; // version 3; the rest may be anything a future version sends
+    future[1] = 0x04; // version 4; the rest may be anything a future version sends
     future.truncate(5);
-    assert_eq!(codec::peek_hello_version(&future), Some(3));
+    assert_eq!(codec::peek_hello_version(&future), Some(4));
     assert_eq!(codec::peek_hello_version(&unhex(WELCOME_BYTES)), None);
 }

@@ -29,31 +29,29 @@ fn options() -> EndpointOptions {
 }
 
 fn hello(version: u16, token: &str) -> Hello {
-    Hello {
-        version,
-        token: token.into(),
-        client_name: "test-client".into(),
-        role: Role::Manipulator,
-        op: "ee".into(),
-        device: DeviceCaps {
-            name: "simulated".into(),
-            dof: 3,
-            workspace_min: vec![-0.1, -0.1, -1.0],
-            workspace_max: vec![0.1, 0.1, 1.0],
-            max_force_n: 5.0,
-            max_torque_nm: 0.5,
-            max_stiffness_n_per_m: 2000.0,
-            max_damping_ns_per_m: 20.0,
-            native_rate_hz: 1000.0,
-        },
-        form: LocalModelForm::OpSpace,
-    }
+    Hello { version, token: token.into(), client_name: "test-client".into(), role: Role::Manipulator }
 }
 
-/// The tiny validator the handshake tests use: one token, planar testbed scene.
-fn validate(hello: &Hello) -> Result<Welcome, Refused> {
+/// The join the tests make: the first operational point the scene offers, with a small desktop device.
+fn join_first(scene: &SceneInfo) -> Result<Join, String> {
+    let op = scene.ops.first().cloned().ok_or("no operational point")?;
+    let device = DeviceCaps { max_force_n: 5.0, continuous_force_n: 2.0, ..DeviceCaps::generous("simulated", 3) };
+    Ok(Join { op, device, form: LocalModelForm::OpSpace, mapping: MappingRequest::default() })
+}
+
+/// The tiny admission the handshake tests use: one token, the planar testbed scene with OP `ee`.
+fn admit(hello: &Hello) -> Result<SceneInfo, Refused> {
     if hello.token != TOKEN {
         return Err(Refused { reason: RefusalReason::BadToken, message: String::new() });
+    }
+    Ok(SceneInfo { name: "testbed".into(), kind: SceneKind::Planar, ops: vec!["ee".into()] })
+}
+
+/// The tiny decision on a join: `ee` only.
+fn decide(_hello: &Hello, join: &Join) -> Result<Welcome, Refused> {
+    if join.op != "ee" {
+        let reason = RefusalReason::UnknownOp { requested: join.op.clone(), available: vec!["ee".into()] };
+        return Err(Refused { reason, message: String::new() });
     }
     let shape = testbed_shape();
     Ok(Welcome {
@@ -70,7 +68,18 @@ fn validate(hello: &Hello) -> Result<Welcome, Refused> {
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 1000.0,
-        gains: RecommendedGains { k_j: 1000.0, b_j: 5.0, k_pc: vec![500.0; 3], b_pc: vec![2.0; 3] },
+        mapping: Mapping::identity(),
+        coupling: CouplingGains { stiffness: vec![500.0; 3], damping: vec![2.0; 3] },
+        op: OpSummary {
+            position: vec![0.0; 2],
+            reach_min: vec![-0.1; 2],
+            reach_max: vec![0.1; 2],
+            tour: Vec::new(),
+            static_force_n: 0.0,
+            static_torque_nm: 0.0,
+            inverse_mass_max: 1.0,
+            inverse_rotational_inertia_max: 100.0,
+        },
     })
 }
 
@@ -80,7 +89,7 @@ struct TestServer {
     session: JoinHandle<Result<AcceptedSession, AcceptError>>,
 }
 
-/// A server that accepts one connection and runs the handshake with [`validate`].
+/// A server that accepts one connection and runs the handshake with [`admit`] and [`decide`].
 fn start_server(opts: &EndpointOptions) -> TestServer {
     let identity = ServerIdentity::generate(&DEFAULT_NAMES).unwrap();
     let endpoint = server_endpoint(loopback(), &identity, opts).unwrap();
@@ -88,7 +97,7 @@ fn start_server(opts: &EndpointOptions) -> TestServer {
     let accepting = endpoint.clone();
     let session = tokio::spawn(async move {
         let incoming = accepting.accept().await.expect("endpoint open");
-        accept(incoming, validate).await
+        accept(incoming, admit, decide).await
     });
     TestServer { addr, identity, session }
 }
@@ -100,7 +109,7 @@ async fn connect_with(
     hello: &Hello,
 ) -> Result<ConnectedSession, ConnectError> {
     let client = client_endpoint(&trust, opts).unwrap();
-    connect(&client, server.addr, "localhost", hello).await
+    connect(&client, server.addr, "localhost", hello, join_first).await
 }
 
 fn pinned(server: &TestServer) -> Trust {
@@ -187,8 +196,9 @@ async fn injected_25ms_each_way_gives_a_50ms_round_trip() {
         };
         let server = start_server(&delayed);
         let (client_endpoint, link_stats) = client_endpoint_with_link_stats(&pinned(&server), &delayed).unwrap();
-        let client =
-            connect(&client_endpoint, server.addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        let client = connect(&client_endpoint, server.addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN), join_first)
+            .await
+            .unwrap();
         let mut accepted = server.session.await.unwrap().unwrap();
         let echo = tokio::spawn(async move {
             while let Ok(Control::Ping { nonce, t_s }) = recv_control(&mut accepted.recv).await {
@@ -292,19 +302,20 @@ async fn ca_file_trusts_the_stored_certificate_and_no_other() {
             while let Some(incoming) = accepting.accept().await {
                 tokio::spawn(async move {
                     // Keep each session until the client closes it, or the welcome may never leave.
-                    if let Ok(session) = accept(incoming, validate).await {
+                    if let Ok(session) = accept(incoming, admit, decide).await {
                         session.connection.closed().await;
                     }
                 });
             }
         });
         let trusted = client_endpoint(&Trust::CaFile(dir.path().join(CERT_FILE)), &options()).unwrap();
-        connect(&trusted, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap();
+        connect(&trusted, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN), join_first).await.unwrap();
 
         let other_dir = tempfile::tempdir().unwrap();
         ServerIdentity::load_or_create(other_dir.path()).unwrap();
         let untrusting = client_endpoint(&Trust::CaFile(other_dir.path().join(CERT_FILE)), &options()).unwrap();
-        let error = connect(&untrusting, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN)).await.unwrap_err();
+        let error =
+            connect(&untrusting, addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN), join_first).await.unwrap_err();
         assert!(matches!(error, ConnectError::UntrustedCertificate { .. }), "{error:?}");
     })
     .await
@@ -335,4 +346,46 @@ async fn fingerprints_are_accepted_with_colons_and_capitals_and_garbage_is_refus
     assert_eq!(normalize_fingerprint(&hex[..62]), None);
     let error = client_endpoint(&Trust::Fingerprint("nope".into()), &options()).unwrap_err();
     assert!(matches!(error, EndpointError::Trust(TrustError::BadFingerprint(_))), "{error:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_sees_the_scene_before_it_joins_and_may_decline() {
+    bounded(async {
+        let server = start_server(&options());
+        let client = client_endpoint(&pinned(&server), &options()).unwrap();
+        let mut seen = None;
+        let error = connect(&client, server.addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN), |scene| {
+            seen = Some(scene.clone());
+            Err(format!("no device for a {:?} scene", scene.kind))
+        })
+        .await
+        .unwrap_err();
+        assert_eq!(seen.map(|s| s.ops), Some(vec!["ee".to_string()]));
+        assert!(matches!(&error, ConnectError::Declined(why) if why.contains("Planar")), "{error}");
+        match server.session.await.unwrap() {
+            Err(AcceptError::Declined(why)) => assert!(why.contains("no device"), "{why}"),
+            other => panic!("the server should see the client decline: {other:?}"),
+        }
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_join_for_an_unknown_op_is_refused_after_the_scene_info() {
+    bounded(async {
+        let server = start_server(&options());
+        let client = client_endpoint(&pinned(&server), &options()).unwrap();
+        let error = connect(&client, server.addr, "localhost", &hello(PROTOCOL_VERSION, TOKEN), |scene| {
+            join_first(scene).map(|join| Join { op: "knee".into(), ..join })
+        })
+        .await
+        .unwrap_err();
+        match error {
+            ConnectError::Refused(Refused { reason: RefusalReason::UnknownOp { requested, available }, .. }) => {
+                assert_eq!((requested.as_str(), available), ("knee", vec!["ee".to_string()]));
+            }
+            other => panic!("expected an unknown-op refusal, got {other}"),
+        }
+    })
+    .await;
 }

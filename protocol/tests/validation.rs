@@ -158,7 +158,18 @@ fn welcome_with_a_wrong_op_dimension_is_refused() {
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 1000.0,
-        gains: RecommendedGains { k_j: 1.0, b_j: 1.0, k_pc: vec![1.0; 6], b_pc: vec![1.0; 6] },
+        mapping: Mapping::identity(),
+        coupling: CouplingGains { stiffness: vec![1.0; 6], damping: vec![1.0; 6] },
+        op: OpSummary {
+            position: vec![0.0; 3],
+            reach_min: vec![0.0; 3],
+            reach_max: vec![0.1; 3],
+            tour: Vec::new(),
+            static_force_n: 0.0,
+            static_torque_nm: 0.0,
+            inverse_mass_max: 1.0,
+            inverse_rotational_inertia_max: 1.0,
+        },
     };
     let error = decode_control(&encode_control(&Control::Welcome(welcome)).unwrap()).unwrap_err();
     assert_eq!(field_of(&error), "welcome.scene.op_dim");

@@ -51,17 +51,7 @@ fn allocator_calls(f: impl FnOnce()) -> u64 {
 }
 
 fn device() -> DeviceCaps {
-    DeviceCaps {
-        name: "d".into(),
-        dof: 3,
-        workspace_min: vec![-1.0; 3],
-        workspace_max: vec![1.0; 3],
-        max_force_n: 50.0,
-        max_torque_nm: 5.0,
-        max_stiffness_n_per_m: 0.0,
-        max_damping_ns_per_m: 0.0,
-        native_rate_hz: 1000.0,
-    }
+    DeviceCaps { max_force_n: 50.0, continuous_force_n: 25.0, max_torque_nm: 5.0, ..DeviceCaps::generous("d", 3) }
 }
 
 /// Joins `forms.len()` users (manipulators and one observer), then counts the allocator calls of `ticks`
@@ -76,8 +66,14 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
         .enumerate()
         .map(|(i, form)| {
             let role = if i == 1 { Role::Observer } else { Role::Manipulator };
-            let request =
-                JoinRequest { name: format!("u{i}"), role, op: op.clone(), form: *form, device: Some(device()) };
+            let request = JoinRequest {
+                name: format!("u{i}"),
+                role,
+                op: op.clone(),
+                form: *form,
+                device: Some(device()),
+                mapping: Default::default(),
+            };
             core.join(Duration::ZERO, request).unwrap().user_id
         })
         .collect();
@@ -161,6 +157,7 @@ fn the_view_tap_allocates_nothing_per_tick() {
             op: "link2".into(),
             form: LocalModelForm::OpSpace,
             device: Some(device()),
+            mapping: Default::default(),
         };
         core.join(Duration::ZERO, request).unwrap();
     }

@@ -20,7 +20,7 @@ use support::*;
 fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Vec<f64>, f64) {
     let mut config = VeConfig::paper();
     config.passivity = passivity;
-    config.coupling_damping = AxisGains::Uniform { linear: 2.0, angular: 0.01 };
+    config.coupling_damping = Some(AxisGains::Uniform { linear: 2.0, angular: 0.01 });
     let mut ve = core(testbed(), config);
     let user = ve.join(Duration::ZERO, request("delayed", Role::Manipulator, "link2", 3)).unwrap().user_id;
     let dt = 1e-3;
@@ -63,7 +63,7 @@ fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Ve
         }
         tick += 1;
         if tick % 10 == 0 {
-            energies.push(ve.kinetic_energy());
+            energies.push(ve.mechanical_energy().0);
         }
     });
     let account = ve.state().users().next().map_or(f64::NAN, |u| u.passivity.absorbed_j);

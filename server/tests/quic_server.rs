@@ -11,7 +11,7 @@ use kinloop_protocol::quic::{
     DatagramSender, EndpointOptions, Trust,
 };
 use kinloop_protocol::{
-    Control, Datagram, DeviceCaps, Hello, LocalModelForm, RefusalReason, Role, SceneKind, SessionShape, Uplink,
+    Control, Datagram, DeviceCaps, Hello, Join, LocalModelForm, RefusalReason, Role, SceneKind, SessionShape, Uplink,
     PROTOCOL_VERSION,
 };
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
@@ -33,31 +33,22 @@ fn start(tokens: &str) -> ServerHandle {
 }
 
 fn hello(token: &str, role: Role) -> Hello {
-    Hello {
-        version: PROTOCOL_VERSION,
-        token: token.into(),
-        client_name: "test client".into(),
-        role,
+    Hello { version: PROTOCOL_VERSION, token: token.into(), client_name: "test client".into(), role }
+}
+
+fn join_link2() -> Join {
+    Join {
         op: "link2".into(),
-        device: DeviceCaps {
-            name: "sim".into(),
-            dof: 3,
-            workspace_min: vec![-0.2; 3],
-            workspace_max: vec![0.2; 3],
-            max_force_n: 20.0,
-            max_torque_nm: 2.0,
-            max_stiffness_n_per_m: 3000.0,
-            max_damping_ns_per_m: 40.0,
-            native_rate_hz: 1000.0,
-        },
+        device: DeviceCaps { max_force_n: 20.0, continuous_force_n: 10.0, ..DeviceCaps::generous("sim", 3) },
         form: LocalModelForm::OpSpace,
+        mapping: Default::default(),
     }
 }
 
 async fn join(server: &ServerHandle, token: &str, role: Role) -> Result<ConnectedSession, ConnectError> {
     let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
     let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
-    connect(&client, server.local_addr(), "localhost", &hello(token, role)).await
+    connect(&client, server.local_addr(), "localhost", &hello(token, role), |_| Ok(join_link2())).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

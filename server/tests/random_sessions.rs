@@ -13,7 +13,7 @@ use kinloop_linkage::builtin::SCENE_FILES;
 use kinloop_linkage::testing::TestRng;
 use kinloop_linkage::{Planar, Space, Spatial};
 use kinloop_protocol::codec::validate;
-use kinloop_protocol::{DeviceCaps, LocalModelForm, Role, Snapshot};
+use kinloop_protocol::{DeviceCaps, LocalModelForm, MappingRequest, Role, Snapshot};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore, VeEvent};
 use support::{core, device, model, uplink};
 
@@ -60,7 +60,14 @@ fn session<S: Space>(scene: &str, seed: u64) {
                 let role = if rng.chance(0.8) { Role::Manipulator } else { Role::Observer };
                 let form = if rng.chance(0.7) { LocalModelForm::OpSpace } else { LocalModelForm::ConfigSpace };
                 let device = some_device(&mut rng, S::DIM);
-                match ve.join(now, JoinRequest { name: format!("u{operation}"), role, op, form, device }) {
+                // Now and then a mapping asked for with odd scales: refused or used, never a panic.
+                let odd_scale = |rng: &mut TestRng| rng.chance(0.2).then(|| rng.odd());
+                let mapping = MappingRequest {
+                    position_scale: odd_scale(&mut rng),
+                    force_scale: odd_scale(&mut rng),
+                    gravity_compensation: rng.chance(0.3),
+                };
+                match ve.join(now, JoinRequest { name: format!("u{operation}"), role, op, form, device, mapping }) {
                     Ok(joined) => {
                         let id = joined.user_id as usize;
                         if present.len() <= id {

@@ -58,8 +58,8 @@ fn two_users_pulling_against_each_other_settle_at_the_static_equilibrium() {
     // mode with a time constant of hours; gains with a well-damped settling keep the test short.
     let k_g = [1000.0, 1000.0, 1.0];
     let mut config = VeConfig::paper();
-    config.coupling_stiffness = AxisGains::PerAxis(k_g.to_vec());
-    config.coupling_damping = AxisGains::PerAxis(vec![300.0, 300.0, 0.3]);
+    config.coupling_stiffness = Some(AxisGains::PerAxis(k_g.to_vec()));
+    config.coupling_damping = Some(AxisGains::PerAxis(vec![300.0, 300.0, 0.3]));
     let mut ve = core(model.clone(), config);
     let a = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
     let b = ve.join(Duration::ZERO, request("B", Role::Manipulator, "link3", 3)).unwrap().user_id;
@@ -449,8 +449,8 @@ fn a_diverging_linkage_is_restored_with_its_loop_closed() {
 #[test]
 fn snapshots_list_the_other_manipulators_hands_and_positions() {
     let mut config = VeConfig::paper();
-    config.coupling_stiffness = AxisGains::Uniform { linear: 0.0, angular: 0.0 };
-    config.coupling_damping = AxisGains::Uniform { linear: 0.0, angular: 0.0 };
+    config.coupling_stiffness = Some(AxisGains::Uniform { linear: 0.0, angular: 0.0 });
+    config.coupling_damping = Some(AxisGains::Uniform { linear: 0.0, angular: 0.0 });
     let mut ve = core(testbed(), config);
     let joins = [("A", Role::Manipulator, "link2"), ("O", Role::Observer, "link2"), ("B", Role::Manipulator, "link2")];
     let ids = join_all(&mut ve, &joins);

@@ -15,7 +15,7 @@ use kinloop_linkage::{Scene, SceneKind};
 use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, Endpoint, EndpointOptions, Trust,
 };
-use kinloop_protocol::{Hello, LocalModelForm, Role, PROTOCOL_VERSION};
+use kinloop_protocol::{Hello, Join, LocalModelForm, MappingRequest, Role, PROTOCOL_VERSION};
 use kinloop_server::{Server, ServerConfig, ServerHandle, ServerStats};
 use tokio::runtime::Runtime;
 
@@ -63,11 +63,13 @@ pub fn stop_server(rt: &Runtime, server: ServerHandle) -> ServerStats {
 }
 
 /// A client of the server at `server` (pinned by `fingerprint`) holding `op` with a constant hand wrench,
-/// on the simulated paper device, reporting every 100 ms.
+/// on the scene's default device mapped one to one (the paper's setting, which these sessions compare with
+/// the harness's), reporting every 100 ms.
 pub fn client_config(server: SocketAddr, fingerprint: &str, name: &str, op: &str, wrench: &[f64]) -> ClientConfig {
     let mut config = ClientConfig::new(server.to_string(), Trust::Fingerprint(fingerprint.to_owned()));
     config.client_name = name.into();
-    config.op = op.into();
+    config.op = Some(op.into());
+    config.mapping = MappingRequest { position_scale: Some(1.0), force_scale: Some(1.0), gravity_compensation: false };
     config.user = UserSpec::Constant(wrench.to_vec());
     config.realtime_priority = false;
     config.report_interval = Duration::from_millis(100);
@@ -92,32 +94,32 @@ pub fn start_client(config: ClientConfig) -> ClientHandle {
     Client::start(config).unwrap_or_else(|e| panic!("client {name} could not start: {e}"))
 }
 
-/// The hello `kinloop-client` sends for the simulated paper device (a raw session built by hand can then
-/// misbehave in ways the real client never would).
-pub fn paper_hello(name: &str, op: &str, token: &str) -> Hello {
-    Hello {
-        version: PROTOCOL_VERSION,
-        token: token.into(),
-        client_name: name.into(),
-        role: Role::Manipulator,
+/// The hello and join `kinloop-client` sends for the simulated paper device at `op` (a raw session built by
+/// hand can then misbehave in ways the real client never would).
+pub fn paper_handshake(name: &str, op: &str, token: &str) -> (Hello, Join) {
+    let hello =
+        Hello { version: PROTOCOL_VERSION, token: token.into(), client_name: name.into(), role: Role::Manipulator };
+    let join = Join {
         op: op.into(),
         device: DevicePreset::Paper.spec(SceneKind::Planar).expect("paper device").caps(),
         form: LocalModelForm::OpSpace,
-    }
+        mapping: MappingRequest::default(),
+    };
+    (hello, join)
 }
 
-/// A session opened by hand with `hello` against `server` (pinned by fingerprint); the endpoint is returned
-/// too, to close it when done.
+/// A session opened by hand with `hello` then `join` against `server` (pinned by fingerprint); the endpoint
+/// is returned too, to close it when done.
 pub fn raw_session(
     rt: &Runtime,
     server: &ServerHandle,
-    hello: &Hello,
+    (hello, join): &(Hello, Join),
 ) -> (Endpoint, Result<ConnectedSession, ConnectError>) {
     rt.block_on(async {
         let options = EndpointOptions { client_bind: LOOPBACK, ..EndpointOptions::default() };
         let endpoint =
             client_endpoint(&Trust::Fingerprint(server.fingerprint().into()), &options).expect("client endpoint");
-        let session = connect(&endpoint, server.local_addr(), "localhost", hello).await;
+        let session = connect(&endpoint, server.local_addr(), "localhost", hello, |_| Ok(join.clone())).await;
         (endpoint, session)
     })
 }

@@ -15,7 +15,9 @@ use kinloop_linkage::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
 use kinloop_linkage::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms, OpPose};
 use kinloop_linkage::op_space::op_space_inertia;
 use kinloop_linkage::{builtin, forward_dynamics, step, Data, Forces, Model, Planar, SceneKind, Space, StepConfig};
-use kinloop_protocol::{ConfigTerms, OtherUsers, RecommendedGains, SceneSummary, Snapshot, Uplink, Welcome};
+use kinloop_protocol::{
+    ConfigTerms, CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Uplink, Welcome,
+};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// The paper's graphics-controller gains (section VI).
@@ -125,8 +127,13 @@ impl TestbedVe {
         }
     }
 
-    /// The welcome a server would send for this scene, with the paper's gains for a 1 kg device.
+    /// The welcome a server would send for this scene: one-to-one mapping, the paper's graphics-controller
+    /// gains, the surveyed reach of `link2`.
     pub fn welcome(&self) -> Welcome {
+        let reach = kinloop_linkage::reach::survey_op(&self.model, self.op, &Default::default()).expect("survey");
+        let mut data = Data::new(&self.model);
+        kinloop_linkage::kinematics::forward_kinematics(&self.model, &mut data, &self.q);
+        let pose = OpPose::of_op(&self.model, &data, self.op);
         Welcome {
             session_id: 7,
             user_id: 1,
@@ -141,12 +148,9 @@ impl TestbedVe {
             },
             ve_rate_hz: 1000.0,
             snapshot_rate_hz: 1000.0,
-            gains: RecommendedGains {
-                k_j: 200.0,
-                b_j: 50.0,
-                k_pc: vec![100.0, 100.0, 0.5],
-                b_pc: vec![70.0, 70.0, 0.375],
-            },
+            mapping: Mapping::identity(),
+            coupling: CouplingGains { stiffness: K_G.to_vec(), damping: B_G.to_vec() },
+            op: OpSummary::from_reach(&reach, &pose),
         }
     }
 

@@ -156,7 +156,12 @@ pub async fn connect(
             Ok(join) => join,
             Err(why) => {
                 let leave = Control::Leave { reason: why.clone() };
-                let _ = send_control(&mut send, &leave).await;
+                if send_control(&mut send, &leave).await.is_ok() {
+                    // Closing at once could discard the leave before it is delivered; the server closes on
+                    // reading it.
+                    let _ = send.finish();
+                    let _ = tokio::time::timeout(REFUSAL_LINGER, connection.closed()).await;
+                }
                 connection.close(close_codes::NORMAL, b"declined");
                 return Err(ConnectError::Declined(why));
             }

@@ -183,48 +183,100 @@ pub fn shape_and_datagram() -> impl Strategy<Value = (SessionShape, Datagram)> {
 }
 
 fn device() -> impl Strategy<Value = DeviceCaps> {
-    (name(), 0u8..=16, vec(within(1.0), 0..=6), 0.0..1e3, 0.0..1e2, 0.0..1e5, 0.0..1e3, 1.0..1e4).prop_map(
-        |(name, dof, half_extent, max_force_n, max_torque_nm, stiffness, damping, native_rate_hz)| DeviceCaps {
-            name,
-            dof,
-            workspace_min: half_extent.iter().map(|h| -h.abs()).collect(),
-            workspace_max: half_extent.iter().map(|h| h.abs()).collect(),
-            max_force_n,
-            max_torque_nm,
-            max_stiffness_n_per_m: stiffness,
-            max_damping_ns_per_m: damping,
-            native_rate_hz,
-        },
+    (
+        (name(), 0u8..=16, 0usize..=6, 0.0..1e3, 0.0..=1.0, 0.0..1e2, 0.0..1e5, 0.0..1e3),
+        (0.0..1e3, 0.0..1e2, 1.0..1e4, any::<bool>()),
     )
+        .prop_flat_map(|(scalars, more)| {
+            let axes = scalars.2;
+            (Just(scalars), Just(more), vec(within(1.0), axes), vec(0.0..1e2, axes), vec(1e-3..1e2, axes))
+        })
+        .prop_map(
+            |(
+                (name, dof, _, max_force_n, continuous, max_torque_nm, stiffness, damping),
+                (angular_stiffness, angular_damping, native_rate_hz, has_force_sensor),
+                half_extent,
+                own_damping,
+                mass,
+            )| DeviceCaps {
+                name,
+                dof,
+                workspace_min: half_extent.iter().map(|h| -h.abs()).collect(),
+                workspace_max: half_extent.iter().map(|h| h.abs()).collect(),
+                max_force_n,
+                continuous_force_n: continuous * max_force_n,
+                max_torque_nm,
+                max_stiffness_n_per_m: stiffness,
+                max_damping_ns_per_m: damping,
+                max_angular_stiffness_nm_per_rad: angular_stiffness,
+                max_angular_damping_nms_per_rad: angular_damping,
+                damping: own_damping,
+                mass,
+                native_rate_hz,
+                has_force_sensor,
+            },
+        )
 }
 
 fn hello() -> impl Strategy<Value = Hello> {
+    (any::<u16>(), name(), name(), prop_oneof![Just(Role::Manipulator), Just(Role::Observer)])
+        .prop_map(|(version, token, client_name, role)| Hello { version, token, client_name, role })
+}
+
+fn scale() -> impl Strategy<Value = Option<f64>> {
+    prop_oneof![Just(None), (1e-4..1e4).prop_map(Some)]
+}
+
+fn join() -> impl Strategy<Value = Join> {
     (
-        any::<u16>(),
-        name(),
-        name(),
-        prop_oneof![Just(Role::Manipulator), Just(Role::Observer)],
         name(),
         device(),
         prop_oneof![Just(LocalModelForm::OpSpace), Just(LocalModelForm::ConfigSpace)],
+        scale(),
+        scale(),
+        any::<bool>(),
     )
-        .prop_map(|(version, token, client_name, role, op, device, form)| Hello {
-            version,
-            token,
-            client_name,
-            role,
+        .prop_map(|(op, device, form, position_scale, force_scale, gravity_compensation)| Join {
             op,
             device,
             form,
+            mapping: MappingRequest { position_scale, force_scale, gravity_compensation },
         })
+}
+
+fn scene_info() -> impl Strategy<Value = SceneInfo> {
+    (name(), prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], vec(name(), 0..8))
+        .prop_map(|(name, kind, ops)| SceneInfo { name, kind, ops })
 }
 
 fn welcome() -> impl Strategy<Value = Welcome> {
     let scene = (name(), prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], 0u32..64, 0u32..64, name());
-    (any::<u64>(), any::<u32>(), scene, 1.0..1e4, 1.0..1e4, 0.0..1e5, 0.0..1e3).prop_flat_map(
-        |(session_id, user_id, (name, kind, n, m, op_name), ve_rate_hz, snapshot_rate_hz, k_j, b_j)| {
-            let k = kind.op_dim();
-            (vec(0.0..1e4, k), vec(0.0..1e2, k)).prop_map(move |(k_pc, b_pc)| Welcome {
+    let mapping =
+        (1e-4..1e4, 1e-4..1e4, any::<bool>()).prop_map(|(position_scale, force_scale, gravity_compensation)| Mapping {
+            position_scale,
+            force_scale,
+            gravity_compensation,
+        });
+    (any::<u64>(), any::<u32>(), scene, 1.0..1e4, 1.0..1e4, mapping, 0usize..20).prop_flat_map(
+        |(session_id, user_id, (name, kind, n, m, op_name), ve_rate_hz, snapshot_rate_hz, mapping, tour)| {
+            let (k, d) = (kind.op_dim(), kind.point_dim());
+            let op = (
+                vec(within(1.0), d),
+                vec(0.0..1.0, d),
+                vec(within(1.0), tour * k),
+                (0.0..1e3, 0.0..1e2, 0.0..1e3, 0.0..1e3),
+            )
+                .prop_map(|(position, extent, tour, (force, torque, inverse_mass, inverse_inertia))| OpSummary {
+                    reach_min: position.clone(),
+                    reach_max: position.iter().zip(&extent).map(|(p, e)| p + e).collect(),
+                    position,
+                    tour,
+                    static_force_n: force,
+                    static_torque_nm: torque,
+                    inverse_mass_max: inverse_mass,
+                    inverse_rotational_inertia_max: inverse_inertia,
+                });
+            (vec(0.0..1e4, k), vec(0.0..1e2, k), op).prop_map(move |(stiffness, damping, op)| Welcome {
                 session_id,
                 user_id,
                 scene: SceneSummary {
@@ -238,7 +290,9 @@ fn welcome() -> impl Strategy<Value = Welcome> {
                 },
                 ve_rate_hz,
                 snapshot_rate_hz,
-                gains: RecommendedGains { k_j, b_j, k_pc, b_pc },
+                mapping: mapping.clone(),
+                coupling: CouplingGains { stiffness, damping },
+                op,
             })
         },
     )
@@ -253,6 +307,7 @@ fn refusal() -> impl Strategy<Value = RefusalReason> {
             .prop_map(|(requested, available)| RefusalReason::UnknownOp { requested, available }),
         Just(RefusalReason::RoleNotAllowed),
         name().prop_map(|what| RefusalReason::Malformed { what }),
+        name().prop_map(|what| RefusalReason::Device { what }),
     ]
 }
 
@@ -276,6 +331,8 @@ pub fn control() -> impl Strategy<Value = Control> {
         (error_code(), name()).prop_map(|(code, message)| Control::Error { code, message }),
         (any::<u64>(), 0.0..1e6).prop_map(|(nonce, t_s)| Control::Ping { nonce, t_s }),
         (any::<u64>(), 0.0..1e6).prop_map(|(nonce, t_s)| Control::Pong { nonce, t_s }),
+        scene_info().prop_map(Control::SceneInfo),
+        join().prop_map(Control::Join),
     ]
 }
 

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use kinloop_linkage::builtin;
 use kinloop_linkage::{Model, Planar, Scene, Space};
-use kinloop_protocol::{DeviceCaps, LocalModelForm, Role, Snapshot, Uplink};
+use kinloop_protocol::{DeviceCaps, LocalModelForm, MappingRequest, Role, Snapshot, Uplink};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 
 /// A built-in scene compiled for space `S`.
@@ -27,21 +27,25 @@ pub fn core<S: Space>(model: Model<S>, config: VeConfig) -> VeCore<S> {
 /// A device able to push 50 N / 5 N·m.
 pub fn device(k: usize) -> DeviceCaps {
     DeviceCaps {
-        name: "test device".into(),
-        dof: k as u8,
-        workspace_min: vec![-0.2; k],
-        workspace_max: vec![0.2; k],
         max_force_n: 50.0,
+        continuous_force_n: 25.0,
         max_torque_nm: 5.0,
         max_stiffness_n_per_m: 3000.0,
         max_damping_ns_per_m: 50.0,
-        native_rate_hz: 1000.0,
+        ..DeviceCaps::generous("test device", k)
     }
 }
 
-/// A join request for `op` with `role`.
+/// A join request for `op` with `role`, mapped one to one (the tests speak in VE units).
 pub fn request(name: &str, role: Role, op: &str, k: usize) -> JoinRequest {
-    JoinRequest { name: name.into(), role, op: op.into(), form: LocalModelForm::OpSpace, device: Some(device(k)) }
+    JoinRequest {
+        name: name.into(),
+        role,
+        op: op.into(),
+        form: LocalModelForm::OpSpace,
+        device: Some(device(k)),
+        mapping: MappingRequest { position_scale: Some(1.0), force_scale: Some(1.0), gravity_compensation: false },
+    }
 }
 
 /// An uplink whose local model sits where `snapshot` put the OP ("following along"), with hand wrench `hand`.

@@ -17,7 +17,7 @@ use kinloop_protocol::quic::{
     client_endpoint, connect, send_control, DatagramReceiver, DatagramSender, EndpointOptions, Trust,
 };
 use kinloop_protocol::{
-    Control, Datagram, DeviceCaps, Hello, LocalModelForm, Role, SceneKind, SessionShape, Uplink, PROTOCOL_VERSION,
+    Control, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Role, SceneKind, SessionShape, Uplink, PROTOCOL_VERSION,
 };
 use kinloop_server::ServerHandle;
 use serde_json::Value;
@@ -183,11 +183,10 @@ impl Pusher {
             token: token.into(),
             client_name: "test pusher".into(),
             role: Role::Manipulator,
-            op: "link2".into(),
-            device,
-            form: LocalModelForm::OpSpace,
         };
-        let mut session = connect(&endpoint, server.local_addr(), "localhost", &hello).await.expect("joined");
+        let join = Join { op: "link2".into(), device, form: LocalModelForm::OpSpace, mapping: Default::default() };
+        let mut session =
+            connect(&endpoint, server.local_addr(), "localhost", &hello, |_| Ok(join)).await.expect("joined");
         let shape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
         let push = Arc::new(AtomicBool::new(true));
         let stop = Arc::new(AtomicBool::new(false));

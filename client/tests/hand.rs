@@ -1,0 +1,137 @@
+//! The simulated hand against closed forms: a mass-spring-damper on the handle, its release, its poke, and
+//! its tour of the waypoints it is given.
+
+use std::time::Duration;
+
+use kinloop_client::device::HapticDevice;
+use kinloop_client::device::{DevicePreset, DeviceSpec, SimulatedDevice, SimulatedDeviceParams, SimulatedRig};
+use kinloop_client::user::hand::{POKE_AT_S, POKE_DURATION_S, POKE_STEP_M, RELEASE_AT_S};
+use kinloop_client::user::{HandImpedance, HandKind, HandSpec, Intent, UserContext, UserSpec};
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::{Planar, SceneKind};
+use nalgebra::{UnitComplex, Vector2, Vector3};
+
+/// A frictionless, undamped handle of `mass` kg per linear axis (and a heavy one in θ), no walls in reach.
+fn ideal_device(mass: f64) -> SimulatedDevice<Planar> {
+    let spec = DeviceSpec {
+        mass: vec![mass, mass, 1.0],
+        workspace_min: vec![-10.0, -10.0, -100.0],
+        workspace_max: vec![10.0, 10.0, 100.0],
+        ..DevicePreset::Paper.spec(SceneKind::Planar).unwrap()
+    };
+    let start = OpPose { position: Vector2::zeros(), rotation: UnitComplex::identity() };
+    SimulatedDevice::new(spec, &SimulatedDeviceParams::ideal(3), start).unwrap()
+}
+
+fn rig(kind: HandKind, intent: Intent, tour: Vec<Vector3<f64>>, mass: f64) -> SimulatedRig<Planar> {
+    let user = UserSpec::Hand(HandSpec { kind, intent }).build::<Planar>(&UserContext { tour }).unwrap();
+    SimulatedRig::new(ideal_device(mass), user)
+}
+
+/// Runs the rig at 1 kHz with a constant `command` until `seconds`, calling `each` after every read.
+fn run(
+    rig: &mut SimulatedRig<Planar>,
+    seconds: f64,
+    command: Vector3<f64>,
+    mut each: impl FnMut(f64, &SimulatedRig<Planar>),
+) {
+    for k in 0..=(seconds * 1000.0) as u64 {
+        let now = Duration::from_millis(k);
+        rig.read(now).unwrap();
+        rig.command(now, &command).unwrap();
+        each(k as f64 * 1e-3, rig);
+    }
+}
+
+#[test]
+fn a_held_handle_under_a_force_step_moves_as_the_hand_mass_spring_damper_says() {
+    // Hand of mass m_h, damping b, stiffness k on a handle of mass m_d, holding still; a step force F on
+    // the handle. Closed form of the second-order step: x(t) = F/k (1 − e^{−ζω t}(cos ω_d t + ζ/√(1−ζ²)
+    // sin ω_d t)), ω = √(k/(m_d + m_h)), ζ = b / (2 √(k (m_d + m_h))).
+    let hand = HandImpedance::soft();
+    let (m_d, f) = (0.2, 0.5);
+    let m = m_d + hand.mass;
+    let omega = (hand.stiffness / m).sqrt();
+    let zeta = hand.damping / (2.0 * (hand.stiffness * m).sqrt());
+    let omega_d = omega * (1.0 - zeta * zeta).sqrt();
+    let expected = |t: f64| {
+        f / hand.stiffness
+            * (1.0
+                - (-zeta * omega * t).exp()
+                    * ((omega_d * t).cos() + zeta / (1.0 - zeta * zeta).sqrt() * (omega_d * t).sin()))
+    };
+    let mut rig = rig(HandKind::Soft, Intent::Hold, Vec::new(), m_d);
+    let mut worst: f64 = 0.0;
+    run(&mut rig, 2.0, Vector3::new(f, 0.0, 0.0), |t, rig| {
+        worst = worst.max((rig.true_pose().position.x - expected(t)).abs());
+    });
+    // The hand's wrench is held over each 1 ms tick: a small phase error against the continuous form.
+    assert!(worst < 0.03 * f / hand.stiffness, "largest error {worst} m against a travel of {} m", f / hand.stiffness);
+}
+
+#[test]
+fn a_released_handle_feels_no_hand_and_carries_no_hand_mass() {
+    let (m_d, f) = (0.2, 0.3);
+    let mut rig = rig(HandKind::Release, Intent::Hold, Vec::new(), m_d);
+    let (mut at_release, mut velocity_at_release) = (0.0, 0.0);
+    run(&mut rig, RELEASE_AT_S + 0.5, Vector3::new(f, 0.0, 0.0), |t, rig| {
+        if (t - RELEASE_AT_S).abs() < 5e-4 {
+            at_release = rig.true_pose().position.x;
+            velocity_at_release = rig.device().true_twist().x;
+        }
+        if t > RELEASE_AT_S {
+            assert_eq!(rig.hand_wrench(), Vector3::zeros(), "the hand let go at {t}");
+        }
+    });
+    // Free flight of the handle alone: x = x₀ + v₀ t + ½ (F/m_d) t².
+    let t = 0.5;
+    let free = at_release + velocity_at_release * t + 0.5 * f / m_d * t * t;
+    let x = rig.true_pose().position.x;
+    assert!((x - free).abs() < 0.01 * (free - at_release), "handle at {x}, free flight predicts {free}");
+}
+
+#[test]
+fn a_poke_steps_the_hand_force_by_its_stiffness_times_the_step() {
+    let hand = HandImpedance::firm();
+    let mut rig = rig(HandKind::Poke, Intent::Hold, Vec::new(), 1e3);
+    let mut before = Vector3::zeros();
+    let mut during = Vector3::zeros();
+    run(&mut rig, POKE_AT_S + POKE_DURATION_S + 0.2, Vector3::zeros(), |t, rig| {
+        if (t - (POKE_AT_S - 0.01)).abs() < 5e-4 {
+            before = rig.hand_wrench();
+        }
+        if (t - (POKE_AT_S + 0.05)).abs() < 5e-4 {
+            during = rig.hand_wrench();
+        }
+    });
+    // The 1000 kg handle barely moves: the jump is the hand's spring on the step.
+    let jump = during.x - before.x;
+    assert!((jump - hand.stiffness * POKE_STEP_M).abs() < 0.05 * hand.stiffness * POKE_STEP_M, "jump {jump} N");
+    assert!(
+        rig.hand_wrench().x.abs() < 0.1 * hand.stiffness * POKE_STEP_M,
+        "the poke is over: {:?}",
+        rig.hand_wrench()
+    );
+}
+
+#[test]
+fn a_touring_hand_takes_a_free_handle_through_every_waypoint_and_back() {
+    let waypoints: Vec<Vector3<f64>> =
+        vec![Vector3::new(0.02, 0.0, 0.0), Vector3::new(0.02, 0.02, 0.0), Vector3::new(-0.01, 0.02, 0.0)];
+    let mut rig = rig(HandKind::Firm, Intent::Tour, waypoints.clone(), 0.1);
+    let mut closest = vec![f64::INFINITY; waypoints.len()];
+    let mut back_home = f64::INFINITY;
+    run(&mut rig, 8.0, Vector3::zeros(), |t, rig| {
+        let p = rig.true_pose().position;
+        for (c, w) in closest.iter_mut().zip(&waypoints) {
+            *c = c.min((p - w.xy()).norm());
+        }
+        if t > 4.0 {
+            back_home = back_home.min((p - waypoints[0].xy()).norm());
+        }
+    });
+    for (i, c) in closest.iter().enumerate() {
+        assert!(*c < 1e-3, "waypoint {i} missed by {c} m");
+    }
+    assert!(back_home < 1e-3, "the tour comes back to its first waypoint ({back_home} m)");
+}
