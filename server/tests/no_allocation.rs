@@ -50,8 +50,8 @@ fn allocator_calls(f: impl FnOnce()) -> u64 {
     CALLS.with(|c| c.get())
 }
 
-fn device() -> DeviceCaps {
-    DeviceCaps { max_force_n: 50.0, continuous_force_n: 25.0, max_torque_nm: 5.0, ..DeviceCaps::generous("d", 3) }
+fn device(k: usize) -> DeviceCaps {
+    DeviceCaps { max_force_n: 50.0, continuous_force_n: 25.0, max_torque_nm: 5.0, ..DeviceCaps::generous("d", k) }
 }
 
 /// Joins `forms.len()` users (manipulators and one observer), then counts the allocator calls of `ticks`
@@ -71,7 +71,7 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
                 role,
                 op: op.clone(),
                 form: *form,
-                device: Some(device()),
+                device: Some(device(S::DIM)),
                 mapping: Default::default(),
             };
             core.join(Duration::ZERO, request).unwrap().user_id
@@ -156,7 +156,7 @@ fn the_view_tap_allocates_nothing_per_tick() {
             role,
             op: "link2".into(),
             form: LocalModelForm::OpSpace,
-            device: Some(device()),
+            device: Some(device(3)),
             mapping: Default::default(),
         };
         core.join(Duration::ZERO, request).unwrap();

@@ -122,7 +122,7 @@ async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
         let (start, now) = (op(&before), op(&held));
         assert!(dist(start, now) > 3e-3, "the drag moved link2: {start:?} -> {now:?} (target {target:?})");
         assert!(
-            dist(now, target) < 0.4 * dist(start, target),
+            dist(now, target) < 0.5 * dist(start, target),
             "link2 went toward the drag target: {start:?} -> {now:?}, target {target:?}"
         );
         browser.screenshot(&output_dir(), "drag.png").await;

@@ -400,9 +400,8 @@ pub struct HapticCore<S: Space> {
     gains: ResolvedGains<S>,
     limits: WrenchLimits,
     scales: Scales,
-    /// The device workspace's centre and the OP reach's centre, when the reach has extent (see
-    /// `DeviceIndex::centred`).
-    centres: Option<(S::Point, S::Point)>,
+    /// The device's workspace and the OP's reach, when the reach has extent (see `DeviceIndex::centred`).
+    boxes: Option<Boxes<S>>,
     /// The device's masses in VE units.
     device_mass: S::OpVec,
     length_scale: f64,
@@ -449,27 +448,44 @@ fn per_axis<S: Space>(what: &str, values: &[f64]) -> Result<S::OpVec, CoreError>
     Ok(S::OpVec::from_slice(values))
 }
 
-/// The centres of the device's workspace and of the OP's reach (linear axes), `None` when the welcome's
-/// reach has no extent or does not fit the space.
-fn centres<S: Space>(
-    device: &crate::device::DeviceSpec,
-    op: &kinloop_protocol::OpSummary,
-) -> Option<(S::Point, S::Point)> {
-    let lin = <S::Point as VecOps>::LEN;
-    if op.reach_min.len() != lin || op.reach_max.len() != lin || device.workspace_min.len() < lin {
-        return None;
+/// The device's workspace and the OP's reach as boxes (linear axes), to index the device so that the one
+/// holds the other.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Boxes<S: Space> {
+    workspace: (S::Point, S::Point),
+    reach: (S::Point, S::Point),
+}
+
+impl<S: Space> Boxes<S> {
+    /// `None` when the welcome's reach has no extent or does not fit the space.
+    fn of(device: &crate::device::DeviceSpec, op: &kinloop_protocol::OpSummary) -> Option<Self> {
+        let lin = <S::Point as VecOps>::LEN;
+        if op.reach_min.len() != lin || op.reach_max.len() != lin || device.workspace_min.len() < lin {
+            return None;
+        }
+        let extent = (0..lin).map(|a| op.reach_max[a] - op.reach_min[a]).fold(0.0, f64::max);
+        if !(extent > 0.0) {
+            return None;
+        }
+        let point = |v: &[f64]| S::Point::from_slice(&v[..lin]);
+        Some(Boxes {
+            workspace: (point(&device.workspace_min), point(&device.workspace_max)),
+            reach: (point(&op.reach_min), point(&op.reach_max)),
+        })
     }
-    let extent = (0..lin).map(|a| op.reach_max[a] - op.reach_min[a]).fold(0.0, f64::max);
-    if !(extent > 0.0) {
-        return None;
+
+    fn centres(&self) -> (S::Point, S::Point) {
+        ((self.workspace.0 + self.workspace.1) * 0.5, (self.reach.0 + self.reach.1) * 0.5)
     }
-    let mut workspace = S::Point::zero();
-    let mut reach = S::Point::zero();
-    for a in 0..lin {
-        workspace.as_mut_slice()[a] = 0.5 * (device.workspace_min[a] + device.workspace_max[a]);
-        reach.as_mut_slice()[a] = 0.5 * (op.reach_min[a] + op.reach_max[a]);
+
+    /// True when indexing the device where it is onto the OP where it is keeps the whole reach inside the
+    /// workspace (then the device need not move to start).
+    fn fits_from(&self, device: &S::Point, op: &S::Point, scale: f64) -> bool {
+        let lo = *device + (self.reach.0 - *op) * scale;
+        let hi = *device + (self.reach.1 - *op) * scale;
+        let (w_lo, w_hi) = (self.workspace.0.as_slice(), self.workspace.1.as_slice());
+        (0..<S::Point as VecOps>::LEN).all(|a| lo.as_slice()[a] >= w_lo[a] && hi.as_slice()[a] <= w_hi[a])
     }
-    Some((workspace, reach))
 }
 
 impl<S: Space> HapticCore<S> {
@@ -511,7 +527,7 @@ impl<S: Space> HapticCore<S> {
         Ok(HapticCore {
             gains,
             limits: WrenchLimits::of(device),
-            centres: centres::<S>(device, &welcome.op),
+            boxes: Boxes::of(device, &welcome.op),
             scales,
             device_mass,
             length_scale: scene.length_scale,
@@ -603,8 +619,11 @@ impl<S: Space> HapticCore<S> {
     /// Where the device's handle belongs for the OP at VE position `op` under this session's mapping (a
     /// simulated device starts there, as a hand would grasp the handle where the linkage is).
     pub fn home(&self, op: &S::Point) -> S::Point {
-        match &self.centres {
-            Some((workspace, reach)) => *workspace + (*op - *reach) * self.scales.position,
+        match &self.boxes {
+            Some(boxes) => {
+                let (workspace, reach) = boxes.centres();
+                workspace + (*op - reach) * self.scales.position
+            }
             None => self.index.to_device(op),
         }
     }
@@ -695,9 +714,13 @@ impl<S: Space> HapticCore<S> {
             self.reaction = S::OpVec::zero();
         }
         if first && self.config.index_at_first_snapshot {
-            self.index = match &self.centres {
-                Some(centres) => DeviceIndex::centred(device, &self.active.op_pose, centres, self.scales.position),
-                None => DeviceIndex::between(device, &self.active.op_pose, self.scales.position),
+            let (op, scale) = (&self.active.op_pose, self.scales.position);
+            self.index = match &self.boxes {
+                // Where the device is, if the reach fits from there (no start-up pull); else centred.
+                Some(boxes) if !boxes.fits_from(&device.position, &op.position, scale) => {
+                    DeviceIndex::centred(device, op, &boxes.centres(), scale)
+                }
+                _ => DeviceIndex::between(device, op, scale),
             };
         }
         self.has_snapshot = true;

@@ -36,6 +36,10 @@ use crate::model::{JointKind, Model};
 /// cancellation, some 1e-16 relative.
 pub const IMMOBILE_GROUP: f64 = 1e-9;
 
+/// Tour waypoints keep to poses where the OP is at least this mobile, relative to the walk's median
+/// (σ_max of Λ̃⁻¹): a twentieth keeps a rocker's swing but its last few degrees before the dead point.
+pub const TOUR_MOBILITY: f64 = 0.05;
+
 /// How far and how often a survey walks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurveyConfig {
@@ -53,7 +57,7 @@ pub struct SurveyConfig {
 
 impl Default for SurveyConfig {
     fn default() -> Self {
-        SurveyConfig { walks: 6, steps: 360, step: 0.04, inertia_every: 3, tour_points: 12 }
+        SurveyConfig { walks: 6, steps: 360, step: 0.04, inertia_every: 3, tour_points: 24 }
     }
 }
 
@@ -349,14 +353,21 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         1 => config.walks.min(2),
         _ => config.walks,
     };
+    let mut tour_data = Data::new(model);
     for walk in 0..walks {
+        let on_tour = walk == 0 || (dof > 1 && walk * 4 == walks);
         let angle = std::f64::consts::TAU * walk as f64 / walks as f64;
         let mut direction = &null_basis[0] * angle.cos();
         if dof > 1 {
             direction += &null_basis[1] * angle.sin();
         }
         let mut q = q0.clone();
-        let mut path = vec![start];
+        // The walk's poses, with how mobile the OP is there (σ_max of the unit-consistent Λ̃⁻¹) on the walks
+        // the tour is taken from.
+        let mobility = |q: &DVector<f64>, data: &mut Data<S>| {
+            static_op_load(model, data, q, op).map_or(0.0, |(_, d)| d.singular_values[0])
+        };
+        let mut path = vec![(start, if on_tour { mobility(&q0, &mut tour_data) } else { 0.0 })];
         let mut failures = 0;
         for step in 1..=config.steps {
             match walker.step(&mut q, &direction, config.step) {
@@ -365,7 +376,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
                     failures = 0;
                     let pose = OpPose::<S>::of_op(model, &walker.data, op);
                     visit(&q, &pose, step % config.inertia_every.max(1) == 0, &mut reach);
-                    path.push(pose);
+                    path.push((pose, if on_tour { mobility(&q, &mut tour_data) } else { 0.0 }));
                 }
                 None => {
                     // A dead point or the end of a stroke: turn back, as the linkage would.
@@ -377,9 +388,16 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
                 }
             }
         }
-        // The tour: the first walk (and, on a linkage of several DOF, the one leaving at a right angle).
-        if walk == 0 || (dof > 1 && walk * 4 == walks) {
-            reach.tour.extend(waypoints(&path, config.tour_points));
+        // The tour: the first walk (and, on a linkage of several DOF, the one leaving at a right angle), away
+        // from the dead points where the OP itself jams (a rocker driven from its output at the ends of its
+        // swing, Λ⁻¹ → 0 there): a hand that means to go there meets a toggle, not the linkage's motion.
+        if on_tour {
+            let mut mobilities: Vec<f64> = path.iter().map(|p| p.1).collect();
+            mobilities.sort_by(f64::total_cmp);
+            let median = mobilities[mobilities.len() / 2];
+            let mobile: Vec<OpPose<S>> =
+                path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
+            reach.tour.extend(waypoints(&mobile, config.tour_points));
         }
     }
     let percentile = |values: &mut Vec<f64>| {

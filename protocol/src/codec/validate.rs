@@ -56,7 +56,8 @@ pub fn join(j: &Join) -> Result<(), DecodeError> {
     mapping_request(&j.mapping)
 }
 
-fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
+/// Checks a device description's numbers (also for callers that join without the wire).
+pub fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
     text(Field::at("join.device.name"), &d.name)?;
     if usize::from(d.dof) > MAX_DEVICE_DOF {
         return Err(DecodeError::TooMany {
@@ -96,7 +97,8 @@ fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
     scalar(Field::at("join.device.native_rate_hz"), d.native_rate_hz, MIN_RATE_HZ, MAX_RATE_HZ)
 }
 
-fn mapping_request(m: &MappingRequest) -> Result<(), DecodeError> {
+/// Checks the scales a join asks for (also for callers that join without the wire).
+pub fn mapping_request(m: &MappingRequest) -> Result<(), DecodeError> {
     for (field, scale) in [
         (Field::at("join.mapping.position_scale"), m.position_scale),
         (Field::at("join.mapping.force_scale"), m.force_scale),

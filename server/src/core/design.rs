@@ -31,6 +31,7 @@
 
 use kinloop_linkage::reach::OpReach;
 use kinloop_linkage::{Space, VecOps};
+use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
@@ -89,8 +90,13 @@ fn axis_names<S: Space>() -> (&'static str, &'static str) {
     }
 }
 
-/// Checks that `device` describes a real device in the scene's operational space.
-pub fn check_device<S: Space>(device: &DeviceCaps) -> Result<(), DesignError> {
+/// Checks that `device` describes a real device in the scene's operational space and that the scales
+/// `request` asks for are usable: the wire's own checks first (a caller that joins without the wire gets
+/// them too), then what only the scene can tell.
+pub fn check_request<S: Space>(device: &DeviceCaps, request: &MappingRequest) -> Result<(), DesignError> {
+    validate::mapping_request(request).map_err(|e| DesignError::Scale { what: e.to_string() })?;
+    validate::device(device)
+        .map_err(|e| DesignError::Impossible { device: device.name.clone(), what: e.to_string() })?;
     let (kind, axes) = axis_names::<S>();
     let lists = [device.workspace_min.len(), device.workspace_max.len(), device.damping.len(), device.mass.len()];
     if let Some(&got) = lists.iter().find(|&&len| len != S::DIM) {
@@ -128,11 +134,13 @@ fn lightest<S: Space>(reach: &OpReach<S>) -> (f64, f64) {
 
 /// The mapping for `device` at the OP of `reach` (see the module documentation), with what the client
 /// asked for taking precedence; a requested scale that would push the device past its peak force (static
-/// load) or its reach past the workspace is refused with the largest that would not.
+/// load; only for a user who renders forces, a manipulator) or its reach past the workspace is refused with
+/// the largest that would not.
 pub fn choose_mapping<S: Space>(
     reach: &OpReach<S>,
     device: &DeviceCaps,
     request: &MappingRequest,
+    renders_force: bool,
 ) -> Result<Mapping, DesignError> {
     let lin = <S::Point as VecOps>::LEN;
     let extent = reach.extent();
@@ -170,7 +178,7 @@ pub fn choose_mapping<S: Space>(
     }
     if let Some(asked) = request.force_scale {
         let most = device.max_force_n / reach.static_force_n.max(1e-12);
-        if asked * reach.static_force_n > device.max_force_n {
+        if renders_force && asked * reach.static_force_n > device.max_force_n {
             return Err(DesignError::Scale {
                 what: format!(
                     "force scale {asked} would need {:.2} N of device {} to hold the OP's static load of {:.2} N \

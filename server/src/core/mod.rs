@@ -366,9 +366,10 @@ impl<S: Space> VeCore<S> {
             });
         };
         let reach = &self.reaches[op];
+        let manipulator = request.role == Role::Manipulator;
         let designed = match &request.device {
-            Some(device) => design::check_device::<S>(device)
-                .and_then(|()| design::choose_mapping(reach, device, &request.mapping))
+            Some(device) => design::check_request::<S>(device, &request.mapping)
+                .and_then(|()| design::choose_mapping(reach, device, &request.mapping, manipulator))
                 .map(|mapping| (mapping, device.native_rate_hz, device.max_torque_nm > 0.0)),
             // A user without a device (a view, a test) is mapped one to one and moves its reference as fast as
             // the VE.
@@ -393,7 +394,6 @@ impl<S: Space> VeCore<S> {
         let point = &self.model.ops[op];
         let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), stiffness, damping);
         coupling.evaluate(&self.model, &self.data.kin, true);
-        let manipulator = request.role == Role::Manipulator;
         if manipulator {
             coupling.pushes = true;
             coupling.target_pose = coupling.op_pose;
