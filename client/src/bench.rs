@@ -73,6 +73,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         server_time_s: 0.0,
         ve_step: 1,
         user_id: 1,
+        uplink_time_s: 0.0,
         op_pose,
         op_twist: op_twist(&model, &data, op).as_slice().to_vec(),
         inverse_inertia: triangle,

@@ -26,6 +26,7 @@ pub fn testbed_snapshot() -> Snapshot {
         server_time_s: 123.456,
         ve_step: 123_456,
         user_id: 1,
+        uplink_time_s: 0.0,
         op_pose: vec![0.1734, -0.0421, 0.6912],
         op_twist: vec![0.0123, -0.0456, 0.2977],
         inverse_inertia: vec![2.314, -0.217, 0.081, 1.772, -0.034, 12.81],

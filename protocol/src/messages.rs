@@ -205,12 +205,15 @@ pub struct Mapping {
     pub force_scale: f64,
     /// The VE holds the linkage's weight at this user's OP.
     pub gravity_compensation: bool,
+    /// The user holds the OP rigidly, turning it with torques; false: as through a pin, pushing with forces
+    /// only (a device without torque, or an OP too light in rotation for the device to render; `design`).
+    pub rigid_grasp: bool,
 }
 
 impl Mapping {
-    /// One to one, no compensation.
+    /// One to one, a rigid grasp, no compensation.
     pub fn identity() -> Self {
-        Mapping { position_scale: 1.0, force_scale: 1.0, gravity_compensation: false }
+        Mapping { position_scale: 1.0, force_scale: 1.0, gravity_compensation: false, rigid_grasp: true }
     }
 
     /// Device N·m per VE N·m.
@@ -591,6 +594,10 @@ pub struct Snapshot {
     pub ve_step: u64,
     /// The user this snapshot is for.
     pub user_id: u32,
+    /// Client clock (`Uplink::client_time_s`) of the newest uplink the VE had used when it took this state
+    /// (0 before the first): the local-model state this VE state answers, so the client compares like with
+    /// like whatever the network's delay.
+    pub uplink_time_s: f64,
     /// Operational-point pose, pose dimension.
     pub op_pose: Vec<f64>,
     /// Operational-point twist, length `k`, linear first.

@@ -118,7 +118,7 @@ fn welcome() -> Control {
         },
         ve_rate_hz: 1000.0,
         snapshot_rate_hz: 500.0,
-        mapping: Mapping { position_scale: 0.5, force_scale: 0.25, gravity_compensation: true },
+        mapping: Mapping { position_scale: 0.5, force_scale: 0.25, gravity_compensation: true, rigid_grasp: false },
         coupling: CouplingGains { stiffness: vec![512.0, 512.0, 4.0], damping: vec![2.0, 2.0, 0.25] },
         op: OpSummary {
             position: vec![0.25, 0.5],
@@ -149,6 +149,7 @@ const WELCOME_BYTES: &[&str] = &[
     "000000000000e03f", // mapping.position_scale 0.5
     "000000000000d03f", // mapping.force_scale 0.25
     "01",               // mapping.gravity_compensation true
+    "00",               // mapping.rigid_grasp false
     "03",               // coupling.stiffness: 3 values
     "0000000000008040", // 512.0
     "0000000000008040", // 512.0

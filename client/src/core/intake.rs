@@ -32,6 +32,8 @@ pub enum SnapshotRejection {
 pub(crate) struct SnapshotTerms<S: Space> {
     pub seq: u64,
     pub received_at: Duration,
+    /// Client clock of the uplink the VE had used (0: none).
+    pub uplink_time_s: f64,
     pub op_pose: OpPose<S>,
     pub op_twist: S::OpVec,
     /// Λ̂⁻¹ (physical units).
@@ -57,6 +59,7 @@ impl<S: Space> SnapshotTerms<S> {
         SnapshotTerms {
             seq: 0,
             received_at: Duration::ZERO,
+            uplink_time_s: 0.0,
             op_pose: OpPose::identity(),
             op_twist: S::OpVec::zero(),
             inverse_inertia: S::OpMat::zero(),
@@ -109,6 +112,7 @@ impl<S: Space> SnapshotTerms<S> {
         }
         self.seq = snap.seq;
         self.received_at = received_at;
+        self.uplink_time_s = snap.uplink_time_s;
         Ok(())
     }
 

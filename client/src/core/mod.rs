@@ -34,6 +34,7 @@ mod deadband;
 mod intake;
 mod model;
 mod observer;
+mod sync;
 
 use std::time::Duration;
 
@@ -57,6 +58,7 @@ use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
 use safety::{force_ratio, limit_wrench, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
+use sync::History;
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
@@ -425,6 +427,8 @@ pub struct HapticCore<S: Space> {
     last_now: Option<Duration>,
     one_way_delay: Duration,
     deadband: Deadband<S>,
+    /// The local model's recent states, by client time (see `sync`).
+    history: History<S>,
     uplink: Uplink,
     /// Trigonometric anchors for the three pose streams converted every tick or snapshot.
     pose_memos: PoseMemos<S>,
@@ -526,7 +530,11 @@ impl<S: Space> HapticCore<S> {
         let uplink = Uplink::at_rest(0, k, pose_len);
         Ok(HapticCore {
             gains,
-            limits: WrenchLimits::of(device),
+            // A pinned grasp renders no torque, whatever the device could (`Mapping::rigid_grasp`).
+            limits: WrenchLimits {
+                max_torque_nm: if welcome.mapping.rigid_grasp { WrenchLimits::of(device).max_torque_nm } else { 0.0 },
+                ..WrenchLimits::of(device)
+            },
             boxes: Boxes::of(device, &welcome.op),
             scales,
             device_mass,
@@ -549,6 +557,7 @@ impl<S: Space> HapticCore<S> {
             last_now: None,
             one_way_delay: Duration::ZERO,
             deadband: Deadband::new(config.deadband),
+            history: History::new(),
             uplink,
             pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),
@@ -609,6 +618,12 @@ impl<S: Space> HapticCore<S> {
             stiffness_cap,
             damping_cap,
         })
+    }
+
+    /// True when the user holds the OP as through a pin (`Mapping::rigid_grasp` false, or a device without
+    /// torque): forces only, the angles left to the linkage.
+    pub fn pinned(&self) -> bool {
+        self.limits.max_torque_nm == 0.0
     }
 
     /// The mapping's scales.
@@ -706,8 +721,7 @@ impl<S: Space> HapticCore<S> {
         // onto the VE instead of being pulled there.
         let restart = first || self.gate.gain() == 0.0;
         self.model.update(&self.active);
-        let pinned = self.limits.max_torque_nm == 0.0;
-        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, pinned);
+        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
         if restart {
             self.model.set_state(self.predicted_op(now), self.active.op_twist);
             self.model.set_inverse_inertia(&self.frame.inverse_inertia);
@@ -755,33 +769,52 @@ impl<S: Space> HapticCore<S> {
         let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
         self.frame.filter(fraction(self.config.terms_time_constant));
         if !stale {
+            let (constrained, free) =
+                (fraction(self.config.blend_time_constant), fraction(self.config.free_blend_time_constant));
+            let (p, l) = (&self.frame.projector, self.length_scale);
+            // Along the constrained directions the model drifts off the linkage's curve as it moves, and the
+            // drift grows over the round trip: it is measured against the VE's state predicted to now. In the
+            // free directions the VE follows the model, and the VE's state is compared with the model's state
+            // it answers (`sync`), which takes the network's delay out of that loop.
             let predicted = self.predicted_op(now);
-            self.model.blend_toward(
-                &predicted,
-                &self.active.op_twist,
-                &self.frame.projector,
-                self.length_scale,
-                fraction(self.config.blend_time_constant),
-                fraction(self.config.free_blend_time_constant),
-            );
+            let (own, own_twist) = (self.model.pose(), self.model.twist());
+            let (mut pose, mut twist) = (predicted.difference(&own), self.active.op_twist - own_twist);
+            if let Some(then) = self.history.at(self.active.uplink_time_s) {
+                let (answered, answered_twist) =
+                    self.history.discrepancy(then, &self.active.op_pose, &self.active.op_twist);
+                let mix = |now: &S::OpVec, answered: &S::OpVec| {
+                    controllers::project_twist::<S>(p, l, now) + *answered
+                        - controllers::project_twist::<S>(p, l, answered)
+                };
+                pose = mix(&pose, &answered);
+                twist = mix(&twist, &answered_twist);
+            }
+            let (moved, sped) = self.model.correct(&pose, &twist, p, l, constrained, free);
+            self.history.moved += moved;
+            self.history.sped += sped;
         }
         self.model.set_inverse_inertia(&self.frame.inverse_inertia);
 
         // 3. Step the local model under the user's wrench.
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
-        let sensed =
-            device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH)).map(|w| self.scales.wrench_to_ve::<S>(&w));
+        // A pin passes no torque: a sensed wrist torque does not reach the linkage.
+        let sensed = device
+            .hand_wrench
+            .filter(|w| within(w.as_slice(), MAX_WRENCH))
+            .map(|w| mask_unactuated::<S>(&self.scales.wrench_to_ve::<S>(&w), &self.limits));
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
         let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
         self.model.step(dt_s, &model_wrench);
+        // Recorded by the client time the uplink of this tick carries.
+        self.history.record(now.as_secs_f64(), self.model.pose(), self.model.twist());
 
         // 4. Controllers.
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
         let mut error = device_pose.difference(&model_pose);
         let mut error_rate = device_twist - model_twist;
-        if self.limits.max_torque_nm == 0.0 {
+        if self.pinned() {
             // Held as through a pin (see `ConstraintFrame::set_target`): no controller acts on angles the
             // device can neither show nor push.
             let lin = <S::Point as VecOps>::LEN;

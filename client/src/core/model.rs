@@ -110,14 +110,30 @@ impl<S: Space> LocalModel<S> {
         constrained: f64,
         free: f64,
     ) {
-        let split = |d: S::OpVec| {
-            let along = project_twist::<S>(projector, length_scale, &d);
-            along * constrained + (d - along) * free
+        let (own, own_twist) = (self.pose(), self.twist());
+        self.correct(&pose.difference(&own), &(*twist - own_twist), projector, length_scale, constrained, free);
+    }
+
+    /// Moves the OP state by the fractions of the pose and twist discrepancies `pose` and `twist` (the part
+    /// along the constrained directions by `constrained`, the rest by `free`); returns what it applied.
+    pub fn correct(
+        &mut self,
+        pose: &S::OpVec,
+        twist: &S::OpVec,
+        projector: &S::OpMat,
+        length_scale: f64,
+        constrained: f64,
+        free: f64,
+    ) -> (S::OpVec, S::OpVec) {
+        let split = |d: &S::OpVec| {
+            let along = project_twist::<S>(projector, length_scale, d);
+            along * constrained + (*d - along) * free
         };
+        let (moved, sped) = (split(pose), split(twist));
         let mut own = self.pose();
-        let own_twist = self.twist();
-        own.integrate(&split(pose.difference(&own)), 1.0);
-        self.set_state(own, own_twist + split(*twist - own_twist));
+        own.integrate(&moved, 1.0);
+        self.set_state(own, self.twist() + sped);
+        (moved, sped)
     }
 
     /// The live contacts of the reduced form (the configuration form tracks none: the paper's eq 13 testbed

@@ -395,8 +395,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
             let mut mobilities: Vec<f64> = path.iter().map(|p| p.1).collect();
             mobilities.sort_by(f64::total_cmp);
             let median = mobilities[mobilities.len() / 2];
-            let mobile: Vec<OpPose<S>> =
-                path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
+            let mobile: Vec<OpPose<S>> = path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
             reach.tour.extend(waypoints(&mobile, config.tour_points));
         }
     }

@@ -230,6 +230,7 @@ pub fn snapshot_op_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Decod
 /// the shape of the others' table and the configuration-space terms.
 pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
+    scalar(Field::at("snapshot.uplink_time_s"), s.uplink_time_s, 0.0, MAX_TIME_S)?;
     pose(Field::at("snapshot.op_pose"), &s.op_pose, shape)?;
     vector(Field::at("snapshot.bias_accel"), &s.bias_accel, shape.op_dim(), MAX_ACCEL)?;
     count(Field::at("snapshot.contacts"), s.contacts.len(), MAX_LIST_ENTRIES)?;

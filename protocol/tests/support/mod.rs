@@ -251,12 +251,14 @@ fn scene_info() -> impl Strategy<Value = SceneInfo> {
 
 fn welcome() -> impl Strategy<Value = Welcome> {
     let scene = (name(), prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], 0u32..64, 0u32..64, name());
-    let mapping =
-        (1e-4..1e4, 1e-4..1e4, any::<bool>()).prop_map(|(position_scale, force_scale, gravity_compensation)| Mapping {
+    let mapping = (1e-4..1e4, 1e-4..1e4, any::<bool>(), any::<bool>()).prop_map(
+        |(position_scale, force_scale, gravity_compensation, rigid_grasp)| Mapping {
             position_scale,
             force_scale,
             gravity_compensation,
-        });
+            rigid_grasp,
+        },
+    );
     (any::<u64>(), any::<u32>(), scene, 1.0..1e4, 1.0..1e4, mapping, 0usize..20).prop_flat_map(
         |(session_id, user_id, (name, kind, n, m, op_name), ve_rate_hz, snapshot_rate_hz, mapping, tour)| {
             let (k, d) = (kind.op_dim(), kind.point_dim());

@@ -48,6 +48,9 @@ pub struct Coupling<S: Space> {
     pub target_pose: OpPose<S>,
     /// ẋ_lm from the newest uplink.
     pub target_twist: S::OpVec,
+    /// The newest uplink's client clock (s; 0 before the first): snapshots tell the client which of its
+    /// local model's states the VE is answering (`Snapshot::uplink_time_s`).
+    pub target_time_s: f64,
     /// K_g per axis.
     pub stiffness: S::OpVec,
     /// B_g per axis.
@@ -82,6 +85,7 @@ impl<S: Space> Coupling<S> {
             hand_wrench: S::OpVec::zero(),
             target_pose: OpPose::identity(),
             target_twist: S::OpVec::zero(),
+            target_time_s: 0.0,
             stiffness,
             damping,
             pd_scale: full_scale::<S>(),

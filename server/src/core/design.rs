@@ -39,7 +39,7 @@ pub const WORKSPACE_FILL: f64 = 0.8;
 /// Fraction of the device's continuous force the static load at the OP maps to (the 25-50 %).
 pub const LOAD_FRACTION: f64 = 0.35;
 /// Natural frequency of the graphics controller on the OP's lightest effective mass (Hz).
-pub const COUPLING_HZ: f64 = 4.0;
+pub const COUPLING_HZ: f64 = 8.0;
 /// Damping ratio of the graphics controller.
 pub const COUPLING_DAMPING_RATIO: f64 = 1.0;
 /// The coupling's frequency stays below the VE rate and the device rate divided by this.
@@ -192,11 +192,29 @@ pub fn choose_mapping<S: Space>(
         }
         force_scale = asked;
     }
+    let (position_scale, force_scale) = (position_scale.clamp(1e-4, 1e4), force_scale.clamp(1e-4, 1e4));
     Ok(Mapping {
-        position_scale: position_scale.clamp(1e-4, 1e4),
-        force_scale: force_scale.clamp(1e-4, 1e4),
+        position_scale,
+        force_scale,
         gravity_compensation: request.gravity_compensation,
+        rigid_grasp: renders_rotation(reach, device, force_scale * position_scale),
     })
+}
+
+/// Largest factor by which a device can be made to feel lighter than it is (the client's impedance
+/// control bound, `MAX_MASS_REDUCTION` there).
+const MASS_REDUCTION: f64 = 4.0;
+
+/// Whether the user holds the OP rigidly: the device renders torque, and the OP's lightest rotational
+/// inertia, seen on the device (times the torque scale), is within what the device can be made to feel.
+/// Otherwise the OP is held as through a pin: a serial arm's tip, 0.004 kg m² in the VE and 5e-5 kg m² on
+/// the paper device at its scales, against the handle's own 0.005 kg m², turned faster than any
+/// controller of the handle could follow, and under 50 ms of delay its angular loop ran away.
+fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_scale: f64) -> bool {
+    let lin = <S::Point as VecOps>::LEN;
+    let (_, inertia) = lightest(reach);
+    let handle = device.mass.get(lin).copied().unwrap_or(0.0);
+    device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle
 }
 
 /// The graphics controller's natural frequency (rad/s) for a VE at `ve_rate_hz` and a device at

@@ -370,7 +370,10 @@ impl<S: Space> VeCore<S> {
         let designed = match &request.device {
             Some(device) => design::check_request::<S>(device, &request.mapping)
                 .and_then(|()| design::choose_mapping(reach, device, &request.mapping, manipulator))
-                .map(|mapping| (mapping, device.native_rate_hz, device.max_torque_nm > 0.0)),
+                .map(|mapping| {
+                    let rigid = mapping.rigid_grasp;
+                    (mapping, device.native_rate_hz, rigid)
+                }),
             // A user without a device (a view, a test) is mapped one to one and moves its reference as fast as
             // the VE.
             None => Ok((
@@ -499,6 +502,9 @@ impl<S: Space> VeCore<S> {
             c.hand_wrench = checked.hand_wrench;
             c.target_pose = checked.model_pose;
             c.target_twist = checked.model_twist;
+            // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet".
+            let t = sample.client_time_s;
+            c.target_time_s = if (0.0..=kinloop_protocol::codec::limits::MAX_TIME_S).contains(&t) { t } else { 0.0 };
         }
         Ok(())
     }

@@ -120,6 +120,7 @@ impl<S: Space> VeCore<S> {
                 let snapshot = user.slot.snapshot_mut();
                 snapshot.seq += 1;
                 snapshot.server_time_s = time_s;
+                snapshot.uplink_time_s = self.couplings[index].target_time_s;
                 snapshot.ve_step = self.step;
                 // The OP's terms are the same numbers in every snapshot built from `at_op`: checked once.
                 let checked = if !others_valid {

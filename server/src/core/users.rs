@@ -105,6 +105,7 @@ impl SnapshotSlot {
             server_time_s: 0.0,
             ve_step: 0,
             user_id: user,
+            uplink_time_s: 0.0,
             op_pose: Vec::with_capacity(pose_len),
             op_twist: Vec::with_capacity(k),
             inverse_inertia: Vec::with_capacity(k * (k + 1) / 2),

@@ -230,6 +230,7 @@ mod tests {
             server_time_s: 0.0,
             ve_step: 1,
             user_id: 1,
+            uplink_time_s: 0.0,
             op_pose: vec![0.1, 0.2, 0.7],
             op_twist: vec![0.0; 3],
             inverse_inertia: vec![1.0, 0.0, 0.0, 0.5, 0.0, 100.0],

@@ -1,0 +1,118 @@
+//! Keeping the local model on the VE without a loop through the network's delay.
+//!
+//! The VE follows the local model (its graphics controller is tied to the uplinked model pose, its force
+//! channel carries the model's driving wrench), and the local model must in turn be kept on the VE: its
+//! frozen terms make it drift off the linkage's curved motion along the constrained directions, and other
+//! users, contacts and the VE's own integration move the VE in ways the model does not know. Pulling the
+//! model toward the VE's newest state closes a loop through both directions of the network: the state
+//! answers an uplink sent a round trip ago, so the pull chases the model's own past, and at 50 ms one way
+//! that loop oscillated on light OPs (a serial arm's tip, a six-bar's output).
+//!
+//! So the comparison is made like with like, as a Smith predictor does: every snapshot names the client
+//! time of the uplink the VE had used (`Snapshot::uplink_time_s`), the core keeps its model's states by
+//! that time ([`History`]), and the discrepancy is the VE's state against the model's state *then*, less
+//! the corrections already applied since (which the VE had not seen yet). When the VE follows the model
+//! faithfully this is zero whatever the delay: nothing is corrected, and there is no loop; what remains is
+//! the real drift, corrected once. Without a usable time (an observer's snapshots, or a state older than
+//! the history) the core falls back to the pull toward the VE's state predicted to now.
+
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::space::{Space, VecOps};
+
+/// Entries kept: 4 s of a 1 kHz loop, so a round trip of up to 4 s finds the state it answers.
+pub const HISTORY_LEN: usize = 4096;
+
+/// One recorded state of the local model.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Entry<S: Space> {
+    /// Client clock of the tick (s), as the uplink of that tick carried it.
+    pub time_s: f64,
+    /// The model's OP pose after the tick's step.
+    pub pose: OpPose<S>,
+    /// Its twist.
+    pub twist: S::OpVec,
+    /// Cumulative position correction applied up to this tick.
+    pub moved: S::OpVec,
+    /// Cumulative velocity correction applied up to this tick.
+    pub sped: S::OpVec,
+}
+
+/// The local model's recent states, oldest first, in a ring allocated once.
+pub(crate) struct History<S: Space> {
+    entries: Box<[Entry<S>]>,
+    /// Index of the oldest entry.
+    start: usize,
+    len: usize,
+    /// Cumulative corrections so far.
+    pub moved: S::OpVec,
+    pub sped: S::OpVec,
+}
+
+impl<S: Space> History<S> {
+    pub fn new() -> Self {
+        let empty = Entry {
+            time_s: f64::NEG_INFINITY,
+            pose: OpPose::identity(),
+            twist: S::OpVec::zero(),
+            moved: S::OpVec::zero(),
+            sped: S::OpVec::zero(),
+        };
+        History {
+            entries: vec![empty; HISTORY_LEN].into_boxed_slice(),
+            start: 0,
+            len: 0,
+            moved: S::OpVec::zero(),
+            sped: S::OpVec::zero(),
+        }
+    }
+
+    /// Forgets every state (a new session's model).
+    pub fn clear(&mut self) {
+        self.start = 0;
+        self.len = 0;
+    }
+
+    fn get(&self, i: usize) -> &Entry<S> {
+        &self.entries[(self.start + i) % HISTORY_LEN]
+    }
+
+    /// Records the model's state of the tick at `time_s` (times must not go back; an earlier one clears).
+    pub fn record(&mut self, time_s: f64, pose: OpPose<S>, twist: S::OpVec) {
+        if self.len > 0 && time_s < self.get(self.len - 1).time_s {
+            self.clear();
+        }
+        let entry = Entry { time_s, pose, twist, moved: self.moved, sped: self.sped };
+        if self.len < HISTORY_LEN {
+            self.entries[(self.start + self.len) % HISTORY_LEN] = entry;
+            self.len += 1;
+        } else {
+            self.entries[self.start] = entry;
+            self.start = (self.start + 1) % HISTORY_LEN;
+        }
+    }
+
+    /// The state recorded at `time_s` (the newest at or before it, within half a millisecond), if still kept.
+    pub fn at(&self, time_s: f64) -> Option<&Entry<S>> {
+        if self.len == 0 || !(time_s > 0.0) {
+            return None;
+        }
+        // Binary search for the last entry with time ≤ time_s.
+        let (mut lo, mut hi) = (0, self.len);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if self.get(mid).time_s <= time_s {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        let found = lo.checked_sub(1).map(|i| self.get(i))?;
+        (time_s - found.time_s <= 5e-4).then_some(found)
+    }
+
+    /// What the VE says the model's state was at `then`, less the corrections applied since: the pose
+    /// and twist discrepancies still to correct.
+    pub fn discrepancy(&self, then: &Entry<S>, ve_pose: &OpPose<S>, ve_twist: &S::OpVec) -> (S::OpVec, S::OpVec) {
+        (ve_pose.difference(&then.pose) - (self.moved - then.moved), *ve_twist - then.twist - (self.sped - then.sped))
+    }
+}
