@@ -182,6 +182,7 @@ fn snapshot() -> Datagram {
         server_time_s: 1.5,
         ve_step: 2000,
         user_id: 1,
+        uplink_time_s: 1.25,
         op_pose: vec![0.25, 0.5, 1.0],
         op_twist: vec![0.5, -0.25, 0.0],
         inverse_inertia: vec![2.0, 0.5, 0.0, 4.0, 0.0, 16.0],
@@ -201,6 +202,7 @@ const SNAPSHOT_BYTES: &[&str] = &[
     "000000000000f83f", // server_time_s 1.5
     "fb d007",          // ve_step 2000
     "01",               // user_id 1
+    "000000000000f43f", // uplink_time_s 1.25
     "03",               // op_pose: 3 values
     "000000000000d03f", // x 0.25
     "000000000000e03f", // y 0.5
@@ -310,8 +312,8 @@ fn planar_testbed_snapshot_matches_golden_bytes() {
     let golden = unhex(SNAPSHOT_BYTES);
     assert_eq!(
         golden.len(),
-        285,
-        "a planar snapshot without contacts is 27 doubles, one other user's row 5, plus small headers"
+        293,
+        "a planar snapshot without contacts is 28 doubles, one other user's row 5, plus small headers"
     );
     assert_eq!(encode_datagram(&snapshot()).unwrap(), golden);
     assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), snapshot());

@@ -98,22 +98,6 @@ impl<S: Space> LocalModel<S> {
         }
     }
 
-    /// Pulls the OP state toward `pose`/`twist` (first-order blend, geodesic in the orientation): the part of
-    /// the difference along the constrained directions (scaled projector `projector`) by the fraction
-    /// `constrained`, the rest by `free`. Nothing jumps, so no force computed from the state jumps.
-    pub fn blend_toward(
-        &mut self,
-        pose: &OpPose<S>,
-        twist: &S::OpVec,
-        projector: &S::OpMat,
-        length_scale: f64,
-        constrained: f64,
-        free: f64,
-    ) {
-        let (own, own_twist) = (self.pose(), self.twist());
-        self.correct(&pose.difference(&own), &(*twist - own_twist), projector, length_scale, constrained, free);
-    }
-
     /// Moves the OP state by the fractions of the pose and twist discrepancies `pose` and `twist` (the part
     /// along the constrained directions by `constrained`, the rest by `free`); returns what it applied.
     pub fn correct(

@@ -33,6 +33,8 @@ struct Coupling {
     bg: [f64; 3],
     hand: Vector3<f64>,
     target: Option<(OpPose<Planar>, Vector3<f64>)>,
+    /// The applied uplink's client clock.
+    target_time_s: f64,
     jacobian_t: DMatrix<f64>,
 }
 
@@ -114,6 +116,7 @@ impl TestbedVe {
                 bg: B_G,
                 hand: Vector3::zeros(),
                 target: None,
+                target_time_s: 0.0,
                 jacobian_t: DMatrix::zeros(n, 3),
             },
             step_config: StepConfig::euler(1e-3),
@@ -159,6 +162,7 @@ impl TestbedVe {
         self.coupling.hand = Vector3::from_column_slice(&uplink.hand_wrench);
         let pose = OpPose::from_slice(&uplink.model_pose).expect("valid model pose");
         self.coupling.target = Some((pose, Vector3::from_column_slice(&uplink.model_twist)));
+        self.coupling.target_time_s = uplink.client_time_s;
     }
 
     /// Replaces the graphics controller's gains.
@@ -238,6 +242,7 @@ impl TestbedVe {
             server_time_s: self.time_s,
             ve_step: self.seq,
             user_id: 1,
+            uplink_time_s: self.coupling.target_time_s,
             op_pose,
             op_twist: twist.as_slice().to_vec(),
             inverse_inertia: triangle,
