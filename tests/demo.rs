@@ -13,6 +13,7 @@ use std::time::Duration;
 use kinloop::demo::{self, records, DemoOptions, DemoReport, DemoSummary};
 use kinloop::experiments::common::{trajectory_at, ve_op_trajectory, Trajectory};
 use kinloop::harness::{self, ClientPlan, SessionPlan};
+use kinloop_client::device::DevicePreset;
 use kinloop_client::user::UserSpec;
 use kinloop_linkage::builtin::PAPER_WRENCH;
 use kinloop_linkage::SceneKind;
@@ -205,11 +206,13 @@ fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
     let (first, second) = (&s.per_user[0], &s.per_user[1]);
     let mut plan = SessionPlan::paper().unwrap();
     plan.duration = Duration::from_secs_f64(seconds);
+    // The demo's server and clients run with the defaults: designed gains and mapping.
+    plan.ve = kinloop_server::core::VeConfig::default();
     let half: Vec<f64> = PAPER_WRENCH.iter().map(|w| w / 2.0).collect();
     let lag = (second.record_offset_s - first.record_offset_s).max(0.0);
     plan.clients = (0..2)
         .map(|i| {
-            let mut c = ClientPlan::paper(&format!("user{}", i + 1));
+            let mut c = ClientPlan::new(&format!("user{}", i + 1), "link2", DevicePreset::Paper);
             c.user = UserSpec::Constant(half.clone());
             c.join_at = Duration::from_secs_f64(if i == 0 { 0.0 } else { lag }).min(Duration::from_millis(500));
             c

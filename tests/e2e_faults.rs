@@ -438,8 +438,13 @@ fn a_junk_flood_from_an_authenticated_client_changes_nothing_for_the_others() {
     let rogue_stats = ve.per_user.iter().find(|u| u.user_id == rogue_id).expect("rogue stats");
     let steady_user = ve.per_user.iter().find(|u| u.name == "steady").expect("steady stats");
     let steps = records::ve_steps(&dir.path().join("ve.csv"));
+    // A manipulator grasps its OP at the join and holds it until its first uplink, or until its silence fades
+    // the grasp out (250 ms and a 200 ms fade): from then on, with nothing but junk from it, its wrench in
+    // the VE must stay zero.
+    let joined_at = steps.iter().find(|s| s.users.iter().any(|u| u.user_id == rogue_id)).map_or(0.0, |s| s.t);
     let rogue_wrench = steps
         .iter()
+        .filter(|s| s.t > joined_at + 0.5)
         .flat_map(|s| s.users.iter().filter(|u| u.user_id == rogue_id).map(|u| linear(u.wrench) + u.wrench[2].abs()))
         .fold(0.0, f64::max);
     let steady_ticks = records::client_ticks(&record);

@@ -4,7 +4,9 @@ use std::time::Duration;
 
 use kinloop::harness::{run, ClientPlan, SessionPlan};
 use kinloop_client::core::ConstraintMode;
+use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
+use kinloop_server::core::VeConfig;
 
 fn paper(mode: ConstraintMode) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
     let mut plan = SessionPlan::paper().unwrap();
@@ -138,11 +140,10 @@ fn two_users_on_one_operational_point_stay_stable() {
 /// Random whole sessions in virtual time: a planar scene, one to four participants on random OPs (devices,
 /// modes, forms and loop rates drawn at random, observers among them, joining late and leaving early), each
 /// behind its own random link (delay up to 80 ms, jitter, independent or burst loss, reordering,
-/// duplication, a bandwidth cap). Whatever the mix, the session runs to its end, the VE never keeps a torn
-/// loop, no device is ever commanded past its limits, and no snapshot is undecodable for its client. These
-/// are safety claims, not stability: some mixes are unstable (the paper's angular graphics-controller gains
-/// on OPs that turn about a nearly fixed point; see the README's known limits), and the VE restores itself
-/// there, which this test also lets happen.
+/// duplication, a bandwidth cap), each with a random hand (soft, firm, release, poke) or the paper's
+/// constant push, and the default mapping and gains. Whatever the mix, the session runs to its end, the VE
+/// never has to restore itself, no device is ever commanded past its limits, and no snapshot is undecodable
+/// for its client.
 #[test]
 fn random_participants_and_networks_keep_sessions_sound() {
     use kinloop_client::core::ModelForm;
@@ -160,12 +161,16 @@ fn random_participants_and_networks_keep_sessions_sound() {
         plan.record_every = 0;
         let ops: Vec<String> = plan.scene.ops.iter().map(|op| op.name.clone()).collect();
         let ms = |rng: &mut TestRng, max: usize| Duration::from_millis(rng.below(max + 1) as u64);
+        plan.ve = VeConfig::default();
         plan.clients = (0..1 + rng.below(4))
             .map(|i| {
-                let mut c = ClientPlan::paper(&format!("u{i}"));
-                c.op = ops[rng.below(ops.len())].clone();
+                let device = [DevicePreset::Paper, DevicePreset::Falcon, DevicePreset::Touch][rng.below(3)];
+                let mut c = ClientPlan::new(&format!("u{i}"), &ops[rng.below(ops.len())], device);
+                c.user = match rng.below(5) {
+                    4 => UserSpec::paper(),
+                    k => UserSpec::Hand(HandSpec::touring(HandKind::ALL[k])),
+                };
                 c.role = if i > 0 && rng.chance(0.2) { Role::Observer } else { Role::Manipulator };
-                c.device = [DevicePreset::Paper, DevicePreset::Falcon, DevicePreset::Touch][rng.below(3)];
                 c.constraint_mode = if rng.chance(0.5) { ConstraintMode::Stiffness } else { ConstraintMode::Impedance };
                 c.form = if rng.chance(0.7) { ModelForm::Op } else { ModelForm::Config };
                 c.rate_hz = [500.0, 1000.0, 2000.0][rng.below(3)];
@@ -192,6 +197,8 @@ fn random_participants_and_networks_keep_sessions_sound() {
         let context = format!("seed {seed}, {scene}: {:#?}", plan.clients);
         let (s, _) = run(&plan, &mut |_| {}).unwrap_or_else(|e| panic!("{context}: {e}"));
         assert!(s.ve_steps >= 1100, "{context}: {} VE steps", s.ve_steps);
+        // With the gains designed from each OP's inertia, the VE never has to restore itself.
+        assert_eq!(s.ve_restores, 0, "{context}: {s:#?}");
         // The loop is never kept torn: a VE step that would start beyond the broken-closure limit is undone.
         let model = kinloop_linkage::Model::<kinloop_linkage::Planar>::compile(&plan.scene, scene).unwrap();
         let broken = kinloop_server::core::BROKEN_CLOSURE_PER_LENGTH * model.length_scale;
@@ -205,10 +212,10 @@ fn random_participants_and_networks_keep_sessions_sound() {
 }
 
 /// The paper's graphics-controller gains (angular 10⁴ N·m/rad, 10⁴ N·m·s/rad, the largest its testbed
-/// allows) destabilize the Watt six-bar's `link5`, an OP that turns about a nearly fixed point: with the paper's
-/// user and 6 ms of jitter the VE has to restore itself again and again. The passivity observer/controller on
-/// each coupling (`--passivity on`) keeps the same session stable and the loop closed. (Measured over 3 s:
-/// 26 restores without it, none with it, device-OP RMS 0.150 → 0.027 m.)
+/// allows; `VeConfig::paper`, no longer the default) destabilize the Watt six-bar's `link5`, an OP that turns
+/// about a nearly fixed point: with the paper's user and 6 ms of jitter the VE has to restore itself again
+/// and again. The passivity observer/controller on each coupling (`--passivity on`) keeps the same session
+/// stable and the loop closed.
 #[test]
 fn the_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
     let session = |passivity: bool| {
@@ -218,6 +225,8 @@ fn the_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
         plan.ve.passivity = passivity;
         let mut user = ClientPlan::paper("u");
         user.op = "link5".into();
+        // One to one in position; the paper's device cannot hold link5's weight at force scale 1.
+        user.mapping.force_scale = None;
         plan.clients =
             vec![user.with_link(LinkConfig { jitter: Duration::from_millis(6), seed: 5, ..LinkConfig::default() })];
         run(&plan, &mut |_| {}).unwrap().0

@@ -189,15 +189,16 @@ fn close<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, z
 }
 
 /// The OP's static load and Λ⁻¹ at the closed configuration `q`, at rest: fills `data` (dynamics at `q`,
-/// q̇ = 0) and returns the static wrench and the constraint directions it was resolved with.
+/// q̇ = `at_rest`, n zeros) and returns the static wrench and the constraint directions it was resolved with.
+/// Allocates nothing (a VE holding a user's share of the weight calls it every snapshot round).
 pub fn static_op_load<S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
     q: &DVector<f64>,
+    at_rest: &DVector<f64>,
     op: usize,
 ) -> Result<(S::OpVec, ConstraintDirections<S>), DynamicsError> {
-    let zero = DVector::zeros(model.nq());
-    forward_dynamics(model, data, q, &zero, &mut ())?;
+    forward_dynamics(model, data, q, at_rest, &mut ())?;
     op_space_inertia(model, data, op)?;
     let directions = constraint_directions::<S>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
     let load = static_wrench(&directions, &op_acceleration(data));
@@ -317,6 +318,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     };
     let mut forces = Vec::new();
     let mut torques = Vec::new();
+    let zero_qd = DVector::zeros(n);
     let mut dynamics_data = Data::new(model);
     let mut visit = |q: &DVector<f64>, pose: &OpPose<S>, with_inertia: bool, reach: &mut OpReach<S>| {
         reach.samples += 1;
@@ -331,7 +333,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         if !with_inertia {
             return;
         }
-        if let Ok((load, _)) = static_op_load(model, &mut dynamics_data, q, op) {
+        if let Ok((load, _)) = static_op_load(model, &mut dynamics_data, q, &zero_qd, op) {
             let inverse = dynamics_data.op.inverse_inertia;
             reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
             reach.inverse_rotational_inertia_max =
@@ -365,7 +367,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         // The walk's poses, with how mobile the OP is there (σ_max of the unit-consistent Λ̃⁻¹) on the walks
         // the tour is taken from.
         let mobility = |q: &DVector<f64>, data: &mut Data<S>| {
-            static_op_load(model, data, q, op).map_or(0.0, |(_, d)| d.singular_values[0])
+            static_op_load(model, data, q, &zero_qd, op).map_or(0.0, |(_, d)| d.singular_values[0])
         };
         let mut path = vec![(start, if on_tour { mobility(&q0, &mut tour_data) } else { 0.0 })];
         let mut failures = 0;

@@ -48,6 +48,10 @@ pub struct Coupling<S: Space> {
     pub target_pose: OpPose<S>,
     /// ẋ_lm from the newest uplink.
     pub target_twist: S::OpVec,
+    /// The static load the VE holds at this OP for its user (gravity compensation; zero otherwise): it joins
+    /// the force channel, so the user's local model, whose bias carries every hand but the user's own, is
+    /// weightless too.
+    pub held_load: S::OpVec,
     /// The newest uplink's client clock (s; 0 before the first): snapshots tell the client which of its
     /// local model's states the VE is answering (`Snapshot::uplink_time_s`).
     pub target_time_s: f64,
@@ -86,6 +90,7 @@ impl<S: Space> Coupling<S> {
             target_pose: OpPose::identity(),
             target_twist: S::OpVec::zero(),
             target_time_s: 0.0,
+            held_load: S::OpVec::zero(),
             stiffness,
             damping,
             pd_scale: full_scale::<S>(),
@@ -145,7 +150,7 @@ impl<S: Space> Coupling<S> {
         }
         let pd = self.pd_wrench();
         for a in 0..S::DIM {
-            f[a] = self.weight * (self.hand_wrench[a] + self.pd_scale[a] * pd[a]);
+            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + self.pd_scale[a] * pd[a]);
         }
         f
     }
@@ -209,20 +214,21 @@ impl<S: Space> Coupling<S> {
         out
     }
 
-    /// The human's own force as the VE applies it (force channel, fade included; zero for observers).
+    /// The force channel as the VE applies it: the human's own force and any load held for the user (fade
+    /// included; zero for observers).
     pub fn hand_part(&self) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
         }
-        self.hand_wrench * self.weight
+        (self.hand_wrench + self.held_load) * self.weight
     }
 
-    /// The part of the applied wrench that is not the human's own force: the (scaled) PD.
+    /// The part of the applied wrench that is not the force channel: the (scaled) PD.
     pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
         }
-        *wrench - self.hand_wrench * self.weight
+        *wrench - self.hand_part()
     }
 }
 

@@ -194,6 +194,9 @@ pub struct VeCore<S: Space> {
     fixed_gains: Option<(S::OpVec, S::OpVec)>,
     /// Each operational point's surveyed reach, by OP index (`design` fits devices and gains to it).
     reaches: Vec<OpReach<S>>,
+    /// A workspace and a state at rest for the loads held for users with gravity compensation (made at the
+    /// first such join).
+    held: Option<(Data<S>, DVector<f64>)>,
     q: DVector<f64>,
     qd: DVector<f64>,
     /// Restore point: q at the start of the last step that began with the loop closed (see `tick`).
@@ -285,6 +288,7 @@ impl<S: Space> VeCore<S> {
             step_config,
             fixed_gains,
             reaches,
+            held: None,
             checkpoint_q: q.clone(),
             step_start_q: q.clone(),
             lambda: DVector::zeros(m),
@@ -422,6 +426,12 @@ impl<S: Space> VeCore<S> {
             slot: SnapshotSlot::new(&self.model, user_id, request.form),
         });
         self.couplings.push(coupling);
+        if manipulator && self.users.last().is_some_and(|u| u.mapping.gravity_compensation) {
+            if self.held.is_none() {
+                self.held = Some((Data::new(&self.model), DVector::zeros(self.model.nq())));
+            }
+            self.update_held_loads();
+        }
         self.roster_version += 1;
         self.metrics.users_joined += 1;
         self.metrics.users = self.present_users() as u32;
@@ -548,6 +558,7 @@ impl<S: Space> VeCore<S> {
         }
         if ran > 0 && self.last_tick_at >= self.next_snapshot_at {
             self.build_snapshots();
+            self.update_held_loads();
             while self.next_snapshot_at <= self.last_tick_at {
                 self.next_snapshot_at += self.snapshot_period;
             }
@@ -609,6 +620,23 @@ impl<S: Space> VeCore<S> {
         self.step += 1;
         self.metrics.ticks += 1;
         self.last_tick_at = at;
+    }
+
+    /// The static loads the VE holds for users with gravity compensation, at the current state (the OP wrench
+    /// that cancels gravity's acceleration in the OP's free directions, `kinloop_linkage::reach`), until the
+    /// next snapshot round. Allocates nothing.
+    fn update_held_loads(&mut self) {
+        let Some((data, at_rest)) = self.held.as_mut() else { return };
+        for (u, c) in self.users.iter().zip(&mut self.couplings) {
+            if !(u.mapping.gravity_compensation && u.role == Role::Manipulator) {
+                continue;
+            }
+            let load = kinloop_linkage::reach::static_op_load(&self.model, data, &self.q, at_rest, u.op);
+            c.held_load = match load {
+                Ok((load, _)) if load.is_finite() => load,
+                _ => S::OpVec::zero(),
+            };
+        }
     }
 
     /// Fade weights (join, silence, leave) and passivity scales for the coming step.
