@@ -1,0 +1,170 @@
+//! The reach survey (`kinloop_linkage::reach`) against independent computations: a crank-rocker's coupler
+//! curve from circle intersections, a serial arm's static load from finite differences of its potential
+//! energy, and the groups an OP does not move in.
+
+use kinloop_linkage::builtin;
+use kinloop_linkage::gravity::potential_energy;
+use kinloop_linkage::kinematics::forward_kinematics;
+use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::reach::{static_op_load, survey_op, SurveyConfig};
+use kinloop_linkage::{Data, Model, Planar};
+use nalgebra::{DMatrix, DVector, Vector2, Vector3};
+
+fn planar(name: &str) -> Model<Planar> {
+    let scene = builtin::scene(name).unwrap().unwrap();
+    Model::compile(&scene, name).unwrap()
+}
+
+/// The crank-rocker's coupler midpoint over a full crank turn, by circle intersection (crank 0.1 m at the
+/// origin, coupler 0.25 m, rocker 0.2 m at (0.3, 0), the branch of q0, where the coupler-rocker pin lies
+/// above the line from the rocker's pivot to the crank's tip).
+fn coupler_curve() -> Vec<Vector2<f64>> {
+    let (a, b, c, o2) = (0.1, 0.25, 0.2, Vector2::new(0.3, 0.0));
+    (0..3600)
+        .map(|k| {
+            let theta = std::f64::consts::TAU * k as f64 / 3600.0;
+            let tip = Vector2::new(a * theta.cos(), a * theta.sin());
+            let d = o2 - tip;
+            let dist = d.norm();
+            // The pin B: |B − tip| = b, |B − o2| = c.
+            let along = (b * b - c * c + dist * dist) / (2.0 * dist);
+            let across = (b * b - along * along).sqrt();
+            let unit = d / dist;
+            let normal = Vector2::new(-unit.y, unit.x);
+            let pin = tip + unit * along + normal * across;
+            (tip + pin) * 0.5
+        })
+        .collect()
+}
+
+#[test]
+fn the_crank_rockers_coupler_reach_is_its_coupler_curve() {
+    let model = planar("fourbar-crank-rocker");
+    let op = model.op_index("coupler").unwrap();
+    let reach = survey_op(&model, op, &SurveyConfig::default()).unwrap();
+    let curve = coupler_curve();
+    let (mut lo, mut hi) = (Vector2::repeat(f64::INFINITY), Vector2::repeat(f64::NEG_INFINITY));
+    for p in &curve {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    // The branch check: q0's coupler point is on the curve.
+    let mut data = Data::new(&model);
+    forward_kinematics(&model, &mut data, &model.q0);
+    let start = OpPose::<Planar>::of_op(&model, &data, op).position;
+    let nearest = curve.iter().map(|p| (p - start).norm()).fold(f64::INFINITY, f64::min);
+    assert!(nearest < 1e-4, "q0's coupler point is {nearest} m off the analytic curve");
+    // The survey walks in steps of 0.04 rad: its box is the curve's within a step's travel.
+    for axis in 0..2 {
+        assert!(
+            (reach.position_min[axis] - lo[axis]).abs() < 2e-3,
+            "min {axis}: {} vs {}",
+            reach.position_min[axis],
+            lo[axis]
+        );
+        assert!(
+            (reach.position_max[axis] - hi[axis]).abs() < 2e-3,
+            "max {axis}: {} vs {}",
+            reach.position_max[axis],
+            hi[axis]
+        );
+    }
+    assert_eq!(reach.dof, 1);
+    // Every tour waypoint lies on the curve (a closed configuration), and the tour goes around it.
+    assert!(reach.tour.len() >= 12, "{} waypoints", reach.tour.len());
+    for w in &reach.tour {
+        let off = curve.iter().map(|p| (p - w.position).norm()).fold(f64::INFINITY, f64::min);
+        assert!(off < 1e-4, "a waypoint {off} m off the curve");
+    }
+    let spread = reach.tour.iter().map(|w| (w.position - reach.tour[0].position).norm()).fold(0.0, f64::max);
+    assert!(spread > 0.5 * reach.largest_extent(), "the tour spans {spread} m of {} m", reach.largest_extent());
+}
+
+/// G = ∂V/∂q by central differences of the potential energy.
+fn gravity_by_differences(model: &Model<Planar>, q: &DVector<f64>) -> DVector<f64> {
+    let mut data = Data::new(model);
+    let mut v = |q: &DVector<f64>| {
+        forward_kinematics(model, &mut data, q);
+        potential_energy(model, &data, q)
+    };
+    let h = 1e-6;
+    DVector::from_fn(q.len(), |i, _| {
+        let (mut up, mut down) = (q.clone(), q.clone());
+        up[i] += h;
+        down[i] -= h;
+        (v(&up) - v(&down)) / (2.0 * h)
+    })
+}
+
+/// The OP's Jacobian (x, y, θ) by central differences of its pose.
+fn jacobian_by_differences(model: &Model<Planar>, q: &DVector<f64>, op: usize) -> DMatrix<f64> {
+    let mut data = Data::new(model);
+    let mut pose = |q: &DVector<f64>| {
+        forward_kinematics(model, &mut data, q);
+        OpPose::<Planar>::of_op(model, &data, op)
+    };
+    let h = 1e-7;
+    let mut j = DMatrix::zeros(3, q.len());
+    for i in 0..q.len() {
+        let (mut up, mut down) = (q.clone(), q.clone());
+        up[i] += h;
+        down[i] -= h;
+        let d = pose(&up).difference(&pose(&down)) / (2.0 * h);
+        j.set_column(i, &d);
+    }
+    j
+}
+
+#[test]
+fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
+    // Along the mechanism's one motion n (the null space of the closure Jacobian W = ∂h/∂q), a wrench F at
+    // the coupler holds the linkage still when its virtual work balances gravity's: Fᵀ J n = Gᵀ n. G, J and W
+    // all come from finite differences here (of the potential energy, the coupler's pose, the loop residual).
+    let model = planar("fourbar-crank-rocker");
+    let op = model.op_index("coupler").unwrap();
+    let at_rest = DVector::zeros(model.nq());
+    let mut data = Data::new(&model);
+    let mut turned = model.q0.clone();
+    turned[0] += 2.0;
+    let turned = kinloop_linkage::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
+    for q in [model.q0.clone(), turned] {
+        let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
+        assert_eq!(directions.count, 2, "a 1-DOF linkage's coupler is free in one direction");
+        let residual = |q: &DVector<f64>, data: &mut Data<Planar>| {
+            forward_kinematics(&model, data, q);
+            kinloop_linkage::loop_closure::loop_closure(&model, data);
+            data.closure_residual.clone()
+        };
+        let h = 1e-7;
+        let mut w = DMatrix::zeros(model.nc(), model.nq());
+        for i in 0..model.nq() {
+            let (mut up, mut down) = (q.clone(), q.clone());
+            up[i] += h;
+            down[i] -= h;
+            let d = (residual(&up, &mut data) - residual(&down, &mut data)) / (2.0 * h);
+            w.set_column(i, &d);
+        }
+        // W is 2×3 (a pin closes the loop of three joints): its null direction is its rows' cross product.
+        let row = |r: usize| Vector3::from_iterator(w.row(r).iter().copied());
+        let n = row(0).cross(&row(1)).normalize();
+        let n = DVector::from_column_slice(n.as_slice());
+        let j = jacobian_by_differences(&model, &q, op);
+        let g = gravity_by_differences(&model, &q);
+        let work_load = (j.transpose() * DVector::from_column_slice(load.as_slice())).dot(&n);
+        let work_gravity = g.dot(&n);
+        assert!(work_gravity.abs() > 0.1, "gravity does work along the motion: {work_gravity}");
+        assert!((work_load - work_gravity).abs() < 1e-5 * work_gravity.abs(), "{work_load} vs {work_gravity}");
+    }
+}
+
+#[test]
+fn a_translating_coupler_has_no_rotational_mobility_and_a_turning_crank_has_both() {
+    let model = planar("parallelogram");
+    let reach = survey_op(&model, model.op_index("coupler").unwrap(), &SurveyConfig::default()).unwrap();
+    assert_eq!(reach.inverse_rotational_inertia_max, 0.0, "the parallelogram's coupler never turns");
+    assert!(reach.rotation_range < 1e-6 && reach.inverse_mass_max > 0.0);
+    let model = planar("fourbar-crank-rocker");
+    let reach = survey_op(&model, model.op_index("crank-tip").unwrap(), &SurveyConfig::default()).unwrap();
+    assert!(reach.inverse_rotational_inertia_max > 0.0 && reach.inverse_mass_max > 0.0);
+    assert!(reach.rotation_range > 3.0, "the crank turns all the way round: {}", reach.rotation_range);
+}
