@@ -29,6 +29,8 @@ fn options(out: &Path, users: usize, seconds: f64) -> DemoOptions {
     o.users = users;
     o.duration = Duration::from_secs_f64(seconds);
     o.progress = false;
+    // These tests compare the real-time session with the harness's paper session: the paper's push.
+    o.paper_push = true;
     o
 }
 

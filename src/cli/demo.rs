@@ -18,8 +18,8 @@ use crate::scene_arg::load_scene;
 /// demo both sides apply them to what they send, so `--delay 20ms` makes a 40 ms round trip.
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Simulated users: each a client with the paper's device, pushing an equal share of the paper's hand
-    /// wrench on the scene's first operational point.
+    /// Simulated users: each a client with `kinloop-client`'s defaults and a simulated hand (relaxed and firm
+    /// in turn) touring its OP's reach, spread over the scene's operational points in turn.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = parse_users)]
     pub users: usize,
     /// How long the clients run: seconds (1.5) or with a unit (1500ms).
@@ -46,6 +46,10 @@ pub struct DemoArgs {
     /// With --view, let the page grab an OP with the mouse.
     #[arg(long, requires = "view")]
     pub view_grab: bool,
+    /// The users all hold the first operational point and share the paper's constant push (section VI)
+    /// instead of touring with hands.
+    #[arg(long)]
+    pub paper_push: bool,
 }
 
 fn parse_users(s: &str) -> Result<usize, String> {
@@ -82,6 +86,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         ctrl_c: true,
         realtime: !args.no_realtime,
         view: args.view.map(|listen| ViewConfig { grab_without_token: args.view_grab, ..ViewConfig::new(listen) }),
+        paper_push: args.paper_push,
+        ..DemoOptions::new(&args.out)?
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {

@@ -1,10 +1,13 @@
 //! `kinloop demo`: the whole system in one process, in real time. A VE server ([`Server::start`]) hosts the
 //! scene (by default the paper's testbed) on an ephemeral loopback port with an ephemeral certificate; N
 //! clients ([`Client::start`]) connect over real QUIC, pinning the server's certificate fingerprint, each
-//! with the simulated `paper` device (`falcon` for spatial scenes) in stiffness mode and the paper's user (section VI: a constant wrench
-//! F = (−0.5 N, 0, −0.0025 N m) at the OP; with N users on one OP each pushes F / N, so the linkage moves
-//! as under the paper's single user). Each side impairs what it sends with the same link emulation
-//! (`--delay 20ms` adds 40 ms to the round trip), each with its own seed derived from `--seed`.
+//! with `kinloop-client`'s defaults: the scene's device (sim:paper planar, sim:touch spatial), the server's
+//! mapping and gains, and a simulated hand touring its OP's reach, relaxed and firm in turn. The users are
+//! spread over the scene's operational points in turn. With `--paper-push` they all hold the first OP and
+//! share the paper's user (section VI: a constant wrench F = (−0.5 N, 0, −0.0025 N m); with N users each
+//! pushes F / N, so the linkage moves as under the paper's single user). Each side impairs what it sends
+//! with the same link emulation (`--delay 20ms` adds 40 ms to the round trip), each with its own seed
+//! derived from `--seed`.
 //!
 //! Afterwards the drivers' statistics make the summary, and their `--record` files (`ve.csv`,
 //! `userN.csv` in the output directory) are read back ([`records`]) into the charts of the paper's Fig 6
@@ -21,8 +24,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
-use kinloop_client::user::UserSpec;
+use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_linkage::builtin::PAPER_WRENCH;
 use kinloop_linkage::{Scene, SceneKind};
 use kinloop_protocol::emulator::LinkConfig;
@@ -42,6 +46,8 @@ pub const MAX_USERS: usize = 64;
 pub const MAX_DURATION: Duration = Duration::from_secs(3600);
 /// How long after the requested duration the demo waits for the clients' loops to end by themselves.
 const FINISH_GRACE: Duration = Duration::from_secs(5);
+/// Users whose haptic loops spin before their deadlines at real-time priority; with more, every loop sleeps.
+const SPINNING_USERS: usize = 2;
 /// Users drawn in the device-OP distance chart (more lines are unreadable).
 const DISTANCE_CHART_USERS: usize = 8;
 
@@ -68,6 +74,14 @@ pub struct DemoOptions {
     pub realtime: bool,
     /// Serve the web view of the session (`--view ADDR`).
     pub view: Option<ViewConfig>,
+    /// The users share the paper's constant push on the first OP instead of touring with hands.
+    pub paper_push: bool,
+    /// The device every user holds (`None`: the scene's default).
+    pub device: Option<DevicePreset>,
+    /// The first user's OP (`None`: the scene's first; the others follow in turn from it).
+    pub first_op: Option<String>,
+    /// Every user's hand (`None`: relaxed and firm in turn).
+    pub hand: Option<HandKind>,
 }
 
 impl DemoOptions {
@@ -85,6 +99,10 @@ impl DemoOptions {
             ctrl_c: false,
             realtime: true,
             view: None,
+            paper_push: false,
+            device: None,
+            first_op: None,
+            hand: None,
         })
     }
 }
@@ -102,10 +120,15 @@ pub struct UserSummary {
     pub client: serde_json::Value,
     /// What the server measured of this user, if it saw it.
     pub server: Option<UserStats>,
-    /// RMS distance between the device and the VE's OP over the ticks with output (mm), from the records.
+    /// RMS distance between the device and the VE's OP over the ticks with output (mm), from the records,
+    /// in the device's space (the VE distance times the mapping's position scale: what the hand feels).
     pub device_op_rms_mm: Option<f64>,
     /// Largest such distance (mm).
     pub device_op_max_mm: Option<f64>,
+    /// Device metres per VE metre (the server's mapping).
+    pub position_scale: f64,
+    /// Device newtons per VE newton.
+    pub force_scale: f64,
     /// When the client's loop started on the VE's clock (s): its record's times plus this are VE times.
     pub record_offset_s: f64,
 }
@@ -163,6 +186,10 @@ pub struct DemoSummary {
     pub max_force_ratio: f64,
     /// Uplinks the VE refused as broken or hostile.
     pub uplinks_rejected: u64,
+    /// States the VE restored after a failed or torn step.
+    pub ve_restores: u64,
+    /// Snapshots the VE withheld (dynamics failed, or a term outside the wire's ranges).
+    pub snapshots_withheld: u64,
     /// Each user.
     pub per_user: Vec<UserSummary>,
     /// Files written in the output directory, `summary.json` last.
@@ -194,7 +221,7 @@ fn side_link(link: &LinkConfig, side: u64) -> Option<LinkConfig> {
     (!link.is_transparent()).then(|| LinkConfig { seed: link.seed.wrapping_add(side), ..link.clone() })
 }
 
-fn check(options: &DemoOptions) -> Result<String> {
+fn check(options: &DemoOptions) -> Result<()> {
     anyhow::ensure!((1..=MAX_USERS).contains(&options.users), "--users {}: between 1 and {MAX_USERS}", options.users);
     anyhow::ensure!(
         !options.duration.is_zero() && options.duration <= MAX_DURATION,
@@ -203,16 +230,29 @@ fn check(options: &DemoOptions) -> Result<String> {
         MAX_DURATION.as_secs()
     );
     options.link.validate().context("link emulation")?;
-    let op = options.scene.ops.first().ok_or_else(|| {
-        anyhow!("scene {} has no operational point ([[op]]) for the users to hold", options.scene_label)
-    })?;
-    Ok(op.name.clone())
+    anyhow::ensure!(
+        !options.scene.ops.is_empty(),
+        "scene {} has no operational point ([[op]]) for the users to hold",
+        options.scene_label
+    );
+    Ok(())
+}
+
+/// User `i`'s operational point and simulated user (see the module documentation).
+fn user_of(options: &DemoOptions, i: usize) -> (String, UserSpec) {
+    let ops = &options.scene.ops;
+    if options.paper_push {
+        return (ops[0].name.clone(), UserSpec::Constant(user_wrench(options.scene.kind, options.users)));
+    }
+    let hand = options.hand.unwrap_or(if i % 2 == 0 { HandKind::Soft } else { HandKind::Firm });
+    let first = options.first_op.as_ref().and_then(|name| ops.iter().position(|o| &o.name == name)).unwrap_or(0);
+    (ops[(first + i) % ops.len()].name.clone(), UserSpec::Hand(HandSpec::touring(hand)))
 }
 
 /// Runs the demo: server and clients in real time, then the summary, charts and `summary.json` in
 /// `options.out/demo/`.
 pub fn run(options: &DemoOptions) -> Result<DemoReport> {
-    let op = check(options)?;
+    check(options)?;
     let dir = options.out.join("demo");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -248,7 +288,7 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
             }
         })
     });
-    let clients = match start_clients(options, &server, &op, &dir, ve_epoch) {
+    let clients = match start_clients(options, &server, &dir, ve_epoch) {
         Ok(clients) => clients,
         Err(e) => {
             // Nothing may outlive a failed start: the server's threads stop with it.
@@ -291,7 +331,6 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
 fn start_clients(
     options: &DemoOptions,
     server: &ServerHandle,
-    op: &str,
     dir: &Path,
     ve_epoch: Instant,
 ) -> Result<Vec<(ClientHandle, UserSummary)>> {
@@ -300,12 +339,18 @@ fn start_clients(
         let name = format!("demo-user{}", i + 1);
         let mut config =
             ClientConfig::new(server.local_addr().to_string(), Trust::Fingerprint(server.fingerprint().to_string()));
-        config.op = Some(op.to_string());
-        config.user = UserSpec::Constant(user_wrench(options.scene.kind, options.users));
+        let (op, user) = user_of(options, i);
+        config.op = Some(op.clone());
+        config.user = user;
+        config.device = options.device;
         config.duration = Some(options.duration);
         config.link = side_link(&options.link, i as u64 + 1);
         config.record = Some(dir.join(format!("user{}.csv", i + 1)));
-        config.realtime_priority = options.realtime;
+        // Two spinning SCHED_FIFO loops fill a 2-core machine: beyond them the loops sleep, at normal
+        // priority, and leave the cores to the VE and the network.
+        let crowded = options.users > SPINNING_USERS;
+        config.realtime_priority = options.realtime && !crowded;
+        config.busy_wait = !crowded;
         config.client_name = name.clone();
         config.report_interval = options.duration.max(Duration::from_secs(1));
         match Client::start(config) {
@@ -314,11 +359,13 @@ fn start_clients(
                 let summary = UserSummary {
                     user_id: client.welcome().user_id,
                     name,
-                    op: op.to_string(),
+                    op,
                     client: serde_json::Value::Null,
                     server: None,
                     device_op_rms_mm: None,
                     device_op_max_mm: None,
+                    position_scale: client.welcome().mapping.position_scale,
+                    force_scale: client.welcome().mapping.force_scale,
                     record_offset_s: loop_epoch.saturating_duration_since(ve_epoch).as_secs_f64(),
                 };
                 clients.push((client, summary));
@@ -431,6 +478,8 @@ fn summarize(
         max_closure_error: ve.core.max_closure_error,
         max_force_ratio: worst(|s| s.max_force_ratio),
         uplinks_rejected: ve.core.uplinks_rejected,
+        ve_restores: ve.core.state_restores,
+        snapshots_withheld: ve.core.snapshots_withheld,
         per_user,
         files: Vec::new(),
     }
@@ -445,7 +494,8 @@ fn draw(options: &DemoOptions, dir: &Path, users: &mut [UserSummary]) -> Result<
     for (i, user) in users.iter_mut().enumerate() {
         let mut s = records::read_client(&dir.join(format!("user{}.csv", i + 1)), kind)?;
         records::merge(&mut s, &ve, user.user_id, user.record_offset_s);
-        let distances: Vec<f64> = s.iter().filter(|s| s.gain > 0.0).filter_map(device_op_distance).collect();
+        let distances: Vec<f64> =
+            s.iter().filter(|s| s.gain > 0.0).filter_map(device_op_distance).map(|d| d * user.position_scale).collect();
         if !distances.is_empty() {
             let rms = (distances.iter().map(|d| d * d).sum::<f64>() / distances.len() as f64).sqrt();
             user.device_op_rms_mm = Some(rms * 1e3);

@@ -76,6 +76,9 @@ pub struct ClientConfig {
     pub record: Option<PathBuf>,
     /// Try SCHED_FIFO for the loop.
     pub realtime_priority: bool,
+    /// Spin before each deadline (see `rt_loop::LoopSettings::busy_wait`); false for many clients on a
+    /// small machine.
+    pub busy_wait: bool,
     /// Name for the server's logs.
     pub client_name: String,
     /// Interval of the periodic timing log.
@@ -104,6 +107,7 @@ impl ClientConfig {
             link: None,
             record: None,
             realtime_priority: true,
+            busy_wait: true,
             client_name: "kinloop-client".into(),
             report_interval: Duration::from_secs(5),
         }
@@ -656,6 +660,7 @@ async fn run<S: Space>(
         rate_hz: config.rate_hz,
         duration: config.duration,
         realtime_priority: config.realtime_priority,
+        busy_wait: config.busy_wait,
         report_every: (config.rate_hz * config.report_interval.as_secs_f64()).max(1.0) as u64,
     };
     let loop_shared = shared.clone();

@@ -93,6 +93,11 @@ pub struct LoopSettings {
     pub duration: Option<Duration>,
     /// Try SCHED_FIFO.
     pub realtime_priority: bool,
+    /// Spin for the last stretch before each deadline (spin_sleep's default); false sleeps only. A spinning
+    /// loop keeps its deadlines to a microsecond but takes about an eighth of a core: many loops on one
+    /// small machine (the demo's 16 users on 2 cores) would take all of it, and their network threads would
+    /// starve.
+    pub busy_wait: bool,
     /// Ticks between reports.
     pub report_every: u64,
 }
@@ -110,7 +115,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
             tracing::warn!(%why, "could not switch the haptic loop to SCHED_FIFO; running at normal priority");
         }
     }
-    let mut ticker = Ticker::new(settings.rate_hz);
+    let mut ticker = Ticker::new(settings.rate_hz, settings.busy_wait);
     loop {
         let now = ticker.wait(&shared.lateness);
         shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
@@ -205,9 +210,9 @@ struct Ticker {
 }
 
 impl Ticker {
-    fn new(rate_hz: f64) -> Self {
+    fn new(rate_hz: f64, busy_wait: bool) -> Self {
         Ticker {
-            sleeper: spin_sleep::SpinSleeper::default(),
+            sleeper: if busy_wait { spin_sleep::SpinSleeper::default() } else { spin_sleep::SpinSleeper::new(0) },
             start: Instant::now(),
             period: Duration::from_secs_f64(1.0 / rate_hz),
             tick: 0,
@@ -239,7 +244,7 @@ impl Ticker {
 pub fn timer_floor(rate_hz: f64, duration: Duration, realtime_priority: bool) -> (LatenessSummary, bool) {
     let fifo = realtime_priority && try_realtime_priority().is_ok();
     let lateness = LatenessHistogram::default();
-    let mut ticker = Ticker::new(rate_hz);
+    let mut ticker = Ticker::new(rate_hz, true);
     while ticker.wait(&lateness) < duration {
         ticker.advance();
     }
