@@ -1,18 +1,22 @@
-//! `kinloop-client`: feel a kinloop server's linkage through a (simulated) haptic device.
+//! The `kinloop-client` program: feel a kinloop server's linkage through a (simulated) haptic device. Its
+//! arguments, how they become a [`ClientConfig`], and what it prints; the binary is [`main`] with the
+//! process's arguments, and tests run the same function in a child process.
 
+use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::Parser;
-use kinloop_client::core::{ConstraintMode, ModelForm};
-use kinloop_client::device::DevicePreset;
-use kinloop_client::driver::{Client, ClientConfig};
-use kinloop_client::user::UserSpec;
 use kinloop_protocol::emulator::LinkArgs;
-use kinloop_protocol::quic::Trust;
-use kinloop_protocol::MappingRequest;
+use kinloop_protocol::quic::{ConnectError, Trust};
+use kinloop_protocol::{MappingRequest, RefusalReason};
+
+use crate::core::{ConstraintMode, ModelForm};
+use crate::device::DevicePreset;
+use crate::driver::{Client, ClientConfig, ClientError};
+use crate::user::UserSpec;
 
 /// Connects to a kinloop server and renders the linkage at an operational point on a simulated device.
 #[derive(Debug, Parser)]
@@ -143,12 +147,46 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
     Ok((config, args.json))
 }
 
-fn run() -> anyhow::Result<()> {
-    let (config, json) = config(Args::parse())?;
-    let server = config.server.clone();
+/// What the person at the client can do about a refusal, in this program's flags.
+fn remedy(reason: &RefusalReason) -> Option<String> {
+    Some(match reason {
+        RefusalReason::UnsupportedVersion { server, .. } => {
+            format!("use a kinloop-client that speaks protocol version {server}")
+        }
+        RefusalReason::BadToken => "pass the token the server's operator gave you with --token".into(),
+        RefusalReason::ServerFull { .. } => "try again when a user has left".into(),
+        RefusalReason::UnknownOp { available, .. } if available.is_empty() => {
+            "every operational point is held; try again when one is free".into()
+        }
+        RefusalReason::UnknownOp { .. } => "choose a free one with --op NAME, or leave --op out for the first".into(),
+        RefusalReason::RoleNotAllowed => "ask the server's operator for a manipulator token".into(),
+        RefusalReason::Device { .. } => {
+            "try another --device, or leave --position-scale and --force-scale to the server".into()
+        }
+        RefusalReason::Malformed { .. } => return None,
+    })
+}
+
+/// A client that could not start, said once, with what to do when the server refused.
+fn not_started(error: ClientError) -> anyhow::Error {
+    let advice = match &error {
+        ClientError::Connect { source: ConnectError::Refused(refused), .. } => remedy(&refused.reason),
+        _ => None,
+    };
+    match advice {
+        Some(advice) => {
+            let said = kinloop_protocol::report::one_line(&error);
+            anyhow::Error::new(error).context(format!("{said}; {advice}"))
+        }
+        None => error.into(),
+    }
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    let (config, json) = config(args)?;
     let bounded = config.duration.is_some();
     let user = config.user.label();
-    let client = Client::start(config).with_context(|| format!("kinloop-client could not start against {server}"))?;
+    let client = Client::start(config).map_err(not_started)?;
     let (w, g) = (client.welcome(), client.gains());
     eprintln!(
         "kinloop-client: holding {} of {} with {}, user {user}; mapping: position ×{:.4}, force ×{:.4}{}",
@@ -226,18 +264,14 @@ fn run() -> anyhow::Result<()> {
     Ok(())
 }
 
-fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "kinloop_client=info".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+/// `kinloop-client ARGS...`: `args` as the process gets them (program name first). Bad arguments print
+/// clap's message and exit at once (code 2; `--help` and `--version` code 0); a failure prints one line,
+/// `error: ...`, and returns failure.
+pub fn main<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let args = Args::try_parse_from(args).unwrap_or_else(|e| e.exit());
+    kinloop_protocol::report::run_program("kinloop_client=info", || run(args))
 }

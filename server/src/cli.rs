@@ -1,18 +1,23 @@
-//! `kinloop-server`: hosts one linkage for many haptic users over QUIC.
+//! The `kinloop-server` program: host one linkage for many haptic users over QUIC. Its arguments, how they
+//! become a [`ServerConfig`], and what it prints; the binary is [`main`] with the process's arguments, and
+//! tests run the same function in a child process.
 
+use std::ffi::OsString;
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
-use kinloop_server::bench::RealtimeRun;
-use kinloop_server::core::AxisGains;
-use kinloop_server::driver::load_scene;
-use kinloop_server::view::{LiveSource, ViewConfig};
-use kinloop_server::{Access, Identity, Server, ServerConfig, VeConfig};
+
+use crate::bench::RealtimeRun;
+use crate::core::AxisGains;
+use crate::driver::load_scene;
+use crate::view::{LiveSource, ViewConfig};
+use crate::{Access, Identity, Server, ServerConfig, VeConfig};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum Switch {
@@ -89,7 +94,7 @@ struct Cli {
     #[arg(long, requires = "view")]
     view_grab: bool,
     /// Frames per second the view sends (1-240).
-    #[arg(long, value_name = "HZ", default_value_t = kinloop_server::view::DEFAULT_FRAME_RATE_HZ, requires = "view")]
+    #[arg(long, value_name = "HZ", default_value_t = crate::view::DEFAULT_FRAME_RATE_HZ, requires = "view")]
     view_rate: f64,
 }
 
@@ -99,16 +104,15 @@ fn synthetic_run(
     run: RealtimeRun,
     view: Option<ViewConfig>,
     access: Access,
-) -> anyhow::Result<(kinloop_server::bench::RealtimeReport, Option<kinloop_server::view::ViewStats>)> {
-    let Some(view) = view else { return Ok((kinloop_server::bench::realtime_run(run)?, None)) };
+) -> anyhow::Result<(crate::bench::RealtimeReport, Option<crate::view::ViewStats>)> {
+    let Some(view) = view else { return Ok((crate::bench::realtime_run(run)?, None)) };
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let users = run.ve.max_users.max(run.users);
-    let (tap, reader) =
-        kinloop_server::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
+    let (tap, reader) = crate::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
     let source = LiveSource { scene: run.scene.clone(), scene_label: run.scene_label.clone(), reader, access };
-    let handle = runtime.block_on(async { kinloop_server::view::start_live(&view, source) })?;
+    let handle = runtime.block_on(async { crate::view::start_live(&view, source) })?;
     println!("view: http://{}/", handle.local_addr());
-    let report = kinloop_server::bench::realtime_run_with_view(run, Some(tap));
+    let report = crate::bench::realtime_run_with_view(run, Some(tap));
     let stats = runtime.block_on(handle.shutdown());
     Ok((report?, Some(stats)))
 }
@@ -137,24 +141,30 @@ fn seconds(what: &str, s: f64) -> anyhow::Result<Duration> {
     Duration::try_from_secs_f64(s).with_context(|| format!("{what} must be a non-negative number of seconds"))
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+/// `kinloop-server ARGS...`: `args` as the process gets them (program name first). Bad arguments print
+/// clap's message and exit at once (code 2; `--help` and `--version` code 0); a failure prints one line,
+/// `error: ...`, and returns failure.
+pub fn main<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = Cli::try_parse_from(args).unwrap_or_else(|e| e.exit());
+    kinloop_protocol::report::run_program("info", || run(cli))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
-    let mut ve = VeConfig::default();
-    ve.ve_rate_hz = cli.ve_rate;
-    ve.snapshot_rate_hz = cli.snapshot_rate.unwrap_or(cli.ve_rate);
-    ve.integrator = cli.integrator;
-    ve.max_users = cli.max_users;
-    ve.passivity = cli.passivity == Switch::On;
-    ve.coupling_stiffness = cli.coupling_stiffness.clone();
-    ve.coupling_damping = cli.coupling_damping.clone();
+    let ve = VeConfig {
+        ve_rate_hz: cli.ve_rate,
+        snapshot_rate_hz: cli.snapshot_rate.unwrap_or(cli.ve_rate),
+        integrator: cli.integrator,
+        max_users: cli.max_users,
+        passivity: cli.passivity == Switch::On,
+        coupling_stiffness: cli.coupling_stiffness.clone(),
+        coupling_damping: cli.coupling_damping.clone(),
+        ..VeConfig::default()
+    };
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
     let access = match &cli.token_file {
