@@ -1,6 +1,8 @@
 //! `kinloop`: run the demo; inspect, simulate and benchmark linkages with kinematic loops; run experiments;
 //! replay recordings in a web page.
 
+use std::process::ExitCode;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use kinloop::cli;
@@ -30,18 +32,25 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Run an experiment: charts (SVG, PNG) and summary.json in DIR/NAME/.
     Experiment(cli::experiment::ExperimentArgs),
-    /// The lateness of an idle 1 kHz loop timed as the haptic loop is: the machine's floor under real time.
+    /// Time an idle 1 kHz loop as the haptic loop times itself: the floor this machine puts under real time.
+    ///
+    /// Times a loop that does nothing, exactly as the haptic loop times itself (absolute deadlines,
+    /// spin_sleep, SCHED_FIFO when permitted), and reports how late its ticks came and how many deadlines it
+    /// missed. Run it before trusting real-time figures on a machine: a loop that misses more deadlines than
+    /// this floor has a problem of its own; one at the floor is limited by the machine (kernel, hypervisor,
+    /// neighbours).
     TimerFloor(cli::timer_floor::TimerFloorArgs),
     /// Replay a recording (a server's or a client's --record CSV) in a web page with a timeline slider.
     View(cli::view::ViewArgs),
 }
 
-fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_writer(std::io::stderr)
-        .init();
+fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Errors only unless RUST_LOG asks for more; a failure on one line, as kinloop-server and kinloop-client say it.
+    kinloop_protocol::report::run_program("error", || run(&cli))
+}
+
+fn run(cli: &Cli) -> Result<()> {
     match &cli.command {
         Command::Demo(a) => cli::demo::run(a),
         Command::Inspect(a) => cli::inspect::run(a),

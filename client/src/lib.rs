@@ -9,12 +9,14 @@
 //!   model (paper eq 11/13), the controllers of section III / Fig 4, the safety envelope and the uplink;
 //! - [`driver`]: the real-time loop thread and the QUIC session around the core
 //!   ([`Client::start`](driver::Client::start));
-//! - [`bench`](mod@bench): the measurements `kinloop bench` reports.
+//! - [`bench`](mod@bench): the measurements `kinloop bench` reports;
+//! - [`cli`]: the `kinloop-client` program itself (its arguments and what it prints).
 
 #![warn(missing_docs)]
 
 pub mod axes;
 pub mod bench;
+pub mod cli;
 pub mod core;
 pub mod device;
 pub mod driver;

@@ -6,6 +6,7 @@
 //! - [`emulator`]: a seeded, sans-IO link emulator (delay, jitter, loss, bursts, reordering, duplication,
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
 //! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
+//! - [`report`]: how the programs print an error (one line, each cause once);
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
@@ -14,6 +15,7 @@ pub mod emulator;
 pub mod messages;
 pub mod quic;
 pub mod realtime;
+pub mod report;
 mod shape;
 
 pub use messages::*;

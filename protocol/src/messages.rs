@@ -327,7 +327,7 @@ pub enum RefusalReason {
         /// What is wrong, naming the device's value and the scene's need.
         what: String,
     },
-    /// The hello made no sense.
+    /// The hello or the join made no sense.
     Malformed {
         /// What was wrong with it.
         what: String,
@@ -352,7 +352,7 @@ impl fmt::Display for RefusalReason {
             }
             RefusalReason::RoleNotAllowed => f.write_str("that role is not allowed on this server"),
             RefusalReason::Device { what } => write!(f, "the device cannot join: {what}"),
-            RefusalReason::Malformed { what } => write!(f, "the hello was malformed: {what}"),
+            RefusalReason::Malformed { what } => write!(f, "the request was malformed: {what}"),
         }
     }
 }

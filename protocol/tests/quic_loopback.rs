@@ -389,3 +389,43 @@ async fn a_join_for_an_unknown_op_is_refused_after_the_scene_info() {
     })
     .await;
 }
+
+/// A join that fails the wire's checks is answered with a refusal naming the field, not a silent close:
+/// the device's numbers (or the scales asked for) as the device's problem, anything else as malformed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_join_that_fails_the_wires_checks_is_refused_naming_the_field() {
+    /// How a case spoils a good join, the field the refusal names, and whether it is the device's problem.
+    type Case = (fn(Join) -> Join, &'static str, bool);
+    let cases: [Case; 3] = [
+        (
+            |j| Join { device: DeviceCaps { max_force_n: -1.0, ..j.device.clone() }, ..j },
+            "join.device.max_force_n",
+            true,
+        ),
+        (
+            |j| Join { mapping: MappingRequest { force_scale: Some(f64::NAN), ..j.mapping.clone() }, ..j },
+            "join.mapping.force_scale",
+            true,
+        ),
+        (|j| Join { op: "x".repeat(10_000), ..j }, "join.op", false),
+    ];
+    for (spoil, field, device) in cases {
+        bounded(async {
+            let server = start_server(&options());
+            let client = client_endpoint(&pinned(&server), &options()).unwrap();
+            let hello = hello(PROTOCOL_VERSION, TOKEN);
+            let error = connect(&client, server.addr, "localhost", &hello, |scene| join_first(scene).map(spoil))
+                .await
+                .unwrap_err();
+            let reason = match &error {
+                ConnectError::Refused(refused) => &refused.reason,
+                other => panic!("{field}: expected a refusal, got {other:?}"),
+            };
+            assert_eq!(matches!(reason, RefusalReason::Device { .. }), device, "{field}: {reason:?}");
+            assert!(matches!(reason, RefusalReason::Device { .. } | RefusalReason::Malformed { .. }), "{reason:?}");
+            assert!(error.to_string().contains(field), "{field}: {error}");
+            assert!(matches!(server.session.await.unwrap(), Err(AcceptError::Refused(_))), "{field}");
+        })
+        .await;
+    }
+}

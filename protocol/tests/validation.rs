@@ -12,16 +12,7 @@ fn decode_snapshot(snapshot: Snapshot) -> Result<Datagram, DecodeError> {
 }
 
 fn field_of(error: &DecodeError) -> String {
-    match error {
-        DecodeError::WrongLength { field, .. }
-        | DecodeError::TooMany { field, .. }
-        | DecodeError::TooLong { field, .. }
-        | DecodeError::NonFinite { field, .. }
-        | DecodeError::OutOfRange { field, .. }
-        | DecodeError::NotUnit { field, .. }
-        | DecodeError::Inconsistent { field, .. } => field.to_string(),
-        other => panic!("no field in {other:?}"),
-    }
+    error.field().unwrap_or_else(|| panic!("no field in {error:?}")).to_string()
 }
 
 #[test]

@@ -9,9 +9,11 @@
 //! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
 //! - [`view`]: the web page that draws the linkage live (and lets a visitor grab it) or replays a recording;
-//! - [`bench`](mod@bench): the numbers `kinloop bench` reports.
+//! - [`bench`](mod@bench): the numbers `kinloop bench` reports;
+//! - [`cli`]: the `kinloop-server` program itself (its arguments and what it prints).
 
 pub mod bench;
+pub mod cli;
 pub mod core;
 
 pub use crate::core::{

@@ -62,7 +62,7 @@ fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Ve
             let _ = ve.handle_uplink(now, user, &u);
         }
         tick += 1;
-        if tick % 10 == 0 {
+        if tick.is_multiple_of(10) {
             energies.push(ve.mechanical_energy().0);
         }
     });

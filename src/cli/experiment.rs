@@ -53,7 +53,8 @@ pub struct ExperimentArgs {
     /// The small grids (each experiment under a minute on two cores).
     #[arg(long)]
     pub quick: bool,
-    /// Threads for sweeps (results do not depend on it).
+    /// Worker threads that run a sweep's independent sessions side by side (1-64); the results are the same
+    /// for any number, only the time to get them changes.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
 }

@@ -442,7 +442,7 @@ impl<S: Space> Session<S> {
         let state = self.ve.state();
         self.max_closure = self.max_closure.max(state.closure_error);
         self.ve_ticks_seen += 1;
-        if self.record_every > 0 && self.ve_ticks_seen % self.record_every as u64 == 0 {
+        if self.record_every > 0 && self.ve_ticks_seen.is_multiple_of(self.record_every as u64) {
             let mut sample = VeSample::from_state(now, &state);
             (sample.kinetic_energy, sample.potential_energy) = self.ve.mechanical_energy();
             self.recording.push_ve(sample);
@@ -513,7 +513,7 @@ impl<S: Space> Session<S> {
                 }
             }
         }
-        if self.record_every > 0 && p.ticks % self.record_every as u64 == 0 {
+        if self.record_every > 0 && p.ticks.is_multiple_of(self.record_every as u64) {
             let ve_op =
                 p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user).map(|u| u.op_pose));
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);

@@ -1,15 +1,17 @@
 //! Servers and clients in child processes, to kill them as a crash or a power cut would (SIGKILL: no close
-//! frame, no goodbye).
+//! frame, no goodbye), or to run the programs themselves on a command line.
 //!
 //! The child is this very test binary, re-executed to run only the test that spawned it (`--exact NAME`)
 //! with the role in an environment variable: that test calls [`serve_if_child`] first, which runs the role
 //! and exits the process. The child thus runs the same drivers as `kinloop-server` / `kinloop-client`
-//! (`Server::start` with a certificate directory, `Client::start`), built from the same sources as the
-//! test, on a fresh clone and under any cargo invocation; the binaries of the server and client packages
-//! are not visible to this package's tests (`CARGO_BIN_EXE_*` names only a package's own binaries) and a
-//! copy found in target/ could be stale.
+//! (`Server::start` with a certificate directory, `Client::start`), or the programs' very `main` on a
+//! command line ([`Role::Program`]), built from the same sources as the test, on a fresh clone and under any
+//! cargo invocation; the binaries of the server and client packages are not visible to this package's
+//! tests (`CARGO_BIN_EXE_*` names only a package's own binaries) and a copy found in target/ could be stale.
 //!
-//! A child exits when its stdin closes, so it never outlives its parent, even one killed by its watchdog.
+//! A child exits when its stdin closes, so it never outlives its parent, even one killed by its watchdog. It
+//! runs in the directory it was given (where a program's default files, such as the server's certificate
+//! directory, land) with its stdout and stderr in files there.
 
 use std::io::Read;
 use std::net::SocketAddr;
@@ -35,6 +37,47 @@ pub enum Role {
     Server { listen: SocketAddr, cert_dir: PathBuf },
     /// `kinloop-client --server SERVER --fingerprint FP --op OP --user constant:WRENCH`.
     Client { server: SocketAddr, fingerprint: String, name: String, op: String, wrench: Vec<f64> },
+    /// `PROGRAM ARGS...` through the program's own `main` (`kinloop_server::cli::main` or
+    /// `kinloop_client::cli::main`): its argument parsing, its output and its exit code.
+    Program { program: Program, args: Vec<String> },
+}
+
+/// The programs a [`Role::Program`] runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Program {
+    /// `kinloop-server`.
+    Server,
+    /// `kinloop-client`.
+    Client,
+}
+
+impl Program {
+    /// The binary's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Program::Server => "kinloop-server",
+            Program::Client => "kinloop-client",
+        }
+    }
+
+    /// The program whose binary is called `name`, if it is one of these.
+    pub fn named(name: &str) -> Option<Program> {
+        [Program::Server, Program::Client].into_iter().find(|p| p.name() == name)
+    }
+
+    /// Runs the program's `main` on `args` (without the program's name) in this process; its exit code.
+    fn run(self, args: &[String]) -> i32 {
+        let command_line = std::iter::once(self.name().to_owned()).chain(args.iter().cloned());
+        let code = match self {
+            Program::Server => kinloop_server::cli::main(command_line),
+            Program::Client => kinloop_client::cli::main(command_line),
+        };
+        if code == std::process::ExitCode::SUCCESS {
+            0
+        } else {
+            1
+        }
+    }
 }
 
 /// What a child reports once it runs.
@@ -51,14 +94,10 @@ pub struct Ready {
 /// In a child process: runs its role and exits. In the test process: returns at once.
 pub fn serve_if_child() {
     let Ok(role) = std::env::var(ROLE_VAR) else { return };
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::new("info"))
-        .with_writer(std::io::stderr)
-        .try_init();
     let ready = PathBuf::from(std::env::var(READY_VAR).unwrap_or_default());
     let code = match serde_json::from_str::<Role>(&role) {
         Ok(role) => match run(role, &ready) {
-            Ok(()) => 0,
+            Ok(code) => code,
             Err(e) => {
                 eprintln!("e2e child failed: {e}");
                 2
@@ -72,7 +111,21 @@ pub fn serve_if_child() {
     std::process::exit(code);
 }
 
-fn run(role: Role, ready: &Path) -> Result<(), String> {
+/// Runs `role`; the process's exit code.
+fn run(role: Role, ready: &Path) -> Result<i32, String> {
+    if let Role::Program { program, args } = role {
+        // The program sets up its logging as it does on its own. It runs until it ends by itself (or Ctrl-C);
+        // a parent that stops it or goes away ends it at once.
+        std::thread::spawn(|| {
+            until_parent_lets_go();
+            std::process::exit(3);
+        });
+        return Ok(program.run(&args));
+    }
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::new("info"))
+        .with_writer(std::io::stderr)
+        .try_init();
     match role {
         Role::Server { listen, cert_dir } => {
             let rt = live::runtime();
@@ -95,8 +148,9 @@ fn run(role: Role, ready: &Path) -> Result<(), String> {
             until_parent_lets_go();
             client.shutdown();
         }
+        Role::Program { .. } => {}
     }
-    Ok(())
+    Ok(0)
 }
 
 /// Writes the ready file whole (temporary name, then rename), so the parent never reads half of it.
@@ -122,28 +176,31 @@ pub struct ChildProcess {
     child: Child,
     stdin: Option<ChildStdin>,
     log: PathBuf,
+    out: PathBuf,
     ready: PathBuf,
     what: String,
 }
 
 impl ChildProcess {
-    /// Re-executes this test binary to run `role` inside the test named `test`; its log and ready file go
-    /// to `dir` under `tag`.
+    /// Re-executes this test binary to run `role` inside the test named `test`, in `dir`; its log (stderr),
+    /// stdout and ready file go to `dir` under `tag`.
     pub fn spawn(test: &str, role: &Role, dir: &Path, tag: &str) -> Self {
         let log = dir.join(format!("{tag}.log"));
+        let out = dir.join(format!("{tag}.out"));
         let ready = dir.join(format!("{tag}.ready"));
         let _ = std::fs::remove_file(&ready);
         let exe = std::env::current_exe().expect("the test binary's path");
         let child = Command::new(exe)
             .args([test, "--exact", "--nocapture", "--test-threads=1"])
+            .current_dir(dir)
             .env(ROLE_VAR, serde_json::to_string(role).expect("role as JSON"))
             .env(READY_VAR, &ready)
             .stdin(Stdio::piped())
-            .stdout(Stdio::null())
+            .stdout(std::fs::File::create(&out).expect("child stdout file"))
             .stderr(std::fs::File::create(&log).expect("child log file"))
             .spawn()
             .expect("the test binary re-executes");
-        let mut process = ChildProcess { child, stdin: None, log, ready, what: format!("{tag} ({role:?})") };
+        let mut process = ChildProcess { child, stdin: None, log, out, ready, what: format!("{tag} ({role:?})") };
         process.stdin = process.child.stdin.take();
         process
     }
@@ -173,6 +230,50 @@ impl ChildProcess {
     /// The whole log.
     pub fn log(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Everything the child wrote to stdout so far (a test binary's child starts with the harness's
+    /// `running 1 test` line).
+    pub fn stdout(&self) -> String {
+        std::fs::read_to_string(&self.out).unwrap_or_default()
+    }
+
+    /// Waits until `found` finds what it looks for in the child's stdout; panics naming `what`, with the
+    /// child's output, when the child exits first or `limit` passes.
+    pub fn wait_for_stdout<T>(&mut self, what: &str, limit: Duration, found: impl Fn(&str) -> Option<T>) -> T {
+        let start = Instant::now();
+        loop {
+            if let Some(found) = found(&self.stdout()) {
+                return found;
+            }
+            if let Ok(Some(status)) = self.child.try_wait() {
+                panic!("{what}: child {} exited ({status}) first:\n{}\n{}", self.what, self.stdout(), self.log_tail());
+            }
+            assert!(start.elapsed() < limit, "{what}: not within {limit:?}:\n{}\n{}", self.stdout(), self.log_tail());
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Waits for the child to exit by itself; its status. Panics with its output after `limit` (and kills it).
+    pub fn exit_status(&mut self, limit: Duration) -> std::process::ExitStatus {
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return status;
+            }
+            if start.elapsed() >= limit {
+                self.kill();
+                panic!("child {} still running after {limit:?}:\n{}\n{}", self.what, self.stdout(), self.log_tail());
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// SIGINT, what Ctrl-C in its terminal sends.
+    pub fn interrupt(&self) {
+        let pid = self.child.id().to_string();
+        let sent = Command::new("kill").args(["-INT", &pid]).status().expect("kill runs");
+        assert!(sent.success(), "kill -INT {pid} failed");
     }
 
     /// SIGKILL: the process vanishes without a word. Returns when it is gone.

@@ -1,12 +1,13 @@
 //! Shared pieces of the end-to-end tests: one real-time session at a time with a hard time limit, servers
 //! and clients in-process over loopback QUIC, the same drivers in child processes (to kill them), and the
-//! CSV recordings both sides write.
+//! CSV recordings both sides write; and what cargo knows of the workspace.
 #![allow(dead_code)] // each e2e binary uses its own part of this module
 
 pub mod checks;
 pub mod child;
 pub mod live;
 pub mod records;
+pub mod workspace;
 
 use std::sync::mpsc;
 use std::sync::{Mutex, MutexGuard};

@@ -428,6 +428,17 @@ struct NetRings<S: Space> {
     reports: rtrb::Consumer<LoopReport>,
 }
 
+/// Longest a client waits for its closing connection to tell the server. A process that exits sooner sends
+/// nothing, and the server keeps the user until its idle timeout.
+const CLOSE_LINGER: Duration = Duration::from_secs(1);
+
+/// Closes a session that will not run and waits (at most [`CLOSE_LINGER`]) for the server to be told, so it
+/// drops the user at once.
+async fn abandon(endpoint: &Endpoint, connection: &kinloop_protocol::quic::Connection, why: &'static [u8]) {
+    connection.close(kinloop_protocol::quic::close_codes::NORMAL, why);
+    let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
+}
+
 const SNAPSHOT_RING: usize = 16;
 const UPLINK_RING: usize = 64;
 const RECORD_RING: usize = 16_384;
@@ -459,6 +470,9 @@ fn network_thread(
         let session = match open_session(&endpoint, address, &config, &mut chosen).await {
             Ok(s) => s,
             Err(source) => {
+                // The handshake closed the connection; the server hears of it before the caller (who may exit
+                // at once) hears why.
+                let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
                 let _ = started.send(Err(ClientError::Connect { server: config.server.clone(), source }));
                 return;
             }
@@ -588,7 +602,7 @@ async fn run<S: Space>(
     }) {
         Ok(parts) => parts,
         Err(e) => {
-            session.connection.close(kinloop_protocol::quic::close_codes::NORMAL, b"client cannot render");
+            abandon(&endpoint, &session.connection, b"client cannot render").await;
             let _ = started.send(Err(e));
             return;
         }
@@ -641,6 +655,7 @@ async fn run<S: Space>(
     let uplink_thread = match uplink_thread {
         Ok(t) => t,
         Err(e) => {
+            abandon(&endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
@@ -670,6 +685,7 @@ async fn run<S: Space>(
     let loop_thread = match loop_thread {
         Ok(t) => t,
         Err(e) => {
+            abandon(&endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
@@ -749,7 +765,7 @@ async fn run<S: Space>(
     }
     drain_reports(&mut rings, &net);
     // Give the close frame a moment to leave.
-    let _ = tokio::time::timeout(Duration::from_secs(1), endpoint.wait_idle()).await;
+    let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
 }
 
 fn drain_reports<S: Space>(rings: &mut NetRings<S>, net: &NetShared) {

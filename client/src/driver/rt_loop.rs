@@ -182,7 +182,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         }
         let stats = core.stats();
         shared.max_force_ratio_bits.fetch_max(stats.max_force_ratio.to_bits(), Ordering::Relaxed);
-        if ticker.tick % settings.report_every.max(1) == 0 {
+        if ticker.tick.is_multiple_of(settings.report_every.max(1)) {
             let report = core.report();
             let _ = rings.reports.push(LoopReport {
                 elapsed: now,

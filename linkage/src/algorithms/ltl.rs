@@ -331,7 +331,7 @@ fn solve_u_group<S: Space, const W: usize>(
     // Chain-prefix rows: one at a time down to a multiple of four, then four at a time (aligned blocks keep
     // every row update in whole vectors).
     let mut k = prefix;
-    while k % 4 != 0 {
+    while !k.is_multiple_of(4) {
         k -= 1;
         let col_k = &a[k * n..k * n + k + 1];
         for x in cols.iter_mut() {
@@ -431,7 +431,7 @@ fn solve_ut_group<S: Space, const W: usize>(model: &Model<S>, a: &[f64], n: usiz
 /// The four dot products `u[c][..len] · x` (len = x.len(), a multiple of four), in four lanes each.
 #[inline(always)]
 fn dot4(u: &[&[f64]; 4], x: &[f64]) -> [f64; 4] {
-    debug_assert!(x.len() % 4 == 0);
+    debug_assert!(x.len().is_multiple_of(4));
     let len = x.len();
     let [u0, u1, u2, u3] = u.map(|c| c[..len].chunks_exact(4));
     let mut acc = [F64x4::zero(); 4];

@@ -18,6 +18,8 @@
 //! [`constraint_directions`] (eq 10), restricted to the directions not counted as constrained — along those
 //! the joints carry the load, not the hand.
 
+use std::cmp::Ordering;
+
 use nalgebra::{DMatrix, DVector};
 
 use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
@@ -179,7 +181,8 @@ fn close<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, z
         };
         let trial = &*q - step;
         let r_trial = residual(model, data, &trial, zero);
-        if !(r_trial < r) {
+        // No smaller (a NaN residual included): the step does not help.
+        if r_trial.partial_cmp(&r) != Some(Ordering::Less) {
             return false;
         }
         *q = trial;
@@ -255,7 +258,8 @@ impl<S: Space> Walker<'_, S> {
         let rows = self.rows()?;
         let tangent = project_null(&rows, direction);
         let norm = tangent.norm();
-        if !(norm > 1e-9) {
+        // Too short to normalise (or NaN).
+        if norm.partial_cmp(&1e-9) != Some(Ordering::Greater) {
             return None;
         }
         let tangent = tangent / norm;

@@ -139,6 +139,25 @@ pub enum DecodeError {
     },
 }
 
+impl DecodeError {
+    /// The field the problem sits in, when it is one field's.
+    pub fn field(&self) -> Option<Field> {
+        match self {
+            DecodeError::WrongLength { field, .. }
+            | DecodeError::TooMany { field, .. }
+            | DecodeError::TooLong { field, .. }
+            | DecodeError::NonFinite { field, .. }
+            | DecodeError::OutOfRange { field, .. }
+            | DecodeError::NotUnit { field, .. }
+            | DecodeError::Inconsistent { field, .. } => Some(*field),
+            DecodeError::TooLarge { .. }
+            | DecodeError::Trailing { .. }
+            | DecodeError::Malformed(_)
+            | DecodeError::UnknownFlags { .. } => None,
+        }
+    }
+}
+
 /// Why a message could not be encoded (a local bug, never the peer's fault).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum EncodeError {

@@ -76,7 +76,7 @@ pub fn device(d: &DeviceCaps) -> Result<(), DecodeError> {
     }
     non_negative_vector(Field::at("join.device.damping"), &d.damping, axes, MAX_GAIN)?;
     vector(Field::at("join.device.mass"), &d.mass, axes, MAX_GAIN)?;
-    if d.mass.iter().any(|m| !(*m > 0.0)) {
+    if d.mass.iter().any(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
         return Err(DecodeError::Inconsistent {
             field: Field::at("join.device.mass"),
             what: "masses must be positive",

@@ -276,16 +276,21 @@ where
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
         send_control(&mut send, &Control::SceneInfo(scene)).await?;
-        let join = match recv_control(&mut recv).await? {
-            Control::Join(join) => join,
-            Control::Leave { reason } => {
+        let join = match recv_control(&mut recv).await {
+            Ok(Control::Join(join)) => join,
+            Ok(Control::Leave { reason }) => {
                 connection.close(close_codes::NORMAL, b"declined");
                 return Err(AcceptError::Declined(reason));
             }
-            other => {
+            Ok(other) => {
                 connection.close(close_codes::PROTOCOL, b"expected Join");
                 return Err(AcceptError::UnexpectedMessage { expected: "Join", got: other.kind_name() });
             }
+            // A join that fails the wire's checks (a device with a negative force, say) is answered as any
+            // refused join is, saying what is wrong; closing without a word left the client with "closed by
+            // peer: 0".
+            Err(ControlStreamError::Decode(error)) => return Err(refuse(&connection, send, invalid_join(&error)).await),
+            Err(error) => return Err(error.into()),
         };
         let welcome = match decide(hello.clone(), join.clone()).await {
             Ok(welcome) => welcome,
@@ -330,6 +335,16 @@ async fn read_hello(recv: &mut RecvStream) -> Result<Hello, HelloProblem> {
             Err(HelloProblem::Refuse(Refused { reason, message: String::new() }))
         }
     }
+}
+
+/// The refusal of a join the wire's checks reject: the device's numbers or the scales asked for are the
+/// device's problem (the user can pick another device or leave the scales to the server), anything else is
+/// a malformed request.
+fn invalid_join(error: &DecodeError) -> Refused {
+    let what = error.to_string();
+    let device = error.field().is_some_and(|f| f.path.starts_with("join.device") || f.path.starts_with("join.mapping"));
+    let reason = if device { RefusalReason::Device { what } } else { RefusalReason::Malformed { what } };
+    Refused { reason, message: String::new() }
 }
 
 /// Sends the refusal, gives the client a moment to read it and close, then closes.

@@ -147,6 +147,8 @@ pub enum ServerError {
 pub(crate) struct Shared {
     commands: Mutex<rtrb::Producer<Command>>,
     users: Mutex<Vec<UserEntry>>,
+    /// The server's endpoint, for the count of open connections.
+    endpoint: Endpoint,
     ve_stats: Mutex<VeLoopStats>,
     started: Instant,
     ve_rate_hz: f64,
@@ -266,6 +268,7 @@ impl Shared {
             uptime_s: self.started.elapsed().as_secs_f64(),
             ve_rate_hz: self.ve_rate_hz,
             users: ve.core.users,
+            connections: self.endpoint.open_connections(),
             ve,
             per_user,
             view: self.view.get().map(|v| v.snapshot()),
@@ -434,6 +437,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
     let shared = Arc::new(Shared {
         commands: Mutex::new(command_tx),
         users: Mutex::new(Vec::new()),
+        endpoint: endpoint.clone(),
         ve_stats: Mutex::new(VeLoopStats::default()),
         started: Instant::now(),
         ve_rate_hz: config.ve.ve_rate_hz,
@@ -522,6 +526,7 @@ async fn collect(
             let s = shared.stats();
             tracing::info!(
                 users = s.users,
+                connections = s.connections,
                 step_p50_us = s.ve.step_time.p50_ns as f64 / 1e3,
                 step_p99_us = s.ve.step_time.p99_ns as f64 / 1e3,
                 step_max_us = s.ve.step_time.max_ns as f64 / 1e3,

@@ -104,18 +104,23 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
         let shutting_down = || refused(RefusalReason::Malformed { what: "the server is shutting down".into() });
         shared.send_command(command).await.map_err(|_| shutting_down())?;
         let joined = reply_rx.await.map_err(|_| shutting_down())?.map_err(refused)?;
-        *slot = Some((uplink_tx, snapshot_rx, notify));
+        *slot = Some((joined.user_id, uplink_tx, snapshot_rx, notify));
         Ok(joined.welcome)
     });
     let session = match handshake.await {
         Ok(session) => session,
         Err(error) => {
+            // The VE may have admitted the user before the handshake failed (the welcome could not be sent:
+            // the client had gone); it leaves now, not at the next restart.
+            if let Some((user, ..)) = ends {
+                let _ = shared.send_command(Command::Leave { user }).await;
+            }
             // Never the hello itself: it carries the token.
             tracing::info!(%remote, %error, "handshake ended without a session");
             return;
         }
     };
-    let Some((uplink_tx, snapshot_rx, notify)) = ends else { return };
+    let Some((_, uplink_tx, snapshot_rx, notify)) = ends else { return };
     run_session(session, shared, uplink_tx, snapshot_rx, notify).await;
 }
 

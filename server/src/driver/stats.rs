@@ -158,6 +158,8 @@ pub struct ServerStats {
     pub ve: VeLoopStats,
     /// Users present now.
     pub users: u32,
+    /// QUIC connections open now: the users' and those of clients still in (or just out of) their handshake.
+    pub connections: usize,
     /// Every user since start.
     pub per_user: Vec<UserStats>,
     /// The web view (`--view`), when served.

@@ -141,7 +141,7 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
         }
         histogram.record(woke.elapsed().as_nanos() as u64);
         iterations += 1;
-        if iterations % publish_every == 0 {
+        if iterations.is_multiple_of(publish_every) {
             stats.step_time = histogram.summary();
             stats.core = core.metrics();
             let _ = io.stats.push(stats);

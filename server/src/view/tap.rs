@@ -104,7 +104,7 @@ impl ViewTap {
     /// after the last tick and wakes the hub.
     pub fn after_tick<S: Space>(&mut self, core: &VeCore<S>, stats: &VeLoopStats) {
         self.iterations += 1;
-        if self.iterations % self.every != 0 {
+        if !self.iterations.is_multiple_of(self.every) {
             return;
         }
         let state = core.state();

@@ -1,0 +1,82 @@
+//! How kinloop's programs run and tell a person what went wrong: one line, each cause said once.
+//!
+//! Errors here and in the crates below usually say their cause in their own message *and* return it as
+//! their `source()`: "cannot connect to 127.0.0.1:4433: the server refused: …", whose source says "the
+//! server refused: …" again. Printing every link of the chain (anyhow's `{:#}`, or its `Caused by:` list)
+//! then repeats the cause; printing only the first link loses what a context wrapped. [`one_line`] walks the
+//! chain and adds a cause only when the line does not say it yet; [`run_program`] is how `kinloop`,
+//! `kinloop-server` and `kinloop-client` run their bodies and end.
+
+use std::error::Error;
+use std::process::ExitCode;
+
+/// Runs a program's `body` as kinloop's programs run: logs go to stderr, filtered by `RUST_LOG` or else
+/// `default_filter` (a process that already has a subscriber, such as a test running the program in a
+/// child, keeps its own); a failure prints `error: ` and [`one_line`] on stderr and ends with failure.
+pub fn run_program<E>(default_filter: &str, body: impl FnOnce() -> Result<(), E>) -> ExitCode
+where
+    E: Into<Box<dyn Error + Send + Sync>>,
+{
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    match body().map_err(Into::into) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {}", one_line(&*error));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `error` and its causes on one line, joined by `": "`, leaving out every cause the line already says.
+pub fn one_line(error: &(dyn Error + 'static)) -> String {
+    let mut line = error.to_string();
+    let mut cause = error.source();
+    while let Some(e) = cause {
+        let said = e.to_string();
+        if !said.is_empty() && !line.contains(&said) {
+            line.push_str(": ");
+            line.push_str(&said);
+        }
+        cause = e.source();
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("the server refused: no such point")]
+    struct Refusal;
+
+    /// Says its source in its message and returns it as its source, as `#[error("..{0}")] X(#[from] E)` does.
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot connect to 127.0.0.1:4433: {0}")]
+    struct Connect(#[from] Refusal);
+
+    /// Says nothing of its source.
+    #[derive(Debug, thiserror::Error)]
+    #[error("the client could not start")]
+    struct Context(#[source] Connect);
+
+    #[test]
+    fn a_cause_the_message_already_says_is_not_repeated() {
+        assert_eq!(one_line(&Connect(Refusal)), "cannot connect to 127.0.0.1:4433: the server refused: no such point");
+    }
+
+    #[test]
+    fn a_context_keeps_the_causes_it_does_not_say_each_once() {
+        assert_eq!(
+            one_line(&Context(Connect(Refusal))),
+            "the client could not start: cannot connect to 127.0.0.1:4433: the server refused: no such point"
+        );
+    }
+
+    #[test]
+    fn an_error_without_a_source_is_its_message() {
+        assert_eq!(one_line(&Refusal), "the server refused: no such point");
+    }
+}

@@ -1,0 +1,257 @@
+//! The `kinloop-server` program: host one linkage for many haptic users over QUIC. Its arguments, how they
+//! become a [`ServerConfig`], and what it prints; the binary is [`main`] with the process's arguments, and
+//! tests run the same function in a child process.
+
+use std::ffi::OsString;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Parser, ValueEnum};
+use kinloop_linkage::Integrator;
+use kinloop_protocol::emulator::LinkArgs;
+
+use crate::bench::RealtimeRun;
+use crate::core::AxisGains;
+use crate::driver::load_scene;
+use crate::view::{LiveSource, ViewConfig};
+use crate::{Access, Identity, Server, ServerConfig, VeConfig};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Switch {
+    On,
+    Off,
+}
+
+/// Host a virtual linkage with kinematic loops that several people feel at once through haptic devices.
+#[derive(Debug, Parser)]
+#[command(name = "kinloop-server", version)]
+struct Cli {
+    /// Scene file (TOML) or built-in name (paper-testbed, fourbar-crank-rocker, chain50_loops5, ...).
+    #[arg(long, value_name = "FILE_OR_BUILTIN_NAME")]
+    scene: String,
+    /// UDP address to listen on, e.g. 0.0.0.0:4433 or 127.0.0.1:0.
+    #[arg(long, value_name = "ADDR")]
+    listen: SocketAddr,
+    /// VE loop rate (Hz).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    ve_rate: f64,
+    /// Snapshot rate (Hz); defaults to the VE rate.
+    #[arg(long, value_name = "HZ")]
+    snapshot_rate: Option<f64>,
+    /// Integrator: euler (semi-implicit, implicit coupling), rk4 or explicit-euler.
+    #[arg(long, value_name = "NAME", default_value = "euler", value_parser = parse_integrator)]
+    integrator: Integrator,
+    /// Token file: one token per line, optionally `TOKEN manipulator|observer`; `#` comments.
+    #[arg(long, value_name = "F")]
+    token_file: Option<PathBuf>,
+    /// Most users at once.
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    max_users: usize,
+    /// Directory of the server certificate (created on first start; the fingerprint stays the same).
+    #[arg(long, value_name = "D", default_value = ".kinloop-server")]
+    cert_dir: PathBuf,
+    #[command(flatten)]
+    link: LinkArgs,
+    /// Write one CSV row per VE step to this file.
+    #[arg(long, value_name = "FILE")]
+    record: Option<PathBuf>,
+    /// Graphics-controller stiffness K_g as `LINEAR,ANGULAR` (N/m, N·m/rad) for every user; default: each
+    /// user's designed from its OP's lightest effective mass (4 Hz, critically damped; printed at join). The
+    /// paper's testbed values are 1000,10000 (with --coupling-damping 100,10000).
+    #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
+    coupling_stiffness: Option<AxisGains>,
+    /// Graphics-controller damping B_g as `LINEAR,ANGULAR` (N·s/m, N·m·s/rad) for every user; default designed
+    /// (given alone, the stiffness is the paper's).
+    #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
+    coupling_damping: Option<AxisGains>,
+    /// Time-domain passivity observer/controller on each coupling.
+    #[arg(long, value_name = "on|off", default_value = "off")]
+    passivity: Switch,
+    /// Log statistics every S seconds (0: never).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    stats_every: f64,
+    /// Stop after S seconds (default: run until Ctrl-C).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Print the final statistics as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Instead of listening, run the VE thread for --duration with N synthetic in-process users and report
+    /// tick times and deadline misses (the real-time check).
+    #[arg(long, value_name = "N")]
+    synthetic_users: Option<usize>,
+    /// Serve a web page on this TCP address (e.g. 127.0.0.1:8080) that draws the linkage live: bodies,
+    /// obstacles, each user's OP, device and coupling force, the constraint directions, the closure error
+    /// and a panel of users, RTT and VE timing. With --token-file the page asks for a token (observer tokens
+    /// watch, manipulator tokens may also drag an OP with the mouse). No TLS: serve on loopback or a trusted
+    /// network.
+    #[arg(long, value_name = "ADDR")]
+    view: Option<SocketAddr>,
+    /// Without --token-file, let any page grab an OP with the mouse (default: pages only watch).
+    #[arg(long, requires = "view")]
+    view_grab: bool,
+    /// Frames per second the view sends (1-240).
+    #[arg(long, value_name = "HZ", default_value_t = crate::view::DEFAULT_FRAME_RATE_HZ, requires = "view")]
+    view_rate: f64,
+}
+
+/// `--synthetic-users`, with a watch-only view of the VE when `view` is given: the VE thread feeds the
+/// view's tap as the server's does, so the run measures what pages cost the VE.
+fn synthetic_run(
+    run: RealtimeRun,
+    view: Option<ViewConfig>,
+    access: Access,
+) -> anyhow::Result<(crate::bench::RealtimeReport, Option<crate::view::ViewStats>)> {
+    let Some(view) = view else { return Ok((crate::bench::realtime_run(run)?, None)) };
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let users = run.ve.max_users.max(run.users);
+    let (tap, reader) = crate::view::tap_for_scene(&run.scene, &run.scene_label, users, run.ve.ve_rate_hz, &view)?;
+    let source = LiveSource { scene: run.scene.clone(), scene_label: run.scene_label.clone(), reader, access };
+    let handle = runtime.block_on(async { crate::view::start_live(&view, source) })?;
+    println!("view: http://{}/", handle.local_addr());
+    let report = crate::bench::realtime_run_with_view(run, Some(tap));
+    let stats = runtime.block_on(handle.shutdown());
+    Ok((report?, Some(stats)))
+}
+
+/// `LINEAR,ANGULAR`: two finite, non-negative gains.
+fn parse_gains(s: &str) -> Result<AxisGains, String> {
+    let values: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not two comma-separated numbers LINEAR,ANGULAR"))?;
+    match values[..] {
+        [linear, angular] if [linear, angular].iter().all(|g| g.is_finite() && *g >= 0.0) => {
+            Ok(AxisGains::Uniform { linear, angular })
+        }
+        [_, _] => Err(format!("{s:?}: gains must be finite and non-negative")),
+        _ => Err(format!("{s:?} is not two comma-separated numbers LINEAR,ANGULAR")),
+    }
+}
+
+fn parse_integrator(s: &str) -> Result<Integrator, String> {
+    Integrator::parse(s).ok_or_else(|| format!("unknown integrator {s:?}; use euler, rk4 or explicit-euler"))
+}
+
+fn seconds(what: &str, s: f64) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(s).with_context(|| format!("{what} must be a non-negative number of seconds"))
+}
+
+/// `kinloop-server ARGS...`: `args` as the process gets them (program name first). Bad arguments print
+/// clap's message and exit at once (code 2; `--help` and `--version` code 0); a failure prints one line,
+/// `error: ...`, and returns failure.
+pub fn main<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = Cli::try_parse_from(args).unwrap_or_else(|e| e.exit());
+    kinloop_protocol::report::run_program("info", || run(cli))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
+    let ve = VeConfig {
+        ve_rate_hz: cli.ve_rate,
+        snapshot_rate_hz: cli.snapshot_rate.unwrap_or(cli.ve_rate),
+        integrator: cli.integrator,
+        max_users: cli.max_users,
+        passivity: cli.passivity == Switch::On,
+        coupling_stiffness: cli.coupling_stiffness.clone(),
+        coupling_damping: cli.coupling_damping.clone(),
+        ..VeConfig::default()
+    };
+    let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
+
+    let access = match &cli.token_file {
+        Some(path) => Access::from_file(path)?,
+        None => Access::open(),
+    };
+    let view = cli.view.map(|listen| ViewConfig {
+        grab_without_token: cli.view_grab,
+        frame_rate_hz: cli.view_rate,
+        ..ViewConfig::new(listen)
+    });
+    if let Some(users) = cli.synthetic_users {
+        let run =
+            RealtimeRun { scene, scene_label: label, users, duration: duration.unwrap_or(Duration::from_secs(10)), ve };
+        let (report, view_stats) = synthetic_run(run, view, access)?;
+        if cli.json {
+            let mut json = serde_json::to_value(&report)?;
+            if let (Some(stats), Some(object)) = (view_stats, json.as_object_mut()) {
+                object.insert("view".into(), serde_json::to_value(stats)?);
+            }
+            println!("{}", serde_json::to_string_pretty(&json)?);
+        } else {
+            println!(
+                "{} users, {} ticks: step p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; {} deadline misses; SCHED_FIFO {}",
+                report.users,
+                report.ve.step_time.samples,
+                report.ve.step_time.p50_ns as f64 / 1e3,
+                report.ve.step_time.p99_ns as f64 / 1e3,
+                report.ve.step_time.max_ns as f64 / 1e3,
+                report.ve.deadline_misses,
+                if report.ve.realtime_priority { "on" } else { "off" },
+            );
+        }
+        return Ok(());
+    }
+
+    let config = ServerConfig {
+        scene,
+        scene_label: label,
+        listen: cli.listen,
+        ve,
+        access,
+        identity: Identity::CertDir(cli.cert_dir.clone()),
+        link: cli.link.emulated_link()?,
+        record: cli.record.clone(),
+        stats_every: Some(seconds("--stats-every", cli.stats_every)?),
+        realtime: true,
+        view,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    runtime.block_on(async move {
+        let server = Server::start(config)?;
+        println!("kinloop-server listening on {}", server.local_addr());
+        println!("certificate fingerprint (sha-256): {}", server.fingerprint());
+        if let Some(addr) = server.view_addr() {
+            println!("view: http://{addr}/");
+        }
+        let stop = async {
+            match duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: telling clients and shutting down"),
+            _ = stop => tracing::info!("--duration elapsed: shutting down"),
+        }
+        let stats = server.shutdown().await?;
+        if cli.json {
+            println!("{}", serde_json::to_string_pretty(&stats)?);
+        }
+        anyhow::Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gains parse as `LINEAR,ANGULAR`; anything else, or a negative or non-finite gain, is refused with a
+    /// message saying what was expected.
+    #[test]
+    fn coupling_gains_parse_or_say_why_not() {
+        assert_eq!(parse_gains("1000, 100"), Ok(AxisGains::Uniform { linear: 1000.0, angular: 100.0 }));
+        for bad in ["1000", "1,2,3", "a,b", "", "1,nan", "-1,5", "1,inf"] {
+            let why = parse_gains(bad).unwrap_err();
+            assert!(why.contains("LINEAR,ANGULAR") || why.contains("finite and non-negative"), "{bad:?}: {why}");
+        }
+    }
+}
