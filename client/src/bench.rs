@@ -176,7 +176,8 @@ pub fn realtime_loop_sim(
         reports: reports_tx,
         uplink_sender: None,
     };
-    let settings = LoopSettings { rate_hz, duration: Some(duration), realtime_priority, busy_wait: true, report_every: 1000 };
+    let settings =
+        LoopSettings { rate_hz, duration: Some(duration), realtime_priority, busy_wait: true, report_every: 1000 };
     let loop_shared = shared.clone();
     let rig = SimulatedRig::new(device, user);
     let haptic = std::thread::Builder::new()

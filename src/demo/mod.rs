@@ -244,7 +244,7 @@ fn user_of(options: &DemoOptions, i: usize) -> (String, UserSpec) {
     if options.paper_push {
         return (ops[0].name.clone(), UserSpec::Constant(user_wrench(options.scene.kind, options.users)));
     }
-    let hand = options.hand.unwrap_or(if i % 2 == 0 { HandKind::Soft } else { HandKind::Firm });
+    let hand = options.hand.unwrap_or(if i.is_multiple_of(2) { HandKind::Soft } else { HandKind::Firm });
     let first = options.first_op.as_ref().and_then(|name| ops.iter().position(|o| &o.name == name)).unwrap_or(0);
     (ops[(first + i) % ops.len()].name.clone(), UserSpec::Hand(HandSpec::touring(hand)))
 }

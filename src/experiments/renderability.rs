@@ -169,16 +169,16 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
     if !verdict.stable {
         failures.extend(verdict.reasons.iter().map(|r| r.to_string()));
     }
-    if !(summary.max_closure_error <= CLOSURE_BOUND_M) {
+    if !within(summary.max_closure_error, CLOSURE_BOUND_M) {
         failures.push(format!("closure {:.1e} m", summary.max_closure_error));
     }
     if c.non_finite > 0 {
         failures.push("non-finite value".into());
     }
-    if !(c.saturated_fraction <= CLAMPED_BOUND) {
+    if !within(c.saturated_fraction, CLAMPED_BOUND) {
         failures.push(format!("clamped {:.1} %", c.saturated_fraction * 100.0));
     }
-    if !(c.device_op_rms_m <= point.network.rms_bound()) {
+    if !within(c.device_op_rms_m, point.network.rms_bound()) {
         failures.push(format!("RMS {:.1} mm", c.device_op_rms_m * 1e3));
     }
     Ok(PointResult {
@@ -276,4 +276,9 @@ pub fn run(options: &Options) -> Result<super::Report> {
 
 fn row_label(p: &Point) -> String {
     format!("{}:{} {}", p.scene, p.op, p.device.name())
+}
+
+/// `value <= bound`, false for NaN: a figure that is not a number fails its bound.
+fn within(value: f64, bound: f64) -> bool {
+    value <= bound
 }

@@ -42,7 +42,7 @@ pub const LOCAL_MODEL_MARGIN: f64 = 0.25;
 
 /// One group's budget: (stiffness, damping) in device units.
 fn budget(max_stiffness: f64, max_damping: f64, mass: f64, own_damping: f64, period_s: f64) -> (f64, f64) {
-    if !(max_stiffness > 0.0) {
+    if max_stiffness.is_nan() || max_stiffness <= 0.0 {
         return (0.0, 0.0);
     }
     let damping = max_damping.min(2.0 * DEVICE_DAMPING_RATIO * (max_stiffness * mass).sqrt()).max(0.0);

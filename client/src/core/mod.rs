@@ -391,7 +391,7 @@ impl<S: Space> DeviceIndex<S> {
     }
 
     /// Where a VE position lies on the device (the inverse of `apply`'s position part).
-    fn to_device(&self, ve: &S::Point) -> S::Point {
+    fn device_point(&self, ve: &S::Point) -> S::Point {
         self.device_origin + (*ve - self.ve_origin) * self.position_scale
     }
 }
@@ -468,7 +468,7 @@ impl<S: Space> Boxes<S> {
             return None;
         }
         let extent = (0..lin).map(|a| op.reach_max[a] - op.reach_min[a]).fold(0.0, f64::max);
-        if !(extent > 0.0) {
+        if extent.is_nan() || extent <= 0.0 {
             return None;
         }
         let point = |v: &[f64]| S::Point::from_slice(&v[..lin]);
@@ -639,7 +639,7 @@ impl<S: Space> HapticCore<S> {
                 let (workspace, reach) = boxes.centres();
                 workspace + (*op - reach) * self.scales.position
             }
-            None => self.index.to_device(op),
+            None => self.index.device_point(op),
         }
     }
 

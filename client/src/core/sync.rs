@@ -93,7 +93,7 @@ impl<S: Space> History<S> {
 
     /// The state recorded at `time_s` (the newest at or before it, within half a millisecond), if still kept.
     pub fn at(&self, time_s: f64) -> Option<&Entry<S>> {
-        if self.len == 0 || !(time_s > 0.0) {
+        if self.len == 0 || time_s.is_nan() || time_s <= 0.0 {
             return None;
         }
         // Binary search for the last entry with time ≤ time_s.

@@ -106,20 +106,21 @@ pub fn check_request<S: Space>(device: &DeviceCaps, request: &MappingRequest) ->
     let lin = <S::Point as VecOps>::LEN;
     for a in 0..lin {
         let extent = device.workspace_max[a] - device.workspace_min[a];
-        if !(extent > 0.0) {
-            return Err(impossible(format!("its workspace has no extent on linear axis {a} ({extent} m)")));
+        if !is_positive(extent) {
+            let axis = ["x", "y", "z"].get(a).copied().unwrap_or("?");
+            return Err(impossible(format!("its workspace has no extent along {axis} ({extent} m)")));
         }
     }
-    if !(device.max_force_n > 0.0) {
+    if !is_positive(device.max_force_n) {
         return Err(impossible(format!("a peak force of {} N renders nothing", device.max_force_n)));
     }
-    if !(device.continuous_force_n > 0.0 && device.continuous_force_n <= device.max_force_n) {
+    if !is_positive(device.continuous_force_n) || device.continuous_force_n > device.max_force_n {
         return Err(impossible(format!(
             "continuous force {} N must be positive and at most the peak {} N",
             device.continuous_force_n, device.max_force_n
         )));
     }
-    if !(device.max_stiffness_n_per_m > 0.0) {
+    if !is_positive(device.max_stiffness_n_per_m) {
         return Err(impossible(format!("a stable stiffness of {} N/m renders nothing", device.max_stiffness_n_per_m)));
     }
     Ok(())
@@ -251,4 +252,9 @@ pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64, torque: bool) ->
 /// The gains as the welcome carries them.
 pub fn coupling_message<S: Space>(stiffness: &S::OpVec, damping: &S::OpVec) -> CouplingGains {
     CouplingGains { stiffness: stiffness.as_slice().to_vec(), damping: damping.as_slice().to_vec() }
+}
+
+/// `x > 0`, false for NaN: a limit that is not a positive number renders nothing.
+fn is_positive(x: f64) -> bool {
+    x > 0.0
 }
