@@ -39,7 +39,7 @@ mod sync;
 use std::time::Duration;
 
 use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{SceneKind, Space, VecOps};
+use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
 use kinloop_protocol::codec::limits::MAX_WRENCH;
 use kinloop_protocol::{uplink_flags, Mapping, SessionShape, Snapshot, Uplink, Welcome};
 
@@ -797,11 +797,12 @@ impl<S: Space> HapticCore<S> {
 
         // 3. Step the local model under the user's wrench.
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
-        // A pin passes no torque: a sensed wrist torque does not reach the linkage.
-        let sensed = device
-            .hand_wrench
-            .filter(|w| within(w.as_slice(), MAX_WRENCH))
-            .map(|w| mask_unactuated::<S>(&self.scales.wrench_to_ve::<S>(&w), &self.limits));
+        // The sensor saturates at the device's peaks (a hand can push harder than the motors, but the
+        // linkage feels what the device can answer); a pin passes no torque (its limit is 0).
+        let sensed = device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH)).map(|w| {
+            let (in_range, _) = clip_wrench_parts::<S>(&w, self.limits.max_force_n, self.limits.max_torque_nm);
+            self.scales.wrench_to_ve::<S>(&in_range)
+        });
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
         let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;

@@ -335,6 +335,27 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
     }
 }
 
+/// The wrench with its force and its torque each scaled back to at most `max_force` and `max_torque`
+/// (each keeps its direction), and whether anything was cut. Force and torque are limited apart, as a
+/// force sensor saturates and as a device's peaks are rated: a wrist torque past its range says nothing
+/// about the force.
+pub fn clip_wrench_parts<S: Space>(wrench: &S::OpVec, max_force: f64, max_torque: f64) -> (S::OpVec, bool) {
+    let lin = <S::Point as VecOps>::LEN;
+    let parts = [(0..lin, S::op_lin(wrench).norm(), max_force), (lin..S::DIM, S::op_ang(wrench).norm(), max_torque)];
+    let mut out = *wrench;
+    let mut clipped = false;
+    for (axes, magnitude, limit) in parts {
+        if magnitude > limit {
+            let scale = limit / magnitude;
+            for axis in axes {
+                out[axis] *= scale;
+            }
+            clipped = true;
+        }
+    }
+    (out, clipped)
+}
+
 /// The plane: positions `(x, y)`, orientation an angle about z.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Planar;
@@ -698,6 +719,23 @@ impl Space for Spatial {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Force and torque saturate apart: a torque past its limit is scaled back without touching the
+    /// force, each part keeps its direction, and a zero limit zeroes its part.
+    #[test]
+    fn wrench_parts_clip_independently_keeping_direction() {
+        let w = Vector3::new(3.0, 4.0, 2.0); // planar: force (3, 4), |f| = 5; torque 2
+        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 10.0, 0.5);
+        assert!(clipped);
+        assert_eq!((out[0], out[1]), (3.0, 4.0));
+        assert!((out[2] - 0.5).abs() < 1e-15);
+        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 2.5, 0.0);
+        assert!(clipped);
+        assert!((out[0] - 1.5).abs() < 1e-15 && (out[1] - 2.0).abs() < 1e-15 && out[2] == 0.0);
+        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 5.0, 2.0);
+        assert!(!clipped);
+        assert_eq!(out, w);
+    }
 
     /// Kinetic energy from the world-frame spatial inertia equals ½ m |v_c|² + ½ ωᵀ I ω computed directly.
     #[test]

@@ -10,6 +10,7 @@
 //! dropped uplink would leave the coupling to fade out.
 
 use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::space::clip_wrench_parts;
 use kinloop_linkage::{Space, VecOps};
 use kinloop_protocol::{DeviceCaps, Mapping, Uplink};
 
@@ -231,26 +232,14 @@ pub fn clip_hand_wrench<S: Space>(
     rating: &WrenchLimits,
     absurd_factor: f64,
 ) -> Result<(S::OpVec, bool), UplinkRejection> {
-    let lin = <S::Point as VecOps>::LEN;
-    let parts = [
-        ("force", 0..lin, S::op_lin(wrench).norm(), rating.max_force_n),
-        ("torque", lin..S::DIM, S::op_ang(wrench).norm(), rating.max_torque_nm),
+    let magnitudes = [
+        ("force", S::op_lin(wrench).norm(), rating.max_force_n),
+        ("torque", S::op_ang(wrench).norm(), rating.max_torque_nm),
     ];
-    let mut out = *wrench;
-    let mut clipped = false;
-    for (field, axes, magnitude, limit) in parts {
-        if magnitude > limit * absurd_factor {
-            return Err(UplinkRejection::WrenchAbsurd { field, magnitude, rating: limit });
-        }
-        if magnitude > limit {
-            let scale = limit / magnitude;
-            for axis in axes {
-                out[axis] *= scale;
-            }
-            clipped = true;
-        }
+    if let Some((field, magnitude, limit)) = magnitudes.into_iter().find(|(_, m, limit)| *m > limit * absurd_factor) {
+        return Err(UplinkRejection::WrenchAbsurd { field, magnitude, rating: limit });
     }
-    Ok((out, clipped))
+    Ok(clip_wrench_parts::<S>(wrench, rating.max_force_n, rating.max_torque_nm))
 }
 
 #[cfg(test)]
