@@ -1,7 +1,10 @@
 //! `kinloop bench`: a fixed suite of the hot paths, each measured as the median over batches in one run.
-//! With `--json`, one object per line: `{"name": ..., "ns_per_call": ..., ...}`. Cases with a goal in the
-//! issues (`server/ve_tick_users_N`, `client/tick_testbed`) also carry `goal_ns` and `meets_goal`.
+//! Three outputs of the same suite: plain lines (the default); with `--json`, one object per line
+//! (`{"name": ..., "ns_per_call": ..., ...}`); with `--markdown`, one Markdown table after a line naming the
+//! machine and the command (what docs/benchmarks.md is made of). Cases with a goal in the issues carry
+//! `goal_ns` and `meets_goal` (JSON) or a goal cell (Markdown).
 
+use std::fmt::Write as _;
 use std::time::Duration;
 
 use anyhow::{ensure, Context, Result};
@@ -13,8 +16,11 @@ use serde_json::{json, Value};
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Print one JSON object per line.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "markdown")]
     pub json: bool,
+    /// Print one Markdown table (case, median, p10, p90, goal) after a line naming the machine and the command.
+    #[arg(long)]
+    pub markdown: bool,
     /// Seconds of measurement per case (the suite has about 20 cases).
     #[arg(long, default_value_t = 1.0)]
     pub seconds: f64,
@@ -23,8 +29,26 @@ pub struct BenchArgs {
     pub filter: Option<String>,
 }
 
+/// One measured case, kept for the Markdown table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Case name, e.g. `ve_step/testbed`.
+    pub name: String,
+    /// Median, ns per call.
+    pub median_ns: f64,
+    /// 10th and 90th percentiles over batches, ns per call (absent where the case measures otherwise).
+    pub p10_ns: Option<f64>,
+    /// See `p10_ns`.
+    pub p90_ns: Option<f64>,
+    /// The goal from the issues, ns per call.
+    pub goal_ns: Option<f64>,
+    /// What else the case reports (snapshot bytes, a p99).
+    pub note: Option<String>,
+}
+
 struct Reporter<'a> {
     args: &'a BenchArgs,
+    rows: Vec<Row>,
 }
 
 impl Reporter<'_> {
@@ -32,14 +56,18 @@ impl Reporter<'_> {
         self.args.filter.as_deref().is_none_or(|f| name.contains(f))
     }
 
-    fn emit(&self, name: &str, ns_per_call: f64, extra: Value) {
-        let mut obj = json!({ "name": name, "ns_per_call": ns_per_call });
+    fn emit(&mut self, row: Row, extra: Value) {
+        let mut obj = json!({ "name": row.name, "ns_per_call": row.median_ns });
         if let (Some(o), Value::Object(e)) = (obj.as_object_mut(), extra) {
             o.extend(e);
         }
+        if let Some(goal) = row.goal_ns {
+            obj["goal_ns"] = json!(goal);
+            obj["meets_goal"] = json!(row.median_ns <= goal);
+        }
         if self.args.json {
             println!("{obj}");
-        } else {
+        } else if !self.args.markdown {
             let rest: Vec<String> = obj
                 .as_object()
                 .into_iter()
@@ -47,20 +75,26 @@ impl Reporter<'_> {
                 .filter(|(k, _)| *k != "name" && *k != "ns_per_call")
                 .map(|(k, v)| format!("{k}={v}"))
                 .collect();
-            println!("{name:<36} {:>12.1} ns   {}", ns_per_call, rest.join(" "));
+            println!("{:<36} {:>12.1} ns   {}", row.name, row.median_ns, rest.join(" "));
         }
+        self.rows.push(row);
     }
 
-    fn timing(&self, name: &str, t: Timing) {
-        self.emit(name, t.median_ns, timing_fields(&t));
+    fn timing(&mut self, name: &str, t: Timing) {
+        self.timing_with_goal(name, t, goal_ns(name));
     }
 
-    /// A timing against its goal (ns per call): the median must not exceed it.
-    fn timing_with_goal(&self, name: &str, t: Timing, goal_ns: f64) {
-        let mut extra = timing_fields(&t);
-        extra["goal_ns"] = json!(goal_ns);
-        extra["meets_goal"] = json!(t.median_ns <= goal_ns);
-        self.emit(name, t.median_ns, extra);
+    /// A timing against its goal (ns per call), if it has one: the median must not exceed it.
+    fn timing_with_goal(&mut self, name: &str, t: Timing, goal_ns: Option<f64>) {
+        let row = Row {
+            name: name.to_owned(),
+            median_ns: t.median_ns,
+            p10_ns: Some(t.p10_ns),
+            p90_ns: Some(t.p90_ns),
+            goal_ns,
+            note: None,
+        };
+        self.emit(row, timing_fields(&t));
     }
 }
 
@@ -79,17 +113,39 @@ fn ve_tick_goal_ns(users: usize) -> f64 {
 /// Issue 5's goal for one haptic tick on the testbed.
 const CLIENT_TICK_GOAL_NS: f64 = 500.0;
 
+/// The goals of the dynamics core (issue 2) and the wire (issue 3), ns per call.
+fn goal_ns(name: &str) -> Option<f64> {
+    match name {
+        "ve_step/testbed" => Some(400.0),
+        "op_space/testbed" => Some(250.0),
+        "local_model/testbed" => Some(100.0),
+        "ve_step/chain50_loops5" => Some(14_000.0),
+        "codec/snapshot_testbed" => Some(1000.0),
+        "quic/datagram_oneway_loopback" => Some(150_000.0),
+        _ => None,
+    }
+}
+
 /// Longest measurement per case `--seconds` accepts.
 const MAX_SECONDS: f64 = 30.0;
 
-/// Runs the suite.
+/// Runs the suite and prints it in the form the arguments ask for.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    let rows = measure_suite(args)?;
+    if args.markdown {
+        print!("{}", markdown(&rows, &machine(), &command_line(args)));
+    }
+    Ok(())
+}
+
+/// Runs the suite; plain lines or JSON lines are printed as each case finishes (unless `--markdown`).
+pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
     ensure!(
         args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= MAX_SECONDS,
         "--seconds: must be in (0, {MAX_SECONDS}] s per case, got {}",
         args.seconds
     );
-    let r = Reporter { args };
+    let mut r = Reporter { args, rows: Vec::new() };
     let budget = Duration::from_secs_f64(args.seconds.max(0.05));
 
     for scene in ["testbed", "chain20_loops1", "chain20_loops5", "chain50_loops1", "chain50_loops5"] {
@@ -109,23 +165,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if r.wanted("op_space/testbed") {
         let mut case = Case::new("paper-testbed").ok_or_else(|| anyhow::anyhow!("testbed"))?;
         case.prepare_op_space();
-        r.timing(
-            "op_space/testbed",
-            measure(budget, || {
-                std::hint::black_box(case.op_space());
-            }),
-        );
+        let t = measure(budget, || {
+            std::hint::black_box(case.op_space());
+        });
+        r.timing("op_space/testbed", t);
     }
     if r.wanted("local_model/testbed") {
         let mut case = Case::new("paper-testbed").ok_or_else(|| anyhow::anyhow!("testbed"))?;
         let mut lm = case.local_model();
         let f = paper_wrench();
-        r.timing(
-            "local_model/testbed",
-            measure(budget, || {
-                std::hint::black_box(lm.step(1e-3, &f));
-            }),
-        );
+        let t = measure(budget, || {
+            std::hint::black_box(lm.step(1e-3, &f));
+        });
+        r.timing("local_model/testbed", t);
     }
     for users in VE_TICK_USERS {
         let name = format!("server/ve_tick_users_{users}");
@@ -135,22 +187,114 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         // Each batch builds its own VE (set-up not timed) and ticks it `calls` times from the paper's start.
         let t = measure_batches(budget, |calls| kinloop_server::bench::ve_tick_users(users, calls))
             .with_context(|| name.clone())?;
-        r.timing_with_goal(&name, t, ve_tick_goal_ns(users));
+        r.timing_with_goal(&name, t, Some(ve_tick_goal_ns(users)));
     }
     if r.wanted("client/tick_testbed") {
         let t = measure_batches(budget, kinloop_client::bench::client_tick_testbed).context("client/tick_testbed")?;
-        r.timing_with_goal("client/tick_testbed", t, CLIENT_TICK_GOAL_NS);
+        r.timing_with_goal("client/tick_testbed", t, Some(CLIENT_TICK_GOAL_NS));
     }
     if r.wanted("codec/snapshot_testbed") {
-        let iters = (200_000.0 * args.seconds).max(1000.0) as u64;
-        let (ns, bytes) = kinloop_protocol::bench::codec_snapshot_testbed(iters)?;
-        r.emit("codec/snapshot_testbed", ns, json!({ "bytes": bytes }));
+        let mut bytes = 0;
+        let t = measure_batches(budget, |calls| {
+            kinloop_protocol::bench::codec_snapshot_testbed(calls).map(|(ns, b)| {
+                bytes = b;
+                ns
+            })
+        })
+        .context("codec/snapshot_testbed")?;
+        let mut extra = timing_fields(&t);
+        extra["bytes"] = json!(bytes);
+        let row = Row {
+            name: "codec/snapshot_testbed".into(),
+            median_ns: t.median_ns,
+            p10_ns: Some(t.p10_ns),
+            p90_ns: Some(t.p90_ns),
+            goal_ns: goal_ns("codec/snapshot_testbed"),
+            note: Some(format!("encode + decode of a {bytes} B snapshot")),
+        };
+        r.emit(row, extra);
     }
     if r.wanted("quic/datagram_oneway_loopback") {
         let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
         let samples = (2000.0 * args.seconds).max(200.0) as usize;
         let (p50, p99) = runtime.block_on(kinloop_protocol::bench::quic_datagram_oneway_loopback(samples))?;
-        r.emit("quic/datagram_oneway_loopback", p50 * 1e3, json!({ "p50_us": p50, "p99_us": p99, "samples": samples }));
+        let row = Row {
+            name: "quic/datagram_oneway_loopback".into(),
+            median_ns: p50 * 1e3,
+            p10_ns: None,
+            p90_ns: None,
+            goal_ns: goal_ns("quic/datagram_oneway_loopback"),
+            note: Some(format!("p99 {} over {samples} datagrams", duration(p99 * 1e3))),
+        };
+        r.emit(row, json!({ "p50_us": p50, "p99_us": p99, "samples": samples }));
     }
-    Ok(())
+    Ok(r.rows)
+}
+
+/// The Markdown table: a line naming the machine and the command, then one row per case.
+pub fn markdown(rows: &[Row], machine: &str, command: &str) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "Machine: {machine}. Command: `{command}`.\n");
+    out.push_str("| case | median | p10 | p90 | goal | note |\n");
+    out.push_str("|---|---:|---:|---:|---|---|\n");
+    let opt = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), duration);
+    for row in rows {
+        let goal = row.goal_ns.map_or_else(String::new, |g| {
+            format!("≤ {} ({})", duration(g), if row.median_ns <= g { "met" } else { "missed" })
+        });
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} | {} |",
+            row.name,
+            duration(row.median_ns),
+            opt(row.p10_ns),
+            opt(row.p90_ns),
+            goal,
+            row.note.as_deref().unwrap_or("")
+        );
+    }
+    out
+}
+
+/// A time in ns with a unit that keeps three or four significant digits: `368 ns`, `1.03 µs`, `13.6 µs`.
+pub fn duration(ns: f64) -> String {
+    let (value, unit) = if ns < 1e3 {
+        (ns, "ns")
+    } else if ns < 1e6 {
+        (ns / 1e3, "µs")
+    } else {
+        (ns / 1e6, "ms")
+    };
+    let digits = if value < 10.0 {
+        2
+    } else if value < 100.0 {
+        1
+    } else {
+        0
+    };
+    format!("{value:.digits$} {unit}")
+}
+
+/// The CPU model and how many logical CPUs this process may use, e.g. `Intel(R) Xeon(R) ..., 2 CPUs`.
+pub fn machine() -> String {
+    let model = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|info| {
+        info.lines()
+            .find(|l| l.starts_with("model name"))
+            .and_then(|l| l.split_once(':'))
+            .map(|(_, v)| v.trim().to_owned())
+    });
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!("{}, {cpus} logical CPU{}", model.unwrap_or_else(|| "unknown CPU".into()), if cpus == 1 { "" } else { "s" })
+}
+
+/// The command that makes this table.
+fn command_line(args: &BenchArgs) -> String {
+    let mut cmd = String::from("kinloop bench --markdown");
+    if args.seconds != 1.0 {
+        let _ = write!(cmd, " --seconds {}", args.seconds);
+    }
+    if let Some(f) = &args.filter {
+        let _ = write!(cmd, " --filter {f}");
+    }
+    cmd
 }
