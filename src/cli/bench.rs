@@ -258,16 +258,17 @@ pub fn markdown(rows: &[Row], machine: &str, command: &str) -> String {
 
 /// A time in ns with a unit that keeps three or four significant digits: `368 ns`, `1.03 µs`, `13.6 µs`.
 pub fn duration(ns: f64) -> String {
-    let (value, unit) = if ns < 1e3 {
+    // Switch units where the rounded figure would reach 1000 (999.7 ns reads 1.00 µs, not 1000 ns).
+    let (value, unit) = if ns < 999.5 {
         (ns, "ns")
-    } else if ns < 1e6 {
+    } else if ns < 999.5e3 {
         (ns / 1e3, "µs")
     } else {
         (ns / 1e6, "ms")
     };
-    let digits = if value < 10.0 {
+    let digits = if value < 9.995 {
         2
-    } else if value < 100.0 {
+    } else if value < 99.95 {
         1
     } else {
         0
@@ -275,7 +276,7 @@ pub fn duration(ns: f64) -> String {
     format!("{value:.digits$} {unit}")
 }
 
-/// The CPU model and how many logical CPUs this process may use, e.g. `Intel(R) Xeon(R) ..., 2 CPUs`.
+/// The CPU model and how many logical CPUs this process may use, e.g. `AMD EPYC, 2 logical CPUs`.
 pub fn machine() -> String {
     let model = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|info| {
         info.lines()
@@ -297,4 +298,41 @@ fn command_line(args: &BenchArgs) -> String {
         let _ = write!(cmd, " --filter {f}");
     }
     cmd
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_keep_three_or_four_digits_and_switch_units_before_1000() {
+        let cases = [
+            (17.94, "17.9 ns"),
+            (366.4, "366 ns"),
+            (999.7, "1.00 µs"),
+            (9_996.0, "10.0 µs"),
+            (13_612.0, "13.6 µs"),
+            (150_000.0, "150 µs"),
+            (2_180_000.0, "2.18 ms"),
+        ];
+        for (ns, text) in cases {
+            assert_eq!(duration(ns), text, "{ns} ns");
+        }
+    }
+
+    #[test]
+    fn a_row_without_percentiles_or_goal_keeps_six_cells() {
+        let row = Row {
+            name: "quic/x".into(),
+            median_ns: 33_500.0,
+            p10_ns: None,
+            p90_ns: None,
+            goal_ns: Some(150_000.0),
+            note: Some("p99 60.2 µs".into()),
+        };
+        let md = markdown(&[row], "CPU, 2 logical CPUs", "kinloop bench --markdown");
+        let last = md.lines().last().unwrap();
+        assert_eq!(last, "| `quic/x` | 33.5 µs | – | – | ≤ 150 µs (met) | p99 60.2 µs |");
+        assert_eq!(last.matches('|').count(), 7);
+    }
 }
