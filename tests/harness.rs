@@ -239,3 +239,33 @@ fn the_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
     assert!(c_observed.device_op_rms_m < 0.5 * c_plain.device_op_rms_m, "{c_observed:#?} vs {c_plain:#?}");
     assert!(c_observed.passivity_activations > 0 && c_observed.max_force_ratio <= 1.0);
 }
+
+/// A user joins a linkage that is moving, 50 ms away: the Watt six-bar left to swing under gravity for
+/// 0.3 s (`rest_unheld` off, as `kinloop-server --free-run`), then a firm hand grasps link5 with sim:paper.
+/// Until the VE has heard from the newcomer it holds link5 where it was at the join, so the newcomer's local
+/// model starts there, at rest, where its device is indexed. Extrapolating the moving OP instead put the
+/// model ahead of the device by its speed times the delay and let the two loops fight over the gap: 95 % of
+/// ticks saturated and VE restores. The user catches the swing (a transient of a few cm) and then renders.
+#[test]
+fn a_user_joining_a_swinging_linkage_over_a_delayed_link_renders() {
+    use kinloop_client::device::DevicePreset;
+    let scene = kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap();
+    let mut late = ClientPlan::new("late", "link5", DevicePreset::Paper);
+    late.user = UserSpec::Hand(HandSpec::touring(HandKind::Firm));
+    late.join_at = Duration::from_millis(300);
+    let link = LinkConfig { delay: Duration::from_millis(50), seed: 4, ..LinkConfig::default() };
+    let plan = SessionPlan {
+        scene,
+        ve: VeConfig { rest_unheld: false, ..VeConfig::default() },
+        clients: vec![late.with_link(link)],
+        duration: Duration::from_secs(4),
+        record_every: 0,
+    };
+    let (s, _) = run(&plan, &mut |_| {}).unwrap();
+    let c = &s.clients[0];
+    assert_eq!(s.ve_restores, 0);
+    assert!(s.max_closure_error <= 1e-6, "closure {:.3e}", s.max_closure_error);
+    assert!(c.non_finite == 0 && c.max_force_ratio <= 1.0, "{c:?}");
+    assert!(c.saturated_fraction <= 0.05, "clamped on {:.1} % of ticks", c.saturated_fraction * 100.0);
+    assert!(c.device_op_rms_m <= 0.010, "device-OP RMS {:.1} mm", c.device_op_rms_m * 1e3);
+}

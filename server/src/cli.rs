@@ -59,7 +59,7 @@ struct Cli {
     #[arg(long, value_name = "FILE")]
     record: Option<PathBuf>,
     /// Graphics-controller stiffness K_g as `LINEAR,ANGULAR` (N/m, N·m/rad) for every user; default: each
-    /// user's designed from its OP's lightest effective mass (4 Hz, critically damped; printed at join). The
+    /// user's designed from its OP's lightest effective mass (8 Hz, critically damped; printed at join). The
     /// paper's testbed values are 1000,10000 (with --coupling-damping 100,10000).
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_stiffness: Option<AxisGains>,
@@ -70,6 +70,10 @@ struct Cli {
     /// Time-domain passivity observer/controller on each coupling.
     #[arg(long, value_name = "on|off", default_value = "off")]
     passivity: Switch,
+    /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
+    /// first user grasps a still linkage rather than one that gravity has been swinging).
+    #[arg(long)]
+    free_run: bool,
     /// Log statistics every S seconds (0: never).
     #[arg(long, value_name = "S", default_value_t = 10.0)]
     stats_every: f64,
@@ -163,6 +167,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         passivity: cli.passivity == Switch::On,
         coupling_stiffness: cli.coupling_stiffness.clone(),
         coupling_damping: cli.coupling_damping.clone(),
+        rest_unheld: !cli.free_run,
         ..VeConfig::default()
     };
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;

@@ -645,3 +645,41 @@ fn gravity_compensation_holds_the_weight_at_the_users_op() {
     println!("after the release: {held:.2e} m held, {sagged:.2e} m sagged");
     assert!(held < 0.05 * sagged, "held {held} m against {sagged} m sagged");
 }
+
+/// A linkage nobody holds waits at rest (`VeConfig::rest_unheld`, the default): the Watt six-bar, which
+/// gravity swings through about 2 J when left to itself, keeps its configuration to the bit for a second
+/// without users, moves under gravity once a manipulator holds it without pushing, and rests again when the
+/// last user has faded out. With `rest_unheld` off the same second moves it (the free run a server can ask for).
+#[test]
+fn a_linkage_nobody_holds_waits_at_rest() {
+    let ms = Duration::from_millis;
+    let unheld = |rest_unheld: bool| {
+        let mut ve =
+            core(model::<kinloop_linkage::Planar>("watt-six-bar"), VeConfig { rest_unheld, ..VeConfig::default() });
+        let q0 = ve.state().q.clone();
+        run(&mut ve, ms(1000), &mut Vec::new(), |_, _, _| {});
+        let moved = (ve.state().q - &q0).amax();
+        (ve, q0, moved)
+    };
+    let (_, _, free) = unheld(false);
+    assert!(free > 0.05, "left to itself the six-bar falls: it moved {free} rad");
+    let (mut ve, q0, rested) = unheld(true);
+    assert_eq!(rested, 0.0, "nobody holds it: it must not move");
+    assert_eq!(ve.state().qd.amax(), 0.0);
+    assert!(ve.metrics().ticks >= 1000, "the VE still ticks while it rests");
+
+    // A manipulator joins and follows along without pushing (its local model wherever the VE's snapshots
+    // put the OP): the VE steps again and gravity moves the linkage under the user's hand.
+    let user = ve.join(ms(1000), request("A", Role::Manipulator, "link5", 3)).unwrap().user_id;
+    run_following(&mut ve, ms(3000), &[user], &[[0.0; 3]]);
+    let moved = (ve.state().q - &q0).amax();
+    assert!(moved > 1e-3, "with a user present the VE steps: it moved {moved} rad");
+    // The user leaves and fades out: nobody holds it any more, and it rests where it was.
+    ve.leave(ms(3000), user).unwrap();
+    run(&mut ve, ms(3500), &mut Vec::new(), |_, _, _| {});
+    assert_eq!(ve.state().users().len(), 0, "the user is gone once faded");
+    let parked = ve.state().q.clone();
+    run(&mut ve, ms(4500), &mut Vec::new(), |_, _, _| {});
+    assert_eq!((ve.state().q - &parked).amax(), 0.0, "after the last user it rests again");
+    assert_eq!(ve.state().qd.amax(), 0.0);
+}

@@ -723,7 +723,18 @@ impl<S: Space> HapticCore<S> {
         self.model.update(&self.active);
         self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
         if restart {
-            self.model.set_state(self.predicted_op(now), self.active.op_twist);
+            // Until the VE has seen one of this client's uplinks it holds the OP where it was at the join
+            // (the grasp: pose held, twist zero), so the model starts there, at rest, where the device is
+            // indexed. Extrapolating a linkage that was moving when the user joined put the model ahead of
+            // the device by its speed times the delay and made both loops fight over the gap (a Watt six-bar
+            // swinging for 0.3 s before the join, 50 ms one way: 95 % of ticks saturated, VE restores; at rest
+            // here, none saturated). Later restarts (a link that came back) find a VE that moves by itself:
+            // the model starts where it is now.
+            if self.active.uplink_time_s > 0.0 {
+                self.model.set_state(self.predicted_op(now), self.active.op_twist);
+            } else {
+                self.model.set_state(self.active.op_pose, S::OpVec::zero());
+            }
             self.model.set_inverse_inertia(&self.frame.inverse_inertia);
             self.reaction = S::OpVec::zero();
         }

@@ -127,6 +127,12 @@ pub struct VeConfig {
     pub max_catch_up_ticks: u32,
     /// Seed of the session ids handed out in welcomes.
     pub session_seed: u64,
+    /// Hold the linkage at rest while no manipulator's coupling holds it (the VE does not step, its
+    /// velocity is zero). A linkage left to itself falls and swings for as long as the server runs, and the
+    /// first user to join then has to catch a moving linkage through the network's delay: a Watt six-bar
+    /// swinging for 1 s before the join went unstable at 50 ms one way (99 % of ticks saturated), the same
+    /// join at rest renders within 2 mm. Off (`kinloop-server --free-run`) the linkage moves on its own.
+    pub rest_unheld: bool,
 }
 
 impl VeConfig {
@@ -155,6 +161,7 @@ impl VeConfig {
             guards: GuardLimits::default(),
             max_catch_up_ticks: 10,
             session_seed: 0x006b_696e_6c6f_6f70,
+            rest_unheld: true,
         }
     }
 

@@ -577,6 +577,15 @@ impl<S: Space> VeCore<S> {
     fn tick(&mut self, at: Duration) {
         let dt = self.step_config.dt;
         self.update_couplings(at, dt);
+        if self.config.rest_unheld && self.couplings.iter().all(|c| c.weight <= 0.0) {
+            // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`).
+            self.qd.fill(0.0);
+            for c in &mut self.couplings {
+                c.step_wrench = S::OpVec::zero();
+            }
+            self.finish_tick(at);
+            return;
+        }
         self.step_start_q.as_mut_slice().copy_from_slice(self.q.as_slice());
         self.refresh_op_order();
         let mut forces = VeForces {
@@ -616,6 +625,11 @@ impl<S: Space> VeCore<S> {
                 self.events.push(VeEvent::StateRestored { step: self.step, error });
             }
         }
+        self.finish_tick(at);
+    }
+
+    /// The bookkeeping that ends every tick, stepped or at rest.
+    fn finish_tick(&mut self, at: Duration) {
         self.remove_faded_users();
         self.step += 1;
         self.metrics.ticks += 1;
