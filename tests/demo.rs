@@ -77,7 +77,7 @@ struct Attempted {
 /// sometimes stalls it for minutes (an idle 1 kHz loop has missed 10-54 % of its deadlines in a bad hour), and
 /// the fine claims checked on the result (tracking, the harness's path) are claims about a session that ran
 /// on time. Every run, stalled or not, must be sane: device limits, closure, files.
-fn run_on_time(dir: &Path, users: usize, seconds: f64) -> Attempted {
+fn run_on_time(dir: &Path, make: impl Fn(&Path) -> DemoOptions) -> Attempted {
     let mut stalls = Vec::new();
     let mut least_missed: Option<(f64, DemoReport)> = None;
     let mut calm_budget = CALM_WAIT;
@@ -96,7 +96,9 @@ fn run_on_time(dir: &Path, users: usize, seconds: f64) -> Attempted {
         }
         let out = dir.join(format!("attempt{attempt}"));
         std::fs::create_dir_all(&out).unwrap();
-        let report = run_bounded(options(&out, users, seconds));
+        let options = make(&out);
+        let users = options.users;
+        let report = run_bounded(options);
         assert_sane(&report, users);
         let s = &report.summary;
         let stale: u64 = s
@@ -186,7 +188,7 @@ fn demo_op_path(report: &DemoReport, user: u32) -> Trajectory {
 fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
     let dir = tempfile::tempdir().unwrap();
     let seconds = 1.5;
-    let run = run_on_time(dir.path(), 2, seconds);
+    let run = run_on_time(dir.path(), |out| options(out, 2, seconds));
     if !run.on_time {
         println!("the host stalled all {ATTEMPTS} runs, so only the coarse bounds are checked: {:?}", run.stalls);
     }
@@ -304,4 +306,85 @@ fn timer_floor_reports_an_idle_loops_lateness() {
     let bad = std::process::Command::new(bin).args(["timer-floor", "--rate", "0"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && stderr.contains("--rate") && !stderr.contains("panicked"), "{stderr}");
+}
+
+/// What `kinloop-server --scene S` and `kinloop-client --op OP --device D` do with default flags, in real
+/// time over loopback QUIC (the programs' own drivers): a subset of the renderability matrix (the
+/// experiment runs all of it in virtual time) chosen to cover every scene kind, every device, both
+/// networks, four hands and three scenes nobody tuned for. Each pair must render by the experiment's
+/// bounds: stable (no VE restore, no withheld snapshot, loops closed within 1e-6 m, no non-finite value),
+/// the device at its force limit on at most 5 % of its ticks, and within 5 mm RMS of its OP on a perfect
+/// network, 10 mm at 50 ms one-way with 5 ms jitter (device space). A run the host stalled is held to the
+/// stability bounds only and tried again.
+#[test]
+fn shipped_linkages_render_with_default_flags_in_real_time() {
+    use kinloop::experiments::renderability::{CLAMPED_BOUND, CLOSURE_BOUND_M, RMS_DELAYED_M, RMS_PERFECT_M};
+    use kinloop_client::user::HandKind;
+    use kinloop_protocol::emulator::LinkConfig;
+
+    // scene, OP, device, hand, one-way delay (ms)
+    const PAIRS: [(&str, &str, DevicePreset, HandKind, u64); 8] = [
+        ("fourbar-crank-rocker", "coupler", DevicePreset::Touch, HandKind::Soft, 50),
+        ("watt-six-bar", "link5", DevicePreset::Paper, HandKind::Firm, 0),
+        ("parallelogram", "coupler", DevicePreset::Falcon, HandKind::Soft, 50),
+        ("spherical-four-bar", "coupler", DevicePreset::Touch, HandKind::Firm, 0),
+        ("stephenson-six-bar", "output", DevicePreset::Falcon, HandKind::Release, 0),
+        ("five-bar-robot", "effector", DevicePreset::Touch, HandKind::Poke, 50),
+        ("bennett-linkage", "coupler", DevicePreset::Falcon, HandKind::Soft, 50),
+        ("slider-crank", "slider", DevicePreset::Paper, HandKind::Soft, 50),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut failures = Vec::new();
+    for (i, &(scene, op, device, hand, delay_ms)) in PAIRS.iter().enumerate() {
+        let label = format!("{scene}:{op} {} {} hand, {delay_ms} ms", device.name(), hand.name());
+        let run = run_on_time(&dir.path().join(format!("pair{i}")), |out| {
+            let mut o = DemoOptions::new(out).unwrap();
+            o.scene = kinloop_linkage::builtin::scene(scene).unwrap().unwrap();
+            o.scene_label = scene.into();
+            o.duration = Duration::from_secs(4);
+            o.progress = false;
+            o.device = Some(device);
+            o.first_op = Some(op.into());
+            o.hand = Some(hand);
+            if delay_ms > 0 {
+                let (delay, jitter) = (Duration::from_millis(delay_ms), Duration::from_millis(5));
+                o.link = LinkConfig { delay, jitter, seed: 7, ..LinkConfig::default() };
+            }
+            o
+        });
+        let s = &run.report.summary;
+        let u = &s.per_user[0];
+        let ticks = u.client["ticks"].as_f64().expect("client ticks");
+        let clamped = u.client["clamped_ticks"].as_f64().expect("client clamped_ticks") / ticks.max(1.0);
+        let rms = u.device_op_rms_mm.expect("distances from the records") * 1e-3;
+        println!(
+            "{label}: clamped {:.1} %, device-OP RMS {:.2} mm, closure {:.1e} m, restores {}{}",
+            clamped * 100.0,
+            rms * 1e3,
+            s.max_closure_error,
+            s.ve_restores,
+            if run.on_time { "" } else { " (host stalled every attempt)" }
+        );
+        let mut broken = Vec::new();
+        if s.ve_restores > 0 || s.snapshots_withheld > 0 {
+            broken.push(format!("{} VE restores, {} snapshots withheld", s.ve_restores, s.snapshots_withheld));
+        }
+        if s.max_closure_error > CLOSURE_BOUND_M {
+            broken.push(format!("closure {:.1e} m", s.max_closure_error));
+        }
+        if u.client["non_finite_events"].as_u64() != Some(0) {
+            broken.push(format!("non-finite events {}", u.client["non_finite_events"]));
+        }
+        let rms_bound = if delay_ms == 0 { RMS_PERFECT_M } else { RMS_DELAYED_M };
+        if run.on_time && clamped > CLAMPED_BOUND {
+            broken.push(format!("clamped on {:.1} % of ticks", clamped * 100.0));
+        }
+        if run.on_time && rms > rms_bound {
+            broken.push(format!("device-OP RMS {:.2} mm", rms * 1e3));
+        }
+        if !broken.is_empty() {
+            failures.push(format!("{label}: {}", broken.join(", ")));
+        }
+    }
+    assert!(failures.is_empty(), "pairs that do not render with default flags:\n{}", failures.join("\n"));
 }

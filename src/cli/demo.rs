@@ -1,5 +1,5 @@
 //! `kinloop demo [--users N] [--duration S] [--delay D] [--jitter J] [--loss L] [--seed N] [--scene FILE]
-//! [--json] [--out DIR] [--view ADDR [--view-grab]]`: a server and N simulated-device clients over loopback QUIC in this process, in
+//! [--device NAME] [--op NAME] [--hand KIND] [--json] [--out DIR] [--view ADDR [--view-grab]]`: a server and N simulated-device clients over loopback QUIC in this process, in
 //! real time (see [`crate::demo`]); prints a summary (one JSON object on stdout with `--json`) and writes
 //! the charts, the records and `summary.json` into `DIR/demo/`.
 
@@ -7,6 +7,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
+use kinloop_client::device::DevicePreset;
+use kinloop_client::user::HandKind;
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
 
 use kinloop_server::view::ViewConfig;
@@ -50,6 +52,23 @@ pub struct DemoArgs {
     /// instead of touring with hands.
     #[arg(long)]
     pub paper_push: bool,
+    /// The device every user holds: sim:paper, sim:falcon or sim:touch (default: the scene's, as
+    /// `kinloop-client` picks it).
+    #[arg(long, value_name = "NAME")]
+    pub device: Option<DevicePreset>,
+    /// The first user's operational point (default: the scene's first); further users take the next ones.
+    #[arg(long, value_name = "NAME")]
+    pub op: Option<String>,
+    /// Every user's hand: soft, firm, release or poke (default: soft and firm in turn).
+    #[arg(long, value_name = "KIND", value_parser = parse_hand)]
+    pub hand: Option<HandKind>,
+}
+
+fn parse_hand(s: &str) -> Result<HandKind, String> {
+    HandKind::parse(s).ok_or_else(|| {
+        let names: Vec<&str> = HandKind::ALL.iter().map(|k| k.name()).collect();
+        format!("{s:?} is not a hand: one of {}", names.join(", "))
+    })
 }
 
 fn parse_users(s: &str) -> Result<usize, String> {
@@ -87,7 +106,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         realtime: !args.no_realtime,
         view: args.view.map(|listen| ViewConfig { grab_without_token: args.view_grab, ..ViewConfig::new(listen) }),
         paper_push: args.paper_push,
-        ..DemoOptions::new(&args.out)?
+        device: args.device,
+        first_op: args.op.clone(),
+        hand: args.hand,
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {

@@ -235,6 +235,15 @@ fn check(options: &DemoOptions) -> Result<()> {
         "scene {} has no operational point ([[op]]) for the users to hold",
         options.scene_label
     );
+    if let Some(op) = &options.first_op {
+        let names: Vec<&str> = options.scene.ops.iter().map(|o| o.name.as_str()).collect();
+        anyhow::ensure!(
+            names.contains(&op.as_str()),
+            "--op {op}: scene {} has {}",
+            options.scene_label,
+            names.join(", ")
+        );
+    }
     Ok(())
 }
 

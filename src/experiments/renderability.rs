@@ -116,6 +116,11 @@ pub struct PointResult {
     pub device_op_rms_m: f64,
     /// Largest closure error (m).
     pub max_closure_error_m: f64,
+    /// The energy criterion's numbers: the largest excess of the linkage's energy over the hands' work, and
+    /// the largest energy that had flowed (J).
+    pub energy_excess_j: f64,
+    /// See `energy_excess_j`.
+    pub energy_flow_max_j: f64,
     /// Position scale chosen.
     pub position_scale: f64,
     /// Force scale chosen.
@@ -190,6 +195,8 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
         clamped_fraction: c.saturated_fraction,
         device_op_rms_m: c.device_op_rms_m,
         max_closure_error_m: summary.max_closure_error,
+        energy_excess_j: verdict.energy_excess_j,
+        energy_flow_max_j: verdict.energy_flow_max_j,
         position_scale: c.position_scale,
         force_scale: c.force_scale,
         coupling: c.coupling.clone(),
@@ -267,7 +274,8 @@ pub fn run(options: &Options) -> Result<super::Report> {
                 "network": r.point.network.name(), "hand": r.point.hand.name(),
                 "renders": r.renders, "failures": r.failures, "stable": r.stable, "ve_restores": r.ve_restores,
                 "clamped_fraction": round(r.clamped_fraction, 4), "device_op_rms_mm": round(r.device_op_rms_m * 1e3, 3),
-                "max_closure_error_m": r.max_closure_error_m, "position_scale": r.position_scale,
+                "max_closure_error_m": r.max_closure_error_m,
+                "energy_excess_j": r.energy_excess_j, "energy_flow_max_j": r.energy_flow_max_j, "position_scale": r.position_scale,
                 "force_scale": r.force_scale, "coupling_kg_bg": r.coupling, "gains_kj_bj_kpc_bpc": r.gains,
             })).collect::<Vec<_>>(),
         }),
