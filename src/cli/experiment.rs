@@ -16,7 +16,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 9] = [
+const WHICH: [Which; 10] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -25,6 +25,7 @@ const WHICH: [Which; 9] = [
     Which::One(Name::Scale),
     Which::One(Name::Pauses),
     Which::One(Name::Renderability),
+    Which::One(Name::RenderabilityLive),
     Which::All,
 ];
 

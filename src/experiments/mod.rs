@@ -10,7 +10,7 @@
 //! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
-//! | [`renderability`] | does every shipped linkage render with default settings, on every device? |
+//! | [`renderability`] | does every shipped linkage render with default settings, on every device? (`renderability-live`: the same in real time) |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
 //! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
@@ -50,11 +50,13 @@ pub enum Name {
     Pauses,
     /// Every shipped linkage with default settings.
     Renderability,
+    /// The same in real time over loopback QUIC.
+    RenderabilityLive,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 8] = [
+    pub const ALL: [Name; 9] = [
         Name::Paper,
         Name::SpeedAccuracy,
         Name::Stability,
@@ -63,6 +65,7 @@ impl Name {
         Name::Scale,
         Name::Pauses,
         Name::Renderability,
+        Name::RenderabilityLive,
     ];
 
     /// What the experiment answers, in a line (the command line's help).
@@ -76,6 +79,7 @@ impl Name {
             Name::Scale => "cost and snapshot size against links and loops",
             Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
             Name::Renderability => "every scene x OP x device x network x hand with default settings",
+            Name::RenderabilityLive => "the renderability matrix in real time over loopback QUIC (about 20 min)",
         }
     }
 
@@ -90,6 +94,7 @@ impl Name {
             Name::Scale => "scale",
             Name::Pauses => "pauses",
             Name::Renderability => "renderability",
+            Name::RenderabilityLive => "renderability-live",
         }
     }
 }
@@ -105,5 +110,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Scale => scale::run(options),
         Name::Pauses => pauses::run(options),
         Name::Renderability => renderability::run(options),
+        Name::RenderabilityLive => renderability::run_live(options),
     }
 }

@@ -116,11 +116,11 @@ pub struct PointResult {
     pub device_op_rms_m: f64,
     /// Largest closure error (m).
     pub max_closure_error_m: f64,
-    /// The energy criterion's numbers: the largest excess of the linkage's energy over the hands' work, and
-    /// the largest energy that had flowed (J).
-    pub energy_excess_j: f64,
+    /// The energy criterion's numbers (virtual time only): the largest excess of the linkage's energy over
+    /// the hands' work, and the largest energy that had flowed (J).
+    pub energy_excess_j: Option<f64>,
     /// See `energy_excess_j`.
-    pub energy_flow_max_j: f64,
+    pub energy_flow_max_j: Option<f64>,
     /// Position scale chosen.
     pub position_scale: f64,
     /// Force scale chosen.
@@ -174,18 +174,10 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
     if !verdict.stable {
         failures.extend(verdict.reasons.iter().map(|r| r.to_string()));
     }
-    if !within(summary.max_closure_error, CLOSURE_BOUND_M) {
-        failures.push(format!("closure {:.1e} m", summary.max_closure_error));
-    }
     if c.non_finite > 0 {
         failures.push("non-finite value".into());
     }
-    if !within(c.saturated_fraction, CLAMPED_BOUND) {
-        failures.push(format!("clamped {:.1} %", c.saturated_fraction * 100.0));
-    }
-    if !within(c.device_op_rms_m, point.network.rms_bound()) {
-        failures.push(format!("RMS {:.1} mm", c.device_op_rms_m * 1e3));
-    }
+    failures.extend(bound_failures(summary.max_closure_error, c.saturated_fraction, c.device_op_rms_m, point.network));
     Ok(PointResult {
         point: point.clone(),
         renders: failures.is_empty(),
@@ -195,8 +187,8 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
         clamped_fraction: c.saturated_fraction,
         device_op_rms_m: c.device_op_rms_m,
         max_closure_error_m: summary.max_closure_error,
-        energy_excess_j: verdict.energy_excess_j,
-        energy_flow_max_j: verdict.energy_flow_max_j,
+        energy_excess_j: Some(verdict.energy_excess_j),
+        energy_flow_max_j: Some(verdict.energy_flow_max_j),
         position_scale: c.position_scale,
         force_scale: c.force_scale,
         coupling: c.coupling.clone(),
@@ -206,14 +198,105 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
 
 /// Runs the experiment (see the module documentation).
 pub fn run(options: &Options) -> Result<super::Report> {
-    let mut out = Output::new("renderability", options)?;
-    let hands = [HandKind::Soft, HandKind::Firm];
-    let all = points(&[], &hands)?;
+    let out = Output::new("renderability", options)?;
+    let all = points(&[], &HANDS)?;
     let seconds = options.pick(6.0, 3.0);
     let results = sweep("renderability", &all, options.threads, options.progress, |p| evaluate(p, seconds))?;
+    report(out, &results, seconds, "Every shipped linkage with default settings", "about 10 s on 2 cores")
+}
+
+/// `renderability-live`: the same matrix in real time, each pair a `kinloop demo` session (a server and one
+/// client over loopback QUIC on real threads, the programs' own drivers, default flags) of 4 s (2 s with
+/// `--quick`, which also keeps only the soft hand), one at a time. What the programs do, not what the
+/// harness predicts: it catches what virtual time leaves out (a VE that ran before the join, the real
+/// network stack, the loops' timing). The energy criterion needs the every-tick recording the harness
+/// keeps, so here "stable" is no VE restore, no withheld snapshot and no non-finite value.
+pub fn run_live(options: &Options) -> Result<super::Report> {
+    let out = Output::new("renderability-live", options)?;
+    let hands: &[HandKind] = if options.quick { &HANDS[..1] } else { &HANDS };
+    let all = points(&[], hands)?;
+    let seconds = options.pick(4.0, 2.0);
+    // Each session's records land here in turn (the last one stays, for a look at it).
+    let scratch = options.out.join("renderability-live").join("last-session");
+    let results = sweep("renderability-live", &all, 1, options.progress, |p| evaluate_live(p, seconds, &scratch))?;
+    report(out, &results, seconds, "Every shipped linkage with default settings, in real time", "about 20 minutes")
+}
+
+/// The hands of the matrix.
+const HANDS: [HandKind; 2] = [HandKind::Soft, HandKind::Firm];
+
+/// Runs one pair in real time for `seconds` (records under `scratch`) and judges it by the same bounds.
+pub fn evaluate_live(point: &Point, seconds: f64, scratch: &std::path::Path) -> Result<PointResult> {
+    let mut o = crate::demo::DemoOptions::new(scratch)?;
+    o.scene = builtin::scene(&point.scene).context("built in")??;
+    o.scene_label = point.scene.clone();
+    o.duration = Duration::from_secs_f64(seconds);
+    o.progress = false;
+    o.device = Some(point.device);
+    o.first_op = Some(point.op.clone());
+    o.hand = Some(point.hand);
+    o.link = point.network.link(0x5eed);
+    let report = crate::demo::run(&o).with_context(|| format!("{} in real time", row_label(point)))?;
+    let s = &report.summary;
+    let u = s.per_user.first().context("the demo's user")?;
+    let count = |key: &str| u.client[key].as_f64().unwrap_or(f64::NAN);
+    let clamped_fraction = count("clamped_ticks") / count("ticks").max(1.0);
+    let device_op_rms_m = u.device_op_rms_mm.map_or(f64::NAN, |mm| mm * 1e-3);
+    let non_finite = count("non_finite_events");
+    let stable = s.ve_restores == 0 && s.snapshots_withheld == 0 && non_finite == 0.0;
+    let mut failures = Vec::new();
+    if !stable {
+        failures.push(format!(
+            "unstable: {} VE restores, {} snapshots withheld, {non_finite} non-finite events",
+            s.ve_restores, s.snapshots_withheld
+        ));
+    }
+    failures.extend(bound_failures(s.max_closure_error, clamped_fraction, device_op_rms_m, point.network));
+    Ok(PointResult {
+        point: point.clone(),
+        renders: failures.is_empty(),
+        failures,
+        stable,
+        ve_restores: s.ve_restores,
+        clamped_fraction,
+        device_op_rms_m,
+        max_closure_error_m: s.max_closure_error,
+        energy_excess_j: None,
+        energy_flow_max_j: None,
+        position_scale: u.position_scale,
+        force_scale: u.force_scale,
+        coupling: Vec::new(),
+        gains: Vec::new(),
+    })
+}
+
+/// The bounds every pair is held to beyond stability: closure, clamped ticks, tracking.
+fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network) -> Vec<String> {
+    let mut failures = Vec::new();
+    if !within(closure_m, CLOSURE_BOUND_M) {
+        failures.push(format!("closure {closure_m:.1e} m"));
+    }
+    if !within(clamped, CLAMPED_BOUND) {
+        failures.push(format!("clamped {:.1} %", clamped * 100.0));
+    }
+    if !within(rms_m, network.rms_bound()) {
+        failures.push(format!("RMS {:.1} mm", rms_m * 1e3));
+    }
+    failures
+}
+
+/// Charts and `summary.json` of a run of the matrix.
+fn report(
+    mut out: Output,
+    results: &[PointResult],
+    seconds: f64,
+    title: &str,
+    runtime_note: &str,
+) -> Result<super::Report> {
+    let hands = HANDS;
     let rows: Vec<String> = {
         let mut rows: Vec<String> = Vec::new();
-        for r in &results {
+        for r in results {
             let label = row_label(&r.point);
             if !rows.contains(&label) {
                 rows.push(label);
@@ -232,7 +315,7 @@ pub fn run(options: &Options) -> Result<super::Report> {
         HeatMap::new("Ticks clamped at the device limit (%), default settings", rows.clone(), columns.clone());
     let mut tracking =
         HeatMap::new("Device-OP RMS (mm, device space), default settings", rows.clone(), columns.clone());
-    for r in &results {
+    for r in results {
         let (row, column) = cell(r);
         clamped.set(row, column, r.clamped_fraction * 100.0, r.clamped_fraction <= CLAMPED_BOUND);
         tracking.set(
@@ -260,8 +343,8 @@ pub fn run(options: &Options) -> Result<super::Report> {
         num(worst_rms * 1e3)
     );
     out.finish(
-        "Every shipped linkage with default settings",
-        "about 2 minutes on 2 cores",
+        title,
+        runtime_note,
         json!({
             "answer": answer,
             "seconds_per_pair": seconds,
