@@ -216,8 +216,8 @@ pub fn run_live(options: &Options) -> Result<super::Report> {
     let hands: &[HandKind] = if options.quick { &HANDS[..1] } else { &HANDS };
     let all = points(&[], hands)?;
     let seconds = options.pick(4.0, 2.0);
-    // Each session's records land here in turn (the last one stays, for a look at it).
-    let scratch = options.out.join("renderability-live").join("last-session");
+    // Each session's records land in the system's temporary directory in turn (the last one stays there).
+    let scratch = std::env::temp_dir().join("kinloop-renderability-live");
     let results = sweep("renderability-live", &all, 1, options.progress, |p| evaluate_live(p, seconds, &scratch))?;
     report(out, &results, seconds, "Every shipped linkage with default settings, in real time", "about 20 minutes")
 }
