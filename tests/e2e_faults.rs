@@ -22,6 +22,12 @@ fn silent_fade() -> f64 {
     (ve.silent_timeout + ve.fade_time).as_secs_f64()
 }
 
+/// How long after its join the grasp of a user never heard from is fully faded out.
+fn grasp_released() -> Duration {
+    let ve = VeConfig::paper();
+    ve.first_uplink_timeout + ve.fade_time
+}
+
 /// How long after its last snapshot a client's force is fully faded out.
 fn stale_fade() -> f64 {
     let safety = SafetyConfig::default();
@@ -402,7 +408,9 @@ fn a_junk_flood_from_an_authenticated_client_changes_nothing_for_the_others() {
     let (endpoint, rogue) = live::raw_session(&rt, &server, &live::paper_handshake("rogue", OPS[1], "any"));
     let rogue = rogue.expect("the rogue is a user like any other");
     let rogue_id = rogue.welcome.user_id;
-    std::thread::sleep(Duration::from_millis(1000));
+    // The rogue's grasp holds its OP until its first uplink, which never comes: the flood starts once the grasp
+    // has let go (see below).
+    std::thread::sleep(grasp_released() + Duration::from_millis(300));
 
     let before = (server.stats().ve, Instant::now());
     let connection = rogue.connection.clone();
@@ -438,13 +446,13 @@ fn a_junk_flood_from_an_authenticated_client_changes_nothing_for_the_others() {
     let rogue_stats = ve.per_user.iter().find(|u| u.user_id == rogue_id).expect("rogue stats");
     let steady_user = ve.per_user.iter().find(|u| u.name == "steady").expect("steady stats");
     let steps = records::ve_steps(&dir.path().join("ve.csv"));
-    // A manipulator grasps its OP at the join and holds it until its first uplink, or until its silence fades
-    // the grasp out (250 ms and a 200 ms fade): from then on, with nothing but junk from it, its wrench in
-    // the VE must stay zero.
+    // A manipulator grasps its OP at the join and holds it until its first uplink, or until the wait for it
+    // fades the grasp out (`first_uplink_timeout` and a fade): from then on, with nothing but junk from it,
+    // its wrench in the VE must stay zero.
     let joined_at = steps.iter().find(|s| s.users.iter().any(|u| u.user_id == rogue_id)).map_or(0.0, |s| s.t);
     let rogue_wrench = steps
         .iter()
-        .filter(|s| s.t > joined_at + 0.5)
+        .filter(|s| s.t > joined_at + grasp_released().as_secs_f64() + 0.05)
         .flat_map(|s| s.users.iter().filter(|u| u.user_id == rogue_id).map(|u| linear(u.wrench) + u.wrench[2].abs()))
         .fold(0.0, f64::max);
     let steady_ticks = records::client_ticks(&record);

@@ -208,6 +208,47 @@ fn join_silence_and_leave_in_mid_motion_make_no_wrench_step() {
     assert_eq!(ve.metrics().users_left, 1);
 }
 
+/// A manipulator's grasp holds its OP until its first uplink, which comes a round trip after the join at the
+/// soonest: it is not faded out after `silent_timeout` (a linkage under gravity would drop from the grasp at
+/// any one-way delay above ~125 ms) but after `first_uplink_timeout`; once the user has spoken, silence fades
+/// it after `silent_timeout` as before.
+#[test]
+fn the_grasp_waits_a_round_trip_for_the_first_uplink_then_silence_fades_as_before() {
+    let config = VeConfig::paper();
+    let (silent, first) = (config.silent_timeout, config.first_uplink_timeout);
+    assert!(first >= Duration::from_secs(2) + silent, "covers 1 s one-way: {first:?}");
+    let ms = Duration::from_millis;
+    let weights = |speak_at: Option<Duration>, until: Duration| {
+        let mut ve = core(testbed(), VeConfig::paper());
+        let user = ve.join(Duration::ZERO, request("A", Role::Manipulator, "link2", 3)).unwrap().user_id;
+        let mut latest = Vec::new();
+        let mut out: Vec<(Duration, f64)> = Vec::new();
+        run(&mut ve, until, &mut latest, |ve, now, latest| {
+            // One uplink at `speak_at` (holding the OP where it is), then silence.
+            if speak_at.is_some_and(|t| now == t) {
+                if let Some(Some(s)) = latest.get(user as usize) {
+                    ve.handle_uplink(now, user, &following(s, 1, &[0.0; 3])).unwrap();
+                }
+            }
+            if let Some(state) = ve.state().users().find(|u| u.user_id == user) {
+                out.push((now, state.weight));
+            }
+        });
+        out
+    };
+    let at = |w: &[(Duration, f64)], t: Duration| w.iter().find(|(when, _)| *when >= t).map_or(f64::NAN, |p| p.1);
+    // Never heard from: full grasp well past the silent timeout (a 1.8 s round trip), faded once the first
+    // uplink's timeout and a fade have passed.
+    let quiet = weights(None, first + ms(600));
+    assert_eq!(at(&quiet, silent + ms(300)), 1.0, "faded after the silent timeout, before any uplink could come");
+    assert_eq!(at(&quiet, ms(1800)), 1.0);
+    assert_eq!(at(&quiet, first + ms(500)), 0.0, "a user never heard from lets go");
+    // Heard from once at 1 s: then the usual silence applies.
+    let once = weights(Some(ms(1000)), ms(2000));
+    assert_eq!(at(&once, ms(1000) + silent - ms(20)), 1.0);
+    assert_eq!(at(&once, ms(1000) + silent + ms(300)), 0.0, "silence after the first uplink fades as before");
+}
+
 /// Malformed, stale, duplicate and hostile uplinks leave the VE bit-identical to a run without them.
 #[test]
 fn malformed_stale_duplicate_and_hostile_uplinks_change_nothing() {

@@ -118,6 +118,13 @@ pub struct VeConfig {
     pub fade_time: Duration,
     /// A manipulator whose uplinks stop this long fades out until they resume.
     pub silent_timeout: Duration,
+    /// How long a manipulator's grasp holds its OP after the join while the VE waits for its first uplink
+    /// (then it fades out as a silent user's does). The first uplink answers the first snapshot, so it cannot
+    /// come sooner than a round trip after the join: [`silent_timeout`](Self::silent_timeout) alone let a
+    /// linkage under gravity drop from the grasp at any one-way delay above ~125 ms, and the user's coupling
+    /// then yanked it back up when the uplinks came (the four-bar's coupler fell 10 cm at 300 ms one-way).
+    /// The default covers 1 s one-way with room for jitter.
+    pub first_uplink_timeout: Duration,
     /// Most users at once (leaving users still fading out do not count).
     pub max_users: usize,
     /// Limits on what clients may report.
@@ -151,6 +158,7 @@ impl VeConfig {
             passivity_allowance_j: 2.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
+            first_uplink_timeout: Duration::from_millis(2500),
             max_users: 16,
             guards: GuardLimits::default(),
             max_catch_up_ticks: 10,

@@ -349,8 +349,9 @@ impl<S: Space> VeCore<S> {
     ///
     /// A manipulator grasps its OP at the join: its coupling fades in at once, holding the OP where it is
     /// (no hand wrench, the OP's pose as the reference) until the user's first uplink takes over, and fades
-    /// out again if none comes within `silent_timeout`. Otherwise a linkage under gravity would fall for the
-    /// network's round trip and the fade-in, and the user's first moments would be spent catching it.
+    /// out again if none comes within `first_uplink_timeout` (the first uplink comes a round trip after the
+    /// join at the soonest). Otherwise a linkage under gravity would fall for the network's round trip and the
+    /// fade-in, and the user's first moments would be spent catching it.
     pub fn join(&mut self, now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
         let present = self.present_users();
         if present >= self.config.max_users {
@@ -419,6 +420,7 @@ impl<S: Space> VeCore<S> {
             // The grasp counts as the user's first word (see above).
             last_uplink_at: manipulator.then_some(now),
             silent: !manipulator,
+            heard: false,
             fade: Fade::off(),
             passivity: PassivityObserver::default(),
             rejections: RejectionBurst::default(),
@@ -506,6 +508,7 @@ impl<S: Space> VeCore<S> {
         let u = &mut self.users[index];
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
+        u.heard = true;
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];
             c.pushes = true;
@@ -644,7 +647,7 @@ impl<S: Space> VeCore<S> {
         let fade_s = self.config.fade_time.as_secs_f64();
         let mut activations = 0;
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
-            let silent = u.is_silent(at, self.config.silent_timeout);
+            let silent = u.is_silent(at, self.config.silent_timeout, self.config.first_uplink_timeout);
             if silent != u.silent && u.presence == Presence::Present && c.pushes {
                 self.events.push(if silent {
                     VeEvent::FadingOut { user: u.id, reason: FadeReason::Silent }

@@ -192,6 +192,8 @@ pub struct User {
     pub last_uplink_at: Option<Duration>,
     /// Silent at the last tick (for reporting transitions).
     pub silent: bool,
+    /// An uplink has been used since the join (before it, silence is judged by `first_uplink_timeout`).
+    pub heard: bool,
     /// Coupling fade.
     pub fade: Fade,
     /// Passivity account.
@@ -205,8 +207,10 @@ pub struct User {
 }
 
 impl User {
-    /// True when the user's newest uplink is older than `timeout` at `now` (or none came yet).
-    pub fn is_silent(&self, now: Duration, timeout: Duration) -> bool {
+    /// True when the user's newest uplink is older than `timeout` at `now` (or none came yet); before the
+    /// first uplink since the join, older than `first_timeout` (the grasp counts as the first word).
+    pub fn is_silent(&self, now: Duration, timeout: Duration, first_timeout: Duration) -> bool {
+        let timeout = if self.heard { timeout } else { first_timeout };
         self.last_uplink_at.is_none_or(|at| now.saturating_sub(at) > timeout)
     }
 }
