@@ -121,29 +121,56 @@ fn stability_maps_have_both_labels_and_the_passivity_bound_is_conservative() {
     assert!(alpha_max(fine) > alpha_max(coarse), "a smaller step tolerates a stiffer Baumgarte: {per_step:?}");
 }
 
-/// Plain coupling over a perfect network is stable, tracking degrades with delay, and the reported failing
-/// delays are the sweep's own unstable points.
+/// The delay sweep (quick grid): on a perfect network the soft hand is stable, tracking degrades with delay,
+/// both methods saw the same grid, and each reported first failure is the smallest unstable delay of its
+/// (scene, hand, method) among the points.
 #[test]
 fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Latency, dir.path());
     let r = &report.summary["results"];
-    let delay = &r["sweeps"]["delay"];
-    let plain = delay["plain"].as_array().unwrap();
-    assert_eq!(plain[0]["value"], 0.0);
-    assert_eq!(plain[0]["stable"], true, "{}", plain[0]);
-    let last = &plain[plain.len() - 1];
-    assert!(f(&last["device_op_rms_mm"]) > 3.0 * f(&plain[0]["device_op_rms_mm"]), "{last} vs {}", plain[0]);
-    for (mode, list) in [("plain", "unstable_values_plain"), ("passivity", "unstable_values_passivity")] {
-        let unstable: Vec<f64> =
-            delay[mode].as_array().unwrap().iter().filter(|p| p["stable"] == false).map(|p| f(&p["value"])).collect();
-        let listed: Vec<f64> = delay[list].as_array().unwrap().iter().map(f).collect();
-        assert_eq!(unstable, listed);
+    let points = r["points"].as_array().unwrap();
+    assert_eq!(points.len(), r["grid"]["points"].as_u64().unwrap() as usize);
+    let find = |hand: &str, delay: f64, method: &str| {
+        points
+            .iter()
+            .find(|p| {
+                p["hand"] == hand
+                    && f(&p["delay_ms"]) == delay
+                    && p["method"] == method
+                    && f(&p["jitter_ms"]) == 0.0
+                    && p["loss"] == "none"
+            })
+            .unwrap_or_else(|| panic!("{hand} {delay} {method}: no such point"))
+    };
+    for method in ["plain", "passivity"] {
+        let (first, last) = (find("soft", 0.0, method), find("soft", 1000.0, method));
+        assert_eq!(first["stable"], true, "{first}");
+        assert!(f(&first["device_op_rms_mm"]) < 1.0, "{first}");
+        assert!(f(&last["device_op_rms_mm"]) > 10.0 * f(&first["device_op_rms_mm"]), "{last} vs {first}");
     }
-    assert_eq!(r["failing_delay_ms"]["plain_coupling"], delay["first_unstable_value_plain"]);
-    for sweep in ["jitter", "loss"] {
-        assert!(r["sweeps"][sweep]["plain"].as_array().is_some_and(|p| p.len() >= 3), "{sweep} swept");
+    for method in ["plain", "passivity"] {
+        assert_eq!(points.iter().filter(|p| p["method"] == method).count(), points.len() / 2, "both methods swept");
     }
+    let failures = r["first_failures"].as_array().unwrap();
+    assert!(!failures.is_empty());
+    for row in failures {
+        let of: Vec<&Value> = points
+            .iter()
+            .filter(|p| p["hand"] == row["hand"] && p["method"] == row["method"] && p["scene"] == row["scene"])
+            .collect();
+        assert_eq!(of.len() as u64, row["points"].as_u64().unwrap());
+        let first = of.iter().filter(|p| p["stable"] == false).map(|p| f(&p["delay_ms"])).reduce(f64::min);
+        assert_eq!(row["first_failure_ms"].as_f64(), first, "{row}");
+        // An unstable point names the parts of the criterion that failed.
+        for p in of.iter().filter(|p| p["stable"] == false) {
+            assert!(p["reasons"].as_array().is_some_and(|r| !r.is_empty()), "{p}");
+        }
+    }
+    assert_eq!(
+        r["goals"]["no_unstable_point_with_defaults"],
+        points.iter().all(|p| p["method"] != "plain" || p["stable"] == true)
+    );
 }
 
 /// 16 users stay stable on one OP and spread over the links, and every user costs the VE something.

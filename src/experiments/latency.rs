@@ -1,87 +1,194 @@
-//! `latency`: the paper's manipulation over a bad network, with and without the VE's passivity
-//! controller (time-domain passivity observer and damper on each coupling, `VeConfig::passivity`).
+//! `latency`: how far does network delay go before rendering a linkage with default settings goes unstable,
+//! with and without the VE's passivity controller (time-domain passivity observer and PD scale on each
+//! coupling, `VeConfig::passivity`, `kinloop-server --passivity on`)?
 //!
-//! Three sweeps, each with passivity off ("plain coupling") and on: one-way delay 0 to 500 ms (both
-//! directions, no jitter, no loss); jitter (standard deviation of the per-packet delay) at 50 ms delay;
-//! independent packet loss at 50 ms delay. Each point is an 8 s session of the paper's user and
-//! device; the client knows the nominal one-way delay (its driver would measure it as half the RTT) and
-//! predicts snapshots forward by it. Measured: the device–OP distance (tracking), the energy balance of the
-//! criterion (linkage kinetic energy against the hand's work) and the couplings' energy account,
-//! and the stability label of [`super::verdict`]. A delay "fails" when its point is unstable.
+//! The grid (issue 22, item 4): one-way delay {0, 50, 100, 200, 300, 500, 750, 1000 ms} × jitter (standard
+//! deviation of the one-way delay) {0, 10, 30 ms} × loss {none, 5 % independent, 20 % in bursts
+//! (Gilbert-Elliott, mean burst [`BURST_LENGTH`] packets)} × hand {soft, firm, release, poke} × scene
+//! {paper-testbed:link2, fourbar-crank-rocker:coupler, watt-six-bar:link5} × passivity {off, on}; the same
+//! conditions both ways. Everything else is what `kinloop-server` and `kinloop-client` do by default: the
+//! server's designed coupling and mapping, the client's designed gains, the `sim:paper` device (the planar
+//! scenes' default), stiffness mode, 1 kHz. Each point is a [`SECONDS`] s session of a simulated hand
+//! touring the OP's reach (`release` lets go at 2 s, `poke` jabs 1 cm at 1.5 s); the client knows the
+//! nominal one-way delay, as its driver measures it (half the round trip), and predicts snapshots by it.
+//! Both settings of the passivity controller see the same network draws (the seed depends on the point's
+//! network, scene, hand and delay, not on the controller).
+//!
+//! Each point is labelled by the one criterion of [`verdict`] (divergence including VE restores, sustained
+//! saturation, energy growth). Measured beside it: the device-OP distance in the device's space (what the hand
+//! feels), loop closure, clamped ticks, and the coupling's energy account when the passivity controller
+//! books it. A (scene, hand, method) **first fails** at the smallest delay where some network condition of
+//! the grid is unstable.
 
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use kinloop_protocol::emulator::LinkConfig;
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use super::common::{paper_plan, round, session, significant, sweep, Options, Output, Report};
+use kinloop_client::device::presets::DevicePreset;
+use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
+use kinloop_server::core::VeConfig;
+
+use super::common::{round, session, significant, sweep, Options, Output, Report};
 use super::verdict::{self, Verdict};
-use crate::charts::{Chart, Legend, Series, StabilityMap};
-use crate::harness::ClientPlan;
+use crate::charts::{Chart, HeatMap, Legend, Series};
+use crate::harness::{ClientPlan, SessionPlan};
 
-/// Delay of the jitter and loss sweeps (ms).
-const BASE_DELAY_MS: f64 = 50.0;
+/// Simulated seconds per point: as long as the real-process test's sessions. (At 8 s the sweep missed the
+/// testbed tour's segment near 9 s where a firm wrist out-twists the `sim:paper` device's 0.2 N m, which
+/// the real processes met at every delay.)
+pub const SECONDS: f64 = 10.0;
+/// One-way delays of the full grid (ms).
+pub const DELAYS_MS: [f64; 8] = [0.0, 50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
+/// Jitters of the full grid (ms).
+pub const JITTERS_MS: [f64; 3] = [0.0, 10.0, 30.0];
+/// Mean length of a loss burst (packets; snapshots and uplinks go at 1 kHz, so about milliseconds).
+pub const BURST_LENGTH: f64 = 10.0;
+/// The goals of issue 22 for the soft hand on the testbed, plain (default) coupling, clean network: device-OP
+/// RMS at most this at 100 ms one-way (m).
+pub const GOAL_RMS_100MS_M: f64 = 0.003;
+/// ... and at most this at 1 s one-way (m).
+pub const GOAL_RMS_1S_M: f64 = 0.025;
 
-/// What a sweep varies.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// The scenes and operational points of the grid: (built-in scene, OP, short name).
+pub const TARGETS: [(&str, &str, &str); 3] = [
+    ("paper-testbed", "link2", "testbed"),
+    ("fourbar-crank-rocker", "coupler", "fourbar"),
+    ("watt-six-bar", "link5", "sixbar"),
+];
+
+/// Packet loss of a point, each direction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
-enum Variable {
+pub enum Loss {
+    /// No loss.
+    None,
+    /// 5 % of packets, independently.
+    Random5,
+    /// 20 % of packets in bursts (Gilbert: lost only in the bad state, mean burst [`BURST_LENGTH`]).
+    Bursty20,
+}
+
+impl Loss {
+    /// Every level, in order.
+    pub const ALL: [Loss; 3] = [Loss::None, Loss::Random5, Loss::Bursty20];
+
+    /// Name in summaries and charts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Loss::None => "no loss",
+            Loss::Random5 => "5 % loss",
+            Loss::Bursty20 => "20 % bursty loss",
+        }
+    }
+
+    fn apply(self, link: &mut LinkConfig) {
+        match self {
+            Loss::None => {}
+            Loss::Random5 => link.loss = 0.05,
+            Loss::Bursty20 => {
+                // Stationary loss p_gb / (p_gb + p_bg) = 0.2 with bursts of mean length 1 / p_bg.
+                let p_bg = 1.0 / BURST_LENGTH;
+                link.burst = Some(GilbertElliott {
+                    p_good_to_bad: p_bg / 4.0,
+                    p_bad_to_good: p_bg,
+                    loss_good: 0.0,
+                    loss_bad: 1.0,
+                });
+            }
+        }
+    }
+}
+
+/// The network of a point (besides its delay).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Network {
+    /// Standard deviation of the one-way delay (ms).
+    pub jitter_ms: f64,
+    /// Loss.
+    pub loss: Loss,
+}
+
+impl Network {
+    /// Name in summaries.
+    pub fn name(self) -> String {
+        format!("jitter {} ms, {}", self.jitter_ms, self.loss.name())
+    }
+
+    fn is_clean(self) -> bool {
+        self.jitter_ms == 0.0 && self.loss == Loss::None
+    }
+}
+
+/// One point of the grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    /// Index into [`TARGETS`].
+    pub target: usize,
+    /// The hand.
+    pub hand: HandKind,
     /// One-way delay (ms).
-    Delay,
-    /// Jitter (ms) at [`BASE_DELAY_MS`].
-    Jitter,
-    /// Loss probability at [`BASE_DELAY_MS`].
-    Loss,
+    pub delay_ms: f64,
+    /// Jitter and loss.
+    pub network: Network,
+    /// The VE's passivity controller on.
+    pub passivity: bool,
 }
 
-impl Variable {
-    fn axis(self) -> &'static str {
-        match self {
-            Variable::Delay => "one-way delay (ms)",
-            Variable::Jitter => "jitter, std dev of the one-way delay (ms), at 50 ms delay",
-            Variable::Loss => "packet loss (%), each direction, at 50 ms delay",
-        }
-    }
-
-    fn link(self, value: f64, seed: u64) -> LinkConfig {
+impl Point {
+    /// The emulated link (each direction; the harness gives the downlink its own seed).
+    fn link(&self) -> LinkConfig {
         let ms = |v: f64| Duration::from_secs_f64(v / 1000.0);
-        match self {
-            Variable::Delay => LinkConfig { delay: ms(value), seed, ..LinkConfig::default() },
-            Variable::Jitter => {
-                LinkConfig { delay: ms(BASE_DELAY_MS), jitter: ms(value), seed, ..LinkConfig::default() }
-            }
-            Variable::Loss => {
-                LinkConfig { delay: ms(BASE_DELAY_MS), loss: value / 100.0, seed, ..LinkConfig::default() }
-            }
-        }
+        let loss = Loss::ALL.iter().position(|l| *l == self.network.loss).unwrap_or(0) as u64;
+        let hand = HandKind::ALL.iter().position(|h| *h == self.hand).unwrap_or(0) as u64;
+        let seed = 0x1a7e_0000
+            + self.delay_ms as u64 * 1_000_000
+            + self.network.jitter_ms as u64 * 1000
+            + loss * 100
+            + self.target as u64 * 10
+            + hand;
+        let mut link =
+            LinkConfig { delay: ms(self.delay_ms), jitter: ms(self.network.jitter_ms), seed, ..LinkConfig::default() };
+        self.network.loss.apply(&mut link);
+        link
     }
 }
 
-#[derive(Clone, Copy, Debug)]
-struct Point {
-    variable: Variable,
-    value: f64,
-    passivity: bool,
-}
-
+/// What one point measured.
 #[derive(Clone, Debug)]
-struct Measured {
-    point: Point,
-    verdict: Verdict,
-    device_op_rms_m: f64,
-    device_model_rms_m: f64,
-    passivity_absorbed_j: f64,
-    passivity_activations: u64,
-    uplinks_refused: u64,
+pub struct Measured {
+    /// The point.
+    pub point: Point,
+    /// The criterion's label.
+    pub verdict: Verdict,
+    /// Device-OP distance, RMS, device space (m).
+    pub device_op_rms_m: f64,
+    /// Device-local-model distance, RMS, device space (m).
+    pub device_model_rms_m: f64,
+    /// VE state restores.
+    pub ve_restores: u64,
+    /// Fraction of active ticks clamped at the device's limit.
+    pub clamped_fraction: f64,
+    /// Non-finite values the client's safety layer refused.
+    pub non_finite: u64,
+    /// Energy the coupling absorbed, as the passivity observer booked it (J; negative: generated; 0 when off).
+    pub passivity_absorbed_j: f64,
+    /// VE ticks in which the controller scaled the PD down.
+    pub passivity_activations: u64,
 }
 
-fn measure(p: &Point, seconds: f64) -> Result<Measured> {
-    let mut plan = paper_plan(seconds)?;
-    plan.ve.passivity = p.passivity;
-    let seed = 1000 + (p.value * 10.0).round() as u64;
-    plan.clients[0] = ClientPlan::paper("user").with_link(p.variable.link(p.value, seed));
+/// Runs one point.
+pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
+    let (scene_name, op, _) = TARGETS[p.target];
+    let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
+    let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
+    client.user = UserSpec::Hand(HandSpec::touring(p.hand));
+    let client = client.with_link(p.link());
+    let ve = VeConfig { passivity: p.passivity, ..VeConfig::default() };
+    let plan =
+        SessionPlan { scene, ve, clients: vec![client], duration: Duration::from_secs_f64(seconds), record_every: 1 };
     let (summary, rec) = session(&plan).with_context(|| format!("{p:?}"))?;
     let c = &summary.clients[0];
     Ok(Measured {
@@ -89,234 +196,357 @@ fn measure(p: &Point, seconds: f64) -> Result<Measured> {
         verdict: verdict::judge(&summary, &rec),
         device_op_rms_m: c.device_op_rms_m,
         device_model_rms_m: c.device_model_rms_m,
+        ve_restores: summary.ve_restores,
+        clamped_fraction: c.saturated_fraction,
+        non_finite: c.non_finite,
         passivity_absorbed_j: c.passivity_absorbed_j,
         passivity_activations: c.passivity_activations,
-        uplinks_refused: c.uplinks_refused,
     })
 }
 
-fn mode(passivity: bool) -> &'static str {
+/// The axes of a run's grid.
+#[derive(Clone, Debug)]
+pub struct Grid {
+    /// Indices into [`TARGETS`].
+    pub targets: Vec<usize>,
+    /// Hands.
+    pub hands: Vec<HandKind>,
+    /// One-way delays (ms).
+    pub delays_ms: Vec<f64>,
+    /// Jitter × loss.
+    pub networks: Vec<Network>,
+}
+
+impl Grid {
+    /// The full grid of the module documentation.
+    pub fn full() -> Self {
+        Grid {
+            targets: (0..TARGETS.len()).collect(),
+            hands: HandKind::ALL.to_vec(),
+            delays_ms: DELAYS_MS.to_vec(),
+            networks: JITTERS_MS
+                .iter()
+                .flat_map(|&jitter_ms| Loss::ALL.iter().map(move |&loss| Network { jitter_ms, loss }))
+                .collect(),
+        }
+    }
+
+    /// The quick grid: the four-bar's coupler, the soft hand and the poke, four delays, a clean network and
+    /// the worst one (30 ms of jitter with 20 % bursty loss).
+    pub fn quick() -> Self {
+        Grid {
+            targets: vec![1],
+            hands: vec![HandKind::Soft, HandKind::Poke],
+            delays_ms: vec![0.0, 100.0, 500.0, 1000.0],
+            networks: vec![
+                Network { jitter_ms: 0.0, loss: Loss::None },
+                Network { jitter_ms: 30.0, loss: Loss::Bursty20 },
+            ],
+        }
+    }
+
+    /// Every point, methods innermost so that both see the same network one after the other.
+    pub fn points(&self) -> Vec<Point> {
+        let mut out = Vec::new();
+        for &target in &self.targets {
+            for &hand in &self.hands {
+                for &network in &self.networks {
+                    for &delay_ms in &self.delays_ms {
+                        for passivity in [false, true] {
+                            out.push(Point { target, hand, delay_ms, network, passivity });
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+fn method(passivity: bool) -> &'static str {
     if passivity {
-        "with passivity controller"
+        "passivity"
     } else {
-        "plain coupling"
+        "plain"
     }
 }
 
 fn point_json(m: &Measured) -> Value {
+    let p = &m.point;
     json!({
-        "value": m.point.value,
-        "passivity": m.point.passivity,
+        "scene": TARGETS[p.target].0,
+        "op": TARGETS[p.target].1,
+        "hand": p.hand.name(),
+        "delay_ms": p.delay_ms,
+        "jitter_ms": p.network.jitter_ms,
+        "loss": p.network.loss,
+        "method": method(p.passivity),
         "stable": m.verdict.stable,
         "reasons": m.verdict.reasons,
         "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
         "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
         "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
+        "ve_restores": m.ve_restores,
+        "max_closure_error_m": significant(m.verdict.max_closure_error_m, 3),
+        "clamped_fraction": round(m.clamped_fraction, 4),
+        "worst_saturation": round(m.verdict.worst_saturation, 3),
+        "non_finite": m.non_finite,
         "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
         "energy_flow_max_j": significant(m.verdict.energy_flow_max_j, 3),
-        "linkage_kinetic_energy_max_j": significant(m.verdict.kinetic_energy_max_j, 3),
-        "worst_saturation": round(m.verdict.worst_saturation, 3),
         "passivity_absorbed_j": significant(m.passivity_absorbed_j, 3),
         "passivity_activations": m.passivity_activations,
-        "uplinks_refused_by_server": m.uplinks_refused,
     })
 }
 
-/// The values whose points are unstable, per passivity setting, in sweep order.
-fn failures(points: &[Measured], passivity: bool) -> Vec<f64> {
-    points.iter().filter(|m| m.point.passivity == passivity && !m.verdict.stable).map(|m| m.point.value).collect()
+/// The points of one (scene, hand, method), in grid order.
+fn pair(all: &[Measured], target: usize, hand: HandKind, passivity: bool) -> impl Iterator<Item = &Measured> {
+    all.iter().filter(move |m| m.point.target == target && m.point.hand == hand && m.point.passivity == passivity)
 }
 
-/// The smallest value whose point is unstable, per passivity setting.
-fn first_failure(points: &[Measured], passivity: bool) -> Option<f64> {
-    failures(points, passivity).into_iter().reduce(f64::min)
+/// The smallest delay at which some point of `points` is unstable.
+fn first_failure<'a>(points: impl Iterator<Item = &'a Measured>) -> Option<f64> {
+    points.filter(|m| !m.verdict.stable).map(|m| m.point.delay_ms).reduce(f64::min)
 }
 
-fn charts(out: &mut Output, variable: Variable, points: &[Measured]) -> Result<()> {
-    let name = match variable {
-        Variable::Delay => "delay",
-        Variable::Jitter => "jitter",
-        Variable::Loss => "loss",
-    };
-    let mut tracking = Chart::new(
-        format!("Tracking vs {name}: device-OP distance, paper manipulation (dots: unstable)"),
-        variable.axis(),
-        "device-OP distance, RMS (mm)",
+/// The clean-network point of (scene, hand, method) at `delay_ms`.
+fn clean(all: &[Measured], target: usize, hand: HandKind, passivity: bool, delay_ms: f64) -> Option<&Measured> {
+    pair(all, target, hand, passivity).find(|m| m.point.network.is_clean() && m.point.delay_ms == delay_ms)
+}
+
+fn tracking_charts(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
+    let axis = "one-way delay (ms)";
+    let rms = |m: &Measured| (m.point.delay_ms, m.device_op_rms_m * 1e3);
+    // The overview: the soft hand on every scene, clean network.
+    let mut overview = Chart::new(
+        "Tracking vs delay: soft hand, no jitter or loss, default settings (circles: unstable)",
+        axis,
+        "device-OP distance, RMS, device space (mm)",
     )
-    .legend(Legend::UpperRight);
-    tracking.log_y = true;
+    .legend(Legend::LowerRight);
+    overview.log_y = true;
+    let soft = if grid.hands.contains(&HandKind::Soft) { HandKind::Soft } else { grid.hands[0] };
     for passivity in [false, true] {
-        let of = |stable: Option<bool>| -> Vec<(f64, f64)> {
-            points
-                .iter()
-                .filter(|m| m.point.passivity == passivity && stable.is_none_or(|s| m.verdict.stable == s))
-                .map(|m| (m.point.value, m.device_op_rms_m * 1e3))
-                .collect()
-        };
-        tracking = tracking.with(Series::line(mode(passivity), of(None)));
-        tracking = tracking.with(Series::markers(format!("unstable, {}", mode(passivity)), of(Some(false))));
-    }
-    out.chart(&format!("tracking_vs_{name}"), &tracking)?;
-    if variable == Variable::Delay {
-        let mut zoom = tracking.clone();
-        zoom.title = "Tracking vs delay, the first 50 ms (dots: unstable)".into();
-        for s in &mut zoom.series {
-            s.points.retain(|p| p.0 <= 50.0);
+        for &target in &grid.targets {
+            let line = grid.delays_ms.iter().filter_map(|&d| clean(all, target, soft, passivity, d)).map(rms).collect();
+            overview = overview.with(Series::line(format!("{} {}", TARGETS[target].2, method(passivity)), line));
         }
-        out.chart("tracking_vs_delay_first_50ms", &zoom)?;
     }
-    let mut energy = Chart::new(
-        format!("Energy vs {name}: linkage energy beyond the hand's work (floored at 0.1 mJ)"),
-        variable.axis(),
+    for passivity in [false, true] {
+        let unstable = grid
+            .targets
+            .iter()
+            .flat_map(|&t| grid.delays_ms.iter().filter_map(move |&d| clean(all, t, soft, passivity, d)))
+            .filter(|m| !m.verdict.stable)
+            .map(rms)
+            .collect();
+        overview = overview.with(Series::markers(format!("unstable, {}", method(passivity)), unstable));
+    }
+    overview = overview.with(Series::markers(
+        "goals: testbed soft, 3 mm at 100 ms, 25 mm at 1 s",
+        vec![(100.0, GOAL_RMS_100MS_M * 1e3), (1000.0, GOAL_RMS_1S_M * 1e3)],
+    ));
+    out.chart("tracking_vs_delay", &overview)?;
+    // Per scene: every hand, both methods, clean network.
+    for &target in &grid.targets {
+        let mut chart = Chart::new(
+            format!(
+                "Tracking vs delay, {}:{}, no jitter or loss (circles: unstable)",
+                TARGETS[target].0, TARGETS[target].1
+            ),
+            axis,
+            "device-OP distance, RMS, device space (mm)",
+        )
+        .legend(Legend::LowerRight);
+        chart.log_y = true;
+        for passivity in [false, true] {
+            for &hand in &grid.hands {
+                let line =
+                    grid.delays_ms.iter().filter_map(|&d| clean(all, target, hand, passivity, d)).map(rms).collect();
+                chart = chart.with(Series::line(format!("{} {}", hand.name(), method(passivity)), line));
+            }
+        }
+        for passivity in [false, true] {
+            let unstable = grid
+                .hands
+                .iter()
+                .flat_map(|&h| grid.delays_ms.iter().filter_map(move |&d| clean(all, target, h, passivity, d)))
+                .filter(|m| !m.verdict.stable)
+                .map(rms)
+                .collect();
+            chart = chart.with(Series::markers(format!("unstable, {}", method(passivity)), unstable));
+        }
+        out.chart(&format!("tracking_vs_delay_{}", TARGETS[target].2), &chart)?;
+    }
+    Ok(())
+}
+
+fn stability_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
+    let rows: Vec<(usize, HandKind, bool)> = [false, true]
+        .iter()
+        .flat_map(|&p| grid.targets.iter().flat_map(move |&t| grid.hands.iter().map(move |&h| (t, h, p))))
+        .collect();
+    let mut map = HeatMap::new(
+        format!(
+            "Unstable network conditions (of {}: jitter x loss) at each one-way delay; green: none",
+            grid.networks.len()
+        ),
+        rows.iter().map(|&(t, h, p)| format!("{} {} {}", TARGETS[t].2, h.name(), method(p))).collect(),
+        grid.delays_ms.iter().map(|d| format!("{d} ms")).collect(),
+    );
+    for (i, &(target, hand, passivity)) in rows.iter().enumerate() {
+        for (j, &d) in grid.delays_ms.iter().enumerate() {
+            let unstable =
+                pair(all, target, hand, passivity).filter(|m| m.point.delay_ms == d && !m.verdict.stable).count();
+            map.set(i, j, unstable as f64, unstable == 0);
+        }
+    }
+    out.heat_map("stability_delay", &map)
+}
+
+fn energy_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
+    let floor = 1e-4;
+    let mut chart = Chart::new(
+        "Energy vs delay, worst over hands, jitter and loss (floored at 0.1 mJ)",
+        "one-way delay (ms)",
         "energy (J)",
     )
-    .legend(Legend::UpperRight);
-    energy.log_y = true;
-    let floor = 1e-4;
+    .legend(Legend::UpperLeft);
+    chart.log_y = true;
+    let worst = |target: usize, passivity: bool, value: &dyn Fn(&Measured) -> f64| -> Vec<(f64, f64)> {
+        grid.delays_ms
+            .iter()
+            .map(|&d| {
+                let v = all
+                    .iter()
+                    .filter(|m| m.point.target == target && m.point.passivity == passivity && m.point.delay_ms == d)
+                    .map(value)
+                    .fold(floor, f64::max);
+                (d, v)
+            })
+            .collect()
+    };
     for passivity in [false, true] {
-        energy = energy.with(Series::line(
-            format!("max(E_kin - W_hand), {}", mode(passivity)),
-            points
-                .iter()
-                .filter(|m| m.point.passivity == passivity)
-                .map(|m| (m.point.value, m.verdict.energy_excess_j.max(floor)))
-                .collect(),
+        for &target in &grid.targets {
+            chart = chart.with(Series::line(
+                format!("{}: max(E_linkage - W_hand), {}", TARGETS[target].2, method(passivity)),
+                worst(target, passivity, &|m| m.verdict.energy_excess_j),
+            ));
+        }
+    }
+    for &target in &grid.targets {
+        chart = chart.with(Series::reference(
+            format!("{}: energy the coupling generated, booked by the passivity observer", TARGETS[target].2),
+            worst(target, true, &|m| -m.passivity_absorbed_j),
         ));
     }
-    energy = energy.with(Series::reference(
-        "energy-growth threshold, plain (half the hand's work + 5 mJ)",
-        points
-            .iter()
-            .filter(|m| !m.point.passivity)
-            .map(|m| (m.point.value, verdict::ENERGY_FRACTION * m.verdict.energy_flow_max_j + verdict::ENERGY_FLOOR_J))
-            .collect(),
-    ));
-    energy = energy.with(Series::reference(
-        "energy the couplings generated, passivity on (booked by its observer)",
-        points
-            .iter()
-            .filter(|m| m.point.passivity)
-            .map(|m| (m.point.value, (-m.passivity_absorbed_j).max(floor)))
-            .collect(),
-    ));
-    out.chart(&format!("energy_vs_{name}"), &energy)?;
-    out.map(
-        &format!("stability_{name}"),
-        &StabilityMap {
-            title: format!("Stability vs {name}: plain coupling and passivity controller"),
-            x_label: variable.axis().into(),
-            y_label: "coupling".into(),
-            log: false,
-            cells: points
-                .iter()
-                .map(|m| (m.point.value, f64::from(u8::from(m.point.passivity)), m.verdict.stable))
-                .collect(),
-            overlays: Vec::new(),
-            legend: Legend::UpperLeft,
-            y_categories: vec!["plain".into(), "passivity".into()],
-        },
-    )
-}
-
-fn sweep_json(variable: Variable, points: &[Measured]) -> Value {
-    let by =
-        |passivity: bool| points.iter().filter(|m| m.point.passivity == passivity).map(point_json).collect::<Vec<_>>();
-    json!({
-        "variable": variable,
-        "axis": variable.axis(),
-        "first_unstable_value_plain": first_failure(points, false),
-        "first_unstable_value_passivity": first_failure(points, true),
-        "unstable_values_plain": failures(points, false),
-        "unstable_values_passivity": failures(points, true),
-        "plain": by(false),
-        "passivity": by(true),
-    })
+    out.chart("energy_vs_delay", &chart)
 }
 
 /// Runs the experiment.
 pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency", options)?;
-    let seconds = 8.0;
-    let values: [(Variable, Vec<f64>); 3] = [
-        (
-            Variable::Delay,
-            options.pick(
-                (0..=15)
-                    .map(|i| 2.0 * i as f64)
-                    .chain([40.0, 50.0, 60.0, 75.0, 100.0, 125.0, 150.0, 175.0, 200.0, 225.0, 250.0, 300.0, 350.0])
-                    .chain([400.0, 450.0, 500.0])
-                    .collect(),
-                vec![0.0, 10.0, 50.0, 200.0, 500.0],
-            ),
-        ),
-        (Variable::Jitter, options.pick(vec![0.0, 2.0, 5.0, 10.0, 20.0, 40.0], vec![0.0, 10.0, 40.0])),
-        (Variable::Loss, options.pick(vec![0.0, 1.0, 5.0, 10.0, 20.0, 30.0, 50.0], vec![0.0, 10.0, 50.0])),
-    ];
-    let mut sweeps = serde_json::Map::new();
-    let mut delay_points = Vec::new();
-    for (variable, vs) in values {
-        let points: Vec<Point> = [false, true]
-            .into_iter()
-            .flat_map(|passivity| vs.iter().map(move |&value| Point { variable, value, passivity }))
-            .collect();
-        let measured =
-            sweep(&format!("{variable:?}").to_lowercase(), &points, options.threads, options.progress, |p| {
-                measure(p, seconds)
-            })?;
-        charts(&mut out, variable, &measured)?;
-        sweeps.insert(format!("{variable:?}").to_lowercase(), sweep_json(variable, &measured));
-        if variable == Variable::Delay {
-            delay_points = measured;
+    let grid = options.pick(Grid::full(), Grid::quick());
+    let points = grid.points();
+    let all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, SECONDS))?;
+    tracking_charts(&mut out, &grid, &all)?;
+    stability_chart(&mut out, &grid, &all)?;
+    energy_chart(&mut out, &grid, &all)?;
+
+    let mut first_failures = Vec::new();
+    let mut table = Vec::new();
+    for &target in &grid.targets {
+        for &hand in &grid.hands {
+            for passivity in [false, true] {
+                let first = first_failure(pair(&all, target, hand, passivity));
+                let first_clean =
+                    first_failure(pair(&all, target, hand, passivity).filter(|m| m.point.network.is_clean()));
+                let unstable: Vec<&Measured> =
+                    pair(&all, target, hand, passivity).filter(|m| !m.verdict.stable).collect();
+                let at_first: Vec<String> = unstable
+                    .iter()
+                    .filter(|m| Some(m.point.delay_ms) == first)
+                    .map(|m| format!("{}: {}", m.point.network.name(), m.verdict.reasons.join(", ")))
+                    .collect();
+                table.push(format!(
+                    "{}:{} {} {}: {}",
+                    TARGETS[target].0,
+                    TARGETS[target].1,
+                    hand.name(),
+                    method(passivity),
+                    first.map_or("none".into(), |d| format!("{d} ms"))
+                ));
+                first_failures.push(json!({
+                    "scene": TARGETS[target].0,
+                    "op": TARGETS[target].1,
+                    "hand": hand.name(),
+                    "method": method(passivity),
+                    "first_failure_ms": first,
+                    "first_failure_clean_network_ms": first_clean,
+                    "unstable_points": unstable.len(),
+                    "points": pair(&all, target, hand, passivity).count(),
+                    "unstable_at_first_failure": at_first,
+                }));
+            }
         }
     }
-    let describe = |passivity: bool| match first_failure(&delay_points, passivity) {
-        None => "at no delay up to 500 ms".to_string(),
-        Some(d) => format!("{d} ms (unstable at {:?} ms)", failures(&delay_points, passivity)),
+    let unstable = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity && !m.verdict.stable).count();
+    let per_method = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity).count();
+    let max_delay = grid.delays_ms.iter().copied().fold(0.0, f64::max);
+    let goal_rms = |delay_ms: f64, passivity: bool| {
+        grid.hands
+            .contains(&HandKind::Soft)
+            .then(|| clean(&all, 0, HandKind::Soft, passivity, delay_ms))
+            .flatten()
+            .map(|m| round(m.device_op_rms_m * 1e3, 2))
     };
-    let plain = first_failure(&delay_points, false);
-    let passive = first_failure(&delay_points, true);
-    let rms_at = |delay: f64, passivity: bool| {
-        delay_points
-            .iter()
-            .find(|m| m.point.value == delay && m.point.passivity == passivity)
-            .map_or(f64::NAN, |m| round(m.device_op_rms_m * 1e3, 2))
-    };
+    let (rms_100, rms_1000) = (goal_rms(100.0, false), goal_rms(1000.0, false));
+    let goals = json!({
+        "no_unstable_point_with_defaults": unstable(false) == 0,
+        "unstable_points_with_defaults": unstable(false),
+        "testbed_soft_device_op_rms_mm_at_100ms": rms_100,
+        "testbed_soft_device_op_rms_mm_at_100ms_goal_met": rms_100.map(|r| r <= GOAL_RMS_100MS_M * 1e3),
+        "testbed_soft_device_op_rms_mm_at_1000ms": rms_1000,
+        "testbed_soft_device_op_rms_mm_at_1000ms_goal_met": rms_1000.map(|r| r <= GOAL_RMS_1S_M * 1e3),
+        "testbed_soft_device_op_rms_mm_with_passivity": {"100ms": goal_rms(100.0, true), "1000ms": goal_rms(1000.0, true)},
+    });
     let answer = format!(
-        "Plain coupling first fails at {}; with the passivity controller at {}. Device-OP RMS at 0 / 100 / 500 ms: \
-         {} / {} / {} mm plain, {} / {} / {} mm with passivity. At 50 ms delay, plain coupling fails first at a jitter \
-         of {} and at a loss of {}.",
-        describe(false),
-        describe(true),
-        rms_at(0.0, false),
-        rms_at(100.0, false),
-        rms_at(500.0, false),
-        rms_at(0.0, true),
-        rms_at(100.0, true),
-        rms_at(500.0, true),
-        sweeps["jitter"]["first_unstable_value_plain"]
-            .as_f64()
-            .map_or("(none up to 40 ms)".into(), |v| format!("{v} ms")),
-        sweeps["loss"]["first_unstable_value_plain"].as_f64().map_or("(none up to 50 %)".into(), |v| format!("{v} %")),
+        "Up to {max_delay} ms one-way, {} of {} points are unstable with plain coupling (the default), {} of {} with the \
+         passivity controller. First failing delay per scene, hand and method (any jitter and loss of the grid): {}. \
+         Testbed, soft hand, clean network, plain: device-OP RMS {} mm at 100 ms (goal 3), {} mm at 1 s (goal 25).",
+        unstable(false),
+        per_method(false),
+        unstable(true),
+        per_method(true),
+        table.join("; "),
+        rms_100.map_or("n/a".into(), |r| r.to_string()),
+        rms_1000.map_or("n/a".into(), |r| r.to_string()),
     );
     let results = json!({
         "answer": answer,
-        "failing_delay_ms": { "plain_coupling": plain, "with_passivity": passive },
-        "passivity_extends_failing_delay_by_ms": match (plain, passive) {
-            (Some(a), Some(b)) => Some(b - a),
-            _ => None,
-        },
+        "goals": goals,
+        "first_failures": first_failures,
         "criterion": verdict::criterion_json(),
-        "setup": {
-            "session": format!("paper testbed, user and device, 1 kHz VE and haptic loop, {seconds} s per point"),
-            "network": "the same conditions in both directions; each point its own emulator seeds",
-            "passivity": "VeConfig::passivity: time-domain passivity observer on each axis of each coupling port (the graphics-controller PD, the hand's force channel excluded); an axis whose PD generated more energy than the port as a whole absorbed has its PD scaled down, to zero once the excess reaches passivity_allowance_j",
-            "null": "a null failing value means no point of the sweep was unstable",
+        "grid": {
+            "scenes": grid.targets.iter().map(|&t| format!("{}:{}", TARGETS[t].0, TARGETS[t].1)).collect::<Vec<_>>(),
+            "hands": grid.hands.iter().map(|h| h.name()).collect::<Vec<_>>(),
+            "delays_ms": grid.delays_ms,
+            "networks": grid.networks.iter().map(|n| n.name()).collect::<Vec<_>>(),
+            "methods": ["plain (passivity off, the default)", "passivity (VeConfig::passivity, --passivity on)"],
+            "points": all.len(),
+            "seconds_per_point": SECONDS,
+            "reduced": options.quick.then_some("--quick: the four-bar coupler, hands soft and poke, delays 0/100/500/1000 ms, a clean network and 30 ms jitter with 20 % bursty loss"),
         },
-        "sweeps": Value::Object(sweeps),
+        "setup": {
+            "session": "one client with default settings (server-designed coupling and mapping, designed client gains, sim:paper, stiffness mode, 1 kHz VE and haptic loop), a simulated hand touring the OP's reach; the client knows the nominal one-way delay",
+            "network": format!("the same conditions both ways; jitter is the standard deviation of the one-way delay; 5 % loss is independent; 20 % bursty loss is Gilbert (lost in the bad state only) with mean burst {BURST_LENGTH} packets"),
+            "first_failure": "the smallest delay at which some jitter and loss of the grid is unstable; null: none up to the largest delay",
+            "passivity": "VeConfig::passivity: time-domain passivity observer on each axis of each coupling port (the graphics-controller PD, the hand's force channel excluded); an axis whose PD generated more energy than the port as a whole absorbed has its PD scaled down, to zero once the excess reaches passivity_allowance_j",
+        },
+        "points": all.iter().map(point_json).collect::<Vec<_>>(),
     });
     out.finish(
-        "Network delay, jitter and loss with and without the passivity controller",
-        "about 5 s on this 2-core machine (82 sessions of 8 s); --quick about 1 s",
+        "Network delay, jitter and loss with default settings, with and without the passivity controller",
+        "about 1.5 to 2 minutes on this 2-core machine shared with other work (1728 sessions of 10 s, --threads 2); --quick (32 sessions) 2 to 3 s",
         results,
     )
 }

@@ -196,7 +196,8 @@ pub struct CoreConfig {
     /// Time constant of the same pull in the free directions. There the VE follows the local model (the
     /// graphics controller couples it to the uplink's model pose) and lags it by the uplink path, so a fast
     /// pull would drag the model back onto a VE that is only following it, and slow both; a slow pull only
-    /// keeps them from parting for good.
+    /// keeps them from parting for good. The core never pulls faster than
+    /// [`FREE_BLEND_PER_ROUND_TRIP`](super::FREE_BLEND_PER_ROUND_TRIP) round trips (see there).
     pub free_blend_time_constant: Duration,
     /// Time constant of the first-order filter on the snapshot terms the controllers use (Λ̂⁻¹ and the
     /// constrained-direction projector), so a new snapshot never steps the force; zero takes them as they come.

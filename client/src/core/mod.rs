@@ -63,6 +63,17 @@ use sync::History;
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
 
+/// The free directions' pull toward the VE takes at least this many round trips as its time constant.
+///
+/// That pull compares the VE's state with the model's state it answered (`sync`), so it would close no loop
+/// if the VE followed the model exactly; it does not (the graphics controller lags the model, the linkage's
+/// dynamics differ from the frozen local model's), and what it corrects comes back a round trip `T` later.
+/// A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`, and the default `τ` of 200 ms made the
+/// testbed unstable from 200 ms one way (a 400 ms round trip: `T/τ` = 2 > π/2). With `τ ≥ 2 T` the loop
+/// crosses over at `1/τ` with at most `T/τ` = 0.5 rad of delay phase: 61° of phase margin. Slower only
+/// means the model and the VE part for longer before they meet again (`latency` experiment).
+pub const FREE_BLEND_PER_ROUND_TRIP: f64 = 2.0;
+
 /// Why a core could not be built for a session.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CoreError {
@@ -674,6 +685,14 @@ impl<S: Space> HapticCore<S> {
         self.one_way_delay = delay;
     }
 
+    /// The free directions' pull time constant: the configured one, never shorter than
+    /// [`FREE_BLEND_PER_ROUND_TRIP`] round trips.
+    pub fn free_blend_time_constant(&self) -> Duration {
+        self.config
+            .free_blend_time_constant
+            .max(self.one_way_delay.saturating_mul(2).mul_f64(FREE_BLEND_PER_ROUND_TRIP))
+    }
+
     /// Takes a snapshot received at `now`. Returns `Ok(true)` when it is the newest so far (it will be used at
     /// the next tick), `Ok(false)` when a newer one was already there (latest wins), an error when refused.
     pub fn handle_snapshot(&mut self, now: Duration, snapshot: &Snapshot) -> Result<bool, SnapshotRejection> {
@@ -781,7 +800,7 @@ impl<S: Space> HapticCore<S> {
         self.frame.filter(fraction(self.config.terms_time_constant));
         if !stale {
             let (constrained, free) =
-                (fraction(self.config.blend_time_constant), fraction(self.config.free_blend_time_constant));
+                (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
             let (p, l) = (&self.frame.projector, self.length_scale);
             // Along the constrained directions the model drifts off the linkage's curve as it moves, and the
             // drift grows over the round trip: it is measured against the VE's state predicted to now. In the
