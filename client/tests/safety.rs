@@ -4,7 +4,7 @@ mod support;
 
 use std::time::Duration;
 
-use kinloop_client::core::safety::{force_ratio, limit_wrench, WrenchLimits};
+use kinloop_client::core::safety::{force_ratio, limit_wrench, limit_wrench_parts, WrenchLimits};
 use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm, UplinkDeadband};
 use kinloop_client::device::{DevicePreset, DeviceState};
 use kinloop_client::user::ConstantWrench;
@@ -18,15 +18,21 @@ fn paper_limits() -> WrenchLimits {
     WrenchLimits::of(&DevicePreset::Paper.spec(SceneKind::Planar).expect("planar"))
 }
 
+/// Force and torque are each clamped to their peak, each keeping its direction: an excess in one never
+/// shrinks the other (a torque over the peak must not give up the force that holds the joints).
 #[test]
-fn clamping_keeps_the_direction_and_zeroes_unactuated_axes() {
+fn clamping_keeps_each_parts_direction_and_zeroes_unactuated_axes() {
     let limits = paper_limits();
     let (w, scale) = limit_wrench::<Planar>(&Vector3::new(30.0, -40.0, 0.1), &limits);
     assert!(w.xy().norm() <= limits.max_force_n && w.xy().norm() > limits.max_force_n - 1e-9);
     assert!((scale - 0.2).abs() < 1e-9);
-    assert!((w - Vector3::new(30.0, -40.0, 0.1) * 0.2).norm() < 1e-9, "direction kept");
-    let torque_heavy = limit_wrench::<Planar>(&Vector3::new(0.1, 0.0, 2.0), &limits).0;
-    assert!((torque_heavy[2] - limits.max_torque_nm).abs() < 1e-9);
+    assert!((w.xy() - Vector2::new(30.0, -40.0) * 0.2).norm() < 1e-9, "the force's direction kept");
+    assert_eq!(w[2], 0.1, "a torque within its peak is left alone");
+    let (torque_heavy, parts) = limit_wrench_parts::<Planar>(&Vector3::new(0.1, 0.0, 2.0), &limits);
+    assert!(torque_heavy[2] <= limits.max_torque_nm && torque_heavy[2] > limits.max_torque_nm - 1e-9);
+    assert_eq!((torque_heavy[0], torque_heavy[1]), (0.1, 0.0), "a force within its peak is left alone");
+    assert_eq!(parts.force, 1.0);
+    assert!((parts.torque - limits.max_torque_nm / 2.0).abs() < 1e-9);
     let falcon = WrenchLimits::of(&DevicePreset::Falcon.spec(SceneKind::Planar).expect("planar"));
     let (w, scale) = limit_wrench::<Planar>(&Vector3::new(1.0, 2.0, 5.0), &falcon);
     assert_eq!((w, scale), (Vector3::new(1.0, 2.0, 0.0), 1.0), "no torque actuator: torque dropped, force kept");

@@ -57,7 +57,7 @@ use deadband::Deadband;
 use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
-use safety::{force_ratio, limit_wrench, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
+use safety::{force_ratio, limit_wrench_parts, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
 use sync::History;
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
@@ -892,8 +892,10 @@ impl<S: Space> HapticCore<S> {
         } else {
             gain = self.gate.update(dt_s, !stale);
             let on_device = self.scales.wrench_to_device::<S>(&(requested * gain));
-            (command, clamp_scale) = limit_wrench::<S>(&on_device, &self.limits);
-            self.reaction = -mask_unactuated::<S>(&pc_felt, &self.limits) * (gain * clamp_scale);
+            let scales;
+            (command, scales) = limit_wrench_parts::<S>(&on_device, &self.limits);
+            clamp_scale = scales.min();
+            self.reaction = -scales.apply::<S>(&mask_unactuated::<S>(&pc_felt, &self.limits)) * gain;
         }
         if clamp_scale < 1.0 {
             flags |= uplink_flags::CLAMPED;
