@@ -135,3 +135,38 @@ fn a_touring_hand_takes_a_free_handle_through_every_waypoint_and_back() {
     }
     assert!(back_home < 1e-3, "the tour comes back to its first waypoint ({back_home} m)");
 }
+
+/// A tour round a handle that turns a whole circle (the testbed's link 2 over its reach): waypoints an eighth
+/// of a turn apart, their angles given as logarithms within ±π of the grasp (so 3π/4 is followed by −π). On
+/// its way forth the wrist turns a light handle steadily through them, never spinning back the long way round
+/// between two neighbours: followed continuously, the handle's angle only grows, past 1.5π.
+#[test]
+fn a_tour_round_a_whole_turn_keeps_the_wrist_turning_one_way() {
+    use std::f64::consts::{FRAC_PI_4, PI};
+    let wrapped = |a: f64| (a + PI).rem_euclid(2.0 * PI) - PI;
+    let waypoints: Vec<Vector3<f64>> =
+        (1..8).map(|k| Vector3::new(0.001 * k as f64, 0.0, wrapped(k as f64 * FRAC_PI_4))).collect();
+    let spec = DeviceSpec {
+        mass: vec![0.1, 0.1, 2e-3],
+        workspace_min: vec![-10.0, -10.0, -100.0],
+        workspace_max: vec![10.0, 10.0, 100.0],
+        ..DevicePreset::Paper.spec(SceneKind::Planar).unwrap()
+    };
+    let start = OpPose { position: Vector2::zeros(), rotation: UnitComplex::identity() };
+    let device = SimulatedDevice::new(spec, &SimulatedDeviceParams::ideal(3), start).unwrap();
+    let user = UserSpec::Hand(HandSpec { kind: HandKind::Firm, intent: Intent::Tour })
+        .build::<Planar>(&UserContext { tour: waypoints })
+        .unwrap();
+    let mut rig = SimulatedRig::new(device, user);
+    let (mut unwrapped, mut last, mut furthest, mut back_spin) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    // Forth: seven segments of at least 0.6 s each from the grasp.
+    run(&mut rig, 4.0, Vector3::zeros(), |_, rig| {
+        let angle = rig.true_pose().rotation.angle();
+        unwrapped += wrapped(angle - last);
+        last = angle;
+        furthest = furthest.max(unwrapped);
+        back_spin = back_spin.max(furthest - unwrapped);
+    });
+    assert!(furthest > 1.5 * PI, "the handle turned only {furthest} rad forth");
+    assert!(back_spin < 0.1, "the handle turned back by {back_spin} rad on the way forth");
+}

@@ -335,6 +335,27 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
     }
 }
 
+/// The rotation-vector part of the displacement `d` (angle θ about u, θ ≤ π as a logarithm gives it) turned
+/// into the equivalent `u (θ + 2πk)` nearest `previous`'s: consecutive displacements along a path that turns
+/// through ±π then stay continuous instead of jumping by 2π (a tour interpolated between the jumps would
+/// spin the long way round).
+pub fn unwrap_rotation_near<S: Space>(d: &mut S::OpVec, previous: &S::OpVec) {
+    let lin = <S::Point as VecOps>::LEN;
+    let theta = (lin..S::DIM).map(|i| d[i] * d[i]).sum::<f64>().sqrt();
+    if !(theta.is_finite() && theta > 0.0) {
+        return;
+    }
+    // `previous` along u, in turns of 2π beyond θ.
+    let along = (lin..S::DIM).map(|i| previous[i] * d[i] / theta).sum::<f64>();
+    let turns = ((along - theta) / std::f64::consts::TAU).round();
+    if turns.is_finite() && turns != 0.0 {
+        let scale = (theta + turns * std::f64::consts::TAU) / theta;
+        for i in lin..S::DIM {
+            d[i] *= scale;
+        }
+    }
+}
+
 /// The wrench with its force and its torque each scaled back to at most `max_force` and `max_torque`
 /// (each keeps its direction), and whether anything was cut. Force and torque are limited apart, as a
 /// force sensor saturates and as a device's peaks are rated: a wrist torque past its range says nothing
@@ -719,6 +740,29 @@ impl Space for Spatial {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A planar tour through ±π: the wrapped angles 2.9, −3.1 (0.28 rad apart the short way) unwrap to 2.9,
+    /// 3.18, and a whole further turn keeps counting; a spatial rotation vector unwraps along its axis.
+    #[test]
+    fn rotations_unwrap_to_the_turn_nearest_the_previous() {
+        let mut d = Vector3::new(0.1, 0.2, -3.1);
+        unwrap_rotation_near::<Planar>(&mut d, &Vector3::new(0.0, 0.0, 2.9));
+        assert!((d[2] - (-3.1 + std::f64::consts::TAU)).abs() < 1e-12 && d[0] == 0.1 && d[1] == 0.2);
+        let mut d = Vector3::new(0.0, 0.0, 0.5);
+        unwrap_rotation_near::<Planar>(&mut d, &Vector3::new(0.0, 0.0, 6.6));
+        assert!((d[2] - (0.5 + std::f64::consts::TAU)).abs() < 1e-12);
+        let mut d = Vector3::new(0.0, 0.0, 0.3);
+        unwrap_rotation_near::<Planar>(&mut d, &Vector3::new(0.0, 0.0, 0.1));
+        assert_eq!(d[2], 0.3, "already nearest");
+        let axis = Vector3::new(1.0, 2.0, 2.0) / 3.0;
+        let mut d = Vector6::zeros();
+        d.fixed_rows_mut::<3>(3).copy_from(&(axis * -3.0));
+        let mut previous = Vector6::zeros();
+        previous.fixed_rows_mut::<3>(3).copy_from(&(axis * 3.0));
+        unwrap_rotation_near::<Spatial>(&mut d, &previous);
+        let expected = axis * (std::f64::consts::TAU - 3.0);
+        assert!((d.fixed_rows::<3>(3) - expected).norm() < 1e-12, "{d:?}");
+    }
 
     /// Force and torque saturate apart: a torque past its limit is scaled back without touching the
     /// force, each part keeps its direction, and a zero limit zeroes its part.
