@@ -5,12 +5,10 @@
 
 mod common;
 
-use std::net::SocketAddr;
 use std::time::Duration;
 
-use common::child::{ChildProcess, Program, Role};
+use common::child::{json_object, listening, ChildProcess, Program, Role};
 use common::workspace;
-use serde_json::Value;
 
 const NAME: &str = "the_documented_hand_run_works_as_written";
 /// The file the README quotes.
@@ -58,22 +56,6 @@ fn documented() -> Vec<Documented> {
 fn milliseconds(value: &str) -> f64 {
     let ms = value.strip_suffix("ms").and_then(|v| v.parse().ok());
     ms.unwrap_or_else(|| panic!("{value:?}: this test reads delays written in ms"))
-}
-
-/// The address and fingerprint the server prints, once it has printed both (the test harness's `test NAME
-/// ... ` may precede the first on its line).
-fn listening(stdout: &str) -> Option<(SocketAddr, String)> {
-    let after = |label: &str| stdout.lines().find_map(|l| l.split_once(label)).map(|(_, value)| value.trim());
-    let addr = after("kinloop-server listening on ")?.parse().ok()?;
-    Some((addr, after("certificate fingerprint (sha-256): ")?.to_owned()))
-}
-
-/// The JSON object a program printed (the test harness's lines around it have no braces).
-fn json_object(stdout: &str) -> Value {
-    match (stdout.find('{'), stdout.rfind('}')) {
-        (Some(start), Some(end)) if start < end => serde_json::from_str(&stdout[start..=end]).expect("one JSON object"),
-        _ => panic!("no JSON object in:\n{stdout}"),
-    }
 }
 
 /// The script's server, then each of its clients, as written: every client exits by itself with success

@@ -305,3 +305,19 @@ impl Drop for ChildProcess {
         }
     }
 }
+
+/// The address and fingerprint a `kinloop-server` prints, once it has printed both (the test harness's
+/// `test NAME ... ` may precede the first on its line).
+pub fn listening(stdout: &str) -> Option<(SocketAddr, String)> {
+    let after = |label: &str| stdout.lines().find_map(|l| l.split_once(label)).map(|(_, value)| value.trim());
+    let addr = after("kinloop-server listening on ")?.parse().ok()?;
+    Some((addr, after("certificate fingerprint (sha-256): ")?.to_owned()))
+}
+
+/// The JSON object a program printed with `--json` (the test harness's lines around it have no braces).
+pub fn json_object(stdout: &str) -> serde_json::Value {
+    match (stdout.find('{'), stdout.rfind('}')) {
+        (Some(start), Some(end)) if start < end => serde_json::from_str(&stdout[start..=end]).expect("one JSON object"),
+        _ => panic!("no JSON object in:\n{stdout}"),
+    }
+}
