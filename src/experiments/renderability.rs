@@ -227,6 +227,13 @@ const HANDS: [HandKind; 2] = [HandKind::Soft, HandKind::Firm];
 
 /// Runs one pair in real time for `seconds` (records under `scratch`) and judges it by the same bounds.
 pub fn evaluate_live(point: &Point, seconds: f64, scratch: &std::path::Path) -> Result<PointResult> {
+    let options = live_options(point, seconds, scratch)?;
+    let report = crate::demo::run(&options).with_context(|| format!("{} in real time", row_label(point)))?;
+    judge_live(point, &report)
+}
+
+/// The demo session that runs `point` for `seconds` with default flags, records under `scratch`.
+pub fn live_options(point: &Point, seconds: f64, scratch: &std::path::Path) -> Result<crate::demo::DemoOptions> {
     let mut o = crate::demo::DemoOptions::new(scratch)?;
     o.scene = builtin::scene(&point.scene).context("built in")??;
     o.scene_label = point.scene.clone();
@@ -236,7 +243,12 @@ pub fn evaluate_live(point: &Point, seconds: f64, scratch: &std::path::Path) -> 
     o.first_op = Some(point.op.clone());
     o.hand = Some(point.hand);
     o.link = point.network.link(0x5eed);
-    let report = crate::demo::run(&o).with_context(|| format!("{} in real time", row_label(point)))?;
+    Ok(o)
+}
+
+/// Judges a real-time session of `point` by the matrix's bounds. "Stable" here is no VE restore, no withheld
+/// snapshot and no non-finite value (the energy criterion needs the harness's every-tick recording).
+pub fn judge_live(point: &Point, report: &crate::demo::DemoReport) -> Result<PointResult> {
     let s = &report.summary;
     let u = s.per_user.first().context("the demo's user")?;
     let count = |key: &str| u.client[key].as_f64().unwrap_or(f64::NAN);

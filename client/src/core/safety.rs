@@ -11,6 +11,7 @@
 //!   ([`usable_state`]) is treated as non-finite.
 
 use kinloop_linkage::local_model::OpPose;
+pub use kinloop_linkage::space::PartScales;
 use kinloop_linkage::space::{clip_wrench_parts, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
 
@@ -66,39 +67,7 @@ pub fn limit_wrench_parts<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> (S::
     let actuated = mask_unactuated::<S>(w, limits);
     // A hair under each limit, so rounding never leaves a part a few ulps above it.
     let under = 1.0 - 1e-12;
-    let (limited, _) = clip_wrench_parts::<S>(&actuated, limits.max_force_n * under, limits.max_torque_nm * under);
-    let scale = |before: f64, after: f64| if before > after { after / before } else { 1.0 };
-    let scales = PartScales {
-        force: scale(S::op_lin(&actuated).norm(), S::op_lin(&limited).norm()),
-        torque: scale(S::op_ang(&actuated).norm(), S::op_ang(&limited).norm()),
-    };
-    (limited, scales)
-}
-
-/// The scales [`limit_wrench_parts`] applied.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PartScales {
-    /// On the force (linear part).
-    pub force: f64,
-    /// On the torque (angular part).
-    pub torque: f64,
-}
-
-impl PartScales {
-    /// The smaller: 1 when nothing was cut.
-    pub fn min(self) -> f64 {
-        self.force.min(self.torque)
-    }
-
-    /// `w` with its force and torque scaled as these say.
-    pub fn apply<S: Space>(self, w: &S::OpVec) -> S::OpVec {
-        let linear = <S::Point as VecOps>::LEN;
-        let mut out = *w;
-        for i in 0..S::DIM {
-            out[i] *= if i < linear { self.force } else { self.torque };
-        }
-        out
-    }
+    clip_wrench_parts::<S>(&actuated, limits.max_force_n * under, limits.max_torque_nm * under)
 }
 
 /// [`limit_wrench_parts`]'s wrench and the smaller of its scales.

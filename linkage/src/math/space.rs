@@ -357,24 +357,46 @@ pub fn unwrap_rotation_near<S: Space>(d: &mut S::OpVec, previous: &S::OpVec) {
 }
 
 /// The wrench with its force and its torque each scaled back to at most `max_force` and `max_torque`
-/// (each keeps its direction), and whether anything was cut. Force and torque are limited apart, as a
-/// force sensor saturates and as a device's peaks are rated: a wrist torque past its range says nothing
-/// about the force.
-pub fn clip_wrench_parts<S: Space>(wrench: &S::OpVec, max_force: f64, max_torque: f64) -> (S::OpVec, bool) {
-    let lin = <S::Point as VecOps>::LEN;
-    let parts = [(0..lin, S::op_lin(wrench).norm(), max_force), (lin..S::DIM, S::op_ang(wrench).norm(), max_torque)];
-    let mut out = *wrench;
-    let mut clipped = false;
-    for (axes, magnitude, limit) in parts {
-        if magnitude > limit {
-            let scale = limit / magnitude;
-            for axis in axes {
-                out[axis] *= scale;
-            }
-            clipped = true;
-        }
+/// (each keeps its direction), and the scales applied. Force and torque are limited apart, as a force sensor
+/// saturates and as a device's peaks are rated: a wrist torque past its range says nothing about the force.
+pub fn clip_wrench_parts<S: Space>(wrench: &S::OpVec, max_force: f64, max_torque: f64) -> (S::OpVec, PartScales) {
+    let scale = |magnitude: f64, limit: f64| if magnitude > limit { limit / magnitude } else { 1.0 };
+    let scales = PartScales {
+        force: scale(S::op_lin(wrench).norm(), max_force),
+        torque: scale(S::op_ang(wrench).norm(), max_torque),
+    };
+    (scales.apply::<S>(wrench), scales)
+}
+
+/// Separate scales on a wrench's force (linear part) and torque (angular part).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PartScales {
+    /// On the force.
+    pub force: f64,
+    /// On the torque.
+    pub torque: f64,
+}
+
+impl PartScales {
+    /// The smaller: 1 when nothing was cut.
+    pub fn min(self) -> f64 {
+        self.force.min(self.torque)
     }
-    (out, clipped)
+
+    /// Whether either part was cut.
+    pub fn clipped(self) -> bool {
+        self.min() < 1.0
+    }
+
+    /// `w` with its force and torque scaled as these say.
+    pub fn apply<S: Space>(self, w: &S::OpVec) -> S::OpVec {
+        let linear = <S::Point as VecOps>::LEN;
+        let mut out = *w;
+        for i in 0..S::DIM {
+            out[i] *= if i < linear { self.force } else { self.torque };
+        }
+        out
+    }
 }
 
 /// The plane: positions `(x, y)`, orientation an angle about z.
@@ -769,15 +791,15 @@ mod tests {
     #[test]
     fn wrench_parts_clip_independently_keeping_direction() {
         let w = Vector3::new(3.0, 4.0, 2.0); // planar: force (3, 4), |f| = 5; torque 2
-        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 10.0, 0.5);
-        assert!(clipped);
+        let (out, scales) = clip_wrench_parts::<Planar>(&w, 10.0, 0.5);
+        assert!(scales.clipped());
         assert_eq!((out[0], out[1]), (3.0, 4.0));
         assert!((out[2] - 0.5).abs() < 1e-15);
-        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 2.5, 0.0);
-        assert!(clipped);
+        let (out, scales) = clip_wrench_parts::<Planar>(&w, 2.5, 0.0);
+        assert!(scales.clipped());
         assert!((out[0] - 1.5).abs() < 1e-15 && (out[1] - 2.0).abs() < 1e-15 && out[2] == 0.0);
-        let (out, clipped) = clip_wrench_parts::<Planar>(&w, 5.0, 2.0);
-        assert!(!clipped);
+        let (out, scales) = clip_wrench_parts::<Planar>(&w, 5.0, 2.0);
+        assert!(!scales.clipped());
         assert_eq!(out, w);
     }
 

@@ -239,7 +239,8 @@ pub fn clip_hand_wrench<S: Space>(
     if let Some((field, magnitude, limit)) = magnitudes.into_iter().find(|(_, m, limit)| *m > limit * absurd_factor) {
         return Err(UplinkRejection::WrenchAbsurd { field, magnitude, rating: limit });
     }
-    Ok(clip_wrench_parts::<S>(wrench, rating.max_force_n, rating.max_torque_nm))
+    let (clipped, scales) = clip_wrench_parts::<S>(wrench, rating.max_force_n, rating.max_torque_nm);
+    Ok((clipped, scales.clipped()))
 }
 
 #[cfg(test)]

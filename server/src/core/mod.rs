@@ -578,11 +578,9 @@ impl<S: Space> VeCore<S> {
         let dt = self.step_config.dt;
         self.update_couplings(at, dt);
         if self.config.rest_unheld && self.couplings.iter().all(|c| c.weight <= 0.0) {
-            // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`).
+            // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`). The
+            // couplings' step wrenches were cleared by `update_couplings`.
             self.qd.fill(0.0);
-            for c in &mut self.couplings {
-                c.step_wrench = S::OpVec::zero();
-            }
             self.finish_tick(at);
             return;
         }
