@@ -517,8 +517,11 @@ impl<S: Space> Session<S> {
             let ve_op =
                 p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user).map(|u| u.op_pose));
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
-            // The true hand (a sensorless device's report carries the observer's estimate).
+            // The true hand (a sensorless device's report carries the observer's estimate) and the handle's
+            // true twist (the report's is the encoders' filtered difference, whose lag made a hand's work
+            // on a spring-like grasp drift by mJ over a tour: the energy criterion must see the plant).
             sample.hand = core.scales().wrench_to_ve::<S>(&rig.hand_wrench()).as_slice().to_vec();
+            sample.device_twist = core.scales().twist_to_ve::<S>(&rig.device().true_twist()).as_slice().to_vec();
             self.recording.push_client(i, sample);
         }
         Ok(())
