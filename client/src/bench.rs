@@ -84,6 +84,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         contacts: Vec::new(),
         others: OtherUsers::default(),
         config: None,
+        energy: kinloop_protocol::PortEnergy::zero(3),
     };
     Ok((welcome, snapshot))
 }
@@ -100,6 +101,7 @@ pub fn client_tick_testbed(iters: u64) -> Result<f64, BenchError> {
         pose: OpPose { position: Vector2::new(0.0, 0.0), rotation: UnitComplex::identity() },
         twist: Vector3::zeros(),
         hand_wrench: Some(Vector3::from_column_slice(&builtin::PAPER_WRENCH)),
+        grasped: None,
     };
     let mut tick = |k: u64| {
         let now = Duration::from_micros(1000 * k);

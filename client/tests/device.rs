@@ -28,6 +28,7 @@ fn unit_spec(max_force: f64) -> DeviceSpec {
         damping: vec![0.0; 3],
         native_rate_hz: 1000.0,
         has_force_sensor: true,
+        has_presence_sensor: false,
         mass: vec![2.0, 2.0, 0.5],
     }
 }
@@ -168,7 +169,7 @@ fn a_replayed_wrench_is_interpolated_and_held() {
     let mut replay = ReplayedWrench::<Planar>::parse(text, Path::new("inline.csv")).unwrap();
     assert!((replay.at(0.25) - Vector3::new(0.25, -0.5, 0.125)).norm() < 1e-12);
     assert_eq!(replay.at(5.0), Vector3::new(1.0, -2.0, 0.5));
-    let state = DeviceState::<Planar> { pose: at_origin(), twist: Vector3::zeros(), hand_wrench: None };
+    let state = DeviceState::<Planar> { pose: at_origin(), twist: Vector3::zeros(), hand_wrench: None, grasped: None };
     assert_eq!(replay.wrench(Duration::from_millis(500), &state), Vector3::new(0.5, -1.0, 0.25));
     for (bad, what) in [
         ("t,fx,fy\n0,1,2\n", "no column"),

@@ -58,6 +58,7 @@ fn odd_reading(rng: &mut TestRng) -> DeviceState<Planar> {
         pose: OpPose { position: Vector2::new(a, 0.01), rotation: UnitComplex::new(0.1) },
         twist: Vector3::new(0.0, b, 0.0),
         hand_wrench: if rng.chance(0.5) { None } else { Some(Vector3::new(rng.odd(), 0.0, 0.0)) },
+        grasped: if rng.chance(0.5) { None } else { Some(rng.chance(0.5)) },
     }
 }
 

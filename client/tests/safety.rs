@@ -93,6 +93,7 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
         pose: OpPose { position: Vector2::new(x, 0.01), rotation: nalgebra::UnitComplex::new(0.2) },
         twist: Vector3::new(0.3, -0.2, 1.0),
         hand_wrench: Some(Vector3::new(-0.5, 0.0, -0.0025)),
+        grasped: None,
     };
     for round in 0..3 {
         for corrupt in &hostile {
@@ -137,6 +138,7 @@ fn a_non_finite_device_reading_commands_zero_and_is_counted() {
         pose: OpPose { position: Vector2::new(f64::NAN, 0.0), rotation: nalgebra::UnitComplex::identity() },
         twist: Vector3::zeros(),
         hand_wrench: None,
+        grasped: None,
     };
     let out = l.core.tick(l.now, &bad);
     assert_eq!(out.command, Vector3::zeros());
@@ -199,4 +201,108 @@ fn the_perceptual_deadband_saves_uplinks_and_respects_the_longest_gap() {
     let skipped =
         samples.iter().filter(|s| s.uplink_sent && s.report.flags & uplink_flags::DEADBAND_SKIPPED != 0).count();
     assert!(skipped > 0, "uplinks after a gap say so");
+}
+
+/// The paper's push until `release_s`, no hand from then until `regrasp_s`, the push again after.
+struct LetsGo {
+    push: ConstantWrench<Planar>,
+    release_s: f64,
+    regrasp_s: f64,
+}
+
+impl kinloop_client::user::SimulatedUser<Planar> for LetsGo {
+    fn wrench(&mut self, now: Duration, device: &DeviceState<Planar>) -> Vector3<f64> {
+        if self.holds(now) {
+            self.push.wrench(now, device)
+        } else {
+            Vector3::zeros()
+        }
+    }
+
+    fn holds(&self, now: Duration) -> bool {
+        let t = now.as_secs_f64();
+        !(self.release_s..self.regrasp_s).contains(&t)
+    }
+}
+
+/// A hand that lets go of a device with a presence sensor: the output fades to a damper that brakes the
+/// handle (it only ever takes energy from it), the local model parks, the VE keeps the linkage where the hand
+/// left it, and the uplinks say HAND_OFF; when the hand returns, the force ramps in again without a step.
+#[test]
+fn a_released_handle_is_braked_and_the_linkage_waits_where_the_hand_left_it() {
+    let mut config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
+    config.safety.ramp_in = Duration::from_millis(200);
+    let fade = config.safety.fade_out;
+    let push = ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values");
+    let user = Box::new(LetsGo { push, release_s: 1.0, regrasp_s: 2.5 });
+    let mut l = ClosedLoop::with(config, user, false);
+    let samples: Vec<_> = (0..3500).map(|_| l.tick()).collect();
+    let at = |s: f64| &samples[(s * 1000.0) as usize];
+    assert_eq!(at(0.9).report.flags & uplink_flags::HAND_OFF, 0);
+    assert!(at(0.9).report.gain == 1.0 && at(0.9).command.norm() > 0.1, "pushing before the release");
+    let released: Vec<_> = samples
+        .iter()
+        .filter(|s| (1.0 + fade.as_secs_f64() + 0.01..2.5).contains(&s.report.time.as_secs_f64()))
+        .collect();
+    assert!(released.len() > 1000);
+    for s in &released {
+        assert_ne!(s.report.flags & uplink_flags::HAND_OFF, 0, "{:?}", s.report.time);
+        assert_eq!(s.report.gain, 0.0);
+        // Only the brake acts: it opposes the handle's motion on every axis.
+        for a in 0..3 {
+            assert!(
+                s.command[a] * s.device.twist[a] <= 1e-12,
+                "{:?}: {:?} on {:?}",
+                s.report.time,
+                s.command,
+                s.device.twist
+            );
+        }
+        assert_eq!(s.report.model_twist, Vector3::zeros(), "the model is parked");
+    }
+    let parked = released[0].report.model_pose.position;
+    assert!(released.iter().all(|s| (s.report.model_pose.position - parked).norm() < 1e-12));
+    let last = released.last().expect("released");
+    assert!(last.device.twist.xy().norm() < 1e-3, "the brake stopped the handle: {:?}", last.device.twist);
+    let op_moved = (last.ve_op.position - at(1.0).ve_op.position).norm();
+    assert!(op_moved < 5e-3, "the VE's OP moved {op_moved} m while no hand held it");
+    assert!(l.core.stats().hand_off_ticks as usize >= released.len());
+    // The hand returns: the force ramps back in without a step, and the push goes on.
+    let back: Vec<_> = samples.iter().filter(|s| s.report.time.as_secs_f64() >= 2.5).collect();
+    assert_eq!(back[0].report.flags & uplink_flags::HAND_OFF, 0);
+    let steps = back.windows(2).map(|w| (w[1].command - w[0].command).norm()).fold(0.0f64, f64::max);
+    assert!(steps < 0.2, "the re-grasp steps the force by {steps} N");
+    assert_eq!(back.last().expect("ran").report.gain, 1.0);
+}
+
+/// The local model's port books what the hand puts into the model, and the uplinks carry it; a snapshot whose
+/// energy books are broken is still used, its books refused and counted.
+#[test]
+fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
+    let mut l = ClosedLoop::paper(ConstraintMode::Stiffness, ModelForm::Op);
+    for _ in 0..1000 {
+        l.tick();
+    }
+    let (own, server) = l.core.energy_books();
+    let received: f64 = own.received_j.iter().sum();
+    assert!(received > 1e-4, "the paper's push did work on the local model: {own:?}");
+    assert_eq!(server.refused, 0, "the test VE's snapshots carry zero books, which are fine");
+    for (n, corrupt) in [
+        |s: &mut Snapshot| s.energy.received_j[0] = f64::NAN,
+        |s: &mut Snapshot| s.energy.emitted_j[2] = -1.0,
+        |s: &mut Snapshot| s.energy.received_j[1] = f64::INFINITY,
+    ]
+    .iter()
+    .enumerate()
+    {
+        let mut s = l.ve.snapshot();
+        s.seq = 1_000_000 + n as u64;
+        s.server_time_s = 10.0 + n as f64;
+        corrupt(&mut s);
+        assert_eq!(l.core.handle_snapshot(l.now, &s), Ok(true), "the state is used");
+        l.tick();
+    }
+    assert_eq!(l.core.energy_books().1.refused, 3);
+    assert_eq!(l.core.stats().energy_reports_refused, 3);
+    assert_eq!(l.core.stats().snapshots_rejected, 0);
 }

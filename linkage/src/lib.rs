@@ -62,7 +62,7 @@ pub mod testing;
 // Every module keeps its path from before the layers (`kinloop_linkage::kinematics`, `::space`, ...).
 pub use algorithms::{
     articulated, assemble, bias, constraint_directions, contact, dynamics, gravity, integrator, jacobian, joint_forces,
-    kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_space, reach,
+    kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_space, passivity, reach,
 };
 pub use math::{dense, eigen, space, trig};
 pub use model::{builtin, data, scene};

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use bytes::Bytes;
 
 use crate::codec::{self, DecodeError, EncodeError};
-use crate::messages::{Datagram, OtherUsers, Snapshot};
+use crate::messages::{Datagram, OtherUsers, PortEnergy, Snapshot};
 use crate::quic::{
     client_endpoint, server_endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity, Trust,
 };
@@ -37,6 +37,7 @@ pub fn testbed_snapshot() -> Snapshot {
         contacts: Vec::new(),
         others: OtherUsers::default(),
         config: None,
+        energy: PortEnergy::zero(3),
     }
 }
 

@@ -29,8 +29,10 @@ use crate::shape::{SceneKind, SessionShape};
 
 /// Version carried in [`Hello::version`]; bumped whenever the wire format changes. Version 3: the handshake
 /// takes two steps (the client learns the scene, then joins with its device), the device describes itself
-/// fully, and the welcome carries the mapping, the coupling gains and the OP's reach.
-pub const PROTOCOL_VERSION: u16 = 3;
+/// fully, and the welcome carries the mapping, the coupling gains and the OP's reach. Version 4: snapshots and
+/// uplinks carry their end's [`PortEnergy`] (the two-port passivity books), and an uplink says when the hand
+/// has let go of the handle ([`uplink_flags::HAND_OFF`]).
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// TLS application protocol name both sides offer; a peer offering anything else fails the QUIC handshake.
 pub const ALPN: &[u8] = b"kinloop/1";
@@ -618,6 +620,30 @@ pub struct Snapshot {
     pub others: OtherUsers,
     /// Configuration-space terms, present only for [`LocalModelForm::ConfigSpace`].
     pub config: Option<ConfigTerms>,
+    /// The energy books of this user's coupling port in the VE.
+    pub energy: PortEnergy,
+}
+
+/// The energy that has crossed one end of the network two-port between a user's device and the VE, per
+/// operational axis, since the session began (J; N·m·rad on angular axes, also J), in the VE's units. At the
+/// client the port is the device (received: what the hand pushed in against the command; emitted: what the
+/// command gave the hand); at the server it is the user's coupling (received: what the VE gave the coupling;
+/// emitted: what the coupling gave the VE). Both only grow. Each end bounds what it emits by what it and the
+/// other end have received (time-domain passivity across the network, Ryu, Artigas & Preusche 2007); see
+/// `kinloop_linkage::passivity`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PortEnergy {
+    /// Energy into the network at this end, per axis, length `k`.
+    pub received_j: Vec<f64>,
+    /// Energy out of the network at this end, per axis, length `k`.
+    pub emitted_j: Vec<f64>,
+}
+
+impl PortEnergy {
+    /// Nothing crossed yet, `k` axes.
+    pub fn zero(k: usize) -> Self {
+        PortEnergy { received_j: vec![0.0; k], emitted_j: vec![0.0; k] }
+    }
 }
 
 /// Bits of [`Uplink::flags`].
@@ -634,8 +660,13 @@ pub mod uplink_flags {
     pub const DEADBAND_SKIPPED: u32 = 1 << 4;
     /// A safety check disabled the device output.
     pub const SAFETY_STOP: u32 = 1 << 5;
-    /// Every bit the protocol defines (versions 1 and 2 alike); the codec refuses others.
-    pub const KNOWN: u32 = FADING | CLAMPED | STALE_SNAPSHOT | IMPEDANCE_MODE | DEADBAND_SKIPPED | SAFETY_STOP;
+    /// The device's presence sensor says no hand holds the handle: the client has faded its output, brakes the
+    /// handle and holds its local model still, so the VE's coupling keeps the linkage where the hand left it
+    /// (version 4).
+    pub const HAND_OFF: u32 = 1 << 6;
+    /// Every bit the protocol defines; the codec refuses others.
+    pub const KNOWN: u32 =
+        FADING | CLAMPED | STALE_SNAPSHOT | IMPEDANCE_MODE | DEADBAND_SKIPPED | SAFETY_STOP | HAND_OFF;
 }
 
 /// What a client reports each haptic tick, client → server.
@@ -662,6 +693,8 @@ pub struct Uplink {
     pub model_twist: Vec<f64>,
     /// Status bits, see [`uplink_flags`].
     pub flags: u32,
+    /// The energy books of the client's device port.
+    pub energy: PortEnergy,
 }
 
 impl Uplink {
@@ -679,6 +712,7 @@ impl Uplink {
             model_pose: vec![0.0; pose_dim],
             model_twist: vec![0.0; k],
             flags: 0,
+            energy: PortEnergy::zero(k),
         }
     }
 }

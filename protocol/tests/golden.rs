@@ -1,4 +1,5 @@
-//! Golden byte vectors freeze the wire format of protocol version 3 (version 2 joined in one step, with a
+//! Golden byte vectors freeze the wire format of protocol version 4 (version 3 had no energy books in
+//! snapshots and uplinks and no HAND_OFF flag; version 2 joined in one step, with a
 //! shorter device description and the server's recommended gains in the welcome; version 1 sent the other
 //! users as a list of entries, each with its own position and wrench vectors).
 //!
@@ -18,12 +19,12 @@ fn unhex(parts: &[&str]) -> Vec<u8> {
 const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
 
 fn hello() -> Control {
-    Control::Hello(Hello { version: 3, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
+    Control::Hello(Hello { version: 4, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
 }
 
 const HELLO_BYTES: &[&str] = &[
     "00",        // Control::Hello
-    "03",        // version 3
+    "04",        // version 4
     "03 746f6b", // token "tok"
     "02 6331",   // client_name "c1"
     "00",        // role Manipulator
@@ -193,6 +194,7 @@ fn snapshot() -> Datagram {
         contacts: vec![],
         others: OtherUsers { user_ids: vec![7], op_positions: vec![0.25, -0.5], wrenches: vec![1.0, 0.0, -0.25] },
         config: None,
+        energy: PortEnergy { received_j: vec![0.5, 0.25, 0.0], emitted_j: vec![2.0, 0.0, 0.0] },
     })
 }
 
@@ -226,21 +228,25 @@ const SNAPSHOT_BYTES: &[&str] = &[
     "000000000000f03f 0000000000000000 0000000000000000",
     "0000000000000000 000000000000f03f 0000000000000000",
     "0000000000000000 0000000000000000 000000000000f03f",
-    "03",               // singular_values: 3 values
-    "0000000000003040", // 16.0
-    "0000000000001040", // 4.0
-    "0000000000000000", // 0.0
-    "01",               // constraint_count 1
-    "00",               // contacts: none
-    "01 07",            // others.user_ids: 1 id, 7
-    "02",               // others.op_positions: 2 values (one planar row)
-    "000000000000d03f", // 0.25
-    "000000000000e0bf", // -0.5
-    "03",               // others.wrenches: 3 values (one planar row)
-    "000000000000f03f", // 1.0
-    "0000000000000000", // 0.0
-    "000000000000d0bf", // -0.25
-    "00",               // config: None
+    "03",                                                 // singular_values: 3 values
+    "0000000000003040",                                   // 16.0
+    "0000000000001040",                                   // 4.0
+    "0000000000000000",                                   // 0.0
+    "01",                                                 // constraint_count 1
+    "00",                                                 // contacts: none
+    "01 07",                                              // others.user_ids: 1 id, 7
+    "02",                                                 // others.op_positions: 2 values (one planar row)
+    "000000000000d03f",                                   // 0.25
+    "000000000000e0bf",                                   // -0.5
+    "03",                                                 // others.wrenches: 3 values (one planar row)
+    "000000000000f03f",                                   // 1.0
+    "0000000000000000",                                   // 0.0
+    "000000000000d0bf",                                   // -0.25
+    "00",                                                 // config: None
+    "03",                                                 // energy.received_j: 3 values
+    "000000000000e03f 000000000000d03f 0000000000000000", // 0.5 0.25 0.0
+    "03",                                                 // energy.emitted_j: 3 values
+    "0000000000000040 0000000000000000 0000000000000000", // 2.0 0.0 0.0
 ];
 
 fn uplink() -> Datagram {
@@ -254,7 +260,8 @@ fn uplink() -> Datagram {
         device_twist: vec![0.0, 0.0, 0.0],
         model_pose: vec![0.25, 0.5, 1.0],
         model_twist: vec![0.0, 0.0, 0.0],
-        flags: uplink_flags::CLAMPED | uplink_flags::IMPEDANCE_MODE,
+        flags: uplink_flags::CLAMPED | uplink_flags::IMPEDANCE_MODE | uplink_flags::HAND_OFF,
+        energy: PortEnergy { received_j: vec![1.0, 0.0, 0.0], emitted_j: vec![0.0, 0.5, 0.0] },
     })
 }
 
@@ -276,7 +283,11 @@ const UPLINK_BYTES: &[&str] = &[
     "000000000000d03f 000000000000e03f 000000000000f03f",
     "03", // model_twist
     "0000000000000000 0000000000000000 0000000000000000",
-    "0a", // flags CLAMPED | IMPEDANCE_MODE
+    "4a", // flags CLAMPED | IMPEDANCE_MODE | HAND_OFF
+    "03", // energy.received_j
+    "000000000000f03f 0000000000000000 0000000000000000",
+    "03", // energy.emitted_j
+    "0000000000000000 000000000000e03f 0000000000000000",
 ];
 
 #[test]
@@ -312,8 +323,9 @@ fn planar_testbed_snapshot_matches_golden_bytes() {
     let golden = unhex(SNAPSHOT_BYTES);
     assert_eq!(
         golden.len(),
-        293,
-        "a planar snapshot without contacts is 28 doubles, one other user's row 5, plus small headers"
+        343,
+        "a planar snapshot without contacts is 34 doubles (6 of them the energy books), one other user's row 5, plus \
+         small headers"
     );
     assert_eq!(encode_datagram(&snapshot()).unwrap(), golden);
     assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), snapshot());

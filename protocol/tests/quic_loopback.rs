@@ -143,6 +143,7 @@ async fn handshake_then_snapshots_and_uplinks_flow_as_datagrams() {
             model_pose: vec![0.0; 3],
             model_twist: vec![0.0; 3],
             flags: 0,
+            energy: PortEnergy::zero(3),
         });
         let mut at_server = DatagramReceiver::new(accepted.connection.clone(), shape);
         DatagramSender::new(client.connection.clone()).send(&uplink).unwrap();

@@ -95,6 +95,8 @@ fn follow(snapshot: &Snapshot, seq: u64, users: usize) -> UplinkSample {
         hand_wrench: [0.0; 6],
         model_pose: [0.0; 7],
         model_twist: [0.0; 6],
+        energy_received_j: [0.0; 6],
+        energy_emitted_j: [0.0; 6],
         op_dim: k as u8,
         pose_len: snapshot.op_pose.len() as u8,
     };

@@ -102,6 +102,8 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
                 hand_wrench: [0.0; 6],
                 model_pose: [0.0; 7],
                 model_twist: [0.0; 6],
+                energy_received_j: [0.0; 6],
+                energy_emitted_j: [0.0; 6],
                 op_dim: s.op_twist.len() as u8,
                 pose_len: s.op_pose.len() as u8,
             });

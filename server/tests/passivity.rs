@@ -16,8 +16,9 @@ use support::*;
 /// A client whose local model is a free mass tied by a spring-damper to the VE's OP as it last heard of
 /// it, with `delay` each way: position-position teleoperation through a delayed channel, a textbook way
 /// for a coupling to generate energy. Returns the VE's kinetic energy every 10 ms and the coupling's energy
-/// account at the end (J absorbed; negative: generated).
-fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Vec<f64>, f64) {
+/// account at the end (J absorbed; negative: generated). A `lying` client claims in every uplink to have put
+/// 10 J/s into its end of the two-port on every axis (its model wrench is zero: it put in nothing).
+fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64, lying: bool) -> (Vec<f64>, f64) {
     let mut config = VeConfig::paper();
     config.passivity = passivity;
     config.coupling_damping = Some(AxisGains::Uniform { linear: 2.0, angular: 0.01 });
@@ -55,7 +56,11 @@ fn delayed_mass_client(passivity: bool, delay_ticks: usize, seconds: u64) -> (Ve
                 xc[a] += dt * v[a];
             }
             seq += 1;
-            up.push_back(uplink(seq, &[0.0; 3], xc, &v));
+            let mut u = uplink(seq, &[0.0; 3], xc, &v);
+            if lying {
+                u.energy.received_j = vec![10.0 * u.client_time_s; 3];
+            }
+            up.push_back(u);
         }
         if up.len() > delay_ticks {
             let u = up.pop_front().unwrap();
@@ -78,8 +83,8 @@ fn passivity_controller_keeps_a_delayed_coupling_from_pumping_energy() {
     let peak = |e: &[f64]| e.iter().cloned().filter(|x| x.is_finite()).fold(0.0, f64::max);
     let allowance = VeConfig::paper().passivity_allowance_j;
     for delay_ms in [25, 100] {
-        let (plain, _) = delayed_mass_client(false, delay_ms, 5);
-        let (passive, account) = delayed_mass_client(true, delay_ms, 5);
+        let (plain, _) = delayed_mass_client(false, delay_ms, 5, false);
+        let (passive, account) = delayed_mass_client(true, delay_ms, 5, false);
         let (plain, passive) = (peak(&plain), peak(&passive));
         // Without the controller the delayed loop pumps far more energy into the VE than the coupling ever
         // held; with it the VE never gains more than that, and the coupling generated at most its allowance
@@ -88,4 +93,56 @@ fn passivity_controller_keeps_a_delayed_coupling_from_pumping_energy() {
         assert!(passive <= STORED_AT_START_J, "delay {delay_ms} ms: passive coupling reached {passive:e} J");
         assert!(account >= -3.3 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
     }
+}
+
+/// A client that claims energy it never put in buys at most the allowance with it: the server credits the
+/// smaller of the claim and its own booking of the client's port (here zero, the model wrench being zero) plus
+/// the allowance, so the liar's coupling stays passive, with at most twice the honest deficit.
+#[test]
+fn a_client_claiming_energy_it_never_put_in_cannot_make_the_coupling_generate() {
+    let peak = |e: &[f64]| e.iter().cloned().filter(|x| x.is_finite()).fold(0.0, f64::max);
+    let allowance = VeConfig::paper().passivity_allowance_j;
+    for delay_ms in [25, 100] {
+        let (lied, account) = delayed_mass_client(true, delay_ms, 5, true);
+        let lied = peak(&lied);
+        assert!(lied <= STORED_AT_START_J, "delay {delay_ms} ms: the liar's VE reached {lied:e} J");
+        assert!(account >= -6.6 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
+    }
+}
+
+/// Energy books that are non-finite, negative, shrinking or faster than the device can push are refused and
+/// counted; the uplink carrying them is still used (its state moves the coupling), and the snapshots carry the
+/// coupling's own books, which only grow.
+#[test]
+fn bad_energy_reports_are_refused_and_counted_and_the_session_carries_on() {
+    let mut ve = core(testbed(), VeConfig::default());
+    let user = ve.join(Duration::ZERO, request("books", Role::Manipulator, "link2", 3)).unwrap().user_id;
+    let bad: [fn(f64) -> Vec<f64>; 4] = [
+        |_| vec![f64::NAN, 0.0, 0.0],
+        |_| vec![-1.0, 0.0, 0.0],
+        |_| vec![0.0; 3],                  // below the good report before it: shrinking
+        |t| vec![1e9 * t + 1.0, 0.0, 0.0], // far beyond 50 N at 200 rad/s over a millisecond
+    ];
+    let (mut seq, mut latest, mut refused_expected, mut accepted) = (0u64, Vec::new(), 0u64, 0u64);
+    let mut books: Vec<(f64, f64)> = Vec::new();
+    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
+        let Some(Some(s)) = latest.get(user as usize) else { return };
+        books.push((s.energy.received_j.iter().sum(), s.energy.emitted_j.iter().sum()));
+        seq += 1;
+        let mut u = following(s, seq, &[0.3, 0.0, 0.0]);
+        // A good report every tick (0.1 J/s on x), a bad one every 50th.
+        u.energy.received_j = vec![0.1 * u.client_time_s, 0.0, 0.0];
+        if seq.is_multiple_of(50) {
+            u.energy.received_j = bad[(seq / 50) as usize % bad.len()](u.client_time_s);
+            refused_expected += 1;
+        }
+        accepted += ve.handle_uplink(now, user, &u).is_ok() as u64;
+    });
+    let m = ve.metrics();
+    assert!(refused_expected >= 6, "{refused_expected}");
+    assert_eq!(m.energy_reports_refused, refused_expected);
+    assert_eq!(accepted, seq, "every uplink was used, its energy report apart");
+    assert_eq!(m.state_restores, 0);
+    assert!(books.windows(2).all(|w| w[1].0 >= w[0].0 && w[1].1 >= w[0].1), "the coupling's books only grow");
+    assert!(books.last().is_some_and(|b| b.0 + b.1 > 0.0), "the pushed coupling booked energy: {books:?}");
 }

@@ -87,6 +87,7 @@ async fn a_client_joins_pushes_receives_snapshots_and_the_server_says_goodbye() 
                 model_pose: snapshot.op_pose.clone(),
                 model_twist: snapshot.op_twist.clone(),
                 flags: 0,
+                energy: kinloop_protocol::PortEnergy::zero(snapshot.op_twist.len()),
             };
             sender.send(&Datagram::Uplink(uplink)).expect("uplink sent");
         }

@@ -39,8 +39,9 @@ mod sync;
 use std::time::Duration;
 
 use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::passivity::{EnergyReports, PortBooks};
 use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
-use kinloop_protocol::codec::limits::MAX_WRENCH;
+use kinloop_protocol::codec::limits::{MAX_SPEED, MAX_WRENCH};
 use kinloop_protocol::{uplink_flags, Mapping, SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
@@ -249,6 +250,11 @@ pub struct CoreStats {
     pub tracking_error_sum_sq: f64,
     /// Largest linear tracking error (m).
     pub tracking_error_max: f64,
+    /// Snapshots whose energy books were refused (non-finite, negative, shrinking, or faster than the wire's
+    /// largest wrench at its largest speed): the rest of the snapshot was used, the last good books kept.
+    pub energy_reports_refused: u64,
+    /// Ticks on which the device's presence sensor said no hand held it (output faded, `HAND_OFF` sent).
+    pub hand_off_ticks: u64,
 }
 
 impl CoreStats {
@@ -440,6 +446,11 @@ pub struct HapticCore<S: Space> {
     deadband: Deadband<S>,
     /// The local model's recent states, by client time (see `sync`).
     history: History<S>,
+    /// This end of the two-port: the local model's port, where the user's wrench (hand and device
+    /// reaction) drives the model (`kinloop_linkage::passivity`); its books go up in every uplink.
+    port: PortBooks,
+    /// The VE coupling's books, as the snapshots report them (checked).
+    server_energy: EnergyReports,
     uplink: Uplink,
     /// Trigonometric anchors for the three pose streams converted every tick or snapshot.
     pose_memos: PoseMemos<S>,
@@ -454,6 +465,18 @@ struct PoseMemos<S: Space> {
     snapshot_op: S::RotParamsMemo,
     uplink_device: S::RotParamsMemo,
     uplink_model: S::RotParamsMemo,
+}
+
+/// The damper that holds a released handle: half the device's highest stable damping on each axis (linear and
+/// angular), against the handle's twist, in device units.
+fn brake<S: Space>(device: &crate::device::DeviceSpec, twist: &S::OpVec) -> S::OpVec {
+    let lin = <S::Point as VecOps>::LEN;
+    let mut w = S::OpVec::zero();
+    for a in 0..S::DIM {
+        let b = if a < lin { device.max_damping } else { device.max_angular_damping };
+        w[a] = -0.5 * b * twist[a];
+    }
+    w
 }
 
 fn per_axis<S: Space>(what: &str, values: &[f64]) -> Result<S::OpVec, CoreError> {
@@ -569,6 +592,8 @@ impl<S: Space> HapticCore<S> {
             one_way_delay: Duration::ZERO,
             deadband: Deadband::new(config.deadband),
             history: History::new(),
+            port: PortBooks::default(),
+            server_energy: EnergyReports::default(),
             uplink,
             pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),
@@ -679,6 +704,12 @@ impl<S: Space> HapticCore<S> {
         self.model.using_config()
     }
 
+    /// This end's two-port books (the local model's port) and the VE coupling's as last accepted from a
+    /// snapshot (`kinloop_linkage::passivity`).
+    pub fn energy_books(&self) -> (&PortBooks, &EnergyReports) {
+        (&self.port, &self.server_energy)
+    }
+
     /// The driver's estimate of the one-way delay from the VE (half the RTT): snapshots are predicted forward
     /// by their age since arrival plus this.
     pub fn set_one_way_delay(&mut self, delay: Duration) {
@@ -714,6 +745,15 @@ impl<S: Space> HapticCore<S> {
             self.stats.snapshots_rejected += 1;
             return Err(rejection);
         }
+        // The energy books are judged apart: a bad report is refused and counted, the state is still used.
+        let e = &snapshot.energy;
+        if self
+            .server_energy
+            .check(snapshot.server_time_s, &e.received_j, &e.emitted_j, MAX_WRENCH * MAX_SPEED, 0.0)
+            .is_err()
+        {
+            self.stats.energy_reports_refused += 1;
+        }
         std::mem::swap(&mut self.incoming, &mut self.pending);
         self.pending_fresh = true;
         self.newest_seq = Some(snapshot.seq);
@@ -732,13 +772,14 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// Makes the pending snapshot the active one.
-    fn apply_pending(&mut self, now: Duration, device: &OpPose<S>) {
+    fn apply_pending(&mut self, now: Duration, device: &OpPose<S>, hand_off: bool) {
         std::mem::swap(&mut self.pending, &mut self.active);
         self.pending_fresh = false;
         let first = !self.has_snapshot;
         // With the output fully faded (start, or a link that came back) nothing is felt, so the model may jump
-        // onto the VE instead of being pulled there.
-        let restart = first || self.gate.gain() == 0.0;
+        // onto the VE instead of being pulled there; not while the hand is off, when the model stays parked
+        // where the VE holds it (jumping onto a VE that follows the model would walk both away).
+        let restart = first || (self.gate.gain() == 0.0 && !hand_off);
         self.model.update(&self.active);
         self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
         if restart {
@@ -779,8 +820,9 @@ impl<S: Space> HapticCore<S> {
         self.last_now = Some(now);
         self.stats.ticks += 1;
         let device_usable = usable_state::<S>(&device.pose, &device.twist);
+        let hand_off = device.grasped == Some(false);
         if self.pending_fresh && device_usable {
-            self.apply_pending(now, &device.pose);
+            self.apply_pending(now, &device.pose, hand_off);
         }
         if !self.has_snapshot || !device_usable {
             return self.idle_tick(now, device_usable);
@@ -794,11 +836,19 @@ impl<S: Space> HapticCore<S> {
         let device_twist = self.scales.twist_to_ve::<S>(&device.twist);
         let age = now.saturating_sub(self.active.received_at);
         let stale = age > self.config.safety.max_snapshot_age;
+        // No hand on the handle (a presence sensor says so): a free device must not be driven, so the output
+        // fades as for stale data while a damper brakes the handle, and the local model parks where it is (no
+        // one drives it), so the VE's coupling holds the linkage where the hand left it rather than letting it
+        // fall. When the hand returns, the model restarts on the VE and the output ramps in again.
+        if hand_off {
+            flags |= uplink_flags::HAND_OFF;
+            self.stats.hand_off_ticks += 1;
+        }
 
         // 2. Pull toward the VE, filter the terms.
         let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
         self.frame.filter(fraction(self.config.terms_time_constant));
-        if !stale {
+        if !stale && !hand_off {
             let (constrained, free) =
                 (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
             let (p, l) = (&self.frame.projector, self.length_scale);
@@ -835,8 +885,20 @@ impl<S: Space> HapticCore<S> {
         });
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
-        let model_wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
-        self.model.step(dt_s, &model_wrench);
+        let model_wrench =
+            if hand_off { S::OpVec::zero() } else { sensed.unwrap_or_else(S::OpVec::zero) + self.reaction };
+        if hand_off {
+            self.model.set_state(self.model.pose(), S::OpVec::zero());
+        } else {
+            self.model.step(dt_s, &model_wrench);
+        }
+        let mut power_out = [0.0; kinloop_linkage::passivity::MAX_AXES];
+        let model_twist_after = self.model.twist();
+        for (a, p) in power_out.iter_mut().enumerate().take(S::DIM) {
+            // Power into the local model is energy this end of the two-port received.
+            *p = -model_wrench[a] * model_twist_after[a];
+        }
+        self.port.book(&power_out[..S::DIM], dt_s);
         // Recorded by the client time the uplink of this tick carries.
         self.history.record(now.as_secs_f64(), self.model.pose(), self.model.twist());
 
@@ -890,8 +952,13 @@ impl<S: Space> HapticCore<S> {
             flags |= uplink_flags::SAFETY_STOP;
             gain = 0.0;
         } else {
-            gain = self.gate.update(dt_s, !stale);
-            let on_device = self.scales.wrench_to_device::<S>(&(requested * gain));
+            gain = self.gate.update(dt_s, !stale && !hand_off);
+            let mut on_device = self.scales.wrench_to_device::<S>(&(requested * gain));
+            if hand_off {
+                // A released handle is braked, not left to coast (Haption's Virtuose engages its brakes when
+                // the dead-man switch opens): a damper is passive, and it comes in as the rendering fades.
+                on_device += brake::<S>(&self.config.device, &device.twist) * (1.0 - gain);
+            }
             let scales;
             (command, scales) = limit_wrench_parts::<S>(&on_device, &self.limits);
             clamp_scale = scales.min();
@@ -1000,5 +1067,7 @@ impl<S: Space> HapticCore<S> {
         self.model.pose().to_slice_memo(&mut u.model_pose, &mut self.pose_memos.uplink_model);
         u.model_twist.copy_from_slice(self.model.twist().as_slice());
         u.flags = flags;
+        u.energy.received_j.copy_from_slice(&self.port.received_j[..S::DIM]);
+        u.energy.emitted_j.copy_from_slice(&self.port.emitted_j[..S::DIM]);
     }
 }

@@ -54,6 +54,9 @@ pub struct DeviceSpec {
     pub native_rate_hz: f64,
     /// True when the device measures the hand wrench.
     pub has_force_sensor: bool,
+    /// True when the handle senses whether a hand holds it (a presence or dead-man switch).
+    #[serde(default)]
+    pub has_presence_sensor: bool,
     /// Moving mass per linear axis (kg) and inertia per angular axis (kg m²) at the handle.
     pub mass: Vec<f64>,
 }
@@ -95,6 +98,9 @@ pub struct DeviceState<S: Space> {
     pub twist: S::OpVec,
     /// Wrench the hand applies to the handle, when the device has a force sensor.
     pub hand_wrench: Option<S::OpVec>,
+    /// Whether a hand holds the handle, when the device has a presence sensor (a dead-man switch in the
+    /// handle, as on Haption's Virtuose): `Some(false)` fades the output and lets go of the VE's OP.
+    pub grasped: Option<bool>,
 }
 
 /// Why a device call failed.

@@ -112,6 +112,8 @@ impl DevicePreset {
                     damping: self.damping(kind),
                     native_rate_hz: 1000.0,
                     has_force_sensor: true,
+                    // An instrumented research handle: a presence switch beside the force sensor.
+                    has_presence_sensor: true,
                     mass: vec![1.0, 1.0, 0.005],
                 }
             }
@@ -135,6 +137,7 @@ impl DevicePreset {
                 damping: self.damping(kind),
                 native_rate_hz: 1000.0,
                 has_force_sensor: false,
+                has_presence_sensor: false,
                 mass: per_axis(kind, 0.15, 1e-3),
             },
             // 3D Systems Touch: 160 x 120 x 70 mm, 3.3 N peak, ~400 N/m (x axis 1.26 N/mm peak is for short
@@ -158,6 +161,7 @@ impl DevicePreset {
                 damping: self.damping(kind),
                 native_rate_hz: 1000.0,
                 has_force_sensor: false,
+                has_presence_sensor: false,
                 mass: per_axis(kind, 0.045, 2e-5),
             },
         };

@@ -52,13 +52,21 @@ impl<S: Space> HapticDevice<S> for SimulatedRig<S> {
         }
         self.last_read = Some(now);
         let (pose, twist) = self.device.sample();
-        let mut state = DeviceState { pose, twist, hand_wrench: None };
+        let mut state = DeviceState { pose, twist, hand_wrench: None, grasped: None };
         // The hand feels the handle itself, not its encoders.
-        let held = DeviceState { pose: self.device.true_pose(), twist: self.device.true_twist(), hand_wrench: None };
+        let held = DeviceState {
+            pose: self.device.true_pose(),
+            twist: self.device.true_twist(),
+            hand_wrench: None,
+            grasped: None,
+        };
         self.hand = self.user.wrench(now, &held);
         self.device.attach_mass(&self.user.attached_mass(now));
         if self.device.spec().has_force_sensor {
             state.hand_wrench = Some(self.hand);
+        }
+        if self.device.spec().has_presence_sensor {
+            state.grasped = Some(self.user.holds(now));
         }
         Ok(state)
     }

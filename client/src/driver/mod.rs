@@ -564,19 +564,7 @@ fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<Ha
 }
 
 fn empty_uplink<S: Space>() -> Uplink {
-    let pose = kinloop_linkage::local_model::OpPose::<S>::wire_len();
-    Uplink {
-        seq: 0,
-        client_time_s: 0.0,
-        last_snapshot_seq: 0,
-        last_snapshot_age_s: 0.0,
-        hand_wrench: vec![0.0; S::DIM],
-        device_pose: vec![0.0; pose],
-        device_twist: vec![0.0; S::DIM],
-        model_pose: vec![0.0; pose],
-        model_twist: vec![0.0; S::DIM],
-        flags: 0,
-    }
+    Uplink::at_rest(0, S::DIM, kinloop_linkage::local_model::OpPose::<S>::wire_len())
 }
 
 async fn run<S: Space>(

@@ -383,4 +383,8 @@ impl<S: Space> SimulatedUser<S> for Hand<S> {
             self.mass
         }
     }
+
+    fn holds(&self, now: Duration) -> bool {
+        !self.released(self.since_grasp(now))
+    }
 }

@@ -38,6 +38,11 @@ pub trait SimulatedUser<S: Space>: Send {
     fn attached_mass(&self, _now: Duration) -> S::OpVec {
         S::OpVec::zero()
     }
+
+    /// Whether the hand holds the handle at `now` (what a presence sensor in the handle reports).
+    fn holds(&self, _now: Duration) -> bool {
+        true
+    }
 }
 
 /// A user as given on the command line, before the scene's space is known.

@@ -253,6 +253,7 @@ impl TestbedVe {
             contacts: Vec::new(),
             others: OtherUsers::default(),
             config,
+            energy: kinloop_protocol::PortEnergy::zero(3),
         }
     }
 }

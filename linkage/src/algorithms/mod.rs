@@ -21,5 +21,6 @@ pub mod loop_closure;
 pub mod ltl;
 pub mod mass_matrix;
 pub mod op_space;
+pub mod passivity;
 pub mod reach;
 pub(crate) mod tree;

@@ -5,7 +5,8 @@ use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
     uplink_flags, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram, DeviceCaps, Hello, Join, Mapping,
-    MappingRequest, OpSummary, OtherUsers, RefusalReason, Refused, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome,
+    MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused, SceneInfo, SceneSummary, Snapshot,
+    Uplink, Welcome,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -238,6 +239,7 @@ pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
         contact(i, c, shape)?;
     }
     other_users_shape(&s.others, shape)?;
+    port_energy_shape(("snapshot.energy.received_j", "snapshot.energy.emitted_j"), &s.energy, shape.op_dim())?;
     match &s.config {
         Some(config) => config_terms(config, shape),
         None => Ok(()),
@@ -318,6 +320,7 @@ pub fn uplink(u: &Uplink, shape: &SessionShape) -> Result<(), DecodeError> {
     vector(Field::at("uplink.device_twist"), &u.device_twist, k, MAX_SPEED)?;
     pose(Field::at("uplink.model_pose"), &u.model_pose, shape)?;
     vector(Field::at("uplink.model_twist"), &u.model_twist, k, MAX_SPEED)?;
+    port_energy_shape(("uplink.energy.received_j", "uplink.energy.emitted_j"), &u.energy, k)?;
     let unknown = u.flags & !uplink_flags::KNOWN;
     if unknown != 0 {
         return Err(DecodeError::UnknownFlags { bits: unknown });
@@ -356,6 +359,14 @@ fn vector(field: Field, v: &[f64], expected: usize, bound: f64) -> Result<(), De
 fn non_negative_vector(field: Field, v: &[f64], expected: usize, bound: f64) -> Result<(), DecodeError> {
     length(field, v.len(), expected)?;
     elements(field, v, 0.0, bound)
+}
+
+/// The energy books' lengths only: their values (finite, non-negative, never decreasing, no faster than a
+/// device can push) are judged against the stream's history by the receiver, which refuses a bad report and
+/// counts it without dropping the rest of the message (`kinloop_linkage::passivity::EnergyReports`).
+fn port_energy_shape(fields: (&'static str, &'static str), e: &PortEnergy, k: usize) -> Result<(), DecodeError> {
+    length(Field::at(fields.0), e.received_j.len(), k)?;
+    length(Field::at(fields.1), e.emitted_j.len(), k)
 }
 
 fn length(field: Field, got: usize, expected: usize) -> Result<(), DecodeError> {

@@ -122,7 +122,7 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
         proptest::option::of(config_terms(shape)),
     );
     (header, local_model, surroundings).prop_map(
-        |(
+        move |(
             (seq, server_time_s, ve_step, user_id),
             (op_pose, op_twist, inverse_inertia, bias_accel, directions, singular_values, constraint_count),
             (contacts, others, config),
@@ -142,6 +142,7 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
             contacts,
             others,
             config,
+            energy: PortEnergy { received_j: vec![0.5; k], emitted_j: vec![0.25; k] },
         },
     )
 }
@@ -155,7 +156,7 @@ pub fn uplink(shape: SessionShape) -> impl Strategy<Value = Uplink> {
         any::<u32>().prop_map(|bits| bits & uplink_flags::KNOWN),
     )
         .prop_map(
-            |(
+            move |(
                 (seq, client_time_s, last_snapshot_seq, last_snapshot_age_s),
                 (hand_wrench, device_pose, device_twist, model_pose, model_twist),
                 flags,
@@ -170,6 +171,7 @@ pub fn uplink(shape: SessionShape) -> impl Strategy<Value = Uplink> {
                 model_pose,
                 model_twist,
                 flags,
+                energy: PortEnergy { received_j: vec![1.5; k], emitted_j: vec![0.75; k] },
             },
         )
 }
@@ -381,6 +383,7 @@ pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
             op_jacobian: vec![0.5; 18],
             op_bias: vec![0.0; 6],
         }),
+        energy: PortEnergy { received_j: vec![0.25; 6], emitted_j: vec![0.125; 6] },
     };
     (shape, snapshot)
 }

@@ -37,6 +37,10 @@ pub struct UplinkSample {
     pub model_pose: [f64; MAX_POSE_LEN],
     /// Local-model OP twist, first `op_dim` entries used.
     pub model_twist: [f64; MAX_OP_DIM],
+    /// The client's energy books (`Uplink::energy`), first `op_dim` entries used.
+    pub energy_received_j: [f64; MAX_OP_DIM],
+    /// The same, emitted.
+    pub energy_emitted_j: [f64; MAX_OP_DIM],
     /// Length of the wrench and twist.
     pub op_dim: u8,
     /// Length of the pose.
@@ -50,6 +54,9 @@ impl UplinkSample {
         if k > MAX_OP_DIM || uplink.model_twist.len() != k {
             return Err(UplinkRejection::WrongShape { field: "hand_wrench/model_twist" });
         }
+        if uplink.energy.received_j.len() != k || uplink.energy.emitted_j.len() != k {
+            return Err(UplinkRejection::WrongShape { field: "energy" });
+        }
         if uplink.model_pose.len() > MAX_POSE_LEN {
             return Err(UplinkRejection::WrongShape { field: "model_pose" });
         }
@@ -60,9 +67,13 @@ impl UplinkSample {
             hand_wrench: [0.0; MAX_OP_DIM],
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],
+            energy_received_j: [0.0; MAX_OP_DIM],
+            energy_emitted_j: [0.0; MAX_OP_DIM],
             op_dim: k as u8,
             pose_len: uplink.model_pose.len() as u8,
         };
+        sample.energy_received_j[..k].copy_from_slice(&uplink.energy.received_j);
+        sample.energy_emitted_j[..k].copy_from_slice(&uplink.energy.emitted_j);
         sample.hand_wrench[..k].copy_from_slice(&uplink.hand_wrench);
         sample.model_twist[..k].copy_from_slice(&uplink.model_twist);
         sample.model_pose[..uplink.model_pose.len()].copy_from_slice(&uplink.model_pose);

@@ -33,6 +33,9 @@ pub struct VeMetrics {
     pub joins_refused: u64,
     /// Ticks in which some passivity controller scaled a PD down.
     pub passivity_activations: u64,
+    /// Clients' energy reports refused (non-finite, negative, shrinking, or faster than the device): the
+    /// coupling kept the last good one.
+    pub energy_reports_refused: u64,
     /// Closure residual norm at the start of the last step (m).
     pub closure_error: f64,
     /// Largest closure residual seen (m).

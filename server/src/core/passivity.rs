@@ -38,19 +38,48 @@
 //! `k E_allow`, which the passivity inequality allows. The scale is continuous in the account, so the PD
 //! never switches on or off as a step.
 
+//!
+//! **Across the network (two-port).** The coupling is one end of the two-port between the user's device and the
+//! VE (`kinloop_linkage::passivity`); the client's local model is the other, and its uplinks carry its books.
+//! Energy the user has put into the local model may legitimately come out here: each axis's account is
+//! credited with what the client received on it, less what the force channel has already delivered to the VE
+//! on it (that energy reached the VE beside the PD), never below zero. The credit trusts the client only as far
+//! as the server can check it: it is the smaller of the client's report (refused and counted when it is
+//! non-finite, negative, shrinking or faster than the device can push, see `EnergyReports`) and the server's
+//! own booking of the same flow from the uplinks it received (the model wrench times the model twist, held
+//! over each gap) plus the allowance. A client that overstates what it received buys nothing; one that
+//! understates only makes its own coupling stricter.
+
+use kinloop_linkage::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
 use kinloop_linkage::{Space, VecOps};
 
 use super::guards::MAX_OP_DIM;
 
-/// Energy account of one coupling, per operational axis.
+/// Longest gap between two uplinks over which the server holds the earlier one's power in its own booking of
+/// the client's port (s): a longer silence books nothing rather than a guess.
+const MAX_HELD_GAP_S: f64 = 0.1;
+
+/// Energy account of one coupling, per operational axis, and the books of its end of the two-port.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PassivityObserver {
-    /// Energy the coupling has absorbed from the VE so far, all axes (J); negative: it generated energy.
+    /// Energy the coupling's PD has absorbed from the VE so far, all axes (J); negative: it generated energy.
     pub absorbed_j: f64,
     /// The same per operational axis, linear first (J; N·m·rad on angular axes, also J).
     pub absorbed_axis_j: [f64; MAX_OP_DIM],
     /// Ticks in which the controller scaled some axis of the PD down.
     pub activations: u64,
+    /// The coupling's whole port (PD and force channel) as the snapshots report it.
+    pub port: PortBooks,
+    /// The force channel's part of it.
+    pub force_channel: PortBooks,
+    /// The client's books as it reported them (checked).
+    #[serde(skip)]
+    pub client: EnergyReports,
+    /// The server's own booking of the client's port from the uplinks it received.
+    pub client_seen: PortBooks,
+    /// Client clock and per-axis power of the last uplink booked into `client_seen`.
+    #[serde(skip)]
+    client_last: Option<(f64, [f64; MAX_AXES])>,
 }
 
 impl PassivityObserver {
@@ -62,15 +91,8 @@ impl PassivityObserver {
         let mut scale = S::OpVec::zero();
         let mut scaled = false;
         for axis in 0..S::DIM {
-            let account = self.absorbed_axis_j[axis] + surplus;
-            let absorbing = predicted_power[axis] <= 0.0;
-            let beta = if account >= 0.0 || (absorbing && account > -allowance_j) {
-                1.0
-            } else if allowance_j > 0.0 {
-                (1.0 + account / allowance_j).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let account = self.absorbed_axis_j[axis] + surplus + self.client_credit(axis, allowance_j);
+            let beta = output_scale(account, predicted_power[axis] <= 0.0, allowance_j);
             scaled |= beta < 1.0;
             scale[axis] = beta;
         }
@@ -80,18 +102,57 @@ impl PassivityObserver {
         scale
     }
 
-    /// Books one step: the PD wrench `pd_wrench` the step applied moved the OP at `op_velocity_after` for
-    /// `dt`. Non-finite values (a failed step) are not booked.
-    pub fn observe<S: Space>(&mut self, pd_wrench: &S::OpVec, op_velocity_after: &S::OpVec, dt: f64) {
+    /// What the client put in on `axis` and the force channel has not yet delivered (J, ≥ 0): the smaller of
+    /// its report and the server's own booking plus `allowance_j`.
+    pub fn client_credit(&self, axis: usize, allowance_j: f64) -> f64 {
+        let trusted = self.client.accepted.received_j[axis].min(self.client_seen.received_j[axis] + allowance_j);
+        (trusted - self.force_channel.emitted_j[axis]).max(0.0)
+    }
+
+    /// Books one step: the PD wrench `pd_wrench` and the force channel's `hand_wrench` the step applied moved
+    /// the OP at `op_velocity_after` for `dt`. Non-finite values (a failed step) are not booked.
+    pub fn observe<S: Space>(
+        &mut self,
+        pd_wrench: &S::OpVec,
+        hand_wrench: &S::OpVec,
+        op_velocity_after: &S::OpVec,
+        dt: f64,
+    ) {
         let mut absorbed = [0.0; MAX_OP_DIM];
-        for (axis, a) in absorbed.iter_mut().enumerate().take(S::DIM) {
-            *a = -pd_wrench[axis] * op_velocity_after[axis] * dt;
+        let (mut pd_power, mut hand_power, mut port_power) = ([0.0; MAX_AXES], [0.0; MAX_AXES], [0.0; MAX_AXES]);
+        for axis in 0..S::DIM {
+            pd_power[axis] = pd_wrench[axis] * op_velocity_after[axis];
+            hand_power[axis] = hand_wrench[axis] * op_velocity_after[axis];
+            port_power[axis] = pd_power[axis] + hand_power[axis];
+            absorbed[axis] = -pd_power[axis] * dt;
         }
-        if absorbed.iter().all(|a| a.is_finite()) {
+        if absorbed.iter().chain(&hand_power).all(|a| a.is_finite()) {
             for (total, a) in self.absorbed_axis_j.iter_mut().zip(absorbed) {
                 *total += a;
             }
             self.absorbed_j += absorbed.iter().sum::<f64>();
+            self.port.book(&port_power[..S::DIM], dt);
+            self.force_channel.book(&hand_power[..S::DIM], dt);
+        }
+    }
+
+    /// Books an accepted uplink's part of the client's port into the server's own account of it: the model
+    /// wrench `wrench` on the local model moving at `twist`, at the client's clock `time_s`. The earlier
+    /// uplink's power is held over the gap (at most [`MAX_HELD_GAP_S`]).
+    pub fn observe_client<S: Space>(&mut self, time_s: f64, wrench: &S::OpVec, twist: &S::OpVec) {
+        let mut power_out = [0.0; MAX_AXES];
+        for axis in 0..S::DIM {
+            // Power into the local model is energy the client's end received.
+            power_out[axis] = -wrench[axis] * twist[axis];
+        }
+        if let Some((last_s, last_power)) = self.client_last {
+            let gap = time_s - last_s;
+            if gap > 0.0 && gap <= MAX_HELD_GAP_S {
+                self.client_seen.book(&last_power[..S::DIM], gap);
+            }
+        }
+        if power_out.iter().all(|p| p.is_finite()) && time_s.is_finite() {
+            self.client_last = Some((time_s, power_out));
         }
     }
 }
@@ -127,7 +188,7 @@ mod tests {
                 let t = k as f64 * h;
                 let force = on_x(f0 * (omega * t).sin());
                 let velocity = on_x(v0 * (omega * (t + h) + phi).sin());
-                observer.observe::<Planar>(&force, &velocity, h);
+                observer.observe::<Planar>(&force, &on_x(0.0), &velocity, h);
             }
             let expected = absorbed_closed_form(f0, v0, omega, phi, steps as f64 * h);
             let booked = observer.absorbed_axis_j[0];
@@ -141,7 +202,12 @@ mod tests {
     fn each_axis_is_booked_on_its_own_and_may_draw_on_the_ports_surplus() {
         // x absorbs 3 J, θ generates 1 J: the port as a whole absorbed 2 J, which pays for θ's deficit.
         let mut observer = PassivityObserver::default();
-        observer.observe::<Planar>(&V::from_slice(&[-3.0, 0.0, 2.0]), &V::from_slice(&[1.0, 5.0, 0.5]), 1.0);
+        observer.observe::<Planar>(
+            &V::from_slice(&[-3.0, 0.0, 2.0]),
+            &on_x(0.0),
+            &V::from_slice(&[1.0, 5.0, 0.5]),
+            1.0,
+        );
         assert_eq!(observer.absorbed_axis_j[..3], [3.0, 0.0, -1.0]);
         assert_eq!(observer.absorbed_j, 2.0);
         let delivering = V::from_slice(&[1.0, 1.0, 1.0]);
@@ -149,7 +215,7 @@ mod tests {
         assert_eq!(observer.activations, 0);
         // θ generates 2.5 J more: the port is 0.5 J in deficit, θ 3.5 J: with a 4 J allowance θ's PD is at
         // 1 − 3.5/4 while it delivers energy, at full strength while it absorbs, and x and y are untouched.
-        observer.observe::<Planar>(&V::from_slice(&[0.0, 0.0, 5.0]), &V::from_slice(&[0.0, 0.0, 0.5]), 1.0);
+        observer.observe::<Planar>(&V::from_slice(&[0.0, 0.0, 5.0]), &on_x(0.0), &V::from_slice(&[0.0, 0.0, 0.5]), 1.0);
         assert_eq!(observer.absorbed_j, -0.5);
         assert_eq!(observer.pd_scale::<Planar>(&delivering, 4.0), V::from_slice(&[1.0, 1.0, 0.125]));
         assert_eq!(observer.pd_scale::<Planar>(&V::from_slice(&[1.0, 1.0, -1.0]), 4.0), delivering);
@@ -165,8 +231,8 @@ mod tests {
     #[test]
     fn non_finite_steps_are_not_booked() {
         let mut observer = PassivityObserver::default();
-        observer.observe::<Planar>(&on_x(f64::NAN), &on_x(1.0), 1e-3);
-        observer.observe::<Planar>(&on_x(1.0), &on_x(f64::INFINITY), 1e-3);
+        observer.observe::<Planar>(&on_x(f64::NAN), &on_x(0.0), &on_x(1.0), 1e-3);
+        observer.observe::<Planar>(&on_x(1.0), &on_x(0.0), &on_x(f64::INFINITY), 1e-3);
         assert_eq!(observer, PassivityObserver::default());
     }
 
@@ -188,7 +254,7 @@ mod tests {
             let force = beta * pd;
             v += h * force / m;
             x += h * v;
-            observer.observe::<Planar>(&on_x(force), &on_x(v), h);
+            observer.observe::<Planar>(&on_x(force), &on_x(0.0), &on_x(v), h);
         }
         (observer, v)
     }
@@ -225,7 +291,7 @@ mod tests {
             assert_eq!(beta, 1.0, "step {n}");
             v += h * (push + beta * pd) / m;
             x += h * v;
-            observer.observe::<Planar>(&on_x(beta * pd), &on_x(v), h);
+            observer.observe::<Planar>(&on_x(beta * pd), &on_x(0.0), &on_x(v), h);
             lowest = lowest.min(observer.absorbed_j);
         }
         assert!(lowest >= 0.0, "lowest account {lowest} J");

@@ -121,6 +121,9 @@ impl<S: Space> VeCore<S> {
                 snapshot.seq += 1;
                 snapshot.server_time_s = time_s;
                 snapshot.uplink_time_s = self.couplings[index].target_time_s;
+                let (books, k) = (&user.passivity.port, snapshot.energy.received_j.len());
+                snapshot.energy.received_j.copy_from_slice(&books.received_j[..k]);
+                snapshot.energy.emitted_j.copy_from_slice(&books.emitted_j[..k]);
                 snapshot.ve_step = self.step;
                 // The OP's terms are the same numbers in every snapshot built from `at_op`: checked once.
                 let checked = if !others_valid {

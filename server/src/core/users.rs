@@ -116,6 +116,7 @@ impl SnapshotSlot {
             contacts: Vec::with_capacity(if model.obstacles.is_empty() { 0 } else { MAX_LOCAL_CONTACTS }),
             others: OtherUsers::default(),
             config,
+            energy: kinloop_protocol::PortEnergy::zero(k),
         };
         let spare_contacts = if model.obstacles.is_empty() {
             Vec::new()

@@ -130,6 +130,8 @@ impl Grip {
             hand_wrench: hand,
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],
+            energy_received_j: [0.0; MAX_OP_DIM],
+            energy_emitted_j: [0.0; MAX_OP_DIM],
             op_dim: k as u8,
             pose_len: 0,
         };
@@ -241,6 +243,7 @@ mod tests {
             contacts: Vec::new(),
             others: Default::default(),
             config: None,
+            energy: kinloop_protocol::PortEnergy::zero(3),
         }
     }
 

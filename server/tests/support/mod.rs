@@ -66,6 +66,7 @@ pub fn uplink(seq: u64, hand: &[f64], pose: &[f64], twist: &[f64]) -> Uplink {
         model_pose: pose.to_vec(),
         model_twist: twist.to_vec(),
         flags: 0,
+        energy: kinloop_protocol::PortEnergy::zero(twist.len()),
     }
 }
 

@@ -217,6 +217,7 @@ impl Pusher {
                         model_pose: s.op_pose.clone(),
                         model_twist: s.op_twist.clone(),
                         flags: 0,
+                        energy: kinloop_protocol::PortEnergy::zero(s.op_twist.len()),
                     };
                     let _ = sender.send(&Datagram::Uplink(uplink));
                 }
