@@ -177,6 +177,32 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     );
 }
 
+/// The delay goal in real time (`--quick`: the testbed on both devices at 100, 300, 500 and 1000 ms one way,
+/// 3 s each): every session reports what the goal is judged on, the answer counts the ones that meet it, and
+/// at 100 and 300 ms both devices meet it (no VE restore, loops closed, at most 5 % of ticks clamped).
+#[test]
+fn latency_live_sessions_report_the_goal_and_meet_it_at_moderate_delay() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::LatencyLive, dir.path());
+    let r = &report.summary["results"];
+    let points = r["points"].as_array().unwrap();
+    assert_eq!(points.len(), 8, "the testbed x 2 devices x 4 delays");
+    for p in points {
+        let meets = p["ve_restores"] == 0
+            && p["snapshots_withheld"] == 0
+            && f(&p["non_finite"]) == 0.0
+            && f(&p["max_closure_error_m"]) <= 1e-6
+            && f(&p["clamped_fraction"]) <= 0.05;
+        assert_eq!(p["meets"], meets, "{p}");
+        if f(&p["delay_ms"]) <= 300.0 {
+            assert_eq!(p["meets"], true, "{p}");
+        }
+    }
+    let meeting = points.iter().filter(|p| p["meets"] == true).count();
+    assert!(r["answer"].as_str().unwrap().starts_with(&format!("{meeting} of 8 ")), "{}", r["answer"]);
+    assert_eq!(r["goal_met"], meeting == 8);
+}
+
 /// 16 users stay stable on one OP and spread over the links, and every user costs the VE something.
 #[test]
 fn sixteen_users_stay_stable_and_cost_grows_with_users() {

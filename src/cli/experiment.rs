@@ -16,7 +16,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 10] = [
+const WHICH: [Which; 11] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -26,6 +26,7 @@ const WHICH: [Which; 10] = [
     Which::One(Name::Pauses),
     Which::One(Name::Renderability),
     Which::One(Name::RenderabilityLive),
+    Which::One(Name::LatencyLive),
     Which::All,
 ];
 

@@ -6,7 +6,7 @@
 //! | [`paper`] | do the paper's two manipulations (Figs 6, 7) come out the same? |
 //! | [`speed_accuracy`] | which integrator, VE rate, snapshot rate and local-model form buy accuracy cheapest? |
 //! | [`stability`] | where do the joint-constraint gains, the haptic rate, Baumgarte and the coupling fail? |
-//! | [`latency`] | how much network delay, jitter and loss does the coupling take, with and without passivity control? |
+//! | [`latency`] | how much network delay, jitter and loss does the coupling take, with and without passivity control? (`latency-live`: the goal's real-time matrix) |
 //! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
@@ -52,11 +52,13 @@ pub enum Name {
     Renderability,
     /// The same in real time over loopback QUIC.
     RenderabilityLive,
+    /// Delay in real time: three scenes x two devices x four delays.
+    LatencyLive,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 9] = [
+    pub const ALL: [Name; 10] = [
         Name::Paper,
         Name::SpeedAccuracy,
         Name::Stability,
@@ -66,6 +68,7 @@ impl Name {
         Name::Pauses,
         Name::Renderability,
         Name::RenderabilityLive,
+        Name::LatencyLive,
     ];
 
     /// What the experiment answers, in a line (the command line's help).
@@ -80,6 +83,9 @@ impl Name {
             Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
             Name::Renderability => "every scene x OP x device x network x hand with default settings",
             Name::RenderabilityLive => "the renderability matrix in real time over loopback QUIC (about 20 min)",
+            Name::LatencyLive => {
+                "3 scenes x 2 devices x 100-1000 ms one way in real time over loopback QUIC (about 5 min)"
+            }
         }
     }
 
@@ -95,6 +101,7 @@ impl Name {
             Name::Pauses => "pauses",
             Name::Renderability => "renderability",
             Name::RenderabilityLive => "renderability-live",
+            Name::LatencyLive => "latency-live",
         }
     }
 }
@@ -111,5 +118,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Pauses => pauses::run(options),
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
+        Name::LatencyLive => latency::run_live(options),
     }
 }
