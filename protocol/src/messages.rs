@@ -626,10 +626,11 @@ pub struct Snapshot {
 
 /// The energy that has crossed one end of the network two-port between a user's device and the VE, per
 /// operational axis, since the session began (J; N·m·rad on angular axes, also J), in the VE's units. At the
-/// client the port is the device (received: what the hand pushed in against the command; emitted: what the
-/// command gave the hand); at the server it is the user's coupling (received: what the VE gave the coupling;
-/// emitted: what the coupling gave the VE). Both only grow. Each end bounds what it emits by what it and the
-/// other end have received (time-domain passivity across the network, Ryu, Artigas & Preusche 2007); see
+/// client the port is the local model (received: what the user's wrench, hand and device reaction, put into
+/// it; emitted: what it gave back); at the server it is the user's coupling (received: what the VE gave the
+/// coupling; emitted: what the coupling gave the VE), booked while its passivity controller is on (zero
+/// otherwise). Both only grow. The server's controller bounds what its coupling emits by what both ends have
+/// received (time-domain passivity across the network, Ryu, Artigas & Preusche 2010); see
 /// `kinloop_linkage::passivity`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PortEnergy {

@@ -110,12 +110,13 @@ fn a_client_claiming_energy_it_never_put_in_cannot_make_the_coupling_generate() 
     }
 }
 
-/// Energy books that are non-finite, negative, shrinking or faster than the device can push are refused and
-/// counted; the uplink carrying them is still used (its state moves the coupling), and the snapshots carry the
-/// coupling's own books, which only grow.
+/// With the passivity controller on, energy books that are non-finite, negative, shrinking or faster than the
+/// device can push are refused and counted; the uplink carrying them is still used (its state moves the
+/// coupling), and the snapshots carry the coupling's own books, which only grow.
 #[test]
 fn bad_energy_reports_are_refused_and_counted_and_the_session_carries_on() {
-    let mut ve = core(testbed(), VeConfig::default());
+    let config = VeConfig { passivity: true, ..VeConfig::default() };
+    let mut ve = core(testbed(), config);
     let user = ve.join(Duration::ZERO, request("books", Role::Manipulator, "link2", 3)).unwrap().user_id;
     let bad: [fn(f64) -> Vec<f64>; 4] = [
         |_| vec![f64::NAN, 0.0, 0.0],
