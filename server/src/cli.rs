@@ -67,7 +67,9 @@ struct Cli {
     /// (given alone, the stiffness is the paper's).
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_damping: Option<AxisGains>,
-    /// Time-domain passivity observer/controller on each coupling.
+    /// Time-domain passivity on each coupling: its port's energy books (sent in the snapshots) and a PD scale
+    /// per axis when the coupling has given the VE more than it and the client's end received (the client's
+    /// books trusted only as far as its uplinks show).
     #[arg(long, value_name = "on|off", default_value = "off")]
     passivity: Switch,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
