@@ -602,31 +602,19 @@ pub struct LiveMeasured {
 /// loopback QUIC through the emulated link, default flags) of `seconds`.
 pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> Result<LiveMeasured> {
     let (scene, op, _) = TARGETS[p.target];
-    let mut o = crate::demo::DemoOptions::new(scratch)?;
-    o.scene = kinloop_linkage::builtin::scene(scene).context("built in")??;
-    o.scene_label = scene.into();
-    o.duration = Duration::from_secs_f64(seconds);
-    o.progress = false;
-    o.device = Some(p.device);
-    o.first_op = Some(op.into());
     let ms = |v: f64| Duration::from_secs_f64(v / 1000.0);
-    o.link = LinkConfig {
+    let link = LinkConfig {
         delay: ms(p.delay_ms),
         jitter: ms(LIVE_JITTER_MS),
         seed: 0x11fe + p.delay_ms as u64,
         ..LinkConfig::default()
     };
+    let o = super::renderability::demo_options(scene, op, p.device, None, link, seconds, scratch)?;
     let report = crate::demo::run(&o).with_context(|| format!("{scene}:{op} {} {} ms", p.device.name(), p.delay_ms))?;
     let s = &report.summary;
-    let u = s.per_user.first().context("the demo's user")?;
-    let count = |key: &str| u.client[key].as_f64().unwrap_or(f64::NAN);
-    let clamped_fraction = count("clamped_ticks") / count("ticks").max(1.0);
-    let non_finite = count("non_finite_events");
-    let meets = s.ve_restores == 0
-        && s.snapshots_withheld == 0
-        && non_finite == 0.0
-        && s.max_closure_error <= LIVE_CLOSURE_BOUND_M
-        && clamped_fraction <= LIVE_CLAMPED_BOUND;
+    let counts = super::renderability::LiveCounts::of(&report)?;
+    let (clamped_fraction, non_finite) = (counts.clamped_fraction, counts.non_finite);
+    let meets = counts.stable && s.max_closure_error <= LIVE_CLOSURE_BOUND_M && clamped_fraction <= LIVE_CLAMPED_BOUND;
     Ok(LiveMeasured {
         target: format!("{scene}:{op}"),
         device: p.device.name(),
@@ -636,7 +624,7 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
         max_closure_error_m: s.max_closure_error,
         clamped_fraction,
         non_finite,
-        device_op_rms_mm: u.device_op_rms_mm,
+        device_op_rms_mm: counts.user.device_op_rms_mm,
         meets,
     })
 }

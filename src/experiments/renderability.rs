@@ -234,28 +234,69 @@ pub fn evaluate_live(point: &Point, seconds: f64, scratch: &std::path::Path) -> 
 
 /// The demo session that runs `point` for `seconds` with default flags, records under `scratch`.
 pub fn live_options(point: &Point, seconds: f64, scratch: &std::path::Path) -> Result<crate::demo::DemoOptions> {
+    let link = point.network.link(0x5eed);
+    demo_options(&point.scene, &point.op, point.device, Some(point.hand), link, seconds, scratch)
+}
+
+/// A `kinloop demo` session of one user holding built-in `scene`'s `op` on `device` with `hand` (`None`: the
+/// demo's default) through `link`, for `seconds`, with its records under `scratch`: what the real-time runs
+/// (`renderability-live`, `latency-live`) are made of.
+pub fn demo_options(
+    scene: &str,
+    op: &str,
+    device: DevicePreset,
+    hand: Option<HandKind>,
+    link: LinkConfig,
+    seconds: f64,
+    scratch: &std::path::Path,
+) -> Result<crate::demo::DemoOptions> {
     let mut o = crate::demo::DemoOptions::new(scratch)?;
-    o.scene = builtin::scene(&point.scene).context("built in")??;
-    o.scene_label = point.scene.clone();
+    o.scene = builtin::scene(scene).context("built in")??;
+    o.scene_label = scene.into();
     o.duration = Duration::from_secs_f64(seconds);
     o.progress = false;
-    o.device = Some(point.device);
-    o.first_op = Some(point.op.clone());
-    o.hand = Some(point.hand);
-    o.link = point.network.link(0x5eed);
+    o.device = Some(device);
+    o.first_op = Some(op.into());
+    o.hand = hand;
+    o.link = link;
     Ok(o)
+}
+
+/// What a real-time session's user measured that the live runs judge: stable (no VE restore, no withheld
+/// snapshot, no non-finite value), the fraction of ticks clamped, and the non-finite events.
+pub struct LiveCounts<'a> {
+    /// The session's one user.
+    pub user: &'a crate::demo::UserSummary,
+    /// Stable as far as a session without an every-tick recording can tell.
+    pub stable: bool,
+    /// Fraction of the client's ticks clamped at the device's limit.
+    pub clamped_fraction: f64,
+    /// Non-finite values the client's safety layer refused.
+    pub non_finite: f64,
+}
+
+impl<'a> LiveCounts<'a> {
+    /// Reads them from a demo's report.
+    pub fn of(report: &'a crate::demo::DemoReport) -> Result<Self> {
+        let s = &report.summary;
+        let user = s.per_user.first().context("the demo's user")?;
+        let count = |key: &str| user.client[key].as_f64().unwrap_or(f64::NAN);
+        let non_finite = count("non_finite_events");
+        Ok(LiveCounts {
+            user,
+            stable: s.ve_restores == 0 && s.snapshots_withheld == 0 && non_finite == 0.0,
+            clamped_fraction: count("clamped_ticks") / count("ticks").max(1.0),
+            non_finite,
+        })
+    }
 }
 
 /// Judges a real-time session of `point` by the matrix's bounds. "Stable" here is no VE restore, no withheld
 /// snapshot and no non-finite value (the energy criterion needs the harness's every-tick recording).
 pub fn judge_live(point: &Point, report: &crate::demo::DemoReport) -> Result<PointResult> {
     let s = &report.summary;
-    let u = s.per_user.first().context("the demo's user")?;
-    let count = |key: &str| u.client[key].as_f64().unwrap_or(f64::NAN);
-    let clamped_fraction = count("clamped_ticks") / count("ticks").max(1.0);
+    let LiveCounts { user: u, stable, clamped_fraction, non_finite } = LiveCounts::of(report)?;
     let device_op_rms_m = u.device_op_rms_mm.map_or(f64::NAN, |mm| mm * 1e-3);
-    let non_finite = count("non_finite_events");
-    let stable = s.ve_restores == 0 && s.snapshots_withheld == 0 && non_finite == 0.0;
     let mut failures = Vec::new();
     if !stable {
         failures.push(format!(

@@ -691,7 +691,7 @@ impl<S: Space> HapticCore<S> {
 
     /// Counters so far.
     pub fn stats(&self) -> CoreStats {
-        self.stats
+        CoreStats { energy_reports_refused: self.server_energy.refused, ..self.stats }
     }
 
     /// The last tick's report.
@@ -745,15 +745,11 @@ impl<S: Space> HapticCore<S> {
             self.stats.snapshots_rejected += 1;
             return Err(rejection);
         }
-        // The energy books are judged apart: a bad report is refused and counted, the state is still used.
+        // The energy books are judged apart: a bad report is refused and counted (`EnergyReports::refused`, in
+        // the stats), the state is still used.
         let e = &snapshot.energy;
-        if self
-            .server_energy
-            .check(snapshot.server_time_s, &e.received_j, &e.emitted_j, MAX_WRENCH * MAX_SPEED, 0.0)
-            .is_err()
-        {
-            self.stats.energy_reports_refused += 1;
-        }
+        let _ =
+            self.server_energy.check(snapshot.server_time_s, &e.received_j, &e.emitted_j, MAX_WRENCH * MAX_SPEED, 0.0);
         std::mem::swap(&mut self.incoming, &mut self.pending);
         self.pending_fresh = true;
         self.newest_seq = Some(snapshot.seq);
@@ -885,13 +881,14 @@ impl<S: Space> HapticCore<S> {
         });
         let estimate = self.observer.update(dt_s, &device_twist, &self.last_command);
         let hand_for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
-        let model_wrench =
-            if hand_off { S::OpVec::zero() } else { sensed.unwrap_or_else(S::OpVec::zero) + self.reaction };
-        if hand_off {
+        let model_wrench = if hand_off {
             self.model.set_state(self.model.pose(), S::OpVec::zero());
+            S::OpVec::zero()
         } else {
-            self.model.step(dt_s, &model_wrench);
-        }
+            let wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
+            self.model.step(dt_s, &wrench);
+            wrench
+        };
         let mut power_out = [0.0; kinloop_linkage::passivity::MAX_AXES];
         let model_twist_after = self.model.twist();
         for (a, p) in power_out.iter_mut().enumerate().take(S::DIM) {

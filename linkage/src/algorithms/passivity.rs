@@ -48,11 +48,6 @@ impl PortBooks {
             }
         }
     }
-
-    /// Received minus emitted on `axis`: what the network has absorbed there (negative: generated).
-    pub fn absorbed(&self, axis: usize) -> f64 {
-        self.received_j[axis] - self.emitted_j[axis]
-    }
 }
 
 /// Why a peer's energy report was refused.
@@ -137,7 +132,33 @@ impl EnergyReports {
         max_power_w: f64,
         slack_j: f64,
     ) -> Result<(), EnergyReportError> {
-        let verdict = self.judge(time_s, received, emitted, max_power_w, slack_j);
+        let verdict = (|| {
+            let before_s = self.accepted_at_s.unwrap_or(0.0);
+            if !time_s.is_finite() || self.accepted_at_s.is_some_and(|before| time_s <= before) {
+                return Err(EnergyReportError::TimeWentBack { before: before_s, now: time_s });
+            }
+            let seconds = (time_s - before_s).max(0.0);
+            let books =
+                [("received", received, &self.accepted.received_j), ("emitted", emitted, &self.accepted.emitted_j)];
+            for (field, values, before) in books {
+                for (axis, (&now, &was)) in values.iter().zip(before.iter()).enumerate() {
+                    if !now.is_finite() {
+                        return Err(EnergyReportError::NonFinite { field, axis });
+                    }
+                    if now < 0.0 {
+                        return Err(EnergyReportError::Negative { field, axis, value: now });
+                    }
+                    if now < was {
+                        return Err(EnergyReportError::Decreased { field, axis, before: was, now });
+                    }
+                    let growth = now - was;
+                    if growth > max_power_w * seconds + slack_j {
+                        return Err(EnergyReportError::TooFast { field, axis, growth, seconds, max_power_w });
+                    }
+                }
+            }
+            Ok(())
+        })();
         match verdict {
             Ok(()) => {
                 let k = received.len().min(MAX_AXES);
@@ -148,40 +169,6 @@ impl EnergyReports {
             Err(_) => self.refused += 1,
         }
         verdict
-    }
-
-    fn judge(
-        &self,
-        time_s: f64,
-        received: &[f64],
-        emitted: &[f64],
-        max_power_w: f64,
-        slack_j: f64,
-    ) -> Result<(), EnergyReportError> {
-        let before_s = self.accepted_at_s.unwrap_or(0.0);
-        if !time_s.is_finite() || self.accepted_at_s.is_some_and(|before| time_s <= before) {
-            return Err(EnergyReportError::TimeWentBack { before: before_s, now: time_s });
-        }
-        let seconds = (time_s - before_s).max(0.0);
-        let books = [("received", received, &self.accepted.received_j), ("emitted", emitted, &self.accepted.emitted_j)];
-        for (field, values, before) in books {
-            for (axis, (&now, &was)) in values.iter().zip(before.iter()).enumerate() {
-                if !now.is_finite() {
-                    return Err(EnergyReportError::NonFinite { field, axis });
-                }
-                if now < 0.0 {
-                    return Err(EnergyReportError::Negative { field, axis, value: now });
-                }
-                if now < was {
-                    return Err(EnergyReportError::Decreased { field, axis, before: was, now });
-                }
-                let growth = now - was;
-                if growth > max_power_w * seconds + slack_j {
-                    return Err(EnergyReportError::TooFast { field, axis, growth, seconds, max_power_w });
-                }
-            }
-        }
-        Ok(())
     }
 }
 
@@ -211,7 +198,8 @@ mod tests {
         books.book(&[2.0, -3.0, 0.0], 0.5);
         assert_eq!(books.emitted_j[..3], [1.0, 0.0, 0.0]);
         assert_eq!(books.received_j[..3], [0.0, 1.5, 0.0]);
-        assert_eq!((books.absorbed(0), books.absorbed(1)), (-1.0, 1.5));
+        let absorbed = |a: usize| books.received_j[a] - books.emitted_j[a];
+        assert_eq!((absorbed(0), absorbed(1)), (-1.0, 1.5));
         let before = books;
         books.book(&[f64::NAN, 1.0, 1.0], 0.1);
         books.book(&[1.0, 1.0, 1.0], f64::INFINITY);
