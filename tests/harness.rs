@@ -300,3 +300,39 @@ fn default_sessions_at_300_ms_one_way_are_stable() {
         assert!(rms < 0.02, "{scene}:{op} at 300 ms: device-OP RMS {rms} m");
     }
 }
+
+/// A firm hand touring the testbed at 500 ms one way: the local model runs a round trip of motion ahead of
+/// the VE its terms were linearized at, and a joint stiffness held against that stale tangent plane pushed
+/// back hard enough to saturate `sim:paper`'s 0.2 N m wrist (77 % of ticks in the worst second). With the
+/// constrained directions softened by `linearization_trust` (the default reach) the tour is stable and no
+/// second is saturated; with the softening off (infinite reach) the same session saturates, so the
+/// softening is what holds it.
+#[test]
+fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane() {
+    use kinloop::experiments::verdict::judge;
+    use kinloop::harness::CoreEdit;
+    use kinloop_client::device::DevicePreset;
+    let session = |reach: Option<f64>| {
+        let mut client = ClientPlan::new("user", "link2", DevicePreset::Paper);
+        client.user = UserSpec::Hand(HandSpec::touring(HandKind::Firm));
+        if let Some(reach) = reach {
+            client.configure = Some(CoreEdit::new(move |c| c.linearization_reach = reach));
+        }
+        let client =
+            client.with_link(LinkConfig { delay: Duration::from_millis(500), seed: 7, ..LinkConfig::default() });
+        let plan = SessionPlan {
+            scene: kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap(),
+            ve: VeConfig::default(),
+            clients: vec![client],
+            duration: Duration::from_secs(10),
+            record_every: 1,
+        };
+        let (summary, rec) = run(&plan, &mut |_| {}).unwrap();
+        judge(&summary, &rec)
+    };
+    let softened = session(None);
+    assert!(softened.stable, "default reach: {softened:?}");
+    assert!(softened.worst_saturation < 0.02, "default reach: {softened:?}");
+    let stiff = session(Some(f64::INFINITY));
+    assert!(stiff.worst_saturation > 0.3, "infinite reach: {stiff:?}");
+}

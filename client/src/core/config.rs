@@ -173,6 +173,12 @@ impl Default for UplinkDeadband {
     }
 }
 
+/// Default [`CoreConfig::linearization_reach`], in length scales: 0.4 L is 18-24 mm on the testbed, the
+/// four-bar and the Watt six-bar. A firm hand touring at 500 ms one way saturated the testbed's wrist 77 % of
+/// a second with no softening and none at 0.4 L; at 0.8 L the four-bar's and the testbed's firm hands still
+/// saturate from 500 ms (`kinloop experiment latency`).
+pub const LINEARIZATION_REACH: f64 = 0.4;
+
 /// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CoreConfig {
@@ -199,6 +205,11 @@ pub struct CoreConfig {
     /// keeps them from parting for good. The core never pulls faster than
     /// [`FREE_BLEND_PER_ROUND_TRIP`](super::FREE_BLEND_PER_ROUND_TRIP) round trips (see there).
     pub free_blend_time_constant: Duration,
+    /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
+    /// its snapshot terms were computed at before the constrained directions are rendered softer (see
+    /// `controllers::linearization_trust`). Under delay the model runs ahead of the VE by a round trip of
+    /// motion, on a tangent plane taken where the VE was; `f64::INFINITY` never softens.
+    pub linearization_reach: f64,
     /// Time constant of the first-order filter on the snapshot terms the controllers use (Λ̂⁻¹ and the
     /// constrained-direction projector), so a new snapshot never steps the force; zero takes them as they come.
     pub terms_time_constant: Duration,
@@ -227,6 +238,7 @@ impl CoreConfig {
             blend_time_constant: Duration::from_millis(20),
             free_blend_time_constant: Duration::from_millis(200),
             terms_time_constant: Duration::from_millis(5),
+            linearization_reach: LINEARIZATION_REACH,
             hand_observer_bandwidth: 50.0,
             index_at_first_snapshot: true,
             safety: SafetyConfig::default(),

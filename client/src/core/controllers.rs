@@ -218,6 +218,28 @@ pub fn joint_constraint_stiffness<S: Space>(
     -project_as_stiffness::<S>(projector, length_scale, &(*error * stiffness + *error_rate * damping))
 }
 
+/// How much of the constrained directions' stiffness a local model at scaled distance `distance` from the
+/// pose its terms were computed at still renders: `1 / (1 + (distance / reach)²)`.
+///
+/// The frozen terms describe the linkage's constraint as a plane through that pose; the linkage's motion
+/// curves away from the plane by about `κ d² / 2` at distance `d` (curvature `κ`). Under delay the model
+/// runs a round trip of motion ahead of the VE it was linearized at (at 500 ms one way, 4 cm/s: 4 cm), the
+/// hand follows the real curve, and a joint stiffness `k` held against the plane pushed back with
+/// `k κ d² / 2`: several newtons, enough to saturate a device. Scaled by this trust the push is
+/// `k κ d² / (2 (1 + d²/reach²))`, never more than `k κ reach² / 2` however far the model runs; near the
+/// linearization point (no delay) the walls keep their full stiffness. The constraint degrades to a softer
+/// wall instead of a wrong one: graceful transparency rather than saturation.
+pub fn linearization_trust(distance: f64, reach: f64) -> f64 {
+    // An infinite reach trusts everywhere (r = 0), a zero reach nowhere off the point (r = ∞ → 0); a
+    // non-finite model is the safety layer's business, not this one's.
+    let r = distance / reach;
+    if r.is_nan() {
+        1.0
+    } else {
+        1.0 / (1.0 + r * r)
+    }
+}
+
 /// Joint-constraint control, impedance mode (second manipulation: "controlling the acceleration of the
 /// end-effector of the haptic device to zero along the directions of cut joint constraint"): cancels, along
 /// the constrained directions, the hand wrench and every other wrench the core commands,
@@ -312,5 +334,26 @@ mod tests {
         let f = impedance_free::<Planar>(&x_constrained, 0.05, &mass, &inverse_inertia, &bias, &hand);
         assert_eq!(f[0], 0.0);
         assert!((f[1] - (1.0 * (0.5 * 0.2 - 0.1) - 0.2)).abs() < 1e-12);
+    }
+    #[test]
+    fn linearization_trust_bounds_the_push_of_a_stale_tangent_plane() {
+        let reach = 0.02;
+        assert_eq!(linearization_trust(0.0, reach), 1.0);
+        assert!((linearization_trust(reach, reach) - 0.5).abs() < 1e-15);
+        assert_eq!(linearization_trust(0.05, f64::INFINITY), 1.0);
+        assert_eq!(linearization_trust(0.05, 0.0), 0.0);
+        // A plane through the linearization point misses a curve of curvature κ by κ d² / 2 at distance d:
+        // the softened push k κ d² / 2 · trust(d) rises monotonically to its bound k κ reach² / 2 and never
+        // passes it, however far the model runs.
+        let (k, kappa) = (2000.0, 10.0);
+        let bound = k * kappa * reach * reach / 2.0;
+        let mut last = 0.0;
+        for i in 1..=2000 {
+            let d = i as f64 * 1e-4;
+            let push = k * kappa * d * d / 2.0 * linearization_trust(d, reach);
+            assert!(push > last && push < bound, "d = {d}: {push} after {last}, bound {bound}");
+            last = push;
+        }
+        assert!(last > 0.98 * bound, "at 10 reaches the push is near its bound: {last} vs {bound}");
     }
 }

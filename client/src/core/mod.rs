@@ -38,6 +38,7 @@ mod sync;
 
 use std::time::Duration;
 
+use kinloop_linkage::constraint_directions::scale_op;
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::passivity::{EnergyReports, PortBooks};
 use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
@@ -51,8 +52,8 @@ pub use config::{
 pub use intake::SnapshotRejection;
 
 use controllers::{
-    contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
-    project_wrench, ConstraintFrame,
+    contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, linearization_trust,
+    position_channel, project_wrench, ConstraintFrame,
 };
 use deadband::Deadband;
 use intake::SnapshotTerms;
@@ -915,7 +916,12 @@ impl<S: Space> HapticCore<S> {
         }
         let g = &self.gains;
         let (l, p) = (self.length_scale, &self.frame.projector);
+        // The constrained directions soften as the model runs away from where its terms were computed
+        // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
+        let distance = scale_op::<S>(&model_pose.difference(&self.active.op_pose), l).norm();
+        let trust = linearization_trust(distance, self.config.linearization_reach * l);
         let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
+        let pc = pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust);
         let imp = match sensed {
             Some(hand) => {
                 impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &self.frame.bias, &hand)
@@ -938,6 +944,7 @@ impl<S: Space> HapticCore<S> {
             // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
             _ => (joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate), pc),
         };
+        let jc = jc * trust;
         let requested = pc + jc + imp + contact;
 
         // 5. Safety.
