@@ -285,6 +285,7 @@ fn point_json(m: &Measured) -> Value {
         "reasons": m.verdict.reasons,
         "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
         "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
+        "device_op_heard_max_mm": round(m.verdict.device_op_heard_max_m * 1e3, 3),
         "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
         "ve_restores": m.ve_restores,
         "max_closure_error_m": significant(m.verdict.max_closure_error_m, 3),

@@ -2,14 +2,16 @@
 //!
 //! A session is **unstable** when any of these holds, and **stable** otherwise:
 //! 1. **divergence** — a client commanded or computed a non-finite value, the VE restored a non-finite
-//!    state, a device ended up more than [`DIVERGENCE_DISTANCE_M`] (5 cm) from its operational point in the
-//!    VE, or the loop-closure error exceeded [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
+//!    state, the VE's operational point ended up more than [`DIVERGENCE_DISTANCE_M`] (5 cm) from its device
+//!    as the VE can have heard of it (the device's position one nominal uplink delay earlier), or the
+//!    loop-closure error exceeded [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
 //! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
 //!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
 //! 3. **energy growth** — at some instant the linkage has gained more mechanical energy (kinetic, plus
-//!    the change of its potential energy since the start) than all hands together have done work on their
-//!    devices, by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
+//!    the change of its potential energy since the start) than all hands together had done work on their
+//!    devices by the time the VE can have heard of it (each hand's work up to one nominal uplink delay
+//!    earlier), by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
 //!    hands' work or the potential energy's change, in absolute value) plus [`ENERGY_FLOOR_J`] (5 mJ): the
 //!    system made energy nobody put in. (A passive chain from hand to
 //!    linkage keeps `E_kin(t) + ΔE_pot(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy
@@ -19,6 +21,14 @@
 //! measured twist, both in VE units: a device mapped with scales does `c_f c_p` times this work itself),
 //! the linkage's kinetic energy `½ q̇ᵀ D q̇` and potential energy after every VE tick. Device-OP distances
 //! are in the device's space. The verdict needs a recording of every tick (`record_every = 1`).
+//!
+//! **Like with like under delay.** The VE at time t has heard of each device, and of the work its hand did,
+//! only up to t minus the uplink's delay, so both comparisons are made there (at zero delay they are the
+//! plain ones). Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
+//! 4-6 cm away, and was judged diverged, though the gap never grows; and a jab that the hand took back before
+//! its delayed copy reached the VE made the VE's energy look unpaid for. The device's distance to the VE's OP
+//! now is still measured and reported (`device_op_max_m`, the RMS figures): it is the transparency, not the
+//! stability.
 
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -41,11 +51,11 @@ pub const ENERGY_FRACTION: f64 = 0.5;
 pub const ENERGY_FLOOR_J: f64 = 0.005;
 
 /// The criterion in one sentence, for summaries.
-pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, a device more than 5 cm \
-from its OP in the VE, or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
+pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, the VE's OP more than 5 \
+cm from its device as the VE can have heard of it (one nominal uplink delay earlier), or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
 ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
-linkage's kinetic energy plus the change of its potential energy exceeds the work all hands have done on their \
-devices by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
+linkage's kinetic energy plus the change of its potential energy exceeds the work all hands had done on their \
+devices one nominal uplink delay earlier by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
 absolute value) plus 5 mJ); stable otherwise";
 
 /// The criterion as a JSON object (the sentence and its thresholds).
@@ -71,6 +81,9 @@ pub struct Verdict {
     pub reasons: Vec<&'static str>,
     /// Largest device–OP distance over all clients (m).
     pub device_op_max_m: f64,
+    /// Largest distance between the VE's OP and its device as the VE can have heard of it, over all clients
+    /// (m): what the divergence test judges.
+    pub device_op_heard_max_m: f64,
     /// Largest closure error (m).
     pub max_closure_error_m: f64,
     /// Largest fraction of clamped ticks in any window, over all clients.
@@ -88,6 +101,7 @@ pub struct Verdict {
 pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     let mut reasons = Vec::new();
     let device_op_max_m = summary.clients.iter().map(|c| c.device_op_max_m).fold(0.0, f64::max);
+    let device_op_heard_max_m = summary.clients.iter().map(|c| c.device_op_heard_max_m).fold(0.0, f64::max);
     let non_finite = summary.clients.iter().any(|c| c.non_finite > 0);
     if non_finite {
         reasons.push("divergence: non-finite value");
@@ -95,8 +109,8 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     if summary.ve_restores > 0 {
         reasons.push("divergence: VE state restored");
     }
-    if exceeds(device_op_max_m, DIVERGENCE_DISTANCE_M) {
-        reasons.push("divergence: device more than 5 cm from its OP");
+    if exceeds(device_op_heard_max_m, DIVERGENCE_DISTANCE_M) {
+        reasons.push("divergence: OP more than 5 cm from its device as heard");
     }
     if exceeds(summary.max_closure_error, CLOSURE_LIMIT_M) {
         reasons.push("divergence: closure error above 1 mm");
@@ -113,6 +127,7 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         stable: reasons.is_empty(),
         reasons,
         device_op_max_m,
+        device_op_heard_max_m,
         max_closure_error_m: summary.max_closure_error,
         worst_saturation,
         energy_excess_j,
@@ -158,7 +173,8 @@ fn worst_window(samples: &[crate::harness::ClientSample]) -> f64 {
     worst
 }
 
-/// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample.
+/// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample, each
+/// client's work taken one nominal uplink delay before the sample (what the VE can have heard of).
 fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
     // Cumulative work per client at each of its samples.
     let work: Vec<Vec<(f64, f64)>> = rec
@@ -186,12 +202,13 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
     let potential_start = rec.ve.first().map_or(0.0, |v| v.potential_energy);
     for v in &rec.ve {
         let mut w_total = 0.0;
-        for (series, cursor) in work.iter().zip(cursors.iter_mut()) {
-            while *cursor + 1 < series.len() && series[*cursor + 1].0 <= v.t {
+        for (client, (series, cursor)) in work.iter().zip(cursors.iter_mut()).enumerate() {
+            let heard_by = v.t - rec.uplink_delays_s.get(client).copied().unwrap_or(0.0);
+            while *cursor + 1 < series.len() && series[*cursor + 1].0 <= heard_by {
                 *cursor += 1;
             }
             if let Some(&(t, w)) = series.get(*cursor) {
-                if t <= v.t {
+                if t <= heard_by {
                     w_total += w;
                 }
             }
@@ -253,7 +270,51 @@ mod tests {
         let (s, r) = recording(10.0, 0.2);
         assert_eq!(judge(&s, &r).reasons, vec!["energy growth"]);
         let (mut s, r) = recording(10.0, 0.0);
-        s.clients[0].device_op_max_m = 0.06;
+        s.clients[0].device_op_heard_max_m = 0.06;
         assert!(!judge(&s, &r).stable);
+        // Trailing the device by a delay's worth of motion is not divergence.
+        let (mut s, r) = recording(10.0, 0.0);
+        s.clients[0].device_op_max_m = 0.06;
+        s.clients[0].device_op_heard_max_m = 0.01;
+        assert!(judge(&s, &r).stable);
+    }
+
+    #[test]
+    fn the_energy_balance_compares_the_ve_with_the_work_it_has_heard_of() {
+        // A jab: the hand puts 40 mJ in over [1.0, 1.1) s, holds, and takes 38 mJ back over [1.3, 1.4) s. The
+        // VE hears of it 0.5 s later and holds 90 % of the work it has heard of as kinetic energy.
+        let work = |t: f64| match t {
+            t if t < 1.0 => 0.0,
+            t if t < 1.1 => 0.4 * (t - 1.0),
+            t if t < 1.3 => 0.04,
+            t if t < 1.4 => 0.04 - 0.38 * (t - 1.3),
+            _ => 0.002,
+        };
+        let mut rec = Recording::new(vec!["a".into()]);
+        for k in 0..3000 {
+            let t = k as f64 * 1e-3;
+            let (hand, v) = match t {
+                t if (1.0..1.1).contains(&t) => (4.0, 0.1),
+                t if (1.3..1.4).contains(&t) => (-3.8, 0.1),
+                _ => (0.0, 0.0),
+            };
+            rec.push_client(0, sample(t, false, hand, v));
+            rec.push_ve(VeSample { t, kinetic_energy: 0.9 * work(t - 0.5), ..VeSample::default() });
+        }
+        let summary = SessionSummary { clients: vec![Default::default()], ..Default::default() };
+        // Against the work done by the same instant, 36 mJ held against 2 mJ of work is growth ...
+        let now = judge(&summary, &rec);
+        assert!((now.energy_excess_j - 0.034).abs() < 1e-3, "{now:?}");
+        assert_eq!(now.reasons, vec!["energy growth"]);
+        // ... against the work the VE had heard of, it is paid for.
+        rec.uplink_delays_s = vec![0.5];
+        let heard = judge(&summary, &rec);
+        assert!(heard.stable, "{heard:?}");
+        assert!(heard.energy_excess_j < 1e-3, "{heard:?}");
+        // Energy made from nothing is still caught, delay or not.
+        for v in rec.ve.iter_mut().filter(|v| v.t >= 2.5) {
+            v.kinetic_energy = 0.1;
+        }
+        assert_eq!(judge(&summary, &rec).reasons, vec!["energy growth"]);
     }
 }

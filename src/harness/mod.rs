@@ -7,6 +7,7 @@
 
 pub mod record;
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -16,6 +17,7 @@ use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::device::rig::SimulatedRig;
 use kinloop_client::device::{HapticDevice, SimulatedDevice};
 use kinloop_client::user::{UserContext, UserSpec};
+use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Model, Planar, Scene, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
 use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
@@ -187,6 +189,11 @@ pub struct ClientSummary {
     pub device_op_rms_m: f64,
     /// Largest device–OP distance, device space (m).
     pub device_op_max_m: f64,
+    /// Largest distance between the VE's OP and the device as the VE can last have heard of it: the device's
+    /// position one nominal uplink delay earlier, device space (m). The VE follows the device through the
+    /// uplink, so under delay it trails the device by the delay's worth of motion (`device_op_max_m` grows
+    /// with it); this distance is what grows only when the VE fails to follow.
+    pub device_op_heard_max_m: f64,
     /// RMS distance between the device and the local model's OP (the client's tracking error), device space, m.
     pub device_model_rms_m: f64,
     /// Fraction of active ticks with the command clamped at the device limit.
@@ -233,6 +240,9 @@ struct Participant<S: Space> {
     left: bool,
     op_sum_sq: f64,
     op_max: f64,
+    /// The device's pose by tick time over the last nominal uplink delay, oldest first (`device_op_heard_max_m`).
+    heard: VecDeque<(Duration, OpPose<S>)>,
+    heard_max: f64,
     model_sum_sq: f64,
     active_ticks: u64,
     saturated: u64,
@@ -290,6 +300,8 @@ impl<S: Space> Session<S> {
                 left: false,
                 op_sum_sq: 0.0,
                 op_max: 0.0,
+                heard: VecDeque::new(),
+                heard_max: 0.0,
                 model_sum_sq: 0.0,
                 active_ticks: 0,
                 saturated: 0,
@@ -302,13 +314,15 @@ impl<S: Space> Session<S> {
             });
         }
         let names = plan.clients.iter().map(|c| c.name.clone()).collect();
+        let mut recording = Recording::new(names);
+        recording.uplink_delays_s = plan.clients.iter().map(|c| c.uplink.delay.as_secs_f64()).collect();
         Ok(Session {
             ve,
             shape,
             participants,
             duration: plan.duration,
             record_every: plan.record_every,
-            recording: Recording::new(names),
+            recording,
             max_closure: 0.0,
             ve_compute: Duration::ZERO,
             encode_buf: Vec::with_capacity(2048),
@@ -510,6 +524,14 @@ impl<S: Space> Session<S> {
                     let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
                     p.op_sum_sq += d * d;
                     p.op_max = p.op_max.max(d);
+                    // The newest pose at least one uplink delay old is what the VE can have heard of.
+                    p.heard.push_back((now, report.device_pose));
+                    let heard_by = now.saturating_sub(p.plan.uplink.delay);
+                    while p.heard.len() > 1 && p.heard[1].0 <= heard_by {
+                        p.heard.pop_front();
+                    }
+                    let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
+                    p.heard_max = p.heard_max.max(heard);
                 }
             }
         }
@@ -544,6 +566,7 @@ impl<S: Space> Session<S> {
                     max_force_ratio: stats.max_force_ratio,
                     device_op_rms_m: (p.op_sum_sq / active).sqrt(),
                     device_op_max_m: p.op_max,
+                    device_op_heard_max_m: p.heard_max,
                     device_model_rms_m: (p.model_sum_sq / active).sqrt(),
                     saturated_fraction: p.saturated as f64 / active,
                     snapshots: stats.snapshots_accepted,

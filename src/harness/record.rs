@@ -117,13 +117,16 @@ pub struct Recording {
     pub clients: Vec<Vec<ClientSample>>,
     /// VE samples.
     pub ve: Vec<VeSample>,
+    /// Per client, the nominal delay of its uplink (s): what the VE at time t has heard of the client is what
+    /// it did up to t minus this.
+    pub uplink_delays_s: Vec<f64>,
 }
 
 impl Recording {
     /// An empty recording for these clients.
     pub fn new(names: Vec<String>) -> Self {
         let n = names.len();
-        Recording { names, clients: vec![Vec::new(); n], ve: Vec::new() }
+        Recording { names, clients: vec![Vec::new(); n], ve: Vec::new(), uplink_delays_s: vec![0.0; n] }
     }
 
     /// Adds a client sample.
