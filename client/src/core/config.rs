@@ -173,11 +173,13 @@ impl Default for UplinkDeadband {
     }
 }
 
-/// Default [`CoreConfig::linearization_reach`], in length scales: 0.4 L is 18-24 mm on the testbed, the
-/// four-bar and the Watt six-bar. A firm hand touring at 500 ms one way saturated the testbed's wrist 77 % of
-/// a second with no softening and none at 0.4 L; at 0.8 L the four-bar's and the testbed's firm hands still
-/// saturate from 500 ms (`kinloop experiment latency`).
-pub const LINEARIZATION_REACH: f64 = 0.4;
+/// Default [`CoreConfig::linearization_reach`], in length scales: 0.3 L is 14-18 mm on the testbed, the
+/// four-bar and the Watt six-bar. With no softening a firm hand touring the testbed at 500 ms one way saturated
+/// the device's wrist 77 % of its worst second; at 0.4 L the four-bar's firm hand still saturated at 1 s
+/// (48 %); at 0.3 L nothing in `kinloop experiment latency`'s grid saturates. The price is softer walls far
+/// from the linearization point: device-to-local-model RMS at 1 s one way 6-21 mm (2-11 mm unsoftened), at
+/// 100 ms unchanged.
+pub const LINEARIZATION_REACH: f64 = 0.3;
 
 /// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.
 #[derive(Clone, Debug, PartialEq)]
