@@ -134,6 +134,7 @@ pub fn read_client(file: &Path, kind: SceneKind) -> Result<Vec<ClientSample>, Re
                 model: pick(&model),
                 model_twist: Vec::new(),
                 ve_op: None,
+                ve_heard_s: None,
                 joint_constraint: pick(&jc),
                 position_channel: pick(&pc),
                 impedance: pick(&imp),

@@ -3,15 +3,15 @@
 //! A session is **unstable** when any of these holds, and **stable** otherwise:
 //! 1. **divergence** — a client commanded or computed a non-finite value, the VE restored a non-finite
 //!    state, the VE's operational point ended up more than [`DIVERGENCE_DISTANCE_M`] (5 cm) from its device
-//!    as the VE can have heard of it (the device's position one nominal uplink delay earlier), or the
+//!    as the VE has heard of it (the device's position at the client time of the newest uplink it used), or the
 //!    loop-closure error exceeded [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
 //! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
 //!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
 //! 3. **energy growth** — at some instant the linkage has gained more mechanical energy (kinetic, plus
 //!    the change of its potential energy since the start) than all hands together had done work on their
-//!    devices by the time the VE can have heard of it (each hand's work up to one nominal uplink delay
-//!    earlier), by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
+//!    devices by the times the VE has heard of (each hand's work up to the client time of the newest uplink
+//!    the VE used from it), by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
 //!    hands' work or the potential energy's change, in absolute value) plus [`ENERGY_FLOOR_J`] (5 mJ): the
 //!    system made energy nobody put in. (A passive chain from hand to
 //!    linkage keeps `E_kin(t) + ΔE_pot(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy
@@ -23,8 +23,9 @@
 //! are in the device's space. The verdict needs a recording of every tick (`record_every = 1`).
 //!
 //! **Like with like under delay.** The VE at time t has heard of each device, and of the work its hand did,
-//! only up to t minus the uplink's delay, so both comparisons are made there (at zero delay they are the
-//! plain ones). Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
+//! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`, what the client's
+//! Smith-style synchronisation compares with too), so both comparisons are made there: about t minus the
+//! uplink's delay, later by jitter and loss, and at zero delay the plain comparisons. Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
 //! 4-6 cm away, and was judged diverged, though the gap never grows; and a jab that the hand took back before
 //! its delayed copy reached the VE made the VE's energy look unpaid for. The device's distance to the VE's OP
 //! now is still measured and reported (`device_op_max_m`, the RMS figures): it is the transparency, not the
@@ -52,10 +53,11 @@ pub const ENERGY_FLOOR_J: f64 = 0.005;
 
 /// The criterion in one sentence, for summaries.
 pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, the VE's OP more than 5 \
-cm from its device as the VE can have heard of it (one nominal uplink delay earlier), or a closure error above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
+cm from its device as the VE has heard of it (at the client time of its newest uplink used), or a closure error \
+above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
 ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
 linkage's kinetic energy plus the change of its potential energy exceeds the work all hands had done on their \
-devices one nominal uplink delay earlier by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
+devices up to the client times of the newest uplinks the VE used by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
 absolute value) plus 5 mJ); stable otherwise";
 
 /// The criterion as a JSON object (the sentence and its thresholds).
@@ -81,7 +83,7 @@ pub struct Verdict {
     pub reasons: Vec<&'static str>,
     /// Largest device–OP distance over all clients (m).
     pub device_op_max_m: f64,
-    /// Largest distance between the VE's OP and its device as the VE can have heard of it, over all clients
+    /// Largest distance between the VE's OP and its device as the VE has heard of it, over all clients
     /// (m): what the divergence test judges.
     pub device_op_heard_max_m: f64,
     /// Largest closure error (m).
@@ -174,7 +176,8 @@ fn worst_window(samples: &[crate::harness::ClientSample]) -> f64 {
 }
 
 /// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample, each
-/// client's work taken one nominal uplink delay before the sample (what the VE can have heard of).
+/// client's work taken up to the client time the VE had heard of it by then (its sample's `ve_heard_s`; the
+/// sample's own time when the recording does not say).
 fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
     // Cumulative work per client at each of its samples.
     let work: Vec<Vec<(f64, f64)>> = rec
@@ -198,12 +201,30 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
         })
         .collect();
     let mut cursors = vec![0usize; work.len()];
+    let mut sample_cursors = vec![0usize; work.len()];
+    // Recordings that say what the VE had heard (the harness's) are judged by it; others by the sample time.
+    let says_heard: Vec<bool> = rec.clients.iter().map(|c| c.iter().any(|s| s.ve_heard_s.is_some())).collect();
     let (mut excess, mut work_max, mut ke_max) = (f64::NEG_INFINITY, 0.0f64, 0.0f64);
     let potential_start = rec.ve.first().map_or(0.0, |v| v.potential_energy);
     for v in &rec.ve {
         let mut w_total = 0.0;
         for (client, (series, cursor)) in work.iter().zip(cursors.iter_mut()).enumerate() {
-            let heard_by = v.t - rec.uplink_delays_s.get(client).copied().unwrap_or(0.0);
+            let samples = &rec.clients[client];
+            let at = &mut sample_cursors[client];
+            while *at + 1 < samples.len() && samples[*at + 1].t <= v.t {
+                *at += 1;
+            }
+            let Some(sample) = samples.get(*at).filter(|s| s.t <= v.t) else { continue };
+            // Before the VE has heard of a client, none of its work has reached the linkage.
+            let heard_by = match sample.ve_heard_s {
+                Some(heard) => heard.min(v.t),
+                None if says_heard[client] => continue,
+                None => v.t,
+            };
+            // Heard times only grow, but a cursor that overshot one would skip work: search when it goes back.
+            if series.get(*cursor).is_some_and(|&(t, _)| t > heard_by) {
+                *cursor = series.partition_point(|&(t, _)| t <= heard_by).saturating_sub(1);
+            }
             while *cursor + 1 < series.len() && series[*cursor + 1].0 <= heard_by {
                 *cursor += 1;
             }
@@ -298,19 +319,22 @@ mod tests {
                 t if (1.3..1.4).contains(&t) => (-3.8, 0.1),
                 _ => (0.0, 0.0),
             };
-            rec.push_client(0, sample(t, false, hand, v));
+            let mut s = sample(t, false, hand, v);
+            s.ve_heard_s = Some(t - 0.5).filter(|&h| h > 0.0);
+            rec.push_client(0, s);
             rec.push_ve(VeSample { t, kinetic_energy: 0.9 * work(t - 0.5), ..VeSample::default() });
         }
         let summary = SessionSummary { clients: vec![Default::default()], ..Default::default() };
-        // Against the work done by the same instant, 36 mJ held against 2 mJ of work is growth ...
-        let now = judge(&summary, &rec);
-        assert!((now.energy_excess_j - 0.034).abs() < 1e-3, "{now:?}");
-        assert_eq!(now.reasons, vec!["energy growth"]);
-        // ... against the work the VE had heard of, it is paid for.
-        rec.uplink_delays_s = vec![0.5];
+        // Against the work the VE had heard of, it is paid for ...
         let heard = judge(&summary, &rec);
         assert!(heard.stable, "{heard:?}");
         assert!(heard.energy_excess_j < 1e-3, "{heard:?}");
+        // ... against the work done by the same instant, 36 mJ held against 2 mJ of work is growth.
+        let mut plain = rec.clone();
+        plain.clients[0].iter_mut().for_each(|s| s.ve_heard_s = None);
+        let now = judge(&summary, &plain);
+        assert!((now.energy_excess_j - 0.034).abs() < 1e-3, "{now:?}");
+        assert_eq!(now.reasons, vec!["energy growth"]);
         // Energy made from nothing is still caught, delay or not.
         for v in rec.ve.iter_mut().filter(|v| v.t >= 2.5) {
             v.kinetic_energy = 0.1;

@@ -189,10 +189,10 @@ pub struct ClientSummary {
     pub device_op_rms_m: f64,
     /// Largest device–OP distance, device space (m).
     pub device_op_max_m: f64,
-    /// Largest distance between the VE's OP and the device as the VE can last have heard of it: the device's
-    /// position one nominal uplink delay earlier, device space (m). The VE follows the device through the
-    /// uplink, so under delay it trails the device by the delay's worth of motion (`device_op_max_m` grows
-    /// with it); this distance is what grows only when the VE fails to follow.
+    /// Largest distance between the VE's OP and the device as the VE has heard of it: the device's position
+    /// at the client time of the newest uplink the VE had used, device space (m). The VE follows the device
+    /// through the uplink, so under delay it trails the device by the delay's worth of motion
+    /// (`device_op_max_m` grows with it); this distance grows only when the VE fails to follow.
     pub device_op_heard_max_m: f64,
     /// RMS distance between the device and the local model's OP (the client's tracking error), device space, m.
     pub device_model_rms_m: f64,
@@ -240,8 +240,8 @@ struct Participant<S: Space> {
     left: bool,
     op_sum_sq: f64,
     op_max: f64,
-    /// The device's pose by tick time over the last nominal uplink delay, oldest first (`device_op_heard_max_m`).
-    heard: VecDeque<(Duration, OpPose<S>)>,
+    /// The device's pose by tick time since the VE's newest heard uplink, oldest first (`device_op_heard_max_m`).
+    heard: VecDeque<(f64, OpPose<S>)>,
     heard_max: f64,
     model_sum_sq: f64,
     active_ticks: u64,
@@ -314,15 +314,13 @@ impl<S: Space> Session<S> {
             });
         }
         let names = plan.clients.iter().map(|c| c.name.clone()).collect();
-        let mut recording = Recording::new(names);
-        recording.uplink_delays_s = plan.clients.iter().map(|c| c.uplink.delay.as_secs_f64()).collect();
         Ok(Session {
             ve,
             shape,
             participants,
             duration: plan.duration,
             record_every: plan.record_every,
-            recording,
+            recording: Recording::new(names),
             max_closure: 0.0,
             ve_compute: Duration::ZERO,
             encode_buf: Vec::with_capacity(2048),
@@ -524,21 +522,24 @@ impl<S: Space> Session<S> {
                     let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
                     p.op_sum_sq += d * d;
                     p.op_max = p.op_max.max(d);
-                    // The newest pose at least one uplink delay old is what the VE can have heard of.
-                    p.heard.push_back((now, report.device_pose));
-                    let heard_by = now.saturating_sub(p.plan.uplink.delay);
-                    while p.heard.len() > 1 && p.heard[1].0 <= heard_by {
+                    // The device's pose at the client time of the newest uplink the VE used (the harness runs
+                    // the client on its own clock) is what the VE has heard of.
+                    p.heard.push_back((now.as_secs_f64(), report.device_pose));
+                    while p.heard.len() > 1 && p.heard[1].0 <= u.heard_until_s {
                         p.heard.pop_front();
                     }
-                    let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
-                    p.heard_max = p.heard_max.max(heard);
+                    if u.heard_until_s > 0.0 && p.heard[0].0 <= u.heard_until_s {
+                        let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
+                        p.heard_max = p.heard_max.max(heard);
+                    }
                 }
             }
         }
         if self.record_every > 0 && p.ticks.is_multiple_of(self.record_every as u64) {
-            let ve_op =
-                p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user).map(|u| u.op_pose));
+            let ve_user = p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user));
+            let ve_op = ve_user.as_ref().map(|u| u.op_pose);
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
+            sample.ve_heard_s = ve_user.map(|u| u.heard_until_s).filter(|&t| t > 0.0);
             // The true hand (a sensorless device's report carries the observer's estimate) and the handle's
             // true twist (the report's is the encoders' filtered difference, whose lag made a hand's work
             // on a spring-like grasp drift by mJ over a tour: the energy criterion must see the plant).

@@ -22,6 +22,8 @@ pub struct ClientSample {
     pub model_twist: Vec<f64>,
     /// The VE's OP position (as the VE last computed it), if joined.
     pub ve_op: Option<Vec<f64>>,
+    /// Client time up to which the VE has heard of this client (its newest uplink used), if joined and heard.
+    pub ve_heard_s: Option<f64>,
     /// Joint-constraint controller wrench.
     pub joint_constraint: Vec<f64>,
     /// Position-channel wrench.
@@ -63,6 +65,7 @@ impl ClientSample {
             model: v(&r.model_pose.position),
             model_twist: v(&r.model_twist),
             ve_op: ve_op.map(|p| v(&p.position)),
+            ve_heard_s: None,
             joint_constraint: v(&r.wrenches.joint_constraint),
             position_channel: v(&r.wrenches.position_channel),
             impedance: v(&r.wrenches.impedance),
@@ -117,16 +120,13 @@ pub struct Recording {
     pub clients: Vec<Vec<ClientSample>>,
     /// VE samples.
     pub ve: Vec<VeSample>,
-    /// Per client, the nominal delay of its uplink (s): what the VE at time t has heard of the client is what
-    /// it did up to t minus this.
-    pub uplink_delays_s: Vec<f64>,
 }
 
 impl Recording {
     /// An empty recording for these clients.
     pub fn new(names: Vec<String>) -> Self {
         let n = names.len();
-        Recording { names, clients: vec![Vec::new(); n], ve: Vec::new(), uplink_delays_s: vec![0.0; n] }
+        Recording { names, clients: vec![Vec::new(); n], ve: Vec::new() }
     }
 
     /// Adds a client sample.

@@ -122,6 +122,9 @@ pub struct UserState<S: Space> {
     pub constraint_count: u8,
     /// The user's passivity account.
     pub passivity: PassivityObserver,
+    /// Client clock of the newest uplink the VE has used (`Snapshot::uplink_time_s`; 0 before the first): the
+    /// VE has heard of what the user did up to then.
+    pub heard_until_s: f64,
 }
 
 /// The VE's state after the last tick, for recording and tests.
@@ -155,6 +158,7 @@ impl<S: Space> VeState<'_, S> {
             weight: c.weight,
             constraint_count: u.constraint_count,
             passivity: u.passivity,
+            heard_until_s: c.target_time_s,
         })
     }
 }
