@@ -336,3 +336,44 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
     let stiff = session(Some(f64::INFINITY));
     assert!(stiff.worst_saturation > 0.3, "infinite reach: {stiff:?}");
 }
+
+/// A poke through the Watt six-bar at 100 ms one way with 30 ms of jitter on a FIFO link (the latency
+/// sweep's draw): packets leave the queue in bursts, and a VE that followed the newest uplink saw the jab's
+/// poses arrive all at once, its PD target jumping centimetres in a tick: 1 J made beyond the hand's work,
+/// the OP 57 mm from the device, the device saturated. Played out at the stream's steady delay (the jitter
+/// buffer, on by default) the same session is stable.
+#[test]
+fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
+    use kinloop::experiments::verdict::judge;
+    use kinloop_client::device::DevicePreset;
+    let session = |jitter_buffer: bool| {
+        let mut client = ClientPlan::new("user", "link5", DevicePreset::Paper);
+        client.user = UserSpec::Hand(HandSpec::touring(HandKind::Poke));
+        let link = LinkConfig {
+            delay: Duration::from_millis(100),
+            jitter: Duration::from_millis(30),
+            // The sweep's seed for this point (`latency::Point::link`).
+            seed: 0x1a7e_0000 + 100 * 1_000_000 + 30 * 1000 + 2 * 10 + 3,
+            ..LinkConfig::default()
+        };
+        let plan = SessionPlan {
+            scene: kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap(),
+            ve: VeConfig { jitter_buffer, ..VeConfig::default() },
+            clients: vec![client.with_link(link)],
+            duration: Duration::from_secs(10),
+            record_every: 1,
+        };
+        let (summary, rec) = run(&plan, &mut |_| {}).unwrap();
+        judge(&summary, &rec)
+    };
+    let buffered = session(true);
+    assert!(buffered.stable, "with the jitter buffer: {buffered:?}");
+    let newest = session(false);
+    assert!(!newest.stable && newest.energy_excess_j > 0.5, "following the newest uplink: {newest:?}");
+    assert!(
+        buffered.energy_excess_j < newest.energy_excess_j / 3.0,
+        "energy made: {} J buffered, {} J newest",
+        buffered.energy_excess_j,
+        newest.energy_excess_j
+    );
+}

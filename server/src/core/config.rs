@@ -110,6 +110,9 @@ pub struct VeConfig {
     pub contact_margin_m: f64,
     /// Time-domain passivity observer/controller on every coupling.
     pub passivity: bool,
+    /// Play each user's uplinks out at the stream's steady delay (a jitter buffer, see `playout`) instead of
+    /// following the newest on arrival.
+    pub jitter_buffer: bool,
     /// Energy each axis of a coupling may generate (beyond what the coupling as a whole absorbed) before the
     /// passivity controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see
     /// `passivity`).
@@ -152,6 +155,7 @@ impl VeConfig {
             contact_damping: None,
             contact_margin_m: 0.005,
             passivity: false,
+            jitter_buffer: true,
             // About what the graphics controller's linear spring (1000 N/m) holds at 2 mm, the device-OP
             // distance stiffness rendering keeps (Fig 6b).
             passivity_allowance_j: 2.0e-3,

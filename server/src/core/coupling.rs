@@ -30,6 +30,8 @@ use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::{Forces, Model, Space, VecOps};
 use nalgebra::{DMatrix, DVector};
 
+use super::playout::{Playout, Reference};
+
 /// One user's coupling to the VE: its reference (the newest checked uplink), gains, weight, and what it
 /// computed at the last evaluation.
 #[derive(Clone, Debug)]
@@ -76,6 +78,8 @@ pub struct Coupling<S: Space> {
     /// snapshots: both move a little each tick, so a short series replaces a library atan2 and sin_cos
     /// (which with the fade's cosine were about 4 % of a 16-user tick).
     pub pose_memo: S::RotParamsMemo,
+    /// The user's uplinks waiting for their turn (the jitter buffer, see `playout`).
+    pub playout: Playout<S>,
 }
 
 impl<S: Space> Coupling<S> {
@@ -100,7 +104,18 @@ impl<S: Space> Coupling<S> {
             wrench: S::OpVec::zero(),
             step_wrench: S::OpVec::zero(),
             pose_memo: S::RotParamsMemo::default(),
+            playout: Playout::new(),
         }
+    }
+
+    /// Makes an uplink's reference the coupling's: the PD's target and the force channel's hand wrench, and
+    /// the client time snapshots will say the VE answers. The coupling pushes from the first one on.
+    pub fn follow(&mut self, reference: &Reference<S>) {
+        self.pushes = true;
+        self.hand_wrench = reference.hand_wrench;
+        self.target_pose = reference.pose;
+        self.target_twist = reference.twist;
+        self.target_time_s = reference.client_time_s;
     }
 
     /// True when the coupling adds anything to the dynamics.

@@ -29,6 +29,7 @@ pub mod fade;
 pub mod guards;
 pub mod metrics;
 pub mod passivity;
+pub mod playout;
 mod snapshots;
 pub mod users;
 
@@ -512,13 +513,21 @@ impl<S: Space> VeCore<S> {
         u.last_uplink_at = Some(now);
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];
-            c.pushes = true;
-            c.hand_wrench = checked.hand_wrench;
-            c.target_pose = checked.model_pose;
-            c.target_twist = checked.model_twist;
-            // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet".
+            // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet", and such an
+            // uplink, which says nothing of when it was sent, is followed at once.
             let t = sample.client_time_s;
-            c.target_time_s = if (0.0..=kinloop_protocol::codec::limits::MAX_TIME_S).contains(&t) { t } else { 0.0 };
+            let timed = (0.0..=kinloop_protocol::codec::limits::MAX_TIME_S).contains(&t) && t > 0.0;
+            let reference = playout::Reference {
+                client_time_s: if timed { t } else { 0.0 },
+                hand_wrench: checked.hand_wrench,
+                pose: checked.model_pose,
+                twist: checked.model_twist,
+            };
+            if self.config.jitter_buffer && timed {
+                c.playout.push(now.as_secs_f64(), reference);
+            } else {
+                c.follow(&reference);
+            }
             if self.config.passivity {
                 // The client's end of the two-port: booked by the server from what it received, and the
                 // client's own books checked against the stream's history (see `passivity`). Only the
@@ -681,6 +690,9 @@ impl<S: Space> VeCore<S> {
         let fade_s = self.config.fade_time.as_secs_f64();
         let mut activations = 0;
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
+            if let Some(reference) = c.playout.due(at.as_secs_f64()) {
+                c.follow(&reference);
+            }
             let silent = u.is_silent(at, self.config.silent_timeout);
             if silent != u.silent && u.presence == Presence::Present && c.pushes {
                 self.events.push(if silent {
