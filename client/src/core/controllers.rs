@@ -218,8 +218,13 @@ pub fn joint_constraint_stiffness<S: Space>(
     -project_as_stiffness::<S>(projector, length_scale, &(*error * stiffness + *error_rate * damping))
 }
 
+/// Distance, in reaches, within which [`linearization_trust`] is exactly 1.
+pub const TRUST_DEAD_ZONE: f64 = 0.05;
+
 /// How much of the constrained directions' stiffness a local model at scaled distance `distance` from the
-/// pose its terms were computed at still renders: `1 / (1 + (distance / reach)²)`.
+/// pose its terms were computed at still renders: `1 / (1 + r² − r₀²)` with `r = distance / reach`, and all of it
+/// within `r₀ =` [`TRUST_DEAD_ZONE`] (a twentieth of the reach: under a millimetre on the built-in scenes, where
+/// a session without delay stays, and the controllers then skip the softening altogether).
 ///
 /// The frozen terms describe the linkage's constraint as a plane through that pose; the linkage's motion
 /// curves away from the plane by about `κ d² / 2` at distance `d` (curvature `κ`). Under delay the model
@@ -233,10 +238,10 @@ pub fn linearization_trust(distance: f64, reach: f64) -> f64 {
     // An infinite reach trusts everywhere (r = 0), a zero reach nowhere off the point (r = ∞ → 0); a
     // non-finite model is the safety layer's business, not this one's.
     let r = distance / reach;
-    if r.is_nan() {
+    if r.is_nan() || r <= TRUST_DEAD_ZONE {
         1.0
     } else {
-        1.0 / (1.0 + r * r)
+        1.0 / (1.0 + r * r - TRUST_DEAD_ZONE * TRUST_DEAD_ZONE)
     }
 }
 
@@ -339,14 +344,17 @@ mod tests {
     fn linearization_trust_bounds_the_push_of_a_stale_tangent_plane() {
         let reach = 0.02;
         assert_eq!(linearization_trust(0.0, reach), 1.0);
-        assert!((linearization_trust(reach, reach) - 0.5).abs() < 1e-15);
+        assert_eq!(linearization_trust(TRUST_DEAD_ZONE * reach, reach), 1.0);
+        let just_out = linearization_trust(TRUST_DEAD_ZONE * reach * 1.001, reach);
+        assert!(just_out < 1.0 && just_out > 0.9999, "continuous at the dead zone's edge: {just_out}");
+        assert!((linearization_trust(reach, reach) - 1.0 / (2.0 - TRUST_DEAD_ZONE * TRUST_DEAD_ZONE)).abs() < 1e-15);
         assert_eq!(linearization_trust(0.05, f64::INFINITY), 1.0);
         assert_eq!(linearization_trust(0.05, 0.0), 0.0);
         // A plane through the linearization point misses a curve of curvature κ by κ d² / 2 at distance d:
         // the softened push k κ d² / 2 · trust(d) rises monotonically to its bound k κ reach² / 2 and never
         // passes it, however far the model runs.
         let (k, kappa) = (2000.0, 10.0);
-        let bound = k * kappa * reach * reach / 2.0;
+        let bound = k * kappa * reach * reach / 2.0 / (1.0 - TRUST_DEAD_ZONE * TRUST_DEAD_ZONE);
         let mut last = 0.0;
         for i in 1..=2000 {
             let d = i as f64 * 1e-4;

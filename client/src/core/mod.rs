@@ -38,7 +38,6 @@ mod sync;
 
 use std::time::Duration;
 
-use kinloop_linkage::constraint_directions::scale_op;
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::passivity::{EnergyReports, PortBooks};
 use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
@@ -918,10 +917,14 @@ impl<S: Space> HapticCore<S> {
         let (l, p) = (self.length_scale, &self.frame.projector);
         // The constrained directions soften as the model runs away from where its terms were computed
         // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
-        let distance = scale_op::<S>(&model_pose.difference(&self.active.op_pose), l).norm();
+        let (linear, turn) = (
+            (model_pose.position - self.active.op_pose.position).norm(),
+            S::rot_chord(&model_pose.rotation, &self.active.op_pose.rotation) * l,
+        );
+        let distance = (linear * linear + turn * turn).sqrt();
         let trust = linearization_trust(distance, self.config.linearization_reach * l);
         let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
-        let pc = pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust);
+        let pc = if trust < 1.0 { pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust) } else { pc };
         let imp = match sensed {
             Some(hand) => {
                 impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &self.frame.bias, &hand)
@@ -944,7 +947,7 @@ impl<S: Space> HapticCore<S> {
             // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
             _ => (joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate), pc),
         };
-        let jc = jc * trust;
+        let jc = if trust < 1.0 { jc * trust } else { jc };
         let requested = pc + jc + imp + contact;
 
         // 5. Safety.

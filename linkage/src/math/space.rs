@@ -249,6 +249,9 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
     fn rot_from_vector(v: &Self::Angular) -> Self::Rot;
     /// Rotation vector (log map) of an orientation; planar: the angle in (-π, π].
     fn rot_log(r: &Self::Rot) -> Self::Angular;
+    /// The chord between two orientations, `2 sin(θ / 2)` for the angle θ between them: the angle to
+    /// second order, without trigonometry (a distance for thresholds, not a rotation vector).
+    fn rot_chord(a: &Self::Rot, b: &Self::Rot) -> f64;
     /// True when the orientation is made of finite numbers.
     fn rot_is_finite(r: &Self::Rot) -> bool;
     /// Number of parameters of an orientation on the wire: 1 (angle) or 4 (unit quaternion w, x, y, z).
@@ -456,6 +459,12 @@ impl Space for Planar {
         trig::atan2(r.im, r.re)
     }
     #[inline]
+    fn rot_chord(a: &Self::Rot, b: &Self::Rot) -> f64 {
+        // |e^{iα} − e^{iβ}| = 2 sin(|α − β| / 2).
+        let (dc, ds) = (a.re - b.re, a.im - b.im);
+        (dc * dc + ds * ds).sqrt()
+    }
+    #[inline]
     fn rot_is_finite(r: &Self::Rot) -> bool {
         r.re.is_finite() && r.im.is_finite()
     }
@@ -614,6 +623,10 @@ impl Space for Spatial {
         Rotation3::new(*v)
     }
     #[inline]
+    fn rot_chord(a: &Self::Rot, b: &Self::Rot) -> f64 {
+        // ‖A − B‖_F² = 2 tr(I − AᵀB) = 4 (1 − cos θ) = 8 sin²(θ / 2).
+        (a.matrix() - b.matrix()).norm() * std::f64::consts::FRAC_1_SQRT_2
+    }
     fn rot_log(r: &Self::Rot) -> Self::Angular {
         // sin θ · axis from the skew part and cos θ from the trace: atan2 keeps full relative accuracy for
         // small angles (acos of the trace, as in `scaled_axis`, loses half the digits there).
@@ -762,6 +775,26 @@ impl Space for Spatial {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The chord is 2 sin(θ/2) for the angle θ between two orientations, computed here from the angles the
+    /// orientations were built with (planar) and from an axis and angle composed onto an arbitrary start
+    /// (spatial).
+    #[test]
+    fn the_chord_between_orientations_is_two_sines_of_the_half_angle() {
+        for (a, b) in [(0.3, 0.3), (0.3, 0.5), (-3.0, 3.0), (1.0, -2.5)] {
+            let (ra, rb) = (Planar::rot_from_vector(&a), Planar::rot_from_vector(&b));
+            let theta = (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            let expected = 2.0 * (theta.abs() / 2.0).sin();
+            assert!((Planar::rot_chord(&ra, &rb) - expected).abs() < 1e-9, "{a} {b}");
+        }
+        let start = Spatial::rot_from_vector(&Vector3::new(0.4, -1.1, 0.7));
+        let axis = Vector3::new(2.0, -1.0, 2.0) / 3.0;
+        for theta in [0.0, 1e-4, 0.5, 2.0, 3.1] {
+            let turned = Spatial::rot_mul(&Spatial::rot_from_vector(&(axis * theta)), &start);
+            let expected = 2.0 * (theta / 2.0).sin();
+            assert!((Spatial::rot_chord(&start, &turned) - expected).abs() < 1e-9, "{theta}");
+        }
+    }
 
     /// A planar tour through ±π: the wrapped angles 2.9, −3.1 (0.28 rad apart the short way) unwrap to 2.9,
     /// 3.18, and a whole further turn keeps counting; a spatial rotation vector unwraps along its axis.
