@@ -153,6 +153,11 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         assert!(f(&first["energy_excess_j"]) < 2e-4, "{first}");
         assert!(f(&last["device_op_rms_mm"]) > 10.0 * f(&first["device_op_rms_mm"]), "{last} vs {first}");
     }
+    // What the hand feels drifts from what the linkage presents as the delay grows (0.41 and 2.8 on the
+    // four-bar's coupler when this was written); without delay the two agree within the device's residue.
+    let (first, last) = (find("soft", 0.0, "plain"), find("soft", 1000.0, "plain"));
+    let (near, far) = (f(&first["felt_vs_rendered_impedance_error"]), f(&last["felt_vs_rendered_impedance_error"]));
+    assert!(near < 1.0 && far > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {far} at 1 s");
     for method in ["plain", "passivity"] {
         assert_eq!(points.iter().filter(|p| p["method"] == method).count(), points.len() / 2, "both methods swept");
     }

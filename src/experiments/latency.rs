@@ -32,6 +32,7 @@ use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
 use kinloop_server::core::VeConfig;
 
 use super::common::{round, session, significant, sweep, Options, Output, Report};
+use super::impedance;
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, HeatMap, Legend, Series};
 use crate::harness::{ClientPlan, SessionPlan};
@@ -177,6 +178,9 @@ pub struct Measured {
     pub passivity_absorbed_j: f64,
     /// VE ticks in which the controller scaled the PD down.
     pub passivity_activations: u64,
+    /// Median relative error of the impedance felt at the handle against the one the VE's linkage presents
+    /// at the OP ([`impedance::felt_vs_rendered_error`]); `None` where the hand moved too little to tell.
+    pub impedance_error: Option<f64>,
 }
 
 /// Runs one point.
@@ -191,6 +195,8 @@ pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
         SessionPlan { scene, ve, clients: vec![client], duration: Duration::from_secs_f64(seconds), record_every: 1 };
     let (summary, rec) = session(&plan).with_context(|| format!("{p:?}"))?;
     let c = &summary.clients[0];
+    let user_id = rec.ve.iter().find_map(|v| v.users.first().map(|u| u.0));
+    let impedance_error = user_id.and_then(|id| impedance::felt_vs_rendered_error(&rec, 0, id));
     Ok(Measured {
         point: *p,
         verdict: verdict::judge(&summary, &rec),
@@ -201,6 +207,7 @@ pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
         non_finite: c.non_finite,
         passivity_absorbed_j: c.passivity_absorbed_j,
         passivity_activations: c.passivity_activations,
+        impedance_error,
     })
 }
 
@@ -296,6 +303,7 @@ fn point_json(m: &Measured) -> Value {
         "energy_flow_max_j": significant(m.verdict.energy_flow_max_j, 3),
         "passivity_absorbed_j": significant(m.passivity_absorbed_j, 3),
         "passivity_activations": m.passivity_activations,
+        "felt_vs_rendered_impedance_error": m.impedance_error.map(|e| round(e, 3)),
     })
 }
 
@@ -443,6 +451,38 @@ fn energy_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
     out.chart("energy_vs_delay", &chart)
 }
 
+/// The felt-vs-rendered impedance error against delay: per scene and hand (not the released one), the median
+/// over the networks of the grid (points where the hand moved too little to tell are left out).
+fn impedance_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
+    let mut chart = Chart::new(
+        "Felt vs rendered impedance, 0.5-4 Hz: |Z_handle - Z_OP| / |Z_OP|, median over networks, default settings",
+        "one-way delay (ms)",
+        "relative impedance error",
+    )
+    .legend(Legend::UpperLeft);
+    chart.log_y = true;
+    // A released handle has no hand on it to feel anything.
+    let hands = grid.hands.iter().filter(|&&h| h != HandKind::Release);
+    for &target in &grid.targets {
+        for &hand in hands.clone() {
+            let line: Vec<(f64, f64)> = grid
+                .delays_ms
+                .iter()
+                .filter_map(|&d| {
+                    let mut errors: Vec<f64> = pair(all, target, hand, false)
+                        .filter(|m| m.point.delay_ms == d)
+                        .filter_map(|m| m.impedance_error)
+                        .collect();
+                    errors.sort_by(f64::total_cmp);
+                    errors.get(errors.len() / 2).map(|&e| (d, e))
+                })
+                .collect();
+            chart = chart.with(Series::line(format!("{} {}", TARGETS[target].2, hand.name()), line));
+        }
+    }
+    out.chart("impedance_vs_delay", &chart)
+}
+
 /// Runs the experiment.
 pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency", options)?;
@@ -452,6 +492,7 @@ pub fn run(options: &Options) -> Result<Report> {
     tracking_charts(&mut out, &grid, &all)?;
     stability_chart(&mut out, &grid, &all)?;
     energy_chart(&mut out, &grid, &all)?;
+    impedance_chart(&mut out, &grid, &all)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();

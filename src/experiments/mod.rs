@@ -17,6 +17,7 @@
 //! wall-clock and are the only numbers that vary between runs.
 
 pub mod common;
+pub mod impedance;
 pub mod latency;
 pub mod paper;
 pub mod pauses;
