@@ -757,6 +757,15 @@ impl<S: Space> HapticCore<S> {
         Ok(true)
     }
 
+    /// How far the local model's constraint geometry is still trusted where the model is now
+    /// (`controllers::linearization_trust` of its scaled distance from the pose its terms were computed at).
+    fn linearization_trust(&self) -> f64 {
+        let (pose, l) = (self.model.pose(), self.length_scale);
+        let linear = (pose.position - self.active.op_pose.position).norm();
+        let turn = S::rot_chord(&pose.rotation, &self.active.op_pose.rotation) * l;
+        linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l)
+    }
+
     /// The VE's OP predicted to `now`: the snapshot's pose moved along its twist for its age plus the one-way
     /// delay (at most the staleness limit).
     fn predicted_op(&self, now: Duration) -> OpPose<S> {
@@ -917,12 +926,7 @@ impl<S: Space> HapticCore<S> {
         let (l, p) = (self.length_scale, &self.frame.projector);
         // The constrained directions soften as the model runs away from where its terms were computed
         // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
-        let (linear, turn) = (
-            (model_pose.position - self.active.op_pose.position).norm(),
-            S::rot_chord(&model_pose.rotation, &self.active.op_pose.rotation) * l,
-        );
-        let distance = (linear * linear + turn * turn).sqrt();
-        let trust = linearization_trust(distance, self.config.linearization_reach * l);
+        let trust = self.linearization_trust();
         let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
         let pc = if trust < 1.0 { pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust) } else { pc };
         let imp = match sensed {
