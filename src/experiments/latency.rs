@@ -451,18 +451,19 @@ fn energy_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
     out.chart("energy_vs_delay", &chart)
 }
 
-/// The felt-vs-rendered impedance error against delay: per scene and hand (not the released one), the median
+/// The felt-vs-rendered impedance error against delay: per scene and touring hand (soft, firm), the median
 /// over the networks of the grid (points where the hand moved too little to tell are left out).
 fn impedance_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
     let mut chart = Chart::new(
-        "Felt vs rendered impedance, 0.5-4 Hz: |Z_handle - Z_OP| / |Z_OP|, median over networks, default settings",
+        "Felt vs rendered impedance at 0.5-4 Hz, median over networks",
         "one-way delay (ms)",
-        "relative impedance error",
+        "|Z_handle - Z_OP| / |Z_OP|",
     )
     .legend(Legend::UpperLeft);
     chart.log_y = true;
-    // A released handle has no hand on it to feel anything.
-    let hands = grid.hands.iter().filter(|&&h| h != HandKind::Release);
+    // The touring hands (a released handle has no hand on it to feel anything; the poke is the firm hand's
+    // tour with a jab, in summary.json).
+    let hands = grid.hands.iter().filter(|&&h| matches!(h, HandKind::Soft | HandKind::Firm));
     for &target in &grid.targets {
         for &hand in hands.clone() {
             let line: Vec<(f64, f64)> = grid
