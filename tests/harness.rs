@@ -341,7 +341,7 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
 /// sweep's draw): packets leave the queue in bursts, and a VE that followed the newest uplink saw the jab's
 /// poses arrive all at once, its PD target jumping centimetres in a tick: 1 J made beyond the hand's work,
 /// the OP 57 mm from the device, the device saturated. Played out at the stream's steady delay (the jitter
-/// buffer, on by default) the same session is stable.
+/// buffer, `VeConfig::jitter_buffer`) the same session is stable.
 #[test]
 fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
     use kinloop::experiments::verdict::judge;

@@ -72,6 +72,11 @@ struct Cli {
     /// books trusted only as far as its uplinks show).
     #[arg(long, value_name = "on|off", default_value = "off")]
     passivity: Switch,
+    /// Play each user's uplinks out at the stream's steady delay once their lateness reaches 25 ms (a jitter
+    /// buffer): steadies a linkage pushed over a jittery link, but holding costs many users on one OP their
+    /// stability when a loaded host, not the network, makes the lateness.
+    #[arg(long, value_name = "on|off", default_value = "off")]
+    jitter_buffer: Switch,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
     /// first user grasps a still linkage rather than one that gravity has been swinging).
     #[arg(long)]
@@ -167,6 +172,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         integrator: cli.integrator,
         max_users: cli.max_users,
         passivity: cli.passivity == Switch::On,
+        jitter_buffer: cli.jitter_buffer == Switch::On,
         coupling_stiffness: cli.coupling_stiffness.clone(),
         coupling_damping: cli.coupling_damping.clone(),
         rest_unheld: !cli.free_run,
