@@ -254,6 +254,9 @@ struct Participant<S: Space> {
     chosen: (f64, f64, Vec<f64>, Vec<f64>),
 }
 
+/// Device poses kept for `device_op_heard_max_m`: 16 s of a 1 kHz loop.
+const HEARD_HISTORY: usize = 16_384;
+
 /// Runs a session to its end; `progress` is called with the simulated time from time to time.
 pub fn run(plan: &SessionPlan, progress: &mut dyn FnMut(Duration)) -> Result<(SessionSummary, Recording)> {
     match plan.scene.kind {
@@ -524,6 +527,11 @@ impl<S: Space> Session<S> {
                     p.op_max = p.op_max.max(d);
                     // The device's pose at the client time of the newest uplink the VE used (the harness runs
                     // the client on its own clock) is what the VE has heard of.
+                    if p.heard.len() == HEARD_HISTORY {
+                        // A VE that has heard nothing for this long (an observer never is) is judged against
+                        // the oldest pose kept.
+                        p.heard.pop_front();
+                    }
                     p.heard.push_back((now.as_secs_f64(), report.device_pose));
                     while p.heard.len() > 1 && p.heard[1].0 <= u.heard_until_s {
                         p.heard.pop_front();
