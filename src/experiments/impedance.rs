@@ -33,8 +33,6 @@ struct Spectra {
     cross: (f64, f64),
     /// Σ |V|².
     auto: f64,
-    /// Σ of the Hann window's squares, to turn `auto` into a mean square.
-    window_power: f64,
 }
 
 /// The impedance estimate `(re, im)` of force over velocity at each of [`FREQUENCIES_HZ`], sampled every
@@ -47,7 +45,9 @@ fn impedance(force: &[f64], velocity: &[f64], dt: f64) -> [Option<(f64, f64)>; F
         return [None; FREQUENCIES_HZ.len()];
     }
     let window: Vec<f64> = (0..n).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / n as f64).cos()).collect();
-    let mut start = 0;
+    // Σ w² over a segment, to turn `auto` into a mean square.
+    let window_power: f64 = window.iter().map(|w| w * w).sum();
+    let (mut start, mut segments) = (0, 0);
     while start + n <= len {
         for (s, &f_hz) in spectra.iter_mut().zip(&FREQUENCIES_HZ) {
             let omega = std::f64::consts::TAU * f_hz * dt;
@@ -64,14 +64,14 @@ fn impedance(force: &[f64], velocity: &[f64], dt: f64) -> [Option<(f64, f64)>; F
             s.cross.0 += fr * vr + fi * vi;
             s.cross.1 += fi * vr - fr * vi;
             s.auto += vr * vr + vi * vi;
-            s.window_power += window.iter().map(|w| w * w).sum::<f64>();
         }
         start += n / 2;
+        segments += 1;
     }
     spectra.map(|s| {
         // The velocity's mean square at this frequency: |V|² over the window's power, times 2 for the negative
         // frequency, per sample.
-        let mean_square = if s.window_power > 0.0 { 2.0 * s.auto / s.window_power } else { 0.0 };
+        let mean_square = 2.0 * s.auto / (segments as f64 * window_power);
         (mean_square.sqrt() >= MIN_VELOCITY_M_S && s.auto > 0.0).then(|| (s.cross.0 / s.auto, s.cross.1 / s.auto))
     })
 }

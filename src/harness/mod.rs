@@ -511,6 +511,8 @@ impl<S: Space> Session<S> {
         rig.command(now, &command).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         p.ticks += 1;
         p.next_tick += p.period;
+        // This user in the VE as the VE's last tick left it (for the figures and the recording).
+        let ve_user = p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user));
         if report.active {
             p.active_ticks += 1;
             let scale = core.scales().position;
@@ -519,32 +521,29 @@ impl<S: Space> Session<S> {
             if report.clamp_scale < 1.0 {
                 p.saturated += 1;
             }
-            if let Some(user) = p.user_id {
-                if let Some(u) = self.ve.state().users().find(|u| u.user_id == user) {
-                    p.passivity = u.passivity;
-                    let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
-                    p.op_sum_sq += d * d;
-                    p.op_max = p.op_max.max(d);
-                    // The device's pose at the client time of the newest uplink the VE used (the harness runs
-                    // the client on its own clock) is what the VE has heard of.
-                    if p.heard.len() == HEARD_HISTORY {
-                        // A VE that has heard nothing for this long (an observer never is) is judged against
-                        // the oldest pose kept.
-                        p.heard.pop_front();
-                    }
-                    p.heard.push_back((now.as_secs_f64(), report.device_pose));
-                    while p.heard.len() > 1 && p.heard[1].0 <= u.heard_until_s {
-                        p.heard.pop_front();
-                    }
-                    if u.heard_until_s > 0.0 && p.heard[0].0 <= u.heard_until_s {
-                        let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
-                        p.heard_max = p.heard_max.max(heard);
-                    }
+            if let Some(u) = &ve_user {
+                p.passivity = u.passivity;
+                let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
+                p.op_sum_sq += d * d;
+                p.op_max = p.op_max.max(d);
+                // The device's pose at the client time of the newest uplink the VE used (the harness runs
+                // the client on its own clock) is what the VE has heard of.
+                if p.heard.len() == HEARD_HISTORY {
+                    // A VE that has heard nothing for this long (an observer never is) is judged against
+                    // the oldest pose kept.
+                    p.heard.pop_front();
+                }
+                p.heard.push_back((now.as_secs_f64(), report.device_pose));
+                while p.heard.len() > 1 && p.heard[1].0 <= u.heard_until_s {
+                    p.heard.pop_front();
+                }
+                if u.heard_until_s > 0.0 && p.heard[0].0 <= u.heard_until_s {
+                    let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
+                    p.heard_max = p.heard_max.max(heard);
                 }
             }
         }
         if self.record_every > 0 && p.ticks.is_multiple_of(self.record_every as u64) {
-            let ve_user = p.user_id.and_then(|user| self.ve.state().users().find(|u| u.user_id == user));
             let ve_op = ve_user.as_ref().map(|u| u.op_pose);
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
             sample.ve_heard_s = ve_user.map(|u| u.heard_until_s).filter(|&t| t > 0.0);

@@ -516,7 +516,7 @@ impl<S: Space> VeCore<S> {
             // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet", and such an
             // uplink, which says nothing of when it was sent, is followed at once.
             let t = sample.client_time_s;
-            let timed = (0.0..=kinloop_protocol::codec::limits::MAX_TIME_S).contains(&t) && t > 0.0;
+            let timed = t > 0.0 && t <= kinloop_protocol::codec::limits::MAX_TIME_S;
             let reference = playout::Reference {
                 client_time_s: if timed { t } else { 0.0 },
                 hand_wrench: checked.hand_wrench,
