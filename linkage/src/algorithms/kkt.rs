@@ -172,6 +172,31 @@ pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dynam
     Ok(())
 }
 
+/// The accelerations a generalized force `τ` alone gives the linkage with its loops closed, `q̈ = P τ` with
+/// `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (eq 4 with no velocity, gravity, joint-force or stabilization terms): what
+/// adding `τ` to the applied forces adds to a [`solve`] at the same state, eq 4 being linear in them.
+/// Needs [`factorize`]. `x` holds τ (n entries) on entry and q̈ on return; `scratch` has at least 2m entries.
+pub fn constrained_response<S: Space>(model: &Model<S>, data: &Data<S>, x: &mut [f64], scratch: &mut [f64]) {
+    let (n, m) = (model.nq(), model.nc());
+    let (zeros, lambda) = scratch[..2 * m].split_at_mut(m);
+    zeros.fill(0.0);
+    by_size!(n, N => {
+        let tau: [f64; N] = x[..N].try_into().expect("n entries");
+        x[..N].copy_from_slice(&kkt_small::solve::<N>(&data.kkt, tau, zeros, lambda));
+    }, _ => {
+        let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
+        ltl::solve_u_columns(model, factor, inv, x, n);
+        if m > 0 {
+            let kkt = &data.kkt;
+            columns_dot(&kkt.z, &kkt.z_rows, x, lambda);
+            dense::pivoted_solve_slices(kkt.schur_factor.as_slice(), m, kkt.schur_inv_diag.as_slice(), &kkt.schur_perm,
+                kkt.schur_rank, lambda, zeros);
+            sub_columns_times(&kkt.z, &kkt.z_rows, lambda, x);
+        }
+        ltl::solve_ut_columns(model, factor, inv, x);
+    });
+}
+
 /// [`solve`] for any n (models of at most 8 joints take `kkt_small`, with the same results).
 pub(crate) fn solve_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     let n = model.nq();
@@ -192,4 +217,44 @@ pub(crate) fn solve_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     }
     let (factor, inv) = (&data.kkt.factor, data.kkt.factor_inv_diag.as_slice());
     ltl::solve_ut_columns(model, factor, inv, data.qdd.as_mut_slice());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algorithms::dynamics::{forward_dynamics, Forces};
+    use crate::data::Kinematics;
+    use crate::testing::random_state;
+
+    /// A fixed generalized force.
+    struct Tau(DVector<f64>);
+
+    impl<S: Space> Forces<S> for Tau {
+        fn add_forces(&mut self, _: &Model<S>, _: &Kinematics<S>, tau: &mut DVector<f64>) {
+            *tau += &self.0;
+        }
+    }
+
+    /// The response to a generalized force alone is what that force adds to a full solve at the same state
+    /// (eq 4 is linear in the applied forces): checked against two full solves, on every test scene (the
+    /// fixed-size path up to 8 joints and the general one beyond).
+    #[test]
+    fn the_constrained_response_is_what_a_force_adds_to_the_solve() {
+        crate::testing::for_each_model!(name, model => {
+            let (q, qd) = random_state(model, 5);
+            let n = model.nq();
+            let tau = DVector::from_fn(n, |i, _| ((i * 7 + 3) % 5) as f64 - 2.0);
+            let mut data = Data::new(model);
+            forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
+            let without = data.qdd.clone();
+            forward_dynamics(model, &mut data, &q, &qd, &mut Tau(tau.clone())).unwrap();
+            let expected = &data.qdd - &without;
+            let mut x = tau.as_slice().to_vec();
+            let mut scratch = vec![f64::NAN; 2 * model.nc()];
+            constrained_response(model, &data, &mut x, &mut scratch);
+            let got = DVector::from_vec(x);
+            assert!(expected.amax() > 1e-3, "{name}: the force must move the linkage");
+            assert!((&got - &expected).amax() <= 1e-9 * (1.0 + expected.amax()), "{name}: {got} vs {expected}");
+        });
+    }
 }
