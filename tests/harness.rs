@@ -377,3 +377,51 @@ fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
         newest.energy_excess_j
     );
 }
+
+/// Users sharing a linkage push each other through the VE: each snapshot's b̂ carries the other users' hands,
+/// a round trip late, and each hand answers what its device does, so under delay the exchange is a loop whose
+/// gain grows with the users. Two users on the testbed's link2, a relaxed and a firm hand touring, 100 ms each
+/// way: with the others' hands taken whole (the paper's b̂, `exchange_delay_s` infinite) the devices saturate
+/// and the OP strays centimetres; weighted by the measured round trip (`sharing`) the session is stable. Four
+/// users at 20 ms likewise, and two on the four-bar's coupler and crank tip at 20 ms, whose pushes reach each
+/// other through the loop.
+#[test]
+fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillation() {
+    use kinloop::experiments::verdict::judge;
+    use kinloop_client::device::DevicePreset;
+    let session = |scene: &str, ops: &[&str], users: usize, delay_ms: u64, exchange_delay_s: f64| {
+        let clients = (0..users)
+            .map(|i| {
+                let mut client = ClientPlan::new(&format!("user{i}"), ops[i % ops.len()], DevicePreset::Paper);
+                let hand = if i % 2 == 0 { HandKind::Soft } else { HandKind::Firm };
+                client.user = UserSpec::Hand(HandSpec::touring(hand));
+                let link =
+                    LinkConfig { delay: Duration::from_millis(delay_ms), seed: 40 + i as u64, ..LinkConfig::default() };
+                client.with_link(link)
+            })
+            .collect();
+        let plan = SessionPlan {
+            scene: kinloop_linkage::builtin::scene(scene).unwrap().unwrap(),
+            ve: VeConfig { exchange_delay_s, ..VeConfig::default() },
+            clients,
+            duration: Duration::from_secs(10),
+            record_every: 1,
+        };
+        let (summary, rec) = run(&plan, &mut |_| {}).unwrap();
+        judge(&summary, &rec)
+    };
+    let cases: [(&str, &[&str], usize, u64); 3] = [
+        ("paper-testbed", &["link2"], 2, 100),
+        ("paper-testbed", &["link2"], 4, 20),
+        ("fourbar-crank-rocker", &["coupler", "crank-tip"], 2, 20),
+    ];
+    for (scene, ops, users, delay_ms) in cases {
+        let weighted = session(scene, ops, users, delay_ms, VeConfig::default().exchange_delay_s);
+        assert!(weighted.stable, "{scene}, {users} users at {delay_ms} ms, weighted: {weighted:?}");
+        let whole = session(scene, ops, users, delay_ms, f64::INFINITY);
+        assert!(
+            !whole.stable && whole.worst_saturation > 0.3,
+            "{scene}, {users} users at {delay_ms} ms, the others' hands whole: {whole:?}"
+        );
+    }
+}

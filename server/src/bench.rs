@@ -92,6 +92,8 @@ fn follow(snapshot: &Snapshot, seq: u64, users: usize) -> UplinkSample {
         seq,
         client_time_s: 0.0,
         flags: 0,
+        last_snapshot_seq: snapshot.seq,
+        last_snapshot_age_s: 0.0,
         hand_wrench: [0.0; 6],
         model_pose: [0.0; 7],
         model_twist: [0.0; 6],

@@ -99,6 +99,8 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
                 seq: 0,
                 client_time_s: 0.0,
                 flags: 0,
+                last_snapshot_seq: 0,
+                last_snapshot_age_s: 0.0,
                 hand_wrench: [0.0; 6],
                 model_pose: [0.0; 7],
                 model_twist: [0.0; 6],
@@ -108,6 +110,8 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
                 pose_len: s.op_pose.len() as u8,
             });
             sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
+            // Each uplink answers the newest snapshot, so the round-trip estimate is kept up too.
+            sample.last_snapshot_seq = s.seq;
             sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
         }
         while core.poll_event().is_some() {}

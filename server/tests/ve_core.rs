@@ -478,7 +478,9 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
 /// Users holding the same OP share its op-space terms within a snapshot round, and only those: with A and C
 /// on link 2 and B between them (in join order) on link 3, A's and C's Λ⁻¹, directions, singular values, pose
 /// and twist are the same numbers and are those a fresh workspace computes at the VE's state, B's are link
-/// 3's, and A's and C's b̂ differ by exactly the part of their own hands, `Λ⁻¹ (F_C − F_A)`.
+/// 3's, and A's and C's b̂ differ by exactly the part of their own hands, `Λ⁻¹ (F_C − F_A)` (their uplinks
+/// answer each snapshot within a tick, a round trip short enough for each to take the others' hands whole,
+/// see `sharing`).
 #[test]
 fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
@@ -531,6 +533,51 @@ fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
         (difference - expected).amax() <= 1e-9 * expected.amax(),
         "b̂_A − b̂_C = {difference} against Λ⁻¹ (F_C − F_A) = {expected}"
     );
+}
+
+/// Before the VE has measured the round trips (uplinks that name no snapshot), every user's b̂ leaves the other
+/// users' hands out as well as its own (`sharing`: an unmeasured round trip counts as long, and the exchange
+/// of delayed pushes is a loop): it is then the OP's acceleration with no hand on the linkage at all, which a
+/// fresh workspace computes at the VE's state: the same for A and C on link 2 whatever their hands, and link
+/// 3's for B, whose hand reaches link 2 through the loop.
+#[test]
+fn an_unmeasured_round_trip_leaves_every_hand_out_of_the_bias() {
+    use kinloop_linkage::local_model::op_acceleration;
+    use kinloop_linkage::op_space::op_space_inertia;
+    use kinloop_linkage::{forward_dynamics, Data, Model, Planar};
+    use nalgebra::{Vector2, Vector3};
+
+    let base = testbed();
+    let link3 = base.body_index("link3").unwrap();
+    let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
+    let mut ve = core(model.clone(), VeConfig::paper());
+    let manipulator = Role::Manipulator;
+    let ids =
+        join_all(&mut ve, &[("A", manipulator, "link2"), ("B", manipulator, "link3"), ("C", manipulator, "link2")]);
+    let hands = [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]];
+    let (mut latest, mut seq) = (Vec::new(), 0);
+    run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
+        seq += 1;
+        for (id, hand) in ids.iter().zip(&hands) {
+            if let Some(Some(s)) = latest.get(*id as usize) {
+                ve.handle_uplink(now, *id, &uplink(seq, hand, &s.op_pose, &s.op_twist)).expect("accepted");
+            }
+        }
+    });
+    let snapshot = |i: usize| latest[ids[i] as usize].as_ref().expect("a snapshot for every user");
+    let state = ve.state();
+    let mut data = Data::new(&model);
+    forward_dynamics(&model, &mut data, state.q, state.qd, &mut ()).unwrap();
+    for (i, op) in [(0, 0), (1, 1), (2, 0)] {
+        op_space_inertia(&model, &mut data, op).unwrap();
+        let free = op_acceleration(&data);
+        let sent = Vector3::from_column_slice(&snapshot(i).bias_accel);
+        assert!((sent - free).amax() <= 1e-9 * free.amax().max(1.0), "user {i}: b̂ {sent} against no hands {free}");
+    }
+    // Had A's and C's hands stayed in b̂, it would be off by Λ⁻¹ (F_A + F_C) at link 2, far beyond the tolerance.
+    op_space_inertia(&model, &mut data, 0).unwrap();
+    let hands_at_link2 = data.op.inverse_inertia * (Vector3::from(hands[0]) + Vector3::from(hands[2]));
+    assert!(hands_at_link2.amax() > 1e-3, "the hands' share {hands_at_link2}");
 }
 
 /// A snapshot that fails the wire checks is withheld, with an event naming the field, for every user on that

@@ -116,6 +116,11 @@ pub struct VeConfig {
     /// 16-user demo's own scheduling lateness engaged it, and 60 s then rejected 15,354 uplinks and clamped
     /// 48,736 ticks at 32-34 mm RMS, against none rejected and 0.2-0.7 mm without it.
     pub jitter_buffer: bool,
+    /// The round trip (s) up to which a user's local model takes the other users' hands whole from its
+    /// snapshot's b̂ (one other user; N − 1 others share it); longer round trips take proportionally less (see
+    /// `sharing`). Infinite takes them whole at any delay, as the paper's b̂ does, which is unstable with
+    /// several users under delay.
+    pub exchange_delay_s: f64,
     /// Energy each axis of a coupling may generate (beyond what the coupling as a whole absorbed) before the
     /// passivity controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see
     /// `passivity`).
@@ -159,6 +164,7 @@ impl VeConfig {
             contact_margin_m: 0.005,
             passivity: false,
             jitter_buffer: false,
+            exchange_delay_s: super::sharing::EXCHANGE_DELAY_S,
             // About what the graphics controller's linear spring (1000 N/m) holds at 2 mm, the device-OP
             // distance stiffness rendering keeps (Fig 6b).
             passivity_allowance_j: 2.0e-3,
@@ -211,6 +217,9 @@ impl VeConfig {
                 what: "guards.absurd_wrench_factor (at least 1)",
                 value: self.guards.absurd_wrench_factor,
             });
+        }
+        if self.exchange_delay_s.is_nan() || self.exchange_delay_s <= 0.0 {
+            return Err(VeConfigError::Negative { what: "exchange_delay_s (positive)", value: self.exchange_delay_s });
         }
         if self.fade_time.is_zero() {
             return Err(VeConfigError::Negative { what: "fade_time", value: 0.0 });
@@ -275,4 +284,22 @@ pub enum VeConfigError {
         /// The value.
         value: usize,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_exchange_delay_must_be_positive_and_may_be_infinite() {
+        assert_eq!(VeConfig::default().validate(), Ok(()));
+        let with = |exchange_delay_s| VeConfig { exchange_delay_s, ..VeConfig::default() }.validate();
+        assert_eq!(with(f64::INFINITY), Ok(()));
+        for bad in [0.0, -0.01, f64::NAN] {
+            match with(bad) {
+                Err(VeConfigError::Negative { what, .. }) => assert!(what.starts_with("exchange_delay_s"), "{what}"),
+                other => panic!("{bad}: {other:?}"),
+            }
+        }
+    }
 }

@@ -31,6 +31,10 @@ pub struct UplinkSample {
     pub client_time_s: f64,
     /// Status bits (`kinloop_protocol::uplink_flags`).
     pub flags: u32,
+    /// Newest snapshot the client had applied (`Uplink::last_snapshot_seq`, 0 for none).
+    pub last_snapshot_seq: u64,
+    /// How long it had held it when the uplink left (s).
+    pub last_snapshot_age_s: f64,
     /// F_h, first `op_dim` entries used.
     pub hand_wrench: [f64; MAX_OP_DIM],
     /// Local-model OP pose, first `pose_len` entries used.
@@ -64,6 +68,8 @@ impl UplinkSample {
             seq: uplink.seq,
             client_time_s: uplink.client_time_s,
             flags: uplink.flags,
+            last_snapshot_seq: uplink.last_snapshot_seq,
+            last_snapshot_age_s: uplink.last_snapshot_age_s,
             hand_wrench: [0.0; MAX_OP_DIM],
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],

@@ -30,6 +30,8 @@ pub mod guards;
 pub mod metrics;
 pub mod passivity;
 pub mod playout;
+pub mod round_trip;
+pub mod sharing;
 mod snapshots;
 pub mod users;
 
@@ -179,6 +181,11 @@ struct SnapshotScratch<S: Space> {
     others: OtherUsers,
     /// The op-space terms of the OP whose users are being built (see `snapshots`).
     at_op: snapshots::AtOp<S>,
+    /// `P Σ Jᵀ F_h` over every pushing user's hand (n): the hands' share of the probe's accelerations
+    /// (see `sharing`).
+    hands_qdd: DVector<f64>,
+    /// Scratch of `kkt::constrained_response` (2m).
+    response: Vec<f64>,
     /// User indices grouped by OP (then in join order), for `roster_version` `order_version`: the order of
     /// the snapshots and of the couplings' evaluation (`VeCore::refresh_op_order`).
     order: Vec<usize>,
@@ -283,6 +290,8 @@ impl<S: Space> VeCore<S> {
                 table
             },
             at_op: snapshots::AtOp::none(),
+            hands_qdd: DVector::zeros(n),
+            response: vec![0.0; 2 * m],
             order: Vec::with_capacity(user_room),
             order_version: u64::MAX,
         };
@@ -426,6 +435,7 @@ impl<S: Space> VeCore<S> {
             silent: !manipulator,
             fade: Fade::off(),
             passivity: PassivityObserver::default(),
+            round_trip: round_trip::RoundTrip::new(),
             rejections: RejectionBurst::default(),
             constraint_count: 0,
             slot: SnapshotSlot::new(&self.model, user_id, request.form),
@@ -511,6 +521,7 @@ impl<S: Space> VeCore<S> {
         let u = &mut self.users[index];
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
+        u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s);
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];
             // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet", and such an

@@ -15,8 +15,10 @@
 //! **Per user** at its operational point h:
 //! - Λ̂⁻¹ with the loops closed (eq 9), `op_space_inertia`; sent as its upper triangle, row-major;
 //! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own hand wrench F_u (the
-//!   client's local model applies it itself); other users' hand wrenches, contacts, gravity and the
-//!   closure's velocity terms stay in b̂. No user's PD coupling does: it is a numerical tie between the VE
+//!   client's local model applies it itself); contacts, gravity and the closure's velocity terms stay in b̂,
+//!   and so do the other users' hand wrenches, weighted by how long the round trip is (`sharing`: under
+//!   delay their exchange is a loop). Their share, `J P Σ Jᵢᵀ F_h,i − Λ̂⁻¹ F_u` over every pushing user,
+//!   comes from one solve a round with the probe's factors (`kkt::constrained_response`). No user's PD coupling does: it is a numerical tie between the VE
 //!   and one local model, and in another user's frozen b̂ it would act as a stiff spring seen one snapshot
 //!   late without its stiffness — two users on one OP went unstable that way. A user feels the others through
 //!   their hands (in b̂) and through the VE, which its own local model is blended toward;
@@ -44,6 +46,8 @@ use kinloop_linkage::constraint_directions::{constraint_directions_from, Constra
 use kinloop_linkage::contact::detect_contacts;
 use kinloop_linkage::data::Data;
 use kinloop_linkage::error::DynamicsError;
+use kinloop_linkage::jacobian::apply_wrench;
+use kinloop_linkage::kkt::constrained_response;
 use kinloop_linkage::local_model::{op_acceleration, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::op_space::{frame_point_inertia, op_space_inertia};
 use kinloop_linkage::{forward_dynamics, MatOps, Model, Space, VecOps};
@@ -54,6 +58,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::coupling::{Evaluation, VeForces};
 use super::events::VeEvent;
+use super::sharing::others_weight;
 use super::users::{Presence, User};
 use super::{Coupling, SnapshotScratch, VeCore};
 
@@ -79,6 +84,7 @@ impl<S: Space> VeCore<S> {
         let scratch = &mut self.scratch;
         // A new state: nothing computed at any OP yet.
         scratch.at_op.forget();
+        let exchange = hands_share(&self.model, &self.data, &self.users, &self.couplings, scratch);
         if self.contacts.is_some() {
             detect_contacts(&self.model, &self.data.kin, self.config.contact_margin_m, &mut scratch.near);
             scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
@@ -112,6 +118,8 @@ impl<S: Space> VeCore<S> {
                 self.contacts.as_ref().map(|c| (c.stiffness, c.damping)),
                 self.roster_version,
                 &mut pose_memo,
+                &exchange,
+                self.config.exchange_delay_s,
             );
             self.couplings[index].pose_memo = pose_memo;
             let user = &mut self.users[index];
@@ -120,6 +128,7 @@ impl<S: Space> VeCore<S> {
                 let snapshot = user.slot.snapshot_mut();
                 snapshot.seq += 1;
                 snapshot.server_time_s = time_s;
+                user.round_trip.built(snapshot.seq, time_s);
                 snapshot.uplink_time_s = self.couplings[index].target_time_s;
                 let (books, k) = (&user.passivity.port, snapshot.energy.received_j.len());
                 snapshot.energy.received_j.copy_from_slice(&books.received_j[..k]);
@@ -182,6 +191,8 @@ pub(super) struct AtOp<S: Space> {
     inverse_inertia: S::OpMat,
     /// `J q̈ + J̇q̇` under the probe's forces.
     acceleration: S::OpVec,
+    /// `J P Σ Jᵢᵀ F_h,i`: the part of `acceleration` that every pushing user's hand makes.
+    hands: S::OpVec,
     /// The SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12).
     directions: ConstraintDirections<S>,
     pose: OpPose<S>,
@@ -196,6 +207,7 @@ impl<S: Space> AtOp<S> {
             checked: false,
             inverse_inertia: S::OpMat::zero(),
             acceleration: S::OpVec::zero(),
+            hands: S::OpVec::zero(),
             directions: ConstraintDirections {
                 singular_values: S::OpVec::zero(),
                 directions: S::OpMat::zero(),
@@ -221,6 +233,7 @@ fn at_op<'a, S: Space>(
     data: &mut Data<S>,
     user: &User,
     shared: &'a mut AtOp<S>,
+    hands_qdd: &DVector<f64>,
 ) -> Result<&'a AtOp<S>, DynamicsError> {
     let op = user.op;
     if shared.op == Some(op) {
@@ -238,11 +251,48 @@ fn at_op<'a, S: Space>(
     });
     shared.inverse_inertia = inverse_inertia;
     shared.acceleration = op_acceleration(data);
+    for c in 0..S::DIM {
+        shared.hands[c] = data.op.jacobian_t.column(c).dot(hands_qdd);
+    }
     shared.directions = constraint_directions_from::<S>(&inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm);
     shared.pose = OpPose::of_op(model, data, op);
     shared.twist = op_twist(model, data, op);
     shared.op = Some(op);
     Ok(shared)
+}
+
+/// Who pushes and over what round trip: what each user's weight of the others' hands depends on (`sharing`).
+struct Exchange {
+    /// Manipulators whose hands push.
+    pushing: usize,
+    /// The longest of their round trips; `None` while one is unmeasured.
+    round_trip_s: Option<f64>,
+}
+
+/// Fills `scratch.hands_qdd` with the hands' share of the probe's accelerations, `P Σ Jᵢᵀ F_h,i` over every
+/// pushing user, at the state in `data` (just solved, so its factors are in place), and says who pushes.
+fn hands_share<S: Space>(
+    model: &Model<S>,
+    data: &Data<S>,
+    users: &[User],
+    couplings: &[Coupling<S>],
+    scratch: &mut SnapshotScratch<S>,
+) -> Exchange {
+    let hands = &mut scratch.hands_qdd;
+    hands.fill(0.0);
+    let mut exchange = Exchange { pushing: 0, round_trip_s: Some(0.0) };
+    for (user, c) in users.iter().zip(couplings).filter(|(_, c)| c.is_active()) {
+        apply_wrench(model, &data.kin, c.body, &c.op_pose.position, &c.hand_part(), hands);
+        exchange.pushing += 1;
+        let held_s = if c.playout.holding() { c.playout.buffer_s() } else { 0.0 };
+        let trip = user.round_trip.estimate_s().map(|t| t + held_s);
+        exchange.round_trip_s = exchange.round_trip_s.zip(trip).map(|(a, b)| a.max(b));
+    }
+    // (An observer's snapshot weights every pusher's hand, so one pusher is enough to need it.)
+    if exchange.pushing > 0 {
+        constrained_response(model, data, hands.as_mut_slice(), &mut scratch.response);
+    }
+    exchange
 }
 
 enum SnapshotFailure {
@@ -265,12 +315,21 @@ fn build_one<S: Space>(
     contact_gains: Option<(f64, f64)>,
     roster_version: u64,
     pose_memo: &mut S::RotParamsMemo,
+    exchange: &Exchange,
+    exchange_delay_s: f64,
 ) -> Result<(), DynamicsError> {
     // What of this user's wrench the probe applied: its hand (see the module documentation).
     let own_wrench = couplings[index].hand_part();
-    let shared = at_op(model, data, &users[index], &mut scratch.at_op)?;
-    // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand.
-    let bias = shared.acceleration - shared.inverse_inertia * own_wrench;
+    let shared = at_op(model, data, &users[index], &mut scratch.at_op, &scratch.hands_qdd)?;
+    // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand, and with only the weighted
+    // share of the other users' hands (`sharing`).
+    let own = shared.inverse_inertia * own_wrench;
+    let others = exchange.pushing - usize::from(couplings[index].is_active());
+    let weight = others_weight(others, exchange.round_trip_s, exchange_delay_s);
+    let mut bias = shared.acceleration - own;
+    if weight < 1.0 {
+        bias -= (shared.hands - own) * (1.0 - weight);
+    }
 
     let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
     let user_id = users[index].id;

@@ -197,6 +197,8 @@ pub struct User {
     pub fade: Fade,
     /// Passivity account.
     pub passivity: PassivityObserver,
+    /// The network's round trip to this user (see `round_trip`).
+    pub round_trip: super::round_trip::RoundTrip,
     /// Current burst of rejected uplinks.
     pub rejections: RejectionBurst,
     /// Constraint count of the last snapshot.

@@ -127,6 +127,8 @@ impl Grip {
             seq: 0,
             client_time_s: now.as_secs_f64(),
             flags: 0,
+            last_snapshot_seq: snapshot.seq,
+            last_snapshot_age_s: 0.0,
             hand_wrench: hand,
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],

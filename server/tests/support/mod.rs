@@ -48,9 +48,10 @@ pub fn request(name: &str, role: Role, op: &str, k: usize) -> JoinRequest {
     }
 }
 
-/// An uplink whose local model sits where `snapshot` put the OP ("following along"), with hand wrench `hand`.
+/// An uplink whose local model sits where `snapshot` put the OP ("following along"), with hand wrench `hand`,
+/// answering that snapshot at once (so the VE measures the round trip: a tick).
 pub fn following(snapshot: &Snapshot, seq: u64, hand: &[f64]) -> Uplink {
-    uplink(seq, hand, &snapshot.op_pose, &snapshot.op_twist)
+    Uplink { last_snapshot_seq: snapshot.seq, ..uplink(seq, hand, &snapshot.op_pose, &snapshot.op_twist) }
 }
 
 /// An uplink with the given hand wrench and local-model pose and twist.

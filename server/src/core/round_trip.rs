@@ -1,0 +1,123 @@
+//! Each user's network round trip, measured by the VE without synchronised clocks.
+//!
+//! Every uplink names the newest snapshot its client had applied (`Uplink::last_snapshot_seq`) and how long
+//! the client had held it when the uplink left (`Uplink::last_snapshot_age_s`). The VE keeps the time it built
+//! each recent snapshot, so an uplink arriving at `t` gives a sample `t − built − age`: the downlink's delay
+//! plus the uplink's, with everything the client did in between taken out. The estimate follows a longer
+//! sample at once and a shorter one slowly (about a second of a 1 kHz stream): what it is used for
+//! (`sharing::others_weight`) must hold through the worst of the jitter, not its mean.
+//!
+//! A client cannot make the estimate shorter than the truth by more than it shortens its own stated age,
+//! and an age longer than the time since the snapshot was built (a sample below zero) is ignored; a client
+//! that overstates its round trip only makes the VE more careful.
+
+/// Snapshot build times kept per user: 4 s of 1 kHz snapshots, beyond any round trip the VE shares.
+pub const BUILT_KEPT: usize = 4096;
+/// How far a shorter sample moves the estimate toward itself, per sample.
+pub const RELEASE_PER_SAMPLE: f64 = 1e-3;
+/// Samples longer than this (s) are ignored: not a round trip but a client that stopped applying snapshots.
+pub const MAX_SAMPLE_S: f64 = 10.0;
+
+/// One user's round-trip estimate (see the module documentation).
+#[derive(Clone, Debug)]
+pub struct RoundTrip {
+    /// `(seq, server time)` of the snapshots built, indexed by `seq % BUILT_KEPT`.
+    built: Box<[(u64, f64)]>,
+    estimate_s: Option<f64>,
+}
+
+impl RoundTrip {
+    /// No snapshot built yet; the storage is allocated once, here.
+    pub fn new() -> Self {
+        RoundTrip { built: vec![(0, 0.0); BUILT_KEPT].into_boxed_slice(), estimate_s: None }
+    }
+
+    /// Snapshot `seq` was built at `at_s` (server clock).
+    pub fn built(&mut self, seq: u64, at_s: f64) {
+        self.built[(seq % BUILT_KEPT as u64) as usize] = (seq, at_s);
+    }
+
+    /// An uplink arrived at `arrival_s` (server clock) saying its client had held snapshot `seq` for `age_s`.
+    /// Returns the sample it gave, if any (seq 0 is "none yet"; a snapshot no longer kept gives none).
+    pub fn heard(&mut self, arrival_s: f64, seq: u64, age_s: f64) -> Option<f64> {
+        let (kept, built_s) = self.built[(seq % BUILT_KEPT as u64) as usize];
+        if seq == 0 || kept != seq || !age_s.is_finite() {
+            return None;
+        }
+        let sample = arrival_s - built_s - age_s;
+        if !(0.0..=MAX_SAMPLE_S).contains(&sample) {
+            return None;
+        }
+        self.estimate_s = Some(match self.estimate_s {
+            Some(estimate) if sample < estimate => estimate + (sample - estimate) * RELEASE_PER_SAMPLE,
+            _ => sample,
+        });
+        Some(sample)
+    }
+
+    /// The round trip (s), once an uplink has answered a snapshot.
+    pub fn estimate_s(&self) -> Option<f64> {
+        self.estimate_s
+    }
+}
+
+impl Default for RoundTrip {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_round_trip_is_the_time_since_the_build_less_the_clients_hold() {
+        let mut rt = RoundTrip::new();
+        assert_eq!(rt.estimate_s(), None);
+        // Snapshots every ms; a 40 ms downlink, the client holds each 0.7 ms, a 60 ms uplink.
+        for seq in 1..=2000u64 {
+            let built = seq as f64 * 1e-3;
+            rt.built(seq, built);
+            if seq > 100 {
+                let answered = seq - 100;
+                let arrival = answered as f64 * 1e-3 + 0.040 + 0.0007 + 0.060;
+                let sample = rt.heard(arrival, answered, 0.0007).expect("kept");
+                assert!((sample - 0.100).abs() < 1e-9, "{sample}");
+            }
+        }
+        assert!((rt.estimate_s().unwrap() - 0.100).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_longer_trip_is_followed_at_once_and_a_shorter_one_slowly() {
+        let mut rt = RoundTrip::new();
+        rt.built(1, 0.0);
+        rt.heard(0.050, 1, 0.0);
+        rt.heard(0.200, 1, 0.0);
+        assert_eq!(rt.estimate_s(), Some(0.200));
+        for _ in 0..100 {
+            rt.heard(0.050, 1, 0.0);
+        }
+        let e = rt.estimate_s().unwrap();
+        // 100 samples at 1e-3: about a tenth of the way down.
+        assert!(e > 0.180 && e < 0.190, "{e}");
+    }
+
+    #[test]
+    fn impossible_and_unknown_answers_are_ignored() {
+        let mut rt = RoundTrip::new();
+        rt.built(7, 1.0);
+        // A snapshot never built, "none yet", an age longer than the time since the build, a non-finite age,
+        // and a client that stopped applying snapshots long ago.
+        assert_eq!(rt.heard(1.1, 8, 0.0), None);
+        assert_eq!(rt.heard(1.1, 0, 0.0), None);
+        assert_eq!(rt.heard(1.1, 7, 0.5), None);
+        assert_eq!(rt.heard(1.1, 7, f64::NAN), None);
+        assert_eq!(rt.heard(1.0 + MAX_SAMPLE_S + 1.0, 7, 0.0), None);
+        assert_eq!(rt.estimate_s(), None);
+        // A snapshot overwritten in the ring is not mistaken for the one asked about.
+        rt.built(7 + BUILT_KEPT as u64, 5.0);
+        assert_eq!(rt.heard(5.1, 7, 0.0), None);
+    }
+}
