@@ -535,6 +535,61 @@ fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     );
 }
 
+/// A user whose presence sensor says its hand is off the handle (`HAND_OFF`) parks its local model, and its
+/// coupling holds the linkage where the hand left it. Alone it keeps holding; with another user's hand on the
+/// linkage it lets go (fades out, `FadeReason::LetGo`) instead of fighting that hand, and comes back when its
+/// hand returns.
+#[test]
+fn a_hand_off_its_handle_lets_go_only_when_another_hand_holds_the_linkage() {
+    use kinloop_protocol::uplink_flags::HAND_OFF;
+    use kinloop_server::core::{FadeReason, VeEvent};
+
+    let mut ve = core(testbed(), VeConfig::paper());
+    let fade = VeConfig::paper().fade_time;
+    let ids = join_all(&mut ve, &[("A", Role::Manipulator, "link2")]);
+    let (mut latest, mut seq) = (Vec::new(), 0);
+    let mut others: Vec<u32> = Vec::new();
+    let mut step = |ve: &mut kinloop_server::core::VeCore<_>, until: Duration, ids: &[u32], off: bool| {
+        run(ve, until, &mut latest, |ve, now, latest| {
+            seq += 1;
+            for (i, id) in ids.iter().enumerate() {
+                if let Some(Some(s)) = latest.get(*id as usize) {
+                    let mut u = following(s, seq, &[0.0, 0.0, 0.0]);
+                    if i == 0 && off {
+                        u.flags |= HAND_OFF;
+                    }
+                    ve.handle_uplink(now, *id, &u).expect("accepted");
+                }
+            }
+        });
+    };
+    let weight_of = |ve: &kinloop_server::core::VeCore<_>, id: u32| {
+        ve.state().users().find(|u| u.user_id == id).expect("present").weight
+    };
+    // Alone, hand off: A keeps holding.
+    step(&mut ve, Duration::from_millis(300) + fade, &ids, true);
+    assert_eq!(weight_of(&ve, ids[0]), 1.0, "alone, the hold stays");
+    // B grasps: A lets go.
+    let at = ve.poll_timeout();
+    others.push(ve.join(at, request("B", Role::Manipulator, "link2", 3)).unwrap().user_id);
+    let both = [ids[0], others[0]];
+    step(&mut ve, at + Duration::from_millis(300) + fade, &both, true);
+    assert_eq!(weight_of(&ve, ids[0]), 0.0, "with B's hand on, A lets go");
+    assert!(weight_of(&ve, others[0]) > 0.99);
+    let mut events = Vec::new();
+    while let Some(e) = ve.poll_event() {
+        events.push(e);
+    }
+    assert!(
+        events.contains(&VeEvent::FadingOut { user: ids[0], reason: FadeReason::LetGo }),
+        "a let-go event: {events:?}"
+    );
+    // A's hand returns: it holds again.
+    let at = ve.poll_timeout();
+    step(&mut ve, at + Duration::from_millis(300) + fade, &both, false);
+    assert_eq!(weight_of(&ve, ids[0]), 1.0, "the hand is back");
+}
+
 /// Before the VE has measured the round trips (uplinks that name no snapshot), every user's b̂ leaves the other
 /// users' hands out as well as its own (`sharing`: an unmeasured round trip counts as long, and the exchange
 /// of delayed pushes is a loop): it is then the OP's acceleration with no hand on the linkage at all, which a

@@ -185,7 +185,8 @@ pub struct ClientSummary {
     /// Largest commanded force or torque over the device's limit (≤ 1 always).
     pub max_force_ratio: f64,
     /// RMS distance between the device and the VE's operational point, in the device's space (what the hand
-    /// feels: the VE distance times the mapping's position scale), m, over active ticks.
+    /// feels: the VE distance times the mapping's position scale), m, over active ticks with a hand on the
+    /// handle (a presence sensor's `HAND_OFF` ticks are left out of this and the next two).
     pub device_op_rms_m: f64,
     /// Largest device–OP distance, device space (m).
     pub device_op_max_m: f64,
@@ -245,6 +246,8 @@ struct Participant<S: Space> {
     heard_max: f64,
     model_sum_sq: f64,
     active_ticks: u64,
+    /// Active ticks with a hand on the handle (the device-OP figures' count).
+    held_ticks: u64,
     saturated: u64,
     compute: Duration,
     uplinks_refused: u64,
@@ -307,6 +310,7 @@ impl<S: Space> Session<S> {
                 heard_max: 0.0,
                 model_sum_sq: 0.0,
                 active_ticks: 0,
+                held_ticks: 0,
                 saturated: 0,
                 compute: Duration::ZERO,
                 uplinks_refused: 0,
@@ -521,8 +525,14 @@ impl<S: Space> Session<S> {
             if report.clamp_scale < 1.0 {
                 p.saturated += 1;
             }
+            // A handle no hand holds is not followed by a VE that others move (see the server's
+            // `update_couplings`), and nobody feels it: its distance to the OP is not tracking.
+            let held = report.flags & kinloop_protocol::uplink_flags::HAND_OFF == 0;
             if let Some(u) = &ve_user {
                 p.passivity = u.passivity;
+            }
+            if let Some(u) = ve_user.as_ref().filter(|_| held) {
+                p.held_ticks += 1;
                 let d = S::op_lin(&report.device_pose.difference(&u.op_pose)).norm() * scale;
                 p.op_sum_sq += d * d;
                 p.op_max = p.op_max.max(d);
@@ -572,7 +582,7 @@ impl<S: Space> Session<S> {
                     name: p.plan.name.clone(),
                     ticks: p.ticks,
                     max_force_ratio: stats.max_force_ratio,
-                    device_op_rms_m: (p.op_sum_sq / active).sqrt(),
+                    device_op_rms_m: (p.op_sum_sq / p.held_ticks.max(1) as f64).sqrt(),
                     device_op_max_m: p.op_max,
                     device_op_heard_max_m: p.heard_max,
                     device_model_rms_m: (p.model_sum_sq / active).sqrt(),

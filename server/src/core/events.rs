@@ -20,6 +20,8 @@ pub enum FadeReason {
     Left,
     /// The user's uplinks stopped for the silent timeout.
     Silent,
+    /// The user's hand is off its handle while another user's hand is on the linkage.
+    LetGo,
 }
 
 /// Something worth a log line.

@@ -435,6 +435,8 @@ impl<S: Space> VeCore<S> {
             silent: !manipulator,
             fade: Fade::off(),
             passivity: PassivityObserver::default(),
+            hand_off: false,
+            let_go: false,
             round_trip: round_trip::RoundTrip::new(),
             rejections: RejectionBurst::default(),
             constraint_count: 0,
@@ -522,6 +524,7 @@ impl<S: Space> VeCore<S> {
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
         u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s);
+        u.hand_off = sample.flags & kinloop_protocol::uplink_flags::HAND_OFF != 0;
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];
             // The wire bounds a client's clock; a direct caller's odd one reads as "no uplink yet", and such an
@@ -696,24 +699,38 @@ impl<S: Space> VeCore<S> {
         }
     }
 
-    /// Fade weights (join, silence, leave) and passivity scales for the coming step.
+    /// Fade weights (join, silence, letting go, leave) and passivity scales for the coming step.
+    ///
+    /// A user whose hand is off its handle (`uplink_flags::HAND_OFF`, from a presence sensor) parks its local
+    /// model where the hand left it, and its coupling holds the linkage there: alone, the linkage stays put
+    /// rather than falling. With another user's hand on the linkage that hold would fight them (four users
+    /// on the testbed, one letting go: the other three clamped 15 % of their ticks pulling against it, and
+    /// the released handle ended 17 cm from the OP), so then it fades out like a silent user's, and fades
+    /// back in when the hand returns (its model restarts on the VE).
     fn update_couplings(&mut self, at: Duration, dt: f64) {
         let fade_s = self.config.fade_time.as_secs_f64();
         let mut activations = 0;
+        let holding =
+            |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
+        let holders = self.users.iter().zip(&self.couplings).filter(|(u, c)| holding(u, c)).count();
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
             if let Some(reference) = c.playout.due(at.as_secs_f64()) {
                 c.follow(&reference);
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
-            if silent != u.silent && u.presence == Presence::Present && c.pushes {
-                self.events.push(if silent {
-                    VeEvent::FadingOut { user: u.id, reason: FadeReason::Silent }
-                } else {
-                    VeEvent::Resumed { user: u.id }
-                });
+            let let_go = u.hand_off && holders > usize::from(holding(u, c));
+            let was = (u.silent, u.let_go);
+            if (silent, let_go) != was && u.presence == Presence::Present && c.pushes {
+                let reason = if silent { Some(FadeReason::Silent) } else { let_go.then_some(FadeReason::LetGo) };
+                match reason {
+                    Some(reason) if !(was.0 || was.1) => self.events.push(VeEvent::FadingOut { user: u.id, reason }),
+                    None => self.events.push(VeEvent::Resumed { user: u.id }),
+                    Some(_) => {}
+                }
             }
             u.silent = silent;
-            u.fade.advance(u.presence == Presence::Present && c.pushes && !silent, dt, fade_s);
+            u.let_go = let_go;
+            u.fade.advance(u.presence == Presence::Present && c.pushes && !silent && !let_go, dt, fade_s);
             c.weight = u.fade.weight();
             c.step_wrench = S::OpVec::zero();
             c.pd_scale = if self.config.passivity && c.pushes {

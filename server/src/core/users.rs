@@ -197,6 +197,11 @@ pub struct User {
     pub fade: Fade,
     /// Passivity account.
     pub passivity: PassivityObserver,
+    /// The newest uplink said no hand holds the device (`uplink_flags::HAND_OFF`).
+    pub hand_off: bool,
+    /// Its coupling fades out because its hand is off while another user's is on (see
+    /// `VeCore::update_couplings`).
+    pub let_go: bool,
     /// The network's round trip to this user (see `round_trip`).
     pub round_trip: super::round_trip::RoundTrip,
     /// Current burst of rejected uplinks.
