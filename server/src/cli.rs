@@ -73,9 +73,8 @@ struct Cli {
     #[arg(long, value_name = "on|off", default_value = "off")]
     passivity: Switch,
     /// Play each user's uplinks out at the stream's steady delay once their lateness reaches 25 ms (a jitter
-    /// buffer): steadies a linkage pushed over a jittery link, but holding costs many users on one OP their
-    /// stability when a loaded host, not the network, makes the lateness.
-    #[arg(long, value_name = "on|off", default_value = "off")]
+    /// buffer): steadies a linkage pushed over a jittery link (off: each uplink is used on arrival).
+    #[arg(long, value_name = "on|off", default_value = "on")]
     jitter_buffer: Switch,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
     /// first user grasps a still linkage rather than one that gravity has been swinging).

@@ -111,10 +111,10 @@ pub struct VeConfig {
     /// Time-domain passivity observer/controller on every coupling.
     pub passivity: bool,
     /// Play each user's uplinks out at the stream's steady delay (a jitter buffer, see `playout`) instead of
-    /// following the newest on arrival. Off by default: in the latency sweep it steadies every point with
-    /// 30 ms of network jitter (5 of 864 unstable without it, none with it), but on a loaded 2-core host the
-    /// 16-user demo's own scheduling lateness engaged it, and 60 s then rejected 15,354 uplinks and clamped
-    /// 48,736 ticks at 32-34 mm RMS, against none rejected and 0.2-0.7 mm without it.
+    /// following the newest on arrival. On by default: in the latency sweep it steadies every point with
+    /// 30 ms of network jitter (5 of 864 unstable without it, none with it). (It was off while the 16-user
+    /// demo broke with it: its hold lengthened the loop through which users on one OP pushed each other,
+    /// which `sharing` now weights by the round trip including the hold.)
     pub jitter_buffer: bool,
     /// The round trip (s) up to which a user's local model takes the other users' hands whole from its
     /// snapshot's b̂ (one other user; N − 1 others share it); longer round trips take proportionally less (see
@@ -163,7 +163,7 @@ impl VeConfig {
             contact_damping: None,
             contact_margin_m: 0.005,
             passivity: false,
-            jitter_buffer: false,
+            jitter_buffer: true,
             exchange_delay_s: super::sharing::EXCHANGE_DELAY_S,
             // About what the graphics controller's linear spring (1000 N/m) holds at 2 mm, the device-OP
             // distance stiffness rendering keeps (Fig 6b).
