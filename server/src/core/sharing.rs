@@ -19,15 +19,70 @@
 //! growth of `kinloop experiment`'s criterion), while with the others' hands left out none was made at any
 //! delay, and tracking was no worse from 50 ms on (3.5 mm RMS at 100 ms against 4.8 with half of them; 9.3
 //! against 9.0 at 300 ms). The whole push is kept only while the round trip is short enough that the loop's
-//! phase cannot turn: a gain of 1 at 10 ms (the Watt six-bar's light `link5` took a gain of 1 only below a
-//! 40 ms round trip), 2.5 at 4 ms. The round trip is the longest of the pushing users' (`round_trip`), plus
+//! phase cannot turn: a gain of 1 up to a 5 ms round trip, 2.5 at 2 ms (two users on the Watt six-bar's light
+//! `link5` with a gain of 1 over a 10 ms round trip diverged; the testbed's 16 users over 4-10 ms track 0.5-0.9
+//! mm RMS at this setting, 0.3-0.6 mm at twice it). The round trip is the longest of the pushing users' (`round_trip`), plus
 //! what the jitter buffer holds their uplinks, since every pair's exchange is a loop through both; one not
 //! measured yet counts as long. What the weight removes still reaches each user through the VE, which its
 //! model is kept on (`kinloop_client::core::sync`), as a correction of its state rather than a force.
+//!
+//! **The load the others no longer carry.** On a linkage under a steady load (gravity on the four-bar and the
+//! six-bars) the hands hold it together; a model that takes only `w` of the others' hands would have its own
+//! hand hold what the others' hands held in the VE, and the VE, pushed by every hand whole, sits above every
+//! model: a steady discrepancy that the pull toward the VE corrects on and on, pumping energy the hands soak
+//! up (4.7 J over 10 s, four users on the four-bar at 20 ms). So each user's b̂ carries its share of the
+//! OP's acceleration without any hand (the load), `s = (1 + w (N − 1)) / N` of it: at `w = 1` all of it, at
+//! `w = 0` a 1/N share, and with every hand holding an equal share a model at rest stays at rest for any w
+//! ([`shared_bias`]). Four users on the four-bar or the Watt six-bar at 20-300 ms: no energy made.
+//!
+//! **The others' hands' inertia.** A hand's sensed wrench carries its own mass's reaction, so the others'
+//! hands in b̂ feed each device's acceleration back to the others, through the OP's mobility Λ̂⁻¹: with
+//! two users on each end of the four-bar, light OPs that the mapping scales up, the devices chattered at
+//! their limits with no delay at all (10-26 % of ticks clamped on the four-bar and the Watt six-bar). The
+//! weight is also held to [`INERTIAL_EXCHANGE_GAIN`] over that loop's gain, `(N − 1) m_hand c_p / c_f
+//! max(Λ̂⁻¹_linear)` with a hand of [`HAND_MASS_KG`] (the simulated grasps' 0.55-0.8 kg) mapped into the
+//! VE ([`inertial_weight`]).
+
+use kinloop_linkage::VecOps;
 
 /// The round trip (s) up to which one other user's hands are taken whole (`VeConfig::exchange_delay_s`'s
 /// default); shorter round trips allow proportionally more users.
-pub const EXCHANGE_DELAY_S: f64 = 0.010;
+pub const EXCHANGE_DELAY_S: f64 = 0.005;
+
+/// The mass of a grasping hand that rides on a handle (kg, device space): the simulated grasps' 0.55-0.8 kg.
+pub const HAND_MASS_KG: f64 = 0.6;
+/// The largest gain allowed to the loop of the others' hands' inertia through the OP (see the module
+/// documentation): measured stable at 12 (no clamped tick with four users on the four-bar, the Watt
+/// six-bar's two OPs or its `link5`) and chattering at 20 (the four-bar's users clamped 2 % of ticks and
+/// the six-bar's diverged); at 8.6 two users on the four-bar tracked three times worse (2.5 mm RMS against
+/// 0.85 mm).
+pub const INERTIAL_EXCHANGE_GAIN: f64 = 12.0;
+
+/// The largest weight of the others' hands that keeps the loop of their inertia through the OP at
+/// [`INERTIAL_EXCHANGE_GAIN`]: `others` other users push an OP of largest linear mobility
+/// `linear_mobility` (the largest diagonal entry of Λ̂⁻¹'s linear block, 1/kg in VE units) for a user whose
+/// mapping has scales `position_scale` and `force_scale` (a device-space mass m is `m c_p / c_f` in the VE).
+pub fn inertial_weight(others: usize, linear_mobility: f64, position_scale: f64, force_scale: f64) -> f64 {
+    let gain = others as f64 * HAND_MASS_KG * position_scale / force_scale * linear_mobility;
+    if gain.is_finite() && gain > INERTIAL_EXCHANGE_GAIN {
+        INERTIAL_EXCHANGE_GAIN / gain
+    } else {
+        1.0
+    }
+}
+
+/// A user's b̂ from the OP's acceleration under every hand (`acceleration`, `J q̈ + J̇q̇` of the probe), the
+/// part of it every pushing hand makes (`hands`), the user's own (`own`, `Λ̂⁻¹ F_u`), the number of other
+/// pushing users and their weight: `acceleration − own − (1 − w) (hands − own) − (1 − s) (acceleration −
+/// hands)` with the load share `s = (1 + w (N − 1)) / N` (see the module documentation).
+pub fn shared_bias<V: VecOps>(acceleration: &V, hands: &V, own: &V, others: usize, weight: f64) -> V {
+    let mut bias = *acceleration - *own;
+    if weight < 1.0 {
+        let load_share = (1.0 + weight * others as f64) / (others + 1) as f64;
+        bias -= (*hands - *own) * (1.0 - weight) + (*acceleration - *hands) * (1.0 - load_share);
+    }
+    bias
+}
 
 /// The weight of the other users' hands in a user's b̂ when `others` other users push and the longest round
 /// trip among the pushing users is `round_trip_s` (`None`: not measured yet, taken as long), for the
@@ -47,6 +102,43 @@ pub fn others_weight(others: usize, round_trip_s: Option<f64>, exchange_delay_s:
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn with_equal_shares_of_the_load_a_model_at_rest_stays_at_rest_whatever_the_weight() {
+        // Four users on one OP of mobility 2/kg under a load of (0, -9.81, 0) m/s² (gravity, say), each hand
+        // holding a quarter: the OP does not accelerate. Each model applies its own hand itself: own + b̂ = 0.
+        let (users, mobility) = (4, 2.0);
+        let load = Vector3::new(0.0, -9.81, 0.0);
+        let share = -load / (mobility * users as f64);
+        let own = share * mobility;
+        let hands = own * users as f64;
+        let acceleration = load + hands;
+        assert!(acceleration.norm() < 1e-12);
+        for weight in [1.0, 0.7, 0.25, 0.0] {
+            let bias = shared_bias(&acceleration, &hands, &own, users - 1, weight);
+            assert!((own + bias).norm() < 1e-12, "w {weight}: {}", own + bias);
+        }
+        // Without the load share, taking none of the others' hands leaves the model falling with 3/4 of it.
+        let unshared = acceleration - own - (hands - own);
+        assert!((own + unshared - load * 0.75).norm() < 1e-12);
+        // Whole, b̂ is the OP's acceleration less the user's own hand.
+        assert_eq!(shared_bias(&acceleration, &hands, &own, 3, 1.0), acceleration - own);
+    }
+
+    #[test]
+    fn the_inertial_weight_holds_the_loop_gain() {
+        // The four-bar's coupler for the `paper` device: mobility 0.61/kg, scales 1.37 and 0.087.
+        let (mobility, cp, cf) = (0.61, 1.37, 0.087);
+        let gain = |others: usize| others as f64 * HAND_MASS_KG * cp / cf * mobility;
+        assert!(gain(1) < INERTIAL_EXCHANGE_GAIN, "one other user: whole");
+        assert_eq!(inertial_weight(1, mobility, cp, cf), 1.0);
+        let w = inertial_weight(3, mobility, cp, cf);
+        assert!(w < 1.0 && (w * gain(3) - INERTIAL_EXCHANGE_GAIN).abs() < 1e-9, "{w}");
+        // Nobody else, or a heavy OP: nothing to hold.
+        assert_eq!(inertial_weight(0, mobility, cp, cf), 1.0);
+        assert_eq!(inertial_weight(15, 1e-6, cp, cf), 1.0);
+    }
 
     const D: f64 = EXCHANGE_DELAY_S;
 
@@ -57,11 +149,11 @@ mod tests {
         // One other user over a LAN, or the same process, keeps the whole push ...
         assert_eq!(others_weight(1, Some(0.002), D), 1.0);
         assert_eq!(others_weight(1, Some(0.0), D), 1.0);
-        // ... over 100 ms, a tenth of it; unmeasured, none.
-        assert!((others_weight(1, Some(0.1), D) - 0.1).abs() < 1e-12);
+        // ... over 100 ms, a twentieth of it; unmeasured, none.
+        assert!((others_weight(1, Some(0.1), D) - 0.05).abs() < 1e-12);
         assert_eq!(others_weight(3, None, D), 0.0);
-        // Fifteen others over 4 ms: a gain of 2.5 shared among them.
-        assert!((others_weight(15, Some(0.004), D) * 15.0 - 2.5).abs() < 1e-12);
+        // Fifteen others over 2 ms: a gain of 2.5 shared among them.
+        assert!((others_weight(15, Some(0.002), D) * 15.0 - 2.5).abs() < 1e-12);
         // An infinite exchange delay is the paper's b̂: everyone whole at any delay.
         assert_eq!(others_weight(15, Some(1.0), f64::INFINITY), 1.0);
         // The gain never grows with the delay, and never exceeds the bound.

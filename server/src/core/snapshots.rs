@@ -58,7 +58,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::coupling::{Evaluation, VeForces};
 use super::events::VeEvent;
-use super::sharing::others_weight;
+use super::sharing::{inertial_weight, others_weight, shared_bias};
 use super::users::{Presence, User};
 use super::{Coupling, SnapshotScratch, VeCore};
 
@@ -321,15 +321,22 @@ fn build_one<S: Space>(
     // What of this user's wrench the probe applied: its hand (see the module documentation).
     let own_wrench = couplings[index].hand_part();
     let shared = at_op(model, data, &users[index], &mut scratch.at_op, &scratch.hands_qdd)?;
-    // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand, and with only the weighted
-    // share of the other users' hands (`sharing`).
+    // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand, with only the weighted share
+    // of the other users' hands and this user's share of the load they no longer carry (`sharing`).
     let own = shared.inverse_inertia * own_wrench;
     let others = exchange.pushing - usize::from(couplings[index].is_active());
-    let weight = others_weight(others, exchange.round_trip_s, exchange_delay_s);
-    let mut bias = shared.acceleration - own;
-    if weight < 1.0 {
-        bias -= (shared.hands - own) * (1.0 - weight);
+    let mapping = &users[index].mapping;
+    let mut linear_mobility = 0.0f64;
+    for a in 0..<S::Point as VecOps>::LEN {
+        linear_mobility = linear_mobility.max(shared.inverse_inertia[(a, a)]);
     }
+    let weight = others_weight(others, exchange.round_trip_s, exchange_delay_s).min(inertial_weight(
+        others,
+        linear_mobility,
+        mapping.position_scale,
+        mapping.force_scale,
+    ));
+    let bias = shared_bias(&shared.acceleration, &shared.hands, &own, others, weight);
 
     let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
     let user_id = users[index].id;
