@@ -237,6 +237,16 @@ fn sixteen_users_stay_stable_and_cost_grows_with_users() {
         .map(|p| f(&p["ve_link2_deviation_from_one_user_mm"]))
         .unwrap();
     assert!(deviation < 20.0, "16 users moved link 2 {deviation} mm RMS away from the one-user path");
+    // Sharing under delay (quick: 0 and 100 ms, up to 4 users): with the others' hands weighted by the round
+    // trip every session is stable; taken whole, 100 ms is unstable for every layout and count.
+    let sharing = &r["sharing"];
+    assert_eq!(sharing["unstable_weighted"], 0, "{}", sharing["answer"]);
+    let points = sharing["points"].as_array().unwrap();
+    let whole_at_100: Vec<_> = points.iter().filter(|p| p["others_hands"] == "whole" && p["delay_ms"] == 100).collect();
+    assert!(!whole_at_100.is_empty());
+    for p in whole_at_100 {
+        assert_eq!(p["stable"], false, "{p}");
+    }
 }
 
 /// The reduced local model's step does not grow with the linkage; the VE step and the configuration form's

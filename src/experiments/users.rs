@@ -11,6 +11,13 @@
 //! labelled by [`super::verdict`] over all users. Cost: the VE's compute per VE tick (its step with every
 //! coupling, and every user's snapshot) and the haptic cores' per user and tick, measured single-threaded,
 //! best of five.
+//!
+//! **Sharing over a slow link.** Then 2, 4 and 16 users with hands that behave like hands (relaxed and firm
+//! in turn, touring the OP's reach, `sim:paper` devices) share the testbed's `link2`, and 2 and 4 the
+//! four-bar's coupler and crank tip, for 10 s at 0-1000 ms one way (both directions), each session twice:
+//! with the other users' hands in each b̂ weighted by the measured round trip (the default, see the
+//! server's `sharing`) and without that weighting (`VeConfig::exchange_delay_s` infinite: whole, as in the
+//! paper's b̂, but for the bound on their inertia's loop, which does not depend on the delay).
 
 use std::time::Duration;
 
@@ -27,9 +34,20 @@ use super::common::{
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, Legend, Series, StabilityMap};
 use crate::harness::{ClientPlan, SessionPlan};
+use kinloop_client::device::presets::DevicePreset;
+use kinloop_client::user::{HandKind, HandSpec};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::core::VeConfig;
 
 /// Simulated seconds per session.
 const DURATION_S: f64 = 3.0;
+/// Simulated seconds per session of the sharing sweep.
+const SHARING_S: f64 = 10.0;
+/// The sharing sweep's layouts: scene, its OPs (users take them in turn), and the user counts.
+const SHARING_LAYOUTS: [(&str, &[&str], &[usize]); 2] =
+    [("paper-testbed", &["link2"], &[2, 4, 16]), ("fourbar-crank-rocker", &["coupler", "crank-tip"], &[2, 4])];
+/// The sharing sweep's one-way delays (ms).
+const SHARING_DELAYS_MS: [u64; 5] = [0, 20, 100, 300, 1000];
 /// Time between two users' joins.
 const JOIN_SPACING: Duration = Duration::from_millis(10);
 
@@ -164,6 +182,179 @@ fn line_per_layout(chart: Chart, measured: &[Measured], label: &str, y: impl Fn(
     })
 }
 
+/// One session of the sharing sweep.
+#[derive(Clone, Copy, Debug)]
+struct SharingPoint {
+    layout: usize,
+    users: usize,
+    delay_ms: u64,
+    /// The other users' hands weighted by the round trip (the default), or whole.
+    weighted: bool,
+}
+
+impl SharingPoint {
+    fn label(&self) -> String {
+        let (scene, ops, _) = SHARING_LAYOUTS[self.layout];
+        format!("{scene} ({}) x{}", ops.join(", "), self.users)
+    }
+    fn method(&self) -> &'static str {
+        if self.weighted {
+            "weighted"
+        } else {
+            "whole"
+        }
+    }
+}
+
+struct SharingMeasured {
+    point: SharingPoint,
+    verdict: Verdict,
+    op_rms_mean_m: f64,
+    op_rms_max_m: f64,
+}
+
+fn sharing_plan(p: &SharingPoint) -> Result<SessionPlan> {
+    let (scene, ops, _) = SHARING_LAYOUTS[p.layout];
+    let clients = (0..p.users)
+        .map(|i| {
+            let mut c = ClientPlan::new(&format!("user{}", i + 1), ops[i % ops.len()], DevicePreset::Paper);
+            let hand = if i % 2 == 0 { HandKind::Soft } else { HandKind::Firm };
+            c.user = UserSpec::Hand(HandSpec::touring(hand));
+            let seed = 0x5a4e_0000 + p.layout as u64 * 1_000_000 + p.delay_ms * 1000 + i as u64;
+            c.with_link(LinkConfig { delay: Duration::from_millis(p.delay_ms), seed, ..LinkConfig::default() })
+        })
+        .collect();
+    let mut ve = VeConfig::default();
+    ve.max_users = ve.max_users.max(p.users);
+    if !p.weighted {
+        ve.exchange_delay_s = f64::INFINITY;
+    }
+    Ok(SessionPlan {
+        scene: kinloop_linkage::builtin::scene(scene).context("built in")??,
+        ve,
+        clients,
+        duration: Duration::from_secs_f64(SHARING_S),
+        record_every: 1,
+    })
+}
+
+fn sharing_measure(p: &SharingPoint) -> Result<SharingMeasured> {
+    let plan = sharing_plan(p)?;
+    let (summary, rec) = session(&plan).with_context(|| format!("{} at {} ms", p.label(), p.delay_ms))?;
+    let rms: Vec<f64> = summary.clients.iter().map(|c| c.device_op_rms_m).collect();
+    Ok(SharingMeasured {
+        point: *p,
+        verdict: verdict::judge(&summary, &rec),
+        op_rms_mean_m: rms.iter().sum::<f64>() / rms.len().max(1) as f64,
+        op_rms_max_m: rms.iter().copied().fold(0.0, f64::max),
+    })
+}
+
+/// The sharing sweep: its charts, and its part of the summary.
+fn sharing(options: &Options, out: &mut Output) -> Result<Value> {
+    let delays: Vec<u64> = options.pick(SHARING_DELAYS_MS.to_vec(), vec![0, 100]);
+    let mut points = Vec::new();
+    for (layout, (_, _, counts)) in SHARING_LAYOUTS.iter().enumerate() {
+        let counts: Vec<usize> = options.pick(counts.to_vec(), counts.iter().copied().filter(|&n| n <= 4).collect());
+        for &users in &counts {
+            for weighted in [true, false] {
+                for &delay_ms in &delays {
+                    points.push(SharingPoint { layout, users, delay_ms, weighted });
+                }
+            }
+        }
+    }
+    let measured = sweep("users sharing under delay", &points, options.threads, options.progress, sharing_measure)?;
+    // One row per layout, count and method, in the order swept.
+    let mut rows: Vec<(String, usize, usize, bool)> = Vec::new();
+    for m in &measured {
+        let p = m.point;
+        let row = format!("{}, {}", p.label(), p.method());
+        if !rows.iter().any(|r| r.0 == row) {
+            rows.push((row, p.layout, p.users, p.weighted));
+        }
+    }
+    let row_of = |p: &SharingPoint| rows.iter().position(|r| (r.1, r.2, r.3) == (p.layout, p.users, p.weighted));
+    out.map(
+        "stability_sharing_vs_delay",
+        &StabilityMap {
+            title: "Users sharing a linkage under delay: the others' hands weighted by the round trip, or whole".into(),
+            x_label: "one-way delay (ms)".into(),
+            y_label: "layout, users, others' hands".into(),
+            log: false,
+            cells: measured
+                .iter()
+                .filter_map(|m| Some((m.point.delay_ms as f64, row_of(&m.point)? as f64, m.verdict.stable)))
+                .collect(),
+            overlays: Vec::new(),
+            legend: Legend::UpperLeft,
+            y_categories: rows.iter().map(|r| r.0.clone()).collect(),
+        },
+    )?;
+    let mut tracking = Chart::new(
+        "Users sharing a linkage under delay, the others' hands weighted: device-OP distance (RMS, mean over users)",
+        "one-way delay (ms)",
+        "device-OP distance, RMS (mm)",
+    )
+    .legend(Legend::UpperLeft);
+    for (row, layout, users, weighted) in rows.iter().filter(|r| r.3) {
+        let line = measured
+            .iter()
+            .filter(|m| (m.point.layout, m.point.users, m.point.weighted) == (*layout, *users, *weighted))
+            .map(|m| (m.point.delay_ms as f64, m.op_rms_mean_m * 1e3))
+            .collect();
+        tracking = tracking.with(Series::line(row.clone(), line));
+    }
+    out.chart("tracking_sharing_vs_delay", &tracking)?;
+    let first_unstable = rows
+        .iter()
+        .map(|(row, layout, users, weighted)| {
+            let first = measured
+                .iter()
+                .filter(|m| (m.point.layout, m.point.users, m.point.weighted) == (*layout, *users, *weighted))
+                .filter(|m| !m.verdict.stable)
+                .map(|m| m.point.delay_ms)
+                .min();
+            json!({ "row": row, "first_unstable_delay_ms": first })
+        })
+        .collect::<Vec<_>>();
+    let unstable =
+        |weighted: bool| measured.iter().filter(|m| m.point.weighted == weighted && !m.verdict.stable).count();
+    let per_method = measured.len() / 2;
+    Ok(json!({
+        "answer": format!(
+            "Users sharing a linkage under delay (0-{} ms one way): {} of {per_method} sessions unstable with the \
+             others' hands weighted by the round trip (the default), {} of {per_method} with them whole.",
+            delays.iter().max().unwrap_or(&0),
+            unstable(true),
+            unstable(false),
+        ),
+        "unstable_weighted": unstable(true),
+        "unstable_whole": unstable(false),
+        "first_unstable": first_unstable,
+        "setup": format!(
+            "{SHARING_S} s sessions, sim:paper devices, relaxed and firm touring hands in turn, the delay both ways; \
+             whole = VeConfig::exchange_delay_s infinite"
+        ),
+        "points": measured
+            .iter()
+            .map(|m| json!({
+                "layout": SHARING_LAYOUTS[m.point.layout].0,
+                "ops": SHARING_LAYOUTS[m.point.layout].1,
+                "users": m.point.users,
+                "delay_ms": m.point.delay_ms,
+                "others_hands": m.point.method(),
+                "stable": m.verdict.stable,
+                "reasons": m.verdict.reasons,
+                "device_op_rms_mm_mean_over_users": round(m.op_rms_mean_m * 1e3, 3),
+                "device_op_rms_mm_worst_user": round(m.op_rms_max_m * 1e3, 3),
+                "worst_saturation": round(m.verdict.worst_saturation, 3),
+                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
+            }))
+            .collect::<Vec<_>>(),
+    }))
+}
+
 /// Runs the experiment.
 pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("users", options)?;
@@ -283,8 +474,12 @@ pub fn run(options: &Options) -> Result<Report> {
             ));
         }
     }
+    let sharing = sharing(options, &mut out)?;
+    answer.push(' ');
+    answer.push_str(sharing["answer"].as_str().unwrap_or_default());
     let results = json!({
         "answer": answer,
+        "sharing": sharing,
         "stable_with_max_users": {
             "users": max_n,
             "same_op": find(Layout::SameOp, max_n).map(|m| m.verdict.stable),
@@ -303,8 +498,8 @@ pub fn run(options: &Options) -> Result<Report> {
         "points": measured.iter().map(point_json).collect::<Vec<_>>(),
     });
     out.finish(
-        "1 to 16 users on one linkage: stability, tracking and VE cost",
-        "about 5 s on this 2-core machine (12 sessions of 3 s and their timing pass); --quick about 2 s",
+        "1 to 16 users on one linkage: stability, tracking and VE cost, and sharing it under delay",
+        "about 15 s on this 2-core machine (12 sessions of 3 s and their timing pass, 50 sharing sessions of 10 s); --quick about 5 s",
         results,
     )
 }
