@@ -385,7 +385,10 @@ where
     let (ex, ey) = (edges(&xs), edges(&ys));
     let (x0, x1, y0, y1) = (ex[0], *ex.last().unwrap_or(&1.0), ey[0], *ey.last().unwrap_or(&1.0));
     let mut builder = ChartBuilder::on(&area);
-    builder.caption(&map.title, ("sans-serif", 20)).margin(14).x_label_area_size(44).y_label_area_size(70);
+    // Category rows name themselves: room for the longest name (about 7 px a character at this size).
+    let longest = map.y_categories.iter().map(|c| c.chars().count()).max().unwrap_or(0) as u32;
+    let y_labels = 70.max(24 + 7 * longest);
+    builder.caption(&map.title, ("sans-serif", 20)).margin(14).x_label_area_size(44).y_label_area_size(y_labels);
     let stable = RGBColor(120, 200, 120);
     let unstable = RGBColor(230, 110, 100);
     macro_rules! body {

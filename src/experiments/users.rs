@@ -43,9 +43,11 @@ use kinloop_server::core::VeConfig;
 const DURATION_S: f64 = 3.0;
 /// Simulated seconds per session of the sharing sweep.
 const SHARING_S: f64 = 10.0;
-/// The sharing sweep's layouts: scene, its OPs (users take them in turn), and the user counts.
-const SHARING_LAYOUTS: [(&str, &[&str], &[usize]); 2] =
-    [("paper-testbed", &["link2"], &[2, 4, 16]), ("fourbar-crank-rocker", &["coupler", "crank-tip"], &[2, 4])];
+/// The sharing sweep's layouts: scene, its OPs (users take them in turn), the user counts, and a short name.
+const SHARING_LAYOUTS: [(&str, &[&str], &[usize], &str); 2] = [
+    ("paper-testbed", &["link2"], &[2, 4, 16], "testbed"),
+    ("fourbar-crank-rocker", &["coupler", "crank-tip"], &[2, 4], "four-bar, 2 OPs"),
+];
 /// The sharing sweep's one-way delays (ms).
 const SHARING_DELAYS_MS: [u64; 5] = [0, 20, 100, 300, 1000];
 /// Time between two users' joins.
@@ -194,8 +196,7 @@ struct SharingPoint {
 
 impl SharingPoint {
     fn label(&self) -> String {
-        let (scene, ops, _) = SHARING_LAYOUTS[self.layout];
-        format!("{scene} ({}) x{}", ops.join(", "), self.users)
+        format!("{} x{}", SHARING_LAYOUTS[self.layout].3, self.users)
     }
     fn method(&self) -> &'static str {
         if self.weighted {
@@ -214,7 +215,7 @@ struct SharingMeasured {
 }
 
 fn sharing_plan(p: &SharingPoint) -> Result<SessionPlan> {
-    let (scene, ops, _) = SHARING_LAYOUTS[p.layout];
+    let (scene, ops, _, _) = SHARING_LAYOUTS[p.layout];
     let clients = (0..p.users)
         .map(|i| {
             let mut c = ClientPlan::new(&format!("user{}", i + 1), ops[i % ops.len()], DevicePreset::Paper);
@@ -254,7 +255,7 @@ fn sharing_measure(p: &SharingPoint) -> Result<SharingMeasured> {
 fn sharing(options: &Options, out: &mut Output) -> Result<Value> {
     let delays: Vec<u64> = options.pick(SHARING_DELAYS_MS.to_vec(), vec![0, 100]);
     let mut points = Vec::new();
-    for (layout, (_, _, counts)) in SHARING_LAYOUTS.iter().enumerate() {
+    for (layout, (_, _, counts, _)) in SHARING_LAYOUTS.iter().enumerate() {
         let counts: Vec<usize> = options.pick(counts.to_vec(), counts.iter().copied().filter(|&n| n <= 4).collect());
         for &users in &counts {
             for weighted in [true, false] {
@@ -278,21 +279,21 @@ fn sharing(options: &Options, out: &mut Output) -> Result<Value> {
     out.map(
         "stability_sharing_vs_delay",
         &StabilityMap {
-            title: "Users sharing a linkage under delay: the others' hands weighted by the round trip, or whole".into(),
+            title: "Users sharing a linkage under delay".into(),
             x_label: "one-way delay (ms)".into(),
-            y_label: "layout, users, others' hands".into(),
+            y_label: "".into(),
             log: false,
             cells: measured
                 .iter()
                 .filter_map(|m| Some((m.point.delay_ms as f64, row_of(&m.point)? as f64, m.verdict.stable)))
                 .collect(),
             overlays: Vec::new(),
-            legend: Legend::UpperLeft,
+            legend: Legend::LowerRight,
             y_categories: rows.iter().map(|r| r.0.clone()).collect(),
         },
     )?;
     let mut tracking = Chart::new(
-        "Users sharing a linkage under delay, the others' hands weighted: device-OP distance (RMS, mean over users)",
+        "Users sharing a linkage under delay: device-OP distance (RMS, mean over users)",
         "one-way delay (ms)",
         "device-OP distance, RMS (mm)",
     )
