@@ -278,20 +278,43 @@ fn hands_share<S: Space>(
     couplings: &[Coupling<S>],
     scratch: &mut SnapshotScratch<S>,
 ) -> Exchange {
-    let hands = &mut scratch.hands_qdd;
-    hands.fill(0.0);
     let mut exchange = Exchange { pushing: 0, round_trip_s: Some(0.0) };
     for (user, c) in users.iter().zip(couplings).filter(|(_, c)| c.is_active()) {
-        apply_wrench(model, &data.kin, c.body, &c.op_pose.position, &c.hand_part(), hands);
         exchange.pushing += 1;
         let held_s = if c.playout.holding() { c.playout.buffer_s() } else { 0.0 };
         let trip = user.round_trip.estimate_s().map(|t| t + held_s);
         exchange.round_trip_s = exchange.round_trip_s.zip(trip).map(|(a, b)| a.max(b));
     }
-    // (An observer's snapshot weights every pusher's hand, so one pusher is enough to need it.)
-    if exchange.pushing > 0 {
-        constrained_response(model, data, hands.as_mut_slice(), &mut scratch.response);
+    let hands = &mut scratch.hands_qdd;
+    hands.fill(0.0);
+    // Only a user with another pushing user to weight needs it (an observer's snapshot weights every pusher's
+    // hand, so one pusher and anyone else is enough); alone, the round skips it.
+    if exchange.pushing == 0 || users.len() < 2 {
+        return exchange;
     }
+    // Users are visited grouped by OP: one `Jᵀ Σ F` per run of users at the same point.
+    let mut run: Option<(usize, S::OpVec)> = None;
+    for &i in &scratch.order {
+        let c = &couplings[i];
+        if !c.is_active() {
+            continue;
+        }
+        match run.as_mut().filter(|(first, _)| couplings[*first].at_same_point(c)) {
+            Some((_, sum)) => *sum += c.hand_part(),
+            None => {
+                if let Some((first, sum)) = run.take() {
+                    let f = &couplings[first];
+                    apply_wrench(model, &data.kin, f.body, &f.op_pose.position, &sum, hands);
+                }
+                run = Some((i, c.hand_part()));
+            }
+        }
+    }
+    if let Some((first, sum)) = run {
+        let f = &couplings[first];
+        apply_wrench(model, &data.kin, f.body, &f.op_pose.position, &sum, hands);
+    }
+    constrained_response(model, data, hands.as_mut_slice(), &mut scratch.response);
     exchange
 }
 
