@@ -167,6 +167,8 @@ impl TickBench {
                 // Reuse the sample: only the pose and twist change (no allocation in the loop).
                 Some(sample) => {
                     let s = pending.snapshot();
+                    // Each uplink answers the newest snapshot, as a client's does (the VE's round trips).
+                    sample.last_snapshot_seq = s.seq;
                     sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
                     sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
                 }

@@ -11,8 +11,12 @@
 //! and an age longer than the time since the snapshot was built (a sample below zero) is ignored; a client
 //! that overstates its round trip only makes the VE more careful.
 
-/// Snapshot build times kept per user: 4 s of 1 kHz snapshots, beyond any round trip the VE shares.
-pub const BUILT_KEPT: usize = 4096;
+/// Every this many snapshots one build time is kept and one answer sampled (a quarter of the stores and the
+/// memory: the VE tick writes this ring every round for every user).
+pub const STRIDE: u64 = 4;
+/// Snapshot build times kept per user: 4 s of 1 kHz snapshots at [`STRIDE`], beyond any round trip the VE
+/// shares.
+pub const BUILT_KEPT: usize = 1024;
 /// How far a shorter sample moves the estimate toward itself, per sample.
 pub const RELEASE_PER_SAMPLE: f64 = 1e-3;
 /// Samples longer than this (s) are ignored: not a round trip but a client that stopped applying snapshots.
@@ -21,7 +25,8 @@ pub const MAX_SAMPLE_S: f64 = 10.0;
 /// One user's round-trip estimate (see the module documentation).
 #[derive(Clone, Debug)]
 pub struct RoundTrip {
-    /// `(seq, server time)` of the snapshots built, indexed by `seq % BUILT_KEPT`.
+    /// `(seq, server time)` of the snapshots built whose seq is a multiple of [`STRIDE`], indexed by
+    /// `seq / STRIDE % BUILT_KEPT`.
     built: Box<[(u64, f64)]>,
     estimate_s: Option<f64>,
 }
@@ -34,14 +39,20 @@ impl RoundTrip {
 
     /// Snapshot `seq` was built at `at_s` (server clock).
     pub fn built(&mut self, seq: u64, at_s: f64) {
-        self.built[(seq % BUILT_KEPT as u64) as usize] = (seq, at_s);
+        if seq.is_multiple_of(STRIDE) {
+            self.built[slot(seq)] = (seq, at_s);
+        }
     }
 
     /// An uplink arrived at `arrival_s` (server clock) saying its client had held snapshot `seq` for `age_s`.
-    /// Returns the sample it gave, if any (seq 0 is "none yet"; a snapshot no longer kept gives none).
+    /// Returns the sample it gave, if any (seq 0 is "none yet"; a snapshot not kept, off the stride or no longer,
+    /// gives none).
     pub fn heard(&mut self, arrival_s: f64, seq: u64, age_s: f64) -> Option<f64> {
-        let (kept, built_s) = self.built[(seq % BUILT_KEPT as u64) as usize];
-        if seq == 0 || kept != seq || !age_s.is_finite() {
+        if seq == 0 || !seq.is_multiple_of(STRIDE) {
+            return None;
+        }
+        let (kept, built_s) = self.built[slot(seq)];
+        if kept != seq || !age_s.is_finite() {
             return None;
         }
         let sample = arrival_s - built_s - age_s;
@@ -59,6 +70,10 @@ impl RoundTrip {
     pub fn estimate_s(&self) -> Option<f64> {
         self.estimate_s
     }
+}
+
+fn slot(seq: u64) -> usize {
+    ((seq / STRIDE) % BUILT_KEPT as u64) as usize
 }
 
 impl Default for RoundTrip {
@@ -82,8 +97,10 @@ mod tests {
             if seq > 100 {
                 let answered = seq - 100;
                 let arrival = answered as f64 * 1e-3 + 0.040 + 0.0007 + 0.060;
-                let sample = rt.heard(arrival, answered, 0.0007).expect("kept");
-                assert!((sample - 0.100).abs() < 1e-9, "{sample}");
+                match rt.heard(arrival, answered, 0.0007) {
+                    Some(sample) => assert!((sample - 0.100).abs() < 1e-9, "{sample}"),
+                    None => assert!(!answered.is_multiple_of(STRIDE), "seq {answered} is kept"),
+                }
             }
         }
         assert!((rt.estimate_s().unwrap() - 0.100).abs() < 1e-9);
@@ -92,12 +109,12 @@ mod tests {
     #[test]
     fn a_longer_trip_is_followed_at_once_and_a_shorter_one_slowly() {
         let mut rt = RoundTrip::new();
-        rt.built(1, 0.0);
-        rt.heard(0.050, 1, 0.0);
-        rt.heard(0.200, 1, 0.0);
+        rt.built(STRIDE, 0.0);
+        rt.heard(0.050, STRIDE, 0.0);
+        rt.heard(0.200, STRIDE, 0.0);
         assert_eq!(rt.estimate_s(), Some(0.200));
         for _ in 0..100 {
-            rt.heard(0.050, 1, 0.0);
+            rt.heard(0.050, STRIDE, 0.0);
         }
         let e = rt.estimate_s().unwrap();
         // 100 samples at 1e-3: about a tenth of the way down.
@@ -107,17 +124,21 @@ mod tests {
     #[test]
     fn impossible_and_unknown_answers_are_ignored() {
         let mut rt = RoundTrip::new();
-        rt.built(7, 1.0);
-        // A snapshot never built, "none yet", an age longer than the time since the build, a non-finite age,
-        // and a client that stopped applying snapshots long ago.
-        assert_eq!(rt.heard(1.1, 8, 0.0), None);
+        let seq = 7 * STRIDE;
+        rt.built(seq, 1.0);
+        rt.built(seq + 1, 1.001);
+        // A snapshot never built, one off the stride, "none yet", an age longer than the time since the build,
+        // a non-finite age, and a client that stopped applying snapshots long ago.
+        assert_eq!(rt.heard(1.1, seq + STRIDE, 0.0), None);
+        assert_eq!(rt.heard(1.1, seq + 1, 0.0), None);
         assert_eq!(rt.heard(1.1, 0, 0.0), None);
-        assert_eq!(rt.heard(1.1, 7, 0.5), None);
-        assert_eq!(rt.heard(1.1, 7, f64::NAN), None);
-        assert_eq!(rt.heard(1.0 + MAX_SAMPLE_S + 1.0, 7, 0.0), None);
+        assert_eq!(rt.heard(1.1, seq, 0.5), None);
+        assert_eq!(rt.heard(1.1, seq, f64::NAN), None);
+        assert_eq!(rt.heard(1.0 + MAX_SAMPLE_S + 1.0, seq, 0.0), None);
         assert_eq!(rt.estimate_s(), None);
         // A snapshot overwritten in the ring is not mistaken for the one asked about.
-        rt.built(7 + BUILT_KEPT as u64, 5.0);
-        assert_eq!(rt.heard(5.1, 7, 0.0), None);
+        rt.built(seq + STRIDE * BUILT_KEPT as u64, 5.0);
+        assert_eq!(rt.heard(5.1, seq, 0.0), None);
+        assert!(rt.heard(5.1, seq + STRIDE * BUILT_KEPT as u64, 0.0).is_some());
     }
 }

@@ -348,17 +348,17 @@ fn build_one<S: Space>(
     // of the other users' hands and this user's share of the load they no longer carry (`sharing`).
     let own = shared.inverse_inertia * own_wrench;
     let others = exchange.pushing - usize::from(couplings[index].is_active());
-    let mapping = &users[index].mapping;
-    let mut linear_mobility = 0.0f64;
-    for a in 0..<S::Point as VecOps>::LEN {
-        linear_mobility = linear_mobility.max(shared.inverse_inertia[(a, a)]);
-    }
-    let weight = others_weight(others, exchange.round_trip_s, exchange_delay_s).min(inertial_weight(
-        others,
-        linear_mobility,
-        mapping.position_scale,
-        mapping.force_scale,
-    ));
+    let weight = if others == 0 {
+        1.0
+    } else {
+        let mapping = &users[index].mapping;
+        let mut linear_mobility = 0.0f64;
+        for a in 0..<S::Point as VecOps>::LEN {
+            linear_mobility = linear_mobility.max(shared.inverse_inertia[(a, a)]);
+        }
+        let inertial = inertial_weight(others, linear_mobility, mapping.position_scale, mapping.force_scale);
+        others_weight(others, exchange.round_trip_s, exchange_delay_s).min(inertial)
+    };
     let bias = shared_bias(&shared.acceleration, &shared.hands, &own, others, weight);
 
     let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
