@@ -475,6 +475,24 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
     }
 }
 
+/// The testbed with a second OP at link 3's middle; A and C joined on link 2 and B on link 3 between them (in
+/// join order); their hand wrenches.
+fn three_users_on_two_ops() -> (
+    kinloop_linkage::Model<kinloop_linkage::Planar>,
+    kinloop_server::core::VeCore<kinloop_linkage::Planar>,
+    Vec<u32>,
+    [[f64; 3]; 3],
+) {
+    let base = testbed();
+    let link3 = base.body_index("link3").unwrap();
+    let model = base.with_op("link3", link3, nalgebra::Vector2::new(0.0105, 0.0));
+    let mut ve = core(model.clone(), VeConfig::paper());
+    let manipulator = Role::Manipulator;
+    let ids =
+        join_all(&mut ve, &[("A", manipulator, "link2"), ("B", manipulator, "link3"), ("C", manipulator, "link2")]);
+    (model, ve, ids, [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]])
+}
+
 /// Users holding the same OP share its op-space terms within a snapshot round, and only those: with A and C
 /// on link 2 and B between them (in join order) on link 3, A's and C's Λ⁻¹, directions, singular values, pose
 /// and twist are the same numbers and are those a fresh workspace computes at the VE's state, B's are link
@@ -485,17 +503,10 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
 fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
     use kinloop_linkage::op_space::op_space_inertia;
-    use kinloop_linkage::{forward_dynamics, Data, Model, Planar};
-    use nalgebra::{Matrix3, Vector2, Vector3};
+    use kinloop_linkage::{forward_dynamics, Data, Planar};
+    use nalgebra::{Matrix3, Vector3};
 
-    let base = testbed();
-    let link3 = base.body_index("link3").unwrap();
-    let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
-    let mut ve = core(model.clone(), VeConfig::paper());
-    let manipulator = Role::Manipulator;
-    let ids =
-        join_all(&mut ve, &[("A", manipulator, "link2"), ("B", manipulator, "link3"), ("C", manipulator, "link2")]);
-    let hands = [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]];
+    let (model, mut ve, ids, hands) = three_users_on_two_ops();
     let (latest, refused) = run_following(&mut ve, Duration::from_millis(400), &ids, &hands);
     assert_eq!(refused, 0, "every uplink accepted");
     let snapshot = |i: usize| latest[ids[i] as usize].as_ref().expect("a snapshot for every user");
@@ -600,17 +611,10 @@ fn a_hand_off_its_handle_lets_go_only_when_another_hand_holds_the_linkage() {
 fn an_unmeasured_round_trip_leaves_every_hand_out_of_the_bias() {
     use kinloop_linkage::local_model::op_acceleration;
     use kinloop_linkage::op_space::op_space_inertia;
-    use kinloop_linkage::{forward_dynamics, Data, Model, Planar};
-    use nalgebra::{Vector2, Vector3};
+    use kinloop_linkage::{forward_dynamics, Data};
+    use nalgebra::Vector3;
 
-    let base = testbed();
-    let link3 = base.body_index("link3").unwrap();
-    let model: Model<Planar> = base.with_op("link3", link3, Vector2::new(0.0105, 0.0));
-    let mut ve = core(model.clone(), VeConfig::paper());
-    let manipulator = Role::Manipulator;
-    let ids =
-        join_all(&mut ve, &[("A", manipulator, "link2"), ("B", manipulator, "link3"), ("C", manipulator, "link2")]);
-    let hands = [[-0.5, 0.1, -0.002], [0.3, 0.2, 0.0], [0.2, -0.4, 0.003]];
+    let (model, mut ve, ids, hands) = three_users_on_two_ops();
     let (mut latest, mut seq) = (Vec::new(), 0);
     run(&mut ve, Duration::from_millis(400), &mut latest, |ve, now, latest| {
         seq += 1;
