@@ -19,11 +19,11 @@
 //! growth of `kinloop experiment`'s criterion), while with the others' hands left out none was made at any
 //! delay, and tracking was no worse from 50 ms on (3.5 mm RMS at 100 ms against 4.8 with half of them; 9.3
 //! against 9.0 at 300 ms). The whole push is kept only while the round trip is short enough that the loop's
-//! phase cannot turn: a gain of 1 up to a 5 ms round trip, 2.5 at 2 ms (two users on the Watt six-bar's light
-//! `link5` with a gain of 1 over a 10 ms round trip diverged; the testbed's 16 users over 4-10 ms track 0.5-0.9
-//! mm RMS at this setting, 0.3-0.6 mm at twice it). The round trip is the longest of the pushing users' (`round_trip`), plus
-//! what the jitter buffer holds their uplinks, since every pair's exchange is a loop through both; one not
-//! measured yet counts as long. What the weight removes still reaches each user through the VE, which its
+//! phase cannot turn: a gain of 1 up to a 5 ms round trip, 2.5 at 2 ms (two users on the Watt six-bar's
+//! light `link5` with a gain of 1 over a 10 ms round trip diverged; the testbed's 16 users over 4-10 ms track
+//! 0.5-0.9 mm RMS at this setting, 0.3-0.6 mm at twice it). The round trip is the longest of the pushing
+//! users' (`round_trip`), plus what the jitter buffer holds their uplinks, since every pair's exchange is a
+//! loop through both; one not measured yet counts as long. What the weight removes still reaches each user through the VE, which its
 //! model is kept on (`kinloop_client::core::sync`), as a correction of its state rather than a force.
 //!
 //! **The load the others no longer carry.** On a linkage under a steady load (gravity on the four-bar and the

@@ -18,10 +18,11 @@
 //!   client's local model applies it itself); contacts, gravity and the closure's velocity terms stay in b̂,
 //!   and so do the other users' hand wrenches, weighted by how long the round trip is (`sharing`: under
 //!   delay their exchange is a loop). Their share, `J P Σ Jᵢᵀ F_h,i − Λ̂⁻¹ F_u` over every pushing user,
-//!   comes from one solve a round with the probe's factors (`kkt::constrained_response`). No user's PD coupling does: it is a numerical tie between the VE
-//!   and one local model, and in another user's frozen b̂ it would act as a stiff spring seen one snapshot
-//!   late without its stiffness — two users on one OP went unstable that way. A user feels the others through
-//!   their hands (in b̂) and through the VE, which its own local model is blended toward;
+//!   comes from one solve a round with the probe's factors (`kkt::constrained_response`). No user's PD
+//!   coupling stays in b̂: it is a numerical tie between the VE and one local model, and in another user's
+//!   frozen b̂ it would act as a stiff spring seen one snapshot late without its stiffness — two users on one
+//!   OP went unstable that way. A user feels the others through their hands (in b̂) and through the VE,
+//!   which its own local model is blended toward;
 //! - the SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12): directions in `(v, L ω)` coordinates, singular values,
 //!   the constraint count;
 //! - OP pose and twist, the other users' OP positions and wrenches, and the configuration-space terms of
