@@ -719,14 +719,14 @@ impl<S: Space> VeCore<S> {
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
             let let_go = u.hand_off && holders > usize::from(holding(u, c));
-            let was = (u.silent, u.let_go);
-            if (silent, let_go) != was && u.presence == Presence::Present && c.pushes {
-                let reason = if silent { Some(FadeReason::Silent) } else { let_go.then_some(FadeReason::LetGo) };
-                match reason {
-                    Some(reason) if !(was.0 || was.1) => self.events.push(VeEvent::FadingOut { user: u.id, reason }),
-                    None => self.events.push(VeEvent::Resumed { user: u.id }),
-                    Some(_) => {}
-                }
+            let (faded, was_faded) = (silent || let_go, u.silent || u.let_go);
+            if faded != was_faded && u.presence == Presence::Present && c.pushes {
+                let reason = if silent { FadeReason::Silent } else { FadeReason::LetGo };
+                self.events.push(if faded {
+                    VeEvent::FadingOut { user: u.id, reason }
+                } else {
+                    VeEvent::Resumed { user: u.id }
+                });
             }
             u.silent = silent;
             u.let_go = let_go;
