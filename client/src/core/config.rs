@@ -205,8 +205,15 @@ pub struct CoreConfig {
     /// graphics controller couples it to the uplink's model pose) and lags it by the uplink path, so a fast
     /// pull would drag the model back onto a VE that is only following it, and slow both; a slow pull only
     /// keeps them from parting for good. The core never pulls faster than
-    /// [`FREE_BLEND_PER_ROUND_TRIP`](super::FREE_BLEND_PER_ROUND_TRIP) round trips (see there).
+    /// `free_blend_round_trips` round trips.
     pub free_blend_time_constant: Duration,
+    /// The free directions' pull takes at least this many round trips as its time constant
+    /// ([`FREE_BLEND_PER_ROUND_TRIP`](super::FREE_BLEND_PER_ROUND_TRIP) by default, see there); 0 leaves
+    /// `free_blend_time_constant` as it is at every delay.
+    pub free_blend_round_trips: f64,
+    /// Pay the pull toward the VE from an energy tank that only the coupling's dampers fill, so the model's
+    /// updates never put into the device-model coupling more energy than it dissipated (`passive_update`).
+    pub passive_update: bool,
     /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
     /// its snapshot terms were computed at before the constrained directions are rendered softer (see
     /// `controllers::linearization_trust`). Under delay the model runs ahead of the VE by a round trip of
@@ -239,6 +246,8 @@ impl CoreConfig {
             period: Duration::from_millis(1),
             blend_time_constant: Duration::from_millis(20),
             free_blend_time_constant: Duration::from_millis(200),
+            free_blend_round_trips: super::FREE_BLEND_PER_ROUND_TRIP,
+            passive_update: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,
             hand_observer_bandwidth: 50.0,

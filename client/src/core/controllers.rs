@@ -50,6 +50,10 @@ pub(crate) struct ConstraintFrame<S: Space> {
     /// Λ̂⁺ restricted to the free directions (physical units): maps an OP acceleration to the OP wrench
     /// that causes it; used to express contact forces as wrenches at the OP.
     pub free_inertia: S::OpMat,
+    /// `Λ̂` itself in every direction the controllers render (physical units), the smallest singular values
+    /// of `Λ̂⁻¹` floored: the local model's kinetic energy is `½ ẋᵀ Λ̂ ẋ`, and along the constrained directions
+    /// the model is heavy, not massless.
+    pub inertia: S::OpMat,
     counted: [bool; 6],
     /// Directions counted as constrained (with hysteresis).
     pub count: usize,
@@ -65,6 +69,7 @@ impl<S: Space> ConstraintFrame<S> {
             inverse_inertia: S::OpMat::zero(),
             bias: S::OpVec::zero(),
             free_inertia: S::OpMat::zero(),
+            inertia: S::OpMat::zero(),
             counted: [false; 6],
             count: 0,
         }
@@ -112,6 +117,7 @@ impl<S: Space> ConstraintFrame<S> {
         let sigma_max = (0..S::DIM).filter(|&i| !angular_only(&column(i))).map(|i| values[i]).fold(0.0, f64::max);
         let mut projector = S::OpMat::zero();
         let mut free_scaled = S::OpMat::zero();
+        let mut inertia_scaled = S::OpMat::zero();
         let mut count = 0;
         for i in 0..S::DIM {
             let u = column(i);
@@ -127,6 +133,9 @@ impl<S: Space> ConstraintFrame<S> {
             if values[i] > 0.0 && w < 1.0 {
                 free_scaled += outer * ((1.0 - w) / values[i]);
             }
+            // A direction the linkage does not move in at all is as heavy as the lightest measurable one
+            // is light, a million times over.
+            inertia_scaled += outer * (1.0 / values[i].max(sigma_max * INERTIA_FLOOR));
             if r <= weighting.count_enter {
                 self.counted[i] = true;
             } else if r >= weighting.count_exit {
@@ -140,6 +149,7 @@ impl<S: Space> ConstraintFrame<S> {
         self.target_bias = terms.bias;
         // (Λ⁻¹)⁺ = T Λ̃⁺ T because Λ̃⁻¹ = T Λ⁻¹ T.
         self.free_inertia = scale_both::<S>(&free_scaled, length_scale, length_scale);
+        self.inertia = scale_both::<S>(&inertia_scaled, length_scale, length_scale);
         if jump {
             self.projector = projector;
             self.inverse_inertia = terms.inverse_inertia;
@@ -217,6 +227,9 @@ pub fn joint_constraint_stiffness<S: Space>(
 ) -> S::OpVec {
     -project_as_stiffness::<S>(projector, length_scale, &(*error * stiffness + *error_rate * damping))
 }
+
+/// Smallest singular value of `Λ̂⁻¹` counted in `ConstraintFrame::inertia`, relative to the largest.
+pub const INERTIA_FLOOR: f64 = 1e-6;
 
 /// Distance, in reaches, within which [`linearization_trust`] is exactly 1.
 pub const TRUST_DEAD_ZONE: f64 = 0.05;
@@ -318,6 +331,34 @@ mod tests {
 
     type V = <Planar as Space>::OpVec;
     type M = <Planar as Space>::OpMat;
+
+    /// `ConstraintFrame::inertia` is `Λ̂ = (Λ̂⁻¹)⁻¹` where that exists (checked against nalgebra's inverse), and
+    /// heavy but finite along a direction the OP cannot move in.
+    #[test]
+    fn the_frame_inertia_inverts_the_inverse_inertia_and_is_heavy_where_the_op_cannot_move() {
+        let length_scale = 0.05;
+        let frame_of = |inverse_inertia: M| {
+            let mut terms = SnapshotTerms::<Planar>::new(None);
+            let d = constraint_directions::<Planar>(&inverse_inertia, length_scale, DEFAULT_THRESHOLD);
+            terms.inverse_inertia = inverse_inertia;
+            terms.singular_values = d.singular_values;
+            terms.directions = d.directions;
+            let mut frame = ConstraintFrame::<Planar>::new();
+            frame.set_target(&terms, &ConstraintWeighting::default(), length_scale, true, false);
+            frame
+        };
+        let a = M::new(2.0, 0.3, -4.0, 0.3, 0.8, 1.0, -4.0, 1.0, 300.0);
+        let frame = frame_of(a);
+        let expected = a.try_inverse().expect("invertible");
+        let error = (frame.inertia - expected).norm() / expected.norm();
+        assert!(error < 1e-9, "relative error {error}");
+        // The OP cannot move along y: Λ̂⁻¹ is singular there.
+        let singular = M::from_diagonal(&V::from_slice(&[2.0, 0.0, 300.0]));
+        let frame = frame_of(singular);
+        let y = frame.inertia[(1, 1)];
+        assert!(y.is_finite() && y > 1e5, "heavy along y: {y}");
+        assert!((frame.inertia[(0, 0)] - 0.5).abs() < 1e-9);
+    }
 
     #[test]
     fn impedance_control_makes_the_device_accelerate_as_the_op_with_its_bias() {

@@ -34,6 +34,7 @@ mod deadband;
 mod intake;
 mod model;
 mod observer;
+mod passive_update;
 mod sync;
 
 use std::time::Duration;
@@ -49,6 +50,7 @@ pub use config::{
     UplinkDeadband,
 };
 pub use intake::SnapshotRejection;
+pub use passive_update::TANK_CAPACITY_J as UPDATE_TANK_CAPACITY_J;
 
 use controllers::{
     contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, linearization_trust,
@@ -58,6 +60,7 @@ use deadband::Deadband;
 use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
+use passive_update::{coupling_energy, damper_dissipation, CouplingSprings, UpdateTank};
 use safety::{force_ratio, limit_wrench_parts, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
 use sync::History;
 
@@ -255,6 +258,9 @@ pub struct CoreStats {
     pub energy_reports_refused: u64,
     /// Ticks on which the device's presence sensor said no hand held it (output faded, `HAND_OFF` sent).
     pub hand_off_ticks: u64,
+    /// Ticks whose pull toward the VE was applied only in part because it would have put more energy into
+    /// the device-model coupling than its dampers had dissipated (`CoreConfig::passive_update`).
+    pub updates_limited: u64,
 }
 
 impl CoreStats {
@@ -446,6 +452,8 @@ pub struct HapticCore<S: Space> {
     deadband: Deadband<S>,
     /// The local model's recent states, by client time (see `sync`).
     history: History<S>,
+    /// The energy the model's updates may still put into the coupling (`passive_update`).
+    tank: UpdateTank,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
     /// reaction) drives the model (`kinloop_linkage::passivity`); its books go up in every uplink.
     port: PortBooks,
@@ -592,6 +600,7 @@ impl<S: Space> HapticCore<S> {
             one_way_delay: Duration::ZERO,
             deadband: Deadband::new(config.deadband),
             history: History::new(),
+            tank: UpdateTank::new(),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             uplink,
@@ -717,11 +726,11 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// The free directions' pull time constant: the configured one, never shorter than
-    /// [`FREE_BLEND_PER_ROUND_TRIP`] round trips.
+    /// `CoreConfig::free_blend_round_trips` round trips.
     pub fn free_blend_time_constant(&self) -> Duration {
         self.config
             .free_blend_time_constant
-            .max(self.one_way_delay.saturating_mul(2).mul_f64(FREE_BLEND_PER_ROUND_TRIP))
+            .max(self.one_way_delay.saturating_mul(2).mul_f64(self.config.free_blend_round_trips))
     }
 
     /// Takes a snapshot received at `now`. Returns `Ok(true)` when it is the newest so far (it will be used at
@@ -816,6 +825,42 @@ impl<S: Space> HapticCore<S> {
         self.has_snapshot = true;
     }
 
+    /// What correcting the model by `moved` and `sped` would change in the energy the device-model coupling
+    /// and the model hold (`passive_update`), the device at `device_pose`.
+    fn update_cost(&self, device_pose: &OpPose<S>, moved: &S::OpVec, sped: &S::OpVec) -> f64 {
+        let springs = self.coupling_springs();
+        let error = self.controlled(device_pose.difference(&self.model.pose()));
+        let twist = self.model.twist();
+        coupling_energy::<S>(&springs, &(error - self.controlled(*moved)), &(twist + *sped))
+            - coupling_energy::<S>(&springs, &error, &twist)
+    }
+
+    /// The springs of the device-model coupling as the controllers render them now.
+    fn coupling_springs(&self) -> CouplingSprings<'_, S> {
+        let joint_stiffness = match self.config.constraint_mode {
+            ConstraintMode::Stiffness => self.gains.joint_stiffness * self.linearization_trust(),
+            // The acceleration-zeroing controller holds no spring.
+            ConstraintMode::Impedance => 0.0,
+        };
+        CouplingSprings {
+            position_stiffness: &self.gains.position_stiffness,
+            joint_stiffness,
+            projector: &self.frame.projector,
+            length_scale: self.length_scale,
+            inertia: &self.frame.inertia,
+        }
+    }
+
+    /// `error` with the axes no controller acts on zeroed (a pinned grasp's angles).
+    fn controlled(&self, mut error: S::OpVec) -> S::OpVec {
+        if self.pinned() {
+            for i in <S::Point as VecOps>::LEN..S::DIM {
+                error[i] = 0.0;
+            }
+        }
+        error
+    }
+
     /// One haptic tick at `now` with the device reading `device` (see the module documentation).
     pub fn tick(&mut self, now: Duration, device: &crate::device::DeviceState<S>) -> TickOutput<'_, S> {
         let dt_s = match self.last_now {
@@ -874,7 +919,16 @@ impl<S: Space> HapticCore<S> {
                 pose = mix(&pose, &answered);
                 twist = mix(&twist, &answered_twist);
             }
-            let (moved, sped) = self.model.correct(&pose, &twist, p, l, constrained, free);
+            let (mut moved, mut sped) = model::split_correction::<S>(&pose, &twist, p, l, constrained, free);
+            if self.config.passive_update {
+                let fraction = self.tank.admit(self.update_cost(&device_pose, &moved, &sped));
+                if fraction < 1.0 {
+                    self.stats.updates_limited += 1;
+                }
+                moved = moved * fraction;
+                sped = sped * fraction;
+            }
+            self.model.apply_correction(&moved, &sped);
             self.history.moved += moved;
             self.history.sped += sped;
         }
@@ -953,6 +1007,16 @@ impl<S: Space> HapticCore<S> {
         };
         let jc = if trust < 1.0 { jc * trust } else { jc };
         let requested = pc + jc + imp + contact;
+        // The dampers' part of what the device receives: what fills the update's tank (`passive_update`).
+        let damping_wrench = {
+            let zero = S::OpVec::zero();
+            let pc = position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate);
+            let pc = if trust < 1.0 { pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust) } else { pc };
+            match (self.config.constraint_mode, hand_for_constraint) {
+                (ConstraintMode::Impedance, Some(_)) => pc - project_wrench::<S>(p, l, &pc),
+                _ => pc + joint_constraint_stiffness::<S>(p, l, 0.0, g.joint_damping, &zero, &error_rate) * trust,
+            }
+        };
 
         // 5. Safety.
         let mut command = S::OpVec::zero();
@@ -975,6 +1039,7 @@ impl<S: Space> HapticCore<S> {
             clamp_scale = scales.min();
             self.reaction = -scales.apply::<S>(&mask_unactuated::<S>(&pc_felt, &self.limits)) * gain;
         }
+        self.tank.fill(damper_dissipation::<S>(&error_rate, &damping_wrench, gain * clamp_scale, dt_s));
         if clamp_scale < 1.0 {
             flags |= uplink_flags::CLAMPED;
             self.stats.clamped_ticks += 1;

@@ -98,26 +98,12 @@ impl<S: Space> LocalModel<S> {
         }
     }
 
-    /// Moves the OP state by the fractions of the pose and twist discrepancies `pose` and `twist` (the part
-    /// along the constrained directions by `constrained`, the rest by `free`); returns what it applied.
-    pub fn correct(
-        &mut self,
-        pose: &S::OpVec,
-        twist: &S::OpVec,
-        projector: &S::OpMat,
-        length_scale: f64,
-        constrained: f64,
-        free: f64,
-    ) -> (S::OpVec, S::OpVec) {
-        let split = |d: &S::OpVec| {
-            let along = project_twist::<S>(projector, length_scale, d);
-            along * constrained + (*d - along) * free
-        };
-        let (moved, sped) = (split(pose), split(twist));
+    /// Moves the OP state by `moved` (a displacement) and `sped` (a twist change), as [`split_correction`]
+    /// gives them.
+    pub fn apply_correction(&mut self, moved: &S::OpVec, sped: &S::OpVec) {
         let mut own = self.pose();
-        own.integrate(&moved, 1.0);
-        self.set_state(own, self.twist() + sped);
-        (moved, sped)
+        own.integrate(moved, 1.0);
+        self.set_state(own, self.twist() + *sped);
     }
 
     /// The live contacts of the reduced form (the configuration form tracks none: the paper's eq 13 testbed
@@ -126,4 +112,21 @@ impl<S: Space> LocalModel<S> {
         let live = if self.using_config { 0 } else { self.reduced.contact_count };
         (&self.reduced.contacts, live)
     }
+}
+
+/// The fractions of the pose and twist discrepancies `pose` and `twist` to correct in one tick: the part
+/// along the constrained directions by `constrained`, the rest by `free`. Returns (displacement, twist change).
+pub(crate) fn split_correction<S: Space>(
+    pose: &S::OpVec,
+    twist: &S::OpVec,
+    projector: &S::OpMat,
+    length_scale: f64,
+    constrained: f64,
+    free: f64,
+) -> (S::OpVec, S::OpVec) {
+    let split = |d: &S::OpVec| {
+        let along = project_twist::<S>(projector, length_scale, d);
+        along * constrained + (*d - along) * free
+    };
+    (split(pose), split(twist))
 }
