@@ -195,6 +195,11 @@ pub struct ClientSummary {
     /// through the uplink, so under delay it trails the device by the delay's worth of motion
     /// (`device_op_max_m` grows with it); this distance grows only when the VE fails to follow.
     pub device_op_heard_max_m: f64,
+    /// RMS distance the device has moved since the pose the VE has heard of (device space, m): the device-OP
+    /// distance a VE sitting exactly on the device as heard would show. A VE that only follows what it has
+    /// heard cannot do better than this on average; less needs a VE that runs ahead of the hand (predicts it),
+    /// with energy the hand has not yet given.
+    pub device_unheard_rms_m: f64,
     /// RMS distance between the device and the local model's OP (the client's tracking error), device space, m.
     pub device_model_rms_m: f64,
     /// Fraction of active ticks with the command clamped at the device limit.
@@ -244,6 +249,9 @@ struct Participant<S: Space> {
     /// The device's pose by tick time since the VE's newest heard uplink, oldest first (`device_op_heard_max_m`).
     heard: VecDeque<(f64, OpPose<S>)>,
     heard_max: f64,
+    /// Sum of squares and count of the device's distance from its pose as heard (`device_unheard_rms_m`).
+    unheard_sum_sq: f64,
+    unheard_ticks: u64,
     model_sum_sq: f64,
     active_ticks: u64,
     /// Active ticks with a hand on the handle (the device-OP figures' count).
@@ -308,6 +316,8 @@ impl<S: Space> Session<S> {
                 op_max: 0.0,
                 heard: VecDeque::new(),
                 heard_max: 0.0,
+                unheard_sum_sq: 0.0,
+                unheard_ticks: 0,
                 model_sum_sq: 0.0,
                 active_ticks: 0,
                 held_ticks: 0,
@@ -550,6 +560,9 @@ impl<S: Space> Session<S> {
                 if u.heard_until_s > 0.0 && p.heard[0].0 <= u.heard_until_s {
                     let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
                     p.heard_max = p.heard_max.max(heard);
+                    let unheard = S::op_lin(&report.device_pose.difference(&p.heard[0].1)).norm() * scale;
+                    p.unheard_sum_sq += unheard * unheard;
+                    p.unheard_ticks += 1;
                 }
             }
         }
@@ -585,6 +598,7 @@ impl<S: Space> Session<S> {
                     device_op_rms_m: (p.op_sum_sq / p.held_ticks.max(1) as f64).sqrt(),
                     device_op_max_m: p.op_max,
                     device_op_heard_max_m: p.heard_max,
+                    device_unheard_rms_m: (p.unheard_sum_sq / p.unheard_ticks.max(1) as f64).sqrt(),
                     device_model_rms_m: (p.model_sum_sq / active).sqrt(),
                     saturated_fraction: p.saturated as f64 / active,
                     snapshots: stats.snapshots_accepted,
