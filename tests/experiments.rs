@@ -180,6 +180,19 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         r["goals"]["no_unstable_point_with_defaults"],
         points.iter().all(|p| p["method"] != "plain" || p["stable"] == true)
     );
+    // Without delay the VE hears the device a tick late: it has hardly moved; at 1 s it has toured on, and the
+    // VE, which follows what it heard, is no nearer than that on average (within the tour's turns).
+    let (first, last) = (find("soft", 0.0, "plain"), find("soft", 1000.0, "plain"));
+    assert!(f(&first["device_unheard_rms_mm"]) < 0.1, "{first}");
+    assert!(f(&last["device_unheard_rms_mm"]) > 10.0, "{last}");
+    assert!(f(&last["device_op_rms_mm"]) > 0.8 * f(&last["device_unheard_rms_mm"]), "{last}");
+    // The model-update rows (item 2): the free pull at a fixed 200 ms makes the testbed gain energy at 300 ms
+    // and 1 s one way; the default pull (at least two round trips) does not.
+    let rows = r["model_update"]["rows"].as_array().unwrap();
+    let row = |name: &str| rows.iter().find(|row| row["update"] == name).unwrap_or_else(|| panic!("{name}"));
+    assert!(row("fixed pull, no tank")["unstable"].as_u64().unwrap() > 0, "{rows:?}");
+    assert_eq!(row("default")["unstable"], 0, "{rows:?}");
+    assert_eq!(row("default")["sessions"], row("fixed pull, no tank")["sessions"]);
 }
 
 /// The delay goal in real time (`--quick`: the testbed on both devices at 100, 300, 500 and 1000 ms one way,

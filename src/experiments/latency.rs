@@ -16,8 +16,10 @@
 //!
 //! Each point is labelled by the one criterion of [`verdict`] (divergence including VE restores, sustained
 //! saturation, energy growth). Measured beside it: the device-OP distance in the device's space (what the hand
-//! feels), loop closure, clamped ticks, and the coupling's energy account when the passivity controller
-//! books it. A (scene, hand, method) **first fails** at the smallest delay where some network condition of
+//! feels) and its floor, how far the device had moved since the pose the VE had heard of (a VE that follows
+//! what it hears cannot be nearer on average), loop closure, clamped ticks, and the coupling's energy account
+//! when the passivity controller books it. The [`model_update`] rows add the local model's update: the
+//! free pull at a fixed 200 ms against the default, with and without its energy tank. A (scene, hand, method) **first fails** at the smallest delay where some network condition of
 //! the grid is unstable.
 
 use std::time::Duration;
@@ -33,9 +35,10 @@ use kinloop_server::core::VeConfig;
 
 use super::common::{round, session, significant, sweep, Options, Output, Report};
 use super::impedance;
+use super::model_update;
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, HeatMap, Legend, Series};
-use crate::harness::{ClientPlan, SessionPlan};
+use crate::harness::{ClientPlan, CoreEdit, SessionPlan};
 
 /// Simulated seconds per point: as long as the real-process test's sessions. (At 8 s the sweep missed the
 /// testbed tour's segment near 9 s where a firm wrist out-twists the `sim:paper` device's 0.2 N m, which
@@ -168,6 +171,9 @@ pub struct Measured {
     pub device_op_rms_m: f64,
     /// Device-local-model distance, RMS, device space (m).
     pub device_model_rms_m: f64,
+    /// How far the device has moved since the pose the VE has heard of, RMS, device space (m): the floor of
+    /// `device_op_rms_m` for a VE that does not run ahead of the hand (`ClientSummary::device_unheard_rms_m`).
+    pub device_unheard_rms_m: f64,
     /// VE state restores.
     pub ve_restores: u64,
     /// Fraction of active ticks clamped at the device's limit.
@@ -185,10 +191,16 @@ pub struct Measured {
 
 /// Runs one point.
 pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
+    measure_with(p, seconds, None)
+}
+
+/// Runs one point with a change to the client's settings.
+pub fn measure_with(p: &Point, seconds: f64, edit: Option<CoreEdit>) -> Result<Measured> {
     let (scene_name, op, _) = TARGETS[p.target];
     let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
     let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
     client.user = UserSpec::Hand(HandSpec::touring(p.hand));
+    client.configure = edit;
     let client = client.with_link(p.link());
     let ve = VeConfig { passivity: p.passivity, ..VeConfig::default() };
     let plan =
@@ -202,6 +214,7 @@ pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
         verdict: verdict::judge(&summary, &rec),
         device_op_rms_m: c.device_op_rms_m,
         device_model_rms_m: c.device_model_rms_m,
+        device_unheard_rms_m: c.device_unheard_rms_m,
         ve_restores: summary.ve_restores,
         clamped_fraction: c.saturated_fraction,
         non_finite: c.non_finite,
@@ -294,6 +307,7 @@ fn point_json(m: &Measured) -> Value {
         "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
         "device_op_heard_max_mm": round(m.verdict.device_op_heard_max_m * 1e3, 3),
         "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
+        "device_unheard_rms_mm": round(m.device_unheard_rms_m * 1e3, 3),
         "ve_restores": m.ve_restores,
         "max_closure_error_m": significant(m.verdict.max_closure_error_m, 3),
         "clamped_fraction": round(m.clamped_fraction, 4),
@@ -339,6 +353,20 @@ fn tracking_charts(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()
             let line = grid.delays_ms.iter().filter_map(|&d| clean(all, target, soft, passivity, d)).map(rms).collect();
             overview = overview.with(Series::line(format!("{} {}", TARGETS[target].2, method(passivity)), line));
         }
+    }
+    // A colour of its own: before the markers, which reuse the palette's first colours.
+    if let Some(&target) = grid.targets.first() {
+        let floor = grid
+            .delays_ms
+            .iter()
+            .filter_map(|&d| clean(all, target, soft, false, d))
+            .filter(|m| m.point.delay_ms > 0.0)
+            .map(|m| (m.point.delay_ms, m.device_unheard_rms_m * 1e3))
+            .collect();
+        overview = overview.with(Series::reference(
+            format!("{}: a VE exactly on the device as heard (no prediction)", TARGETS[target].2),
+            floor,
+        ));
     }
     for passivity in [false, true] {
         let unstable = grid
@@ -494,6 +522,7 @@ pub fn run(options: &Options) -> Result<Report> {
     stability_chart(&mut out, &grid, &all)?;
     energy_chart(&mut out, &grid, &all)?;
     impedance_chart(&mut out, &grid, &all)?;
+    let model_update = model_update::run(&mut out, options)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();
@@ -543,6 +572,14 @@ pub fn run(options: &Options) -> Result<Report> {
             .map(|m| round(m.device_op_rms_m * 1e3, 2))
     };
     let (rms_100, rms_1000) = (goal_rms(100.0, false), goal_rms(1000.0, false));
+    let floor = |delay_ms: f64| {
+        grid.hands
+            .contains(&HandKind::Soft)
+            .then(|| clean(&all, 0, HandKind::Soft, false, delay_ms))
+            .flatten()
+            .map(|m| round(m.device_unheard_rms_m * 1e3, 2))
+    };
+    let (floor_100, floor_1000) = (floor(100.0), floor(1000.0));
     let goals = json!({
         "no_unstable_point_with_defaults": unstable(false) == 0,
         "unstable_points_with_defaults": unstable(false),
@@ -551,11 +588,14 @@ pub fn run(options: &Options) -> Result<Report> {
         "testbed_soft_device_op_rms_mm_at_1000ms": rms_1000,
         "testbed_soft_device_op_rms_mm_at_1000ms_goal_met": rms_1000.map(|r| r <= GOAL_RMS_1S_M * 1e3),
         "testbed_soft_device_op_rms_mm_with_passivity": {"100ms": goal_rms(100.0, true), "1000ms": goal_rms(1000.0, true)},
+        "testbed_soft_device_unheard_rms_mm": {"100ms": floor_100, "1000ms": floor_1000},
+        "device_unheard_rms_means": "how far the device had moved since the pose the VE had heard of: the device-OP distance of a VE sitting exactly on the device as heard, which a VE that does not run ahead of the hand cannot beat on average",
     });
     let answer = format!(
         "Up to {max_delay} ms one-way, {} of {} points are unstable with plain coupling (the default), {} of {} with the \
          passivity controller. First failing delay per scene, hand and method (any jitter and loss of the grid): {}. \
-         Testbed, soft hand, clean network, plain: device-OP RMS {} mm at 100 ms (goal 3), {} mm at 1 s (goal 25).",
+         Testbed, soft hand, clean network, plain: device-OP RMS {} mm at 100 ms (goal 3), {} mm at 1 s (goal 25); \
+         the device had moved {} mm and {} mm (RMS) from the pose the VE had heard of.",
         unstable(false),
         per_method(false),
         unstable(true),
@@ -563,10 +603,13 @@ pub fn run(options: &Options) -> Result<Report> {
         table.join("; "),
         rms_100.map_or("n/a".into(), |r| r.to_string()),
         rms_1000.map_or("n/a".into(), |r| r.to_string()),
+        floor_100.map_or("n/a".into(), |r| r.to_string()),
+        floor_1000.map_or("n/a".into(), |r| r.to_string()),
     );
     let results = json!({
-        "answer": answer,
+        "answer": format!("{answer} {}", model_update["answer"].as_str().unwrap_or_default()),
         "goals": goals,
+        "model_update": model_update,
         "first_failures": first_failures,
         "criterion": verdict::criterion_json(),
         "grid": {
@@ -589,7 +632,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Network delay, jitter and loss with default settings, with and without the passivity controller",
-        "about 1.5 to 2 minutes on this 2-core machine shared with other work (1728 sessions of 10 s, --threads 2); --quick (32 sessions) 2 to 3 s",
+        "about 1 to 2 minutes on this 2-core machine shared with other work (1728 sessions of 10 s and 144 model-update sessions, --threads 2); --quick (40 sessions) 2 to 3 s",
         results,
     )
 }

@@ -1,0 +1,170 @@
+//! The `latency` experiment's model-update rows (issue 22, item 2): does the local model's pull toward the
+//! delayed VE make energy?
+//!
+//! The pull compares the VE's state with the model's state it answered (`sync` in the client's core) and
+//! corrects what differs over a time constant τ; what it corrects comes back a round trip `T` later, and such
+//! a loop is stable only for `T < π τ / 2`. With τ fixed at 200 ms the testbed gained energy from a few
+//! hundred milliseconds one way. Each row here runs the grid's clean-network sessions (soft and firm hands,
+//! every scene, [`DELAYS_MS`]) with one way of pulling:
+//! - `fixed pull, no tank`: τ = 200 ms at every delay, the update unbounded;
+//! - `fixed pull, tank`: the same with the energy tank that pays for each correction
+//!   (`CoreConfig::passive_update`), which bounds what the update puts into the device-model coupling;
+//! - `default, no tank`: τ of at least two round trips (`CoreConfig::free_blend_round_trips`);
+//! - `default`: both, as `kinloop-client` runs.
+
+use anyhow::Result;
+use serde_json::{json, Value};
+
+use kinloop_client::user::HandKind;
+
+use super::common::{round, sweep, Options, Output};
+use super::latency::{measure_with, Loss, Measured, Network, Point, SECONDS, TARGETS};
+use crate::charts::HeatMap;
+use crate::harness::CoreEdit;
+
+/// One-way delays of the rows (ms).
+pub const DELAYS_MS: [f64; 6] = [100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
+
+/// A way of pulling the local model toward the VE.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Update {
+    /// τ = 200 ms at every delay, no tank.
+    FixedBare,
+    /// τ = 200 ms at every delay, with the tank.
+    FixedTank,
+    /// τ ≥ two round trips, no tank.
+    ScaledBare,
+    /// τ ≥ two round trips with the tank: the default.
+    Default,
+}
+
+impl Update {
+    /// Every way, the default last.
+    pub const ALL: [Update; 4] = [Update::FixedBare, Update::FixedTank, Update::ScaledBare, Update::Default];
+
+    /// Name in summaries and charts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Update::FixedBare => "fixed pull, no tank",
+            Update::FixedTank => "fixed pull, tank",
+            Update::ScaledBare => "default, no tank",
+            Update::Default => "default",
+        }
+    }
+
+    fn edit(self) -> Option<CoreEdit> {
+        let (fixed, tank) = match self {
+            Update::FixedBare => (true, false),
+            Update::FixedTank => (true, true),
+            Update::ScaledBare => (false, false),
+            Update::Default => return None,
+        };
+        Some(CoreEdit::new(move |c| {
+            if fixed {
+                c.free_blend_round_trips = 0.0;
+            }
+            c.passive_update = tank;
+        }))
+    }
+}
+
+/// Runs the rows, draws their stability map, and returns their summary.
+pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
+    let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
+    let hands = options.pick(vec![HandKind::Soft, HandKind::Firm], vec![HandKind::Soft]);
+    let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![300.0, 1000.0]);
+    let clean = Network { jitter_ms: 0.0, loss: Loss::None };
+    let mut points = Vec::new();
+    for &update in &Update::ALL {
+        for &target in &targets {
+            for &hand in &hands {
+                for &delay_ms in &delays {
+                    points.push((update, Point { target, hand, delay_ms, network: clean, passivity: false }));
+                }
+            }
+        }
+    }
+    let all: Vec<(Update, Measured)> =
+        sweep("latency: model update", &points, options.threads, options.progress, |(update, p)| {
+            Ok((*update, measure_with(p, SECONDS, update.edit())?))
+        })?;
+
+    let mut rows: Vec<(Update, usize, HandKind)> = Vec::new();
+    for &u in &Update::ALL {
+        for &t in &targets {
+            for &h in &hands {
+                rows.push((u, t, h));
+            }
+        }
+    }
+    let mut map = HeatMap::new(
+        "Model update: 1 = unstable, clean network (fixed: the free pull at 200 ms whatever the delay)",
+        rows.iter().map(|&(u, t, h)| format!("{} {} {}", TARGETS[t].2, h.name(), u.name())).collect(),
+        delays.iter().map(|d| format!("{d} ms")).collect(),
+    );
+    let find = |u: Update, t: usize, h: HandKind, d: f64| {
+        all.iter().find(|(w, m)| *w == u && m.point.target == t && m.point.hand == h && m.point.delay_ms == d)
+    };
+    for (i, &(u, t, h)) in rows.iter().enumerate() {
+        for (j, &d) in delays.iter().enumerate() {
+            if let Some((_, m)) = find(u, t, h, d) {
+                map.set(i, j, if m.verdict.stable { 0.0 } else { 1.0 }, m.verdict.stable);
+            }
+        }
+    }
+    out.heat_map("stability_model_update", &map)?;
+
+    let unstable = |u: Update| all.iter().filter(|(w, m)| *w == u && !m.verdict.stable).count();
+    let per = |u: Update| all.iter().filter(|(w, _)| *w == u).count();
+    let first_unstable = |u: Update| {
+        all.iter().filter(|(w, m)| *w == u && !m.verdict.stable).map(|(_, m)| m.point.delay_ms).reduce(f64::min)
+    };
+    let rows_json: Vec<Value> = Update::ALL
+        .iter()
+        .map(|&u| {
+            json!({
+                "update": u.name(),
+                "unstable": unstable(u),
+                "sessions": per(u),
+                "first_unstable_delay_ms": first_unstable(u),
+            })
+        })
+        .collect();
+    let answer = format!(
+        "The local model's update (clean network, soft and firm hands, {} ms one way): {}.",
+        delays.iter().map(|d| d.to_string()).collect::<Vec<_>>().join("/"),
+        Update::ALL
+            .iter()
+            .map(|&u| format!(
+                "{} {} of {} unstable{}",
+                u.name(),
+                unstable(u),
+                per(u),
+                first_unstable(u).map_or(String::new(), |d| format!(" (from {d} ms)"))
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let points_json: Vec<Value> = all
+        .iter()
+        .map(|(u, m)| {
+            json!({
+                "update": u.name(),
+                "scene": TARGETS[m.point.target].0,
+                "hand": m.point.hand.name(),
+                "delay_ms": m.point.delay_ms,
+                "stable": m.verdict.stable,
+                "reasons": m.verdict.reasons,
+                "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
+                "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
+                "energy_excess_j": m.verdict.energy_excess_j,
+            })
+        })
+        .collect();
+    Ok(json!({
+        "answer": answer,
+        "rows": rows_json,
+        "points": points_json,
+        "setup": "clean network (no jitter or loss), the grid's sessions otherwise; fixed: CoreConfig::free_blend_round_trips = 0 (the free pull at its configured 200 ms at every delay); tank: CoreConfig::passive_update",
+    }))
+}
