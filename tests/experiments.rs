@@ -197,9 +197,10 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
 
 /// The delay goal in real time (`--quick`: the testbed on both devices at 100, 300, 500 and 1000 ms one way,
 /// 3 s each): every session reports what the goal is judged on, the answer counts the ones that meet it, and
-/// at 100 and 300 ms both devices meet it (no VE restore, loops closed, at most 5 % of ticks clamped).
+/// every one meets it (no VE restore, loops closed, at most 5 % of ticks clamped). Before the client took its
+/// first delay estimate from the handshake, the Falcon at 1 s clamped 17 % of its ticks in 10 s sessions.
 #[test]
-fn latency_live_sessions_report_the_goal_and_meet_it_at_moderate_delay() {
+fn latency_live_sessions_report_the_goal_and_meet_it() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::LatencyLive, dir.path());
     let r = &report.summary["results"];
@@ -212,9 +213,7 @@ fn latency_live_sessions_report_the_goal_and_meet_it_at_moderate_delay() {
             && f(&p["max_closure_error_m"]) <= 1e-6
             && f(&p["clamped_fraction"]) <= 0.05;
         assert_eq!(p["meets"], meets, "{p}");
-        if f(&p["delay_ms"]) <= 300.0 {
-            assert_eq!(p["meets"], true, "{p}");
-        }
+        assert_eq!(p["meets"], true, "{p}");
     }
     let meeting = points.iter().filter(|p| p["meets"] == true).count();
     assert!(r["answer"].as_str().unwrap().starts_with(&format!("{meeting} of 8 ")), "{}", r["answer"]);
