@@ -60,7 +60,7 @@ use deadband::Deadband;
 use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
-use passive_update::{coupling_energy, damper_dissipation, CouplingSprings, UpdateTank};
+use passive_update::{damper_dissipation, energy_change, CouplingSprings, UpdateTank};
 use safety::{force_ratio, limit_wrench_parts, mask_unactuated, usable_state, within, OutputGate, WrenchLimits};
 use sync::History;
 
@@ -828,11 +828,8 @@ impl<S: Space> HapticCore<S> {
     /// What correcting the model by `moved` and `sped` would change in the energy the device-model coupling
     /// and the model hold (`passive_update`), the device at `device_pose`.
     fn update_cost(&self, device_pose: &OpPose<S>, moved: &S::OpVec, sped: &S::OpVec) -> f64 {
-        let springs = self.coupling_springs();
         let error = self.controlled(device_pose.difference(&self.model.pose()));
-        let twist = self.model.twist();
-        coupling_energy::<S>(&springs, &(error - self.controlled(*moved)), &(twist + *sped))
-            - coupling_energy::<S>(&springs, &error, &twist)
+        energy_change::<S>(&self.coupling_springs(), &error, &self.model.twist(), &self.controlled(*moved), sped)
     }
 
     /// The springs of the device-model coupling as the controllers render them now.

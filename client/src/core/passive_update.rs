@@ -47,8 +47,27 @@ pub(crate) struct CouplingSprings<'a, S: Space> {
     pub inertia: &'a S::OpMat,
 }
 
+/// What moving the model by `moved` and changing its twist by `sped` changes in [`coupling_energy`], with
+/// the device-model error `error` and the model twist `twist` before (the error becomes `error − moved`):
+/// `mᵀK(½m − e) + k_j mᵀTP̃T(½m − e) + sᵀΛ̂(ẋ + ½s)`, the difference of the two energies in closed form.
+pub(crate) fn energy_change<S: Space>(
+    springs: &CouplingSprings<S>,
+    error: &S::OpVec,
+    twist: &S::OpVec,
+    moved: &S::OpVec,
+    sped: &S::OpVec,
+) -> f64 {
+    let stretch = *moved * 0.5 - *error;
+    let position = stretch.dot(&hadamard::<S>(springs.position_stiffness, moved));
+    let joints = springs.joint_stiffness
+        * stretch.dot(&project_as_stiffness::<S>(springs.projector, springs.length_scale, moved));
+    let kinetic = sped.dot(&(*springs.inertia * (*twist + *sped * 0.5)));
+    position + joints + kinetic
+}
+
 /// Energy the device-model coupling and the local model hold with device-model error `error`
 /// (`x_d ⊖ x_m`) and model twist `twist`: `½ eᵀ K_pc e + ½ k_j eᵀ T P̃ T e + ½ ẋᵀ Λ̂ ẋ`.
+#[cfg(test)]
 pub(crate) fn coupling_energy<S: Space>(springs: &CouplingSprings<S>, error: &S::OpVec, twist: &S::OpVec) -> f64 {
     let position = error.dot(&hadamard::<S>(springs.position_stiffness, error));
     let joints =
@@ -132,6 +151,19 @@ mod tests {
             0.5 * (100.0 * 1e-4 + 200.0 * 4e-4 + 0.5 * 0.01) + 0.5 * 400.0 * 1e-4 + 0.5 * (2.0 * 0.01 + 0.01 * 4.0);
         let got = coupling_energy(&springs(&k, &p, &m), &e, &v);
         assert!((got - expected).abs() < 1e-12, "{got} vs {expected}");
+    }
+
+    #[test]
+    fn the_energy_change_in_closed_form_is_the_difference_of_the_energies() {
+        let k = Vector3::new(300.0, 120.0, 1.5);
+        let p = Matrix3::new(0.5, 0.5, 0.0, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0);
+        let m = Matrix3::new(1.5, 0.2, 0.01, 0.2, 0.9, -0.02, 0.01, -0.02, 0.03);
+        let s = springs(&k, &p, &m);
+        let (e, v) = (Vector3::new(0.003, -0.002, 0.04), Vector3::new(0.05, -0.1, 0.7));
+        let (moved, sped) = (Vector3::new(-0.001, 0.004, -0.02), Vector3::new(0.02, 0.03, -0.4));
+        let difference = coupling_energy(&s, &(e - moved), &(v + sped)) - coupling_energy(&s, &e, &v);
+        let closed = energy_change(&s, &e, &v, &moved, &sped);
+        assert!((closed - difference).abs() < 1e-12 * difference.abs().max(1e-3), "{closed} vs {difference}");
     }
 
     #[test]
