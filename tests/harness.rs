@@ -301,19 +301,23 @@ fn default_sessions_at_300_ms_one_way_are_stable() {
     }
 }
 
-/// The testbed, soft hand, 300 ms one way, default settings but for the free directions' pull.
-fn testbed_soft_at_300_ms(
+/// The testbed toured by `hand` for 10 s over `delay_ms` one way (no jitter or loss), default settings but
+/// for `edit`.
+fn testbed_tour(
+    hand: HandKind,
+    delay_ms: u64,
+    seed: u64,
     edit: Option<kinloop::harness::CoreEdit>,
 ) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
     use kinloop_client::device::DevicePreset;
     let mut client = ClientPlan::new("user", "link2", DevicePreset::Paper);
-    client.user = UserSpec::Hand(HandSpec::touring(HandKind::Soft));
+    client.user = UserSpec::Hand(HandSpec::touring(hand));
     client.configure = edit;
-    let client = client.with_link(LinkConfig { delay: Duration::from_millis(300), seed: 3, ..LinkConfig::default() });
+    let link = LinkConfig { delay: Duration::from_millis(delay_ms), seed, ..LinkConfig::default() };
     let plan = SessionPlan {
         scene: kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap(),
         ve: VeConfig::default(),
-        clients: vec![client],
+        clients: vec![client.with_link(link)],
         duration: Duration::from_secs(10),
         record_every: 1,
     };
@@ -333,7 +337,7 @@ fn a_fixed_200_ms_pull_toward_the_ve_gains_energy_at_300_ms_one_way() {
         c.free_blend_round_trips = 0.0;
         c.free_blend_time_constant = Duration::from_millis(200);
     });
-    let (summary, rec) = testbed_soft_at_300_ms(Some(fixed));
+    let (summary, rec) = testbed_tour(HandKind::Soft, 300, 3, Some(fixed));
     let verdict = judge(&summary, &rec);
     assert!(!verdict.stable && verdict.reasons.contains(&"energy growth"), "{verdict:?}");
 }
@@ -344,7 +348,7 @@ fn a_fixed_200_ms_pull_toward_the_ve_gains_energy_at_300_ms_one_way() {
 /// a fifth of that floor.
 #[test]
 fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
-    let (summary, rec) = testbed_soft_at_300_ms(None);
+    let (summary, rec) = testbed_tour(HandKind::Soft, 300, 3, None);
     let c = &summary.clients[0];
     let samples = &rec.clients[0];
     let lag = 300;
@@ -378,23 +382,9 @@ fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
 fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane() {
     use kinloop::experiments::verdict::judge;
     use kinloop::harness::CoreEdit;
-    use kinloop_client::device::DevicePreset;
     let session = |reach: Option<f64>| {
-        let mut client = ClientPlan::new("user", "link2", DevicePreset::Paper);
-        client.user = UserSpec::Hand(HandSpec::touring(HandKind::Firm));
-        if let Some(reach) = reach {
-            client.configure = Some(CoreEdit::new(move |c| c.linearization_reach = reach));
-        }
-        let client =
-            client.with_link(LinkConfig { delay: Duration::from_millis(500), seed: 7, ..LinkConfig::default() });
-        let plan = SessionPlan {
-            scene: kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap(),
-            ve: VeConfig::default(),
-            clients: vec![client],
-            duration: Duration::from_secs(10),
-            record_every: 1,
-        };
-        let (summary, rec) = run(&plan, &mut |_| {}).unwrap();
+        let edit = reach.map(|reach| CoreEdit::new(move |c| c.linearization_reach = reach));
+        let (summary, rec) = testbed_tour(HandKind::Firm, 500, 7, edit);
         judge(&summary, &rec)
     };
     let softened = session(None);
