@@ -826,18 +826,22 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// What correcting the model by `moved` and `sped` would change in the energy the device-model coupling
-    /// and the model hold (`passive_update`), the device at `device_pose`.
-    fn update_cost(&self, device_pose: &OpPose<S>, moved: &S::OpVec, sped: &S::OpVec) -> f64 {
+    /// and the model hold (`passive_update`), the device at `device_pose` (`sensed`: it measures the hand).
+    fn update_cost(&self, device_pose: &OpPose<S>, sensed: bool, moved: &S::OpVec, sped: &S::OpVec) -> f64 {
         let error = self.controlled(device_pose.difference(&self.model.pose()));
-        energy_change::<S>(&self.coupling_springs(), &error, &self.model.twist(), &self.controlled(*moved), sped)
+        let springs = self.coupling_springs(sensed);
+        energy_change::<S>(&springs, &error, &self.model.twist(), &self.controlled(*moved), sped)
     }
 
-    /// The springs of the device-model coupling as the controllers render them now.
-    fn coupling_springs(&self) -> CouplingSprings<'_, S> {
-        let joint_stiffness = match self.config.constraint_mode {
-            ConstraintMode::Stiffness => self.gains.joint_stiffness * self.linearization_trust(),
-            // The acceleration-zeroing controller holds no spring.
-            ConstraintMode::Impedance => 0.0,
+    /// The springs of the device-model coupling as the controllers render them now (`sensed`: the device
+    /// measures the hand's wrench).
+    fn coupling_springs(&self, sensed: bool) -> CouplingSprings<'_, S> {
+        // The acceleration-zeroing controller holds no spring, when it has a hand wrench to work with (see
+        // step 4 of `tick`); without one the joints are held stiff.
+        let hand_known = sensed || self.config.hand_observer_bandwidth > 0.0;
+        let joint_stiffness = match (self.config.constraint_mode, hand_known) {
+            (ConstraintMode::Impedance, true) => 0.0,
+            _ => self.gains.joint_stiffness * self.linearization_trust(),
         };
         CouplingSprings {
             position_stiffness: &self.gains.position_stiffness,
@@ -848,7 +852,8 @@ impl<S: Space> HapticCore<S> {
         }
     }
 
-    /// `error` with the axes no controller acts on zeroed (a pinned grasp's angles).
+    /// `error` with the axes no controller acts on zeroed: held as through a pin (see
+    /// `ConstraintFrame::set_target`), no controller acts on angles the device can neither show nor push.
     fn controlled(&self, mut error: S::OpVec) -> S::OpVec {
         if self.pinned() {
             for i in <S::Point as VecOps>::LEN..S::DIM {
@@ -918,7 +923,8 @@ impl<S: Space> HapticCore<S> {
             }
             let (mut moved, mut sped) = model::split_correction::<S>(&pose, &twist, p, l, constrained, free);
             if self.config.passive_update {
-                let fraction = self.tank.admit(self.update_cost(&device_pose, &moved, &sped));
+                let sensed = device.hand_wrench.is_some();
+                let fraction = self.tank.admit(self.update_cost(&device_pose, sensed, &moved, &sped));
                 if fraction < 1.0 {
                     self.stats.updates_limited += 1;
                 }
@@ -962,17 +968,8 @@ impl<S: Space> HapticCore<S> {
         // 4. Controllers.
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
-        let mut error = device_pose.difference(&model_pose);
-        let mut error_rate = device_twist - model_twist;
-        if self.pinned() {
-            // Held as through a pin (see `ConstraintFrame::set_target`): no controller acts on angles the
-            // device can neither show nor push.
-            let lin = <S::Point as VecOps>::LEN;
-            for i in lin..S::DIM {
-                error[i] = 0.0;
-                error_rate[i] = 0.0;
-            }
-        }
+        let error = self.controlled(device_pose.difference(&model_pose));
+        let error_rate = self.controlled(device_twist - model_twist);
         let g = &self.gains;
         let (l, p) = (self.length_scale, &self.frame.projector);
         // The constrained directions soften as the model runs away from where its terms were computed
