@@ -17,7 +17,7 @@ use serde_json::{json, Value};
 
 use kinloop_client::user::HandKind;
 
-use super::common::{round, sweep, Options, Output};
+use super::common::{round, significant, sweep, Options, Output};
 use super::latency::{measure_with, Loss, Measured, Network, Point, SECONDS, TARGETS};
 use crate::charts::HeatMap;
 use crate::harness::CoreEdit;
@@ -157,7 +157,7 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
                 "reasons": m.verdict.reasons,
                 "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
                 "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
-                "energy_excess_j": m.verdict.energy_excess_j,
+                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
             })
         })
         .collect();
