@@ -19,8 +19,8 @@
 //! feels) and its floor, how far the device had moved since the pose the VE had heard of (a VE that follows
 //! what it hears cannot be nearer on average), loop closure, clamped ticks, and the coupling's energy account
 //! when the passivity controller books it. The [`model_update`] rows add the local model's update: the
-//! free pull at a fixed 200 ms against the default, with and without its energy tank. A (scene, hand, method) **first fails** at the smallest delay where some network condition of
-//! the grid is unstable.
+//! free pull at a fixed 200 ms against the default, with and without its energy tank. A (scene, hand,
+//! method) **first fails** at the smallest delay where some network condition of the grid is unstable.
 
 use std::time::Duration;
 
@@ -564,21 +564,17 @@ pub fn run(options: &Options) -> Result<Report> {
     let unstable = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity && !m.verdict.stable).count();
     let per_method = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity).count();
     let max_delay = grid.delays_ms.iter().copied().fold(0.0, f64::max);
-    let goal_rms = |delay_ms: f64, passivity: bool| {
+    // A distance (mm) of the testbed's soft hand on a clean network, when the grid has that point.
+    let testbed_soft_mm = |delay_ms: f64, passivity: bool, metres: fn(&Measured) -> f64| {
         grid.hands
             .contains(&HandKind::Soft)
             .then(|| clean(&all, 0, HandKind::Soft, passivity, delay_ms))
             .flatten()
-            .map(|m| round(m.device_op_rms_m * 1e3, 2))
+            .map(|m| round(metres(m) * 1e3, 2))
     };
+    let goal_rms = |delay_ms: f64, passivity: bool| testbed_soft_mm(delay_ms, passivity, |m| m.device_op_rms_m);
     let (rms_100, rms_1000) = (goal_rms(100.0, false), goal_rms(1000.0, false));
-    let floor = |delay_ms: f64| {
-        grid.hands
-            .contains(&HandKind::Soft)
-            .then(|| clean(&all, 0, HandKind::Soft, false, delay_ms))
-            .flatten()
-            .map(|m| round(m.device_unheard_rms_m * 1e3, 2))
-    };
+    let floor = |delay_ms: f64| testbed_soft_mm(delay_ms, false, |m| m.device_unheard_rms_m);
     let (floor_100, floor_1000) = (floor(100.0), floor(1000.0));
     let goals = json!({
         "no_unstable_point_with_defaults": unstable(false) == 0,

@@ -74,42 +74,36 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
     let hands = options.pick(vec![HandKind::Soft, HandKind::Firm], vec![HandKind::Soft]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![300.0, 1000.0]);
     let clean = Network { jitter_ms: 0.0, loss: Loss::None };
-    let mut points = Vec::new();
+    let mut rows: Vec<(Update, usize, HandKind)> = Vec::new();
     for &update in &Update::ALL {
         for &target in &targets {
             for &hand in &hands {
-                for &delay_ms in &delays {
-                    points.push((update, Point { target, hand, delay_ms, network: clean, passivity: false }));
-                }
+                rows.push((update, target, hand));
             }
         }
     }
+    // Row-major: a row's delays one after the other.
+    let points: Vec<(Update, Point)> = rows
+        .iter()
+        .flat_map(|&(update, target, hand)| {
+            delays
+                .iter()
+                .map(move |&delay_ms| (update, Point { target, hand, delay_ms, network: clean, passivity: false }))
+        })
+        .collect();
     let all: Vec<(Update, Measured)> =
         sweep("latency: model update", &points, options.threads, options.progress, |(update, p)| {
             Ok((*update, measure_with(p, SECONDS, update.edit())?))
         })?;
 
-    let mut rows: Vec<(Update, usize, HandKind)> = Vec::new();
-    for &u in &Update::ALL {
-        for &t in &targets {
-            for &h in &hands {
-                rows.push((u, t, h));
-            }
-        }
-    }
     let mut map = HeatMap::new(
         "Model update: 1 = unstable, clean network (fixed: the free pull at 200 ms whatever the delay)",
         rows.iter().map(|&(u, t, h)| format!("{} {} {}", TARGETS[t].2, h.name(), u.name())).collect(),
         delays.iter().map(|d| format!("{d} ms")).collect(),
     );
-    let find = |u: Update, t: usize, h: HandKind, d: f64| {
-        all.iter().find(|(w, m)| *w == u && m.point.target == t && m.point.hand == h && m.point.delay_ms == d)
-    };
-    for (i, &(u, t, h)) in rows.iter().enumerate() {
-        for (j, &d) in delays.iter().enumerate() {
-            if let Some((_, m)) = find(u, t, h, d) {
-                map.set(i, j, if m.verdict.stable { 0.0 } else { 1.0 }, m.verdict.stable);
-            }
+    for (i, row) in all.chunks(delays.len()).enumerate() {
+        for (j, (_, m)) in row.iter().enumerate() {
+            map.set(i, j, if m.verdict.stable { 0.0 } else { 1.0 }, m.verdict.stable);
         }
     }
     out.heat_map("stability_model_update", &map)?;
@@ -131,7 +125,8 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
         })
         .collect();
     let answer = format!(
-        "The local model's update (clean network, soft and firm hands, {} ms one way): {}.",
+        "The local model's update (clean network, hands {}, {} ms one way): {}.",
+        hands.iter().map(|h| h.name()).collect::<Vec<_>>().join("/"),
         delays.iter().map(|d| d.to_string()).collect::<Vec<_>>().join("/"),
         Update::ALL
             .iter()

@@ -975,8 +975,12 @@ impl<S: Space> HapticCore<S> {
         // The constrained directions soften as the model runs away from where its terms were computed
         // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
         let trust = self.linearization_trust();
-        let pc = position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate);
-        let pc = if trust < 1.0 { pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust) } else { pc };
+        let soften = |w: S::OpVec| if trust < 1.0 { w - project_wrench::<S>(p, l, &w) * (1.0 - trust) } else { w };
+        let pc = soften(position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate));
+        // The dampers' part of it, which with the joint-constraint controller's fills the update's tank
+        // (`passive_update`).
+        let zero = S::OpVec::zero();
+        let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         let imp = match sensed {
             Some(hand) => {
                 impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &self.frame.bias, &hand)
@@ -986,8 +990,9 @@ impl<S: Space> HapticCore<S> {
         let (contacts, live) = self.model.contacts();
         let contact = contact_feedforward::<S>(contacts, live, &self.frame.free_inertia);
         // `pc_felt`: what the device receives from the position channels once the joint-constraint controller
-        // has acted, so what the local model gets back as their reaction (step 5).
-        let (jc, pc_felt) = match (self.config.constraint_mode, hand_for_constraint) {
+        // has acted, so what the local model gets back as their reaction (step 5); `damping_felt` the same
+        // of the dampers, the joint-constraint controller's included.
+        let (jc, pc_felt, damping_felt) = match (self.config.constraint_mode, hand_for_constraint) {
             (ConstraintMode::Impedance, Some(hand)) => (
                 joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact)),
                 // The acceleration-zeroing controller cancels the channels along the constrained directions:
@@ -995,22 +1000,17 @@ impl<S: Space> HapticCore<S> {
                 // model (and, through the uplink, the VE) along directions the joints hold with K_pc times a
                 // drift that grows without bound in this mode (Fig 7b): 80 N on a 10 N device after 5 s.
                 pc - project_wrench::<S>(p, l, &pc),
+                pc_damping - project_wrench::<S>(p, l, &pc_damping),
             ),
             // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
-            _ => (joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate), pc),
+            _ => (
+                joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate),
+                pc,
+                pc_damping + joint_constraint_stiffness::<S>(p, l, 0.0, g.joint_damping, &zero, &error_rate) * trust,
+            ),
         };
         let jc = if trust < 1.0 { jc * trust } else { jc };
         let requested = pc + jc + imp + contact;
-        // The dampers' part of what the device receives: what fills the update's tank (`passive_update`).
-        let damping_wrench = {
-            let zero = S::OpVec::zero();
-            let pc = position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate);
-            let pc = if trust < 1.0 { pc - project_wrench::<S>(p, l, &pc) * (1.0 - trust) } else { pc };
-            match (self.config.constraint_mode, hand_for_constraint) {
-                (ConstraintMode::Impedance, Some(_)) => pc - project_wrench::<S>(p, l, &pc),
-                _ => pc + joint_constraint_stiffness::<S>(p, l, 0.0, g.joint_damping, &zero, &error_rate) * trust,
-            }
-        };
 
         // 5. Safety.
         let mut command = S::OpVec::zero();
@@ -1033,7 +1033,7 @@ impl<S: Space> HapticCore<S> {
             clamp_scale = scales.min();
             self.reaction = -scales.apply::<S>(&mask_unactuated::<S>(&pc_felt, &self.limits)) * gain;
         }
-        self.tank.fill(damper_dissipation::<S>(&error_rate, &damping_wrench, gain * clamp_scale, dt_s));
+        self.tank.fill(damper_dissipation::<S>(&error_rate, &damping_felt, gain * clamp_scale, dt_s));
         if clamp_scale < 1.0 {
             flags |= uplink_flags::CLAMPED;
             self.stats.clamped_ticks += 1;

@@ -33,7 +33,7 @@ use super::controllers::{hadamard, project_as_stiffness};
 /// more than a hand would notice as a kick.
 pub const TANK_CAPACITY_J: f64 = 0.01;
 
-/// The springs and the free motion whose stored energy a correction changes.
+/// The springs and the model motion whose stored energy a correction changes.
 pub(crate) struct CouplingSprings<'a, S: Space> {
     /// Position channels' stiffness `K_pc`, per axis.
     pub position_stiffness: &'a S::OpVec,

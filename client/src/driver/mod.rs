@@ -828,8 +828,7 @@ async fn serve_session<S: Space>(
     // session's first tick rather than from the first pong, a round trip later. (At 1 s one way the first
     // two seconds pulled the local model toward the VE as fast as on a LAN, and the testbed with a Falcon
     // clamped 2-10 % of its ticks where virtual time, whose client knows its delay, clamped none.)
-    let handshake_rtt = session.connection.rtt();
-    shared.one_way_delay_ns.store(u64::try_from(handshake_rtt.as_nanos() / 2).unwrap_or(u64::MAX), Ordering::Relaxed);
+    shared.set_round_trip(session.connection.rtt());
     let scene = &session.welcome.scene;
     let shape = scene.shape();
     let mut receiver = DatagramReceiver::new(session.connection.clone(), shape);
@@ -853,8 +852,8 @@ async fn serve_session<S: Space>(
             message = session.control.recv() => match message {
                 Some(Ok(Control::Pong { t_s, .. })) => {
                     let rtt_ms = (epoch.elapsed().as_secs_f64() - t_s) * 1e3;
-                    if rtt_ms.is_finite() && rtt_ms >= 0.0 {
-                        shared.one_way_delay_ns.store((rtt_ms * 0.5e6) as u64, Ordering::Relaxed);
+                    if let Ok(rtt) = Duration::try_from_secs_f64(rtt_ms * 1e-3) {
+                        shared.set_round_trip(rtt);
                         if let Ok(mut r) = net.rtt_ms.lock() {
                             if r.len() < 100_000 {
                                 r.push(rtt_ms);

@@ -41,6 +41,11 @@ pub struct LoopShared {
 }
 
 impl LoopShared {
+    /// Takes a round trip measured by the network side: the loop's core predicts by half of it.
+    pub fn set_round_trip(&self, rtt: Duration) {
+        self.one_way_delay_ns.store(u64::try_from(rtt.as_nanos() / 2).unwrap_or(u64::MAX), Ordering::Relaxed);
+    }
+
     /// Largest `|F| / F_max` commanded so far.
     pub fn max_force_ratio(&self) -> f64 {
         f64::from_bits(self.max_force_ratio_bits.load(Ordering::Relaxed))
