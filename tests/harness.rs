@@ -214,15 +214,17 @@ fn random_participants_and_networks_keep_sessions_sound() {
 /// The paper's graphics-controller gains (angular 10⁴ N·m/rad, 10⁴ N·m·s/rad, the largest its testbed
 /// allows; `VeConfig::paper`, no longer the default) destabilize the Watt six-bar's `link5`, an OP that turns
 /// about a nearly fixed point: with the paper's user and 6 ms of jitter the VE has to restore itself again
-/// and again. The passivity observer/controller on each coupling (`--passivity on`) keeps the same session
-/// stable and the loop closed.
+/// and again. The per-axis passivity controller (`VeConfig::passivity_per_axis`), which scales only the axis
+/// that generates and leaves it free, keeps the same session stable and the loop closed. (The default port
+/// controller does not: the client's received energy grows with the shaking and pays for the angular axis.)
 #[test]
-fn the_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
+fn the_per_axis_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
     let session = |passivity: bool| {
         let mut plan = SessionPlan::paper().unwrap();
         plan.scene = kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap();
         plan.record_every = 0;
         plan.ve.passivity = passivity;
+        plan.ve.passivity_per_axis = passivity;
         let mut user = ClientPlan::paper("u");
         user.op = "link5".into();
         // One to one in position; the paper's device cannot hold link5's weight at force scale 1.

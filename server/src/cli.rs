@@ -68,9 +68,9 @@ struct Cli {
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_damping: Option<AxisGains>,
     /// Time-domain passivity on each coupling: its port's energy books (sent in the snapshots) and a PD scale
-    /// per axis when the coupling has given the VE more than it and the client's end received (the client's
-    /// books trusted only as far as its uplinks show).
-    #[arg(long, value_name = "on|off", default_value = "off")]
+    /// when the coupling has given the VE more than it and the client's end received (the client's books
+    /// trusted only as far as its uplinks show).
+    #[arg(long, value_name = "on|off", default_value = "on")]
     passivity: Switch,
     /// Play each user's uplinks out at the stream's steady delay once their lateness reaches 25 ms (a jitter
     /// buffer): steadies a linkage pushed over a jittery link (off: each uplink is used on arrival).

@@ -87,17 +87,19 @@ fn passivity_controller_keeps_a_delayed_coupling_from_pumping_energy() {
         let (passive, account) = delayed_mass_client(true, delay_ms, 5, false);
         let (plain, passive) = (peak(&plain), peak(&passive));
         // Without the controller the delayed loop pumps far more energy into the VE than the coupling ever
-        // held; with it the VE never gains more than that, and the coupling generated at most its allowance
-        // on each of its three axes (plus a tick's worth).
+        // held; with it the VE never gains more than that, and the coupling generated at most its allowance and
+        // what the ticks in which a prediction of "absorbing" was wrong let through (1.23 allowances at 100 ms
+        // when this was written): one account for the port, whatever its axes.
         assert!(plain > 100.0 * STORED_AT_START_J, "delay {delay_ms} ms: plain coupling peaked at {plain:e} J");
         assert!(passive <= STORED_AT_START_J, "delay {delay_ms} ms: passive coupling reached {passive:e} J");
-        assert!(account >= -3.3 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
+        assert!(account >= -1.6 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
     }
 }
 
 /// A client that claims energy it never put in buys at most the allowance with it: the server credits the
 /// smaller of the claim and its own booking of the client's port (here zero, the model wrench being zero) plus
-/// the allowance, so the liar's coupling stays passive, with at most twice the honest deficit.
+/// the allowance on each of the three axes, so the liar's coupling stays passive, with at most the honest
+/// bound plus three allowances.
 #[test]
 fn a_client_claiming_energy_it_never_put_in_cannot_make_the_coupling_generate() {
     let peak = |e: &[f64]| e.iter().cloned().filter(|x| x.is_finite()).fold(0.0, f64::max);
@@ -106,7 +108,7 @@ fn a_client_claiming_energy_it_never_put_in_cannot_make_the_coupling_generate() 
         let (lied, account) = delayed_mass_client(true, delay_ms, 5, true);
         let lied = peak(&lied);
         assert!(lied <= STORED_AT_START_J, "delay {delay_ms} ms: the liar's VE reached {lied:e} J");
-        assert!(account >= -6.6 * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
+        assert!(account >= -(1.6 + 3.0) * allowance, "delay {delay_ms} ms: the coupling generated {} J", -account);
     }
 }
 

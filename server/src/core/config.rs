@@ -108,8 +108,15 @@ pub struct VeConfig {
     pub contact_damping: Option<f64>,
     /// Contacts closer than this gap (m) are sent to clients as local-model contact terms.
     pub contact_margin_m: f64,
-    /// Time-domain passivity observer/controller on every coupling.
+    /// Time-domain passivity observer/controller on every coupling (see `passivity`). On by default: in the
+    /// latency sweep it costs nothing measurable (device-OP RMS at 0 ms within 1 % of off) and bounds what a
+    /// delayed coupling can give the VE; the paper's VE ([`VeConfig::paper`]) has none.
     pub passivity: bool,
+    /// With `passivity`: the per-axis controller instead of the port's (each OP axis on its own account, the
+    /// axis left free rather than braked when scaled; see `passivity`). Off by default: on the latency sweep
+    /// it makes 56 of 864 points unstable; it is the one that steadies the paper's stiff gains on the Watt
+    /// six-bar's turning link5, where the port controller does not.
+    pub passivity_per_axis: bool,
     /// Play each user's uplinks out at the stream's steady delay (a jitter buffer, see `playout`) instead of
     /// following the newest on arrival. On by default: in the latency sweep it steadies every point with
     /// 30 ms of network jitter (5 of 864 unstable without it, none with it). (It was off while the 16-user
@@ -121,9 +128,8 @@ pub struct VeConfig {
     /// `sharing`). Infinite takes them whole at any delay, as the paper's b̂ does, which is unstable with
     /// several users under delay.
     pub exchange_delay_s: f64,
-    /// Energy each axis of a coupling may generate (beyond what the coupling as a whole absorbed) before the
-    /// passivity controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see
-    /// `passivity`).
+    /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
+    /// controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see `passivity`).
     pub passivity_allowance_j: f64,
     /// Duration of a coupling's fade in or out (raised cosine).
     pub fade_time: Duration,
@@ -163,6 +169,7 @@ impl VeConfig {
             contact_damping: None,
             contact_margin_m: 0.005,
             passivity: false,
+            passivity_per_axis: false,
             jitter_buffer: true,
             exchange_delay_s: super::sharing::EXCHANGE_DELAY_S,
             // About what the graphics controller's linear spring (1000 N/m) holds at 2 mm, the device-OP
@@ -234,7 +241,7 @@ impl VeConfig {
 impl Default for VeConfig {
     /// The paper's VE with each user's graphics-controller gains designed from its device and its OP.
     fn default() -> Self {
-        VeConfig { coupling_stiffness: None, coupling_damping: None, ..VeConfig::paper() }
+        VeConfig { coupling_stiffness: None, coupling_damping: None, passivity: true, ..VeConfig::paper() }
     }
 }
 

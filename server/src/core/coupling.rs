@@ -3,19 +3,21 @@
 //! For a manipulator at operational point `op` with fade weight `w` (see `fade`), the paper's force channel
 //! plus graphics controller (section IV; Fig 3):
 //! ```text
-//! F = w · [ F_h + β ⊙ (K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op)) ]
+//! F = w · [ F_h + β ⊙ (K_g ⊙ (x_lm ⊖ x_op) + B_g ⊙ (ẋ_lm − ẋ_op)) − (1 − β) ⊙ B_g ⊙ ẋ_op ]
 //! ```
 //! with `x_lm, ẋ_lm` the client's local-model OP pose and twist (from its newest uplink), `x_op, ẋ_op` the
 //! VE's, `⊖` the pose difference (linear, rotation vector) and `β ∈ [0, 1]` per axis the passivity
-//! controller's scale on the PD (one unless `--passivity on` finds the coupling generating energy, see
-//! `passivity`). The wrench enters eq 4 as `Jᵀ F`.
+//! controller's scale on the PD (one unless the controller finds the coupling generating energy, see
+//! `passivity`). What it takes off the PD becomes a brake on the OP, which only dissipates. The wrench
+//! enters eq 4 as `Jᵀ F`.
 //!
 //! **Linearly implicit coupling.** The paper's gains (K_g up to 10⁴, B_g up to 10⁴ on a link with
 //! I = 0.0021 kg m²) are far too stiff for an explicit step at 1 kHz. Under semi-implicit Euler the PD is
 //! evaluated at the end of the step, linearized: `x_op⁺ ≈ x_op + h J q̇⁺`, `ẋ_op⁺ = J q̇⁺`, `q̇⁺ = q̇ + h q̈`,
-//! which moves `Jᵀ (wβ(hB + h²K)) J` to the left of eq 4 and adds `−h Jᵀ (wβK ⊙ ẋ_op)` on the right
-//! ([`Forces::add_implicit`]). The step is then stable for any gains; the wrench it effectively applied is
-//! `F − h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈` ([`Coupling::implicit_correction`]).
+//! which moves `Jᵀ (w(hB + βh²K)) J` to the left of eq 4 (the PD's damper and the brake together: hB) and
+//! adds `−h Jᵀ (wβK ⊙ ẋ_op)` on the right ([`Forces::add_implicit`]). The step is then stable for any gains;
+//! the wrench it effectively applied is `F − h wβK ⊙ ẋ_op − w(hB + βh²K) ⊙ J q̈`
+//! ([`Coupling::implicit_correction`]).
 //!
 //! **Users on one OP.** The couplings are visited in an order that groups users by OP ([`VeForces::order`]),
 //! and neighbours at the same body and point (several users on a scene's one OP, the common case) form a
@@ -63,6 +65,9 @@ pub struct Coupling<S: Space> {
     pub damping: S::OpVec,
     /// β per axis, the passivity controller's scale on the PD for the current tick (ones when it is off).
     pub pd_scale: S::OpVec,
+    /// Whether what β takes off the PD becomes a brake on the OP (the port controller's way; the per-axis
+    /// controller leaves the axis free).
+    pub brakes: bool,
     /// Jᵀ at the OP (n×k) at the last evaluation that needed it (see [`Coupling::evaluate`]).
     pub jacobian_t: DMatrix<f64>,
     /// x_op at the last evaluation.
@@ -98,6 +103,7 @@ impl<S: Space> Coupling<S> {
             stiffness,
             damping,
             pd_scale: full_scale::<S>(),
+            brakes: true,
             jacobian_t: DMatrix::zeros(nq, S::DIM),
             op_pose: OpPose::identity(),
             op_twist: S::OpVec::zero(),
@@ -165,7 +171,12 @@ impl<S: Space> Coupling<S> {
         }
         let pd = self.pd_wrench();
         for a in 0..S::DIM {
-            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + self.pd_scale[a] * pd[a]);
+            // What the passivity controller takes off the PD is replaced by a brake on the OP (the PD's own
+            // damping against the OP's velocity), which only dissipates: a PD scaled to zero leaves the VE damped
+            // rather than free, and what the brake absorbs lets the account recover (see `passivity`).
+            let beta = self.pd_scale[a];
+            let brake = if self.brakes { -(1.0 - beta) * self.damping[a] * self.op_twist[a] } else { 0.0 };
+            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + beta * pd[a] + brake);
         }
         f
     }
@@ -186,11 +197,12 @@ impl<S: Space> Coupling<S> {
         self.weight * self.pd_scale[axis]
     }
 
-    /// Per-axis coefficient `wβ(hB + h²K)` moved to the mass side by the implicit treatment.
+    /// Per-axis coefficient `w(hB + βh²K)` moved to the mass side by the implicit treatment.
     fn implicit_coefficient(&self, dt: f64) -> S::OpVec {
         let mut c = S::OpVec::zero();
         for a in 0..S::DIM {
-            c[a] = self.pd_weight(a) * (dt * self.damping[a] + dt * dt * self.stiffness[a]);
+            let damping = if self.brakes { self.weight } else { self.pd_weight(a) } * dt * self.damping[a];
+            c[a] = damping + self.pd_weight(a) * dt * dt * self.stiffness[a];
         }
         c
     }
@@ -217,7 +229,7 @@ impl<S: Space> Coupling<S> {
     }
 
     /// What the implicit treatment added to the explicit wrench in a step of `dt` that produced `qdd`:
-    /// `−h wβK ⊙ ẋ_op − wβ(hB + h²K) ⊙ J q̈`.
+    /// `−h wβK ⊙ ẋ_op − w(hB + βh²K) ⊙ J q̈`.
     pub fn implicit_correction(&self, model: &Model<S>, qdd: &DVector<f64>, dt: f64) -> S::OpVec {
         let coefficient = self.implicit_coefficient(dt);
         let accel = self.op_space_image(model, qdd);
@@ -238,7 +250,7 @@ impl<S: Space> Coupling<S> {
         (self.hand_wrench + self.held_load) * self.weight
     }
 
-    /// The part of the applied wrench that is not the force channel: the (scaled) PD.
+    /// The part of the applied wrench that is not the force channel: the (scaled) PD and its brake.
     pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
@@ -486,6 +498,39 @@ mod tests {
             assert_eq!(mass, mass.transpose());
             let (got, want) = (&tau_implicit, &expected_implicit);
             assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
+        }
+    }
+
+    /// What the passivity controller takes off the PD becomes a brake on the OP: at β = 0 the coupling applies
+    /// the hand's force and `−wB ⊙ ẋ_op`, which takes power from the moving OP on every axis; in between, the
+    /// PD's share and the brake's add up to the whole PD's damping, which the implicit treatment keeps whole.
+    #[test]
+    fn what_the_controller_takes_off_the_pd_brakes_the_op() {
+        let (model, data, _) = testbed_in_motion(5);
+        let stiffness = Vector3::new(800.0, 900.0, 2.0);
+        let mut c =
+            Coupling::<Planar>::new(1, nalgebra::Vector2::new(0.01, -0.002), model.nq(), stiffness, stiffness * 0.05);
+        c.pushes = true;
+        c.weight = 0.8;
+        c.hand_wrench = Vector3::new(0.3, -0.2, 0.001);
+        c.target_pose = OpPose { position: nalgebra::Point2::new(0.02, 0.03).coords, ..OpPose::identity() };
+        c.evaluate(&model, &data.kin, true);
+        assert!(c.op_twist.norm() > 0.0, "the testbed is moving");
+        let dt = 1e-3;
+        let full = c.implicit_coefficient(dt);
+        for beta in [0.0, 0.5] {
+            c.pd_scale = Vector3::repeat(beta);
+            let controller = c.controller_part(&c.explicit_wrench());
+            let pd = c.pd_wrench();
+            for a in 0..3 {
+                let brake = -c.weight * c.damping[a] * c.op_twist[a];
+                let expected = c.weight * beta * pd[a] + (1.0 - beta) * brake;
+                assert!((controller[a] - expected).abs() <= 1e-12 * (1.0 + expected.abs()), "β {beta} axis {a}");
+                assert!(brake * c.op_twist[a] <= 0.0, "the brake takes power on axis {a}");
+                let coefficient = c.implicit_coefficient(dt)[a];
+                let damping_part = c.weight * dt * c.damping[a];
+                assert!((coefficient - damping_part - beta * (full[a] - damping_part)).abs() <= 1e-15 * full[a]);
+            }
         }
     }
 

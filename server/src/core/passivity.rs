@@ -1,54 +1,76 @@
-//! Time-domain passivity observer and controller on each coupling (Hannaford & Ryu 2002; Ryu, Kwon &
-//! Hannaford 2004 for the per-axis use on a multi-DOF port).
+//! Time-domain passivity observer and controller on each coupling (Hannaford & Ryu 2002). On by default
+//! (`VeConfig::passivity`).
 //!
-//! **The port.** Seen from the VE, a user's graphics-controller PD (section IV, Fig 3) is a one-port at the
-//! user's OP whose other side is the network delay and the client's local model. The force channel F_h is
-//! not part of it: that energy is the human's to give, and the VE applies it beside the PD (see
-//! `coupling`). On each operational axis `a` the observer books the energy this port has *absorbed* from the
-//! VE,
+//! **The port.** Seen from the VE, a user's coupling (section IV, Fig 3: the force channel F_h beside the
+//! graphics-controller PD) is a one-port at the user's OP whose other side is the network and the client's
+//! local model. On each operational axis `a` the observer books the energy the PD has *absorbed* from the VE,
 //! ```text
-//! E_a(n) = − Σ_{k ≤ n} F_c,a(k) · ẋ_op,a(k+1) · h,
+//! E_a(n) = − Σ_{k ≤ n} F_c,a(k) · ẋ_op,a(k+1) · h,        E = Σ_a E_a,
 //! ```
-//! with `F_c` the PD wrench the step effectively applied (fade and implicit correction included) and
-//! `ẋ_op(k+1) = J q̇⁺` the OP velocity that step produced (the work semi-implicit Euler actually does). A
-//! spring-damper tied to a consistent reference keeps `E_a ≥ 0` (it gives back at most what it stored);
-//! with a delayed reference it can go negative: the coupling generates energy. Booking each axis on its
-//! own is stricter than booking their sum (the port is passive when every axis is) and keeps a deficit in
-//! one axis (the testbed's stiff angular axis) from being paid for by the others.
+//! with `F_c` the controller's wrench the step effectively applied (scaled PD and brake, fade and implicit
+//! correction included) and `ẋ_op(k+1) = J q̇⁺` the OP velocity that step produced (the work semi-implicit
+//! Euler actually does); the force channel's work is booked apart (`force_channel`). A spring-damper tied to
+//! a consistent reference keeps `E ≥ 0` (it gives back at most what it stored); with a delayed reference it
+//! can go negative: the coupling generates energy.
 //!
-//! **The controller scales the PD, it does not add a damper.** The textbook controller for this causality
-//! is a damper `α ẋ_op` sized to dissipate the deficit. It fails here: the VE's OP is tied to the local
-//! model's by a stiff PD (K_g up to 10⁴), so a damper at the OP only makes the OP lag, the PD pulls harder
-//! by the damper's force, and the deficit never shrinks while the damper keeps braking the motion the force
-//! channel drives (measured on the paper's session at 0 ms delay with α capped at 10 N·s/m: the damper
-//! dissipated 0.39 J against 0.06 J of work by the hand, and the device saturated). What generates the
-//! energy is the PD's *reference*, so the controller bounds the PD's output instead. For the coming tick,
-//! each axis gets a scale `β_a ∈ [0, 1]` from its account
+//! **The account.** Energy may legitimately enter the VE through the coupling when the hand put it in at the
+//! client. The controller's account is
 //! ```text
-//! A_a = E_a + max(0, Σ_b E_b),        β_a = clamp(1 + A_a / E_allow, 0, 1),
+//! A = E + (force channel: received − emitted) + (what the hand put into the client's end, trusted),
 //! ```
-//! full strength while the axis is in credit, fading linearly to zero as its deficit reaches the allowance
-//! `E_allow`. An axis in deficit may draw on the surplus the port as a whole has absorbed (energy moves
-//! between axes through the linkage; the port is passive when the total is), and while its account is above
-//! `−E_allow` a tick in which its PD is about to absorb energy (`w F_pd,a ẋ_op,a ≤ 0`, predicted from the
-//! last evaluation) is not scaled, so the account can recover. Below `−E_allow` the scale is zero whatever
-//! the prediction: with a stiff PD the OP can reverse within a tick and a prediction of "absorbing" be wrong,
-//! and an axis must not keep generating on wrong predictions. The port as a whole thus generates at most
-//! `k E_allow` (k axes) plus one tick's worth per axis over a session: passive with an initial storage of
-//! `k E_allow`, which the passivity inequality allows. The scale is continuous in the account, so the PD
-//! never switches on or off as a step.
-
+//! the energy the VE has received through the coupling beyond what the hand put in is `−A`. It is one
+//! account for the port, not one per axis: passivity is a property of the port's total power, and the linkage
+//! moves energy from one OP axis to another (the testbed's coupler at 300 ms one way booked −6.8 mJ on y and
+//! +6.6 mJ on θ). Per-axis accounts cut y's PD off for good there: 56 of 864 latency-sweep points unstable.
+//! What the client's end *emitted* (its local model's work on the hand) is not debited: the local model is a
+//! second copy of the linkage with its own gravity and synchronisation, and what it gives a holding hand is
+//! not energy the VE's coupling created (the six-bar's start booked 2.2 J given to the hand in 100 ms against
+//! 0.36 J the VE's PD absorbed; debited, it held the PD off at 0-50 ms). The bound the controller keeps is
+//! therefore: the VE gains through the coupling at most what the hand put in, plus `E_allow`.
+//!
+//! **The controller scales the PD and brakes what it takes off.** The textbook controller for this causality
+//! is a damper `α ẋ_op` added to the PD, sized to dissipate the deficit. It fails here: the VE's OP is tied to
+//! the local model's by a stiff PD (K_g up to 10⁴), so a damper beside the PD only makes the OP lag, the PD
+//! pulls harder by the damper's force, and the deficit never shrinks while the damper keeps braking the motion
+//! the force channel drives (measured on the paper's session at 0 ms delay with α capped at 10 N·s/m: the
+//! damper dissipated 0.39 J against 0.06 J of work by the hand, and the device saturated). What generates the
+//! energy is the PD's *reference*, so the controller scales the PD, and what it takes off becomes a brake on
+//! the OP with the PD's own damping (`−(1 − β) B_g ⊙ ẋ_op`, see `coupling`). The brake only dissipates: a PD
+//! scaled to zero leaves the VE damped rather than free (a six-bar left free under gravity with the hand's
+//! force still on ran away to 27 kJ; without the brake 4 of 864 latency-sweep points are unstable, with it
+//! none), and what the brake absorbs is booked, so the account recovers and the PD comes back. For the coming tick each axis gets
+//! ```text
+//! β_a = clamp(1 + A / E_allow, 0, 1),
+//! ```
+//! full strength while the port is in credit, fading linearly to zero as its deficit reaches the allowance
+//! `E_allow`. While `A > −E_allow` an axis whose PD is about to absorb energy (`w F_pd,a ẋ_op,a ≤ 0`,
+//! predicted from the last evaluation) is not scaled, so the account can recover; below `−E_allow` the scale
+//! is zero whatever the prediction (with a stiff PD the OP can reverse within a tick and a prediction of
+//! "absorbing" be wrong). **Raising β is paid for**: a stiffer spring at the same stretch `e_a` holds
+//! `½ Δβ w K_a e_a²` more energy that no one put in and that the PD gives the VE as it relaxes, so a rise is
+//! limited to what the account holds above `−E_allow` (shared by the axes in order). The port thus generates
+//! about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong: 1.2
+//! allowances in the server's delayed-mass test): passive with that initial storage. The scale is continuous
+//! in the account, so the PD never switches on or off as a step.
+//!
+//! **Per axis, for stiff gains** (`VeConfig::passivity_per_axis`, off by default). The credit for what the
+//! hand put in counts what it received and not what it took back, so a client whose model shakes under a
+//! constant hand earns credit with every swing. With the paper's gains on the Watt six-bar's turning link5
+//! (K_g 10⁴ N·m/rad, 6 ms of jitter) that credit, earned on x and y, paid for 36 J generated on θ: 181 VE
+//! restores in 3 s. The per-axis controller (each axis on its own account plus the PD's surplus, no brake,
+//! no price on a rise; the first version of this module) scales only the axis that generates and leaves it
+//! free, and steadies that session; on the latency sweep it cuts axes that merely pass energy on (56 of 864
+//! points unstable). Debiting what the client's end emitted, the principled fix, holds the PD off at the
+//! six-bar's start (20 of 864 unstable, 2.1 times the device-OP distance at 0 ms).
 //!
 //! **Across the network (two-port).** The coupling is one end of the two-port between the user's device and the
 //! VE (`kinloop_linkage::passivity`); the client's local model is the other, and its uplinks carry its books.
-//! Energy the user has put into the local model may legitimately come out here: each axis's account is
-//! credited with what the client received on it, less what the force channel has already delivered to the VE
-//! on it (that energy reached the VE beside the PD), never below zero. The credit trusts the client only as far
-//! as the server can check it: it is the smaller of the client's report (refused and counted when it is
-//! non-finite, negative, shrinking or faster than the device can push, see `EnergyReports`) and the server's
-//! own booking of the same flow from the uplinks it received (the model wrench times the model twist, held
-//! over each gap) plus the allowance. A client that overstates what it received buys nothing; one that
-//! understates only makes its own coupling stricter.
+//! The credit for what the hand put in trusts the client only as far as the server can check it: on each axis
+//! it is the smaller of the client's report (refused and counted when it is non-finite, negative, shrinking or
+//! faster than the device can push, see `EnergyReports`) and the server's own booking of the same flow from
+//! the uplinks it received (the model wrench times the model twist, held over each gap) plus the allowance. A
+//! client that overstates what it received buys at most an allowance per axis; one that understates only
+//! makes its own coupling stricter.
 
 use kinloop_linkage::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
 use kinloop_linkage::{Space, VecOps};
@@ -83,30 +105,77 @@ pub struct PassivityObserver {
 }
 
 impl PassivityObserver {
-    /// The PD scale β for the coming tick, per axis, from the power `predicted_power` (per axis, W) the
-    /// unscaled PD would deliver to the VE at the last evaluated state; `allowance_j` is `E_allow` (≥ 0; zero
-    /// is the strict limit: off while in deficit). Counts an activation when an axis is scaled down.
-    pub fn pd_scale<S: Space>(&mut self, predicted_power: &S::OpVec, allowance_j: f64) -> S::OpVec {
-        let surplus = self.absorbed_j.max(0.0);
+    /// The PD scale β for the coming tick, per axis. `predicted_power` is the power (per axis, W) the unscaled
+    /// PD would deliver to the VE at the last evaluated state, `spring_energy` what its spring holds per unit
+    /// of β (`½ w K_a e_a²`, J), `previous` the β the last tick used, `allowance_j` is `E_allow` (≥ 0; zero is
+    /// the strict limit: off while in deficit). Counts an activation when an axis is scaled down.
+    pub fn pd_scale<S: Space>(
+        &mut self,
+        predicted_power: &S::OpVec,
+        spring_energy: &S::OpVec,
+        previous: &S::OpVec,
+        allowance_j: f64,
+    ) -> S::OpVec {
+        let account = self.account_j(allowance_j);
+        // What raising β may still spend: a stiffer spring at the same stretch holds energy no one put in.
+        let mut headroom = (account + allowance_j).max(0.0);
         let mut scale = S::OpVec::zero();
-        let mut scaled = false;
         for axis in 0..S::DIM {
-            let account = self.absorbed_axis_j[axis] + surplus + self.client_credit(axis, allowance_j);
-            let beta = output_scale(account, predicted_power[axis] <= 0.0, allowance_j);
-            scaled |= beta < 1.0;
+            let mut beta = output_scale(account, predicted_power[axis] <= 0.0, allowance_j);
+            let rise = beta - previous[axis];
+            if rise > 0.0 && spring_energy[axis] > 0.0 {
+                let affordable = rise.min(headroom / spring_energy[axis]);
+                headroom -= affordable * spring_energy[axis];
+                beta = previous[axis] + affordable;
+            }
             scale[axis] = beta;
         }
-        if scaled {
-            self.activations += 1;
-        }
+        self.count_activation::<S>(&scale);
         scale
     }
 
-    /// What the client put in on `axis` and the force channel has not yet delivered (J, ≥ 0): the smaller of
-    /// its report and the server's own booking plus `allowance_j`.
-    pub fn client_credit(&self, axis: usize, allowance_j: f64) -> f64 {
-        let trusted = self.client.accepted.received_j[axis].min(self.client_seen.received_j[axis] + allowance_j);
-        (trusted - self.force_channel.emitted_j[axis]).max(0.0)
+    /// The PD scale of the per-axis controller (`VeConfig::passivity_per_axis`): each axis on its own account,
+    /// `A_a = E_a + max(0, E) + max(0, R_a − F_a)` with `R_a` what the hand put into the client's end on the
+    /// axis (trusted as in [`Self::client_received`]) and `F_a` what the force channel delivered on it; no
+    /// brake and no price on a rise (see the module documentation for where this is the better choice).
+    pub fn pd_scale_per_axis<S: Space>(&mut self, predicted_power: &S::OpVec, allowance_j: f64) -> S::OpVec {
+        let surplus = self.absorbed_j.max(0.0);
+        let mut scale = S::OpVec::zero();
+        for axis in 0..S::DIM {
+            let credit = (self.trusted_received(axis, allowance_j) - self.force_channel.emitted_j[axis]).max(0.0);
+            let account = self.absorbed_axis_j[axis] + surplus + credit;
+            scale[axis] = output_scale(account, predicted_power[axis] <= 0.0, allowance_j);
+        }
+        self.count_activation::<S>(&scale);
+        scale
+    }
+
+    fn count_activation<S: Space>(&mut self, scale: &S::OpVec) {
+        if (0..S::DIM).any(|axis| scale[axis] < 1.0) {
+            self.activations += 1;
+        }
+    }
+
+    /// The account `A` (J): what the coupling's port (PD and force channel) absorbed from the VE, plus what the
+    /// hand put into the client's end (trusted as far as the server can check it).
+    pub fn account_j(&self, allowance_j: f64) -> f64 {
+        let mut force_channel = 0.0;
+        for axis in 0..MAX_AXES {
+            force_channel += self.force_channel.received_j[axis] - self.force_channel.emitted_j[axis];
+        }
+        self.absorbed_j + force_channel + self.client_received(allowance_j)
+    }
+
+    /// What the hand put into the client's end on all axes (J, ≥ 0): per axis, the smaller of the client's
+    /// report and the server's own booking plus `allowance_j`.
+    pub fn client_received(&self, allowance_j: f64) -> f64 {
+        (0..MAX_AXES).map(|axis| self.trusted_received(axis, allowance_j)).sum()
+    }
+
+    /// What the hand put into the client's end on `axis` (J): the smaller of the client's report and the
+    /// server's own booking plus `allowance_j`.
+    fn trusted_received(&self, axis: usize, allowance_j: f64) -> f64 {
+        self.client.accepted.received_j[axis].min(self.client_seen.received_j[axis] + allowance_j)
     }
 
     /// Books one step: the PD wrench `pd_wrench` and the force channel's `hand_wrench` the step applied moved
@@ -198,9 +267,15 @@ mod tests {
         }
     }
 
+    /// β for an unstretched spring (nothing to price) from `previous` β.
+    fn scale_from(observer: &mut PassivityObserver, power: &V, previous: &V, allowance_j: f64) -> V {
+        observer.pd_scale::<Planar>(power, &V::zeros(), previous, allowance_j)
+    }
+
     #[test]
-    fn each_axis_is_booked_on_its_own_and_may_draw_on_the_ports_surplus() {
-        // x absorbs 3 J, θ generates 1 J: the port as a whole absorbed 2 J, which pays for θ's deficit.
+    fn the_port_is_booked_as_a_whole_and_only_delivering_axes_are_scaled() {
+        // x absorbs 3 J, θ generates 1 J: energy the linkage moved from one axis to another. The port absorbed
+        // 2 J and is passive, so nothing is scaled (one account per axis would have cut θ off).
         let mut observer = PassivityObserver::default();
         observer.observe::<Planar>(
             &V::from_slice(&[-3.0, 0.0, 2.0]),
@@ -210,22 +285,57 @@ mod tests {
         );
         assert_eq!(observer.absorbed_axis_j[..3], [3.0, 0.0, -1.0]);
         assert_eq!(observer.absorbed_j, 2.0);
-        let delivering = V::from_slice(&[1.0, 1.0, 1.0]);
-        assert_eq!(observer.pd_scale::<Planar>(&delivering, 2.0), delivering, "in credit overall: full strength");
+        let full = V::from_slice(&[1.0, 1.0, 1.0]);
+        assert_eq!(scale_from(&mut observer, &full, &full, 2.0), full, "in credit: full strength");
         assert_eq!(observer.activations, 0);
-        // θ generates 2.5 J more: the port is 0.5 J in deficit, θ 3.5 J: with a 4 J allowance θ's PD is at
-        // 1 − 3.5/4 while it delivers energy, at full strength while it absorbs, and x and y are untouched.
+        // θ generates 2.5 J more: the port is 0.5 J in deficit; with a 4 J allowance every axis about to
+        // deliver energy is at 1 − 0.5/4, and one about to absorb is at full strength.
         observer.observe::<Planar>(&V::from_slice(&[0.0, 0.0, 5.0]), &on_x(0.0), &V::from_slice(&[0.0, 0.0, 0.5]), 1.0);
         assert_eq!(observer.absorbed_j, -0.5);
-        assert_eq!(observer.pd_scale::<Planar>(&delivering, 4.0), V::from_slice(&[1.0, 1.0, 0.125]));
-        assert_eq!(observer.pd_scale::<Planar>(&V::from_slice(&[1.0, 1.0, -1.0]), 4.0), delivering);
-        assert_eq!(observer.activations, 1);
-        // Beyond the allowance the axis is off, whatever the prediction says.
-        assert_eq!(
-            observer.pd_scale::<Planar>(&V::from_slice(&[1.0, 1.0, -1.0]), 3.0),
-            V::from_slice(&[1.0, 1.0, 0.0])
-        );
-        assert_eq!(observer.pd_scale::<Planar>(&delivering, 0.0), V::from_slice(&[1.0, 1.0, 0.0]), "strict limit");
+        assert_eq!(scale_from(&mut observer, &full, &full, 4.0), V::from_slice(&[0.875, 0.875, 0.875]));
+        let absorbing_on_theta = V::from_slice(&[1.0, 1.0, -1.0]);
+        assert_eq!(scale_from(&mut observer, &absorbing_on_theta, &full, 4.0), V::from_slice(&[0.875, 0.875, 1.0]));
+        assert_eq!(observer.activations, 2);
+        // Beyond the allowance the port is off, whatever the prediction says.
+        assert_eq!(scale_from(&mut observer, &absorbing_on_theta, &full, 0.4), V::zeros());
+        assert_eq!(scale_from(&mut observer, &full, &full, 0.0), V::zeros(), "strict limit");
+    }
+
+    #[test]
+    fn the_account_counts_the_force_channel_and_what_the_hand_put_in_at_the_client() {
+        let mut observer = PassivityObserver::default();
+        // The force channel delivered 1.5 J to the VE on x and took 0.5 J back: the account is 1 J short.
+        observer.observe::<Planar>(&on_x(0.0), &on_x(1.5), &on_x(1.0), 1.0);
+        observer.observe::<Planar>(&on_x(0.0), &on_x(0.5), &on_x(-1.0), 1.0);
+        assert_eq!(observer.account_j(0.1), -1.0);
+        // The client reports 2 J received on x and its uplinks show 1.2 J (a model wrench of 1.2 N on a
+        // model moving along it at 1 m/s for a second, an uplink every 50 ms): the server credits 1.2 J plus the
+        // allowance.
+        for n in 0..=20 {
+            observer.observe_client::<Planar>(0.05 * n as f64, &on_x(1.2), &on_x(1.0));
+        }
+        observer.client.check(1.0, &[2.0, 0.0, 0.0], &[0.0; 3], 10.0, 0.0).unwrap();
+        let received = observer.client_received(0.1);
+        assert!((received - 1.3).abs() < 1e-12, "{received} J, seen {:?}", observer.client_seen);
+        assert!((observer.account_j(0.1) - 0.3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn raising_the_scale_on_a_stretched_spring_is_paid_from_the_account() {
+        // The port absorbed 0.5 J; its PD was off on x and y, and each spring holds 1 J at full strength. A
+        // stiffer spring at the same stretch holds energy no one put in, so the rise may spend the account down
+        // to −E_allow (0.6 J here) and no further: x takes all of it, y must wait.
+        let mut observer = PassivityObserver::default();
+        observer.observe::<Planar>(&on_x(-0.5), &on_x(0.0), &on_x(1.0), 1.0);
+        let (off, spring) = (V::from_slice(&[0.0, 0.0, 1.0]), V::from_slice(&[1.0, 1.0, 0.0]));
+        let full = V::from_slice(&[1.0, 1.0, 1.0]);
+        let beta = observer.pd_scale::<Planar>(&full, &spring, &off, 0.1);
+        assert!((beta - V::from_slice(&[0.6, 0.0, 1.0])).norm() < 1e-12, "β = {beta:?}");
+        // An unstretched spring costs nothing to stiffen; lowering β is always free.
+        assert_eq!(observer.pd_scale::<Planar>(&full, &V::zeros(), &off, 0.1), full);
+        let spring_on_x = V::from_slice(&[1.0, 0.0, 0.0]);
+        observer.observe::<Planar>(&on_x(2.0), &on_x(0.0), &on_x(1.0), 1.0);
+        assert_eq!(observer.pd_scale::<Planar>(&full, &spring_on_x, &full, 0.1), V::zeros());
     }
 
     #[test]
@@ -244,14 +354,17 @@ mod tests {
         let (k, b, u, m, h) = (1000.0, 100.0, 0.2, 1.0, 1e-4);
         let (mut x, mut v) = (0.0, 0.0);
         let mut observer = PassivityObserver::default();
+        let mut beta = 1.0;
         for n in 0..(seconds / h) as usize {
             let reference = u * n as f64 * h;
             let pd = k * (reference - x) + b * (u - v);
-            let beta = match allowance_j {
-                Some(allowance) => observer.pd_scale::<Planar>(&on_x(pd * v), allowance)[0],
+            let spring = 0.5 * k * (reference - x).powi(2);
+            beta = match allowance_j {
+                Some(allowance) => observer.pd_scale::<Planar>(&on_x(pd * v), &on_x(spring), &on_x(beta), allowance)[0],
                 None => 1.0,
             };
-            let force = beta * pd;
+            // The coupling's controller part: the scaled PD and the brake that replaces the rest (`coupling`).
+            let force = beta * pd - (1.0 - beta) * b * v;
             v += h * force / m;
             x += h * v;
             observer.observe::<Planar>(&on_x(force), &on_x(0.0), &on_x(v), h);
@@ -287,7 +400,7 @@ mod tests {
         for n in 0..5000 {
             let push = if n < 300 { 1.0 } else { 0.0 };
             let pd = -k * x - b * v;
-            let beta = observer.pd_scale::<Planar>(&on_x(pd * v), 0.0)[0];
+            let beta = observer.pd_scale::<Planar>(&on_x(pd * v), &on_x(0.5 * k * x * x), &on_x(1.0), 0.0)[0];
             assert_eq!(beta, 1.0, "step {n}");
             v += h * (push + beta * pd) / m;
             x += h * v;
