@@ -25,6 +25,14 @@ enum Switch {
     Off,
 }
 
+/// `--passivity`: the port controller (on), none (off), or the per-axis controller for stiff gains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum PassivityMode {
+    On,
+    Off,
+    PerAxis,
+}
+
 /// Host a virtual linkage with kinematic loops that several people feel at once through haptic devices.
 #[derive(Debug, Parser)]
 #[command(name = "kinloop-server", version)]
@@ -68,10 +76,11 @@ struct Cli {
     #[arg(long, value_name = "LIN,ANG", value_parser = parse_gains)]
     coupling_damping: Option<AxisGains>,
     /// Time-domain passivity on each coupling: its port's energy books (sent in the snapshots) and a PD scale
-    /// when the coupling has given the VE more than it and the client's end received (the client's books
-    /// trusted only as far as its uplinks show).
-    #[arg(long, value_name = "on|off", default_value = "on")]
-    passivity: Switch,
+    /// when the VE has received through the coupling more than the hand put in at the client (the client's
+    /// books trusted only as far as its uplinks show). `per-axis`: each axis on its own account, for stiff
+    /// coupling gains on a turning OP (see `VeConfig::passivity_per_axis`).
+    #[arg(long, value_name = "on|off|per-axis", default_value = "on")]
+    passivity: PassivityMode,
     /// Play each user's uplinks out at the stream's steady delay once their lateness reaches 25 ms (a jitter
     /// buffer): steadies a linkage pushed over a jittery link (off: each uplink is used on arrival).
     #[arg(long, value_name = "on|off", default_value = "on")]
@@ -163,20 +172,26 @@ where
     kinloop_protocol::report::run_program("info", || run(cli))
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
-    let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
-    let ve = VeConfig {
+/// The VE's settings from the flags (the rest are `VeConfig::default`).
+fn ve_config(cli: &Cli) -> VeConfig {
+    VeConfig {
         ve_rate_hz: cli.ve_rate,
         snapshot_rate_hz: cli.snapshot_rate.unwrap_or(cli.ve_rate),
         integrator: cli.integrator,
         max_users: cli.max_users,
-        passivity: cli.passivity == Switch::On,
+        passivity: cli.passivity != PassivityMode::Off,
+        passivity_per_axis: cli.passivity == PassivityMode::PerAxis,
         jitter_buffer: cli.jitter_buffer == Switch::On,
         coupling_stiffness: cli.coupling_stiffness.clone(),
         coupling_damping: cli.coupling_damping.clone(),
         rest_unheld: !cli.free_run,
         ..VeConfig::default()
-    };
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
+    let ve = ve_config(&cli);
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
     let access = match &cli.token_file {
@@ -265,5 +280,24 @@ mod tests {
             let why = parse_gains(bad).unwrap_err();
             assert!(why.contains("LINEAR,ANGULAR") || why.contains("finite and non-negative"), "{bad:?}: {why}");
         }
+    }
+
+    /// The passivity controller is on by default (the port's); `off` removes it, `per-axis` picks the per-axis
+    /// one, and any other value is refused naming the flag.
+    #[test]
+    fn passivity_flag_picks_the_controller() {
+        let config = |extra: &[&str]| {
+            let args = ["kinloop-server", "--scene", "paper-testbed", "--listen", "127.0.0.1:0"].iter().chain(extra);
+            Cli::try_parse_from(args).map(|cli| {
+                let ve = ve_config(&cli);
+                (ve.passivity, ve.passivity_per_axis)
+            })
+        };
+        assert_eq!(config(&[]).unwrap(), (true, false));
+        assert_eq!(config(&["--passivity", "on"]).unwrap(), (true, false));
+        assert_eq!(config(&["--passivity", "off"]).unwrap(), (false, false));
+        assert_eq!(config(&["--passivity", "per-axis"]).unwrap(), (true, true));
+        let refused = config(&["--passivity", "sometimes"]).unwrap_err().to_string();
+        assert!(refused.contains("--passivity") && refused.contains("per-axis"), "{refused}");
     }
 }
