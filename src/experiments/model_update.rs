@@ -16,6 +16,7 @@ use anyhow::Result;
 use serde_json::{json, Value};
 
 use kinloop_client::user::HandKind;
+use kinloop_server::core::VeConfig;
 
 use super::common::{round, significant, sweep, Options, Output};
 use super::latency::{measure_with, Loss, Measured, Network, Point, SECONDS, TARGETS};
@@ -86,9 +87,9 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
     let points: Vec<(Update, Point)> = rows
         .iter()
         .flat_map(|&(update, target, hand)| {
-            delays
-                .iter()
-                .map(move |&delay_ms| (update, Point { target, hand, delay_ms, network: clean, passivity: false }))
+            delays.iter().map(move |&delay_ms| {
+                (update, Point { target, hand, delay_ms, network: clean, passivity: VeConfig::default().passivity })
+            })
         })
         .collect();
     let all: Vec<(Update, Measured)> =
