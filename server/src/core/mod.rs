@@ -737,11 +737,9 @@ impl<S: Space> VeCore<S> {
                 // The power the full PD would deliver, from the OP twist of the previous evaluation (one tick
                 // old at most) and the newest reference.
                 let pd = c.pd_wrench();
-                let stretch = c.target_pose.difference(&c.op_pose);
-                let (mut power, mut spring) = (S::OpVec::zero(), S::OpVec::zero());
+                let mut power = S::OpVec::zero();
                 for a in 0..S::DIM {
                     power[a] = c.weight * pd[a] * c.op_twist[a];
-                    spring[a] = 0.5 * c.weight * c.stiffness[a] * stretch[a] * stretch[a];
                 }
                 let before = u.passivity.activations;
                 let allowance = self.config.passivity_allowance_j;
@@ -749,7 +747,7 @@ impl<S: Space> VeCore<S> {
                 let scale = if self.config.passivity_per_axis {
                     u.passivity.pd_scale_per_axis::<S>(&power, allowance)
                 } else {
-                    u.passivity.pd_scale::<S>(&power, &spring, &c.pd_scale, allowance)
+                    u.passivity.pd_scale::<S>(&power, &c.spring_energy(), &c.pd_scale, allowance)
                 };
                 activations += u.passivity.activations - before;
                 scale
