@@ -7,8 +7,9 @@
 //! as much force as the springs give.
 //!
 //! Here every correction is priced by what it changes in the energy the coupling and the model hold
-//! ([`coupling_energy`]: the position channels' and the joint-constraint controller's springs, and the
-//! model's kinetic energy `½ ẋᵀ Λ̂ ẋ`, heavy along the constrained directions), and paid from a tank
+//! ([`energy_change`] of `½ eᵀ K_pc e + ½ k_j eᵀ T P̃ T e + ½ ẋᵀ Λ̂ ẋ`: the position channels' and the
+//! joint-constraint controller's springs, and the model's kinetic energy, heavy along the constrained
+//! directions), and paid from a tank
 //! ([`UpdateTank`]) that only the controllers' own dissipation fills: the energy their dampers took out of
 //! the coupling, plus what earlier corrections gave back. A correction that would cost more than the tank
 //! holds is applied in part (the energy change is convex in the fraction applied, so the fraction
@@ -21,8 +22,8 @@
 //! What the tank does not cover: the VE follows the model's pose, so a correction also moves the VE, and
 //! the energy that gives the linkage is made on the server's side of the network. The pull's own loop
 //! through the delay (the band where a fixed 200 ms pull made the testbed gain energy from 300 ms one way)
-//! is held by the pull's time constant of at least two round trips (`FREE_BLEND_PER_ROUND_TRIP`), not
-//! by the tank; the `latency` experiment's model-update rows show both.
+//! is held by the pull's time constant of at least two round trips (`CoreConfig::free_blend_round_trips`),
+//! not by the tank; the `latency` experiment's model-update rows show both.
 
 use kinloop_linkage::space::{Space, VecOps};
 
@@ -47,7 +48,7 @@ pub(crate) struct CouplingSprings<'a, S: Space> {
     pub inertia: &'a S::OpMat,
 }
 
-/// What moving the model by `moved` and changing its twist by `sped` changes in [`coupling_energy`], with
+/// What moving the model by `moved` and changing its twist by `sped` changes in the coupling's energy, with
 /// the device-model error `error` and the model twist `twist` before (the error becomes `error − moved`):
 /// `mᵀK(½m − e) + k_j mᵀTP̃T(½m − e) + sᵀΛ̂(ẋ + ½s)`, the difference of the two energies in closed form.
 pub(crate) fn energy_change<S: Space>(

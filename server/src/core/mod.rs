@@ -414,6 +414,7 @@ impl<S: Space> VeCore<S> {
         self.next_user_id += 1;
         let point = &self.model.ops[op];
         let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), stiffness, damping);
+        coupling.brakes = !self.config.passivity_per_axis;
         coupling.evaluate(&self.model, &self.data.kin, true);
         if manipulator {
             coupling.pushes = true;
@@ -743,7 +744,6 @@ impl<S: Space> VeCore<S> {
                 }
                 let before = u.passivity.activations;
                 let allowance = self.config.passivity_allowance_j;
-                c.brakes = !self.config.passivity_per_axis;
                 let scale = if self.config.passivity_per_axis {
                     u.passivity.pd_scale_per_axis::<S>(&power, allowance)
                 } else {
