@@ -85,6 +85,12 @@ struct Cli {
     /// buffer): steadies a linkage pushed over a jittery link (off: each uplink is used on arrival).
     #[arg(long, value_name = "on|off", default_value = "on")]
     jitter_buffer: Switch,
+    /// Aim each graphics controller at where its client's local model is predicted to be after the network's
+    /// one-way delay (half the shortest round trip), up to MS milliseconds ahead of the uplink heard (0, the
+    /// default: follow what is heard). Brings the VE's OP nearer the device under delay, but the VE then moves
+    /// on a guess, and a hand that jabs or lets go makes it overshoot (see the README's known limits).
+    #[arg(long, value_name = "MS", default_value_t = 0.0, value_parser = parse_lead_ms)]
+    lead_max_ms: f64,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
     /// first user grasps a still linkage rather than one that gravity has been swinging).
     #[arg(long)]
@@ -152,6 +158,15 @@ fn parse_gains(s: &str) -> Result<AxisGains, String> {
     }
 }
 
+/// The longest lead in milliseconds: finite, 0 to 4000 (the client keeps 4 s of its model's states).
+fn parse_lead_ms(s: &str) -> Result<f64, String> {
+    let ms: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number of milliseconds"))?;
+    if !(0.0..=4000.0).contains(&ms) {
+        return Err(format!("{ms} ms is outside 0..4000 ms"));
+    }
+    Ok(ms)
+}
+
 fn parse_integrator(s: &str) -> Result<Integrator, String> {
     Integrator::parse(s).ok_or_else(|| format!("unknown integrator {s:?}; use euler, rk4 or explicit-euler"))
 }
@@ -185,6 +200,7 @@ fn ve_config(cli: &Cli) -> VeConfig {
         coupling_stiffness: cli.coupling_stiffness.clone(),
         coupling_damping: cli.coupling_damping.clone(),
         rest_unheld: !cli.free_run,
+        coupling_lead_max_s: cli.lead_max_ms * 1e-3,
         ..VeConfig::default()
     }
 }
@@ -299,5 +315,21 @@ mod tests {
         assert_eq!(config(&["--passivity", "per-axis"]).unwrap(), (true, true));
         let refused = config(&["--passivity", "sometimes"]).unwrap_err().to_string();
         assert!(refused.contains("--passivity") && refused.contains("per-axis"), "{refused}");
+    }
+
+    /// The VE follows what it hears unless told to lead; a lead is given in milliseconds, and one that is not a
+    /// number, negative or beyond the client's 4 s of history is refused naming the flag.
+    #[test]
+    fn lead_flag_sets_the_longest_lead() {
+        let lead = |extra: &[&str]| {
+            let args = ["kinloop-server", "--scene", "paper-testbed", "--listen", "127.0.0.1:0"].iter().chain(extra);
+            Cli::try_parse_from(args).map(|cli| ve_config(&cli).coupling_lead_max_s)
+        };
+        assert_eq!(lead(&[]).unwrap(), 0.0);
+        assert!((lead(&["--lead-max-ms", "150"]).unwrap() - 0.15).abs() < 1e-12);
+        for bad in ["-5", "NaN", "inf", "4001", "soon"] {
+            let refused = lead(&[&format!("--lead-max-ms={bad}")]).unwrap_err().to_string();
+            assert!(refused.contains("--lead-max-ms"), "{bad}: {refused}");
+        }
     }
 }

@@ -19,7 +19,8 @@
 //! feels) and its floor, how far the device had moved since the pose the VE had heard of (a VE that follows
 //! what it hears cannot be nearer on average), loop closure, clamped ticks, and the coupling's energy account
 //! when the passivity controller books it. The [`model_update`] rows add the local model's update: the
-//! free pull at a fixed 200 ms against the default, with and without its energy tank. A (scene, hand,
+//! free pull at a fixed 200 ms against the default, with and without its energy tank; the [`lead`] rows a VE
+//! that runs ahead of the hand (not default), the only way below the device-OP floor. A (scene, hand,
 //! method) **first fails** at the smallest delay where some network condition of the grid is unstable.
 
 use std::time::Duration;
@@ -35,6 +36,7 @@ use kinloop_server::core::VeConfig;
 
 use super::common::{round, session, significant, sweep, Options, Output, Report};
 use super::impedance;
+use super::lead;
 use super::model_update;
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, HeatMap, Legend, Series};
@@ -124,7 +126,7 @@ impl Network {
         format!("jitter {} ms, {}", self.jitter_ms, self.loss.name())
     }
 
-    fn is_clean(self) -> bool {
+    pub fn is_clean(self) -> bool {
         self.jitter_ms == 0.0 && self.loss == Loss::None
     }
 }
@@ -199,13 +201,19 @@ pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
 
 /// Runs one point with a change to the client's settings.
 pub fn measure_with(p: &Point, seconds: f64, edit: Option<CoreEdit>) -> Result<Measured> {
+    measure_leading(p, seconds, edit, VeConfig::default().coupling_lead_max_s)
+}
+
+/// As [`measure_with`] with the VE leading each coupling's target by up to `lead_max_s`
+/// (`VeConfig::coupling_lead_max_s`; the [`lead`] rows).
+pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead_max_s: f64) -> Result<Measured> {
     let (scene_name, op, _) = TARGETS[p.target];
     let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
     let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
     client.user = UserSpec::Hand(HandSpec::touring(p.hand));
     client.configure = edit;
     let client = client.with_link(p.link());
-    let ve = VeConfig { passivity: p.passivity, ..VeConfig::default() };
+    let ve = VeConfig { passivity: p.passivity, coupling_lead_max_s: lead_max_s, ..VeConfig::default() };
     let plan =
         SessionPlan { scene, ve, clients: vec![client], duration: Duration::from_secs_f64(seconds), record_every: 1 };
     let (summary, rec) = session(&plan).with_context(|| format!("{p:?}"))?;
@@ -531,6 +539,14 @@ pub fn run(options: &Options) -> Result<Report> {
     energy_chart(&mut out, &grid, &all)?;
     impedance_chart(&mut out, &grid, &all)?;
     let model_update = model_update::run(&mut out, options)?;
+    let default_line: Vec<(f64, f64)> = grid
+        .delays_ms
+        .iter()
+        .filter(|&&d| d > 0.0)
+        .filter_map(|&d| clean(&all, 0, HandKind::Soft, default_passivity(), d))
+        .map(|m| (m.point.delay_ms, m.device_op_rms_m * 1e3))
+        .collect();
+    let lead = lead::run(&mut out, options, default_line)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();
@@ -634,9 +650,10 @@ pub fn run(options: &Options) -> Result<Report> {
         floor_1000.map_or("n/a".into(), |r| r.to_string()),
     );
     let results = json!({
-        "answer": format!("{answer} {}", model_update["answer"].as_str().unwrap_or_default()),
+        "answer": format!("{answer} {} {}", model_update["answer"].as_str().unwrap_or_default(), lead.answer),
         "goals": goals,
         "model_update": model_update,
+        "lead": lead.summary,
         "first_failures": first_failures,
         "criterion": verdict::criterion_json(),
         "grid": {

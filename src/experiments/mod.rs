@@ -19,6 +19,7 @@
 pub mod common;
 pub mod impedance;
 pub mod latency;
+pub mod lead;
 pub mod model_update;
 pub mod paper;
 pub mod pauses;

@@ -25,7 +25,9 @@
 //! **Like with like under delay.** The VE at time t has heard of each device, and of the work its hand did,
 //! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`, what the client's
 //! Smith-style synchronisation compares with too), so both comparisons are made there: about t minus the
-//! uplink's delay, later by jitter and loss, and at zero delay the plain comparisons. Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
+//! uplink's delay, later by jitter and loss, and at zero delay the plain comparisons. A VE that leads its target
+//! (`VeConfig::coupling_lead_max_s`) names the later client time it aims at, and is compared there: it is
+//! charged for what it guessed and the hand had not done by then. Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
 //! 4-6 cm away, and was judged diverged, though the gap never grows; and a jab that the hand took back before
 //! its delayed copy reached the VE made the VE's energy look unpaid for. The device's distance to the VE's OP
 //! now is still measured and reported (`device_op_max_m`, the RMS figures): it is the transparency, not the

@@ -191,7 +191,8 @@ pub struct ClientSummary {
     /// Largest device–OP distance, device space (m).
     pub device_op_max_m: f64,
     /// Largest distance between the VE's OP and the device as the VE has heard of it: the device's position
-    /// at the client time of the newest uplink the VE had used, device space (m). The VE follows the device
+    /// at the client time of the newest uplink the VE had used (for a VE that leads its target, the later
+    /// client time it aims at, `Snapshot::uplink_time_s`), device space (m). The VE follows the device
     /// through the uplink, so under delay it trails the device by the delay's worth of motion
     /// (`device_op_max_m` grows with it); this distance grows only when the VE fails to follow.
     pub device_op_heard_max_m: f64,
@@ -558,18 +559,23 @@ impl<S: Space> Session<S> {
                     p.heard.pop_front();
                 }
                 if u.heard_until_s > 0.0 && p.heard[0].0 <= u.heard_until_s {
-                    let heard = S::op_lin(&p.heard[0].1.difference(&u.op_pose)).norm() * scale;
-                    p.heard_max = p.heard_max.max(heard);
                     let unheard = S::op_lin(&report.device_pose.difference(&p.heard[0].1)).norm() * scale;
                     p.unheard_sum_sq += unheard * unheard;
                     p.unheard_ticks += 1;
+                }
+                // A VE that leads its target (`VeConfig::coupling_lead_max_s`) aims at the device of a later
+                // client time, and is judged against the device then.
+                let aimed = p.heard.iter().take_while(|(t, _)| *t <= u.answers_s).last();
+                if let Some((_, device)) = aimed.filter(|_| u.answers_s > 0.0) {
+                    let heard = S::op_lin(&device.difference(&u.op_pose)).norm() * scale;
+                    p.heard_max = p.heard_max.max(heard);
                 }
             }
         }
         if self.record_every > 0 && p.ticks.is_multiple_of(self.record_every as u64) {
             let ve_op = ve_user.as_ref().map(|u| u.op_pose);
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
-            sample.ve_heard_s = ve_user.map(|u| u.heard_until_s).filter(|&t| t > 0.0);
+            sample.ve_heard_s = ve_user.map(|u| u.answers_s).filter(|&t| t > 0.0);
             // The true hand (a sensorless device's report carries the observer's estimate) and the handle's
             // true twist (the report's is the encoders' filtered difference, whose lag made a hand's work
             // on a spring-like grasp drift by mJ over a tour: the energy criterion must see the plant).

@@ -48,17 +48,23 @@ pub struct Coupling<S: Space> {
     pub weight: f64,
     /// F_h from the newest uplink.
     pub hand_wrench: S::OpVec,
-    /// x_lm from the newest uplink.
+    /// The PD's target: x_lm from the newest uplink, led along its twist by the coupling's lead (see
+    /// [`Coupling::lead_by`]).
     pub target_pose: OpPose<S>,
+    /// x_lm exactly as the newest uplink carried it.
+    pub heard_pose: OpPose<S>,
     /// ẋ_lm from the newest uplink.
     pub target_twist: S::OpVec,
     /// The static load the VE holds at this OP for its user (gravity compensation; zero otherwise): it joins
     /// the force channel, so the user's local model, whose bias carries every hand but the user's own, is
     /// weightless too.
     pub held_load: S::OpVec,
-    /// The newest uplink's client clock (s; 0 before the first): snapshots tell the client which of its
-    /// local model's states the VE is answering (`Snapshot::uplink_time_s`).
+    /// The client time the PD's target stands for (s; 0 before the first uplink): the newest uplink's client
+    /// clock plus the lead. Snapshots tell the client which of its local model's states the VE is answering
+    /// (`Snapshot::uplink_time_s`).
     pub target_time_s: f64,
+    /// The newest uplink's client clock (s; 0 before the first).
+    pub heard_time_s: f64,
     /// K_g per axis.
     pub stiffness: S::OpVec,
     /// B_g per axis.
@@ -97,8 +103,10 @@ impl<S: Space> Coupling<S> {
             weight: 0.0,
             hand_wrench: S::OpVec::zero(),
             target_pose: OpPose::identity(),
+            heard_pose: OpPose::identity(),
             target_twist: S::OpVec::zero(),
             target_time_s: 0.0,
+            heard_time_s: 0.0,
             held_load: S::OpVec::zero(),
             stiffness,
             damping,
@@ -120,8 +128,23 @@ impl<S: Space> Coupling<S> {
         self.pushes = true;
         self.hand_wrench = reference.hand_wrench;
         self.target_pose = reference.pose;
+        self.heard_pose = reference.pose;
         self.target_twist = reference.twist;
         self.target_time_s = reference.client_time_s;
+        self.heard_time_s = reference.client_time_s;
+    }
+
+    /// Leads the PD's target by `lead_s` (≥ 0) of the client's time: the heard pose moved along the heard
+    /// twist, standing for the local model's state that much after the uplink was sent. A VE that only follows
+    /// what it has heard trails the hand by the uplink's delay; leading by that delay puts the OP where the
+    /// hand is now, to first order. The target's time moves with it, so a snapshot names the model state the VE
+    /// aimed at and the client's synchronisation still compares like with like. The energy a wrong guess puts
+    /// into the linkage is the PD's, which the passivity controller books and bounds.
+    pub fn lead_by(&mut self, lead_s: f64) {
+        let lead_s = if lead_s.is_finite() { lead_s.max(0.0) } else { 0.0 };
+        self.target_pose = self.heard_pose;
+        self.target_pose.integrate(&self.target_twist, lead_s);
+        self.target_time_s = if self.heard_time_s > 0.0 { self.heard_time_s + lead_s } else { 0.0 };
     }
 
     /// True when the coupling adds anything to the dynamics.
@@ -268,6 +291,18 @@ impl<S: Space> Coupling<S> {
         }
         *wrench - self.hand_part()
     }
+}
+
+/// How far ahead of its newest heard uplink a coupling's target is led (s): the network's one-way delay, half
+/// the shortest round trip heard (`shortest_round_trip_s`; the clocks are not synchronised, and the shortest
+/// trip leaves out the jitter, over which a guess overshoots), at most `max_s`, in whole VE ticks of `dt`
+/// (the client keeps its model's states by tick, and a snapshot names the state the VE aimed at).
+pub fn target_lead_s(shortest_round_trip_s: Option<f64>, max_s: f64, dt: f64) -> f64 {
+    let one_way = shortest_round_trip_s.map_or(0.0, |rtt| 0.5 * rtt);
+    if !(one_way.is_finite() && max_s > 0.0 && dt > 0.0) {
+        return 0.0;
+    }
+    (one_way.min(max_s) / dt).floor() * dt
 }
 
 /// β = 1 on every axis: the PD at full strength.
@@ -510,6 +545,42 @@ mod tests {
             let (got, want) = (&tau_implicit, &expected_implicit);
             assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
         }
+    }
+
+    #[test]
+    fn a_led_target_is_the_heard_pose_moved_along_its_twist_and_names_its_client_time() {
+        let mut c = Coupling::<Planar>::new(1, nalgebra::Vector2::new(0.1, 0.0), 3, Vector3::zeros(), Vector3::zeros());
+        let mut pose = OpPose::<Planar>::identity();
+        pose.position = nalgebra::Vector2::new(0.02, -0.01);
+        let twist = Vector3::new(0.05, 0.1, 2.0);
+        c.follow(&Reference { client_time_s: 3.0, hand_wrench: Vector3::zeros(), pose, twist });
+        c.lead_by(0.1);
+        // 0.1 s along (0.05, 0.1) m/s and 2 rad/s: 5 and 10 mm, 0.2 rad.
+        let moved = c.target_pose.difference(&pose);
+        assert!((moved - Vector3::new(0.005, 0.010, 0.2)).norm() < 1e-12, "{moved}");
+        assert!((c.target_time_s - 3.1).abs() < 1e-12);
+        assert_eq!((c.heard_pose, c.heard_time_s), (pose, 3.0));
+        // Leads do not accumulate: each is taken from the heard pose; a bad lead is none.
+        c.lead_by(0.05);
+        assert!((c.target_pose.difference(&pose) - Vector3::new(0.0025, 0.005, 0.1)).norm() < 1e-12);
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
+            c.lead_by(bad);
+            assert_eq!((c.target_pose, c.target_time_s), (pose, 3.0), "{bad}");
+        }
+    }
+
+    #[test]
+    fn the_lead_is_half_the_shortest_round_trip_capped_in_whole_ticks() {
+        let dt = 1e-3;
+        // 2 x 100 ms: 100 ms, or the cap; 0.2005 s round trip: 100 ms (floored to the tick).
+        assert!((target_lead_s(Some(0.2), 1.0, dt) - 0.1).abs() < 1e-12);
+        assert!((target_lead_s(Some(0.2), 0.05, dt) - 0.05).abs() < 1e-12);
+        assert!((target_lead_s(Some(0.2015), 1.0, dt) - 0.1).abs() < 1e-12);
+        // No round trip heard yet, no lead allowed, or nonsense: no lead.
+        assert_eq!(target_lead_s(None, 1.0, dt), 0.0);
+        assert_eq!(target_lead_s(Some(0.2), 0.0, dt), 0.0);
+        assert_eq!(target_lead_s(Some(f64::NAN), 1.0, dt), 0.0);
+        assert_eq!(target_lead_s(Some(f64::INFINITY), 1.0, dt), 0.0);
     }
 
     /// What the passivity controller takes off the PD becomes a brake on the OP: at β = 0 the coupling applies

@@ -125,9 +125,12 @@ pub struct UserState<S: Space> {
     pub constraint_count: u8,
     /// The user's passivity account.
     pub passivity: PassivityObserver,
-    /// Client clock of the newest uplink the VE has used (`Snapshot::uplink_time_s`; 0 before the first): the
-    /// VE has heard of what the user did up to then.
+    /// Client clock of the newest uplink the VE has used (0 before the first): the VE has heard of what the
+    /// user did up to then.
     pub heard_until_s: f64,
+    /// The client time whose local-model state the VE's coupling aims at (`Snapshot::uplink_time_s`; 0 before
+    /// the first uplink): `heard_until_s` plus the coupling's lead (see `Coupling::lead_by`).
+    pub answers_s: f64,
 }
 
 /// The VE's state after the last tick, for recording and tests.
@@ -161,7 +164,8 @@ impl<S: Space> VeState<'_, S> {
             weight: c.weight,
             constraint_count: u.constraint_count,
             passivity: u.passivity,
-            heard_until_s: c.target_time_s,
+            heard_until_s: c.heard_time_s,
+            answers_s: c.target_time_s,
         })
     }
 }
@@ -419,6 +423,7 @@ impl<S: Space> VeCore<S> {
         if manipulator {
             coupling.pushes = true;
             coupling.target_pose = coupling.op_pose;
+            coupling.heard_pose = coupling.op_pose;
         }
         let welcome = self.welcome(user_id, op, &mapping, &coupling);
         self.users.push(User {
@@ -717,6 +722,10 @@ impl<S: Space> VeCore<S> {
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
             if let Some(reference) = c.playout.due(at.as_secs_f64()) {
                 c.follow(&reference);
+            }
+            let lead_max_s = self.config.coupling_lead_max_s;
+            if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
+                c.lead_by(coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, dt));
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
             let let_go = u.hand_off && holders > usize::from(holding(u, c));

@@ -21,6 +21,9 @@ pub const BUILT_KEPT: usize = 1024;
 pub const RELEASE_PER_SAMPLE: f64 = 1e-3;
 /// Samples longer than this (s) are ignored: not a round trip but a client that stopped applying snapshots.
 pub const MAX_SAMPLE_S: f64 = 10.0;
+/// How fast the shortest round trip may rise, seconds per second: a route that got slower is followed in
+/// minutes, a jitter spike not at all.
+pub const SHORTEST_CREEP: f64 = 1e-3;
 
 /// One user's round-trip estimate (see the module documentation).
 #[derive(Clone, Debug)]
@@ -29,12 +32,21 @@ pub struct RoundTrip {
     /// `seq / STRIDE % BUILT_KEPT`.
     built: Box<[(u64, f64)]>,
     estimate_s: Option<f64>,
+    /// The shortest sample, crept up by [`SHORTEST_CREEP`] per second since (see [`RoundTrip::shortest_s`]).
+    shortest_s: Option<f64>,
+    /// Server time of the last sample (s).
+    last_sample_at_s: f64,
 }
 
 impl RoundTrip {
     /// No snapshot built yet; the storage is allocated once, here.
     pub fn new() -> Self {
-        RoundTrip { built: vec![(0, 0.0); BUILT_KEPT].into_boxed_slice(), estimate_s: None }
+        RoundTrip {
+            built: vec![(0, 0.0); BUILT_KEPT].into_boxed_slice(),
+            estimate_s: None,
+            shortest_s: None,
+            last_sample_at_s: 0.0,
+        }
     }
 
     /// Snapshot `seq` was built at `at_s` (server clock).
@@ -63,7 +75,19 @@ impl RoundTrip {
             Some(estimate) if sample < estimate => estimate + (sample - estimate) * RELEASE_PER_SAMPLE,
             _ => sample,
         });
+        self.shortest_s = Some(match self.shortest_s {
+            Some(shortest) => (shortest + SHORTEST_CREEP * (arrival_s - self.last_sample_at_s).max(0.0)).min(sample),
+            None => sample,
+        });
+        self.last_sample_at_s = arrival_s;
         Some(sample)
+    }
+
+    /// The shortest round trip heard (s), allowed to creep up slowly: the network's own delay without its
+    /// jitter, of which half is the best guess at the fastest one-way trip (the VE leads a coupling by it, see
+    /// `coupling`). [`RoundTrip::estimate_s`] covers the jitter instead.
+    pub fn shortest_s(&self) -> Option<f64> {
+        self.shortest_s
     }
 
     /// The round trip (s), once an uplink has answered a snapshot.
@@ -104,6 +128,32 @@ mod tests {
             }
         }
         assert!((rt.estimate_s().unwrap() - 0.100).abs() < 1e-9);
+        assert!((rt.shortest_s().unwrap() - 0.100).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_shortest_trip_ignores_spikes_and_creeps_up_to_a_slower_route() {
+        let mut rt = RoundTrip::new();
+        // A 100 ms route with a 150 ms spike every tenth sample, for 10 s.
+        for k in 1..=2500u64 {
+            let seq = k * STRIDE;
+            let built = k as f64 * 4e-3;
+            rt.built(seq, built);
+            let trip = if k % 10 == 0 { 0.250 } else { 0.100 };
+            rt.heard(built + trip, seq, 0.0);
+        }
+        // (Less the creep since the last short sample: the spike arrived 154 ms after it, 0.15 ms of creep.)
+        assert!((rt.shortest_s().unwrap() - 0.100).abs() < 2e-4, "{:?}", rt.shortest_s());
+        assert!(rt.estimate_s().unwrap() > 0.2, "the estimate covers the spikes");
+        // The route slows to 200 ms: 1 ms a second of creep, so after 10 s the shortest is 110 ms.
+        for k in 2501..=5000u64 {
+            let seq = k * STRIDE;
+            let built = k as f64 * 4e-3;
+            rt.built(seq, built);
+            rt.heard(built + 0.200, seq, 0.0);
+        }
+        let shortest = rt.shortest_s().unwrap();
+        assert!((shortest - 0.110).abs() < 1e-3, "{shortest}");
     }
 
     #[test]

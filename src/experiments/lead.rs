@@ -1,0 +1,188 @@
+//! The `latency` experiment's lead rows (issue 22's tracking goals): what a VE that runs ahead of the hand
+//! buys, and what it costs.
+//!
+//! A VE that follows what it hears trails the device by the uplink's delay: on the testbed's soft tour the
+//! device has moved about 5 mm (RMS) at 100 ms one way, and 42 mm at 1 s, since the pose the VE heard of
+//! (`device_unheard_rms_mm`), above the issue's goals of 3 and 25 mm. Only a VE that runs ahead of the hand
+//! can be nearer. `VeConfig::coupling_lead_max_s` (`kinloop-server --lead-max-ms`, off by default) aims each
+//! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap;
+//! what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions (every scene and
+//! hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 % bursty loss) with
+//! one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity controller on), and
+//! is judged by the sweep's criterion; the energy comparison is made at the client time the VE aimed at
+//! (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by then.
+
+use anyhow::Result;
+use serde_json::{json, Value};
+
+use kinloop_client::user::HandKind;
+use kinloop_server::core::VeConfig;
+
+use super::common::{round, significant, sweep, Options, Output};
+use super::latency::{
+    measure_leading, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, SECONDS, TARGETS,
+};
+use crate::charts::{Chart, HeatMap, Legend, Series};
+
+/// One-way delays of the rows (ms).
+pub const DELAYS_MS: [f64; 7] = [50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
+/// The caps on the lead (s): a lead of at most 100 ms, and the whole delay of the grid.
+pub const CAPS_S: [f64; 2] = [0.1, 1.0];
+
+/// A row's cap as its name.
+fn cap_name(cap_s: f64) -> String {
+    format!("lead <= {} ms", cap_s * 1e3)
+}
+
+/// The rows' results: what [`run`] measured, for the latency summary.
+pub struct LeadRows {
+    /// The summary (JSON).
+    pub summary: Value,
+    /// Its answer, one sentence per cap.
+    pub answer: String,
+}
+
+/// Runs the rows, draws their stability map and the testbed's soft tour against `default_line` (the
+/// default VE's device-OP RMS by delay, mm, from the grid), and returns their summary.
+pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -> Result<LeadRows> {
+    let caps: Vec<f64> = options.pick(CAPS_S.to_vec(), vec![1.0]);
+    let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
+    let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
+    let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![100.0, 1000.0]);
+    let clean = Network { jitter_ms: 0.0, loss: Loss::None };
+    let worst = Network { jitter_ms: 30.0, loss: Loss::Bursty20 };
+    let networks = options.pick(vec![clean, worst], vec![clean]);
+    let passivity = VeConfig::default().passivity;
+    let mut rows: Vec<(f64, usize, HandKind, Network)> = Vec::new();
+    for &cap in &caps {
+        for &target in &targets {
+            for &hand in &hands {
+                for &network in &networks {
+                    rows.push((cap, target, hand, network));
+                }
+            }
+        }
+    }
+    // Row-major: a row's delays one after the other.
+    let points: Vec<(f64, Point)> = rows
+        .iter()
+        .flat_map(|&(cap, target, hand, network)| {
+            delays.iter().map(move |&delay_ms| (cap, Point { target, hand, delay_ms, network, passivity }))
+        })
+        .collect();
+    let all: Vec<(f64, Measured)> = sweep("latency: lead", &points, options.threads, options.progress, |(cap, p)| {
+        Ok((*cap, measure_leading(p, SECONDS, None, *cap)?))
+    })?;
+
+    let mut map = HeatMap::new(
+        "Leading the VE's target by the one-way delay (not default): 1 = unstable",
+        rows.iter()
+            .map(|&(cap, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), cap_name(cap)))
+            .collect(),
+        delays.iter().map(|d| format!("{d} ms")).collect(),
+    );
+    for (i, row) in all.chunks(delays.len()).enumerate() {
+        for (j, (_, m)) in row.iter().enumerate() {
+            map.set(i, j, if m.verdict.stable { 0.0 } else { 1.0 }, m.verdict.stable);
+        }
+    }
+    out.heat_map("stability_lead", &map)?;
+
+    // The testbed's soft tour on a clean network, where the goals are set.
+    let soft_clean = |cap: f64| {
+        all.iter().filter(move |(c, m)| {
+            *c == cap && m.point.target == 0 && m.point.hand == HandKind::Soft && m.point.network.is_clean()
+        })
+    };
+    let rms = |m: &Measured| (m.point.delay_ms, m.device_op_rms_m * 1e3);
+    let mut chart = Chart::new(
+        "Testbed, soft hand, clean network: following what is heard vs leading it (circles: unstable)",
+        "one-way delay (ms)",
+        "device-OP distance, RMS, device space (mm)",
+    )
+    .legend(Legend::LowerRight);
+    chart.log_y = true;
+    chart = chart.with(Series::line("default (follows what it hears)", default_line));
+    for &cap in &caps {
+        chart = chart.with(Series::line(cap_name(cap), soft_clean(cap).map(|(_, m)| rms(m)).collect()));
+    }
+    if let Some(&cap) = caps.first() {
+        let floor = soft_clean(cap).map(|(_, m)| (m.point.delay_ms, m.device_unheard_rms_m * 1e3)).collect();
+        chart = chart.with(Series::reference("a VE exactly on the device as heard", floor));
+    }
+    let unstable_soft = caps.iter().flat_map(|&c| soft_clean(c)).filter(|(_, m)| !m.verdict.stable);
+    chart = chart.with(Series::markers("unstable", unstable_soft.map(|(_, m)| rms(m)).collect()));
+    chart = chart.with(Series::markers(
+        "goals: 3 mm at 100 ms, 25 mm at 1 s",
+        vec![(100.0, GOAL_RMS_100MS_M * 1e3), (1000.0, GOAL_RMS_1S_M * 1e3)],
+    ));
+    out.chart("tracking_lead", &chart)?;
+
+    let of = |cap: f64| all.iter().filter(move |(c, _)| *c == cap).map(|(_, m)| m);
+    let first_unstable = |cap: f64, clean_only: bool| {
+        of(cap)
+            .filter(|m| !m.verdict.stable && (!clean_only || m.point.network.is_clean()))
+            .map(|m| m.point.delay_ms)
+            .reduce(f64::min)
+    };
+    let soft_rms_at = |cap: f64, delay_ms: f64| {
+        soft_clean(cap).find(|(_, m)| m.point.delay_ms == delay_ms).map(|(_, m)| round(m.device_op_rms_m * 1e3, 2))
+    };
+    let rows_json: Vec<Value> = caps
+        .iter()
+        .map(|&cap| {
+            json!({
+                "cap_s": cap,
+                "unstable": of(cap).filter(|m| !m.verdict.stable).count(),
+                "sessions": of(cap).count(),
+                "first_unstable_delay_ms": first_unstable(cap, false),
+                "first_unstable_delay_clean_network_ms": first_unstable(cap, true),
+                "testbed_soft_clean_device_op_rms_mm": {"100ms": soft_rms_at(cap, 100.0), "1000ms": soft_rms_at(cap, 1000.0)},
+            })
+        })
+        .collect();
+    let answer = caps
+        .iter()
+        .map(|&cap| {
+            format!(
+                "Leading the VE by the one-way delay ({}, not default): testbed soft clean {} mm at 100 ms and {} mm \
+                 at 1 s; {} of {} sessions unstable{}.",
+                cap_name(cap),
+                soft_rms_at(cap, 100.0).map_or("n/a".into(), |r| r.to_string()),
+                soft_rms_at(cap, 1000.0).map_or("n/a".into(), |r| r.to_string()),
+                of(cap).filter(|m| !m.verdict.stable).count(),
+                of(cap).count(),
+                first_unstable(cap, false).map_or(String::new(), |d| format!(" (from {d} ms)")),
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(" ");
+    let points_json: Vec<Value> = all
+        .iter()
+        .map(|(cap, m)| {
+            json!({
+                "cap_s": cap,
+                "scene": TARGETS[m.point.target].0,
+                "hand": m.point.hand.name(),
+                "network": m.point.network.name(),
+                "delay_ms": m.point.delay_ms,
+                "stable": m.verdict.stable,
+                "reasons": m.verdict.reasons,
+                "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
+                "device_unheard_rms_mm": round(m.device_unheard_rms_m * 1e3, 3),
+                "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
+                "clamped_fraction": round(m.clamped_fraction, 4),
+                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
+            })
+        })
+        .collect();
+    Ok(LeadRows {
+        summary: json!({
+            "answer": answer,
+            "rows": rows_json,
+            "points": points_json,
+            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
+        }),
+        answer,
+    })
+}
