@@ -307,7 +307,8 @@ fn method(passivity: bool) -> &'static str {
     }
 }
 
-fn point_json(m: &Measured) -> Value {
+/// One measured point as the summaries list it.
+pub fn point_json(m: &Measured) -> Value {
     let p = &m.point;
     json!({
         "scene": TARGETS[p.target].0,

@@ -18,9 +18,9 @@ use serde_json::{json, Value};
 use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
-use super::common::{round, significant, sweep, Options, Output};
+use super::common::{round, sweep, Options, Output};
 use super::latency::{
-    measure_leading, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, SECONDS, TARGETS,
+    measure_leading, point_json, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, SECONDS, TARGETS,
 };
 use crate::charts::{Chart, HeatMap, Legend, Series};
 
@@ -160,20 +160,9 @@ pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -
     let points_json: Vec<Value> = all
         .iter()
         .map(|(cap, m)| {
-            json!({
-                "cap_s": cap,
-                "scene": TARGETS[m.point.target].0,
-                "hand": m.point.hand.name(),
-                "network": m.point.network.name(),
-                "delay_ms": m.point.delay_ms,
-                "stable": m.verdict.stable,
-                "reasons": m.verdict.reasons,
-                "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
-                "device_unheard_rms_mm": round(m.device_unheard_rms_m * 1e3, 3),
-                "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
-                "clamped_fraction": round(m.clamped_fraction, 4),
-                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
-            })
+            let mut point = point_json(m);
+            point["cap_s"] = json!(cap);
+            point
         })
         .collect();
     Ok(LeadRows {

@@ -18,8 +18,8 @@ use serde_json::{json, Value};
 use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
-use super::common::{round, significant, sweep, Options, Output};
-use super::latency::{measure_with, Loss, Measured, Network, Point, SECONDS, TARGETS};
+use super::common::{sweep, Options, Output};
+use super::latency::{measure_with, point_json, Loss, Measured, Network, Point, SECONDS, TARGETS};
 use crate::charts::HeatMap;
 use crate::harness::CoreEdit;
 
@@ -144,17 +144,9 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
     let points_json: Vec<Value> = all
         .iter()
         .map(|(u, m)| {
-            json!({
-                "update": u.name(),
-                "scene": TARGETS[m.point.target].0,
-                "hand": m.point.hand.name(),
-                "delay_ms": m.point.delay_ms,
-                "stable": m.verdict.stable,
-                "reasons": m.verdict.reasons,
-                "device_op_rms_mm": round(m.device_op_rms_m * 1e3, 3),
-                "device_local_model_rms_mm": round(m.device_model_rms_m * 1e3, 3),
-                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
-            })
+            let mut point = point_json(m);
+            point["update"] = json!(u.name());
+            point
         })
         .collect();
     Ok(json!({
