@@ -126,6 +126,7 @@ impl Network {
         format!("jitter {} ms, {}", self.jitter_ms, self.loss.name())
     }
 
+    /// No jitter and no loss.
     pub fn is_clean(self) -> bool {
         self.jitter_ms == 0.0 && self.loss == Loss::None
     }

@@ -139,7 +139,10 @@ impl<S: Space> Coupling<S> {
     /// what it has heard trails the hand by the uplink's delay; leading by that delay puts the OP where the
     /// hand is now, to first order. The target's time moves with it, so a snapshot names the model state the VE
     /// aimed at and the client's synchronisation still compares like with like. The energy a wrong guess puts
-    /// into the linkage is the PD's, which the passivity controller books and bounds.
+    /// into the linkage goes through the PD, which the passivity controller books; but its account holds
+    /// credit for all the hand ever put in at the client, so an overshoot is paid from it rather than stopped
+    /// (`kinloop experiment latency`, the lead rows: a poke's jab led by 100 ms gives the linkage twice its
+    /// kinetic energy).
     pub fn lead_by(&mut self, lead_s: f64) {
         let lead_s = if lead_s.is_finite() { lead_s.max(0.0) } else { 0.0 };
         self.target_pose = self.heard_pose;

@@ -134,7 +134,7 @@ mod tests {
     #[test]
     fn the_shortest_trip_ignores_spikes_and_creeps_up_to_a_slower_route() {
         let mut rt = RoundTrip::new();
-        // A 100 ms route with a 150 ms spike every tenth sample, for 10 s.
+        // A 100 ms route, every tenth sample 150 ms later, for 10 s.
         for k in 1..=2500u64 {
             let seq = k * STRIDE;
             let built = k as f64 * 4e-3;
