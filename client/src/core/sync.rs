@@ -91,7 +91,10 @@ impl<S: Space> History<S> {
         }
     }
 
-    /// The state recorded at `time_s` (the newest at or before it, within half a millisecond), if still kept.
+    /// The state recorded at `time_s`, if still kept: the newest at or before it, when a later one was recorded
+    /// too (the time falls within the ticks kept: a VE that leads its target names a client time a whole number
+    /// of its own ticks after an uplink's, which need not be one of the client's tick times in real time), or
+    /// within half a millisecond of it when it is the newest.
     pub fn at(&self, time_s: f64) -> Option<&Entry<S>> {
         if self.len == 0 || time_s.is_nan() || time_s <= 0.0 {
             return None;
@@ -106,13 +109,47 @@ impl<S: Space> History<S> {
                 hi = mid;
             }
         }
-        let found = lo.checked_sub(1).map(|i| self.get(i))?;
-        (time_s - found.time_s <= 5e-4).then_some(found)
+        let index = lo.checked_sub(1)?;
+        let found = self.get(index);
+        (index + 1 < self.len || time_s - found.time_s <= 5e-4).then_some(found)
     }
 
     /// What the VE says the model's state was at `then`, less the corrections applied since: the pose
     /// and twist discrepancies still to correct.
     pub fn discrepancy(&self, then: &Entry<S>, ve_pose: &OpPose<S>, ve_twist: &S::OpVec) -> (S::OpVec, S::OpVec) {
         (ve_pose.difference(&then.pose) - (self.moved - then.moved), *ve_twist - then.twist - (self.sped - then.sped))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::Planar;
+
+    fn at_x(x: f64) -> OpPose<Planar> {
+        let mut pose = OpPose::<Planar>::identity();
+        pose.position = nalgebra::Vector2::new(x, 0.0);
+        pose
+    }
+
+    #[test]
+    fn a_state_is_found_by_its_tick_or_between_ticks_but_not_past_the_newest() {
+        let mut history = History::<Planar>::new();
+        // Ticks about a millisecond apart, as a real-time loop keeps them.
+        let times = [1.0000, 1.0011, 1.0019, 1.0031];
+        for (i, &t) in times.iter().enumerate() {
+            history.record(t, at_x(i as f64), <Planar as Space>::OpVec::zero());
+        }
+        let x = |t: f64| history.at(t).map(|e| e.pose.position[0]);
+        assert_eq!(x(1.0011), Some(1.0), "a tick's own time");
+        // A time 0.8 ms after a tick and before the next: that tick's state.
+        assert_eq!(x(1.0019 + 0.0008), Some(2.0));
+        // Past the newest: within half a millisecond only.
+        assert_eq!(x(1.0031 + 0.0004), Some(3.0));
+        assert_eq!(x(1.0031 + 0.0008), None);
+        // Before the oldest, or no time: none.
+        assert_eq!(x(0.9995), None);
+        assert_eq!(x(0.0), None);
+        assert_eq!(x(f64::NAN), None);
     }
 }
