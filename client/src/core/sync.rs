@@ -91,10 +91,10 @@ impl<S: Space> History<S> {
         }
     }
 
-    /// The state recorded at `time_s`, if still kept: the newest at or before it, when a later one was recorded
-    /// too (the time falls within the ticks kept: a VE that leads its target names a client time a whole number
-    /// of its own ticks after an uplink's, which need not be one of the client's tick times in real time), or
-    /// within half a millisecond of it when it is the newest.
+    /// The state recorded at `time_s`, if still kept: the nearer of the two ticks around it when it falls
+    /// within the ticks kept (a VE that leads its target names a client time a whole number of its own ticks
+    /// after an uplink's, which in real time need not be a tick of the client's, and in virtual time may miss
+    /// one by a rounding error), or the newest when it is at most half a millisecond past it.
     pub fn at(&self, time_s: f64) -> Option<&Entry<S>> {
         if self.len == 0 || time_s.is_nan() || time_s <= 0.0 {
             return None;
@@ -111,7 +111,12 @@ impl<S: Space> History<S> {
         }
         let index = lo.checked_sub(1)?;
         let found = self.get(index);
-        (index + 1 < self.len || time_s - found.time_s <= 5e-4).then_some(found)
+        if index + 1 < self.len {
+            // Between two ticks: the nearer (a time a rounding error short of a tick is that tick).
+            let next = self.get(index + 1);
+            return Some(if next.time_s - time_s < time_s - found.time_s { next } else { found });
+        }
+        (time_s - found.time_s <= 5e-4).then_some(found)
     }
 
     /// What the VE says the model's state was at `then`, less the corrections applied since: the pose
@@ -142,8 +147,10 @@ mod tests {
         }
         let x = |t: f64| history.at(t).map(|e| e.pose.position[0]);
         assert_eq!(x(1.0011), Some(1.0), "a tick's own time");
-        // A time 0.8 ms after a tick and before the next: that tick's state.
-        assert_eq!(x(1.0019 + 0.0008), Some(2.0));
+        // Between two ticks: the nearer one's state; a rounding error short of a tick is that tick.
+        assert_eq!(x(1.0019 + 0.0004), Some(2.0));
+        assert_eq!(x(1.0019 + 0.0008), Some(3.0));
+        assert_eq!(x(1.0011 - 1e-12), Some(1.0));
         // Past the newest: within half a millisecond only.
         assert_eq!(x(1.0031 + 0.0004), Some(3.0));
         assert_eq!(x(1.0031 + 0.0008), None);
