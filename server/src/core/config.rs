@@ -131,7 +131,7 @@ pub struct VeConfig {
     /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::lead_by`): the VE aims each
     /// graphics controller at where the local model was predicted to be the network's one-way delay after the
     /// uplink left, up to this. 0 (the default) follows what it has heard: a lead brings the OP nearer the
-    /// device (testbed, soft hand, 100 ms one way: 2.3 mm RMS against 5.3 mm) but makes energy when the hand
+    /// device (testbed, soft hand, 100 ms one way: 2.4 mm RMS against 5.3 mm) but makes energy when the hand
     /// does not go where the guess went (`kinloop experiment latency`, the lead rows: pokes and releases go
     /// unstable from 50 ms).
     pub coupling_lead_max_s: f64,
