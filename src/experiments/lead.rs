@@ -34,6 +34,17 @@ fn cap_name(cap_s: f64) -> String {
     format!("lead <= {} ms", cap_s * 1e3)
 }
 
+/// What one cap's sessions came to.
+struct CapTally {
+    cap_s: f64,
+    unstable: usize,
+    sessions: usize,
+    first_unstable_ms: Option<f64>,
+    first_unstable_clean_ms: Option<f64>,
+    soft_rms_100_mm: Option<f64>,
+    soft_rms_1000_mm: Option<f64>,
+}
+
 /// The rows' results: what [`run`] measured, for the latency summary.
 pub struct LeadRows {
     /// The summary (JSON).
@@ -128,31 +139,45 @@ pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -
     let soft_rms_at = |cap: f64, delay_ms: f64| {
         soft_clean(cap).find(|(_, m)| m.point.delay_ms == delay_ms).map(|(_, m)| round(m.device_op_rms_m * 1e3, 2))
     };
-    let rows_json: Vec<Value> = caps
+    // One tally per cap, which both the JSON rows and the answer read.
+    let tallies: Vec<CapTally> = caps
         .iter()
-        .map(|&cap| {
+        .map(|&cap| CapTally {
+            cap_s: cap,
+            unstable: of(cap).filter(|m| !m.verdict.stable).count(),
+            sessions: of(cap).count(),
+            first_unstable_ms: first_unstable(cap, false),
+            first_unstable_clean_ms: first_unstable(cap, true),
+            soft_rms_100_mm: soft_rms_at(cap, 100.0),
+            soft_rms_1000_mm: soft_rms_at(cap, 1000.0),
+        })
+        .collect();
+    let rows_json: Vec<Value> = tallies
+        .iter()
+        .map(|t| {
             json!({
-                "cap_s": cap,
-                "unstable": of(cap).filter(|m| !m.verdict.stable).count(),
-                "sessions": of(cap).count(),
-                "first_unstable_delay_ms": first_unstable(cap, false),
-                "first_unstable_delay_clean_network_ms": first_unstable(cap, true),
-                "testbed_soft_clean_device_op_rms_mm": {"100ms": soft_rms_at(cap, 100.0), "1000ms": soft_rms_at(cap, 1000.0)},
+                "cap_s": t.cap_s,
+                "unstable": t.unstable,
+                "sessions": t.sessions,
+                "first_unstable_delay_ms": t.first_unstable_ms,
+                "first_unstable_delay_clean_network_ms": t.first_unstable_clean_ms,
+                "testbed_soft_clean_device_op_rms_mm": {"100ms": t.soft_rms_100_mm, "1000ms": t.soft_rms_1000_mm},
             })
         })
         .collect();
-    let answer = caps
+    let mm = |r: Option<f64>| r.map_or("n/a".into(), |r| r.to_string());
+    let answer = tallies
         .iter()
-        .map(|&cap| {
+        .map(|t| {
             format!(
                 "Leading the VE by the one-way delay ({}, not default): testbed soft clean {} mm at 100 ms and {} mm \
                  at 1 s; {} of {} sessions unstable{}.",
-                cap_name(cap),
-                soft_rms_at(cap, 100.0).map_or("n/a".into(), |r| r.to_string()),
-                soft_rms_at(cap, 1000.0).map_or("n/a".into(), |r| r.to_string()),
-                of(cap).filter(|m| !m.verdict.stable).count(),
-                of(cap).count(),
-                first_unstable(cap, false).map_or(String::new(), |d| format!(" (from {d} ms)")),
+                cap_name(t.cap_s),
+                mm(t.soft_rms_100_mm),
+                mm(t.soft_rms_1000_mm),
+                t.unstable,
+                t.sessions,
+                t.first_unstable_ms.map_or(String::new(), |d| format!(" (from {d} ms)")),
             )
         })
         .collect::<Vec<_>>()

@@ -565,8 +565,8 @@ impl<S: Space> Session<S> {
                 }
                 // A VE that leads its target (`VeConfig::coupling_lead_max_s`) aims at the device of a later
                 // client time, and is judged against the device then.
-                let aimed = p.heard.iter().take_while(|(t, _)| *t <= u.answers_s).last();
-                if let Some((_, device)) = aimed.filter(|_| u.answers_s > 0.0) {
+                let aimed = (u.answers_s > 0.0).then(|| p.heard.iter().take_while(|(t, _)| *t <= u.answers_s).last());
+                if let Some((_, device)) = aimed.flatten() {
                     let heard = S::op_lin(&device.difference(&u.op_pose)).norm() * scale;
                     p.heard_max = p.heard_max.max(heard);
                 }
