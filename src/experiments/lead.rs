@@ -5,8 +5,10 @@
 //! device has moved about 5 mm (RMS) at 100 ms one way, and 42 mm at 1 s, since the pose the VE heard of
 //! (`device_unheard_rms_mm`), above the goals of 3 and 25 mm. Only a VE that runs ahead of the hand
 //! can be nearer. `VeConfig::coupling_lead_max_s` (`kinloop-server --lead-max-ms`, off by default) aims each
-//! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap;
-//! what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions (every scene and
+//! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap
+//! and no longer than the heard motion supports (`Coupling::trusted_lead_s`: the twist's recent rates of
+//! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
+//! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions (every scene and
 //! hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 % bursty loss) with
 //! one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity controller on), and
 //! is judged by the sweep's criterion; the energy comparison is made at the client time the VE aimed at
@@ -195,7 +197,7 @@ pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -
             "answer": answer,
             "rows": rows_json,
             "points": points_json,
-            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
+            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
         }),
         answer,
     })

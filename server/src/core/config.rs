@@ -128,13 +128,21 @@ pub struct VeConfig {
     /// `sharing`). Infinite takes them whole at any delay, as the paper's b̂ does, which is unstable with
     /// several users under delay.
     pub exchange_delay_s: f64,
-    /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::lead_by`): the VE aims each
-    /// graphics controller at where the local model was predicted to be the network's one-way delay after the
-    /// uplink left, up to this. 0 (the default) follows what it has heard: a lead brings the OP nearer the
-    /// device (testbed, soft hand, 100 ms one way: 2.4 mm RMS against 5.3 mm) but makes energy when the hand
-    /// does not go where the guess went (`kinloop experiment latency`, the lead rows: pokes and releases go
-    /// unstable from 50 ms).
+    /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::steer_lead`): the VE aims
+    /// each graphics controller at where the local model was predicted to be the network's one-way delay after
+    /// the uplink left, up to this and no further than the heard motion supports
+    /// (`coupling_lead_guess_energy_j`). 0 (the default) follows what it has heard. A lead brings the OP nearer
+    /// the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against 5.3 mm; `kinloop experiment
+    /// latency`, the lead rows, none of 168 sessions unstable), but it is a guess about the hand, and with
+    /// every session of the sweep led one poke of 864 (200 ms, 10 ms jitter, bursty loss) crosses the energy
+    /// criterion, which is why it is not on by default.
     pub coupling_lead_max_s: f64,
+    /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
+    /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
+    /// this through K_g. 1 mJ: leading without this bound left 22 of the lead rows' 168 sessions unstable
+    /// (pokes and releases); at 2 mJ the testbed's poke at 50 ms with 30 ms of jitter and bursty loss crosses
+    /// the energy criterion; at 0.5 mJ the testbed's soft tour is 3.1 mm from the OP at 100 ms one way.
+    pub coupling_lead_guess_energy_j: f64,
     /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
     /// controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see `passivity`).
     pub passivity_allowance_j: f64,
@@ -183,6 +191,7 @@ impl VeConfig {
             // distance stiffness rendering keeps (Fig 6b).
             passivity_allowance_j: 2.0e-3,
             coupling_lead_max_s: 0.0,
+            coupling_lead_guess_energy_j: 1.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
             max_users: 16,
@@ -216,6 +225,7 @@ impl VeConfig {
             ("contact_margin_m", self.contact_margin_m),
             ("passivity_allowance_j", self.passivity_allowance_j),
             ("coupling_lead_max_s", self.coupling_lead_max_s),
+            ("coupling_lead_guess_energy_j", self.coupling_lead_guess_energy_j),
             ("contact_stiffness", self.contact_stiffness.unwrap_or(0.0)),
             ("contact_damping", self.contact_damping.unwrap_or(0.0)),
             ("guards.max_model_offset_m", self.guards.max_model_offset_m),
@@ -315,6 +325,26 @@ mod tests {
             match with(bad) {
                 Err(VeConfigError::Negative { what, .. }) => assert!(what.starts_with("exchange_delay_s"), "{what}"),
                 other => panic!("{bad}: {other:?}"),
+            }
+        }
+    }
+
+    /// The lead's cap and guess energy are refused by name when negative or not finite; zero is allowed
+    /// (no lead).
+    #[test]
+    fn the_lead_numbers_must_be_finite_and_not_negative() {
+        type WithValue = fn(f64) -> VeConfig;
+        let set: [(&str, WithValue); 2] = [
+            ("coupling_lead_max_s", |v| VeConfig { coupling_lead_max_s: v, ..VeConfig::default() }),
+            ("coupling_lead_guess_energy_j", |v| VeConfig { coupling_lead_guess_energy_j: v, ..VeConfig::default() }),
+        ];
+        for (name, with) in set {
+            assert_eq!(with(0.0).validate(), Ok(()), "{name}");
+            for bad in [-1e-3, f64::NAN, f64::INFINITY] {
+                match with(bad).validate() {
+                    Err(VeConfigError::Negative { what, .. }) => assert_eq!(what, name),
+                    other => panic!("{name} = {bad}: {other:?}"),
+                }
             }
         }
     }

@@ -725,7 +725,8 @@ impl<S: Space> VeCore<S> {
             }
             let lead_max_s = self.config.coupling_lead_max_s;
             if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
-                c.lead_by(coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, dt));
+                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, dt);
+                c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
             let let_go = u.hand_off && holders > usize::from(holding(u, c));
