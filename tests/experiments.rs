@@ -223,6 +223,25 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     for p in lead_points {
         assert_eq!(p["stable"], true, "{p}");
     }
+    // Every session the grid ran with the default method, led again: the same sessions, each judged (its
+    // unstable ones listed), and nearer the device on average under delay than unled (4.0 against 5.8 mm at
+    // 100 ms over the full grid when this was written).
+    let everywhere = &lead["everywhere"];
+    let default_points = points.iter().filter(|p| p["method"] == "passivity").count();
+    assert_eq!(everywhere["sessions"].as_u64().unwrap() as usize, default_points, "{everywhere}");
+    let listed = everywhere["unstable_points"].as_array().unwrap();
+    assert_eq!(everywhere["unstable"].as_u64().unwrap() as usize, listed.len());
+    assert!(listed.iter().all(|p| p["stable"] == false && p["method"] == "passivity"), "{everywhere}");
+    let by_delay = everywhere["device_op_rms_mm_mean_by_delay"].as_array().unwrap();
+    let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
+    assert!(f(&at_100["led"]) < f(&at_100["unled"]), "{at_100}");
+    let unled_100: Vec<f64> = points
+        .iter()
+        .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
+        .map(|p| f(&p["device_op_rms_mm"]))
+        .collect();
+    let unled_mean = unled_100.iter().sum::<f64>() / unled_100.len() as f64;
+    assert!((f(&at_100["unled"]) - unled_mean).abs() < 2e-3, "{at_100} vs {unled_mean}");
     for row in lead["rows"].as_array().unwrap() {
         let of: Vec<&Value> = lead_points.iter().filter(|p| p["cap_s"] == row["cap_s"]).collect();
         assert_eq!(row["sessions"].as_u64().unwrap() as usize, of.len(), "{row}");

@@ -548,7 +548,8 @@ pub fn run(options: &Options) -> Result<Report> {
         .filter_map(|&d| clean(&all, 0, HandKind::Soft, default_passivity(), d))
         .map(|m| (m.point.delay_ms, m.device_op_rms_m * 1e3))
         .collect();
-    let lead = lead::run(&mut out, options, default_line)?;
+    let unled: Vec<&Measured> = all.iter().filter(|m| m.point.passivity == default_passivity()).collect();
+    let lead = lead::run(&mut out, options, default_line, &unled)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();

@@ -12,7 +12,9 @@
 //! hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 % bursty loss) with
 //! one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity controller on), and
 //! is judged by the sweep's criterion; the energy comparison is made at the client time the VE aimed at
-//! (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by then.
+//! (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by then. A last row
+//! ([`everywhere`]) runs every session the grid ran with the default method again, led: what turning the lead
+//! on by default would do.
 
 use anyhow::Result;
 use serde_json::{json, Value};
@@ -57,7 +59,14 @@ pub struct LeadRows {
 
 /// Runs the rows, draws their stability map and the testbed's soft tour against `default_line` (the
 /// default VE's device-OP RMS by delay, mm, from the grid), and returns their summary.
-pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -> Result<LeadRows> {
+///
+/// `unled` are the grid's sessions with the default method: each is run again led (see [`everywhere`]).
+pub fn run(
+    out: &mut Output,
+    options: &Options,
+    default_line: Vec<(f64, f64)>,
+    unled: &[&Measured],
+) -> Result<LeadRows> {
     let caps: Vec<f64> = options.pick(CAPS_S.to_vec(), vec![1.0]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
@@ -184,6 +193,8 @@ pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -
         })
         .collect::<Vec<_>>()
         .join(" ");
+    let (everywhere_json, everywhere_answer) = everywhere(options, unled)?;
+    let answer = format!("{answer} {everywhere_answer}");
     let points_json: Vec<Value> = all
         .iter()
         .map(|(cap, m)| {
@@ -197,8 +208,72 @@ pub fn run(out: &mut Output, options: &Options, default_line: Vec<(f64, f64)>) -
             "answer": answer,
             "rows": rows_json,
             "points": points_json,
+            "everywhere": everywhere_json,
             "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
         }),
         answer,
     })
+}
+
+/// The cap of the [`everywhere`] row (s).
+pub const EVERYWHERE_CAP_S: f64 = 0.1;
+
+/// What turning the lead on by default would do: every session of the grid that the default method ran
+/// (`unled`), run again led by at most [`EVERYWHERE_CAP_S`], judged by the same criterion. Returns its
+/// summary and one sentence.
+fn everywhere(options: &Options, unled: &[&Measured]) -> Result<(Value, String)> {
+    let points: Vec<Point> = unled.iter().map(|m| m.point).collect();
+    let led: Vec<Measured> = sweep("latency: lead everywhere", &points, options.threads, options.progress, |p| {
+        measure_leading(p, SECONDS, None, EVERYWHERE_CAP_S)
+    })?;
+    let unstable: Vec<&Measured> = led.iter().filter(|m| !m.verdict.stable).collect();
+    // Tracking, led and not, over the same sessions: the mean device-OP RMS at each delay.
+    let delays: Vec<f64> = {
+        let mut d: Vec<f64> = points.iter().map(|p| p.delay_ms).collect();
+        d.sort_by(f64::total_cmp);
+        d.dedup();
+        d
+    };
+    let mean_rms_mm = |set: &[&Measured], delay_ms: f64| {
+        let at: Vec<f64> =
+            set.iter().filter(|m| m.point.delay_ms == delay_ms).map(|m| m.device_op_rms_m * 1e3).collect();
+        round(at.iter().sum::<f64>() / at.len().max(1) as f64, 3)
+    };
+    let led_refs: Vec<&Measured> = led.iter().collect();
+    let by_delay: Vec<Value> = delays
+        .iter()
+        .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(&led_refs, d), "unled": mean_rms_mm(unled, d)}))
+        .collect();
+    let summary = json!({
+        "cap_s": EVERYWHERE_CAP_S,
+        "sessions": led.len(),
+        "unstable": unstable.len(),
+        "unstable_points": unstable.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
+        "device_op_rms_mm_mean_by_delay": by_delay,
+    });
+    let answer = format!(
+        "Every session of the grid led ({}): {} of {} unstable{}.",
+        cap_name(EVERYWHERE_CAP_S),
+        unstable.len(),
+        led.len(),
+        if unstable.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({})",
+                unstable
+                    .iter()
+                    .map(|m| format!(
+                        "{} {} {} ms {}",
+                        TARGETS[m.point.target].2,
+                        m.point.hand.name(),
+                        m.point.delay_ms,
+                        m.point.network.name()
+                    ))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            )
+        },
+    );
+    Ok((summary, answer))
 }
