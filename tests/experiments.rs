@@ -242,6 +242,19 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         .collect();
     let unled_mean = unled_100.iter().sum::<f64>() / unled_100.len() as f64;
     assert!((f(&at_100["unled"]) - unled_mean).abs() < 2e-3, "{at_100} vs {unled_mean}");
+    // Beside it, what the hand feels: the touring hands' median felt-vs-rendered impedance error, the unled
+    // one recomputed from the grid's points (led, it was 1.20 against 1.06 at 100 ms over the full grid).
+    let impedance = everywhere["felt_vs_rendered_impedance_error_median_by_delay"].as_array().unwrap();
+    let at_100 = impedance.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
+    let mut touring: Vec<f64> = points
+        .iter()
+        .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
+        .filter(|p| p["hand"] == "soft" || p["hand"] == "firm")
+        .filter_map(|p| p["felt_vs_rendered_impedance_error"].as_f64())
+        .collect();
+    touring.sort_by(f64::total_cmp);
+    assert!((f(&at_100["unled"]) - touring[touring.len() / 2]).abs() < 2e-3, "{at_100} vs {touring:?}");
+    assert!(f(&at_100["led"]) > 0.0, "{at_100}");
     for row in lead["rows"].as_array().unwrap() {
         let of: Vec<&Value> = lead_points.iter().filter(|p| p["cap_s"] == row["cap_s"]).collect();
         assert_eq!(row["sessions"].as_u64().unwrap() as usize, of.len(), "{row}");

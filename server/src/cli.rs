@@ -88,8 +88,9 @@ struct Cli {
     /// Aim each graphics controller at where its client's local model is predicted to be after the network's
     /// one-way delay (half the shortest round trip), up to MS milliseconds ahead of the uplink heard and no
     /// further than the hand's recent accelerations make a safe guess (0, the default: follow what is heard).
-    /// Brings the VE's OP nearer the device under delay (testbed, 100 ms one way: 2.8 mm RMS against 5.3 mm);
-    /// the VE then moves on a guess (see the README's known limits).
+    /// Brings the VE's OP nearer the device under delay (testbed, 100 ms one way: 2.8 mm RMS against 5.3 mm),
+    /// but the VE then moves on a guess and the handle feels less like the linkage (see the README's known
+    /// limits).
     #[arg(long, value_name = "MS", default_value_t = 0.0, value_parser = parse_lead_ms)]
     lead_max_ms: f64,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the

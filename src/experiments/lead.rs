@@ -193,7 +193,7 @@ pub fn run(
         })
         .collect::<Vec<_>>()
         .join(" ");
-    let (everywhere_json, everywhere_answer) = everywhere(options, unled)?;
+    let (everywhere_json, everywhere_answer) = everywhere(out, options, unled)?;
     let answer = format!("{answer} {everywhere_answer}");
     let points_json: Vec<Value> = all
         .iter()
@@ -219,9 +219,10 @@ pub fn run(
 pub const EVERYWHERE_CAP_S: f64 = 0.1;
 
 /// What turning the lead on by default would do: every session of the grid that the default method ran
-/// (`unled`), run again led by at most [`EVERYWHERE_CAP_S`], judged by the same criterion. Returns its
-/// summary and one sentence.
-fn everywhere(options: &Options, unled: &[&Measured]) -> Result<(Value, String)> {
+/// (`unled`), run again led by at most [`EVERYWHERE_CAP_S`], judged by the same criterion, with the device-OP
+/// distance and the felt-vs-rendered impedance error beside the unled sessions' (chart `impedance_lead`).
+/// Returns its summary and one sentence.
+fn everywhere(out: &mut Output, options: &Options, unled: &[&Measured]) -> Result<(Value, String)> {
     let points: Vec<Point> = unled.iter().map(|m| m.point).collect();
     let led: Vec<Measured> = sweep("latency: lead everywhere", &points, options.threads, options.progress, |p| {
         measure_leading(p, SECONDS, None, EVERYWHERE_CAP_S)
@@ -239,21 +240,63 @@ fn everywhere(options: &Options, unled: &[&Measured]) -> Result<(Value, String)>
             set.iter().filter(|m| m.point.delay_ms == delay_ms).map(|m| m.device_op_rms_m * 1e3).collect();
         round(at.iter().sum::<f64>() / at.len().max(1) as f64, 3)
     };
+    // What the hand feels, led and not: the median felt-vs-rendered impedance error of the touring hands (soft,
+    // firm) at each delay; a lead that brings the OP to the device can take the feel away from the linkage.
+    let median_impedance_error = |set: &[&Measured], delay_ms: f64| {
+        let mut at: Vec<f64> = set
+            .iter()
+            .filter(|m| m.point.delay_ms == delay_ms && matches!(m.point.hand, HandKind::Soft | HandKind::Firm))
+            .filter_map(|m| m.impedance_error)
+            .collect();
+        at.sort_by(f64::total_cmp);
+        at.get(at.len() / 2).map(|&e| round(e, 3))
+    };
     let led_refs: Vec<&Measured> = led.iter().collect();
     let by_delay: Vec<Value> = delays
         .iter()
         .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(&led_refs, d), "unled": mean_rms_mm(unled, d)}))
         .collect();
+    let impedance_by_delay: Vec<Value> = delays
+        .iter()
+        .map(|&d| {
+            json!({
+                "delay_ms": d,
+                "led": median_impedance_error(&led_refs, d),
+                "unled": median_impedance_error(unled, d),
+            })
+        })
+        .collect();
+    let mut chart = Chart::new(
+        "Every session led (lead <= 100 ms) or not: what the hand feels, median over touring hands",
+        "one-way delay (ms)",
+        "|Z_handle - Z_OP| / |Z_OP|",
+    )
+    .legend(Legend::UpperLeft);
+    for (name, set) in [("led", &led_refs[..]), ("following what is heard (default)", unled)] {
+        let line = delays.iter().filter_map(|&d| median_impedance_error(set, d).map(|e| (d, e))).collect();
+        chart = chart.with(Series::line(name, line));
+    }
+    out.chart("impedance_lead", &chart)?;
     let summary = json!({
         "cap_s": EVERYWHERE_CAP_S,
         "sessions": led.len(),
         "unstable": unstable.len(),
         "unstable_points": unstable.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
         "device_op_rms_mm_mean_by_delay": by_delay,
+        "felt_vs_rendered_impedance_error_median_by_delay": impedance_by_delay,
     });
+    let at_100 = |f: &dyn Fn(&[&Measured], f64) -> Option<f64>, set: &[&Measured]| {
+        f(set, 100.0).map_or("n/a".to_string(), |v| v.to_string())
+    };
+    let rms_at = |set: &[&Measured], d: f64| Some(mean_rms_mm(set, d));
     let answer = format!(
-        "Every session of the grid led ({}): {} of {} unstable{}.",
+        "Every session of the grid led ({}): mean device-OP RMS at 100 ms {} mm against {} unled, median \
+         felt-vs-rendered impedance error (touring hands) {} against {}; {} of {} unstable{}.",
         cap_name(EVERYWHERE_CAP_S),
+        at_100(&rms_at, &led_refs),
+        at_100(&rms_at, unled),
+        at_100(&median_impedance_error, &led_refs),
+        at_100(&median_impedance_error, unled),
         unstable.len(),
         led.len(),
         if unstable.is_empty() {

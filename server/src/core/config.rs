@@ -132,16 +132,17 @@ pub struct VeConfig {
     /// each graphics controller at where the local model was predicted to be the network's one-way delay after
     /// the uplink left, up to this and no further than the heard motion supports
     /// (`coupling_lead_guess_energy_j`). 0 (the default) follows what it has heard. A lead brings the OP nearer
-    /// the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against 5.3 mm; `kinloop experiment
-    /// latency`, the lead rows, none of 168 sessions unstable), but it is a guess about the hand, and with
-    /// every session of the sweep led one poke of 864 (200 ms, 10 ms jitter, bursty loss) crosses the energy
-    /// criterion, which is why it is not on by default.
+    /// the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against 5.3 mm) and, with every session of
+    /// the latency sweep led by up to 100 ms, none is unstable; but what the hand feels moves away from the
+    /// linkage (median felt-vs-rendered impedance error at 100 ms 1.20 against 1.06, at 1 s 1.97 against
+    /// 1.31), which is why it is not on by default (`kinloop experiment latency`, the lead rows).
     pub coupling_lead_max_s: f64,
     /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
     /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
-    /// this through K_g. 1 mJ: leading without this bound left 22 of the lead rows' 168 sessions unstable
-    /// (pokes and releases); at 2 mJ the testbed's poke at 50 ms with 30 ms of jitter and bursty loss crosses
-    /// the energy criterion; at 0.5 mJ the testbed's soft tour is 3.1 mm from the OP at 100 ms one way.
+    /// this through K_g. Leading without this bound left 22 of the lead rows' 168 sessions unstable (pokes and
+    /// releases). 1 mJ: testbed soft tour 2.8 mm from the OP at 100 ms one way; 2 mJ: 2.6 mm, still stable
+    /// everywhere, and the felt impedance a little farther from the linkage's (1.25 against 1.20 at 100 ms);
+    /// 0.5 mJ: 3.1 mm.
     pub coupling_lead_guess_energy_j: f64,
     /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
     /// controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see `passivity`).
