@@ -137,7 +137,6 @@ impl<S: Space> Coupling<S> {
     /// Makes an uplink's reference the coupling's: the PD's target and the force channel's hand wrench, and
     /// the client time snapshots will say the VE answers. The coupling pushes from the first one on.
     pub fn follow(&mut self, reference: &Reference<S>) {
-        self.track_twist_rate(reference);
         if self.first_heard_s <= 0.0 {
             self.first_heard_s = reference.client_time_s;
         }
@@ -166,10 +165,11 @@ impl<S: Space> Coupling<S> {
         self.target_time_s = if self.heard_time_s > 0.0 { self.heard_time_s + lead_s } else { 0.0 };
     }
 
-    /// Folds a newer uplink's twist into [`Coupling::twist_rate_envelope`]: per axis, the rate of change
-    /// since the previous uplink, or the envelope decayed over the client time between them, whichever is
-    /// larger. Uplinks out of order, repeated, or non-finite leave it as it was.
-    fn track_twist_rate(&mut self, reference: &Reference<S>) {
+    /// Folds a newer uplink's twist into [`Coupling::twist_rate_envelope`], before [`Coupling::follow`] makes
+    /// it the coupling's: per axis, the rate of change since the previous uplink, or the envelope decayed over
+    /// the client time between them, whichever is larger. Uplinks out of order, repeated, or non-finite leave
+    /// it as it was. Only a VE that leads needs it (`update_couplings` skips it otherwise).
+    pub fn track_twist_rate(&mut self, reference: &Reference<S>) {
         let dt = reference.client_time_s - self.heard_time_s;
         if !(self.heard_time_s > 0.0 && dt > 0.0 && dt.is_finite()) {
             return;
@@ -662,6 +662,12 @@ mod tests {
         }
     }
 
+    /// What `update_couplings` does with an uplink when the VE leads: tracks its twist's rate, then follows it.
+    fn hear(c: &mut Coupling<Planar>, reference: Reference<Planar>) {
+        c.track_twist_rate(&reference);
+        c.follow(&reference);
+    }
+
     /// A planar coupling with the testbed's default-like gains, having heard a hand that started at
     /// `(pose0, twist0)` and accelerates steadily at `accel` (linear m/s², angular rad/s²), from client time
     /// 1 s for `heard_s`, one uplink per millisecond.
@@ -678,7 +684,7 @@ mod tests {
             }
             let reference =
                 Reference { client_time_s: 1.0 + k as f64 * dt, hand_wrench: Vector3::zeros(), pose, twist };
-            c.follow(&reference);
+            hear(&mut c, reference);
         }
         (c, pose, twist)
     }
@@ -694,12 +700,12 @@ mod tests {
         assert!((envelope - accel.abs()).amax() < 1e-9 * accel.amax(), "{envelope} vs {accel}");
         let last = c.heard_time_s;
         // The jitter buffer hands uplinks over in order, but may repeat one.
-        c.follow(&Reference { client_time_s: last, hand_wrench: Vector3::zeros(), pose, twist });
+        hear(&mut c, Reference { client_time_s: last, hand_wrench: Vector3::zeros(), pose, twist });
         assert_eq!(c.twist_rate_envelope, envelope);
         let dt = 1e-3;
         for k in 1..=(LEAD_RATE_MEMORY_S / dt).round() as usize {
             pose.integrate(&twist, dt);
-            c.follow(&Reference { client_time_s: last + k as f64 * dt, hand_wrench: Vector3::zeros(), pose, twist });
+            hear(&mut c, Reference { client_time_s: last + k as f64 * dt, hand_wrench: Vector3::zeros(), pose, twist });
         }
         let forgotten = accel.abs() * (-1.0f64).exp();
         assert!((c.twist_rate_envelope - forgotten).amax() < 1e-9 * accel.amax(), "{}", c.twist_rate_envelope);
@@ -707,7 +713,7 @@ mod tests {
         // shows is the change over 5 ms, four times what it would be spread over the gap.
         let (gap, change) = (0.02, Vector3::new(0.5, 0.0, 0.0));
         let (before, at) = (c.twist_rate_envelope, c.heard_time_s + gap);
-        c.follow(&Reference { client_time_s: at, hand_wrench: Vector3::zeros(), pose, twist: twist + change });
+        hear(&mut c, Reference { client_time_s: at, hand_wrench: Vector3::zeros(), pose, twist: twist + change });
         assert!((c.twist_rate_envelope[0] - change[0] / LEAD_RATE_GAP_S).abs() < 1e-9, "{}", c.twist_rate_envelope);
         let decayed = before[2] * (-gap / LEAD_RATE_MEMORY_S).exp();
         assert!((c.twist_rate_envelope[2] - decayed).abs() < 1e-9, "{}", c.twist_rate_envelope);
@@ -768,7 +774,7 @@ mod tests {
             }
             pose.integrate(&twist, dt);
             heard += dt;
-            c.follow(&Reference { client_time_s: heard, hand_wrench: Vector3::zeros(), pose, twist });
+            hear(&mut c, Reference { client_time_s: heard, hand_wrench: Vector3::zeros(), pose, twist });
         }
         assert!(aimed.windows(2).all(|w| w[1] >= w[0] - 1e-12), "the aimed time went back");
         assert_eq!(c.lead_s, 0.0);

@@ -720,10 +720,13 @@ impl<S: Space> VeCore<S> {
             |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
         let holders = self.users.iter().zip(&self.couplings).filter(|(u, c)| holding(u, c)).count();
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
+            let lead_max_s = self.config.coupling_lead_max_s;
             if let Some(reference) = c.playout.due(at.as_secs_f64()) {
+                if lead_max_s > 0.0 {
+                    c.track_twist_rate(&reference);
+                }
                 c.follow(&reference);
             }
-            let lead_max_s = self.config.coupling_lead_max_s;
             if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
                 let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, dt);
                 c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
