@@ -8,13 +8,13 @@
 //! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap
 //! and no longer than the heard motion supports (`Coupling::trusted_lead_s`: the twist's recent rates of
 //! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
-//! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions (every scene and
-//! hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 % bursty loss) with
-//! one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity controller on), and
-//! is judged by the sweep's criterion; the energy comparison is made at the client time the VE aimed at
-//! (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by then. A last row
-//! ([`everywhere`]) runs every session the grid ran with the default method again, led: what turning the lead
-//! on by default would do.
+//! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions
+//! (every scene and hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 %
+//! bursty loss) with one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity
+//! controller on), and is judged by the sweep's criterion; the energy comparison is made at the client time
+//! the VE aimed at (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by
+//! then. A last row ([`everywhere`]) runs every session the grid ran with the default method again, led:
+//! what turning the lead on by default would do.
 
 use anyhow::Result;
 use serde_json::{json, Value};
@@ -267,7 +267,10 @@ fn everywhere(out: &mut Output, options: &Options, unled: &[&Measured]) -> Resul
         })
         .collect();
     let mut chart = Chart::new(
-        "Every session led (lead <= 100 ms) or not: what the hand feels, median over touring hands",
+        format!(
+            "Every session led ({}) or not: what the hand feels, median over touring hands",
+            cap_name(EVERYWHERE_CAP_S)
+        ),
         "one-way delay (ms)",
         "|Z_handle - Z_OP| / |Z_OP|",
     )

@@ -668,9 +668,10 @@ mod tests {
         c.follow(&reference);
     }
 
-    /// A planar coupling with the testbed's default-like gains, having heard a hand that started at
-    /// `(pose0, twist0)` and accelerates steadily at `accel` (linear m/s², angular rad/s²), from client time
-    /// 1 s for `heard_s`, one uplink per millisecond.
+    /// A planar coupling with the testbed's default-like gains, having heard a hand that started at the
+    /// identity pose with twist (0.04 m/s, −0.02 m/s, 0.3 rad/s) and accelerates steadily at `accel` (linear
+    /// m/s², angular rad/s²), from client time 1 s for `heard_s`, one uplink per millisecond. Returns the
+    /// coupling and the hand's last pose and twist.
     fn heard_accelerating(accel: Vector3<f64>, heard_s: f64) -> (Coupling<Planar>, OpPose<Planar>, Vector3<f64>) {
         let stiffness = Vector3::new(9500.0, 9500.0, 12.5);
         let mut c = Coupling::<Planar>::new(1, nalgebra::Vector2::zeros(), 3, stiffness, Vector3::zeros());
