@@ -122,9 +122,11 @@ fn a_client_that_declines_the_scene_says_why_and_the_server_lets_go() {
 }
 
 /// Clients that send their join and close at once, before their welcome: whatever the server had done with
-/// the join when it noticed (read nothing of it, or admitted the user into the VE and then failed to send
-/// the welcome), no user and no connection remain. Which of the two happens is a race, so the test tries
-/// fifty times; the second once kept the user in the VE until the server stopped.
+/// the join when it noticed (read nothing of it, admitted the user into the VE and then failed to send the
+/// welcome, or sent the welcome into the stream's buffer and started a session that ends at once), no user
+/// and no connection remain, and no session is left connected. Which happens is a race, so the test tries
+/// fifty times; the second once kept the user in the VE until the server stopped, and the third
+/// was seen in CI (one of fifty tries).
 #[test]
 fn a_client_gone_before_its_welcome_leaves_no_user_behind() {
     const NAME: &str = "a_client_gone_before_its_welcome_leaves_no_user_behind";
@@ -152,7 +154,8 @@ fn a_client_gone_before_its_welcome_leaves_no_user_behind() {
     }
     let stats = live::stop_server(&rt, server);
     println!("admitted into the VE before the welcome failed: {} of {TRIES}", stats.ve.core.users_joined);
-    assert!(stats.per_user.is_empty(), "no session started: {:?}", stats.per_user);
+    assert!(stats.per_user.iter().all(|u| !u.connected), "a session is left connected: {:?}", stats.per_user);
+    assert_eq!(stats.users, 0, "{stats:?}");
 }
 
 /// Joins whose device cannot exist (a negative peak force, a workspace without extent) or has the wrong
