@@ -158,6 +158,15 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
     let (near, far) = (f(&first["felt_vs_rendered_impedance_error"]), f(&last["felt_vs_rendered_impedance_error"]));
     assert!(near < 1.0 && far > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {far} at 1 s");
+    // The feel against the same hand without delay: the undelayed session is its own reference (no change),
+    // and the delay moves the feel away from it (0.30 at 100 ms and 1.75 at 1 s on the four-bar's soft tour
+    // when this was written).
+    for method in ["plain", "passivity"] {
+        assert_eq!(f(&find("soft", 0.0, method)["felt_change_from_undelayed"]), 0.0);
+        let (near, far) = (find("soft", 100.0, method), find("soft", 1000.0, method));
+        let (near, far) = (f(&near["felt_change_from_undelayed"]), f(&far["felt_change_from_undelayed"]));
+        assert!(near > 0.0 && far > 2.0 * near, "{method}: felt change {near} at 100 ms, {far} at 1 s");
+    }
     for method in ["plain", "passivity"] {
         assert_eq!(points.iter().filter(|p| p["method"] == method).count(), points.len() / 2, "both methods swept");
     }
@@ -251,6 +260,18 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
         .filter(|p| p["hand"] == "soft" || p["hand"] == "firm")
         .filter_map(|p| p["felt_vs_rendered_impedance_error"].as_f64())
+        .collect();
+    touring.sort_by(f64::total_cmp);
+    assert!((f(&at_100["unled"]) - touring[touring.len() / 2]).abs() < 2e-3, "{at_100} vs {touring:?}");
+    assert!(f(&at_100["led"]) > 0.0, "{at_100}");
+    // And the felt impedance's change from the same hand without delay, recomputed the same way.
+    let change = everywhere["felt_change_from_undelayed_median_by_delay"].as_array().unwrap();
+    let at_100 = change.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
+    let mut touring: Vec<f64> = points
+        .iter()
+        .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
+        .filter(|p| p["hand"] == "soft" || p["hand"] == "firm")
+        .filter_map(|p| p["felt_change_from_undelayed"].as_f64())
         .collect();
     touring.sort_by(f64::total_cmp);
     assert!((f(&at_100["unled"]) - touring[touring.len() / 2]).abs() < 2e-3, "{at_100} vs {touring:?}");

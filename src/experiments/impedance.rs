@@ -76,9 +76,21 @@ fn impedance(force: &[f64], velocity: &[f64], dt: f64) -> [Option<(f64, f64)>; F
     })
 }
 
-/// Median over linear axes and frequencies of the relative felt-vs-rendered impedance error of client
-/// `client` (user id `user_id` in the VE's samples); `None` when no frequency had motion enough to estimate.
-pub fn felt_vs_rendered_error(rec: &Recording, client: usize, user_id: u32) -> Option<f64> {
+/// One axis's impedance estimates `(re, im)` at [`FREQUENCIES_HZ`]; `None` where the motion was too small.
+pub type AxisImpedance = [Option<(f64, f64)>; FREQUENCIES_HZ.len()];
+
+/// The impedances of one session's user, per linear axis.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Impedances {
+    /// At the handle: the hand's wrench over the handle's velocity (VE units).
+    pub felt: Vec<AxisImpedance>,
+    /// At the VE's OP: the coupling's wrench over the OP's velocity.
+    pub rendered: Vec<AxisImpedance>,
+}
+
+/// The felt and rendered impedances of client `client` (user id `user_id` in the VE's samples); `None`
+/// without samples enough.
+pub fn estimate(rec: &Recording, client: usize, user_id: u32) -> Option<Impedances> {
     let samples = rec.clients.get(client)?;
     let samples: Vec<_> = samples.iter().filter(|s| s.t >= SETTLE_S).collect();
     let ve: Vec<_> = rec.ve.iter().filter(|v| v.t >= SETTLE_S).collect();
@@ -88,7 +100,7 @@ pub fn felt_vs_rendered_error(rec: &Recording, client: usize, user_id: u32) -> O
     let dt_client = (samples[samples.len() - 1].t - samples[0].t) / (samples.len() - 1) as f64;
     let dt_ve = (ve[ve.len() - 1].t - ve[0].t) / (ve.len() - 1) as f64;
     let axes = samples[0].device.len();
-    let mut errors = Vec::new();
+    let mut impedances = Impedances::default();
     for axis in 0..axes {
         let felt_force: Vec<f64> = samples.iter().map(|s| s.hand.get(axis).copied().unwrap_or(0.0)).collect();
         let felt_velocity: Vec<f64> =
@@ -109,13 +121,22 @@ pub fn felt_vs_rendered_error(rec: &Recording, client: usize, user_id: u32) -> O
                 }
             })
             .collect();
-        let felt = impedance(&felt_force, &felt_velocity, dt_client);
-        let rendered = impedance(&rendered_force, &rendered_velocity, dt_ve);
-        for (f, r) in felt.iter().zip(&rendered) {
-            if let (Some(f), Some(r)) = (f, r) {
+        impedances.felt.push(impedance(&felt_force, &felt_velocity, dt_client));
+        impedances.rendered.push(impedance(&rendered_force, &rendered_velocity, dt_ve));
+    }
+    Some(impedances)
+}
+
+/// Median over axes and frequencies of `|Z − Z_ref| / |Z_ref|`, where both were estimated; `None` where
+/// neither axis nor frequency had both.
+pub fn relative_error(z: &[AxisImpedance], reference: &[AxisImpedance]) -> Option<f64> {
+    let mut errors = Vec::new();
+    for (axis, reference_axis) in z.iter().zip(reference) {
+        for (z, r) in axis.iter().zip(reference_axis) {
+            if let (Some(z), Some(r)) = (z, r) {
                 let magnitude = r.0.hypot(r.1);
                 if magnitude > 0.0 {
-                    errors.push((f.0 - r.0).hypot(f.1 - r.1) / magnitude);
+                    errors.push((z.0 - r.0).hypot(z.1 - r.1) / magnitude);
                 }
             }
         }
@@ -125,6 +146,13 @@ pub fn felt_vs_rendered_error(rec: &Recording, client: usize, user_id: u32) -> O
     }
     errors.sort_by(f64::total_cmp);
     Some(errors[errors.len() / 2])
+}
+
+/// Median over linear axes and frequencies of the relative felt-vs-rendered impedance error of client
+/// `client` (user id `user_id` in the VE's samples); `None` when no frequency had motion enough to estimate.
+pub fn felt_vs_rendered_error(rec: &Recording, client: usize, user_id: u32) -> Option<f64> {
+    let z = estimate(rec, client, user_id)?;
+    relative_error(&z.felt, &z.rendered)
 }
 
 #[cfg(test)]
@@ -159,5 +187,30 @@ mod tests {
         }
         // Without motion there is nothing to estimate.
         assert!(impedance(&force, &vec![0.0; n], dt).iter().all(Option::is_none));
+    }
+
+    /// The relative error is `|Z − Z_ref| / |Z_ref|` where both were estimated, its median over axes and
+    /// frequencies: a reference scaled by `1 + 0.5 i` is off by 0.5 wherever it is, whatever its size.
+    #[test]
+    fn the_relative_error_is_the_median_where_both_were_estimated() {
+        let reference: Vec<AxisImpedance> =
+            vec![[Some((3.0, 4.0)), Some((-10.0, 2.0)), None, Some((0.5, 0.0))], [Some((1.0, 1.0)), None, None, None]];
+        let scaled: Vec<AxisImpedance> =
+            reference.iter().map(|axis| axis.map(|z| z.map(|(re, im)| (re - 0.5 * im, im + 0.5 * re)))).collect();
+        let error = relative_error(&scaled, &reference).expect("estimated");
+        assert!((error - 0.5).abs() < 1e-12, "{error}");
+        assert_eq!(relative_error(&reference, &reference), Some(0.0));
+        // Where one side has no estimate the frequency is left out; with none in common there is no error.
+        // Doubled at three of the four estimated frequencies (error 1 there, 0 at the fourth); the added
+        // estimates at frequencies the reference lacks do not count, so the median is 1.
+        let mut doubled = reference.clone();
+        for (axis, i) in [(0, 0), (0, 1), (1, 0)] {
+            doubled[axis][i] = doubled[axis][i].map(|(re, im)| (2.0 * re, 2.0 * im));
+        }
+        doubled[1][1] = Some((100.0, 0.0));
+        doubled[1][2] = Some((100.0, 0.0));
+        assert_eq!(relative_error(&doubled, &reference), Some(1.0));
+        let elsewhere: Vec<AxisImpedance> = vec![[None, None, Some((1.0, 0.0)), None]; 2];
+        assert_eq!(relative_error(&elsewhere, &reference), None);
     }
 }

@@ -17,8 +17,10 @@
 //! Each point is labelled by the one criterion of [`verdict`] (divergence including VE restores, sustained
 //! saturation, energy growth). Measured beside it: the device-OP distance in the device's space (what the hand
 //! feels) and its floor, how far the device had moved since the pose the VE had heard of (a VE that follows
-//! what it hears cannot be nearer on average), loop closure, clamped ticks, and the coupling's energy account
-//! when the passivity controller books it. The [`model_update`] rows add the local model's update: the
+//! what it hears cannot be nearer on average), loop closure, clamped ticks, the coupling's energy account
+//! when the passivity controller books it, and two impedance figures at 0.5-4 Hz: the handle's against the
+//! VE's OP (felt vs rendered) and the handle's against the same hand's without delay (how far the network
+//! moved the feel, [`fill_felt_changes`]). The [`model_update`] rows add the local model's update: the
 //! free pull at a fixed 200 ms against the default, with and without its energy tank; the [`lead`] rows a VE
 //! that runs ahead of the hand (not default), the only way below the device-OP floor. A (scene, hand,
 //! method) **first fails** at the smallest delay where some network condition of the grid is unstable.
@@ -193,6 +195,37 @@ pub struct Measured {
     /// Median relative error of the impedance felt at the handle against the one the VE's linkage presents
     /// at the OP ([`impedance::felt_vs_rendered_error`]); `None` where the hand moved too little to tell.
     pub impedance_error: Option<f64>,
+    /// The impedances behind it, per linear axis and frequency (`None` without samples enough).
+    pub impedances: Option<impedance::Impedances>,
+    /// Median relative change of the impedance felt at the handle from the same scene, hand and method
+    /// without delay on a clean network (filled by [`fill_felt_changes`]; `None` until then, or where
+    /// either session's hand moved too little to tell).
+    pub felt_change: Option<f64>,
+}
+
+/// The undelayed session a point's feel is compared with: same scene, hand and method, 0 ms, clean network.
+fn is_undelayed_reference(m: &Measured, of: &Point) -> bool {
+    m.point.target == of.target
+        && m.point.hand == of.hand
+        && m.point.passivity == of.passivity
+        && m.point.delay_ms == 0.0
+        && m.point.network.is_clean()
+}
+
+/// Fills each point's [`Measured::felt_change`] against its undelayed session among `references`: how far
+/// the delay, and whatever the VE and the client do about it, moved what the hand feels from what the same
+/// hand feels without a network. The felt-vs-rendered error compares the handle with the VE's OP, whose
+/// wrench-over-velocity depends on how the coupling drives it (on the testbed's soft tour, unled, its relative
+/// change from the undelayed session's is 1.2 at 50 ms and 6.8 at 1 s), so it cannot tell a change of feel
+/// from a change in how the VE is driven; this can.
+pub fn fill_felt_changes(points: &mut [Measured], references: &[Measured]) {
+    for m in points.iter_mut() {
+        let reference = references.iter().find(|r| is_undelayed_reference(r, &m.point));
+        m.felt_change = match (m.impedances.as_ref(), reference.and_then(|r| r.impedances.as_ref())) {
+            (Some(z), Some(reference)) => impedance::relative_error(&z.felt, &reference.felt),
+            _ => None,
+        };
+    }
 }
 
 /// Runs one point.
@@ -220,7 +253,8 @@ pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead_max
     let (summary, rec) = session(&plan).with_context(|| format!("{p:?}"))?;
     let c = &summary.clients[0];
     let user_id = rec.ve.iter().find_map(|v| v.users.first().map(|u| u.0));
-    let impedance_error = user_id.and_then(|id| impedance::felt_vs_rendered_error(&rec, 0, id));
+    let impedances = user_id.and_then(|id| impedance::estimate(&rec, 0, id));
+    let impedance_error = impedances.as_ref().and_then(|z| impedance::relative_error(&z.felt, &z.rendered));
     Ok(Measured {
         point: *p,
         verdict: verdict::judge(&summary, &rec),
@@ -233,6 +267,8 @@ pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead_max
         passivity_absorbed_j: c.passivity_absorbed_j,
         passivity_activations: c.passivity_activations,
         impedance_error,
+        impedances,
+        felt_change: None,
     })
 }
 
@@ -336,6 +372,7 @@ pub fn point_json(m: &Measured) -> Value {
         "passivity_absorbed_j": significant(m.passivity_absorbed_j, 3),
         "passivity_activations": m.passivity_activations,
         "felt_vs_rendered_impedance_error": m.impedance_error.map(|e| round(e, 3)),
+        "felt_change_from_undelayed": m.felt_change.map(|e| round(e, 3)),
     })
 }
 
@@ -497,15 +534,16 @@ fn energy_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
     out.chart("energy_vs_delay", &chart)
 }
 
-/// The felt-vs-rendered impedance error against delay: per scene and touring hand (soft, firm), the median
-/// over the networks of the grid (points where the hand moved too little to tell are left out).
-fn impedance_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
-    let mut chart = Chart::new(
-        "Felt vs rendered impedance at 0.5-4 Hz, median over networks",
-        "one-way delay (ms)",
-        "|Z_handle - Z_OP| / |Z_OP|",
-    )
-    .legend(Legend::UpperLeft);
+/// An impedance figure against delay: per scene and touring hand (soft, firm), the median over the networks
+/// of the grid of `metric` (points where it could not be told are left out).
+fn impedance_chart(
+    out: &mut Output,
+    grid: &Grid,
+    all: &[Measured],
+    (name, title, y): (&str, &str, &str),
+    metric: fn(&Measured) -> Option<f64>,
+) -> Result<()> {
+    let mut chart = Chart::new(title, "one-way delay (ms)", y).legend(Legend::UpperLeft);
     chart.log_y = true;
     // The touring hands (a released handle has no hand on it to feel anything; the poke is the firm hand's
     // tour with a jab, in summary.json).
@@ -516,18 +554,20 @@ fn impedance_chart(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()
                 .delays_ms
                 .iter()
                 .filter_map(|&d| {
-                    let mut errors: Vec<f64> = pair(all, target, hand, default_passivity())
+                    let mut values: Vec<f64> = pair(all, target, hand, default_passivity())
                         .filter(|m| m.point.delay_ms == d)
-                        .filter_map(|m| m.impedance_error)
+                        .filter_map(metric)
+                        // A log axis has no place for an undelayed session's zero change.
+                        .filter(|&v| v > 0.0)
                         .collect();
-                    errors.sort_by(f64::total_cmp);
-                    errors.get(errors.len() / 2).map(|&e| (d, e))
+                    values.sort_by(f64::total_cmp);
+                    values.get(values.len() / 2).map(|&v| (d, v))
                 })
                 .collect();
             chart = chart.with(Series::line(format!("{} {}", TARGETS[target].2, hand.name()), line));
         }
     }
-    out.chart("impedance_vs_delay", &chart)
+    out.chart(name, &chart)
 }
 
 /// Runs the experiment.
@@ -535,11 +575,34 @@ pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency", options)?;
     let grid = options.pick(Grid::full(), Grid::quick());
     let points = grid.points();
-    let all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, SECONDS))?;
+    let mut all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, SECONDS))?;
+    let references: Vec<Measured> = all.iter().filter(|m| is_undelayed_reference(m, &m.point)).cloned().collect();
+    fill_felt_changes(&mut all, &references);
     tracking_charts(&mut out, &grid, &all)?;
     stability_chart(&mut out, &grid, &all)?;
     energy_chart(&mut out, &grid, &all)?;
-    impedance_chart(&mut out, &grid, &all)?;
+    impedance_chart(
+        &mut out,
+        &grid,
+        &all,
+        (
+            "impedance_vs_delay",
+            "Felt vs rendered impedance at 0.5-4 Hz, median over networks",
+            "|Z_handle - Z_OP| / |Z_OP|",
+        ),
+        |m| m.impedance_error,
+    )?;
+    impedance_chart(
+        &mut out,
+        &grid,
+        &all,
+        (
+            "felt_change_vs_delay",
+            "Felt impedance at 0.5-4 Hz against the same hand without delay, median over networks",
+            "|Z_handle - Z_handle(0 ms)| / |Z_handle(0 ms)|",
+        ),
+        |m| m.felt_change,
+    )?;
     let model_update = model_update::run(&mut out, options)?;
     let default_line: Vec<(f64, f64)> = grid
         .delays_ms
@@ -549,7 +612,7 @@ pub fn run(options: &Options) -> Result<Report> {
         .map(|m| (m.point.delay_ms, m.device_op_rms_m * 1e3))
         .collect();
     let unled: Vec<&Measured> = all.iter().filter(|m| m.point.passivity == default_passivity()).collect();
-    let lead = lead::run(&mut out, options, default_line, &unled)?;
+    let lead = lead::run(&mut out, options, default_line, &unled, &references)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();

@@ -24,7 +24,8 @@ use kinloop_server::core::VeConfig;
 
 use super::common::{round, sweep, Options, Output};
 use super::latency::{
-    measure_leading, point_json, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, SECONDS, TARGETS,
+    fill_felt_changes, measure_leading, point_json, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
+    SECONDS, TARGETS,
 };
 use crate::charts::{Chart, HeatMap, Legend, Series};
 
@@ -66,6 +67,7 @@ pub fn run(
     options: &Options,
     default_line: Vec<(f64, f64)>,
     unled: &[&Measured],
+    undelayed: &[Measured],
 ) -> Result<LeadRows> {
     let caps: Vec<f64> = options.pick(CAPS_S.to_vec(), vec![1.0]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
@@ -193,7 +195,7 @@ pub fn run(
         })
         .collect::<Vec<_>>()
         .join(" ");
-    let (everywhere_json, everywhere_answer) = everywhere(out, options, unled)?;
+    let (everywhere_json, everywhere_answer) = everywhere(out, options, unled, undelayed)?;
     let answer = format!("{answer} {everywhere_answer}");
     let points_json: Vec<Value> = all
         .iter()
@@ -215,18 +217,28 @@ pub fn run(
     })
 }
 
+/// A median over a set of sessions at one delay (ms).
+type MedianByDelay<'a> = dyn Fn(&[&Measured], f64) -> Option<f64> + 'a;
+
 /// The cap of the [`everywhere`] row (s).
 pub const EVERYWHERE_CAP_S: f64 = 0.1;
 
 /// What turning the lead on by default would do: every session of the grid that the default method ran
 /// (`unled`), run again led by at most [`EVERYWHERE_CAP_S`], judged by the same criterion, with the device-OP
-/// distance and the felt-vs-rendered impedance error beside the unled sessions' (chart `impedance_lead`).
-/// Returns its summary and one sentence.
-fn everywhere(out: &mut Output, options: &Options, unled: &[&Measured]) -> Result<(Value, String)> {
+/// distance and what the hand feels beside the unled sessions' (chart `impedance_lead`): the felt-vs-rendered
+/// impedance error, and the felt impedance's change from the same hand without delay (its sessions in
+/// `undelayed`; at 0 ms a lead of at most the delay is none). Returns its summary and one sentence.
+fn everywhere(
+    out: &mut Output,
+    options: &Options,
+    unled: &[&Measured],
+    undelayed: &[Measured],
+) -> Result<(Value, String)> {
     let points: Vec<Point> = unled.iter().map(|m| m.point).collect();
-    let led: Vec<Measured> = sweep("latency: lead everywhere", &points, options.threads, options.progress, |p| {
+    let mut led: Vec<Measured> = sweep("latency: lead everywhere", &points, options.threads, options.progress, |p| {
         measure_leading(p, SECONDS, None, EVERYWHERE_CAP_S)
     })?;
+    fill_felt_changes(&mut led, undelayed);
     let unstable: Vec<&Measured> = led.iter().filter(|m| !m.verdict.stable).collect();
     // Tracking, led and not, over the same sessions: the mean device-OP RMS at each delay.
     let delays: Vec<f64> = {
@@ -240,44 +252,49 @@ fn everywhere(out: &mut Output, options: &Options, unled: &[&Measured]) -> Resul
             set.iter().filter(|m| m.point.delay_ms == delay_ms).map(|m| m.device_op_rms_m * 1e3).collect();
         round(at.iter().sum::<f64>() / at.len().max(1) as f64, 3)
     };
-    // What the hand feels, led and not: the median felt-vs-rendered impedance error of the touring hands (soft,
-    // firm) at each delay; a lead that brings the OP to the device can take the feel away from the linkage.
-    let median_impedance_error = |set: &[&Measured], delay_ms: f64| {
-        let mut at: Vec<f64> = set
-            .iter()
-            .filter(|m| m.point.delay_ms == delay_ms && matches!(m.point.hand, HandKind::Soft | HandKind::Firm))
-            .filter_map(|m| m.impedance_error)
-            .collect();
-        at.sort_by(f64::total_cmp);
-        at.get(at.len() / 2).map(|&e| round(e, 3))
+    // What the hand feels, led and not: the median over the touring hands (soft, firm) at each delay; a lead
+    // that brings the OP to the device can take the feel away from the linkage.
+    let median_of = |metric: fn(&Measured) -> Option<f64>| {
+        move |set: &[&Measured], delay_ms: f64| {
+            let mut at: Vec<f64> = set
+                .iter()
+                .filter(|m| m.point.delay_ms == delay_ms && matches!(m.point.hand, HandKind::Soft | HandKind::Firm))
+                .filter_map(|m| metric(m))
+                .collect();
+            at.sort_by(f64::total_cmp);
+            at.get(at.len() / 2).map(|&e| round(e, 3))
+        }
     };
+    let median_impedance_error = median_of(|m| m.impedance_error);
+    let median_felt_change = median_of(|m| m.felt_change);
     let led_refs: Vec<&Measured> = led.iter().collect();
     let by_delay: Vec<Value> = delays
         .iter()
         .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(&led_refs, d), "unled": mean_rms_mm(unled, d)}))
         .collect();
-    let impedance_by_delay: Vec<Value> = delays
-        .iter()
-        .map(|&d| {
-            json!({
-                "delay_ms": d,
-                "led": median_impedance_error(&led_refs, d),
-                "unled": median_impedance_error(unled, d),
-            })
-        })
-        .collect();
+    let led_and_unled = |median: &MedianByDelay| -> Vec<Value> {
+        delays.iter().map(|&d| json!({"delay_ms": d, "led": median(&led_refs, d), "unled": median(unled, d)})).collect()
+    };
+    let impedance_by_delay = led_and_unled(&median_impedance_error);
+    let felt_change_by_delay = led_and_unled(&median_felt_change);
     let mut chart = Chart::new(
         format!(
             "Every session led ({}) or not: what the hand feels, median over touring hands",
             cap_name(EVERYWHERE_CAP_S)
         ),
         "one-way delay (ms)",
-        "|Z_handle - Z_OP| / |Z_OP|",
+        "relative impedance error",
     )
     .legend(Legend::UpperLeft);
     for (name, set) in [("led", &led_refs[..]), ("following what is heard (default)", unled)] {
-        let line = delays.iter().filter_map(|&d| median_impedance_error(set, d).map(|e| (d, e))).collect();
-        chart = chart.with(Series::line(name, line));
+        let lines: [(&str, &MedianByDelay); 2] = [
+            ("|Z_handle - Z_OP| / |Z_OP|", &median_impedance_error),
+            ("|Z_handle - Z_handle(0 ms)| / |Z_handle(0 ms)|", &median_felt_change),
+        ];
+        for (metric, median) in lines {
+            let line = delays.iter().filter_map(|&d| median(set, d).map(|e| (d, e))).collect();
+            chart = chart.with(Series::line(format!("{name}: {metric}"), line));
+        }
     }
     out.chart("impedance_lead", &chart)?;
     let summary = json!({
@@ -287,19 +304,23 @@ fn everywhere(out: &mut Output, options: &Options, unled: &[&Measured]) -> Resul
         "unstable_points": unstable.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
         "device_op_rms_mm_mean_by_delay": by_delay,
         "felt_vs_rendered_impedance_error_median_by_delay": impedance_by_delay,
+        "felt_change_from_undelayed_median_by_delay": felt_change_by_delay,
     });
     let at_100 = |f: &dyn Fn(&[&Measured], f64) -> Option<f64>, set: &[&Measured]| {
         f(set, 100.0).map_or("n/a".to_string(), |v| v.to_string())
     };
     let rms_at = |set: &[&Measured], d: f64| Some(mean_rms_mm(set, d));
     let answer = format!(
-        "Every session of the grid led ({}): mean device-OP RMS at 100 ms {} mm against {} unled, median \
-         felt-vs-rendered impedance error (touring hands) {} against {}; {} of {} unstable{}.",
+        "Every session of the grid led ({}): mean device-OP RMS at 100 ms {} mm against {} unled; median over \
+         touring hands at 100 ms of the felt-vs-rendered impedance error {} against {}, and of the felt impedance's \
+         change from the same hand without delay {} against {}; {} of {} unstable{}.",
         cap_name(EVERYWHERE_CAP_S),
         at_100(&rms_at, &led_refs),
         at_100(&rms_at, unled),
         at_100(&median_impedance_error, &led_refs),
         at_100(&median_impedance_error, unled),
+        at_100(&median_felt_change, &led_refs),
+        at_100(&median_felt_change, unled),
         unstable.len(),
         led.len(),
         if unstable.is_empty() {
