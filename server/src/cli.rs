@@ -14,7 +14,7 @@ use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
 
 use crate::bench::RealtimeRun;
-use crate::core::AxisGains;
+use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_MAX_S};
 use crate::driver::load_scene;
 use crate::view::{LiveSource, ViewConfig};
 use crate::{Access, Identity, Server, ServerConfig, VeConfig};
@@ -87,11 +87,10 @@ struct Cli {
     jitter_buffer: Switch,
     /// Aim each graphics controller at where its client's local model is predicted to be after the network's
     /// one-way delay (half the shortest round trip), up to MS milliseconds ahead of the uplink heard and no
-    /// further than the hand's recent accelerations make a safe guess (0, the default: follow what is heard).
-    /// Brings the VE's OP nearer the device under delay (testbed, 100 ms one way: 2.8 mm RMS against 5.3 mm),
-    /// but the VE then moves on a guess and the handle feels less like the linkage (see the README's known
-    /// limits).
-    #[arg(long, value_name = "MS", default_value_t = 0.0, value_parser = parse_lead_ms)]
+    /// further than the hand's recent accelerations make a safe guess (0, the default: follow what is heard, as
+    /// the paper's VE does). Brings the VE's OP nearer the device under delay (testbed, 100 ms one way: 2.8 mm
+    /// RMS against 5.3 mm), but a weak device may not damp the guesses (see the README's known limits).
+    #[arg(long, value_name = "MS", default_value_t = DEFAULT_COUPLING_LEAD_MAX_S * 1e3, value_parser = parse_lead_ms)]
     lead_max_ms: f64,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
     /// first user grasps a still linkage rather than one that gravity has been swinging).

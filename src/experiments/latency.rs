@@ -604,15 +604,8 @@ pub fn run(options: &Options) -> Result<Report> {
         |m| m.felt_change,
     )?;
     let model_update = model_update::run(&mut out, options)?;
-    let default_line: Vec<(f64, f64)> = grid
-        .delays_ms
-        .iter()
-        .filter(|&&d| d > 0.0)
-        .filter_map(|&d| clean(&all, 0, HandKind::Soft, default_passivity(), d))
-        .map(|m| (m.point.delay_ms, m.device_op_rms_m * 1e3))
-        .collect();
-    let unled: Vec<&Measured> = all.iter().filter(|m| m.point.passivity == default_passivity()).collect();
-    let lead = lead::run(&mut out, options, default_line, &unled, &references)?;
+    let defaults: Vec<&Measured> = all.iter().filter(|m| m.point.passivity == default_passivity()).collect();
+    let lead = lead::run(&mut out, options, &defaults, &references)?;
 
     let mut first_failures = Vec::new();
     let mut table = Vec::new();

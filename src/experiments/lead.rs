@@ -10,11 +10,12 @@
 //! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
 //! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions
 //! (every scene and hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 %
-//! bursty loss) with one cap, the rest as `kinloop-server` and `kinloop-client` run by default (passivity
-//! controller on), and is judged by the sweep's criterion; the energy comparison is made at the client time
-//! the VE aimed at (`Snapshot::uplink_time_s`), so a lead is charged only for what the hand had not done by
-//! then. A last row ([`everywhere`]) runs every session the grid ran with the default method again, led:
-//! what turning the lead on by default would do.
+//! bursty loss) with one cap ([`CAPS_S`], no lead among them), the rest as `kinloop-server` and
+//! `kinloop-client` run by default (passivity controller on), and is judged by the sweep's criterion; the
+//! energy comparison is made at the client time the VE aimed at (`Snapshot::uplink_time_s`), so a lead is
+//! charged only for what the hand had not done by then. A last row ([`everywhere`]) runs every session the
+//! grid ran with the default method again with the lead set the other way: what turning the default over
+//! would do to tracking, stability and feel.
 
 use anyhow::Result;
 use serde_json::{json, Value};
@@ -31,12 +32,23 @@ use crate::charts::{Chart, HeatMap, Legend, Series};
 
 /// One-way delays of the rows (ms).
 pub const DELAYS_MS: [f64; 7] = [50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
-/// The caps on the lead (s): a lead of at most 100 ms, and the whole delay of the grid.
-pub const CAPS_S: [f64; 2] = [0.1, 1.0];
+/// The caps on the lead (s): none (a VE that follows what it hears, the paper's), at most 100 ms (the
+/// default, `DEFAULT_COUPLING_LEAD_MAX_S`), and the whole delay of the grid.
+pub const CAPS_S: [f64; 3] = [0.0, 0.1, 1.0];
+
+/// The lead's cap in the VE a server runs by default (s).
+fn default_cap_s() -> f64 {
+    VeConfig::default().coupling_lead_max_s
+}
 
 /// A row's cap as its name.
 fn cap_name(cap_s: f64) -> String {
-    format!("lead <= {} ms", cap_s * 1e3)
+    let name = if cap_s > 0.0 { format!("lead <= {} ms", cap_s * 1e3) } else { "no lead".to_string() };
+    if cap_s == default_cap_s() {
+        format!("{name} (default)")
+    } else {
+        name
+    }
 }
 
 /// What one cap's sessions came to.
@@ -58,17 +70,12 @@ pub struct LeadRows {
     pub answer: String,
 }
 
-/// Runs the rows, draws their stability map and the testbed's soft tour against `default_line` (the
-/// default VE's device-OP RMS by delay, mm, from the grid), and returns their summary.
+/// Runs the rows, draws their stability map and the testbed's soft tour at each cap, and returns their
+/// summary.
 ///
-/// `unled` are the grid's sessions with the default method: each is run again led (see [`everywhere`]).
-pub fn run(
-    out: &mut Output,
-    options: &Options,
-    default_line: Vec<(f64, f64)>,
-    unled: &[&Measured],
-    undelayed: &[Measured],
-) -> Result<LeadRows> {
+/// `defaults` are the grid's sessions with the default method: each is run again with the lead set the other
+/// way (see [`everywhere`]); `undelayed` holds the grid's sessions without delay on a clean network.
+pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelayed: &[Measured]) -> Result<LeadRows> {
     let caps: Vec<f64> = options.pick(CAPS_S.to_vec(), vec![1.0]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
@@ -99,7 +106,7 @@ pub fn run(
     })?;
 
     let mut map = HeatMap::new(
-        "Leading the VE's target by the one-way delay (not default): 1 = unstable",
+        "Leading the VE's target by the one-way delay: 1 = unstable",
         rows.iter()
             .map(|&(cap, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), cap_name(cap)))
             .collect(),
@@ -126,7 +133,6 @@ pub fn run(
     )
     .legend(Legend::LowerRight);
     chart.log_y = true;
-    chart = chart.with(Series::line("default (follows what it hears)", default_line));
     for &cap in &caps {
         chart = chart.with(Series::line(cap_name(cap), soft_clean(cap).map(|(_, m)| rms(m)).collect()));
     }
@@ -183,8 +189,8 @@ pub fn run(
         .iter()
         .map(|t| {
             format!(
-                "Leading the VE by the one-way delay ({}, not default): testbed soft clean {} mm at 100 ms and {} mm \
-                 at 1 s; {} of {} sessions unstable{}.",
+                "Leading the VE by the one-way delay, {}: testbed soft clean {} mm at 100 ms and {} mm at 1 s; {} \
+                 of {} sessions unstable{}.",
                 cap_name(t.cap_s),
                 mm(t.soft_rms_100_mm),
                 mm(t.soft_rms_1000_mm),
@@ -195,7 +201,7 @@ pub fn run(
         })
         .collect::<Vec<_>>()
         .join(" ");
-    let (everywhere_json, everywhere_answer) = everywhere(out, options, unled, undelayed)?;
+    let (everywhere_json, everywhere_answer) = everywhere(out, options, defaults, undelayed)?;
     let answer = format!("{answer} {everywhere_answer}");
     let points_json: Vec<Value> = all
         .iter()
@@ -220,26 +226,36 @@ pub fn run(
 /// A median over a set of sessions at one delay (ms).
 type MedianByDelay<'a> = dyn Fn(&[&Measured], f64) -> Option<f64> + 'a;
 
-/// The cap of the [`everywhere`] row (s).
+/// The sessions of `set` the criterion judged unstable.
+fn unstable<'m>(set: &[&'m Measured]) -> Vec<&'m Measured> {
+    set.iter().copied().filter(|m| !m.verdict.stable).collect()
+}
+
+/// The cap of the [`everywhere`] row's led sessions (s).
 pub const EVERYWHERE_CAP_S: f64 = 0.1;
 
-/// What turning the lead on by default would do: every session of the grid that the default method ran
-/// (`unled`), run again led by at most [`EVERYWHERE_CAP_S`], judged by the same criterion, with the device-OP
-/// distance and what the hand feels beside the unled sessions' (chart `impedance_lead`): the felt-vs-rendered
-/// impedance error, and the felt impedance's change from the same hand without delay (its sessions in
-/// `undelayed`; at 0 ms a lead of at most the delay is none). Returns its summary and one sentence.
+/// Every session of the grid that the default method ran (`defaults`), run again with the lead set the other
+/// way (no lead when the default leads, else led by at most [`EVERYWHERE_CAP_S`]), judged by the same
+/// criterion, with the device-OP distance and what the hand feels beside the default sessions' (chart
+/// `impedance_lead`): the felt-vs-rendered impedance error, and the felt impedance's change from the same hand
+/// without delay (its sessions in `undelayed`; at 0 ms a lead of at most the delay is none). Returns its
+/// summary and one sentence.
 fn everywhere(
     out: &mut Output,
     options: &Options,
-    unled: &[&Measured],
+    defaults: &[&Measured],
     undelayed: &[Measured],
 ) -> Result<(Value, String)> {
-    let points: Vec<Point> = unled.iter().map(|m| m.point).collect();
-    let mut led: Vec<Measured> = sweep("latency: lead everywhere", &points, options.threads, options.progress, |p| {
-        measure_leading(p, SECONDS, None, EVERYWHERE_CAP_S)
-    })?;
-    fill_felt_changes(&mut led, undelayed);
-    let unstable: Vec<&Measured> = led.iter().filter(|m| !m.verdict.stable).collect();
+    let points: Vec<Point> = defaults.iter().map(|m| m.point).collect();
+    let default_leads = default_cap_s() > 0.0;
+    let other_cap = if default_leads { 0.0 } else { EVERYWHERE_CAP_S };
+    let mut others: Vec<Measured> =
+        sweep("latency: lead set the other way", &points, options.threads, options.progress, |p| {
+            measure_leading(p, SECONDS, None, other_cap)
+        })?;
+    fill_felt_changes(&mut others, undelayed);
+    let others: Vec<&Measured> = others.iter().collect();
+    let (led, unled) = if default_leads { (defaults, &others[..]) } else { (&others[..], defaults) };
     // Tracking, led and not, over the same sessions: the mean device-OP RMS at each delay.
     let delays: Vec<f64> = {
         let mut d: Vec<f64> = points.iter().map(|p| p.delay_ms).collect();
@@ -267,13 +283,12 @@ fn everywhere(
     };
     let median_impedance_error = median_of(|m| m.impedance_error);
     let median_felt_change = median_of(|m| m.felt_change);
-    let led_refs: Vec<&Measured> = led.iter().collect();
     let by_delay: Vec<Value> = delays
         .iter()
-        .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(&led_refs, d), "unled": mean_rms_mm(unled, d)}))
+        .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(led, d), "unled": mean_rms_mm(unled, d)}))
         .collect();
     let led_and_unled = |median: &MedianByDelay| -> Vec<Value> {
-        delays.iter().map(|&d| json!({"delay_ms": d, "led": median(&led_refs, d), "unled": median(unled, d)})).collect()
+        delays.iter().map(|&d| json!({"delay_ms": d, "led": median(led, d), "unled": median(unled, d)})).collect()
     };
     let impedance_by_delay = led_and_unled(&median_impedance_error);
     let felt_change_by_delay = led_and_unled(&median_felt_change);
@@ -286,7 +301,7 @@ fn everywhere(
         "relative impedance error",
     )
     .legend(Legend::UpperLeft);
-    for (name, set) in [("led", &led_refs[..]), ("following what is heard (default)", unled)] {
+    for (name, set) in [("led", led), ("following what is heard", unled)] {
         let lines: [(&str, &MedianByDelay); 2] = [
             ("|Z_handle - Z_OP| / |Z_OP|", &median_impedance_error),
             ("|Z_handle - Z_handle(0 ms)| / |Z_handle(0 ms)|", &median_felt_change),
@@ -297,50 +312,52 @@ fn everywhere(
         }
     }
     out.chart("impedance_lead", &chart)?;
+    let (unstable_led, unstable_unled) = (unstable(led), unstable(unled));
     let summary = json!({
         "cap_s": EVERYWHERE_CAP_S,
+        "default_leads": default_leads,
         "sessions": led.len(),
-        "unstable": unstable.len(),
-        "unstable_points": unstable.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
+        "unstable_led": unstable_led.len(),
+        "unstable_unled": unstable_unled.len(),
+        "unstable_points": {
+            "led": unstable_led.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
+            "unled": unstable_unled.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
+        },
         "device_op_rms_mm_mean_by_delay": by_delay,
         "felt_vs_rendered_impedance_error_median_by_delay": impedance_by_delay,
         "felt_change_from_undelayed_median_by_delay": felt_change_by_delay,
     });
-    let at_100 = |f: &dyn Fn(&[&Measured], f64) -> Option<f64>, set: &[&Measured]| {
-        f(set, 100.0).map_or("n/a".to_string(), |v| v.to_string())
-    };
+    let at_100 = |f: &MedianByDelay, set: &[&Measured]| f(set, 100.0).map_or("n/a".to_string(), |v| v.to_string());
     let rms_at = |set: &[&Measured], d: f64| Some(mean_rms_mm(set, d));
+    let listed = |set: &[&Measured]| {
+        if set.is_empty() {
+            return String::new();
+        }
+        let names: Vec<String> = set
+            .iter()
+            .map(|m| {
+                let p = &m.point;
+                format!("{} {} {} ms {}", TARGETS[p.target].2, p.hand.name(), p.delay_ms, p.network.name())
+            })
+            .collect();
+        format!(" ({})", names.join("; "))
+    };
     let answer = format!(
-        "Every session of the grid led ({}): mean device-OP RMS at 100 ms {} mm against {} unled; median over \
-         touring hands at 100 ms of the felt-vs-rendered impedance error {} against {}, and of the felt impedance's \
-         change from the same hand without delay {} against {}; {} of {} unstable{}.",
+        "Every session of the grid led ({}) and not: mean device-OP RMS at 100 ms {} mm led against {} unled; median \
+         over touring hands at 100 ms of the felt-vs-rendered impedance error {} against {}, and of the felt \
+         impedance's change from the same hand without delay {} against {}; unstable: {} of {} led{}, {} unled{}.",
         cap_name(EVERYWHERE_CAP_S),
-        at_100(&rms_at, &led_refs),
+        at_100(&rms_at, led),
         at_100(&rms_at, unled),
-        at_100(&median_impedance_error, &led_refs),
+        at_100(&median_impedance_error, led),
         at_100(&median_impedance_error, unled),
-        at_100(&median_felt_change, &led_refs),
+        at_100(&median_felt_change, led),
         at_100(&median_felt_change, unled),
-        unstable.len(),
+        unstable_led.len(),
         led.len(),
-        if unstable.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " ({})",
-                unstable
-                    .iter()
-                    .map(|m| format!(
-                        "{} {} {} ms {}",
-                        TARGETS[m.point.target].2,
-                        m.point.hand.name(),
-                        m.point.delay_ms,
-                        m.point.network.name()
-                    ))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            )
-        },
+        listed(&unstable_led),
+        unstable_unled.len(),
+        listed(&unstable_unled),
     );
     Ok((summary, answer))
 }

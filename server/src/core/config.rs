@@ -131,11 +131,8 @@ pub struct VeConfig {
     /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::steer_lead`): the VE aims
     /// each graphics controller at where the local model was predicted to be the network's one-way delay after
     /// the uplink left, up to this and no further than the heard motion supports
-    /// (`coupling_lead_guess_energy_j`). 0 (the default) follows what it has heard. A lead brings the OP nearer
-    /// the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against 5.3 mm) and, with every session of
-    /// the latency sweep led by up to 100 ms, none is unstable; but what the hand feels moves away from the
-    /// linkage (median felt-vs-rendered impedance error at 100 ms 1.20 against 1.06, at 1 s 1.97 against
-    /// 1.31), which is why it is not on by default (`kinloop experiment latency`, the lead rows).
+    /// (`coupling_lead_guess_energy_j`). 0 follows what it has heard (the paper's VE, [`VeConfig::paper`]);
+    /// the default is [`DEFAULT_COUPLING_LEAD_MAX_S`].
     pub coupling_lead_max_s: f64,
     /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
     /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
@@ -258,10 +255,28 @@ impl VeConfig {
     }
 }
 
+/// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]): none, the VE follows what it hears. Led
+/// by up to 100 ms the OP is nearer the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against
+/// 5.3 mm), what the hand feels is nearer what the same hand feels without delay (median relative change of
+/// the felt impedance over the latency sweep's touring hands: 0.49 against 0.57 at 100 ms, 1.07 against 1.45
+/// at 1 s), and no session of that sweep is unstable; but on a weak device the lead's guesses feed a loop
+/// through the client's synchronisation that the device cannot damp: the testbed on a `sim:touch`, firm hand,
+/// 50 ms one way, ran 43 mm from its local model with 12 % of ticks clamped within 10 s, led by 50 ms or
+/// more (4 mm and none clamped unled). Renderability matrix at 20 s per pair: 18 of 196 pairs fail led, 15
+/// unled.
+pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.0;
+
 impl Default for VeConfig {
-    /// The paper's VE with each user's graphics-controller gains designed from its device and its OP.
+    /// The paper's VE with each user's graphics-controller gains designed from its device and its OP, the
+    /// passivity controller on, and each target led by up to [`DEFAULT_COUPLING_LEAD_MAX_S`] (none).
     fn default() -> Self {
-        VeConfig { coupling_stiffness: None, coupling_damping: None, passivity: true, ..VeConfig::paper() }
+        VeConfig {
+            coupling_stiffness: None,
+            coupling_damping: None,
+            passivity: true,
+            coupling_lead_max_s: DEFAULT_COUPLING_LEAD_MAX_S,
+            ..VeConfig::paper()
+        }
     }
 }
 

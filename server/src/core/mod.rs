@@ -49,7 +49,7 @@ use kinloop_protocol::{
 };
 use nalgebra::{DMatrix, DVector};
 
-pub use config::{AxisGains, GuardLimits, VeConfig, VeConfigError};
+pub use config::{AxisGains, GuardLimits, VeConfig, VeConfigError, DEFAULT_COUPLING_LEAD_MAX_S};
 pub use coupling::Coupling;
 pub use events::{FadeReason, VeEvent};
 pub use guards::{UplinkRejection, UplinkSample, WrenchLimits};
