@@ -168,3 +168,38 @@ fn a_translating_coupler_has_no_rotational_mobility_and_a_turning_crank_has_both
     assert!(reach.inverse_rotational_inertia_max > 0.0 && reach.inverse_mass_max > 0.0);
     assert!(reach.rotation_range > 3.0, "the crank turns all the way round: {}", reach.rotation_range);
 }
+
+/// The slider-crank's wall stops the survey as it stops the linkage: by closed form (crank 0.05 m, rod
+/// 0.15 m, slider on the x axis, x = r cos θ + √(l² − r² sin² θ)), the slider's ball (radius 0.01 m) meets
+/// the wall at x = 0.195 m, with the crank within about 22° of its outer dead centre. No tour waypoint puts
+/// the slider in the wall, and the walks come within a step of it (crank tip's x, the reach's largest, at
+/// the crank angle where the ball touches). Before the survey knew of obstacles, its tour crossed the outer
+/// dead centre, and a hand following it pressed into the wall until the device saturated.
+#[test]
+fn the_slider_cranks_survey_turns_back_at_its_wall() {
+    let model = planar("slider-crank");
+    let op = model.op_index("crank-tip").unwrap();
+    let reach = survey_op(&model, op, &SurveyConfig::default()).unwrap();
+    let (r, l, wall) = (0.05_f64, 0.15_f64, 0.205 - 0.01);
+    let slider_x = |theta: f64| r * theta.cos() + (l * l - (r * theta.sin()).powi(2)).sqrt();
+    assert!(!reach.tour.is_empty());
+    for pose in &reach.tour {
+        let theta = pose.position.y.atan2(pose.position.x);
+        assert!(slider_x(theta) <= wall + 1e-9, "a waypoint at {:.1}° puts the slider in the wall", theta.to_degrees());
+    }
+    // Where the ball touches: the crank angle with slider_x = wall, by bisection on [0, π/2].
+    let (mut lo, mut hi) = (0.0_f64, std::f64::consts::FRAC_PI_2);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if slider_x(mid) > wall {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let touching_x = r * hi.cos();
+    // Beyond the wall the crank tip's x would reach r; the survey's stops where the ball touches, within a
+    // step of 0.04 rad of crank.
+    assert!(reach.position_max.x <= touching_x + 1e-9, "{} > {touching_x}", reach.position_max.x);
+    assert!(reach.position_max.x > r * (hi + 0.04).cos(), "{} stops short of the wall", reach.position_max.x);
+}

@@ -9,7 +9,9 @@
 //! around bends, and each step is pulled back onto `h = 0` by Gauss-Newton (`Δq = −W⁺ h`, as `assemble`).
 //! Starting from `q0` keeps the walk on q0's assembly branch: a four-bar's crossed branch, which no motion
 //! reaches, is never visited. A walk that cannot close (a rocker at its dead point, a slider at the end of
-//! its stroke) reverses, as the linkage itself would. Walks leave `q0` in several directions of the null
+//! its stroke) or that would push the linkage's geometry into an obstacle (the slider-crank's wall) reverses,
+//! as the linkage itself would. (Through the wall, the slider-crank's tour led the hand 22° of crank past
+//! where the slider meets it, and every device saturated against a hand that pressed on for its waypoints.) Walks leave `q0` in several directions of the null
 //! space (one back and forth on a 1-DOF linkage, a star on a 2-DOF one).
 //!
 //! **Per sample** (at rest, so the loads are static): Λ⁻¹ with the loops closed (eq 9), the OP's
@@ -23,6 +25,7 @@ use std::cmp::Ordering;
 use nalgebra::{DMatrix, DVector};
 
 use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
+use crate::algorithms::contact::{contact_capacity, detect_contacts, Contact};
 use crate::algorithms::dynamics::forward_dynamics;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::local_model::{op_acceleration, OpPose};
@@ -240,6 +243,8 @@ struct Walker<'a, S: Space> {
     data: Data<S>,
     weights: DVector<f64>,
     zero: DVector<f64>,
+    /// Scratch for the obstacle check.
+    contacts: Vec<Contact<S>>,
 }
 
 impl<S: Space> Walker<'_, S> {
@@ -251,10 +256,18 @@ impl<S: Space> Walker<'_, S> {
         row_space(&scaled)
     }
 
+    /// How deep the linkage's geometry is in the scene's obstacles at the kinematics in `data` (m, ≥ 0).
+    fn penetration(&mut self) -> f64 {
+        detect_contacts(self.model, &self.data.kin, 0.0, &mut self.contacts);
+        self.contacts.iter().map(|c| -c.gap).fold(0.0, f64::max)
+    }
+
     /// Moves `q` one step along `direction` (weighted coordinates), projected on the tangent space; the new
-    /// direction, or `None` when the step does not close.
+    /// direction, or `None` when the step does not close or would push the geometry deeper into an obstacle
+    /// (a wall stops the linkage as a dead point does; a `q0` already in contact may still leave it).
     fn step(&mut self, q: &mut DVector<f64>, direction: &DVector<f64>, length: f64) -> Option<DVector<f64>> {
         residual(self.model, &mut self.data, q, &self.zero);
+        let depth_before = self.penetration();
         let rows = self.rows()?;
         let tangent = project_null(&rows, direction);
         let norm = tangent.norm();
@@ -270,6 +283,11 @@ impl<S: Space> Walker<'_, S> {
         if !close(self.model, &mut self.data, &mut trial, &self.zero) {
             return None;
         }
+        // `close` leaves the kinematics of `trial` in `data`.
+        let depth = self.penetration();
+        if depth > 0.0 && depth > depth_before {
+            return None;
+        }
         *q = trial;
         Some(tangent)
     }
@@ -282,7 +300,13 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     }
     let n = model.nq();
     let lin = <S::Point as VecOps>::LEN;
-    let mut walker = Walker { model, data: Data::new(model), weights: joint_weights(model), zero: DVector::zeros(n) };
+    let mut walker = Walker {
+        model,
+        data: Data::new(model),
+        weights: joint_weights(model),
+        zero: DVector::zeros(n),
+        contacts: Vec::with_capacity(contact_capacity(model)),
+    };
     let mut q0 = model.q0.clone();
     // A q0 that does not quite close (a hand-written scene) is closed first; if it cannot be, walk from it.
     close(model, &mut walker.data, &mut q0, &walker.zero);
