@@ -257,13 +257,15 @@ impl VeConfig {
 
 /// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]): none, the VE follows what it hears. Led
 /// by up to 100 ms the OP is nearer the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against
-/// 5.3 mm), what the hand feels is nearer what the same hand feels without delay (median relative change of
-/// the felt impedance over the latency sweep's touring hands: 0.49 against 0.57 at 100 ms, 1.07 against 1.45
-/// at 1 s), and no session of that sweep is unstable; but on a weak device the lead's guesses feed a loop
+/// 5.3 mm), and over the latency sweep's 10 s sessions what the hand feels is nearer what the same hand feels
+/// without delay (median relative change of the felt impedance, touring hands: 0.49 against 0.57 at 100 ms)
+/// with no session unstable; over whole tours (40 s) the feel is no nearer (0.46 against 0.44) and 47
+/// sessions are unstable against 40 unled. And on a weak device the lead's guesses feed a loop
 /// through the client's synchronisation that the device cannot damp: the testbed on a `sim:touch`, firm hand,
 /// 50 ms one way, ran 43 mm from its local model with 12 % of ticks clamped within 10 s, led by 50 ms or
-/// more (4 mm and none clamped unled). Renderability matrix at 20 s per pair: 18 of 196 pairs fail led, 15
-/// unled.
+/// more (4 mm and none clamped unled; with the synchronisation replaced by the pull toward the VE's state
+/// predicted to now, 4 mm led). Renderability matrix at 20 s per pair, before the reach survey knew of walls:
+/// 18 of 196 pairs failed led, 15 unled.
 pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.0;
 
 impl Default for VeConfig {
