@@ -32,8 +32,8 @@ use crate::charts::{Chart, HeatMap, Legend, Series};
 
 /// One-way delays of the rows (ms).
 pub const DELAYS_MS: [f64; 7] = [50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
-/// The caps on the lead (s): none (a VE that follows what it hears, the paper's), at most 100 ms (the
-/// default, `DEFAULT_COUPLING_LEAD_MAX_S`), and the whole delay of the grid.
+/// The caps on the lead (s): none (a VE that follows what it hears, the paper's and the default,
+/// `DEFAULT_COUPLING_LEAD_MAX_S`), at most 100 ms, and the whole delay of the grid.
 pub const CAPS_S: [f64; 3] = [0.0, 0.1, 1.0];
 
 /// The lead's cap in the VE a server runs by default (s).
