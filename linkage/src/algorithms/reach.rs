@@ -11,8 +11,9 @@
 //! reaches, is never visited. A walk that cannot close (a rocker at its dead point, a slider at the end of
 //! its stroke) or that would push the linkage's geometry into an obstacle (the slider-crank's wall) reverses,
 //! as the linkage itself would. (Through the wall, the slider-crank's tour led the hand 22° of crank past
-//! where the slider meets it, and every device saturated against a hand that pressed on for its waypoints.) Walks leave `q0` in several directions of the null
-//! space (one back and forth on a 1-DOF linkage, a star on a 2-DOF one).
+//! where the slider meets it, and every device saturated against a hand that pressed on for its waypoints.)
+//! Walks leave `q0` in several directions of the null space (one back and forth on a 1-DOF linkage, a star
+//! on a 2-DOF one).
 //!
 //! **Per sample** (at rest, so the loads are static): Λ⁻¹ with the loops closed (eq 9), the OP's
 //! acceleration under gravity alone `a_g = J q̈_g` (eq 4 with q̇ = 0), and the static load: the OP wrench

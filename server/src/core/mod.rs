@@ -719,8 +719,8 @@ impl<S: Space> VeCore<S> {
         let holding =
             |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
         let holders = self.users.iter().zip(&self.couplings).filter(|(u, c)| holding(u, c)).count();
+        let lead_max_s = self.config.coupling_lead_max_s;
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
-            let lead_max_s = self.config.coupling_lead_max_s;
             if let Some(reference) = c.playout.due(at.as_secs_f64()) {
                 if lead_max_s > 0.0 {
                     c.track_twist_rate(&reference);
