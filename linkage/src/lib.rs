@@ -61,7 +61,7 @@ pub mod testing;
 
 // Every module keeps its path from before the layers (`kinloop_linkage::kinematics`, `::space`, ...).
 pub use algorithms::{
-    approach, articulated, assemble, bias, constraint_directions, contact, dynamics, gravity, integrator, jacobian, joint_forces,
+    articulated, assemble, bias, constraint_directions, contact, dynamics, gravity, integrator, jacobian, joint_forces,
     kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_space, passivity, reach,
 };
 pub use math::{dense, eigen, space, trig};

@@ -3,7 +3,6 @@
 //! assembly near q0) and the tree walks the recursions share (`tree`). They use `math` and `model`; nothing
 //! below uses them.
 
-pub mod approach;
 pub mod articulated;
 pub mod assemble;
 pub mod bias;
