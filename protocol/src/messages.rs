@@ -597,8 +597,9 @@ pub struct Snapshot {
     /// The user this snapshot is for.
     pub user_id: u32,
     /// Client clock (`Uplink::client_time_s`) of the newest uplink the VE had used when it took this state
-    /// (0 before the first): the local-model state this VE state answers, so the client compares like with
-    /// like whatever the network's delay.
+    /// (0 before the first): the local-model state this VE state answers. A client whose model restarts
+    /// learns from it whether the VE has heard it yet, and a judge of the session compares the VE with the
+    /// device there, whatever the network's delay.
     pub uplink_time_s: f64,
     /// Operational-point pose, pose dimension.
     pub op_pose: Vec<f64>,

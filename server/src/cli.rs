@@ -159,7 +159,8 @@ fn parse_gains(s: &str) -> Result<AxisGains, String> {
     }
 }
 
-/// The longest lead in milliseconds: finite, 0 to 4000 (the client keeps 4 s of its model's states).
+/// The longest lead in milliseconds: finite, 0 to 4000 (the VE keeps 4 s of snapshot times to measure round
+/// trips with, `round_trip::BUILT_KEPT`; a longer lead would guess past any round trip it shares).
 fn parse_lead_ms(s: &str) -> Result<f64, String> {
     let ms: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number of milliseconds"))?;
     if !(0.0..=4000.0).contains(&ms) {
@@ -319,7 +320,7 @@ mod tests {
     }
 
     /// The VE follows what it hears unless told to lead; a lead is given in milliseconds, and one that is not a
-    /// number, negative or beyond the client's 4 s of history is refused naming the flag.
+    /// number, negative or beyond 4 s is refused naming the flag.
     #[test]
     fn lead_flag_sets_the_longest_lead() {
         let lead = |extra: &[&str]| {

@@ -1,8 +1,8 @@
 //! The `latency` experiment's model-update rows (issue 22, item 2): does the local model's pull toward the
 //! delayed VE make energy?
 //!
-//! The pull compares the VE's state with the model's state it answered (`sync` in the client's core) and
-//! corrects what differs over a time constant τ; what it corrects comes back a round trip `T` later, and such
+//! The pull compares the VE's state, predicted to now, with the model's (step 2 of the client core's tick)
+//! and corrects what differs over a time constant τ; what it corrects comes back a round trip `T` later, and such
 //! a loop is stable only for `T < π τ / 2`. With τ fixed at 200 ms the testbed gained energy from a few
 //! hundred milliseconds one way. Each row here runs the grid's clean-network sessions (soft and firm hands,
 //! every scene, [`DELAYS_MS`]) with one way of pulling:

@@ -23,8 +23,7 @@
 //! are in the device's space. The verdict needs a recording of every tick (`record_every = 1`).
 //!
 //! **Like with like under delay.** The VE at time t has heard of each device, and of the work its hand did,
-//! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`, what the client's
-//! Smith-style synchronisation compares with too), so both comparisons are made there: about t minus the
+//! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`), so both comparisons are made there: about t minus the
 //! uplink's delay, later by jitter and loss, and at zero delay the plain comparisons. A VE that leads its target
 //! (`VeConfig::coupling_lead_max_s`) names the later client time it aims at, and is compared there: it is
 //! charged for what it guessed and the hand had not done by then. Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is

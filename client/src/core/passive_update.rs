@@ -1,6 +1,6 @@
 //! The local model's update toward the VE made passive toward the hand (issue 22, item 2): an energy tank.
 //!
-//! The pull toward the VE (`sync`) moves the local model's state by corrections the hand did not cause. A
+//! The pull toward the VE (step 2 of `HapticCore::tick`) moves the local model's state by corrections the hand did not cause. A
 //! correction that stretches the device-model coupling, or speeds the model up, stores energy there that
 //! then flows into the hand: energy the network made. A VE that runs away from the model (a restore, a
 //! server out of step, another user's pull the model cannot explain) would drag a still hand after it with

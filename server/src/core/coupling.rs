@@ -153,7 +153,7 @@ impl<S: Space> Coupling<S> {
     /// twist, standing for the local model's state that much after the uplink was sent. A VE that only follows
     /// what it has heard trails the hand by the uplink's delay; leading by that delay puts the OP where the
     /// hand is now, to first order. The target's time moves with it, so a snapshot names the model state the VE
-    /// aimed at and the client's synchronisation still compares like with like. The energy a wrong guess puts
+    /// aimed at. The energy a wrong guess puts
     /// into the linkage goes through the PD, which the passivity controller books; but its account holds
     /// credit for all the hand ever put in at the client, so an overshoot is paid from it rather than stopped
     /// (led blindly by 100 ms, a poke's jab gave the linkage twice its kinetic energy): [`Coupling::steer_lead`]

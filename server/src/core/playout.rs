@@ -24,7 +24,7 @@
 //! now counts the hold in the round trip); the threshold stays, as holding for a host's own lateness buys
 //! nothing. With both, 60 s of that demo: no uplink rejected, no tick clamped, 0.3-2.4 mm RMS.
 //! On a clean link every uplink arrives `base` after it was sent and the buffer stays at zero. The played-out client time is what snapshots report as the
-//! uplink they answer (`Snapshot::uplink_time_s`), so the client's synchronisation compares like with like.
+//! uplink they answer (`Snapshot::uplink_time_s`).
 
 use std::collections::VecDeque;
 
