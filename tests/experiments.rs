@@ -210,13 +210,16 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     assert!(f(&first["device_unheard_rms_mm"]) < 0.1, "{first}");
     assert!(f(&last["device_unheard_rms_mm"]) > 10.0, "{last}");
     assert!(f(&last["device_op_rms_mm"]) > 0.8 * f(&last["device_unheard_rms_mm"]), "{last}");
-    // The model-update rows (item 2): the free pull at a fixed 200 ms makes the testbed gain energy at 300 ms
-    // and 1 s one way; the default pull (at least two round trips) does not.
+    // The model-update rows (item 2): every way of pulling runs the same sessions, and the default pull (at
+    // least two round trips, paid from the tank) leaves none unstable. (While the free directions were
+    // compared with the model's own answered state, the fixed 200 ms pull made the testbed gain energy at
+    // 300 ms and 1 s one way; compared with the VE's state predicted to now, it no longer does.)
     let rows = r["model_update"]["rows"].as_array().unwrap();
     let row = |name: &str| rows.iter().find(|row| row["update"] == name).unwrap_or_else(|| panic!("{name}"));
-    assert!(row("fixed pull, no tank")["unstable"].as_u64().unwrap() > 0, "{rows:?}");
     assert_eq!(row("default")["unstable"], 0, "{rows:?}");
-    assert_eq!(row("default")["sessions"], row("fixed pull, no tank")["sessions"]);
+    for other in ["fixed pull, no tank", "fixed pull, tank", "default, no tank"] {
+        assert_eq!(row("default")["sessions"], row(other)["sessions"], "{rows:?}");
+    }
     // The lead rows (`--lead-max-ms`; quick: the whole delay as the cap): a VE that leads its target by the
     // one-way delay is nearer the device than any VE that follows what it heard can be (2.8 against 5.2 mm at
     // 100 ms when this was written); the lead is cut to what the heard motion supports, so none of these

@@ -326,22 +326,28 @@ fn testbed_tour(
     run(&plan, &mut |_| {}).unwrap()
 }
 
-/// The band the local model's update made (issue 22, item 2): with the free directions pulled toward the VE
-/// at a fixed 200 ms whatever the delay, the testbed under a soft hand gains energy at 300 ms one way (the
-/// pull answers a 600 ms round trip late: `T / τ` = 3 > π/2); the default pull of at least two round trips
-/// (`default_sessions_at_300_ms_one_way_are_stable`) is what removes it. The energy tank that pays for the
-/// pull (`CoreConfig::passive_update`, on in both) guards the hand's side, not this loop through the VE.
+/// The band the local model's update made (issue 22, item 2) is gone by construction. While the free
+/// directions were compared with the model's own state that the VE answered (a Smith predictor), a pull at a
+/// fixed 200 ms answered a 600 ms round trip late at 300 ms one way (`T / τ` = 3 > π/2) and the testbed under
+/// a soft hand gained energy. The model is now pulled toward the VE's state predicted to now, so the pull
+/// corrects the VE's motion rather than its own echo: the same fixed 200 ms pull is stable at 300 ms and at 1 s
+/// one way, with the energy tank that pays for it (`CoreConfig::passive_update`) and without.
 #[test]
-fn a_fixed_200_ms_pull_toward_the_ve_gains_energy_at_300_ms_one_way() {
+fn a_fixed_200_ms_pull_toward_the_ve_predicted_to_now_stays_stable_at_long_delays() {
     use kinloop::experiments::verdict::judge;
     use kinloop::harness::CoreEdit;
-    let fixed = CoreEdit::new(|c| {
-        c.free_blend_round_trips = 0.0;
-        c.free_blend_time_constant = Duration::from_millis(200);
-    });
-    let (summary, rec) = testbed_tour(HandKind::Soft, 300, 3, Some(fixed));
-    let verdict = judge(&summary, &rec);
-    assert!(!verdict.stable && verdict.reasons.contains(&"energy growth"), "{verdict:?}");
+    for passive_update in [true, false] {
+        for delay_ms in [300, 1000] {
+            let fixed = CoreEdit::new(move |c| {
+                c.free_blend_round_trips = 0.0;
+                c.free_blend_time_constant = Duration::from_millis(200);
+                c.passive_update = passive_update;
+            });
+            let (summary, rec) = testbed_tour(HandKind::Soft, delay_ms, 3, Some(fixed));
+            let verdict = judge(&summary, &rec);
+            assert!(verdict.stable, "tank {passive_update}, {delay_ms} ms: {verdict:?}");
+        }
+    }
 }
 
 /// `device_unheard_rms_m`, the device-OP distance of a VE sitting exactly on the device as heard, recomputed
@@ -440,10 +446,11 @@ fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
 /// Users sharing a linkage push each other through the VE: each snapshot's b̂ carries the other users' hands,
 /// a round trip late, and each hand answers what its device does, so under delay the exchange is a loop whose
 /// gain grows with the users. Two users on the testbed's link2, a relaxed and a firm hand touring, 100 ms each
-/// way: with the others' hands taken whole (the paper's b̂, `exchange_delay_s` infinite) the devices saturate
-/// and the OP strays centimetres; weighted by the measured round trip (`sharing`) the session is stable. Four
-/// users at 20 ms likewise, and two on the four-bar's coupler and crank tip at 20 ms, whose pushes reach each
-/// other through the loop.
+/// way: with the others' hands taken whole (the paper's b̂, `exchange_delay_s` infinite) the exchange gains
+/// energy (when this was written the devices also saturated a quarter of their ticks and the OP strayed 26 mm);
+/// weighted by the measured round trip (`sharing`) the session is stable. Four users at 20 ms likewise, and two
+/// on the four-bar's coupler and crank tip at 20 ms, whose pushes reach each other through the loop (taken
+/// whole, the OP left its device by 13 cm).
 #[test]
 fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillation() {
     use kinloop::experiments::verdict::judge;
@@ -479,7 +486,7 @@ fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillat
         assert!(weighted.stable, "{scene}, {users} users at {delay_ms} ms, weighted: {weighted:?}");
         let whole = session(scene, ops, users, delay_ms, f64::INFINITY);
         assert!(
-            !whole.stable && whole.worst_saturation > 0.3,
+            !whole.stable && whole.reasons.contains(&"energy growth"),
             "{scene}, {users} users at {delay_ms} ms, the others' hands whole: {whole:?}"
         );
     }

@@ -70,7 +70,8 @@ const MAX_STEP_S: f64 = 0.02;
 /// Along the free directions the VE follows the model, a one-way delay late, so what that pull corrects comes
 /// back a round trip `T` later.
 /// A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`, and the default `τ` of 200 ms made the
-/// testbed unstable from 200 ms one way (a 400 ms round trip: `T/τ` = 2 > π/2). With `τ ≥ 2 T` the loop
+/// testbed unstable from 200 ms one way (a 400 ms round trip: `T/τ` = 2 > π/2) while the free directions were
+/// compared with the model's own answered state (a Smith predictor, since removed: see `tick`, step 2). With `τ ≥ 2 T` the loop
 /// crosses over at `1/τ` with at most `T/τ` = 0.5 rad of delay phase: 61° of phase margin. Slower only
 /// means the model and the VE part for longer before they meet again (`latency` experiment).
 pub const FREE_BLEND_PER_ROUND_TRIP: f64 = 2.0;
