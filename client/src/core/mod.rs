@@ -68,12 +68,13 @@ const MAX_STEP_S: f64 = 0.02;
 /// The free directions' pull toward the VE takes at least this many round trips as its time constant.
 ///
 /// Along the free directions the VE follows the model, a one-way delay late, so what that pull corrects comes
-/// back a round trip `T` later.
-/// A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`, and the default `τ` of 200 ms made the
-/// testbed unstable from 200 ms one way (a 400 ms round trip: `T/τ` = 2 > π/2) while the free directions were
-/// compared with the model's own answered state (a Smith predictor, since removed: see `tick`, step 2). With `τ ≥ 2 T` the loop
-/// crosses over at `1/τ` with at most `T/τ` = 0.5 rad of delay phase: 61° of phase margin. Slower only
-/// means the model and the VE part for longer before they meet again (`latency` experiment).
+/// back a round trip `T` later. A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`: while the
+/// free directions were compared with the model's own state that the VE answered (a Smith predictor, since
+/// removed: see `tick`, step 2), the default `τ` of 200 ms made the testbed unstable from 200 ms one way (a
+/// 400 ms round trip: `T/τ` = 2 > π/2). Compared with the VE's state predicted to now, the same fixed pull
+/// is stable at 1 s one way (`tests/harness.rs`); `τ ≥ 2 T` keeps the margin the bound asks for anyway
+/// (crossover at `1/τ` with at most `T/τ` = 0.5 rad of delay phase: 61°). Slower only means the model and
+/// the VE part for longer before they meet again (`latency` experiment).
 pub const FREE_BLEND_PER_ROUND_TRIP: f64 = 2.0;
 
 /// Why a core could not be built for a session.
@@ -902,7 +903,7 @@ impl<S: Space> HapticCore<S> {
             // The model is pulled toward the VE's state predicted to now: along the constrained directions
             // fast, where the frozen terms let it drift off the linkage's curve; along the free ones over
             // round trips, as the VE follows the model there. (Comparing the free directions instead with the
-            // model's own state that the VE's answered, as a Smith predictor does, took the delay out of that
+            // model's own state that the VE answered, as a Smith predictor does, took the delay out of that
             // loop but put the model's corrections in it: at 50 ms one way it made the Watt six-bar's light
             // output saturate a Touch and grow energy on a Falcon, 190 of 196 pairs rendering over whole
             // tours against 194 without it, and the testbed's soft tour ran 5.4 mm from the OP at 100 ms

@@ -256,16 +256,13 @@ impl VeConfig {
 }
 
 /// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]): none, the VE follows what it hears. Led
-/// by up to 100 ms the OP is nearer the device (testbed, soft hand, 100 ms one way: 2.8 mm RMS against
-/// 5.3 mm), and over the latency sweep's 10 s sessions what the hand feels is nearer what the same hand feels
-/// without delay (median relative change of the felt impedance, touring hands: 0.49 against 0.57 at 100 ms)
-/// with no session unstable; over whole tours (40 s) the feel is no nearer (0.46 against 0.44) and 47
-/// sessions are unstable against 40 unled. And on a weak device the lead's guesses feed a loop
-/// through the client's synchronisation that the device cannot damp: the testbed on a `sim:touch`, firm hand,
-/// 50 ms one way, ran 43 mm from its local model with 12 % of ticks clamped within 10 s, led by 50 ms or
-/// more (4 mm and none clamped unled; with the synchronisation replaced by the pull toward the VE's state
-/// predicted to now, 4 mm led). Renderability matrix at 20 s per pair, before the reach survey knew of walls:
-/// 18 of 196 pairs failed led, 15 unled.
+/// by up to 100 ms the OP is nearer the device (testbed, soft hand, 100 ms one way: 2.15 mm RMS against
+/// 4.6 mm), and over the latency sweep's 10 s sessions what the hand feels is a little nearer what the same
+/// hand feels without delay (median relative change of the felt impedance, touring hands: 0.55 against 0.64
+/// at 100 ms) with one session of 864 unstable (the six-bar's light OP, firm hand, 50 ms with 30 ms of
+/// jitter) against none. Over whole tours (40 s) 44 sessions are unstable led against 40 unled, five of them
+/// at 50 ms (the testbed with soft and firm hands, the six-bar firm), where none is unled: its guesses cost
+/// stability where the delay is short, so the lead stays a choice for long links.
 pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.0;
 
 impl Default for VeConfig {
