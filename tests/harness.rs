@@ -402,6 +402,28 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
     assert!(stiff.worst_saturation > 0.3, "infinite reach: {stiff:?}");
 }
 
+/// The four-bar's coupler toured whole (40 s) by a firm hand at 500 ms one way, the latency grid's session:
+/// its coupler curve bends away from the stale tangent plane faster than the testbed's link does, and with the
+/// walls trusted out to 0.3 length scales the hand pushed at `sim:paper`'s limit through more than a third of
+/// its worst second. The default reach holds every second under a tenth clamped; at 0.3 L the same session
+/// saturates, so the reach is what holds it.
+#[test]
+fn a_firm_hand_touring_the_four_bar_coupler_at_500_ms_is_not_held_at_the_device_limit() {
+    use kinloop::experiments::latency::{measure_leading, Loss, Network, Point, TARGETS};
+    use kinloop::harness::CoreEdit;
+    let target = TARGETS.iter().position(|t| t.0 == "fourbar-crank-rocker").unwrap();
+    let network = Network { jitter_ms: 0.0, loss: Loss::None };
+    let point = Point { target, hand: HandKind::Firm, delay_ms: 500.0, network, passivity: true };
+    let session = |reach: Option<f64>| {
+        let edit = reach.map(|reach| CoreEdit::new(move |c| c.linearization_reach = reach));
+        measure_leading(&point, 40.0, edit, 0.0).unwrap().verdict
+    };
+    let default = session(None);
+    assert!(default.stable && default.worst_saturation <= 0.1, "default reach: {default:?}");
+    let wider = session(Some(0.3));
+    assert!(!wider.stable && wider.worst_saturation > 0.3, "0.3 L: {wider:?}");
+}
+
 /// A poke through the Watt six-bar at 100 ms one way with 30 ms of jitter on a FIFO link (the latency
 /// sweep's draw): packets leave the queue in bursts, and a VE that followed the newest uplink saw the jab's
 /// poses arrive all at once, its PD target jumping centimetres in a tick: 1 J made beyond the hand's work,

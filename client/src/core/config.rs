@@ -173,13 +173,16 @@ impl Default for UplinkDeadband {
     }
 }
 
-/// Default [`CoreConfig::linearization_reach`], in length scales: 0.3 L is 14-18 mm on the testbed, the
+/// Default [`CoreConfig::linearization_reach`], in length scales: 0.25 L is 12-15 mm on the testbed, the
 /// four-bar and the Watt six-bar. With no softening a firm hand touring the testbed at 500 ms one way saturated
-/// the device's wrist 77 % of its worst second; at 0.4 L the four-bar's firm hand still saturated at 1 s
-/// (48 %); at 0.3 L nothing in `kinloop experiment latency`'s grid saturates. The price is softer walls far
-/// from the linearization point: device-to-local-model RMS at 1 s one way 6-21 mm (2-11 mm unsoftened), at
-/// 100 ms unchanged.
-pub const LINEARIZATION_REACH: f64 = 0.3;
+/// the device's wrist 77 % of its worst second. Over whole tours (the latency grid at 40 s per session) 0.3 L
+/// left the four-bar's coupler with firm and poking hands saturated from 300 ms one way (40 of 864 sessions;
+/// at 500 ms on a clean link 37 % of its worst second), 0.25 L only at 1 s (18 of 864), as 0.2 L does, which
+/// softens more for nothing (testbed soft tour at 1 s: 47.6 mm at 0.25 L, 48.2 at 0.2, 47.2 at 0.3), and
+/// 0.15 L lets the four-bar's OP diverge from its device at 1 s (27 of its 144). The price is softer walls far
+/// from the linearization point (device-to-local-model RMS at 1 s one way, see `latency`); at 100 ms the
+/// tracking is unchanged.
+pub const LINEARIZATION_REACH: f64 = 0.25;
 
 /// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.
 #[derive(Clone, Debug, PartialEq)]

@@ -260,9 +260,11 @@ impl VeConfig {
 /// 4.6 mm), and over the latency sweep's 10 s sessions what the hand feels is a little nearer what the same
 /// hand feels without delay (median relative change of the felt impedance, touring hands: 0.55 against 0.64
 /// at 100 ms) with one session of 864 unstable (the six-bar's light OP, firm hand, 50 ms with 30 ms of
-/// jitter) against none. Over whole tours (40 s) 44 sessions are unstable led against 40 unled, five of them
-/// at 50 ms (the testbed with soft and firm hands, the six-bar firm), where none is unled: its guesses cost
-/// stability where the delay is short, so the lead stays a choice for long links.
+/// jitter) against none. Over whole tours (40 s) 35 sessions are unstable led against 18 unled (those the
+/// four-bar's coupler at 1 s): twelve more on the four-bar at 500 ms (saturated against the local model's
+/// walls, which the lead's guesses move further from where they were set) and five at 50 ms (the testbed's
+/// soft and firm hands, 27 mJ made on 27 mJ of flow; the six-bar's firm hand with 30 ms of jitter, 1.7 J).
+/// Its guesses cost stability at short and long delays alike, so the lead stays a choice.
 pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.0;
 
 impl Default for VeConfig {
