@@ -380,6 +380,12 @@ fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
     assert!(c.device_op_rms_m >= 0.9 * reported && c.device_op_rms_m <= 1.2 * reported, "{c:?}");
 }
 
+/// A core edit that trusts the local model's walls out to `reach` length scales
+/// (`CoreConfig::linearization_reach`).
+fn reach_edit(reach: f64) -> kinloop::harness::CoreEdit {
+    kinloop::harness::CoreEdit::new(move |c| c.linearization_reach = reach)
+}
+
 /// A firm hand touring the testbed at 500 ms one way: the local model runs a round trip of motion ahead of
 /// the VE its terms were linearized at, and a joint stiffness held against that stale tangent plane pushed
 /// back hard enough to saturate `sim:paper`'s 0.2 N m wrist (77 % of ticks in the worst second). With the
@@ -389,9 +395,8 @@ fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
 #[test]
 fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane() {
     use kinloop::experiments::verdict::judge;
-    use kinloop::harness::CoreEdit;
     let session = |reach: Option<f64>| {
-        let edit = reach.map(|reach| CoreEdit::new(move |c| c.linearization_reach = reach));
+        let edit = reach.map(reach_edit);
         let (summary, rec) = testbed_tour(HandKind::Firm, 500, 7, edit);
         judge(&summary, &rec)
     };
@@ -410,12 +415,11 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_at_500_ms_is_not_held_at_the_device_limit() {
     use kinloop::experiments::latency::{measure_leading, Loss, Network, Point, TARGETS};
-    use kinloop::harness::CoreEdit;
     let target = TARGETS.iter().position(|t| t.0 == "fourbar-crank-rocker").unwrap();
     let network = Network { jitter_ms: 0.0, loss: Loss::None };
     let point = Point { target, hand: HandKind::Firm, delay_ms: 500.0, network, passivity: true };
     let session = |reach: Option<f64>| {
-        let edit = reach.map(|reach| CoreEdit::new(move |c| c.linearization_reach = reach));
+        let edit = reach.map(reach_edit);
         measure_leading(&point, 40.0, edit, 0.0).unwrap().verdict
     };
     let default = session(None);
