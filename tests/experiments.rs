@@ -8,7 +8,7 @@ use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
 
 fn run(name: Name, out: &Path) -> Report {
-    let options = Options { out: out.to_path_buf(), quick: true, progress: false, threads: 2 };
+    let options = Options { out: out.to_path_buf(), quick: true, progress: false, threads: 2, seconds: None };
     let report = experiments::run(name, &options).unwrap_or_else(|e| panic!("{}: {e:#}", name.as_str()));
     assert_eq!(report.dir, out.join(name.as_str()));
     assert!(report.files.iter().any(|f| f.ends_with(".png")), "{}: charts written", name.as_str());
@@ -414,6 +414,53 @@ fn bad_experiment_arguments_are_refused_cleanly() {
     assert!(stderr.contains("not a directory") && !stderr.contains("panicked"), "{stderr}");
     let threads = Command::new(bin).args(["experiment", "paper", "--threads", "0"]).output().unwrap();
     assert!(!threads.status.success() && String::from_utf8_lossy(&threads.stderr).contains("--threads"));
+    // A session length that is not one, or one the experiment would silently ignore, is refused by name.
+    let cases: [(&[&str], &str); 6] = [
+        (&["latency", "--seconds", "nan"], "must be in"),
+        (&["latency", "--seconds", "0"], "must be in"),
+        (&["latency", "--seconds=-3"], "must be in"),
+        (&["renderability", "--seconds", "1e9"], "must be in"),
+        (&["paper", "--seconds", "40"], "experiment paper has no session length"),
+        (&["all", "--seconds", "40"], "has no session length"),
+    ];
+    for (args, says) in cases {
+        let out = Command::new(bin).arg("experiment").args(args).env("RUST_BACKTRACE", "0").output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains("--seconds") && stderr.contains(says) && !stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
+
+/// `--seconds` sets how long each session runs: the renderability matrix run twice as long books, pair by
+/// pair, at least the energy flow of the shorter run (the flow is a running maximum and the sessions are
+/// deterministic, so the shorter run is the longer one's beginning), strictly more on some pairs, and the
+/// summary says how it ran.
+#[test]
+fn the_seconds_flag_sets_each_sessions_length() {
+    let bin = env!("CARGO_BIN_EXE_kinloop");
+    let dir = tempfile::tempdir().unwrap();
+    let run = |seconds: &str| -> Value {
+        let out = dir.path().join(seconds);
+        let status = Command::new(bin)
+            .args(["experiment", "renderability", "--quick", "--seconds", seconds, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+        serde_json::from_str(&std::fs::read_to_string(out.join("renderability/summary.json")).unwrap()).unwrap()
+    };
+    let (short, long) = (run("0.5"), run("1"));
+    assert_eq!(short["command"], "kinloop experiment renderability --quick --seconds 0.5");
+    assert_eq!(f(&short["results"]["seconds_per_pair"]), 0.5);
+    assert_eq!(f(&long["results"]["seconds_per_pair"]), 1.0);
+    let flows = |summary: &Value| -> Vec<f64> {
+        summary["results"]["points"].as_array().unwrap().iter().map(|p| f(&p["energy_flow_max_j"])).collect()
+    };
+    let (short, long) = (flows(&short), flows(&long));
+    assert_eq!(short.len(), long.len());
+    assert!(short.len() > 10, "{} pairs", short.len());
+    assert!(short.iter().zip(&long).all(|(s, l)| l >= s), "a longer session books less flow");
+    assert!(short.iter().zip(&long).any(|(s, l)| l > s), "the longer sessions ran no longer");
 }
 
 /// The other commands' numeric flags are checked too: a NaN, infinite, zero or overlong measurement time is

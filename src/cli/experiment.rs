@@ -1,5 +1,6 @@
-//! `kinloop experiment NAME [--out DIR] [--quick]`: runs one experiment (or `all`), writing its charts and
-//! `summary.json` into `DIR/NAME/`, and prints where they went and the headline answer.
+//! `kinloop experiment NAME [--out DIR] [--quick] [--threads N] [--seconds S]`: runs one experiment (or
+//! `all`), writing its charts and `summary.json` into `DIR/NAME/`, and prints where they went and the
+//! headline answer.
 
 use std::path::PathBuf;
 
@@ -59,6 +60,32 @@ pub struct ExperimentArgs {
     /// for any number, only the time to get them changes.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Seconds per session instead of the experiment's own (latency 10, renderability 40, the live ones 10
+    /// and 4): e.g. `latency --seconds 40` judges every point over its hand's whole tour. Only the touring
+    /// experiments take it: latency, latency-live, renderability, renderability-live.
+    #[arg(long, value_name = "S")]
+    pub seconds: Option<f64>,
+}
+
+/// Longest session `--seconds` accepts (the latency grid's 864 points at this length take about an hour of
+/// simulation on two cores).
+const MAX_SESSION_SECONDS: f64 = 600.0;
+
+/// Refuses a `--seconds` that is not a length or that the experiment(s) would ignore.
+fn check_seconds(seconds: Option<f64>, names: &[Name]) -> Result<()> {
+    let Some(seconds) = seconds else { return Ok(()) };
+    ensure!(
+        seconds.is_finite() && seconds > 0.0 && seconds <= MAX_SESSION_SECONDS,
+        "--seconds: must be in (0, {MAX_SESSION_SECONDS}] s per session, got {seconds}"
+    );
+    if let Some(name) = names.iter().find(|n| !n.takes_seconds()) {
+        anyhow::bail!(
+            "--seconds: experiment {} has no session length to set (only latency, latency-live, renderability \
+             and renderability-live take it)",
+            name.as_str()
+        );
+    }
+    Ok(())
 }
 
 /// Runs `kinloop experiment`.
@@ -67,11 +94,13 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     if args.out.exists() {
         ensure!(args.out.is_dir(), "--out: {} exists and is not a directory", args.out.display());
     }
-    let options = Options { out: args.out.clone(), quick: args.quick, progress: true, threads: args.threads };
     let names: Vec<Name> = match args.name {
         Which::One(name) => vec![name],
         Which::All => Name::ALL.to_vec(),
     };
+    check_seconds(args.seconds, &names)?;
+    let options =
+        Options { out: args.out.clone(), quick: args.quick, progress: true, threads: args.threads, seconds: args.seconds };
     for name in names {
         eprintln!("experiment {}{} ...", name.as_str(), if args.quick { " (quick)" } else { "" });
         let report = experiments::run(name, &options)?;

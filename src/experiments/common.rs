@@ -30,12 +30,16 @@ pub struct Options {
     pub progress: bool,
     /// Threads a sweep may use (results do not depend on it).
     pub threads: usize,
+    /// Simulated (or real, for the live experiments) seconds per session, overriding the experiment's own
+    /// length; only the experiments whose sessions are hands touring a linkage take it
+    /// ([`super::Name::takes_seconds`]).
+    pub seconds: Option<f64>,
 }
 
 impl Options {
     /// Full grids, results under `out`, progress bars, two threads.
     pub fn new(out: impl Into<PathBuf>) -> Self {
-        Options { out: out.into(), quick: false, progress: true, threads: 2 }
+        Options { out: out.into(), quick: false, progress: true, threads: 2, seconds: None }
     }
 
     /// The quick grids.
@@ -51,6 +55,11 @@ impl Options {
         } else {
             full
         }
+    }
+
+    /// Seconds per session: `--seconds` when given, else the full or the quick length.
+    pub fn session_seconds(&self, full: f64, quick: f64) -> f64 {
+        self.seconds.unwrap_or_else(|| self.pick(full, quick))
     }
 }
 
@@ -76,6 +85,7 @@ pub struct Output {
     files: Vec<String>,
     started: Instant,
     quick: bool,
+    seconds: Option<f64>,
 }
 
 impl Output {
@@ -83,7 +93,7 @@ impl Output {
     pub fn new(name: &'static str, options: &Options) -> Result<Self> {
         let dir = options.out.join(name);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
-        Ok(Output { name, dir, files: Vec::new(), started: Instant::now(), quick: options.quick })
+        Ok(Output { name, dir, files: Vec::new(), started: Instant::now(), quick: options.quick, seconds: options.seconds })
     }
 
     /// The directory.
@@ -124,7 +134,10 @@ impl Output {
     pub fn finish(mut self, title: &str, full_runtime_note: &str, results: Value) -> Result<Report> {
         let runtime_s = self.started.elapsed().as_secs_f64();
         self.files.push("summary.json".into());
-        let command = format!("kinloop experiment {}{}", self.name, if self.quick { " --quick" } else { "" });
+        let mut command = format!("kinloop experiment {}{}", self.name, if self.quick { " --quick" } else { "" });
+        if let Some(seconds) = self.seconds {
+            command += &format!(" --seconds {seconds}");
+        }
         let summary = json!({
             "experiment": self.name,
             "title": title,

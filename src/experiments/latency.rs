@@ -48,6 +48,12 @@ use crate::harness::{ClientPlan, CoreEdit, SessionPlan};
 /// testbed tour's segment near 9 s where a firm wrist out-twists the `sim:paper` device's 0.2 N m, which
 /// the real processes met at every delay.)
 pub const SECONDS: f64 = 10.0;
+
+/// Seconds per point of this run: [`SECONDS`], or `--seconds` (at 40 s a hand tours its whole reach, there
+/// and back; the grid's lead and model-update rows run as long, so their comparisons stay like for like).
+pub fn seconds_per_point(options: &Options) -> f64 {
+    options.session_seconds(SECONDS, SECONDS)
+}
 /// One-way delays of the full grid (ms).
 pub const DELAYS_MS: [f64; 8] = [0.0, 50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
 /// Jitters of the full grid (ms).
@@ -575,7 +581,8 @@ pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency", options)?;
     let grid = options.pick(Grid::full(), Grid::quick());
     let points = grid.points();
-    let mut all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, SECONDS))?;
+    let seconds = seconds_per_point(options);
+    let mut all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, seconds))?;
     let references: Vec<Measured> = all.iter().filter(|m| is_undelayed_reference(m, &m.point)).cloned().collect();
     fill_felt_changes(&mut all, &references);
     tracking_charts(&mut out, &grid, &all)?;
@@ -722,7 +729,7 @@ pub fn run(options: &Options) -> Result<Report> {
             "networks": grid.networks.iter().map(|n| n.name()).collect::<Vec<_>>(),
             "methods": ["plain (VeConfig::passivity off, --passivity off)", "passivity (VeConfig::passivity, the default)"],
             "points": all.len(),
-            "seconds_per_point": SECONDS,
+            "seconds_per_point": seconds,
             "reduced": options.quick.then_some("--quick: the four-bar coupler, hands soft and poke, delays 0/100/500/1000 ms, a clean network and 30 ms jitter with 20 % bursty loss"),
         },
         "setup": {
@@ -833,7 +840,7 @@ pub fn run_live(options: &Options) -> Result<Report> {
             }
         }
     }
-    let seconds = options.pick(SECONDS, 3.0);
+    let seconds = options.session_seconds(SECONDS, 3.0);
     let scratch = std::env::temp_dir().join("kinloop-latency-live");
     let all = sweep("latency-live", &points, 1, options.progress, |p| measure_live(p, seconds, &scratch))?;
     let rows: Vec<String> = targets

@@ -26,7 +26,7 @@ use kinloop_server::core::VeConfig;
 use super::common::{round, sweep, Options, Output};
 use super::latency::{
     fill_felt_changes, measure_leading, point_json, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
-    SECONDS, TARGETS,
+    seconds_per_point, TARGETS,
 };
 use crate::charts::{Chart, HeatMap, Legend, Series};
 
@@ -102,7 +102,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
         })
         .collect();
     let all: Vec<(f64, Measured)> = sweep("latency: lead", &points, options.threads, options.progress, |(cap, p)| {
-        Ok((*cap, measure_leading(p, SECONDS, None, *cap)?))
+        Ok((*cap, measure_leading(p, seconds_per_point(options), None, *cap)?))
     })?;
 
     let mut map = HeatMap::new(
@@ -251,7 +251,7 @@ fn everywhere(
     let other_cap = if default_leads { 0.0 } else { EVERYWHERE_CAP_S };
     let mut others: Vec<Measured> =
         sweep("latency: lead set the other way", &points, options.threads, options.progress, |p| {
-            measure_leading(p, SECONDS, None, other_cap)
+            measure_leading(p, seconds_per_point(options), None, other_cap)
         })?;
     fill_felt_changes(&mut others, undelayed);
     let others: Vec<&Measured> = others.iter().collect();

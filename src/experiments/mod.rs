@@ -92,6 +92,12 @@ impl Name {
         }
     }
 
+    /// Whether `--seconds` sets its sessions' length: the experiments whose sessions are hands touring a
+    /// linkage (the others sweep ticks, rates or sizes, whose lengths are part of what they measure).
+    pub fn takes_seconds(self) -> bool {
+        matches!(self, Name::Latency | Name::LatencyLive | Name::Renderability | Name::RenderabilityLive)
+    }
+
     /// The name on the command line and of the output directory.
     pub fn as_str(self) -> &'static str {
         match self {

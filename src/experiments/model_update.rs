@@ -21,7 +21,7 @@ use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
-use super::latency::{measure_with, point_json, Loss, Measured, Network, Point, SECONDS, TARGETS};
+use super::latency::{measure_with, point_json, Loss, Measured, Network, Point, seconds_per_point, TARGETS};
 use crate::charts::HeatMap;
 use crate::harness::CoreEdit;
 
@@ -96,7 +96,7 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
         .collect();
     let all: Vec<(Update, Measured)> =
         sweep("latency: model update", &points, options.threads, options.progress, |(update, p)| {
-            Ok((*update, measure_with(p, SECONDS, update.edit())?))
+            Ok((*update, measure_with(p, seconds_per_point(options), update.edit())?))
         })?;
 
     let mut map = HeatMap::new(

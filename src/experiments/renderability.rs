@@ -208,7 +208,7 @@ pub const SECONDS: f64 = 40.0;
 pub fn run(options: &Options) -> Result<super::Report> {
     let out = Output::new("renderability", options)?;
     let all = points(&[], &HANDS)?;
-    let seconds = options.pick(SECONDS, 3.0);
+    let seconds = options.session_seconds(SECONDS, 3.0);
     let results = sweep("renderability", &all, options.threads, options.progress, |p| evaluate(p, seconds))?;
     report(out, &results, seconds, "Every shipped linkage with default settings", "about 30 s on 2 cores")
 }
@@ -223,7 +223,7 @@ pub fn run_live(options: &Options) -> Result<super::Report> {
     let out = Output::new("renderability-live", options)?;
     let hands: &[HandKind] = if options.quick { &HANDS[..1] } else { &HANDS };
     let all = points(&[], hands)?;
-    let seconds = options.pick(4.0, 2.0);
+    let seconds = options.session_seconds(4.0, 2.0);
     // Each session's records land in the system's temporary directory in turn (the last one stays there).
     let scratch = std::env::temp_dir().join("kinloop-renderability-live");
     let results = sweep("renderability-live", &all, 1, options.progress, |p| evaluate_live(p, seconds, &scratch))?;
