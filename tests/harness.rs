@@ -352,8 +352,9 @@ fn a_fixed_200_ms_pull_toward_the_ve_predicted_to_now_stays_stable_at_long_delay
 
 /// `device_unheard_rms_m`, the device-OP distance of a VE sitting exactly on the device as heard, recomputed
 /// from the recording: at 300 ms one way on a clean link the VE hears the device 300 ms (and a tick) late, so
-/// it is the RMS of the device's displacement over the last 300 ms. The VE of the default session is within
-/// a fifth of that floor.
+/// it is the RMS of the device's displacement over the last 300 ms. No VE that follows what it hears is
+/// nearer on average; the default VE leads by up to 100 ms at this delay, so it is below that floor (12.2
+/// against 14.4 mm), though by no more than the lead can buy.
 #[test]
 fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
     let (summary, rec) = testbed_tour(HandKind::Soft, 300, 3, None);
@@ -377,7 +378,7 @@ fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
     println!("unheard {reported} m reported, {recomputed} m recomputed, device-OP {} m", c.device_op_rms_m);
     assert!((reported - recomputed).abs() <= 0.03 * recomputed, "{reported} vs {recomputed} m");
     assert!(reported > 5e-3, "the tour moves: {reported} m");
-    assert!(c.device_op_rms_m >= 0.9 * reported && c.device_op_rms_m <= 1.2 * reported, "{c:?}");
+    assert!(c.device_op_rms_m < 0.95 * reported && c.device_op_rms_m >= 0.5 * reported, "{c:?}");
 }
 
 /// A core edit that trusts the local model's walls out to `reach` length scales
@@ -411,21 +412,41 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
 /// its coupler curve bends away from the stale tangent plane faster than the testbed's link does, and with the
 /// walls trusted out to 0.3 length scales the hand pushed at `sim:paper`'s limit through more than a third of
 /// its worst second. The default reach holds every second under a tenth clamped; at 0.3 L the same session
-/// saturates, so the reach is what holds it.
+/// saturates, so the reach is what holds it. So does the lead's window: led by 100 ms at 500 ms one way, the
+/// VE's guesses move the walls further still and the hand is held at the limit again.
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_at_500_ms_is_not_held_at_the_device_limit() {
-    use kinloop::experiments::latency::{measure_leading, Loss, Network, Point, TARGETS};
+    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, Loss, Network, Point, TARGETS};
     let target = TARGETS.iter().position(|t| t.0 == "fourbar-crank-rocker").unwrap();
     let network = Network { jitter_ms: 0.0, loss: Loss::None };
     let point = Point { target, hand: HandKind::Firm, delay_ms: 500.0, network, passivity: true };
-    let session = |reach: Option<f64>| {
-        let edit = reach.map(reach_edit);
-        measure_leading(&point, 40.0, edit, 0.0).unwrap().verdict
-    };
+    let session = |reach: Option<f64>| measure_with(&point, 40.0, reach.map(reach_edit)).unwrap().verdict;
     let default = session(None);
     assert!(default.stable && default.worst_saturation <= 0.1, "default reach: {default:?}");
     let wider = session(Some(0.3));
     assert!(!wider.stable && wider.worst_saturation > 0.3, "0.3 L: {wider:?}");
+    let led = measure_leading(&point, 40.0, None, Lead::everywhere(0.1)).unwrap().verdict;
+    assert!(!led.stable && led.worst_saturation > 0.1, "led at 500 ms: {led:?}");
+}
+
+/// Where the VE leads by default (75 to 400 ms one way) the OP is nearer the device than a VE that follows
+/// what it hears can be: the testbed's soft tour at 100 ms one way is within issue 22's 3 mm (RMS) led and
+/// not without the lead, where it is no nearer than the device's own motion since the pose the VE heard of.
+/// Below the window (50 ms) the default follows: the same as no lead.
+#[test]
+fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
+    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, Loss, Network, Point, GOAL_RMS_100MS_M};
+    let network = Network { jitter_ms: 0.0, loss: Loss::None };
+    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    let led = measure_with(&at(100.0), 10.0, None).unwrap();
+    let following = measure_leading(&at(100.0), 10.0, None, Lead::NONE).unwrap();
+    assert!(led.verdict.stable && following.verdict.stable);
+    assert!(led.device_op_rms_m <= GOAL_RMS_100MS_M, "led: {} m", led.device_op_rms_m);
+    assert!(following.device_op_rms_m > GOAL_RMS_100MS_M, "following: {} m", following.device_op_rms_m);
+    assert!(following.device_op_rms_m > 0.9 * following.device_unheard_rms_m);
+    let (led_50, following_50) =
+        (measure_with(&at(50.0), 10.0, None).unwrap(), measure_leading(&at(50.0), 10.0, None, Lead::NONE).unwrap());
+    assert_eq!(led_50.device_op_rms_m, following_50.device_op_rms_m);
 }
 
 /// A poke through the Watt six-bar at 100 ms one way with 30 ms of jitter on a FIFO link (the latency

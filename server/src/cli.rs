@@ -14,7 +14,7 @@ use kinloop_linkage::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
 
 use crate::bench::RealtimeRun;
-use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_MAX_S};
+use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_DELAYS_S, DEFAULT_COUPLING_LEAD_MAX_S};
 use crate::driver::load_scene;
 use crate::view::{LiveSource, ViewConfig};
 use crate::{Access, Identity, Server, ServerConfig, VeConfig};
@@ -87,11 +87,15 @@ struct Cli {
     jitter_buffer: Switch,
     /// Aim each graphics controller at where its client's local model is predicted to be after the network's
     /// one-way delay (half the shortest round trip), up to MS milliseconds ahead of the uplink heard and no
-    /// further than the hand's recent accelerations make a safe guess (0, the default: follow what is heard, as
-    /// the paper's VE does). Brings the VE's OP nearer the device under delay (testbed, 100 ms one way: 2.8 mm
-    /// RMS against 5.3 mm), but a weak device may not damp the guesses (see the README's known limits).
+    /// further than the hand's recent accelerations make a safe guess, for users whose one-way delay is within
+    /// --lead-delays-ms (0: follow what is heard, as the paper's VE does). Brings the VE's OP nearer the device
+    /// under delay (testbed, soft tour, 100 ms one way: 2.15 mm RMS against 4.6 mm).
     #[arg(long, value_name = "MS", default_value_t = DEFAULT_COUPLING_LEAD_MAX_S * 1e3, value_parser = parse_lead_ms)]
     lead_max_ms: f64,
+    /// The one-way delays over which the VE leads, FROM..UNTIL in milliseconds (UNTIL may be left out: no
+    /// upper bound). Outside them the guesses cost more than they buy (see `kinloop experiment latency`).
+    #[arg(long, value_name = "FROM..UNTIL", default_value_t = LeadDelays(DEFAULT_COUPLING_LEAD_DELAYS_S.map(|s| s * 1e3)), value_parser = parse_lead_delays)]
+    lead_delays_ms: LeadDelays,
     /// Let the linkage move on its own while no manipulator holds it (by default it waits at rest, so the
     /// first user grasps a still linkage rather than one that gravity has been swinging).
     #[arg(long)]
@@ -159,6 +163,40 @@ fn parse_gains(s: &str) -> Result<AxisGains, String> {
     }
 }
 
+/// The one-way delays a lead acts over (ms), as `--lead-delays-ms` reads them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LeadDelays([f64; 2]);
+
+impl std::fmt::Display for LeadDelays {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [from, until] = self.0;
+        if until.is_finite() {
+            write!(f, "{from}..{until}")
+        } else {
+            write!(f, "{from}..")
+        }
+    }
+}
+
+/// `FROM..UNTIL` or `FROM..` in milliseconds: numbers, 0 <= FROM <= UNTIL.
+fn parse_lead_delays(s: &str) -> Result<LeadDelays, String> {
+    let (from, until) = s.split_once("..").ok_or_else(|| format!("{s:?} is not FROM..UNTIL (milliseconds)"))?;
+    let number = |t: &str| -> Result<f64, String> {
+        let ms: f64 = t.trim().parse().map_err(|_| format!("{t:?} is not a number of milliseconds"))?;
+        if ms.is_finite() && ms >= 0.0 {
+            Ok(ms)
+        } else {
+            Err(format!("{ms} ms is not a delay"))
+        }
+    };
+    let from = number(from)?;
+    let until = if until.trim().is_empty() { f64::INFINITY } else { number(until)? };
+    if until < from {
+        return Err(format!("{until} ms ends before {from} ms"));
+    }
+    Ok(LeadDelays([from, until]))
+}
+
 /// The longest lead in milliseconds: finite, 0 to 4000 (the VE keeps 4 s of snapshot times to measure round
 /// trips with, `round_trip::BUILT_KEPT`; a longer lead would guess past any round trip it shares).
 fn parse_lead_ms(s: &str) -> Result<f64, String> {
@@ -203,6 +241,7 @@ fn ve_config(cli: &Cli) -> VeConfig {
         coupling_damping: cli.coupling_damping.clone(),
         rest_unheld: !cli.free_run,
         coupling_lead_max_s: cli.lead_max_ms * 1e-3,
+        coupling_lead_delays_s: cli.lead_delays_ms.0.map(|ms| ms * 1e-3),
         ..VeConfig::default()
     }
 }
@@ -327,11 +366,30 @@ mod tests {
             let args = ["kinloop-server", "--scene", "paper-testbed", "--listen", "127.0.0.1:0"].iter().chain(extra);
             Cli::try_parse_from(args).map(|cli| ve_config(&cli).coupling_lead_max_s)
         };
-        assert_eq!(lead(&[]).unwrap(), 0.0);
+        assert_eq!(lead(&[]).unwrap(), 0.1);
+        assert_eq!(lead(&["--lead-max-ms", "0"]).unwrap(), 0.0);
         assert!((lead(&["--lead-max-ms", "150"]).unwrap() - 0.15).abs() < 1e-12);
         for bad in ["-5", "NaN", "inf", "4001", "soon"] {
             let refused = lead(&[&format!("--lead-max-ms={bad}")]).unwrap_err().to_string();
             assert!(refused.contains("--lead-max-ms"), "{bad}: {refused}");
+        }
+    }
+
+    /// The delays a lead acts over: 75 to 400 ms by default, FROM..UNTIL in milliseconds, UNTIL optional;
+    /// anything else is refused naming the flag.
+    #[test]
+    fn lead_delays_flag_sets_where_the_ve_leads() {
+        let delays = |extra: &[&str]| {
+            let args = ["kinloop-server", "--scene", "paper-testbed", "--listen", "127.0.0.1:0"].iter().chain(extra);
+            Cli::try_parse_from(args).map(|cli| ve_config(&cli).coupling_lead_delays_s)
+        };
+        let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12;
+        assert!(close(delays(&[]).unwrap(), [0.075, 0.4]));
+        assert!(close(delays(&["--lead-delays-ms", "0..1000"]).unwrap(), [0.0, 1.0]));
+        assert_eq!(delays(&["--lead-delays-ms", "50.."]).unwrap(), [0.05, f64::INFINITY]);
+        for bad in ["100", "300..100", "-5..10", "a..b", "NaN..1", "..", "5..inf"] {
+            let refused = delays(&[&format!("--lead-delays-ms={bad}")]).unwrap_err().to_string();
+            assert!(refused.contains("--lead-delays-ms"), "{bad}: {refused}");
         }
     }
 }

@@ -99,8 +99,13 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         Which::All => Name::ALL.to_vec(),
     };
     check_seconds(args.seconds, &names)?;
-    let options =
-        Options { out: args.out.clone(), quick: args.quick, progress: true, threads: args.threads, seconds: args.seconds };
+    let options = Options {
+        out: args.out.clone(),
+        quick: args.quick,
+        progress: true,
+        threads: args.threads,
+        seconds: args.seconds,
+    };
     for name in names {
         eprintln!("experiment {}{} ...", name.as_str(), if args.quick { " (quick)" } else { "" });
         let report = experiments::run(name, &options)?;

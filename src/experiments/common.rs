@@ -93,7 +93,14 @@ impl Output {
     pub fn new(name: &'static str, options: &Options) -> Result<Self> {
         let dir = options.out.join(name);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
-        Ok(Output { name, dir, files: Vec::new(), started: Instant::now(), quick: options.quick, seconds: options.seconds })
+        Ok(Output {
+            name,
+            dir,
+            files: Vec::new(),
+            started: Instant::now(),
+            quick: options.quick,
+            seconds: options.seconds,
+        })
     }
 
     /// The directory.

@@ -241,19 +241,65 @@ pub fn measure(p: &Point, seconds: f64) -> Result<Measured> {
 
 /// Runs one point with a change to the client's settings.
 pub fn measure_with(p: &Point, seconds: f64, edit: Option<CoreEdit>) -> Result<Measured> {
-    measure_leading(p, seconds, edit, VeConfig::default().coupling_lead_max_s)
+    measure_leading(p, seconds, edit, Lead::default())
 }
 
-/// As [`measure_with`] with the VE leading each coupling's target by up to `lead_max_s`
-/// (`VeConfig::coupling_lead_max_s`; the [`lead`] rows).
-pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead_max_s: f64) -> Result<Measured> {
+/// How a session's VE leads its couplings' targets ([`VeConfig::coupling_lead_max_s`] over the one-way delays
+/// of [`VeConfig::coupling_lead_delays_s`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lead {
+    /// The longest lead (s; 0: none).
+    pub max_s: f64,
+    /// The one-way delays it acts over (s, from and until).
+    pub delays_s: [f64; 2],
+}
+
+impl Default for Lead {
+    /// As `kinloop-server` leads by default.
+    fn default() -> Self {
+        let ve = VeConfig::default();
+        Lead { max_s: ve.coupling_lead_max_s, delays_s: ve.coupling_lead_delays_s }
+    }
+}
+
+impl Lead {
+    /// A VE that follows what it hears.
+    pub const NONE: Lead = Lead { max_s: 0.0, delays_s: [0.0, f64::INFINITY] };
+
+    /// Leading by up to `max_s` at every delay.
+    pub fn everywhere(max_s: f64) -> Self {
+        Lead { max_s, delays_s: [0.0, f64::INFINITY] }
+    }
+
+    /// Its name in charts and summaries: "no lead", "lead <= 100 ms", "lead <= 100 ms at 75-400 ms".
+    pub fn name(&self) -> String {
+        if self.max_s <= 0.0 {
+            return "no lead".into();
+        }
+        let [from, until] = self.delays_s;
+        let within = match (from > 0.0, until.is_finite()) {
+            (false, false) => String::new(),
+            (_, true) => format!(" at {}-{} ms", from * 1e3, until * 1e3),
+            (true, false) => format!(" from {} ms", from * 1e3),
+        };
+        format!("lead <= {} ms{within}", self.max_s * 1e3)
+    }
+}
+
+/// As [`measure_with`] with the VE leading each coupling's target as `lead` says (the [`lead`] rows).
+pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead: Lead) -> Result<Measured> {
     let (scene_name, op, _) = TARGETS[p.target];
     let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
     let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
     client.user = UserSpec::Hand(HandSpec::touring(p.hand));
     client.configure = edit;
     let client = client.with_link(p.link());
-    let ve = VeConfig { passivity: p.passivity, coupling_lead_max_s: lead_max_s, ..VeConfig::default() };
+    let ve = VeConfig {
+        passivity: p.passivity,
+        coupling_lead_max_s: lead.max_s,
+        coupling_lead_delays_s: lead.delays_s,
+        ..VeConfig::default()
+    };
     let plan =
         SessionPlan { scene, ve, clients: vec![client], duration: Duration::from_secs_f64(seconds), record_every: 1 };
     let (summary, rec) = session(&plan).with_context(|| format!("{p:?}"))?;

@@ -4,13 +4,15 @@
 //! A VE that follows what it hears trails the device by the uplink's delay: on the testbed's soft tour the
 //! device has moved about 5 mm (RMS) at 100 ms one way, and 42 mm at 1 s, since the pose the VE heard of
 //! (`device_unheard_rms_mm`), above the issue's goals of 3 and 25 mm. Only a VE that runs ahead of the hand
-//! can be nearer. `VeConfig::coupling_lead_max_s` (`kinloop-server --lead-max-ms`, off by default) aims each
+//! can be nearer. `VeConfig::coupling_lead_max_s` (`kinloop-server --lead-max-ms`, 100 ms by default, over the
+//! one-way delays of `VeConfig::coupling_lead_delays_s`, 75 to 400 ms by default) aims each
 //! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap
 //! and no longer than the heard motion supports (`Coupling::trusted_lead_s`: the twist's recent rates of
 //! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
 //! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions
 //! (every scene and hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 %
-//! bursty loss) with one cap ([`CAPS_S`], no lead among them), the rest as `kinloop-server` and
+//! bursty loss) with one lead ([`leads`]: none, at most 100 ms or the whole delay at every delay, and the
+//! default), the rest as `kinloop-server` and
 //! `kinloop-client` run by default (passivity controller on), and is judged by the sweep's criterion; the
 //! energy comparison is made at the client time the VE aimed at (`Snapshot::uplink_time_s`), so a lead is
 //! charged only for what the hand had not done by then. A last row ([`everywhere`]) runs every session the
@@ -25,35 +27,32 @@ use kinloop_server::core::VeConfig;
 
 use super::common::{round, sweep, Options, Output};
 use super::latency::{
-    fill_felt_changes, measure_leading, point_json, Loss, Measured, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
-    seconds_per_point, TARGETS,
+    fill_felt_changes, measure_leading, point_json, seconds_per_point, Lead, Loss, Measured, Network, Point,
+    GOAL_RMS_100MS_M, GOAL_RMS_1S_M, TARGETS,
 };
 use crate::charts::{Chart, HeatMap, Legend, Series};
 
 /// One-way delays of the rows (ms).
 pub const DELAYS_MS: [f64; 7] = [50.0, 100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];
-/// The caps on the lead (s): none (a VE that follows what it hears, the paper's and the default,
-/// `DEFAULT_COUPLING_LEAD_MAX_S`), at most 100 ms, and the whole delay of the grid.
-pub const CAPS_S: [f64; 3] = [0.0, 0.1, 1.0];
-
-/// The lead's cap in the VE a server runs by default (s).
-fn default_cap_s() -> f64 {
-    VeConfig::default().coupling_lead_max_s
+/// The leads of the rows: none (a VE that follows what it hears, the paper's), at most 100 ms and at most
+/// the whole delay of the grid at every delay, and the default (at most 100 ms over the one-way delays of
+/// `DEFAULT_COUPLING_LEAD_DELAYS_S`).
+pub fn leads() -> [Lead; 4] {
+    [Lead::NONE, Lead::everywhere(0.1), Lead::everywhere(1.0), Lead::default()]
 }
 
-/// A row's cap as its name.
-fn cap_name(cap_s: f64) -> String {
-    let name = if cap_s > 0.0 { format!("lead <= {} ms", cap_s * 1e3) } else { "no lead".to_string() };
-    if cap_s == default_cap_s() {
-        format!("{name} (default)")
+/// A row's lead as its name.
+fn lead_name(lead: Lead) -> String {
+    if lead == Lead::default() {
+        format!("{} (default)", lead.name())
     } else {
-        name
+        lead.name()
     }
 }
 
-/// What one cap's sessions came to.
-struct CapTally {
-    cap_s: f64,
+/// What one lead's sessions came to.
+struct LeadTally {
+    lead: Lead,
     unstable: usize,
     sessions: usize,
     first_unstable_ms: Option<f64>,
@@ -76,7 +75,7 @@ pub struct LeadRows {
 /// `defaults` are the grid's sessions with the default method: each is run again with the lead set the other
 /// way (see [`everywhere`]); `undelayed` holds the grid's sessions without delay on a clean network.
 pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelayed: &[Measured]) -> Result<LeadRows> {
-    let caps: Vec<f64> = options.pick(CAPS_S.to_vec(), vec![1.0]);
+    let caps: Vec<Lead> = options.pick(leads().to_vec(), vec![Lead::everywhere(1.0)]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![100.0, 1000.0]);
@@ -84,7 +83,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     let worst = Network { jitter_ms: 30.0, loss: Loss::Bursty20 };
     let networks = options.pick(vec![clean, worst], vec![clean]);
     let passivity = VeConfig::default().passivity;
-    let mut rows: Vec<(f64, usize, HandKind, Network)> = Vec::new();
+    let mut rows: Vec<(Lead, usize, HandKind, Network)> = Vec::new();
     for &cap in &caps {
         for &target in &targets {
             for &hand in &hands {
@@ -95,20 +94,20 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
         }
     }
     // Row-major: a row's delays one after the other.
-    let points: Vec<(f64, Point)> = rows
+    let points: Vec<(Lead, Point)> = rows
         .iter()
         .flat_map(|&(cap, target, hand, network)| {
             delays.iter().map(move |&delay_ms| (cap, Point { target, hand, delay_ms, network, passivity }))
         })
         .collect();
-    let all: Vec<(f64, Measured)> = sweep("latency: lead", &points, options.threads, options.progress, |(cap, p)| {
+    let all: Vec<(Lead, Measured)> = sweep("latency: lead", &points, options.threads, options.progress, |(cap, p)| {
         Ok((*cap, measure_leading(p, seconds_per_point(options), None, *cap)?))
     })?;
 
     let mut map = HeatMap::new(
         "Leading the VE's target by the one-way delay: 1 = unstable",
         rows.iter()
-            .map(|&(cap, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), cap_name(cap)))
+            .map(|&(cap, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), lead_name(cap)))
             .collect(),
         delays.iter().map(|d| format!("{d} ms")).collect(),
     );
@@ -120,7 +119,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     out.heat_map("stability_lead", &map)?;
 
     // The testbed's soft tour on a clean network, where the goals are set.
-    let soft_clean = |cap: f64| {
+    let soft_clean = |cap: Lead| {
         all.iter().filter(move |(c, m)| {
             *c == cap && m.point.target == 0 && m.point.hand == HandKind::Soft && m.point.network.is_clean()
         })
@@ -134,7 +133,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     .legend(Legend::LowerRight);
     chart.log_y = true;
     for &cap in &caps {
-        chart = chart.with(Series::line(cap_name(cap), soft_clean(cap).map(|(_, m)| rms(m)).collect()));
+        chart = chart.with(Series::line(lead_name(cap), soft_clean(cap).map(|(_, m)| rms(m)).collect()));
     }
     if let Some(&cap) = caps.first() {
         let floor = soft_clean(cap).map(|(_, m)| (m.point.delay_ms, m.device_unheard_rms_m * 1e3)).collect();
@@ -148,21 +147,21 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     ));
     out.chart("tracking_lead", &chart)?;
 
-    let of = |cap: f64| all.iter().filter(move |(c, _)| *c == cap).map(|(_, m)| m);
-    let first_unstable = |cap: f64, clean_only: bool| {
+    let of = |cap: Lead| all.iter().filter(move |(c, _)| *c == cap).map(|(_, m)| m);
+    let first_unstable = |cap: Lead, clean_only: bool| {
         of(cap)
             .filter(|m| !m.verdict.stable && (!clean_only || m.point.network.is_clean()))
             .map(|m| m.point.delay_ms)
             .reduce(f64::min)
     };
-    let soft_rms_at = |cap: f64, delay_ms: f64| {
+    let soft_rms_at = |cap: Lead, delay_ms: f64| {
         soft_clean(cap).find(|(_, m)| m.point.delay_ms == delay_ms).map(|(_, m)| round(m.device_op_rms_m * 1e3, 2))
     };
     // One tally per cap, which both the JSON rows and the answer read.
-    let tallies: Vec<CapTally> = caps
+    let tallies: Vec<LeadTally> = caps
         .iter()
-        .map(|&cap| CapTally {
-            cap_s: cap,
+        .map(|&cap| LeadTally {
+            lead: cap,
             unstable: of(cap).filter(|m| !m.verdict.stable).count(),
             sessions: of(cap).count(),
             first_unstable_ms: first_unstable(cap, false),
@@ -175,7 +174,9 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
         .iter()
         .map(|t| {
             json!({
-                "cap_s": t.cap_s,
+                "lead": lead_name(t.lead),
+                "cap_s": t.lead.max_s,
+                "delays_ms": t.lead.delays_s.map(|s| s * 1e3),
                 "unstable": t.unstable,
                 "sessions": t.sessions,
                 "first_unstable_delay_ms": t.first_unstable_ms,
@@ -191,7 +192,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
             format!(
                 "Leading the VE by the one-way delay, {}: testbed soft clean {} mm at 100 ms and {} mm at 1 s; {} \
                  of {} sessions unstable{}.",
-                cap_name(t.cap_s),
+                lead_name(t.lead),
                 mm(t.soft_rms_100_mm),
                 mm(t.soft_rms_1000_mm),
                 t.unstable,
@@ -207,7 +208,8 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
         .iter()
         .map(|(cap, m)| {
             let mut point = point_json(m);
-            point["cap_s"] = json!(cap);
+            point["lead"] = json!(lead_name(*cap));
+            point["cap_s"] = json!(cap.max_s);
             point
         })
         .collect();
@@ -217,7 +219,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
             "rows": rows_json,
             "points": points_json,
             "everywhere": everywhere_json,
-            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
+            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
         }),
         answer,
     })
@@ -231,11 +233,11 @@ fn unstable<'m>(set: &[&'m Measured]) -> Vec<&'m Measured> {
     set.iter().copied().filter(|m| !m.verdict.stable).collect()
 }
 
-/// The cap of the [`everywhere`] row's led sessions (s).
+/// The cap of the [`everywhere`] row's led sessions when the default does not lead (s).
 pub const EVERYWHERE_CAP_S: f64 = 0.1;
 
 /// Every session of the grid that the default method ran (`defaults`), run again with the lead set the other
-/// way (no lead when the default leads, else led by at most [`EVERYWHERE_CAP_S`]), judged by the same
+/// way (no lead when the default leads, else led by at most [`EVERYWHERE_CAP_S`] at every delay), judged by the same
 /// criterion, with the device-OP distance and what the hand feels beside the default sessions' (chart
 /// `impedance_lead`): the felt-vs-rendered impedance error, and the felt impedance's change from the same hand
 /// without delay (its sessions in `undelayed`; at 0 ms a lead of at most the delay is none). Returns its
@@ -247,8 +249,12 @@ fn everywhere(
     undelayed: &[Measured],
 ) -> Result<(Value, String)> {
     let points: Vec<Point> = defaults.iter().map(|m| m.point).collect();
-    let default_leads = default_cap_s() > 0.0;
-    let other_cap = if default_leads { 0.0 } else { EVERYWHERE_CAP_S };
+    let default_leads = Lead::default().max_s > 0.0;
+    let (led_lead, other_cap) = if default_leads {
+        (Lead::default(), Lead::NONE)
+    } else {
+        (Lead::everywhere(EVERYWHERE_CAP_S), Lead::everywhere(EVERYWHERE_CAP_S))
+    };
     let mut others: Vec<Measured> =
         sweep("latency: lead set the other way", &points, options.threads, options.progress, |p| {
             measure_leading(p, seconds_per_point(options), None, other_cap)
@@ -293,10 +299,7 @@ fn everywhere(
     let impedance_by_delay = led_and_unled(&median_impedance_error);
     let felt_change_by_delay = led_and_unled(&median_felt_change);
     let mut chart = Chart::new(
-        format!(
-            "Every session led ({}) or not: what the hand feels, median over touring hands",
-            cap_name(EVERYWHERE_CAP_S)
-        ),
+        format!("Every session led ({}) or not: what the hand feels, median over touring hands", led_lead.name()),
         "one-way delay (ms)",
         "relative impedance error",
     )
@@ -314,7 +317,8 @@ fn everywhere(
     out.chart("impedance_lead", &chart)?;
     let (unstable_led, unstable_unled) = (unstable(led), unstable(unled));
     let summary = json!({
-        "cap_s": EVERYWHERE_CAP_S,
+        "led": lead_name(led_lead),
+        "cap_s": led_lead.max_s,
         "default_leads": default_leads,
         "sessions": led.len(),
         "unstable_led": unstable_led.len(),
@@ -346,7 +350,7 @@ fn everywhere(
         "Every session of the grid led ({}) and not: mean device-OP RMS at 100 ms {} mm led against {} unled; median \
          over touring hands at 100 ms of the felt-vs-rendered impedance error {} against {}, and of the felt \
          impedance's change from the same hand without delay {} against {}; unstable: {} of {} led{}, {} unled{}.",
-        cap_name(EVERYWHERE_CAP_S),
+        lead_name(led_lead),
         at_100(&rms_at, led),
         at_100(&rms_at, unled),
         at_100(&median_impedance_error, led),

@@ -21,7 +21,7 @@ use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
-use super::latency::{measure_with, point_json, Loss, Measured, Network, Point, seconds_per_point, TARGETS};
+use super::latency::{measure_with, point_json, seconds_per_point, Loss, Measured, Network, Point, TARGETS};
 use crate::charts::HeatMap;
 use crate::harness::CoreEdit;
 

@@ -131,9 +131,14 @@ pub struct VeConfig {
     /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::steer_lead`): the VE aims
     /// each graphics controller at where the local model was predicted to be the network's one-way delay after
     /// the uplink left, up to this and no further than the heard motion supports
-    /// (`coupling_lead_guess_energy_j`). 0 follows what it has heard (the paper's VE, [`VeConfig::paper`]);
-    /// the default is [`DEFAULT_COUPLING_LEAD_MAX_S`].
+    /// (`coupling_lead_guess_energy_j`), and only while that delay is within `coupling_lead_delays_s`. 0
+    /// follows what it has heard (the paper's VE, [`VeConfig::paper`]); the default is
+    /// [`DEFAULT_COUPLING_LEAD_MAX_S`].
     pub coupling_lead_max_s: f64,
+    /// The one-way delays (s, from and until, inclusive; until may be infinite) over which the VE leads: a
+    /// user whose link is faster or slower is followed as heard. The default is
+    /// [`DEFAULT_COUPLING_LEAD_DELAYS_S`].
+    pub coupling_lead_delays_s: [f64; 2],
     /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
     /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
     /// this through K_g. Leading without this bound left 22 of the lead rows' 168 sessions unstable (pokes and
@@ -189,6 +194,7 @@ impl VeConfig {
             // distance stiffness rendering keeps (Fig 6b).
             passivity_allowance_j: 2.0e-3,
             coupling_lead_max_s: 0.0,
+            coupling_lead_delays_s: DEFAULT_COUPLING_LEAD_DELAYS_S,
             coupling_lead_guess_energy_j: 1.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
@@ -245,6 +251,10 @@ impl VeConfig {
         if self.exchange_delay_s.is_nan() || self.exchange_delay_s <= 0.0 {
             return Err(VeConfigError::Negative { what: "exchange_delay_s (positive)", value: self.exchange_delay_s });
         }
+        let [from, until] = self.coupling_lead_delays_s;
+        if !(from.is_finite() && from >= 0.0 && until >= from) {
+            return Err(VeConfigError::Negative { what: "coupling_lead_delays_s (0 <= from <= until)", value: from });
+        }
         if self.fade_time.is_zero() {
             return Err(VeConfigError::Negative { what: "fade_time", value: 0.0 });
         }
@@ -255,17 +265,22 @@ impl VeConfig {
     }
 }
 
-/// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]): none, the VE follows what it hears. Led
-/// by up to 100 ms the OP is nearer the device (testbed, soft hand, 100 ms one way: 2.15 mm RMS against
-/// 4.6 mm), and over the latency sweep's 10 s sessions what the hand feels is a little nearer what the same
-/// hand feels without delay (median relative change of the felt impedance, touring hands: 0.55 against 0.64
-/// at 100 ms) with one session of 864 unstable (the six-bar's light OP, firm hand, 50 ms with 30 ms of
-/// jitter) against none. Over whole tours (40 s) 35 sessions are unstable led against 18 unled (those the
-/// four-bar's coupler at 1 s): twelve more on the four-bar at 500 ms (saturated against the local model's
-/// walls, which the lead's guesses move further from where they were set) and five at 50 ms (the testbed's
-/// soft and firm hands, 27 mJ made on 27 mJ of flow; the six-bar's firm hand with 30 ms of jitter, 1.7 J).
-/// Its guesses cost stability at short and long delays alike, so the lead stays a choice.
-pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.0;
+/// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]), over the one-way delays of
+/// [`DEFAULT_COUPLING_LEAD_DELAYS_S`]. Led by up to 100 ms the OP is nearer the device: the testbed's soft tour
+/// 2.15 mm RMS from it at 100 ms one way against 4.6 mm (6.2 against 9.3 at 200 ms, 12.2 against 14.5 at
+/// 300 ms; the four-bar's coupler and the Watt six-bar's link5 alike), with no session of the latency
+/// sweep unstable at those delays, over 10 s or whole tours (40 s).
+pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.1;
+
+/// The one-way delays (s) over which the VE leads by default ([`VeConfig::coupling_lead_delays_s`]). Below
+/// 75 ms the VE that follows is already within 2.3 mm of the testbed's soft tour at 50 ms, and the lead's
+/// guesses tipped four whole tours on the testbed over the energy criterion at its floor (27 mJ made on 27 mJ
+/// of flow) and the six-bar's light link5 with 30 ms of jitter (1.7 J); beyond 400 ms they move the local
+/// model's walls on the four-bar's coupler further from where they were set, and firm and poking hands held
+/// it at the device's limit at 500 ms (12 more whole tours unstable). Leading at every delay, 35 of the 864
+/// whole tours of the sweep are unstable against 18 following; within these delays, 18 (the same sessions at
+/// 1 s, where no lead acts).
+pub const DEFAULT_COUPLING_LEAD_DELAYS_S: [f64; 2] = [0.075, 0.4];
 
 impl Default for VeConfig {
     /// The paper's VE with each user's graphics-controller gains designed from its device and its OP, the

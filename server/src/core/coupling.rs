@@ -389,10 +389,11 @@ pub const LEAD_GROWTH_PER_S: f64 = 0.5;
 /// How far ahead of its newest heard uplink a coupling's target is led (s): the network's one-way delay, half
 /// the shortest round trip heard (`shortest_round_trip_s`; the clocks are not synchronised, and the shortest
 /// trip leaves out the jitter, over which a guess overshoots), at most `max_s`, in whole VE ticks of `dt`
-/// (the client keeps its model's states by tick, and a snapshot names the state the VE aimed at).
-pub fn target_lead_s(shortest_round_trip_s: Option<f64>, max_s: f64, dt: f64) -> f64 {
+/// (the client keeps its model's states by tick, and a snapshot names the state the VE aimed at); none when
+/// that delay is outside `[from, until]` (`VeConfig::coupling_lead_delays_s`).
+pub fn target_lead_s(shortest_round_trip_s: Option<f64>, max_s: f64, [from, until]: [f64; 2], dt: f64) -> f64 {
     let one_way = shortest_round_trip_s.map_or(0.0, |rtt| 0.5 * rtt);
-    if !(one_way.is_finite() && max_s > 0.0 && dt > 0.0) {
+    if !(one_way.is_finite() && max_s > 0.0 && dt > 0.0) || one_way < from || one_way > until {
         return 0.0;
     }
     (one_way.min(max_s) / dt).floor() * dt
@@ -793,14 +794,23 @@ mod tests {
     fn the_lead_is_half_the_shortest_round_trip_capped_in_whole_ticks() {
         let dt = 1e-3;
         // 2 x 100 ms: 100 ms, or the cap; 0.2005 s round trip: 100 ms (floored to the tick).
-        assert!((target_lead_s(Some(0.2), 1.0, dt) - 0.1).abs() < 1e-12);
-        assert!((target_lead_s(Some(0.2), 0.05, dt) - 0.05).abs() < 1e-12);
-        assert!((target_lead_s(Some(0.2015), 1.0, dt) - 0.1).abs() < 1e-12);
+        let everywhere = [0.0, f64::INFINITY];
+        assert!((target_lead_s(Some(0.2), 1.0, everywhere, dt) - 0.1).abs() < 1e-12);
+        assert!((target_lead_s(Some(0.2), 0.05, everywhere, dt) - 0.05).abs() < 1e-12);
+        assert!((target_lead_s(Some(0.2015), 1.0, everywhere, dt) - 0.1).abs() < 1e-12);
         // No round trip heard yet, no lead allowed, or nonsense: no lead.
-        assert_eq!(target_lead_s(None, 1.0, dt), 0.0);
-        assert_eq!(target_lead_s(Some(0.2), 0.0, dt), 0.0);
-        assert_eq!(target_lead_s(Some(f64::NAN), 1.0, dt), 0.0);
-        assert_eq!(target_lead_s(Some(f64::INFINITY), 1.0, dt), 0.0);
+        assert_eq!(target_lead_s(None, 1.0, everywhere, dt), 0.0);
+        assert_eq!(target_lead_s(Some(0.2), 0.0, everywhere, dt), 0.0);
+        assert_eq!(target_lead_s(Some(f64::NAN), 1.0, everywhere, dt), 0.0);
+        assert_eq!(target_lead_s(Some(f64::INFINITY), 1.0, everywhere, dt), 0.0);
+        // Outside the delays it leads over, none; at their edges, all (inclusive).
+        let window = [0.075, 0.4];
+        assert_eq!(target_lead_s(Some(0.1), 1.0, window, dt), 0.0);
+        assert_eq!(target_lead_s(Some(1.0), 1.0, window, dt), 0.0);
+        assert!(target_lead_s(Some(0.15), 1.0, window, dt) > 0.07);
+        assert!(target_lead_s(Some(0.8), 1.0, window, dt) > 0.39);
+        assert!((target_lead_s(Some(0.6), 1.0, window, dt) - 0.3).abs() < 1e-12);
+        assert!((target_lead_s(Some(0.6), 0.1, window, dt) - 0.1).abs() < 1e-12);
     }
 
     /// What the passivity controller takes off the PD becomes a brake on the OP: at β = 0 the coupling applies

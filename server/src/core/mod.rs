@@ -49,7 +49,9 @@ use kinloop_protocol::{
 };
 use nalgebra::{DMatrix, DVector};
 
-pub use config::{AxisGains, GuardLimits, VeConfig, VeConfigError, DEFAULT_COUPLING_LEAD_MAX_S};
+pub use config::{
+    AxisGains, GuardLimits, VeConfig, VeConfigError, DEFAULT_COUPLING_LEAD_DELAYS_S, DEFAULT_COUPLING_LEAD_MAX_S,
+};
 pub use coupling::Coupling;
 pub use events::{FadeReason, VeEvent};
 pub use guards::{UplinkRejection, UplinkSample, WrenchLimits};
@@ -728,7 +730,8 @@ impl<S: Space> VeCore<S> {
                 c.follow(&reference);
             }
             if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
-                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, dt);
+                let delays = self.config.coupling_lead_delays_s;
+                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, delays, dt);
                 c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
