@@ -252,8 +252,14 @@ impl VeConfig {
             return Err(VeConfigError::Negative { what: "exchange_delay_s (positive)", value: self.exchange_delay_s });
         }
         let [from, until] = self.coupling_lead_delays_s;
-        if !(from.is_finite() && from >= 0.0 && until >= from) {
-            return Err(VeConfigError::Negative { what: "coupling_lead_delays_s (0 <= from <= until)", value: from });
+        if !(from.is_finite() && from >= 0.0) {
+            return Err(VeConfigError::Negative { what: "coupling_lead_delays_s[0] (from, finite)", value: from });
+        }
+        if !(until >= from) {
+            return Err(VeConfigError::Negative {
+                what: "coupling_lead_delays_s[1] (until, at least from)",
+                value: until,
+            });
         }
         if self.fade_time.is_zero() {
             return Err(VeConfigError::Negative { what: "fade_time", value: 0.0 });
@@ -377,6 +383,25 @@ mod tests {
                     Err(VeConfigError::Negative { what, .. }) => assert_eq!(what, name),
                     other => panic!("{name} = {bad}: {other:?}"),
                 }
+            }
+        }
+        // The delays a lead acts over: from finite and not negative, until at least from (infinite allowed),
+        // each refused by its own name with its own value.
+        let delays = |d: [f64; 2]| VeConfig { coupling_lead_delays_s: d, ..VeConfig::default() }.validate();
+        assert_eq!(delays([0.0, f64::INFINITY]), Ok(()));
+        assert_eq!(delays([0.1, 0.1]), Ok(()));
+        for (bad, field, value) in [
+            ([-0.1, 0.4], "coupling_lead_delays_s[0]", -0.1),
+            ([f64::INFINITY, f64::INFINITY], "coupling_lead_delays_s[0]", f64::INFINITY),
+            ([0.3, 0.1], "coupling_lead_delays_s[1]", 0.1),
+            ([0.1, f64::NAN], "coupling_lead_delays_s[1]", f64::NAN),
+        ] {
+            match delays(bad) {
+                Err(VeConfigError::Negative { what, value: got }) => {
+                    assert!(what.starts_with(field), "{bad:?}: {what}");
+                    assert!(got == value || (got.is_nan() && value.is_nan()), "{bad:?}: {got}");
+                }
+                other => panic!("{bad:?}: {other:?}"),
             }
         }
     }
