@@ -255,7 +255,7 @@ impl VeConfig {
         if !(from.is_finite() && from >= 0.0) {
             return Err(VeConfigError::Negative { what: "coupling_lead_delays_s[0] (from, finite)", value: from });
         }
-        if !(until >= from) {
+        if until.is_nan() || until < from {
             return Err(VeConfigError::Negative {
                 what: "coupling_lead_delays_s[1] (until, at least from)",
                 value: until,
