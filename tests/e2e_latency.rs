@@ -85,7 +85,8 @@ fn run_point(delay_ms: u64) -> Point {
 
 /// Over real QUIC with 0, 20, 50 and 100 ms each way, with the default hand and mapping: the round trip
 /// measured is twice the delay, the device trails its operational point in the VE further as the delay
-/// grows, and the session stays stable (no restore, nothing non-finite, force within the device's limit, the
+/// grows while the VE follows what it hears, less than that once it leads (100 ms), and the session stays
+/// stable (no restore, nothing non-finite, force within the device's limit, the
 /// device never 5 cm off its OP).
 #[test]
 fn latency_sweep_over_real_quic() {
@@ -124,7 +125,23 @@ fn latency_sweep_over_real_quic() {
         assert!(p.device_op_max < 0.05, "{p:?}");
         assert!(p.max_closure_error <= 1e-6, "{p:?}");
     }
-    for pair in points.windows(2) {
+    // Below 75 ms one way the VE follows what it hears, so the device trails its OP further with each delay
+    // (about in proportion: 0.55 mm at 20 ms, 1.28 mm at 50 ms). At 100 ms it leads its target by the delay
+    // (`VeConfig::coupling_lead_delays_s`), so the device is no longer twice as far as at 50 ms, as it would
+    // be following (1.23 mm against 1.28 when this was written), though still further than without delay.
+    let (followed, led): (Vec<&Point>, Vec<&Point>) = points.iter().partition(|p| p.delay_ms < 75);
+    let last_followed = followed.last().expect("delays below the lead's");
+    for p in &led {
+        assert!(
+            p.device_op_rms < 1.5 * last_followed.device_op_rms && p.device_op_rms > points[0].device_op_rms,
+            "led at {} ms: {:.3} mm against {:.3} mm at {} ms",
+            p.delay_ms,
+            p.device_op_rms * 1e3,
+            last_followed.device_op_rms * 1e3,
+            last_followed.delay_ms
+        );
+    }
+    for pair in followed.windows(2) {
         assert!(
             pair[1].device_op_rms > pair[0].device_op_rms,
             "the device trails its OP further at {} ms than at {} ms: {:.3} vs {:.3} mm",
