@@ -129,7 +129,8 @@ fn latency_sweep_over_real_quic() {
     // (about in proportion: 0.55 mm at 20 ms, 1.28 mm at 50 ms). At 100 ms it leads its target by the delay
     // (`VeConfig::coupling_lead_delays_s`), so the device is no longer twice as far as at 50 ms, as it would
     // be following (1.23 mm against 1.28 when this was written), though still further than without delay.
-    let (followed, led): (Vec<&Point>, Vec<&Point>) = points.iter().partition(|p| p.delay_ms < 75);
+    let leads_from_ms = kinloop_server::core::DEFAULT_COUPLING_LEAD_DELAYS_S[0] * 1e3;
+    let (followed, led): (Vec<&Point>, Vec<&Point>) = points.iter().partition(|p| (p.delay_ms as f64) < leads_from_ms);
     let last_followed = followed.last().expect("delays below the lead's");
     for p in &led {
         assert!(

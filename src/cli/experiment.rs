@@ -79,10 +79,11 @@ fn check_seconds(seconds: Option<f64>, names: &[Name]) -> Result<()> {
         "--seconds: must be in (0, {MAX_SESSION_SECONDS}] s per session, got {seconds}"
     );
     if let Some(name) = names.iter().find(|n| !n.takes_seconds()) {
+        let takers: Vec<&str> = Name::ALL.iter().filter(|n| n.takes_seconds()).map(|n| n.as_str()).collect();
         anyhow::bail!(
-            "--seconds: experiment {} has no session length to set (only latency, latency-live, renderability \
-             and renderability-live take it)",
-            name.as_str()
+            "--seconds: experiment {} has no session length to set (only {} take it)",
+            name.as_str(),
+            takers.join(", ")
         );
     }
     Ok(())

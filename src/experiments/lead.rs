@@ -75,7 +75,7 @@ pub struct LeadRows {
 /// `defaults` are the grid's sessions with the default method: each is run again with the lead set the other
 /// way (see [`everywhere`]); `undelayed` holds the grid's sessions without delay on a clean network.
 pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelayed: &[Measured]) -> Result<LeadRows> {
-    let caps: Vec<Lead> = options.pick(leads().to_vec(), vec![Lead::everywhere(1.0)]);
+    let chosen: Vec<Lead> = options.pick(leads().to_vec(), vec![Lead::everywhere(1.0)]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![100.0, 1000.0]);
@@ -84,11 +84,11 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     let networks = options.pick(vec![clean, worst], vec![clean]);
     let passivity = VeConfig::default().passivity;
     let mut rows: Vec<(Lead, usize, HandKind, Network)> = Vec::new();
-    for &cap in &caps {
+    for &lead in &chosen {
         for &target in &targets {
             for &hand in &hands {
                 for &network in &networks {
-                    rows.push((cap, target, hand, network));
+                    rows.push((lead, target, hand, network));
                 }
             }
         }
@@ -96,18 +96,19 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     // Row-major: a row's delays one after the other.
     let points: Vec<(Lead, Point)> = rows
         .iter()
-        .flat_map(|&(cap, target, hand, network)| {
-            delays.iter().map(move |&delay_ms| (cap, Point { target, hand, delay_ms, network, passivity }))
+        .flat_map(|&(lead, target, hand, network)| {
+            delays.iter().map(move |&delay_ms| (lead, Point { target, hand, delay_ms, network, passivity }))
         })
         .collect();
-    let all: Vec<(Lead, Measured)> = sweep("latency: lead", &points, options.threads, options.progress, |(cap, p)| {
-        Ok((*cap, measure_leading(p, seconds_per_point(options), None, *cap)?))
-    })?;
+    let all: Vec<(Lead, Measured)> =
+        sweep("latency: lead", &points, options.threads, options.progress, |(lead, p)| {
+            Ok((*lead, measure_leading(p, seconds_per_point(options), None, *lead)?))
+        })?;
 
     let mut map = HeatMap::new(
         "Leading the VE's target by the one-way delay: 1 = unstable",
         rows.iter()
-            .map(|&(cap, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), lead_name(cap)))
+            .map(|&(lead, t, h, n)| format!("{} {} {} {}", TARGETS[t].2, h.name(), n.name(), lead_name(lead)))
             .collect(),
         delays.iter().map(|d| format!("{d} ms")).collect(),
     );
@@ -119,9 +120,9 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     out.heat_map("stability_lead", &map)?;
 
     // The testbed's soft tour on a clean network, where the goals are set.
-    let soft_clean = |cap: Lead| {
+    let soft_clean = |lead: Lead| {
         all.iter().filter(move |(c, m)| {
-            *c == cap && m.point.target == 0 && m.point.hand == HandKind::Soft && m.point.network.is_clean()
+            *c == lead && m.point.target == 0 && m.point.hand == HandKind::Soft && m.point.network.is_clean()
         })
     };
     let rms = |m: &Measured| (m.point.delay_ms, m.device_op_rms_m * 1e3);
@@ -132,14 +133,14 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     )
     .legend(Legend::LowerRight);
     chart.log_y = true;
-    for &cap in &caps {
-        chart = chart.with(Series::line(lead_name(cap), soft_clean(cap).map(|(_, m)| rms(m)).collect()));
+    for &lead in &chosen {
+        chart = chart.with(Series::line(lead_name(lead), soft_clean(lead).map(|(_, m)| rms(m)).collect()));
     }
-    if let Some(&cap) = caps.first() {
-        let floor = soft_clean(cap).map(|(_, m)| (m.point.delay_ms, m.device_unheard_rms_m * 1e3)).collect();
+    if let Some(&lead) = chosen.first() {
+        let floor = soft_clean(lead).map(|(_, m)| (m.point.delay_ms, m.device_unheard_rms_m * 1e3)).collect();
         chart = chart.with(Series::reference("a VE exactly on the device as heard", floor));
     }
-    let unstable_soft = caps.iter().flat_map(|&c| soft_clean(c)).filter(|(_, m)| !m.verdict.stable);
+    let unstable_soft = chosen.iter().flat_map(|&c| soft_clean(c)).filter(|(_, m)| !m.verdict.stable);
     chart = chart.with(Series::markers("unstable", unstable_soft.map(|(_, m)| rms(m)).collect()));
     chart = chart.with(Series::markers(
         "goals: 3 mm at 100 ms, 25 mm at 1 s",
@@ -147,27 +148,27 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     ));
     out.chart("tracking_lead", &chart)?;
 
-    let of = |cap: Lead| all.iter().filter(move |(c, _)| *c == cap).map(|(_, m)| m);
-    let first_unstable = |cap: Lead, clean_only: bool| {
-        of(cap)
+    let of = |lead: Lead| all.iter().filter(move |(c, _)| *c == lead).map(|(_, m)| m);
+    let first_unstable = |lead: Lead, clean_only: bool| {
+        of(lead)
             .filter(|m| !m.verdict.stable && (!clean_only || m.point.network.is_clean()))
             .map(|m| m.point.delay_ms)
             .reduce(f64::min)
     };
-    let soft_rms_at = |cap: Lead, delay_ms: f64| {
-        soft_clean(cap).find(|(_, m)| m.point.delay_ms == delay_ms).map(|(_, m)| round(m.device_op_rms_m * 1e3, 2))
+    let soft_rms_at = |lead: Lead, delay_ms: f64| {
+        soft_clean(lead).find(|(_, m)| m.point.delay_ms == delay_ms).map(|(_, m)| round(m.device_op_rms_m * 1e3, 2))
     };
-    // One tally per cap, which both the JSON rows and the answer read.
-    let tallies: Vec<LeadTally> = caps
+    // One tally per lead, which both the JSON rows and the answer read.
+    let tallies: Vec<LeadTally> = chosen
         .iter()
-        .map(|&cap| LeadTally {
-            lead: cap,
-            unstable: of(cap).filter(|m| !m.verdict.stable).count(),
-            sessions: of(cap).count(),
-            first_unstable_ms: first_unstable(cap, false),
-            first_unstable_clean_ms: first_unstable(cap, true),
-            soft_rms_100_mm: soft_rms_at(cap, 100.0),
-            soft_rms_1000_mm: soft_rms_at(cap, 1000.0),
+        .map(|&lead| LeadTally {
+            lead,
+            unstable: of(lead).filter(|m| !m.verdict.stable).count(),
+            sessions: of(lead).count(),
+            first_unstable_ms: first_unstable(lead, false),
+            first_unstable_clean_ms: first_unstable(lead, true),
+            soft_rms_100_mm: soft_rms_at(lead, 100.0),
+            soft_rms_1000_mm: soft_rms_at(lead, 1000.0),
         })
         .collect();
     let rows_json: Vec<Value> = tallies
@@ -206,10 +207,10 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     let answer = format!("{answer} {everywhere_answer}");
     let points_json: Vec<Value> = all
         .iter()
-        .map(|(cap, m)| {
+        .map(|(lead, m)| {
             let mut point = point_json(m);
-            point["lead"] = json!(lead_name(*cap));
-            point["cap_s"] = json!(cap.max_s);
+            point["lead"] = json!(lead_name(*lead));
+            point["cap_s"] = json!(lead.max_s);
             point
         })
         .collect();
@@ -219,7 +220,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
             "rows": rows_json,
             "points": points_json,
             "everywhere": everywhere_json,
-            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each cap, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
+            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each lead, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
         }),
         answer,
     })
@@ -250,14 +251,11 @@ fn everywhere(
 ) -> Result<(Value, String)> {
     let points: Vec<Point> = defaults.iter().map(|m| m.point).collect();
     let default_leads = Lead::default().max_s > 0.0;
-    let (led_lead, other_cap) = if default_leads {
-        (Lead::default(), Lead::NONE)
-    } else {
-        (Lead::everywhere(EVERYWHERE_CAP_S), Lead::everywhere(EVERYWHERE_CAP_S))
-    };
+    let led_lead = if default_leads { Lead::default() } else { Lead::everywhere(EVERYWHERE_CAP_S) };
+    let other_lead = if default_leads { Lead::NONE } else { led_lead };
     let mut others: Vec<Measured> =
         sweep("latency: lead set the other way", &points, options.threads, options.progress, |p| {
-            measure_leading(p, seconds_per_point(options), None, other_cap)
+            measure_leading(p, seconds_per_point(options), None, other_lead)
         })?;
     fill_felt_changes(&mut others, undelayed);
     let others: Vec<&Measured> = others.iter().collect();

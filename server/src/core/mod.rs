@@ -721,7 +721,7 @@ impl<S: Space> VeCore<S> {
         let holding =
             |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
         let holders = self.users.iter().zip(&self.couplings).filter(|(u, c)| holding(u, c)).count();
-        let lead_max_s = self.config.coupling_lead_max_s;
+        let (lead_max_s, lead_delays_s) = (self.config.coupling_lead_max_s, self.config.coupling_lead_delays_s);
         for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
             if let Some(reference) = c.playout.due(at.as_secs_f64()) {
                 if lead_max_s > 0.0 {
@@ -730,8 +730,7 @@ impl<S: Space> VeCore<S> {
                 c.follow(&reference);
             }
             if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
-                let delays = self.config.coupling_lead_delays_s;
-                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, delays, dt);
+                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, lead_delays_s, dt);
                 c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
