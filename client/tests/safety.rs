@@ -306,3 +306,30 @@ fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
     assert_eq!(l.core.stats().energy_reports_refused, 3);
     assert_eq!(l.core.stats().snapshots_rejected, 0);
 }
+
+/// A welcome whose OP path cannot be followed (poses that repeat, accelerations that do not match the poses)
+/// gets a typed error that says what is wrong; a core that does not follow paths ignores it; a good path is
+/// taken.
+#[test]
+fn a_welcome_whose_path_cannot_be_followed_is_refused_by_name() {
+    use kinloop_client::core::CoreError;
+    use kinloop_linkage::op_path::PathError;
+    let ve = TestbedVe::new(false);
+    let config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
+    let mut welcome = ve.welcome();
+    assert!(welcome.op.path.is_empty(), "the testbed has two degrees of freedom: no path");
+    welcome.op.path = vec![0.1, 0.2, 0.0, 0.1, 0.2, 0.0];
+    welcome.op.path_rest_acceleration = vec![0.0, 0.0];
+    let error = HapticCore::<Planar>::new(config.clone(), &welcome).err().expect("refused");
+    assert!(matches!(error, CoreError::Path(PathError::Repeated(0, 1))), "{error:?}");
+    assert_eq!(error.to_string(), "the welcome's OP path: poses 0 and 1 of the path coincide");
+    welcome.op.path = vec![0.1, 0.2, 0.0, 0.15, 0.2, 0.1];
+    welcome.op.path_rest_acceleration = vec![0.0];
+    let error = HapticCore::<Planar>::new(config.clone(), &welcome).err().expect("refused");
+    assert!(matches!(error, CoreError::Path(PathError::RestAcceleration { got: 1, poses: 2 })), "{error:?}");
+    let mut ignoring = config.clone();
+    ignoring.follow_path = false;
+    assert!(HapticCore::<Planar>::new(ignoring, &welcome).is_ok());
+    welcome.op.path_rest_acceleration = vec![0.0, -1.0];
+    assert!(HapticCore::<Planar>::new(config, &welcome).is_ok());
+}

@@ -41,6 +41,7 @@
 //! | [`contact`] | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
 //! | [`assemble`] | the nearest closed configuration | |
 //! | [`reach`] | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
+//! | [`op_path`] | a 1-DOF linkage's OP path: nearest point, tangent (the free direction), turning a frame along it | eq 10 |
 //! | `algorithms::compile` | scene → [`Model`]: validation, topological order, cut primitives, closure rank | |
 //!
 //! Planar scenes use 3-D spatial algebra and a 3-DOF operational space (x, y, θ); spatial scenes 6-D
@@ -62,7 +63,7 @@ pub mod testing;
 // Every module keeps its path from before the layers (`kinloop_linkage::kinematics`, `::space`, ...).
 pub use algorithms::{
     articulated, assemble, bias, constraint_directions, contact, dynamics, gravity, integrator, jacobian, joint_forces,
-    kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_space, passivity, reach,
+    kinematics, kkt, local_model, loop_closure, ltl, mass_matrix, op_path, op_space, passivity, reach,
 };
 pub use math::{dense, eigen, space, trig};
 pub use model::{builtin, data, scene};

@@ -3,7 +3,7 @@
 //! energy, and the groups an OP does not move in.
 
 use kinloop_linkage::builtin;
-use kinloop_linkage::gravity::potential_energy;
+use kinloop_linkage::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::kinematics::forward_kinematics;
 use kinloop_linkage::local_model::OpPose;
 use kinloop_linkage::reach::{static_op_load, survey_op, SurveyConfig};
@@ -202,4 +202,91 @@ fn the_slider_cranks_survey_turns_back_at_its_wall() {
     // step of 0.04 rad of crank.
     assert!(reach.position_max.x <= touching_x + 1e-9, "{} > {touching_x}", reach.position_max.x);
     assert!(reach.position_max.x > r * (hi + 0.04).cos(), "{} stops short of the wall", reach.position_max.x);
+}
+
+/// The crank-rocker's coupler path (`OpReach::path`): one closed lap of the analytic coupler curve, every
+/// pose on it and all of it within a step of the path; a 2-DOF linkage has no path.
+#[test]
+fn the_crank_rockers_coupler_path_is_one_lap_of_its_coupler_curve() {
+    let model = planar("fourbar-crank-rocker");
+    let reach = survey_op(&model, model.op_index("coupler").unwrap(), &SurveyConfig::default()).unwrap();
+    let path = reach.path.expect("a 1-DOF linkage has a path");
+    assert!(path.is_closed(), "the crank turns all the way round");
+    let curve = coupler_curve();
+    let to_curve = |p: &Vector2<f64>| curve.iter().map(|c| (c - p).norm()).fold(f64::INFINITY, f64::min);
+    // The analytic samples are 0.14 mm apart at most: a pose on the curve is within half of that.
+    for pose in path.poses() {
+        assert!(to_curve(&pose.position) < 1e-4, "a path pose is {} m off the curve", to_curve(&pose.position));
+    }
+    // All the curve, and only one lap: each analytic point is near the path, and the path is no longer than
+    // the curve.
+    let positions: Vec<Vector2<f64>> = path.poses().iter().map(|p| p.position).collect();
+    for c in curve.iter().step_by(10) {
+        let gap = positions.iter().map(|p| (p - c).norm()).fold(f64::INFINITY, f64::min);
+        assert!(gap < 3e-3, "the path misses the curve by {gap} m");
+    }
+    let length = |ps: &[Vector2<f64>]| ps.windows(2).map(|w| (w[1] - w[0]).norm()).sum::<f64>();
+    let (path_length, curve_length) = (length(&positions), length(&curve));
+    assert!(path_length < curve_length && path_length > 0.97 * curve_length, "{path_length} vs {curve_length}");
+    let testbed = planar("paper-testbed");
+    let reach = survey_op(&testbed, testbed.op_index("link2").unwrap(), &SurveyConfig::default()).unwrap();
+    assert_eq!((reach.dof, reach.path.is_some()), (2, false));
+    // The Watt six-bar's link5 swings forth and back while its crank turns round: one pose of link5 is two
+    // configurations, so there is no path to give (its walk does pass each pose twice, going opposite ways).
+    let six_bar = planar("watt-six-bar");
+    let reach = survey_op(&six_bar, six_bar.op_index("link5").unwrap(), &SurveyConfig::default()).unwrap();
+    assert_eq!((reach.dof, reach.path.is_some()), (1, false));
+    let reach = survey_op(&six_bar, six_bar.op_index("coupler").unwrap(), &SurveyConfig::default()).unwrap();
+    assert!(reach.path.is_some_and(|p| p.is_closed()), "the six-bar's coupler goes round");
+}
+
+/// The path's acceleration at rest against a second formulation: at configurations assembled from crank
+/// angles, the reduced dynamics along the one motion n (null space of W by differences), q̈ = −n (nᵀG) / (nᵀDn)
+/// with G = ∂V/∂q by differences of the potential energy and nᵀDn = 2 T(q̇ = n) from the kinetic energy,
+/// maps to the coupler as J q̈ (J by differences; at rest J̇q̇ and Ẇq̇ vanish). The path, interpolated
+/// between its samples, gives the same vector.
+#[test]
+fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity() {
+    let model = planar("fourbar-crank-rocker");
+    let op = model.op_index("coupler").unwrap();
+    let path = survey_op(&model, op, &SurveyConfig::default()).unwrap().path.unwrap();
+    let mut data = Data::new(&model);
+    // Turned from q0 in small steps, each assembled from the last, so it stays on q0's branch.
+    let mut q = model.q0.clone();
+    for turn in [0.3, 1.2, 2.0, 3.5, 5.0] {
+        let target = model.q0[0] + turn;
+        while q[0] < target {
+            q[0] = (q[0] + 0.05).min(target);
+            q = kinloop_linkage::assemble::assemble(&model, &q, 1e-13).unwrap().q;
+        }
+        let residual = |q: &DVector<f64>, data: &mut Data<Planar>| {
+            forward_kinematics(&model, data, q);
+            kinloop_linkage::loop_closure::loop_closure(&model, data);
+            data.closure_residual.clone()
+        };
+        let h = 1e-7;
+        let mut w = DMatrix::zeros(model.nc(), model.nq());
+        for i in 0..model.nq() {
+            let (mut up, mut down) = (q.clone(), q.clone());
+            up[i] += h;
+            down[i] -= h;
+            w.set_column(i, &((residual(&up, &mut data) - residual(&down, &mut data)) / (2.0 * h)));
+        }
+        let row = |r: usize| Vector3::from_iterator(w.row(r).iter().copied());
+        let n = DVector::from_column_slice(row(0).cross(&row(1)).normalize().as_slice());
+        forward_kinematics(&model, &mut data, &q);
+        kinloop_linkage::kinematics::forward_velocity(&model, &mut data, &n);
+        let mass_along = 2.0 * kinetic_energy(&model, &data);
+        let g = gravity_by_differences(&model, &q);
+        let qdd = &n * (-g.dot(&n) / mass_along);
+        let expected = jacobian_by_differences(&model, &q, op) * qdd;
+        forward_kinematics(&model, &mut data, &q);
+        let on = path.nearest(&OpPose::<Planar>::of_op(&model, &data, op), None);
+        // Within the chords' sagitta of the curve (steps of a few mm).
+        assert!(on.distance < 1e-4, "the configuration is on the path ({} m off)", on.distance);
+        let got = Vector3::from_column_slice(on.rest_acceleration.as_slice());
+        let expected = Vector3::from_column_slice(expected.as_slice());
+        assert!(expected.norm() > 0.01, "gravity moves the coupler here: {expected:?}");
+        assert!((got - expected).norm() < 0.02 * expected.norm(), "crank turned {turn} rad: {got:?} vs {expected:?}");
+    }
 }

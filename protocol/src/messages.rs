@@ -31,8 +31,13 @@ use crate::shape::{SceneKind, SessionShape};
 /// takes two steps (the client learns the scene, then joins with its device), the device describes itself
 /// fully, and the welcome carries the mapping, the coupling gains and the OP's reach. Version 4: snapshots and
 /// uplinks carry their end's [`PortEnergy`] (the two-port passivity books), and an uplink says when the hand
-/// has let go of the handle ([`uplink_flags::HAND_OFF`]).
-pub const PROTOCOL_VERSION: u16 = 4;
+/// has let go of the handle ([`uplink_flags::HAND_OFF`]). Version 5: the welcome carries the OP's whole path on
+/// a linkage of one degree of freedom ([`OpSummary::path`]).
+pub const PROTOCOL_VERSION: u16 = 5;
+
+/// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
+/// poses are 28 kB, within a control frame with the rest of the welcome.
+pub const MAX_PATH_POSES: usize = 512;
 
 /// TLS application protocol name both sides offer; a peer offering anything else fails the QUIC handshake.
 pub const ALPN: &[u8] = b"kinloop/1";
@@ -255,6 +260,15 @@ pub struct OpSummary {
     pub inverse_mass_max: f64,
     /// Largest inverse rotational effective inertia over the reach (1/(kg·m²)).
     pub inverse_rotational_inertia_max: f64,
+    /// On a linkage of one degree of freedom, every pose the OP can take, in order along its one path
+    /// (world poses, `[x, y, θ]` or `[x, y, z, qw, qx, qy, qz]` each; at most [`MAX_PATH_POSES`]); empty
+    /// otherwise. The client's local model holds the OP to it far from where a snapshot was linearized.
+    pub path: Vec<f64>,
+    /// The OP's acceleration at rest at each pose of `path` (gravity, springs, actuators), along the path's
+    /// direction there (pose order; unit-consistent coordinates `(v, L ω)`, m/s²): one value per pose.
+    pub path_rest_acceleration: Vec<f64>,
+    /// `path`'s last pose leads back to its first.
+    pub path_closed: bool,
 }
 
 impl OpSummary {
@@ -263,6 +277,13 @@ impl OpSummary {
         let mut tour = Vec::with_capacity(reach.tour.len() * S::DIM);
         for pose in &reach.tour {
             tour.extend_from_slice(pose.difference(now).as_slice());
+        }
+        let (poses, rest) = reach.path.as_ref().map_or((&[][..], &[][..]), |p| (p.poses(), p.rest_acceleration()));
+        let stride = poses.len().div_ceil(MAX_PATH_POSES).max(1);
+        let wire = OpPose::<S>::wire_len();
+        let mut path = vec![0.0; poses.len().div_ceil(stride) * wire];
+        for (pose, out) in poses.iter().step_by(stride).zip(path.chunks_mut(wire)) {
+            pose.to_slice(out);
         }
         OpSummary {
             position: now.position.as_slice().to_vec(),
@@ -273,6 +294,9 @@ impl OpSummary {
             static_torque_nm: reach.static_torque_nm,
             inverse_mass_max: reach.inverse_mass_max,
             inverse_rotational_inertia_max: reach.inverse_rotational_inertia_max,
+            path,
+            path_rest_acceleration: rest.iter().step_by(stride).copied().collect(),
+            path_closed: reach.path.as_ref().is_some_and(|p| p.is_closed()),
         }
     }
 }

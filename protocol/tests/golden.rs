@@ -1,5 +1,5 @@
-//! Golden byte vectors freeze the wire format of protocol version 4 (version 3 had no energy books in
-//! snapshots and uplinks and no HAND_OFF flag; version 2 joined in one step, with a
+//! Golden byte vectors freeze the wire format of protocol version 5 (version 4 had no OP path in the welcome;
+//! version 3 had no energy books in snapshots and uplinks and no HAND_OFF flag; version 2 joined in one step, with a
 //! shorter device description and the server's recommended gains in the welcome; version 1 sent the other
 //! users as a list of entries, each with its own position and wrench vectors).
 //!
@@ -19,12 +19,12 @@ fn unhex(parts: &[&str]) -> Vec<u8> {
 const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
 
 fn hello() -> Control {
-    Control::Hello(Hello { version: 4, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
+    Control::Hello(Hello { version: 5, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
 }
 
 const HELLO_BYTES: &[&str] = &[
     "00",        // Control::Hello
-    "04",        // version 4
+    "05",        // version 5
     "03 746f6b", // token "tok"
     "02 6331",   // client_name "c1"
     "00",        // role Manipulator
@@ -130,6 +130,9 @@ fn welcome() -> Control {
             static_torque_nm: 0.0,
             inverse_mass_max: 4.0,
             inverse_rotational_inertia_max: 16.0,
+            path: vec![0.25, 0.5, 0.0, 0.5, 0.5, 1.0],
+            path_rest_acceleration: vec![-2.0, 0.5],
+            path_closed: false,
         },
     })
 }
@@ -175,6 +178,17 @@ const WELCOME_BYTES: &[&str] = &[
     "0000000000000000", // op.static_torque_nm 0.0
     "0000000000001040", // op.inverse_mass_max 4.0
     "0000000000003040", // op.inverse_rotational_inertia_max 16.0
+    "06",               // op.path: 6 values (two planar poses)
+    "000000000000d03f", // 0.25
+    "000000000000e03f", // 0.5
+    "0000000000000000", // 0.0
+    "000000000000e03f", // 0.5
+    "000000000000e03f", // 0.5
+    "000000000000f03f", // 1.0
+    "02",               // op.path_rest_acceleration: 2 values
+    "00000000000000c0", // -2.0
+    "000000000000e03f", // 0.5
+    "00",               // op.path_closed false
 ];
 
 fn snapshot() -> Datagram {
@@ -341,8 +355,8 @@ fn uplink_matches_golden_bytes() {
 #[test]
 fn hello_variant_and_version_lead_the_frame_so_other_versions_can_be_refused() {
     let mut future = unhex(HELLO_BYTES);
-    future[1] = 0x04; // version 4; the rest may be anything a future version sends
+    future[1] = 0x06; // version 6; the rest may be anything a future version sends
     future.truncate(5);
-    assert_eq!(codec::peek_hello_version(&future), Some(4));
+    assert_eq!(codec::peek_hello_version(&future), Some(6));
     assert_eq!(codec::peek_hello_version(&unhex(WELCOME_BYTES)), None);
 }

@@ -79,6 +79,9 @@ fn decide(_hello: &Hello, join: &Join) -> Result<Welcome, Refused> {
             static_torque_nm: 0.0,
             inverse_mass_max: 1.0,
             inverse_rotational_inertia_max: 100.0,
+            path: Vec::new(),
+            path_rest_acceleration: Vec::new(),
+            path_closed: false,
         },
     })
 }

@@ -133,9 +133,9 @@ fn long_strings_are_refused() {
     assert_eq!(field_of(&error), "leave.reason");
 }
 
-#[test]
-fn welcome_with_a_wrong_op_dimension_is_refused() {
-    let welcome = Welcome {
+/// A well-formed welcome to a spatial scene.
+fn spatial_welcome() -> Welcome {
+    Welcome {
         session_id: 1,
         user_id: 1,
         scene: SceneSummary {
@@ -143,7 +143,7 @@ fn welcome_with_a_wrong_op_dimension_is_refused() {
             kind: SceneKind::Spatial,
             n: 6,
             m: 0,
-            op_dim: 3,
+            op_dim: 6,
             op_name: "ee".into(),
             length_scale: 0.05,
         },
@@ -160,10 +160,57 @@ fn welcome_with_a_wrong_op_dimension_is_refused() {
             static_torque_nm: 0.0,
             inverse_mass_max: 1.0,
             inverse_rotational_inertia_max: 1.0,
+            path: Vec::new(),
+            path_rest_acceleration: Vec::new(),
+            path_closed: false,
         },
-    };
+    }
+}
+
+#[test]
+fn welcome_with_a_wrong_op_dimension_is_refused() {
+    let mut welcome = spatial_welcome();
+    assert!(decode_control(&encode_control(&Control::Welcome(welcome.clone())).unwrap()).is_ok());
+    welcome.scene.op_dim = 3;
     let error = decode_control(&encode_control(&Control::Welcome(welcome)).unwrap()).unwrap_err();
     assert_eq!(field_of(&error), "welcome.scene.op_dim");
+}
+
+/// A welcome's OP path: whole poses, each finite and bounded, spatial orientations unit quaternions, at most
+/// `MAX_PATH_POSES`; each refusal names the pose.
+#[test]
+fn a_welcomes_path_is_checked_pose_by_pose() {
+    let mut welcome = spatial_welcome();
+    let check = |w: &Welcome| decode_control(&encode_control(&Control::Welcome(w.clone())).unwrap());
+    let pose = [0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0];
+    welcome.op.path = [pose, pose].concat();
+    welcome.op.path_rest_acceleration = vec![0.5, -9.81];
+    welcome.op.path_closed = true;
+    assert!(check(&welcome).is_ok());
+    // One acceleration per pose, finite.
+    welcome.op.path_rest_acceleration.push(0.0);
+    assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path_rest_acceleration");
+    welcome.op.path_rest_acceleration = vec![0.5, f64::NAN];
+    assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path_rest_acceleration");
+    welcome.op.path_rest_acceleration = vec![0.5, -9.81];
+    // A quaternion that is not unit, in the second pose.
+    welcome.op.path[10] = 0.5;
+    let error = check(&welcome).unwrap_err();
+    assert!(matches!(error, DecodeError::NotUnit { .. }), "{error:?}");
+    assert_eq!(field_of(&error), "welcome.op.path[1].pose");
+    // A non-finite position.
+    welcome.op.path = [pose, pose].concat();
+    welcome.op.path[8] = f64::NAN;
+    assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path[1].pose");
+    // Half a pose left over.
+    welcome.op.path_rest_acceleration = vec![0.0];
+    welcome.op.path = [&pose[..], &pose[..3]].concat();
+    let error = check(&welcome).unwrap_err();
+    assert!(matches!(error, DecodeError::WrongLength { got: 10, expected: 7, .. }), "{error:?}");
+    // Too many poses.
+    welcome.op.path = pose.repeat(MAX_PATH_POSES + 1);
+    welcome.op.path_rest_acceleration = vec![0.0; MAX_PATH_POSES + 1];
+    assert!(matches!(check(&welcome), Err(DecodeError::TooMany { .. })));
 }
 
 #[test]

@@ -175,13 +175,13 @@ impl Default for UplinkDeadband {
 
 /// Default [`CoreConfig::linearization_reach`], in length scales: 0.25 L is 12-15 mm on the testbed, the
 /// four-bar and the Watt six-bar. With no softening a firm hand touring the testbed at 500 ms one way saturated
-/// the device's wrist 77 % of its worst second. Over whole tours (the latency grid at 40 s per session) 0.3 L
-/// left the four-bar's coupler with firm and poking hands saturated from 300 ms one way (40 of 864 sessions;
-/// at 500 ms on a clean link 37 % of its worst second), 0.25 L only at 1 s (18 of 864), as 0.2 L does, which
-/// softens more for nothing (testbed soft tour at 1 s: 47.6 mm at 0.25 L, 48.2 at 0.2, 47.2 at 0.3), and
-/// 0.15 L lets the four-bar's OP diverge from its device at 1 s (27 of its 144). The price is softer walls far
-/// from the linearization point (device-to-local-model RMS at 1 s one way, see `latency`); at 100 ms the
-/// tracking is unchanged.
+/// the device's wrist 77 % of its worst second. On a linkage of one degree of freedom the frame is carried along
+/// the OP's path to the model (`follow_path`), so the distance this softens by stays near zero there and the
+/// reach matters on linkages of more degrees of freedom (the testbed, the five-bar, the serial arm). Held to
+/// the tangent line instead, the four-bar's coupler needed it: over whole tours (the latency grid at 40 s per
+/// session) 0.3 L left it saturated with firm and poking hands from 300 ms one way (40 of 864 sessions), 0.25 L
+/// only at 1 s (18 of 864), and 0.15 L let its OP diverge from its device at 1 s. The price is softer walls
+/// far from the linearization point; at 100 ms the tracking is unchanged.
 pub const LINEARIZATION_REACH: f64 = 0.25;
 
 /// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.
@@ -222,6 +222,12 @@ pub struct CoreConfig {
     /// `controllers::linearization_trust`). Under delay the model runs ahead of the VE by a round trip of
     /// motion, on a tangent plane taken where the VE was; `f64::INFINITY` never softens.
     pub linearization_reach: f64,
+    /// On a linkage of one degree of freedom whose welcome carries the OP's path (`OpSummary::path`), carry
+    /// the snapshot's frame along the path to where the local model is, and hold the model to the path
+    /// rather than to the tangent line at the snapshot's pose: the walls stay where the joints put them however
+    /// far the model runs ahead of the VE (a round trip of motion under delay), and the frame's distance from
+    /// its linearization point, which `linearization_reach` softens by, stays near zero.
+    pub follow_path: bool,
     /// Time constant of the first-order filter on the snapshot terms the controllers use (Λ̂⁻¹ and the
     /// constrained-direction projector), so a new snapshot never steps the force; zero takes them as they come.
     pub terms_time_constant: Duration,
@@ -253,6 +259,7 @@ impl CoreConfig {
             passive_update: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,
+            follow_path: true,
             hand_observer_bandwidth: 50.0,
             index_at_first_snapshot: true,
             safety: SafetyConfig::default(),

@@ -14,6 +14,7 @@
 
 use kinloop_linkage::constraint_directions::{constraint_directions, scale_op, DEFAULT_THRESHOLD};
 use kinloop_linkage::local_model::{ContactTerm, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::op_path::product;
 use kinloop_linkage::space::{MatOps, Space, VecOps};
 
 use super::config::ConstraintWeighting;
@@ -163,6 +164,30 @@ impl<S: Space> ConstraintFrame<S> {
         self.inverse_inertia += (self.target_inverse_inertia - self.inverse_inertia) * alpha;
         self.bias += (self.target_bias - self.bias) * alpha;
     }
+
+    /// The terms in use turned by `turn` (a rotation of the unit-consistent coordinates, `op_path::turn_between`)
+    /// — the frame carried along a 1-DOF linkage's path from where its snapshot was linearized to where the
+    /// model is. Directions and their weights turn (`R P̃ Rᵀ`), Λ̂⁻¹ and b̂ turn as twists do (`Q = T⁻¹ R T`:
+    /// `Q Λ̂⁻¹ Qᵀ`, `Q b̂`), the inertias as wrenches do (`Q⁻ᵀ Λ̂ Q⁻¹`, with `Q⁻ᵀ = T R T⁻¹`); the
+    /// singular values, so the count, are kept.
+    pub fn turned(&self, turn: &S::OpMat, length_scale: f64) -> Self {
+        let twist_turn = twist_turn::<S>(turn, length_scale);
+        let wrench_turn = scale_both::<S>(turn, length_scale, 1.0 / length_scale);
+        let conjugate = |q: &S::OpMat, a: &S::OpMat| product::<S>(&product::<S>(q, a), &q.transpose());
+        ConstraintFrame {
+            projector: conjugate(turn, &self.projector),
+            inverse_inertia: conjugate(&twist_turn, &self.inverse_inertia),
+            bias: twist_turn * self.bias,
+            free_inertia: conjugate(&wrench_turn, &self.free_inertia),
+            inertia: conjugate(&wrench_turn, &self.inertia),
+            ..*self
+        }
+    }
+}
+
+/// A rotation `R` of the unit-consistent coordinates as it acts on physical twists: `T⁻¹ R T`.
+pub(crate) fn twist_turn<S: Space>(turn: &S::OpMat, length_scale: f64) -> S::OpMat {
+    scale_both::<S>(turn, 1.0 / length_scale, length_scale)
 }
 
 /// `A` with rows of angular index multiplied by `row_factor` and columns by `column_factor`:
@@ -358,6 +383,48 @@ mod tests {
         let y = frame.inertia[(1, 1)];
         assert!(y.is_finite() && y > 1e5, "heavy along y: {y}");
         assert!((frame.inertia[(0, 0)] - 0.5).abs() < 1e-9);
+    }
+
+    /// A 1-DOF linkage's frame linearized at one pose and carried to another by the turn between their
+    /// tangents (`turned`) is the frame linearized at the other (same mobility along the path, a second
+    /// formulation built directly from Λ⁻¹ there): projector, Λ̂⁻¹, both inertias, the count, and a bias along
+    /// the path moved onto the new tangent.
+    #[test]
+    fn a_frame_carried_along_a_path_is_the_frame_linearized_where_it_arrives() {
+        let length_scale = 0.05;
+        let (mass_along, accel_along) = (0.8, 2.5);
+        // Unit tangents in unit-consistent coordinates (x, y, L θ).
+        let (from, to) = (V::new(0.6, 0.0, 0.8), V::new(0.0, 0.96, -0.28));
+        let unscaled = |v: &V| V::new(v[0], v[1], v[2] / length_scale);
+        let frame_along = |t: &V, bias: V| {
+            let scaled = Planar::op_outer(t, t) * (1.0 / mass_along);
+            let inverse_inertia = scale_both::<Planar>(&scaled, 1.0 / length_scale, 1.0 / length_scale);
+            let mut terms = SnapshotTerms::<Planar>::new(None);
+            let d = constraint_directions::<Planar>(&inverse_inertia, length_scale, DEFAULT_THRESHOLD);
+            terms.inverse_inertia = inverse_inertia;
+            terms.singular_values = d.singular_values;
+            terms.directions = d.directions;
+            terms.bias = bias;
+            let mut frame = ConstraintFrame::<Planar>::new();
+            frame.set_target(&terms, &ConstraintWeighting::default(), length_scale, true, false);
+            frame
+        };
+        let start = frame_along(&from, unscaled(&from) * accel_along);
+        let there = frame_along(&to, unscaled(&to) * accel_along);
+        let turn = kinloop_linkage::op_path::turn_between::<Planar>(&from, &to, 1.0);
+        let carried = start.turned(&turn, length_scale);
+        let close = |a: &M, b: &M, what: &str| {
+            let error = (a - b).norm() / b.norm().max(1e-300);
+            assert!(error < 1e-9, "{what}: relative error {error}\n{a}\n{b}");
+        };
+        close(&carried.projector, &there.projector, "projector");
+        close(&carried.inverse_inertia, &there.inverse_inertia, "inverse inertia");
+        close(&carried.free_inertia, &there.free_inertia, "free inertia");
+        close(&carried.inertia, &there.inertia, "inertia");
+        assert!((carried.bias - there.bias).norm() < 1e-9 * there.bias.norm(), "{} vs {}", carried.bias, there.bias);
+        assert_eq!((carried.count, there.count), (2, 2));
+        // And the turn did something: the start's walls are not the arrival's.
+        assert!((start.projector - there.projector).norm() > 0.5);
     }
 
     #[test]

@@ -7,9 +7,11 @@
 //! One tick (paper Fig 3, Fig 4):
 //! 1. take the newest snapshot received (update the local model's frozen terms and the controllers'
 //!    targets; the first snapshot also maps the device onto the operational point);
-//! 2. filter Λ̂⁻¹ and the constrained-direction projector (`terms_time_constant`); pull the local model's
-//!    OP toward the VE's OP predicted to now (first-order: fast along the constrained directions, slow in
-//!    the free ones, see `CoreConfig::free_blend_time_constant`);
+//! 2. filter Λ̂⁻¹ and the constrained-direction projector (`terms_time_constant`); on a linkage of one degree
+//!    of freedom, carry them along the OP's path (from the welcome) to where the model is, with the forces at
+//!    rest there (`CoreConfig::follow_path`); pull the local model's OP toward the VE's OP predicted to now
+//!    (first-order: fast along the constrained directions, onto the path when there is one; slow in the free
+//!    ones, see `CoreConfig::free_blend_time_constant`);
 //! 3. step the local model (eq 11/13) under the user's wrench: the hand wrench (force channel, when measured)
 //!    plus the position channels' reaction applied to the device last tick;
 //! 4. the controllers, with `e = x_d ⊖ x_m`: joint constraint (stiffness or impedance mode), impedance with
@@ -39,6 +41,7 @@ mod passive_update;
 use std::time::Duration;
 
 use kinloop_linkage::local_model::OpPose;
+use kinloop_linkage::op_path::{turn_between, OpPath, PathError};
 use kinloop_linkage::passivity::{EnergyReports, PortBooks};
 use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_SPEED, MAX_WRENCH};
@@ -53,7 +56,7 @@ pub use passive_update::TANK_CAPACITY_J as UPDATE_TANK_CAPACITY_J;
 
 use controllers::{
     contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, linearization_trust,
-    position_channel, project_wrench, ConstraintFrame,
+    position_channel, project_twist, project_wrench, twist_turn, ConstraintFrame,
 };
 use deadband::Deadband;
 use intake::SnapshotTerms;
@@ -125,6 +128,9 @@ pub enum CoreError {
     /// A tick period that is not positive.
     #[error("the tick period must be positive")]
     Period,
+    /// The welcome's OP path cannot be followed.
+    #[error("the welcome's OP path: {0}")]
+    Path(#[from] PathError),
 }
 
 /// The wrench each controller asks for this tick, before the safety envelope, and what was commanded.
@@ -440,7 +446,16 @@ pub struct HapticCore<S: Space> {
     active: Box<SnapshotTerms<S>>,
     has_snapshot: bool,
     model: LocalModel<S>,
+    /// The snapshot's frame (filtered), as linearized at the snapshot's pose.
     frame: ConstraintFrame<S>,
+    /// The frame the controllers use this tick: `frame`, carried along the OP's path to the model (see
+    /// `follow_path`) when there is one.
+    local: ConstraintFrame<S>,
+    /// A 1-DOF linkage's OP path (`CoreConfig::follow_path`), with where the model and the snapshot were
+    /// found on it last.
+    path: Option<PathFollower<S>>,
+    /// How far the walls of the frame in use are trusted where the model is (`place_frame`).
+    trust: f64,
     index: DeviceIndex<S>,
     gate: OutputGate,
     observer: HandObserver<S>,
@@ -461,6 +476,61 @@ pub struct HapticCore<S: Space> {
     pose_memos: PoseMemos<S>,
     stats: CoreStats,
     report: TickReport<S>,
+}
+
+/// The OP's path and where on it the model and the active snapshot's pose were found last.
+#[derive(Clone, Debug)]
+struct PathFollower<S: Space> {
+    path: OpPath<S>,
+    model_segment: Option<usize>,
+    snapshot_segment: Option<usize>,
+    /// Unit tangent at the active snapshot's pose (unit-consistent coordinates).
+    snapshot_tangent: Option<S::OpVec>,
+    /// The OP's acceleration at rest at the active snapshot's pose, as the path has it.
+    snapshot_rest: S::OpVec,
+    /// The forces at rest are felt where the model is, not where the snapshot was taken (false when the VE
+    /// holds the linkage's weight at this OP: `Mapping::gravity_compensation` takes them out of b̂).
+    rest_where_model_is: bool,
+}
+
+impl<S: Space> PathFollower<S> {
+    /// The welcome's path, if it has one and the configuration follows it.
+    fn of(welcome: &Welcome, config: &CoreConfig) -> Result<Option<Self>, CoreError> {
+        let op = &welcome.op;
+        if !config.follow_path || op.path.is_empty() {
+            return Ok(None);
+        }
+        let wire = OpPose::<S>::wire_len();
+        let mut poses = Vec::with_capacity(op.path.len() / wire);
+        for (i, chunk) in op.path.chunks(wire).enumerate() {
+            poses.push(OpPose::from_slice(chunk).ok_or(PathError::NonFinite(i))?);
+        }
+        let path = OpPath::new(poses, op.path_closed, welcome.scene.length_scale)?
+            .with_rest_acceleration(op.path_rest_acceleration.clone())?;
+        Ok(Some(PathFollower {
+            path,
+            model_segment: None,
+            snapshot_segment: None,
+            snapshot_tangent: None,
+            snapshot_rest: S::OpVec::zero(),
+            rest_where_model_is: !welcome.mapping.gravity_compensation,
+        }))
+    }
+
+    /// `tangent` as the frame sees it: a pinned grasp's frame has only linear directions (its angular
+    /// axes are neither free nor constrained), so only the tangent's linear part turns it.
+    fn as_framed(tangent: &S::OpVec, pinned: bool) -> S::OpVec {
+        if !pinned {
+            return *tangent;
+        }
+        let linear = S::op_lin(tangent);
+        let norm = linear.norm();
+        if norm > 1e-9 {
+            S::op(linear * (1.0 / norm), S::Angular::zero())
+        } else {
+            S::OpVec::zero()
+        }
+    }
 }
 
 /// One memo per stream of poses the core reads or writes on the wire (see `Space::RotParamsMemo`): each
@@ -588,6 +658,9 @@ impl<S: Space> HapticCore<S> {
             has_snapshot: false,
             model: LocalModel::new(config_shape),
             frame: ConstraintFrame::new(),
+            local: ConstraintFrame::new(),
+            path: PathFollower::of(welcome, &config)?,
+            trust: 1.0,
             index: DeviceIndex::identity(scales.position),
             gate: OutputGate::new(&config.safety),
             observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
@@ -762,13 +835,10 @@ impl<S: Space> HapticCore<S> {
         Ok(true)
     }
 
-    /// How far the local model's constraint geometry is still trusted where the model is now
-    /// (`controllers::linearization_trust` of its scaled distance from the pose its terms were computed at).
+    /// How far the local model's constraint geometry is still trusted where the model is now, as this tick's
+    /// `place_frame` found it.
     fn linearization_trust(&self) -> f64 {
-        let (pose, l) = (self.model.pose(), self.length_scale);
-        let linear = (pose.position - self.active.op_pose.position).norm();
-        let turn = S::rot_chord(&pose.rotation, &self.active.op_pose.rotation) * l;
-        linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l)
+        self.trust
     }
 
     /// The VE's OP predicted to `now`: the snapshot's pose moved along its twist for its age plus the one-way
@@ -792,6 +862,12 @@ impl<S: Space> HapticCore<S> {
         let restart = first || (self.gate.gain() == 0.0 && !hand_off);
         self.model.update(&self.active);
         self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
+        if let Some(f) = self.path.as_mut() {
+            let on = f.path.nearest(&self.active.op_pose, f.snapshot_segment);
+            f.snapshot_segment = Some(on.segment);
+            f.snapshot_tangent = Some(on.tangent);
+            f.snapshot_rest = on.rest_acceleration;
+        }
         if restart {
             // Until the VE has seen one of this client's uplinks it holds the OP where it was at the join
             // (the grasp: pose held, twist zero), so the model starts there, at rest, where the device is
@@ -842,10 +918,57 @@ impl<S: Space> HapticCore<S> {
         CouplingSprings {
             position_stiffness: &self.gains.position_stiffness,
             joint_stiffness,
-            projector: &self.frame.projector,
+            projector: &self.local.projector,
             length_scale: self.length_scale,
-            inertia: &self.frame.inertia,
+            inertia: &self.local.inertia,
         }
+    }
+
+    /// Sets the frame the controllers use this tick and how far they trust its walls.
+    ///
+    /// The snapshot's frame was linearized at the VE's pose; under delay the model runs a round trip of motion
+    /// ahead of it, where the linkage's constraint has turned away from that tangent plane. The walls then
+    /// soften with the model's distance from the pose (`linearization_trust`), and on a linkage of one degree
+    /// of freedom whose path the welcome carries (`CoreConfig::follow_path`; the reduced form, whose Λ̂⁻¹ the
+    /// frame is) the frame is carried along the path toward the model's point on it, as far as the tangent is
+    /// no longer trusted (`w = 1 − trust`): turned by `w` of the angle between the tangents, the model pulled
+    /// that far onto the path, the forces at rest that far from where the model is, and the walls trusted as far
+    /// as either the tangent or the path is. Near the snapshot's pose (no delay) the frame is the snapshot's
+    /// own, which is exact where the path, sampled every few millimetres, is only interpolated; and a model
+    /// past the end of an open path (the Bennett linkage's walk stops where its closure does not converge,
+    /// and the linkage goes on) counts the path less as it goes on, as the tangent is counted less away from
+    /// its pose (followed whole, the Bennett coupler on a Falcon at 50 ms was pulled back to the end of its
+    /// path and saturated).
+    ///
+    /// Returns the model's point on the path, the fraction `w` and the turn as it acts on twists, or `None`
+    /// when the snapshot's frame is used as it is.
+    fn place_frame(&mut self) -> Option<(OpPose<S>, f64, S::OpMat)> {
+        self.local = self.frame;
+        let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
+        let linear = (pose.position - at.position).norm();
+        let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
+        self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
+        let pinned = self.pinned();
+        let follower = self.path.as_mut().filter(|_| !self.model.using_config() && self.trust < 1.0)?;
+        let from = PathFollower::<S>::as_framed(&follower.snapshot_tangent?, pinned);
+        let on = follower.path.nearest(&pose, follower.model_segment);
+        follower.model_segment = Some(on.segment);
+        // A model past the end of an open path (where the survey's walk stopped) is not where the path says:
+        // the path counts as little there as a tangent that far from its pose.
+        let reach = self.config.linearization_reach * l;
+        let along = (1.0 - self.trust) * linearization_trust(on.past_end, reach);
+        let turn = turn_between::<S>(&from, &PathFollower::<S>::as_framed(&on.tangent, pinned), along);
+        let twist_turn = twist_turn::<S>(&turn, l);
+        self.local = self.frame.turned(&turn, l);
+        if follower.rest_where_model_is {
+            // b̂ holds the forces at rest where the snapshot was taken; the model feels them where it is.
+            // Carried along unchanged they are a spring felt a round trip late, which makes energy (the
+            // four-bar's weight at 1 s one way: 2 J beyond the hand's work over a whole tour).
+            self.local.bias += (on.rest_acceleration - twist_turn * follower.snapshot_rest) * along;
+        }
+        // The walls are right as far as the tangent or the path is.
+        self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
+        Some((on.pose, along, twist_turn))
     }
 
     /// `error` with the axes no controller acts on zeroed: held as through a pin (see
@@ -896,10 +1019,11 @@ impl<S: Space> HapticCore<S> {
         // 2. Pull toward the VE, filter the terms.
         let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
         self.frame.filter(fraction(self.config.terms_time_constant));
+        let on_path = self.place_frame();
         if !stale && !hand_off {
             let (constrained, free) =
                 (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
-            let (p, l) = (&self.frame.projector, self.length_scale);
+            let (p, l) = (&self.local.projector, self.length_scale);
             // The model is pulled toward the VE's state predicted to now: along the constrained directions
             // fast, where the frozen terms let it drift off the linkage's curve; along the free ones over
             // round trips, as the VE follows the model there. (Comparing the free directions instead with the
@@ -910,7 +1034,17 @@ impl<S: Space> HapticCore<S> {
             // against 4.6.)
             let predicted = self.predicted_op(now);
             let (own, own_twist) = (self.model.pose(), self.model.twist());
-            let (pose, twist) = (predicted.difference(&own), self.active.op_twist - own_twist);
+            let mut pose = predicted.difference(&own);
+            let mut ve_twist = self.active.op_twist;
+            if let Some((point, along, twist_turn)) = on_path {
+                // On a path the model belongs, along the constrained directions, on the path where it is
+                // (where the joints hold the OP), not on the tangent line through the VE's pose; and the
+                // VE's twist, along the path where the VE was, is turned to where the model is (both as far
+                // as `place_frame` carries the frame).
+                pose += project_twist::<S>(p, l, &(point.difference(&own) - pose)) * along;
+                ve_twist = twist_turn * ve_twist;
+            }
+            let twist = ve_twist - own_twist;
             let (mut moved, mut sped) = model::split_correction::<S>(&pose, &twist, p, l, constrained, free);
             if self.config.passive_update {
                 let sensed = device.hand_wrench.is_some();
@@ -923,7 +1057,7 @@ impl<S: Space> HapticCore<S> {
             }
             self.model.apply_correction(&moved, &sped);
         }
-        self.model.set_inverse_inertia(&self.frame.inverse_inertia);
+        self.model.set_inverse_inertia(&self.local.inverse_inertia);
 
         // 3. Step the local model under the user's wrench.
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
@@ -957,7 +1091,7 @@ impl<S: Space> HapticCore<S> {
         let error = self.controlled(device_pose.difference(&model_pose));
         let error_rate = self.controlled(device_twist - model_twist);
         let g = &self.gains;
-        let (l, p) = (self.length_scale, &self.frame.projector);
+        let (l, p) = (self.length_scale, &self.local.projector);
         // The constrained directions soften as the model runs away from where its terms were computed
         // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
         let trust = self.linearization_trust();
@@ -969,12 +1103,12 @@ impl<S: Space> HapticCore<S> {
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         let imp = match sensed {
             Some(hand) => {
-                impedance_free::<S>(p, l, &self.device_mass, &self.frame.inverse_inertia, &self.frame.bias, &hand)
+                impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &self.local.bias, &hand)
             }
             None => S::OpVec::zero(),
         };
         let (contacts, live) = self.model.contacts();
-        let contact = contact_feedforward::<S>(contacts, live, &self.frame.free_inertia);
+        let contact = contact_feedforward::<S>(contacts, live, &self.local.free_inertia);
         // `pc_felt`: what the device receives from the position channels once the joint-constraint controller
         // has acted, so what the local model gets back as their reaction (step 5); `damping_felt` the same
         // of the dampers, the joint-constraint controller's included.

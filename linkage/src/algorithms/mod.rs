@@ -20,6 +20,7 @@ pub mod local_model;
 pub mod loop_closure;
 pub mod ltl;
 pub mod mass_matrix;
+pub mod op_path;
 pub mod op_space;
 pub mod passivity;
 pub mod reach;

@@ -25,12 +25,14 @@ use std::cmp::Ordering;
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::algorithms::constraint_directions::scale_op;
 use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
 use crate::algorithms::contact::{contact_capacity, detect_contacts, Contact};
 use crate::algorithms::dynamics::forward_dynamics;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::local_model::{op_acceleration, OpPose};
 use crate::algorithms::loop_closure::loop_closure;
+use crate::algorithms::op_path::OpPath;
 use crate::algorithms::op_space::op_space_inertia;
 use crate::error::DynamicsError;
 use crate::math::space::{Space, VecOps};
@@ -98,6 +100,15 @@ pub struct OpReach<S: Space> {
     pub inverse_rotational_inertia_max: f64,
     /// Dimension of the closed configuration manifold at `q0` (the linkage's degrees of freedom).
     pub dof: usize,
+    /// On a linkage of one degree of freedom, the OP's whole path in order, one walk step apart: one lap of
+    /// a closed path (a crank's coupler curve), or end to end of an open one (between dead points, stroke
+    /// ends or obstacles), with the OP's acceleration at rest at each pose (the forces at rest: gravity,
+    /// springs, actuators). Every pose the OP can take lies on it, so a client that knows it knows where the
+    /// joints hold the OP far from where a snapshot linearized them (the constrained directions turn along
+    /// the path; `kinloop_client`'s local model follows them), and what the forces at rest do there. `None`
+    /// on other linkages, whose reach is a surface or more, and where the OP turns back along its path while
+    /// the linkage moves on (a rocker's output: one pose, two configurations).
+    pub path: Option<OpPath<S>>,
 }
 
 impl<S: Space> OpReach<S> {
@@ -344,6 +355,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         inverse_mass_max: 0.0,
         inverse_rotational_inertia_max: 0.0,
         dof,
+        path: None,
     };
     let mut forces = Vec::new();
     let mut torques = Vec::new();
@@ -385,6 +397,8 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         _ => config.walks,
     };
     let mut tour_data = Data::new(model);
+    // On a 1-DOF linkage, each walk's poses up to its first turn: the OP's path forth and back from q0.
+    let mut halves: Vec<Vec<(OpPose<S>, S::OpVec)>> = Vec::new();
     for walk in 0..walks {
         let on_tour = walk == 0 || (dof > 1 && walk * 4 == walks);
         let angle = std::f64::consts::TAU * walk as f64 / walks as f64;
@@ -395,11 +409,18 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         let mut q = q0.clone();
         // The walk's poses, with how mobile the OP is there (σ_max of the unit-consistent Λ̃⁻¹) on the walks
         // the tour is taken from.
-        let mobility = |q: &DVector<f64>, data: &mut Data<S>| {
-            static_op_load(model, data, q, &zero_qd, op).map_or(0.0, |(_, d)| d.singular_values[0])
+        // And, on a 1-DOF linkage, the OP's acceleration at rest there (the path's).
+        let at_rest = |q: &DVector<f64>, data: &mut Data<S>| {
+            if !(on_tour || dof == 1) {
+                return (0.0, S::OpVec::zero());
+            }
+            static_op_load(model, data, q, &zero_qd, op)
+                .map_or((0.0, S::OpVec::zero()), |(_, d)| (d.singular_values[0], op_acceleration(data)))
         };
-        let mut path = vec![(start, if on_tour { mobility(&q0, &mut tour_data) } else { 0.0 })];
+        let (mobility, accel) = at_rest(&q0, &mut tour_data);
+        let mut path = vec![(start, mobility, accel)];
         let mut failures = 0;
+        let mut first_turn = None;
         for step in 1..=config.steps {
             match walker.step(&mut q, &direction, config.step) {
                 Some(tangent) => {
@@ -407,10 +428,12 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
                     failures = 0;
                     let pose = OpPose::<S>::of_op(model, &walker.data, op);
                     visit(&q, &pose, step % config.inertia_every.max(1) == 0, &mut reach);
-                    path.push((pose, if on_tour { mobility(&q, &mut tour_data) } else { 0.0 }));
+                    let (mobility, accel) = at_rest(&q, &mut tour_data);
+                    path.push((pose, mobility, accel));
                 }
                 None => {
                     // A dead point or the end of a stroke: turn back, as the linkage would.
+                    first_turn.get_or_insert(path.len());
                     failures += 1;
                     if failures > 2 {
                         break;
@@ -429,6 +452,12 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
             let mobile: Vec<OpPose<S>> = path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
             reach.tour.extend(waypoints(&mobile, config.tour_points));
         }
+        if dof == 1 {
+            halves.push(path[..first_turn.unwrap_or(path.len())].iter().map(|p| (p.0, p.2)).collect());
+        }
+    }
+    if let [forth, back] = halves.as_slice() {
+        reach.path = one_dof_path(forth, back, model.length_scale);
     }
     let percentile = |values: &mut Vec<f64>| {
         if values.is_empty() {
@@ -454,15 +483,12 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     Ok(reach)
 }
 
-/// Up to `count` poses of `path` evenly spaced by the OP's arc length, stopping where a closed path comes
-/// back to its start (a crank-rocker's coupler curve is walked around more than once).
-fn waypoints<S: Space>(path: &[OpPose<S>], count: usize) -> Vec<OpPose<S>> {
-    if path.len() < 2 || count == 0 {
-        return path.iter().take(1).copied().collect();
-    }
+/// Where a walk's `path` first comes back near its start after having gone away (a crank-rocker's coupler
+/// curve is walked around more than once): the index of that pose, or `None` for a path that never returns.
+/// Also the OP's arc length at each pose up to there.
+fn lap<S: Space>(path: &[OpPose<S>]) -> (Option<usize>, Vec<f64>) {
     let mut arc = vec![0.0];
     let mut far = 0.0f64;
-    let mut end = path.len();
     for i in 1..path.len() {
         let d = (path[i].position - path[i - 1].position).norm();
         arc.push(arc[i - 1] + d);
@@ -470,10 +496,60 @@ fn waypoints<S: Space>(path: &[OpPose<S>], count: usize) -> Vec<OpPose<S>> {
         far = far.max(from_start);
         // Back where it started after having gone away: one lap.
         if far > 0.0 && from_start < 0.05 * far && arc[i] > 2.0 * far {
-            end = i + 1;
-            break;
+            return (Some(i), arc);
         }
     }
+    (None, arc)
+}
+
+/// The OP's path on a 1-DOF linkage from the walks forth and back from q0 (each up to its first turn, both
+/// starting at q0's pose; poses with the OP's acceleration at rest): one lap of the forth walk when it comes
+/// back to its start, else the back walk reversed followed by the forth one. `None` when the walks do not
+/// make a path (fewer than two distinct poses).
+fn one_dof_path<S: Space>(
+    forth: &[(OpPose<S>, S::OpVec)],
+    back: &[(OpPose<S>, S::OpVec)],
+    length_scale: f64,
+) -> Option<OpPath<S>> {
+    let forth_poses: Vec<OpPose<S>> = forth.iter().map(|p| p.0).collect();
+    let (samples, closed) = match lap(&forth_poses) {
+        (Some(mut end), _) => {
+            // `lap` stops within 5 % of the extent of the start; the lap ends at the pose nearest to it.
+            let from_start = |i: usize| (forth[i].0.position - forth[0].0.position).norm();
+            while end + 1 < forth.len() && from_start(end + 1) < from_start(end) {
+                end += 1;
+            }
+            (forth[..end].to_vec(), true)
+        }
+        (None, _) => {
+            let mut samples: Vec<(OpPose<S>, S::OpVec)> = back.iter().skip(1).rev().copied().collect();
+            samples.extend_from_slice(forth);
+            (samples, false)
+        }
+    };
+    let path = OpPath::new(samples.iter().map(|p| p.0).collect(), closed, length_scale).ok()?;
+    // An OP that turns back along its path while the linkage moves on (a rocker's output swings forth and
+    // back while the crank turns) has one pose for two configurations, with different forces at rest, on a
+    // path that runs over itself: its pose does not say where the linkage is, and there is no path to give.
+    let n = path.poses().len();
+    let turns_back =
+        (0..n).filter(|&k| closed || k + 1 < n).any(|k| path.tangent(k).dot(&path.tangent((k + 1) % n)) < 0.0);
+    if turns_back {
+        return None;
+    }
+    // At rest the OP can only accelerate along the path: its acceleration is the tangent's multiple.
+    let along = (0..samples.len()).map(|k| path.tangent(k).dot(&scale_op::<S>(&samples[k].1, length_scale))).collect();
+    path.with_rest_acceleration(along).ok()
+}
+
+/// Up to `count` poses of `path` evenly spaced by the OP's arc length, stopping where a closed path comes
+/// back to its start (see [`lap`]).
+fn waypoints<S: Space>(path: &[OpPose<S>], count: usize) -> Vec<OpPose<S>> {
+    if path.len() < 2 || count == 0 {
+        return path.iter().take(1).copied().collect();
+    }
+    let (lap_end, arc) = lap(path);
+    let end = lap_end.map_or(path.len(), |i| i + 1);
     let total = arc[end - 1];
     if total <= 0.0 {
         return vec![path[0]];

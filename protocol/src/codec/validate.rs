@@ -6,7 +6,7 @@ use super::limits::*;
 use crate::messages::{
     uplink_flags, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram, DeviceCaps, Hello, Join, Mapping,
     MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused, SceneInfo, SceneSummary, Snapshot,
-    Uplink, Welcome,
+    Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -119,7 +119,7 @@ pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
     mapping(&w.mapping)?;
     let k = w.scene.kind.op_dim();
     coupling(&w.coupling, k)?;
-    op_summary(&w.op, w.scene.kind)
+    op_summary(&w.op, &w.scene.shape())
 }
 
 fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
@@ -147,7 +147,8 @@ fn coupling(g: &CouplingGains, k: usize) -> Result<(), DecodeError> {
     non_negative_vector(Field::at("welcome.coupling.damping"), &g.damping, k, MAX_GAIN)
 }
 
-fn op_summary(o: &OpSummary, kind: SceneKind) -> Result<(), DecodeError> {
+fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
+    let kind = shape.kind;
     let d = kind.point_dim();
     vector(Field::at("welcome.op.position"), &o.position, d, MAX_POSITION)?;
     vector(Field::at("welcome.op.reach_min"), &o.reach_min, d, MAX_POSITION)?;
@@ -170,7 +171,14 @@ fn op_summary(o: &OpSummary, kind: SceneKind) -> Result<(), DecodeError> {
         o.inverse_rotational_inertia_max,
         0.0,
         MAX_MATRIX_ENTRY,
-    )
+    )?;
+    let poses = o.path.len() / shape.pose_dim();
+    count(Field::at("welcome.op.path"), poses, MAX_PATH_POSES)?;
+    length(Field::at("welcome.op.path"), o.path.len(), poses * shape.pose_dim())?;
+    for (i, p) in o.path.chunks(shape.pose_dim()).enumerate() {
+        pose(Field::in_item("welcome.op.path", i, "pose"), p, shape)?;
+    }
+    vector(Field::at("welcome.op.path_rest_acceleration"), &o.path_rest_acceleration, poses, MAX_ACCEL)
 }
 
 fn refused(r: &Refused) -> Result<(), DecodeError> {

@@ -271,16 +271,30 @@ fn welcome() -> impl Strategy<Value = Welcome> {
                 vec(within(1.0), tour * k),
                 (0.0..1e3, 0.0..1e2, 0.0..1e3, 0.0..1e3),
             )
-                .prop_map(|(position, extent, tour, (force, torque, inverse_mass, inverse_inertia))| OpSummary {
-                    reach_min: position.clone(),
-                    reach_max: position.iter().zip(&extent).map(|(p, e)| p + e).collect(),
-                    position,
-                    tour,
-                    static_force_n: force,
-                    static_torque_nm: torque,
-                    inverse_mass_max: inverse_mass,
-                    inverse_rotational_inertia_max: inverse_inertia,
-                });
+                .prop_map(
+                    move |(position, extent, tour, (force, torque, inverse_mass, inverse_inertia))| OpSummary {
+                        // Up to three poses of the OP's path from the tour's numbers: positions (and a planar angle)
+                        // within ±1, spatial orientations the identity quaternion.
+                        path: tour
+                            .chunks(k)
+                            .take(3)
+                            .flat_map(|c| match kind {
+                                SceneKind::Planar => c[..3].to_vec(),
+                                SceneKind::Spatial => [&c[..3], &[1.0, 0.0, 0.0, 0.0][..]].concat(),
+                            })
+                            .collect(),
+                        path_rest_acceleration: tour.chunks(k).take(3).map(|c| c[0] * 10.0).collect(),
+                        path_closed: tour.len() % 2 == 1,
+                        reach_min: position.clone(),
+                        reach_max: position.iter().zip(&extent).map(|(p, e)| p + e).collect(),
+                        position,
+                        tour,
+                        static_force_n: force,
+                        static_torque_nm: torque,
+                        inverse_mass_max: inverse_mass,
+                        inverse_rotational_inertia_max: inverse_inertia,
+                    },
+                );
             (vec(0.0..1e4, k), vec(0.0..1e2, k), op).prop_map(move |(stiffness, damping, op)| Welcome {
                 session_id,
                 user_id,

@@ -1,0 +1,364 @@
+//! The path of an operational point on a linkage of one degree of freedom, and where a pose lies along it.
+//!
+//! A 1-DOF linkage moves its OP along one curve in operational space (position and orientation together),
+//! which the reach survey walks once (`reach::OpReach::path`). Its tangent is the one direction the joints
+//! let the OP move: the free direction of eq 10's SVD of Λ⁻¹, since Λ⁻¹ = J M⁻¹ Jᵀ has rank one along the
+//! OP's velocity per unit of the linkage's coordinate. A local model linearized at one pose (eq 11, 13)
+//! holds the OP to the tangent *line* there; the path holds it to the curve wherever it has run, so the
+//! constrained directions can turn as the linkage's do ([`turn_between`]).
+//!
+//! A path may carry, per pose, the OP's acceleration at rest there (gravity, springs, actuators: what moves
+//! the linkage when nothing holds it), which is along the tangent since the OP can only move along the path.
+//! A local model that has run ahead of its snapshot along the path feels these forces where it is, not where
+//! the snapshot was taken: a position-dependent force felt at a pose a round trip behind acts as a spring
+//! rendered late, which makes energy when the hand goes back and forth (a four-bar's weight, 1 s one way:
+//! about 1 J per tour).
+//!
+//! Distances and tangents are in the unit-consistent coordinates of `constraint_directions` (`(x, L θ)`,
+//! `L` the scene's length scale). Queries allocate nothing and, given the segment of the last answer, look
+//! only at its neighbours (a curve that passes near itself, as a coupler curve can, is followed along the
+//! branch the OP is on instead of jumping to the other).
+
+use crate::algorithms::constraint_directions::scale_op;
+use crate::algorithms::local_model::OpPose;
+use crate::math::space::{MatOps, Space, VecOps};
+
+/// A sampled OP path: poses in order, closed or open.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpPath<S: Space> {
+    poses: Vec<OpPose<S>>,
+    /// Unit tangent at each pose (unit-consistent coordinates), pointing along the path's order.
+    tangents: Vec<S::OpVec>,
+    /// The OP's acceleration at rest at each pose, along its tangent (unit-consistent, m/s²); zeros when not
+    /// given.
+    rest_acceleration: Vec<f64>,
+    closed: bool,
+    length_scale: f64,
+}
+
+/// The point of a path nearest a pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathPoint<S: Space> {
+    /// The point (interpolated between two samples).
+    pub pose: OpPose<S>,
+    /// Unit tangent there (unit-consistent coordinates), along the path's order; interpolated between the
+    /// samples' so that it turns continuously.
+    pub tangent: S::OpVec,
+    /// Distance from the pose asked about (unit-consistent, m).
+    pub distance: f64,
+    /// The same distance when the point is an end of an open path (the pose is past it, or beside it), else 0.
+    pub past_end: f64,
+    /// The OP's acceleration at rest there (physical units, linear first), interpolated.
+    pub rest_acceleration: S::OpVec,
+    /// The segment it lies on (a hint for the next query).
+    pub segment: usize,
+}
+
+/// Why a path was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PathError {
+    /// Fewer than two poses.
+    #[error("a path needs at least two poses, got {0}")]
+    TooShort(usize),
+    /// A pose is not finite, or the length scale is not positive.
+    #[error("pose {0} of the path is not finite")]
+    NonFinite(usize),
+    /// Two consecutive poses coincide: no tangent there.
+    #[error("poses {0} and {1} of the path coincide")]
+    Repeated(usize, usize),
+    /// The length scale is not finite and positive.
+    #[error("length scale {0} is not finite and positive")]
+    LengthScale(f64),
+    /// The accelerations at rest are not one finite value per pose.
+    #[error("{got} accelerations at rest for {poses} poses (one finite value per pose)")]
+    RestAcceleration {
+        /// Values given.
+        got: usize,
+        /// Poses.
+        poses: usize,
+    },
+}
+
+impl<S: Space> OpPath<S> {
+    /// A path through `poses` in order (`closed`: the last leads back to the first), measured with the
+    /// scene's `length_scale`.
+    pub fn new(poses: Vec<OpPose<S>>, closed: bool, length_scale: f64) -> Result<Self, PathError> {
+        if !(length_scale.is_finite() && length_scale > 0.0) {
+            return Err(PathError::LengthScale(length_scale));
+        }
+        let n = poses.len();
+        if n < 2 {
+            return Err(PathError::TooShort(n));
+        }
+        if let Some(i) = poses.iter().position(|p| !(p.position.is_finite() && S::rot_is_finite(&p.rotation))) {
+            return Err(PathError::NonFinite(i));
+        }
+        let scaled = |a: &OpPose<S>, b: &OpPose<S>| scale_op::<S>(&a.difference(b), length_scale);
+        let segments = if closed { n } else { n - 1 };
+        for k in 0..segments {
+            let next = (k + 1) % n;
+            if scaled(&poses[next], &poses[k]).norm() <= 1e-12 * length_scale {
+                return Err(PathError::Repeated(k, next));
+            }
+        }
+        // Central differences inside, one-sided at the ends of an open path.
+        let tangents = (0..n)
+            .map(|k| {
+                let (before, after) = match (closed, k) {
+                    (true, _) => ((k + n - 1) % n, (k + 1) % n),
+                    (false, 0) => (0, 1),
+                    (false, k) if k == n - 1 => (n - 2, n - 1),
+                    (false, k) => (k - 1, k + 1),
+                };
+                let d = scaled(&poses[after], &poses[before]);
+                d * (1.0 / d.norm())
+            })
+            .collect();
+        Ok(OpPath { rest_acceleration: vec![0.0; n], poses, tangents, closed, length_scale })
+    }
+
+    /// The path with the OP's acceleration at rest at each pose, along the pose's tangent ([`Self::tangent`];
+    /// unit-consistent, m/s²).
+    pub fn with_rest_acceleration(mut self, along: Vec<f64>) -> Result<Self, PathError> {
+        if along.len() != self.poses.len() || along.iter().any(|a| !a.is_finite()) {
+            return Err(PathError::RestAcceleration { got: along.len(), poses: self.poses.len() });
+        }
+        self.rest_acceleration = along;
+        Ok(self)
+    }
+
+    /// The unit tangent at pose `k` (unit-consistent coordinates), along the path's order.
+    pub fn tangent(&self, k: usize) -> S::OpVec {
+        self.tangents[k]
+    }
+
+    /// The accelerations at rest, per pose, along the tangents.
+    pub fn rest_acceleration(&self) -> &[f64] {
+        &self.rest_acceleration
+    }
+
+    /// The poses.
+    pub fn poses(&self) -> &[OpPose<S>] {
+        &self.poses
+    }
+
+    /// True when the last pose leads back to the first.
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
+    fn segments(&self) -> usize {
+        if self.closed {
+            self.poses.len()
+        } else {
+            self.poses.len() - 1
+        }
+    }
+
+    /// Where on segment `k` `pose` is nearest: (scaled displacement from `pose` to that point, fraction along
+    /// the segment).
+    fn on_segment(&self, k: usize, pose: &OpPose<S>) -> (S::OpVec, f64) {
+        let l = self.length_scale;
+        let a = scale_op::<S>(&self.poses[k].difference(pose), l);
+        let b = scale_op::<S>(&self.poses[(k + 1) % self.poses.len()].difference(pose), l);
+        let d = b - a;
+        let u = (-a.dot(&d) / d.dot(&d)).clamp(0.0, 1.0);
+        (a + d * u, u)
+    }
+
+    /// The point of the path nearest `pose`. With `near`, the segment of an earlier answer, the search walks
+    /// from there to neighbouring segments while they are nearer (the branch the OP is on); without, it
+    /// looks at every segment.
+    pub fn nearest(&self, pose: &OpPose<S>, near: Option<usize>) -> PathPoint<S> {
+        let segments = self.segments();
+        let distance = |k: usize| self.on_segment(k, pose).0.norm();
+        let mut best = match near {
+            Some(k) if k < segments => k,
+            _ => (0..segments).min_by(|&i, &j| distance(i).total_cmp(&distance(j))).unwrap_or(0),
+        };
+        let mut best_distance = distance(best);
+        let neighbours = |k: usize| -> [Option<usize>; 2] {
+            if self.closed {
+                [Some((k + segments - 1) % segments), Some((k + 1) % segments)]
+            } else {
+                [k.checked_sub(1), (k + 1 < segments).then_some(k + 1)]
+            }
+        };
+        for _ in 0..segments {
+            let step = neighbours(best)
+                .into_iter()
+                .flatten()
+                .map(|k| (k, distance(k)))
+                .filter(|(_, d)| *d < best_distance)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            match step {
+                Some((k, d)) => (best, best_distance) = (k, d),
+                None => break,
+            }
+        }
+        let (offset, u) = self.on_segment(best, pose);
+        let mut point = *pose;
+        point.integrate(&scale_op::<S>(&offset, 1.0 / self.length_scale), 1.0);
+        let next = (best + 1) % self.poses.len();
+        let blended = self.tangents[best] * (1.0 - u) + self.tangents[next] * u;
+        let norm = blended.norm();
+        // Opposite tangents at both ends of a segment (a path that doubles back on one segment) blend to
+        // nothing: keep the segment's own direction.
+        let tangent = if norm > 1e-9 {
+            blended * (1.0 / norm)
+        } else {
+            let d = scale_op::<S>(&self.poses[next].difference(&self.poses[best]), self.length_scale);
+            d * (1.0 / d.norm())
+        };
+        let along = self.rest_acceleration[best] * (1.0 - u) + self.rest_acceleration[next] * u;
+        let rest_acceleration = scale_op::<S>(&(tangent * along), 1.0 / self.length_scale);
+        let at_end = !self.closed && ((best == 0 && u == 0.0) || (best + 1 == segments && u == 1.0));
+        let distance = offset.norm();
+        PathPoint {
+            pose: point,
+            tangent,
+            distance,
+            past_end: if at_end { distance } else { 0.0 },
+            rest_acceleration,
+            segment: best,
+        }
+    }
+}
+
+/// The rotation of operational space (unit-consistent coordinates) that turns unit direction `from` through
+/// `fraction` ∈ [0, 1] of the angle θ onto `to`, within the plane the two span and fixing everything
+/// orthogonal to it: `R = I + (cos φ − 1)(u uᵀ + w wᵀ) + sin φ (w uᵀ − u wᵀ)` with `φ = fraction θ`, `u = from`,
+/// `w` the unit part of `to` orthogonal to `u`. At `fraction` 1, `R from = to`. The identity when they are the
+/// same direction; `−I` when opposite and `fraction` is at least a half (a path that doubles back: a projector
+/// is unchanged, and what moves along the path is turned round with it).
+///
+/// Both are tangents taken in the path's order, and the turn keeps it: a twist or an acceleration along
+/// `from` arrives along `to` with its sign, forward along the path staying forward, however sharply the path
+/// turns between them (a coupler curve's corner turns its tangent by more than a right angle).
+pub fn turn_between<S: Space>(from: &S::OpVec, to: &S::OpVec, fraction: f64) -> S::OpMat {
+    let cos = from.dot(to).clamp(-1.0, 1.0);
+    let orthogonal = *to - *from * cos;
+    let sin = orthogonal.norm();
+    // Parallel, opposite, or not a number: no plane to turn in.
+    if sin.partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
+        return if cos < 0.0 && fraction >= 0.5 { S::OpMat::identity() * -1.0 } else { S::OpMat::identity() };
+    }
+    let w = orthogonal * (1.0 / sin);
+    let u = *from;
+    let angle = sin.atan2(cos) * fraction.clamp(0.0, 1.0);
+    S::OpMat::identity()
+        + (S::op_outer(&u, &u) + S::op_outer(&w, &w)) * (angle.cos() - 1.0)
+        + (S::op_outer(&w, &u) - S::op_outer(&u, &w)) * angle.sin()
+}
+
+/// `a b` for operational-space matrices.
+pub fn product<S: Space>(a: &S::OpMat, b: &S::OpMat) -> S::OpMat {
+    let mut out = S::OpMat::zero();
+    for c in 0..S::DIM {
+        for k in 0..S::DIM {
+            let bkc = b[(k, c)];
+            if bkc != 0.0 {
+                for r in 0..S::DIM {
+                    out[(r, c)] += a[(r, k)] * bkc;
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::space::Planar;
+    use nalgebra::{Vector2, Vector3};
+
+    fn circle(n: usize, radius: f64) -> Vec<OpPose<Planar>> {
+        (0..n)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / n as f64;
+                // A crank's tip: the orientation turns with the position.
+                OpPose {
+                    position: Vector2::new(radius * a.cos(), radius * a.sin()),
+                    rotation: Planar::rot_from_vector(&a),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_nearest_point_of_a_crank_tips_circle_is_radial_and_its_tangent_turns_with_it() {
+        let (r, l) = (0.1, 0.1);
+        let path = OpPath::<Planar>::new(circle(360, r), true, l).unwrap();
+        // A pose outside the circle at 100°, turned as the crank is there.
+        let a = 100f64.to_radians();
+        let pose =
+            OpPose { position: Vector2::new(0.12 * a.cos(), 0.12 * a.sin()), rotation: Planar::rot_from_vector(&a) };
+        let p = path.nearest(&pose, None);
+        assert!((p.pose.position - Vector2::new(r * a.cos(), r * a.sin())).norm() < 1e-5, "{p:?}");
+        assert!((p.distance - 0.02).abs() < 1e-5, "{p:?}");
+        // Closed form: d/da (r cos a, r sin a, L a) normalized.
+        let t = Vector3::new(-r * a.sin(), r * a.cos(), l) / (2.0 * r * r).sqrt();
+        assert!((p.tangent - t).norm() < 1e-4, "{:?} against {t:?}", p.tangent);
+        // From a hint far away the walk along the circle still gets there (no other branch to stop on).
+        let from_hint = path.nearest(&pose, Some(300));
+        assert!((from_hint.pose.position - p.pose.position).norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_hint_keeps_the_branch_where_a_path_passes_near_itself() {
+        // A hairpin: out along y = 0, back along y = 0.01.
+        let mut poses: Vec<OpPose<Planar>> = (0..=20)
+            .map(|k| OpPose { position: Vector2::new(0.005 * k as f64, 0.0), rotation: Planar::rot_identity() })
+            .collect();
+        poses.extend(
+            (0..=20)
+                .rev()
+                .map(|k| OpPose { position: Vector2::new(0.005 * k as f64, 0.01), rotation: Planar::rot_identity() }),
+        );
+        let path = OpPath::<Planar>::new(poses, false, 0.1).unwrap();
+        let between = OpPose { position: Vector2::new(0.05, 0.0049), rotation: Planar::rot_identity() };
+        assert!(path.nearest(&between, None).pose.position.y < 0.005);
+        // Coming from the return leg, the query stays on it.
+        let back = path.nearest(&between, Some(30));
+        assert!((back.pose.position.y - 0.01).abs() < 1e-12, "{back:?}");
+        assert_eq!(back.past_end, 0.0);
+        // Past the end of the return leg.
+        let beyond = OpPose { position: Vector2::new(-0.03, 0.01), rotation: Planar::rot_identity() };
+        let end = path.nearest(&beyond, Some(39));
+        assert!((end.past_end - 0.03).abs() < 1e-12 && end.distance == end.past_end, "{end:?}");
+    }
+
+    #[test]
+    fn the_turn_maps_one_direction_onto_the_other_and_keeps_lengths() {
+        let from = Vector3::new(1.0, 0.0, 0.0);
+        let to = Vector3::new(0.6, 0.48, 0.64);
+        let r = turn_between::<Planar>(&from, &to, 1.0);
+        assert!((r * from - to).norm() < 1e-12);
+        assert!((product::<Planar>(&r, &r.transpose()) - nalgebra::Matrix3::identity()).norm() < 1e-12);
+        // A direction orthogonal to both is left alone.
+        let other = Vector3::new(0.0, 0.8, -0.6);
+        assert!((r * other - other).norm() < 1e-12);
+        // Past a right angle, forward stays forward.
+        let back = turn_between::<Planar>(&from, &-to, 1.0);
+        assert!((back * from + to).norm() < 1e-12);
+        assert_eq!(turn_between::<Planar>(&from, &from, 1.0), nalgebra::Matrix3::identity());
+        assert_eq!(turn_between::<Planar>(&from, &-from, 1.0), -nalgebra::Matrix3::identity());
+        // Part of the way: half the angle, twice over, is the whole turn; none of it is no turn.
+        let half = turn_between::<Planar>(&from, &to, 0.5);
+        assert!((half * (half * from) - to).norm() < 1e-12);
+        assert!((half * from).dot(&from) > from.dot(&to));
+        assert_eq!(turn_between::<Planar>(&from, &to, 0.0), nalgebra::Matrix3::identity());
+    }
+
+    #[test]
+    fn bad_paths_are_refused_with_what_is_wrong() {
+        let mut poses = circle(8, 0.1);
+        assert_eq!(OpPath::<Planar>::new(poses[..1].to_vec(), false, 0.1), Err(PathError::TooShort(1)));
+        assert_eq!(OpPath::<Planar>::new(poses.clone(), true, 0.0), Err(PathError::LengthScale(0.0)));
+        poses[3] = poses[2];
+        assert_eq!(OpPath::<Planar>::new(poses.clone(), true, 0.1), Err(PathError::Repeated(2, 3)));
+        poses[3].position.x = f64::NAN;
+        assert_eq!(OpPath::<Planar>::new(poses, true, 0.1), Err(PathError::NonFinite(3)));
+    }
+}
