@@ -115,6 +115,28 @@ fn jacobian_by_differences(model: &Model<Planar>, q: &DVector<f64>, op: usize) -
     j
 }
 
+/// A four-bar's one motion at `q`: the null direction of the closure Jacobian W = ∂h/∂q, W by central
+/// differences of the loop residual. W is 2×3 (a pin closes the loop of three joints), so the direction is its
+/// rows' cross product.
+fn four_bar_motion_by_differences(model: &Model<Planar>, q: &DVector<f64>) -> DVector<f64> {
+    let mut data = Data::new(model);
+    let mut residual = |q: &DVector<f64>| {
+        forward_kinematics(model, &mut data, q);
+        kinloop_linkage::loop_closure::loop_closure(model, &mut data);
+        data.closure_residual.clone()
+    };
+    let h = 1e-7;
+    let mut w = DMatrix::zeros(model.nc(), model.nq());
+    for i in 0..model.nq() {
+        let (mut up, mut down) = (q.clone(), q.clone());
+        up[i] += h;
+        down[i] -= h;
+        w.set_column(i, &((residual(&up) - residual(&down)) / (2.0 * h)));
+    }
+    let row = |r: usize| Vector3::from_iterator(w.row(r).iter().copied());
+    DVector::from_column_slice(row(0).cross(&row(1)).normalize().as_slice())
+}
+
 #[test]
 fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
     // Along the mechanism's one motion n (the null space of the closure Jacobian W = ∂h/∂q), a wrench F at
@@ -130,24 +152,7 @@ fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
     for q in [model.q0.clone(), turned] {
         let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
         assert_eq!(directions.count, 2, "a 1-DOF linkage's coupler is free in one direction");
-        let residual = |q: &DVector<f64>, data: &mut Data<Planar>| {
-            forward_kinematics(&model, data, q);
-            kinloop_linkage::loop_closure::loop_closure(&model, data);
-            data.closure_residual.clone()
-        };
-        let h = 1e-7;
-        let mut w = DMatrix::zeros(model.nc(), model.nq());
-        for i in 0..model.nq() {
-            let (mut up, mut down) = (q.clone(), q.clone());
-            up[i] += h;
-            down[i] -= h;
-            let d = (residual(&up, &mut data) - residual(&down, &mut data)) / (2.0 * h);
-            w.set_column(i, &d);
-        }
-        // W is 2×3 (a pin closes the loop of three joints): its null direction is its rows' cross product.
-        let row = |r: usize| Vector3::from_iterator(w.row(r).iter().copied());
-        let n = row(0).cross(&row(1)).normalize();
-        let n = DVector::from_column_slice(n.as_slice());
+        let n = four_bar_motion_by_differences(&model, &q);
         let j = jacobian_by_differences(&model, &q, op);
         let g = gravity_by_differences(&model, &q);
         let work_load = (j.transpose() * DVector::from_column_slice(load.as_slice())).dot(&n);
@@ -259,21 +264,7 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
             q[0] = (q[0] + 0.05).min(target);
             q = kinloop_linkage::assemble::assemble(&model, &q, 1e-13).unwrap().q;
         }
-        let residual = |q: &DVector<f64>, data: &mut Data<Planar>| {
-            forward_kinematics(&model, data, q);
-            kinloop_linkage::loop_closure::loop_closure(&model, data);
-            data.closure_residual.clone()
-        };
-        let h = 1e-7;
-        let mut w = DMatrix::zeros(model.nc(), model.nq());
-        for i in 0..model.nq() {
-            let (mut up, mut down) = (q.clone(), q.clone());
-            up[i] += h;
-            down[i] -= h;
-            w.set_column(i, &((residual(&up, &mut data) - residual(&down, &mut data)) / (2.0 * h)));
-        }
-        let row = |r: usize| Vector3::from_iterator(w.row(r).iter().copied());
-        let n = DVector::from_column_slice(row(0).cross(&row(1)).normalize().as_slice());
+        let n = four_bar_motion_by_differences(&model, &q);
         forward_kinematics(&model, &mut data, &q);
         kinloop_linkage::kinematics::forward_velocity(&model, &mut data, &n);
         let mass_along = 2.0 * kinetic_energy(&model, &data);

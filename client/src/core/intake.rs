@@ -34,6 +34,8 @@ pub(crate) struct SnapshotTerms<S: Space> {
     pub received_at: Duration,
     /// Client clock of the uplink the VE had used (0: none).
     pub uplink_time_s: f64,
+    /// Other users hold the linkage (the snapshot's table of them is not empty).
+    pub shared: bool,
     pub op_pose: OpPose<S>,
     pub op_twist: S::OpVec,
     /// Λ̂⁻¹ (physical units).
@@ -60,6 +62,7 @@ impl<S: Space> SnapshotTerms<S> {
             seq: 0,
             received_at: Duration::ZERO,
             uplink_time_s: 0.0,
+            shared: false,
             op_pose: OpPose::identity(),
             op_twist: S::OpVec::zero(),
             inverse_inertia: S::OpMat::zero(),
@@ -113,6 +116,7 @@ impl<S: Space> SnapshotTerms<S> {
         self.seq = snap.seq;
         self.received_at = received_at;
         self.uplink_time_s = snap.uplink_time_s;
+        self.shared = !snap.others.is_empty();
         Ok(())
     }
 

@@ -491,11 +491,17 @@ struct PathFollower<S: Space> {
     /// The forces at rest are felt where the model is, not where the snapshot was taken (false when the VE
     /// holds the linkage's weight at this OP: `Mapping::gravity_compensation` takes them out of b̂).
     rest_where_model_is: bool,
+    /// The grasp is pinned: the path is its positions only, and poses are looked for by position.
+    pinned: bool,
 }
 
 impl<S: Space> PathFollower<S> {
-    /// The welcome's path, if it has one and the configuration follows it.
-    fn of(welcome: &Welcome, config: &CoreConfig) -> Result<Option<Self>, CoreError> {
+    /// The welcome's path, if it has one and the configuration follows it; `pinned`: the grasp renders no
+    /// torque (`HapticCore::pinned`), so the model's angle is the linkage's business, not the hand's, and
+    /// the path is followed by position (`OpPath::positions_only`; by the whole pose, a model whose angle
+    /// had drifted found its point on the four-bar's coupler curve off where it was, and on a Falcon at
+    /// 500 ms one way the forces at rest taken there made 9 J).
+    fn of(welcome: &Welcome, config: &CoreConfig, pinned: bool) -> Result<Option<Self>, CoreError> {
         let op = &welcome.op;
         if !config.follow_path || op.path.is_empty() {
             return Ok(None);
@@ -507,6 +513,7 @@ impl<S: Space> PathFollower<S> {
         }
         let path = OpPath::new(poses, op.path_closed, welcome.scene.length_scale)?
             .with_rest_acceleration(op.path_rest_acceleration.clone())?;
+        let path = if pinned { path.positions_only()? } else { path };
         Ok(Some(PathFollower {
             path,
             model_segment: None,
@@ -514,7 +521,17 @@ impl<S: Space> PathFollower<S> {
             snapshot_tangent: None,
             snapshot_rest: S::OpVec::zero(),
             rest_where_model_is: !welcome.mapping.gravity_compensation,
+            pinned,
         }))
+    }
+
+    /// Where `pose` is looked for on the path (by position alone when pinned).
+    fn query(&self, pose: &OpPose<S>) -> OpPose<S> {
+        if self.pinned {
+            OpPose { position: pose.position, rotation: S::rot_identity() }
+        } else {
+            *pose
+        }
     }
 
     /// `tangent` as the frame sees it: a pinned grasp's frame has only linear directions (its angular
@@ -637,13 +654,15 @@ impl<S: Space> HapticCore<S> {
         let pose_len = OpPose::<S>::wire_len();
         let k = S::DIM;
         let uplink = Uplink::at_rest(0, k, pose_len);
+        // A pinned grasp renders no torque, whatever the device could (`Mapping::rigid_grasp`).
+        let limits = WrenchLimits {
+            max_torque_nm: if welcome.mapping.rigid_grasp { WrenchLimits::of(device).max_torque_nm } else { 0.0 },
+            ..WrenchLimits::of(device)
+        };
+        let path = PathFollower::of(welcome, &config, limits.max_torque_nm == 0.0)?;
         Ok(HapticCore {
             gains,
-            // A pinned grasp renders no torque, whatever the device could (`Mapping::rigid_grasp`).
-            limits: WrenchLimits {
-                max_torque_nm: if welcome.mapping.rigid_grasp { WrenchLimits::of(device).max_torque_nm } else { 0.0 },
-                ..WrenchLimits::of(device)
-            },
+            limits,
             boxes: Boxes::of(device, &welcome.op),
             scales,
             device_mass,
@@ -659,7 +678,7 @@ impl<S: Space> HapticCore<S> {
             model: LocalModel::new(config_shape),
             frame: ConstraintFrame::new(),
             local: ConstraintFrame::new(),
-            path: PathFollower::of(welcome, &config)?,
+            path,
             trust: 1.0,
             index: DeviceIndex::identity(scales.position),
             gate: OutputGate::new(&config.safety),
@@ -863,7 +882,7 @@ impl<S: Space> HapticCore<S> {
         self.model.update(&self.active);
         self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
         if let Some(f) = self.path.as_mut() {
-            let on = f.path.nearest(&self.active.op_pose, f.snapshot_segment);
+            let on = f.path.nearest(&f.query(&self.active.op_pose), f.snapshot_segment);
             f.snapshot_segment = Some(on.segment);
             f.snapshot_tangent = Some(on.tangent);
             f.snapshot_rest = on.rest_acceleration;
@@ -940,6 +959,11 @@ impl<S: Space> HapticCore<S> {
     /// its pose (followed whole, the Bennett coupler on a Falcon at 50 ms was pulled back to the end of its
     /// path and saturated).
     ///
+    /// Only for a user alone on the linkage: with others on it each local model runs ahead along its own OP's
+    /// path by its own hand, and models that disagree about the linkage's one coordinate pull the VE apart
+    /// (the four-bar's coupler and crank tip shared at 300 ms and 1 s one way, 2 and 4 users: saturated and
+    /// 5 cm from the devices; on the snapshots' tangents, stable).
+    ///
     /// Returns the model's point on the path, the fraction `w` and the turn as it acts on twists, or `None`
     /// when the snapshot's frame is used as it is.
     fn place_frame(&mut self) -> Option<(OpPose<S>, f64, S::OpMat)> {
@@ -949,9 +973,10 @@ impl<S: Space> HapticCore<S> {
         let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
         self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
         let pinned = self.pinned();
-        let follower = self.path.as_mut().filter(|_| !self.model.using_config() && self.trust < 1.0)?;
+        let alone = !self.active.shared;
+        let follower = self.path.as_mut().filter(|_| alone && !self.model.using_config() && self.trust < 1.0)?;
         let from = PathFollower::<S>::as_framed(&follower.snapshot_tangent?, pinned);
-        let on = follower.path.nearest(&pose, follower.model_segment);
+        let on = follower.path.nearest(&follower.query(&pose), follower.model_segment);
         follower.model_segment = Some(on.segment);
         // A model past the end of an open path (where the survey's walk stopped) is not where the path says:
         // the path counts as little there as a tangent that far from its pose.

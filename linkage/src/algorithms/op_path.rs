@@ -127,6 +127,18 @@ impl<S: Space> OpPath<S> {
         Ok(self)
     }
 
+    /// The path as a hand that holds the OP as through a pin sees it: positions only (identity orientations),
+    /// since it neither pushes on nor holds the angle, with the accelerations at rest kept in their linear
+    /// part (along the position's tangent). An error when the OP turns without moving somewhere along the way.
+    pub fn positions_only(&self) -> Result<Self, PathError> {
+        let poses = self.poses.iter().map(|p| OpPose { position: p.position, rotation: S::rot_identity() }).collect();
+        let path = OpPath::new(poses, self.closed, self.length_scale)?;
+        // a = α t̃: its linear part is α |t̃_lin| along the unit linear tangent.
+        let along =
+            (0..self.poses.len()).map(|k| self.rest_acceleration[k] * S::op_lin(&self.tangents[k]).norm()).collect();
+        path.with_rest_acceleration(along)
+    }
+
     /// The unit tangent at pose `k` (unit-consistent coordinates), along the path's order.
     pub fn tangent(&self, k: usize) -> S::OpVec {
         self.tangents[k]
@@ -303,6 +315,33 @@ mod tests {
         // From a hint far away the walk along the circle still gets there (no other branch to stop on).
         let from_hint = path.nearest(&pose, Some(300));
         assert!((from_hint.pose.position - p.pose.position).norm() < 1e-9);
+    }
+
+    /// A crank tip's circle seen through a pin: the same positions, no angle, and the acceleration at rest's
+    /// linear part (a tangential g cos a, the closed form for a point mass on a massless crank).
+    #[test]
+    fn a_pinned_hand_sees_the_path_of_positions_with_the_linear_part_of_its_accelerations() {
+        let (r, l, g) = (0.1, 0.1, 9.81);
+        let poses = circle(360, r);
+        let full = OpPath::<Planar>::new(poses, true, l).unwrap();
+        // θ̈ = −(g / r) cos a; the scaled tangent moves √(r² + L²) per radian.
+        let along = (0..360)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 360.0;
+                -(g / r) * a.cos() * (r * r + l * l).sqrt()
+            })
+            .collect();
+        let full = full.with_rest_acceleration(along).unwrap();
+        let pinned = full.positions_only().unwrap();
+        let a = 0.7f64;
+        let query = OpPose { position: Vector2::new(r * a.cos(), r * a.sin()), rotation: Planar::rot_identity() };
+        let p = pinned.nearest(&query, None);
+        assert!(p.distance < 1e-4 && p.pose.rotation == Planar::rot_identity(), "{p:?}");
+        assert!(p.tangent[2].abs() < 1e-12);
+        let expected = Vector2::new(-a.sin(), a.cos()) * (-g * a.cos());
+        let got = Vector2::new(p.rest_acceleration[0], p.rest_acceleration[1]);
+        assert!((got - expected).norm() < 1e-3 * g, "{got:?} vs {expected:?}");
+        assert_eq!(p.rest_acceleration[2], 0.0);
     }
 
     #[test]
