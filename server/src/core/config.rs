@@ -281,11 +281,12 @@ pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.1;
 /// The one-way delays (s) over which the VE leads by default ([`VeConfig::coupling_lead_delays_s`]). Below
 /// 75 ms the VE that follows is already within 2.3 mm of the testbed's soft tour at 50 ms, and the lead's
 /// guesses tipped four whole tours on the testbed over the energy criterion at its floor (27 mJ made on 27 mJ
-/// of flow) and the six-bar's light link5 with 30 ms of jitter (1.7 J); beyond 400 ms they move the local
+/// of flow) and the six-bar's light link5 with 30 ms of jitter (1.7 J); beyond 400 ms they moved the local
 /// model's walls on the four-bar's coupler further from where they were set, and firm and poking hands held
-/// it at the device's limit at 500 ms (12 more whole tours unstable). Leading at every delay, 35 of the 864
-/// whole tours of the sweep are unstable against 18 following; within these delays, 18 (the same sessions at
-/// 1 s, where no lead acts).
+/// it at the device's limit at 500 ms (12 more whole tours unstable, while the four-bar's local model was held
+/// to its snapshot's tangent). Since the four-bar's model follows its path, leading by up to 100 ms at every
+/// delay tips only the testbed's whole tours at 50 ms (2 of the lead rows' 168), so the upper edge is
+/// conservative; it was not chosen again.
 pub const DEFAULT_COUPLING_LEAD_DELAYS_S: [f64; 2] = [0.075, 0.4];
 
 impl Default for VeConfig {
