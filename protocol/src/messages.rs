@@ -36,7 +36,7 @@ use crate::shape::{SceneKind, SessionShape};
 pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
-/// poses are 28 kB, within a control frame with the rest of the welcome.
+/// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.
 pub const MAX_PATH_POSES: usize = 512;
 
 /// TLS application protocol name both sides offer; a peer offering anything else fails the QUIC handshake.
@@ -260,8 +260,8 @@ pub struct OpSummary {
     pub inverse_mass_max: f64,
     /// Largest inverse rotational effective inertia over the reach (1/(kg·m²)).
     pub inverse_rotational_inertia_max: f64,
-    /// On a linkage of one degree of freedom, every pose the OP can take, in order along its one path
-    /// (world poses, `[x, y, θ]` or `[x, y, z, qw, qx, qy, qz]` each; at most [`MAX_PATH_POSES`]); empty
+    /// On a linkage of one degree of freedom, the poses the OP can take, in order along its one path, a
+    /// survey step apart (world poses, `[x, y, θ]` or `[x, y, z, qw, qx, qy, qz]` each; at most [`MAX_PATH_POSES`]); empty
     /// otherwise. The client's local model holds the OP to it far from where a snapshot was linearized.
     pub path: Vec<f64>,
     /// The OP's acceleration at rest at each pose of `path` (gravity, springs, actuators), along the path's

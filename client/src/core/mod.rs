@@ -533,21 +533,6 @@ impl<S: Space> PathFollower<S> {
             *pose
         }
     }
-
-    /// `tangent` as the frame sees it: a pinned grasp's frame has only linear directions (its angular
-    /// axes are neither free nor constrained), so only the tangent's linear part turns it.
-    fn as_framed(tangent: &S::OpVec, pinned: bool) -> S::OpVec {
-        if !pinned {
-            return *tangent;
-        }
-        let linear = S::op_lin(tangent);
-        let norm = linear.norm();
-        if norm > 1e-9 {
-            S::op(linear * (1.0 / norm), S::Angular::zero())
-        } else {
-            S::OpVec::zero()
-        }
-    }
 }
 
 /// One memo per stream of poses the core reads or writes on the wire (see `Space::RotParamsMemo`): each
@@ -972,17 +957,18 @@ impl<S: Space> HapticCore<S> {
         let linear = (pose.position - at.position).norm();
         let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
         self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
-        let pinned = self.pinned();
         let alone = !self.active.shared;
         let follower = self.path.as_mut().filter(|_| alone && !self.model.using_config() && self.trust < 1.0)?;
-        let from = PathFollower::<S>::as_framed(&follower.snapshot_tangent?, pinned);
+        // A pinned grasp's path is its positions (`PathFollower::of`): its tangents are linear, as its frame's
+        // directions are.
+        let from = follower.snapshot_tangent?;
         let on = follower.path.nearest(&follower.query(&pose), follower.model_segment);
         follower.model_segment = Some(on.segment);
         // A model past the end of an open path (where the survey's walk stopped) is not where the path says:
         // the path counts as little there as a tangent that far from its pose.
         let reach = self.config.linearization_reach * l;
         let along = (1.0 - self.trust) * linearization_trust(on.past_end, reach);
-        let turn = turn_between::<S>(&from, &PathFollower::<S>::as_framed(&on.tangent, pinned), along);
+        let turn = turn_between::<S>(&from, &on.tangent, along);
         let twist_turn = twist_turn::<S>(&turn, l);
         self.local = self.frame.turned(&turn, l);
         if follower.rest_where_model_is {
