@@ -467,6 +467,34 @@ fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
     assert_eq!(led_50.device_op_rms_m, following_50.device_op_rms_m);
 }
 
+/// Issue 22's tracking goals on the motion the issue measured them with (the soft hand on a 5 mm circle, a
+/// turn every 2 s): the testbed's OP within 3 mm (RMS) of the device at 100 ms one way and within 25 mm at
+/// 1 s, both stable. At 1 s the OP still lags as a VE that hears the hand a second late must (no nearer than
+/// half the device's own motion in that second), and the touring hand's distance there is held up by the
+/// same floor: the device moves more than 25 mm (RMS) in the second the VE has not heard of, and the OP is
+/// no nearer than nine tenths of that.
+#[test]
+fn the_testbed_meets_the_tracking_goals_on_the_issues_circle_and_the_tour_is_held_by_its_unheard_floor() {
+    use kinloop::experiments::latency::{
+        goal_circle, measure_intending, measure_with, Lead, Loss, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
+    };
+    use kinloop_client::user::Intent;
+    let network = Network { jitter_ms: 0.0, loss: Loss::None };
+    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    let circling = |delay_ms: f64| {
+        measure_intending(&at(delay_ms), Intent::Path(goal_circle()), 10.0, None, Lead::default()).unwrap()
+    };
+    let (near, far) = (circling(100.0), circling(1000.0));
+    assert!(near.verdict.stable && far.verdict.stable, "{:?} {:?}", near.verdict, far.verdict);
+    assert!(near.device_op_rms_m <= GOAL_RMS_100MS_M, "100 ms: {} m", near.device_op_rms_m);
+    assert!(far.device_op_rms_m <= GOAL_RMS_1S_M, "1 s: {} m", far.device_op_rms_m);
+    assert!(far.device_op_rms_m >= 0.5 * far.device_unheard_rms_m, "1 s: {far:?}");
+    let touring = measure_with(&at(1000.0), 10.0, None).unwrap();
+    assert!(touring.verdict.stable);
+    assert!(touring.device_unheard_rms_m > GOAL_RMS_1S_M, "unheard {} m", touring.device_unheard_rms_m);
+    assert!(touring.device_op_rms_m >= 0.9 * touring.device_unheard_rms_m, "{touring:?}");
+}
+
 /// A poke through the Watt six-bar at 100 ms one way with 30 ms of jitter on a FIFO link (the latency
 /// sweep's draw): packets leave the queue in bursts, and a VE that followed the newest uplink saw the jab's
 /// poses arrive all at once, its PD target jumping centimetres in a tick: 1 J made beyond the hand's work,

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use kinloop_client::device::DevicePreset;
-use kinloop_client::user::HandKind;
+use kinloop_client::user::{HandKind, HandSpec};
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
 
 use kinloop_server::view::ViewConfig;
@@ -108,7 +108,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         paper_push: args.paper_push,
         device: args.device,
         first_op: args.op.clone(),
-        hand: args.hand,
+        hand: args.hand.map(HandSpec::touring),
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {

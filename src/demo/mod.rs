@@ -80,8 +80,8 @@ pub struct DemoOptions {
     pub device: Option<DevicePreset>,
     /// The first user's OP (`None`: the scene's first; the others follow in turn from it).
     pub first_op: Option<String>,
-    /// Every user's hand (`None`: relaxed and firm in turn).
-    pub hand: Option<HandKind>,
+    /// Every user's hand and what it intends (`None`: relaxed and firm in turn, touring the reach).
+    pub hand: Option<HandSpec>,
 }
 
 impl DemoOptions {
@@ -253,9 +253,12 @@ fn user_of(options: &DemoOptions, i: usize) -> (String, UserSpec) {
     if options.paper_push {
         return (ops[0].name.clone(), UserSpec::Constant(user_wrench(options.scene.kind, options.users)));
     }
-    let hand = options.hand.unwrap_or(if i.is_multiple_of(2) { HandKind::Soft } else { HandKind::Firm });
+    let hand = options
+        .hand
+        .clone()
+        .unwrap_or_else(|| HandSpec::touring(if i.is_multiple_of(2) { HandKind::Soft } else { HandKind::Firm }));
     let first = options.first_op.as_ref().and_then(|name| ops.iter().position(|o| &o.name == name)).unwrap_or(0);
-    (ops[(first + i) % ops.len()].name.clone(), UserSpec::Hand(HandSpec::touring(hand)))
+    (ops[(first + i) % ops.len()].name.clone(), UserSpec::Hand(hand))
 }
 
 /// Runs the demo: server and clients in real time, then the summary, charts and `summary.json` in

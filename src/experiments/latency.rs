@@ -22,7 +22,8 @@
 //! VE's OP (felt vs rendered) and the handle's against the same hand's without delay (how far the network
 //! moved the feel, [`fill_felt_changes`]). The [`model_update`] rows add the local model's update: the
 //! free pull at a fixed 200 ms against the default, with and without its energy tank; the [`lead`] rows a VE
-//! that runs ahead of the hand (not default), the only way below the device-OP floor. A (scene, hand,
+//! that runs ahead of the hand (not default), the only way below the device-OP floor; and the testbed's soft
+//! hand on the issue's own 5 mm circle ([`goal_circle`]) at each delay, the motion its goals were set with. A (scene, hand,
 //! method) **first fails** at the smallest delay where some network condition of the grid is unstable.
 
 use std::time::Duration;
@@ -32,7 +33,7 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 use kinloop_client::device::presets::DevicePreset;
-use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_client::user::{HandKind, HandSpec, Intent, PathSpec, UserSpec};
 use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
 use kinloop_server::core::VeConfig;
 
@@ -65,6 +66,13 @@ pub const BURST_LENGTH: f64 = 10.0;
 pub const GOAL_RMS_100MS_M: f64 = 0.003;
 /// ... and at most this at 1 s one-way (m).
 pub const GOAL_RMS_1S_M: f64 = 0.025;
+/// The motion issue 22 measured the baseline of those goals with (`--user path:circle:0.005,2`: the soft hand
+/// on a 5 mm circle through its grasp, a turn every 2 s; device-OP RMS 1.4 mm at 100 ms then). The sweep's
+/// touring hand moves up to [`kinloop_client::user::hand::TOUR_SPEED_M_S`] between waypoints, about 4 cm in
+/// the second a VE 1 s away has not heard of, more than the 1 s goal: the goals are judged on both motions.
+pub fn goal_circle() -> PathSpec {
+    PathSpec::Circle { radius: 0.005, period_s: 2.0 }
+}
 /// Issue 22, item 3: the passivity layer is on by default when, without delay, the device-OP distance with it
 /// is within this factor of the distance without it (mean over the 0 ms points of the grid).
 pub const GOAL_PASSIVITY_COST_AT_0MS: f64 = 1.10;
@@ -288,10 +296,21 @@ impl Lead {
 
 /// As [`measure_with`] with the VE leading each coupling's target as `lead` says (the [`lead`] rows).
 pub fn measure_leading(p: &Point, seconds: f64, edit: Option<CoreEdit>, lead: Lead) -> Result<Measured> {
+    measure_intending(p, Intent::Tour, seconds, edit, lead)
+}
+
+/// As [`measure_leading`] with the point's hand intending `intent` instead of touring the OP's reach.
+pub fn measure_intending(
+    p: &Point,
+    intent: Intent,
+    seconds: f64,
+    edit: Option<CoreEdit>,
+    lead: Lead,
+) -> Result<Measured> {
     let (scene_name, op, _) = TARGETS[p.target];
     let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
     let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
-    client.user = UserSpec::Hand(HandSpec::touring(p.hand));
+    client.user = UserSpec::Hand(HandSpec { kind: p.hand, intent });
     client.configure = edit;
     let client = client.with_link(p.link());
     let ve = VeConfig {
@@ -443,7 +462,7 @@ fn clean(all: &[Measured], target: usize, hand: HandKind, passivity: bool, delay
     pair(all, target, hand, passivity).find(|m| m.point.network.is_clean() && m.point.delay_ms == delay_ms)
 }
 
-fn tracking_charts(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()> {
+fn tracking_charts(out: &mut Output, grid: &Grid, all: &[Measured], circle: &[Measured]) -> Result<()> {
     let axis = "one-way delay (ms)";
     let rms = |m: &Measured| (m.point.delay_ms, m.device_op_rms_m * 1e3);
     // The overview: the soft hand on every scene, clean network.
@@ -475,11 +494,18 @@ fn tracking_charts(out: &mut Output, grid: &Grid, all: &[Measured]) -> Result<()
             floor,
         ));
     }
+    if !circle.is_empty() {
+        overview = overview.with(Series::line(
+            format!("{} soft on the issue's 5 mm circle, {}", TARGETS[0].2, method(default_passivity())),
+            circle.iter().map(rms).collect(),
+        ));
+    }
     for passivity in [false, true] {
         let unstable = grid
             .targets
             .iter()
             .flat_map(|&t| grid.delays_ms.iter().filter_map(move |&d| clean(all, t, soft, passivity, d)))
+            .chain(circle.iter().filter(|m| m.point.passivity == passivity))
             .filter(|m| !m.verdict.stable)
             .map(rms)
             .collect();
@@ -631,7 +657,19 @@ pub fn run(options: &Options) -> Result<Report> {
     let mut all = sweep("latency", &points, options.threads, options.progress, |p| measure(p, seconds))?;
     let references: Vec<Measured> = all.iter().filter(|m| is_undelayed_reference(m, &m.point)).cloned().collect();
     fill_felt_changes(&mut all, &references);
-    tracking_charts(&mut out, &grid, &all)?;
+    // The goals' other motion: the testbed's soft hand on the issue's circle, defaults, clean network.
+    let circle_points: Vec<Point> = if grid.targets.contains(&0) {
+        let network = Network { jitter_ms: 0.0, loss: Loss::None };
+        let at =
+            |delay_ms| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: default_passivity() };
+        grid.delays_ms.iter().map(|&d| at(d)).collect()
+    } else {
+        Vec::new()
+    };
+    let circle = sweep("latency: the issue's circle", &circle_points, options.threads, options.progress, |p| {
+        measure_intending(p, Intent::Path(goal_circle()), seconds, None, Lead::default())
+    })?;
+    tracking_charts(&mut out, &grid, &all, &circle)?;
     stability_chart(&mut out, &grid, &all)?;
     energy_chart(&mut out, &grid, &all)?;
     impedance_chart(
@@ -713,6 +751,13 @@ pub fn run(options: &Options) -> Result<Report> {
     let (rms_100, rms_1000) = (goal_rms(100.0, default), goal_rms(1000.0, default));
     let floor = |delay_ms: f64| testbed_soft_mm(delay_ms, default, |m| m.device_unheard_rms_m);
     let (floor_100, floor_1000) = (floor(100.0), floor(1000.0));
+    let on_circle = |delay_ms: f64| circle.iter().find(|m| m.point.delay_ms == delay_ms);
+    let circle_mm =
+        |delay_ms: f64, metres: fn(&Measured) -> f64| on_circle(delay_ms).map(|m| round(metres(m) * 1e3, 2));
+    let (circle_100, circle_1000) = (circle_mm(100.0, |m| m.device_op_rms_m), circle_mm(1000.0, |m| m.device_op_rms_m));
+    let circle_goal_met = |rms: Option<f64>, goal_m: f64, delay_ms: f64| {
+        rms.zip(on_circle(delay_ms)).map(|(r, m)| m.verdict.stable && r <= goal_m * 1e3)
+    };
     // Item 3: what the passivity layer costs without delay, over every 0 ms point of the grid.
     let mean_rms_at_0ms = |passivity: bool| {
         let at_0: Vec<f64> = all
@@ -741,6 +786,15 @@ pub fn run(options: &Options) -> Result<Report> {
         "testbed_soft_device_op_rms_mm_at_1000ms_goal_met": rms_1000.map(|r| r <= GOAL_RMS_1S_M * 1e3),
         "testbed_soft_device_op_rms_mm_with_passivity_off": {"100ms": goal_rms(100.0, false), "1000ms": goal_rms(1000.0, false)},
         "testbed_soft_device_unheard_rms_mm": {"100ms": floor_100, "1000ms": floor_1000},
+        "testbed_soft_issue_circle": {
+            "motion": "the soft hand on issue 22's own measured motion, --user path:circle:0.005,2 (a 5 mm circle, a turn every 2 s)",
+            "device_op_rms_mm": {"100ms": circle_100, "1000ms": circle_1000},
+            "device_unheard_rms_mm": {"100ms": circle_mm(100.0, |m| m.device_unheard_rms_m), "1000ms": circle_mm(1000.0, |m| m.device_unheard_rms_m)},
+            "goal_met_at_100ms": circle_goal_met(circle_100, GOAL_RMS_100MS_M, 100.0),
+            "goal_met_at_1000ms": circle_goal_met(circle_1000, GOAL_RMS_1S_M, 1000.0),
+            "unstable_points": circle.iter().filter(|m| !m.verdict.stable).count(),
+            "points": circle.iter().map(point_json).collect::<Vec<_>>(),
+        },
         "device_unheard_rms_means": "how far the device had moved since the pose the VE had heard of: the device-OP distance of a VE sitting exactly on the device as heard, which a VE that does not run ahead of the hand cannot beat on average",
     });
     let answer = format!(
@@ -749,7 +803,7 @@ pub fn run(options: &Options) -> Result<Report> {
          on / off; goal at most {GOAL_PASSIVITY_COST_AT_0MS}). First failing delay per scene, hand and method (any \
          jitter and loss of the grid): {}. Testbed, soft hand, clean network, defaults: device-OP RMS {} mm at 100 ms \
          (goal 3), {} mm at 1 s (goal 25); the device had moved {} mm and {} mm (RMS) from the pose the VE had heard \
-         of.",
+         of. The same hand on the issue's 5 mm circle: {} mm at 100 ms, {} mm at 1 s ({} of {} delays unstable).",
         unstable(default),
         per_method(default),
         unstable(!default),
@@ -760,6 +814,10 @@ pub fn run(options: &Options) -> Result<Report> {
         rms_1000.map_or("n/a".into(), |r| r.to_string()),
         floor_100.map_or("n/a".into(), |r| r.to_string()),
         floor_1000.map_or("n/a".into(), |r| r.to_string()),
+        circle_100.map_or("n/a".into(), |r| r.to_string()),
+        circle_1000.map_or("n/a".into(), |r| r.to_string()),
+        circle.iter().filter(|m| !m.verdict.stable).count(),
+        circle.len(),
     );
     let results = json!({
         "answer": format!("{answer} {} {}", model_update["answer"].as_str().unwrap_or_default(), lead.answer),
@@ -788,7 +846,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Network delay, jitter and loss with default settings, with and without the passivity controller",
-        "about 1 to 2 minutes on this 2-core machine shared with other work (1728 sessions of 10 s and 144 model-update sessions, --threads 2); --quick (40 sessions) 2 to 3 s",
+        "about 1 to 2 minutes on this 2-core machine shared with other work (1728 sessions of 10 s, 144 model-update sessions and 8 on the issue's circle, --threads 2); --quick (40 sessions) 2 to 3 s",
         results,
     )
 }
@@ -799,6 +857,8 @@ pub const LIVE_DELAYS_MS: [f64; 4] = [100.0, 300.0, 500.0, 1000.0];
 pub const LIVE_JITTER_MS: f64 = 10.0;
 /// Devices of the real-time run.
 pub const LIVE_DEVICES: [DevicePreset; 2] = [DevicePreset::Paper, DevicePreset::Falcon];
+/// The hand of the real-time run's circle rows.
+const LIVE_CIRCLE_HAND: &str = "soft on path:circle:0.005,2";
 /// The real-time run's bound on ticks clamped at the device's limit (issue 22's goal).
 pub const LIVE_CLAMPED_BOUND: f64 = 0.05;
 /// ... and on the loops' closure (m).
@@ -813,6 +873,8 @@ pub struct LivePoint {
     pub device: DevicePreset,
     /// One-way delay (ms).
     pub delay_ms: f64,
+    /// The soft hand on the issue's circle ([`goal_circle`]) instead of the demo's default hand and tour.
+    pub on_circle: bool,
 }
 
 /// What a real-time session measured.
@@ -824,6 +886,8 @@ pub struct LiveMeasured {
     pub device: &'static str,
     /// One-way delay (ms).
     pub delay_ms: f64,
+    /// The hand: the demo's default, or the soft hand on the issue's circle.
+    pub hand: &'static str,
     /// VE state restores.
     pub ve_restores: u64,
     /// Snapshots the VE withheld as out of the wire's range.
@@ -851,7 +915,8 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
         seed: 0x11fe + p.delay_ms as u64,
         ..LinkConfig::default()
     };
-    let o = super::renderability::demo_options(scene, op, p.device, None, link, seconds, scratch)?;
+    let hand = p.on_circle.then(|| HandSpec { kind: HandKind::Soft, intent: Intent::Path(goal_circle()) });
+    let o = super::renderability::demo_options(scene, op, p.device, hand, link, seconds, scratch)?;
     let report = crate::demo::run(&o).with_context(|| format!("{scene}:{op} {} {} ms", p.device.name(), p.delay_ms))?;
     let s = &report.summary;
     let counts = super::renderability::LiveCounts::of(&report)?;
@@ -861,6 +926,7 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
         target: format!("{scene}:{op}"),
         device: p.device.name(),
         delay_ms: p.delay_ms,
+        hand: if p.on_circle { LIVE_CIRCLE_HAND } else { "default (soft, touring)" },
         ve_restores: s.ve_restores,
         snapshots_withheld: s.snapshots_withheld,
         max_closure_error_m: s.max_closure_error,
@@ -873,7 +939,8 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
 
 /// `latency-live`: issue 22's real-process goal, three scenes × two devices × one-way delay {100, 300, 500,
 /// 1000 ms} with 10 ms jitter each way, each a 10 s real-time session with default flags (3 s, testbed only,
-/// with `--quick`), one at a time. A point meets the goal with no VE restore, no withheld snapshot, nothing
+/// with `--quick`), one at a time, and the testbed on `sim:paper` with the soft hand on the issue's circle
+/// ([`goal_circle`]) at each delay, where its tracking goals are read. A point meets the goal with no VE restore, no withheld snapshot, nothing
 /// non-finite, closure within 1e-6 m and at most 5 % of the client's ticks clamped at the device's limit.
 pub fn run_live(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency-live", options)?;
@@ -882,9 +949,13 @@ pub fn run_live(options: &Options) -> Result<Report> {
     for &target in targets {
         for device in LIVE_DEVICES {
             for delay_ms in LIVE_DELAYS_MS {
-                points.push(LivePoint { target, device, delay_ms });
+                points.push(LivePoint { target, device, delay_ms, on_circle: false });
             }
         }
+    }
+    // Issue 22's tracking goals on the motion it measured them with, in real processes.
+    for delay_ms in LIVE_DELAYS_MS {
+        points.push(LivePoint { target: 0, device: DevicePreset::Paper, delay_ms, on_circle: true });
     }
     let seconds = options.session_seconds(SECONDS, 3.0);
     let scratch = std::env::temp_dir().join("kinloop-latency-live");
@@ -892,6 +963,7 @@ pub fn run_live(options: &Options) -> Result<Report> {
     let rows: Vec<String> = targets
         .iter()
         .flat_map(|&t| LIVE_DEVICES.iter().map(move |d| format!("{} {}", TARGETS[t].2, d.name())))
+        .chain(std::iter::once(format!("{} {} circle", TARGETS[0].2, DevicePreset::Paper.name())))
         .collect();
     let columns: Vec<String> = LIVE_DELAYS_MS.iter().map(|d| format!("{d} ms")).collect();
     let mut clamped =
@@ -910,9 +982,10 @@ pub fn run_live(options: &Options) -> Result<Report> {
         .filter(|m| !m.meets)
         .map(|m| {
             format!(
-                "{} {} {} ms: {} restores, {:.1} % clamped, closure {:.1e} m",
+                "{} {} {} {} ms: {} restores, {:.1} % clamped, closure {:.1e} m",
                 m.target,
                 m.device,
+                m.hand,
                 m.delay_ms,
                 m.ve_restores,
                 m.clamped_fraction * 100.0,
@@ -920,14 +993,24 @@ pub fn run_live(options: &Options) -> Result<Report> {
             )
         })
         .collect();
+    let circle_mm = |delay_ms: f64| {
+        all.iter().find(|m| m.hand == LIVE_CIRCLE_HAND && m.delay_ms == delay_ms).and_then(|m| m.device_op_rms_mm)
+    };
+    let (circle_100, circle_1000) = (circle_mm(100.0), circle_mm(1000.0));
     let answer = format!(
-        "{meeting} of {} real-time sessions meet the goal (no VE restore, closure <= 1e-6 m, <= 5 % of ticks clamped){}",
+        "{meeting} of {} real-time sessions meet the goal (no VE restore, closure <= 1e-6 m, <= 5 % of ticks clamped){}. \
+         Testbed, sim:paper, {LIVE_CIRCLE_HAND}: device-OP RMS {} mm at 100 ms (goal 3), {} mm at 1 s (goal 25).",
         all.len(),
-        if failing.is_empty() { String::new() } else { format!("; not: {}", failing.join("; ")) }
+        if failing.is_empty() { String::new() } else { format!("; not: {}", failing.join("; ")) },
+        circle_100.map_or("n/a".into(), |r| format!("{r:.2}")),
+        circle_1000.map_or("n/a".into(), |r| format!("{r:.2}")),
     );
     let results = json!({
         "answer": answer,
         "goal_met": meeting == all.len(),
+        "testbed_issue_circle_device_op_rms_mm": {"100ms": circle_100, "1000ms": circle_1000},
+        "testbed_issue_circle_tracking_goal_met": circle_100.zip(circle_1000)
+            .map(|(a, b)| a <= GOAL_RMS_100MS_M * 1e3 && b <= GOAL_RMS_1S_M * 1e3),
         "setup": {
             "session": "kinloop demo: a server and one client on real threads over loopback QUIC through the emulated link, default flags (the scene's OP, the device preset, the client's default hand)",
             "seconds": seconds,
@@ -938,7 +1021,7 @@ pub fn run_live(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Issue 22's real-process goal: three scenes x two devices x delay, real time",
-        "about 5 minutes (24 sessions of 10 s, one at a time); --quick about 30 s",
+        "about 6 minutes (28 sessions of 10 s, one at a time); --quick about 30 s",
         results,
     )
 }

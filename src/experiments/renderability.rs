@@ -243,7 +243,7 @@ pub fn evaluate_live(point: &Point, seconds: f64, scratch: &std::path::Path) -> 
 /// The demo session that runs `point` for `seconds` with default flags, records under `scratch`.
 pub fn live_options(point: &Point, seconds: f64, scratch: &std::path::Path) -> Result<crate::demo::DemoOptions> {
     let link = point.network.link(0x5eed);
-    demo_options(&point.scene, &point.op, point.device, Some(point.hand), link, seconds, scratch)
+    demo_options(&point.scene, &point.op, point.device, Some(HandSpec::touring(point.hand)), link, seconds, scratch)
 }
 
 /// A `kinloop demo` session of one user holding built-in `scene`'s `op` on `device` with `hand` (`None`: the
@@ -253,7 +253,7 @@ pub fn demo_options(
     scene: &str,
     op: &str,
     device: DevicePreset,
-    hand: Option<HandKind>,
+    hand: Option<HandSpec>,
     link: LinkConfig,
     seconds: f64,
     scratch: &std::path::Path,
