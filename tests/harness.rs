@@ -447,7 +447,7 @@ fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_t
     );
 }
 
-/// Where the VE leads by default (75 to 400 ms one way) the OP is nearer the device than a VE that follows
+/// Where the VE leads by default (from 75 ms one way) the OP is nearer the device than a VE that follows
 /// what it hears can be: the testbed's soft tour at 100 ms one way is within issue 22's 3 mm (RMS) led and
 /// not without the lead, where it is no nearer than the device's own motion since the pose the VE heard of.
 /// Below the window (50 ms) the default follows: the same as no lead.

@@ -375,7 +375,7 @@ mod tests {
         }
     }
 
-    /// The delays a lead acts over: 75 to 400 ms by default, FROM..UNTIL in milliseconds, UNTIL optional;
+    /// The delays a lead acts over: from 75 ms on by default (the default's `75..` reads back as itself), FROM..UNTIL in milliseconds, UNTIL optional;
     /// anything else is refused naming the flag.
     #[test]
     fn lead_delays_flag_sets_where_the_ve_leads() {
@@ -384,7 +384,9 @@ mod tests {
             Cli::try_parse_from(args).map(|cli| ve_config(&cli).coupling_lead_delays_s)
         };
         let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12;
-        assert!(close(delays(&[]).unwrap(), [0.075, 0.4]));
+        let default = delays(&[]).unwrap();
+        assert!((default[0] - DEFAULT_COUPLING_LEAD_DELAYS_S[0]).abs() < 1e-12, "{default:?}");
+        assert_eq!(default[1], DEFAULT_COUPLING_LEAD_DELAYS_S[1]);
         assert!(close(delays(&["--lead-delays-ms", "0..1000"]).unwrap(), [0.0, 1.0]));
         assert_eq!(delays(&["--lead-delays-ms", "50.."]).unwrap(), [0.05, f64::INFINITY]);
         for bad in ["100", "300..100", "-5..10", "a..b", "NaN..1", "..", "5..inf"] {

@@ -279,7 +279,7 @@ impl Lead {
         Lead { max_s, delays_s: [0.0, f64::INFINITY] }
     }
 
-    /// Its name in charts and summaries: "no lead", "lead <= 100 ms", "lead <= 100 ms at 75-400 ms".
+    /// Its name in charts and summaries: "no lead", "lead <= 100 ms", "lead <= 100 ms from 75 ms".
     pub fn name(&self) -> String {
         if self.max_s <= 0.0 {
             return "no lead".into();

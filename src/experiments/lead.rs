@@ -5,7 +5,7 @@
 //! device has moved about 5 mm (RMS) at 100 ms one way, and 42 mm at 1 s, since the pose the VE heard of
 //! (`device_unheard_rms_mm`), above the goals of 3 and 25 mm. Only a VE that runs ahead of the hand
 //! can be nearer. `VeConfig::coupling_lead_max_s` (`kinloop-server --lead-max-ms`, 100 ms by default, over the
-//! one-way delays of `VeConfig::coupling_lead_delays_s`, 75 to 400 ms by default) aims each
+//! one-way delays of `VeConfig::coupling_lead_delays_s`, from 75 ms on by default) aims each
 //! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap
 //! and no longer than the heard motion supports (`Coupling::trusted_lead_s`: the twist's recent rates of
 //! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
