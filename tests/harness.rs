@@ -467,6 +467,28 @@ fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
     assert_eq!(led_50.device_op_rms_m, following_50.device_op_rms_m);
 }
 
+/// The default lead has no upper edge: at 500 ms and 1 s one way the testbed's soft tour is stable led, and
+/// its OP nearer the device than a VE that follows what it hears (by at least 3 %; 13 % and 6 % when this was
+/// written), while the OP that follows is no nearer than nine tenths of the device's own unheard motion.
+#[test]
+fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
+    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, Loss, Network, Point};
+    let network = Network { jitter_ms: 0.0, loss: Loss::None };
+    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    for delay_ms in [500.0, 1000.0] {
+        let led = measure_with(&at(delay_ms), 10.0, None).unwrap();
+        let following = measure_leading(&at(delay_ms), 10.0, None, Lead::NONE).unwrap();
+        assert!(led.verdict.stable && following.verdict.stable, "{delay_ms} ms");
+        assert!(
+            led.device_op_rms_m < 0.97 * following.device_op_rms_m,
+            "{delay_ms} ms: led {} m, following {} m",
+            led.device_op_rms_m,
+            following.device_op_rms_m
+        );
+        assert!(following.device_op_rms_m > 0.9 * following.device_unheard_rms_m, "{delay_ms} ms: {following:?}");
+    }
+}
+
 /// Issue 22's tracking goals on the motion the issue measured them with (the soft hand on a 5 mm circle, a
 /// turn every 2 s): the testbed's OP within 3 mm (RMS) of the device at 100 ms one way and within 25 mm at
 /// 1 s, both stable. At 1 s the OP still lags as a VE that hears the hand a second late must (no nearer than
