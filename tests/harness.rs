@@ -423,10 +423,9 @@ fn tangent_only() -> kinloop::harness::CoreEdit {
 /// with no second saturated past a tenth, and at 500 ms the reach no longer matters.
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_tangent() {
-    use kinloop::experiments::latency::{measure_with, Loss, Network, Point, TARGETS};
+    use kinloop::experiments::latency::{measure_with, Network, Point, TARGETS};
     let target = TARGETS.iter().position(|t| t.0 == "fourbar-crank-rocker").unwrap();
-    let network = Network { jitter_ms: 0.0, loss: Loss::None };
-    let at = |delay_ms: f64| Point { target, hand: HandKind::Firm, delay_ms, network, passivity: true };
+    let at = |delay_ms: f64| Point { target, hand: HandKind::Firm, delay_ms, network: Network::CLEAN, passivity: true };
     let session = |delay_ms: f64, edit| measure_with(&at(delay_ms), 40.0, edit).unwrap().verdict;
     let on_path = session(1000.0, None);
     assert!(on_path.stable && on_path.worst_saturation <= 0.1, "on the path at 1 s: {on_path:?}");
@@ -447,15 +446,20 @@ fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_t
     );
 }
 
+/// The latency grid's testbed session with the soft hand on a clean network, defaults, at `delay_ms` one way.
+fn testbed_soft(delay_ms: f64) -> kinloop::experiments::latency::Point {
+    use kinloop::experiments::latency::{Network, Point};
+    Point { target: 0, hand: HandKind::Soft, delay_ms, network: Network::CLEAN, passivity: true }
+}
+
 /// Where the VE leads by default (from 75 ms one way) the OP is nearer the device than a VE that follows
 /// what it hears can be: the testbed's soft tour at 100 ms one way is within issue 22's 3 mm (RMS) led and
 /// not without the lead, where it is no nearer than the device's own motion since the pose the VE heard of.
 /// Below the window (50 ms) the default follows: the same as no lead.
 #[test]
 fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
-    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, Loss, Network, Point, GOAL_RMS_100MS_M};
-    let network = Network { jitter_ms: 0.0, loss: Loss::None };
-    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, GOAL_RMS_100MS_M};
+    let at = testbed_soft;
     let led = measure_with(&at(100.0), 10.0, None).unwrap();
     let following = measure_leading(&at(100.0), 10.0, None, Lead::NONE).unwrap();
     assert!(led.verdict.stable && following.verdict.stable);
@@ -472,9 +476,8 @@ fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
 /// written), while the OP that follows is no nearer than nine tenths of the device's own unheard motion.
 #[test]
 fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
-    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, Loss, Network, Point};
-    let network = Network { jitter_ms: 0.0, loss: Loss::None };
-    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    use kinloop::experiments::latency::{measure_leading, measure_with, Lead};
+    let at = testbed_soft;
     for delay_ms in [500.0, 1000.0] {
         let led = measure_with(&at(delay_ms), 10.0, None).unwrap();
         let following = measure_leading(&at(delay_ms), 10.0, None, Lead::NONE).unwrap();
@@ -498,11 +501,10 @@ fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
 #[test]
 fn the_testbed_meets_the_tracking_goals_on_the_issues_circle_and_the_tour_is_held_by_its_unheard_floor() {
     use kinloop::experiments::latency::{
-        goal_circle, measure_intending, measure_with, Lead, Loss, Network, Point, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
+        goal_circle, measure_intending, measure_with, Lead, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
     };
     use kinloop_client::user::Intent;
-    let network = Network { jitter_ms: 0.0, loss: Loss::None };
-    let at = |delay_ms: f64| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: true };
+    let at = testbed_soft;
     let circling = |delay_ms: f64| {
         measure_intending(&at(delay_ms), Intent::Path(goal_circle()), 10.0, None, Lead::default()).unwrap()
     };

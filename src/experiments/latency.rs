@@ -137,6 +137,9 @@ pub struct Network {
 }
 
 impl Network {
+    /// No jitter and no loss.
+    pub const CLEAN: Network = Network { jitter_ms: 0.0, loss: Loss::None };
+
     /// Name in summaries.
     pub fn name(self) -> String {
         format!("jitter {} ms, {}", self.jitter_ms, self.loss.name())
@@ -144,7 +147,7 @@ impl Network {
 
     /// No jitter and no loss.
     pub fn is_clean(self) -> bool {
-        self.jitter_ms == 0.0 && self.loss == Loss::None
+        self == Network::CLEAN
     }
 }
 
@@ -377,10 +380,7 @@ impl Grid {
             targets: vec![1],
             hands: vec![HandKind::Soft, HandKind::Poke],
             delays_ms: vec![0.0, 100.0, 500.0, 1000.0],
-            networks: vec![
-                Network { jitter_ms: 0.0, loss: Loss::None },
-                Network { jitter_ms: 30.0, loss: Loss::Bursty20 },
-            ],
+            networks: vec![Network::CLEAN, Network { jitter_ms: 30.0, loss: Loss::Bursty20 }],
         }
     }
 

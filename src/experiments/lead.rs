@@ -79,7 +79,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![100.0, 1000.0]);
-    let clean = Network { jitter_ms: 0.0, loss: Loss::None };
+    let clean = Network::CLEAN;
     let worst = Network { jitter_ms: 30.0, loss: Loss::Bursty20 };
     let networks = options.pick(vec![clean, worst], vec![clean]);
     let passivity = VeConfig::default().passivity;

@@ -21,7 +21,7 @@ use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
-use super::latency::{measure_with, point_json, seconds_per_point, Loss, Measured, Network, Point, TARGETS};
+use super::latency::{measure_with, point_json, seconds_per_point, Measured, Network, Point, TARGETS};
 use crate::charts::HeatMap;
 use crate::harness::CoreEdit;
 
@@ -76,7 +76,7 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(vec![HandKind::Soft, HandKind::Firm], vec![HandKind::Soft]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![300.0, 1000.0]);
-    let clean = Network { jitter_ms: 0.0, loss: Loss::None };
+    let clean = Network::CLEAN;
     let mut rows: Vec<(Update, usize, HandKind)> = Vec::new();
     for &update in &Update::ALL {
         for &target in &targets {
