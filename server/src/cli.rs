@@ -375,8 +375,8 @@ mod tests {
         }
     }
 
-    /// The delays a lead acts over: from 75 ms on by default (the default's `75..` reads back as itself), FROM..UNTIL in milliseconds, UNTIL optional;
-    /// anything else is refused naming the flag.
+    /// The delays a lead acts over: from 75 ms on by default (the default's `75..` reads back as itself),
+    /// FROM..UNTIL in milliseconds, UNTIL optional; anything else is refused naming the flag.
     #[test]
     fn lead_delays_flag_sets_where_the_ve_leads() {
         let delays = |extra: &[&str]| {

@@ -23,8 +23,9 @@
 //! moved the feel, [`fill_felt_changes`]). The [`model_update`] rows add the local model's update: the
 //! free pull at a fixed 200 ms against the default, with and without its energy tank; the [`lead`] rows a VE
 //! that runs ahead of the hand (not default), the only way below the device-OP floor; and the testbed's soft
-//! hand on the issue's own 5 mm circle ([`goal_circle`]) at each delay, the motion its goals were set with. A (scene, hand,
-//! method) **first fails** at the smallest delay where some network condition of the grid is unstable.
+//! hand on the issue's own 5 mm circle ([`goal_circle`]) at each delay, the motion its goals were set with.
+//! A (scene, hand, method) **first fails** at the smallest delay where some network condition of the grid is
+//! unstable.
 
 use std::time::Duration;
 
@@ -659,7 +660,7 @@ pub fn run(options: &Options) -> Result<Report> {
     fill_felt_changes(&mut all, &references);
     // The goals' other motion: the testbed's soft hand on the issue's circle, defaults, clean network.
     let circle_points: Vec<Point> = if grid.targets.contains(&0) {
-        let network = Network { jitter_ms: 0.0, loss: Loss::None };
+        let network = Network::CLEAN;
         let at =
             |delay_ms| Point { target: 0, hand: HandKind::Soft, delay_ms, network, passivity: default_passivity() };
         grid.delays_ms.iter().map(|&d| at(d)).collect()
@@ -940,8 +941,9 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
 /// `latency-live`: issue 22's real-process goal, three scenes × two devices × one-way delay {100, 300, 500,
 /// 1000 ms} with 10 ms jitter each way, each a 10 s real-time session with default flags (3 s, testbed only,
 /// with `--quick`), one at a time, and the testbed on `sim:paper` with the soft hand on the issue's circle
-/// ([`goal_circle`]) at each delay, where its tracking goals are read. A point meets the goal with no VE restore, no withheld snapshot, nothing
-/// non-finite, closure within 1e-6 m and at most 5 % of the client's ticks clamped at the device's limit.
+/// ([`goal_circle`]) at each delay, where its tracking goals are read. A point meets the goal with no VE
+/// restore, no withheld snapshot, nothing non-finite, closure within 1e-6 m and at most 5 % of the client's
+/// ticks clamped at the device's limit.
 pub fn run_live(options: &Options) -> Result<Report> {
     let mut out = Output::new("latency-live", options)?;
     let targets: &[usize] = if options.quick { &[0] } else { &[0, 1, 2] };
