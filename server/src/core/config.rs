@@ -273,7 +273,7 @@ impl VeConfig {
 
 /// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]), over the one-way delays of
 /// [`DEFAULT_COUPLING_LEAD_DELAYS_S`]. Led by up to 100 ms the OP is nearer the device: the testbed's soft tour
-/// 2.15 mm RMS from it at 100 ms one way against 4.6 mm (6.2 against 9.3 at 200 ms, 12.2 against 14.5 at
+/// 2.21 mm RMS from it at 100 ms one way against 4.9 mm (6.3 against 9.7 at 200 ms, 12.8 against 14.9 at
 /// 300 ms; the four-bar's coupler and the Watt six-bar's link5 alike), with no session of the latency
 /// sweep unstable at those delays, over 10 s or whole tours (40 s).
 pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.1;
@@ -286,7 +286,7 @@ pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.1;
 /// walls moved further from where they were set and firm and poking hands held the device at its limit (12
 /// more whole tours unstable); since the model follows its path, the lead at 500 ms to 1 s makes no session of
 /// the latency grid unstable, over 10 s or whole tours, and brings the OP 6-19 % nearer the device on the soft
-/// tours (the testbed's 46 mm from it at 1 s against 49). With the local model pulled at a fixed 200 ms (not
+/// tours (the testbed's 47 mm from it at 1 s against 50). With the local model pulled at a fixed 200 ms (not
 /// the default, which slows with the round trip) it took the six-bar's link5 5 cm off the device in 3 of 36
 /// whole tours at 750 ms and beyond.
 pub const DEFAULT_COUPLING_LEAD_DELAYS_S: [f64; 2] = [0.075, f64::INFINITY];
