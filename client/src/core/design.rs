@@ -21,9 +21,10 @@
 //!    joints never act without them: a third of `K` with two thirds of `B` damps the device's mass at
 //!    ζ ≈ 0.8, where a third of each left it at 0.4 (0.3 with a firm hand's mass), and the five-bar robot's
 //!    effector on `sim:paper` under a firm hand made 29 mJ over its tour beyond the hand's work (13 mJ now,
-//!    within the energy criterion; the latency grid's tracking without delay 4 % further off). The joint-constraint controller acts through the unit-consistent
-//!    coordinates `(v, L ω)`, so on the angular axes the device feels `k_j (c_p L)²`; with torque actuation
-//!    `k_j` and `b_j` also stay within the angular budget's share.
+//!    within the energy criterion; the latency grid's tracking without delay 4 % further off). The
+//!    joint-constraint controller acts through the unit-consistent coordinates `(v, L ω)`, so on the angular
+//!    axes the device feels `k_j (c_p L)²`; with torque actuation `k_j` and `b_j` also stay within the
+//!    angular budget's share.
 //! 4. **The local model**: the position channels' reaction drives the local model, a mass as light as the
 //!    OP's lightest direction over its reach (`m_op = 1 / max λ(Λ⁻¹)`), integrated once a period. A spring
 //!    on a mass integrated at step T is stable for `K T² / m < 4` and a damper for `B T / m < 2`; the channels
