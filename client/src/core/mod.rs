@@ -644,7 +644,7 @@ impl<S: Space> HapticCore<S> {
             max_torque_nm: if welcome.mapping.rigid_grasp { WrenchLimits::of(device).max_torque_nm } else { 0.0 },
             ..WrenchLimits::of(device)
         };
-        let path = PathFollower::of(welcome, &config, limits.max_torque_nm == 0.0)?;
+        let path = PathFollower::of(welcome, &config, limits.pins_the_grasp())?;
         Ok(HapticCore {
             gains,
             limits,
@@ -741,7 +741,7 @@ impl<S: Space> HapticCore<S> {
     /// True when the user holds the OP as through a pin (`Mapping::rigid_grasp` false, or a device without
     /// torque): forces only, the angles left to the linkage.
     pub fn pinned(&self) -> bool {
-        self.limits.max_torque_nm == 0.0
+        self.limits.pins_the_grasp()
     }
 
     /// The mapping's scales.

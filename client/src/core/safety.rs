@@ -33,6 +33,11 @@ impl WrenchLimits {
         let sane = |x: f64| if x.is_finite() && x > 0.0 { x } else { 0.0 };
         WrenchLimits { max_force_n: sane(spec.max_force_n), max_torque_nm: sane(spec.max_torque_nm) }
     }
+
+    /// No torque is rendered: the grasp is a pin, its angle the linkage's business, not the hand's.
+    pub fn pins_the_grasp(&self) -> bool {
+        self.max_torque_nm == 0.0
+    }
 }
 
 /// Zeroes the linear or angular part of `w` when the device cannot actuate it.
