@@ -52,8 +52,7 @@ fn closure_error_stays_below_a_nanometre_in_the_paper_manipulation() {
 
 /// On the benchmark chains, moving fast after half a second of the paper's push (3 s of it), the residual
 /// the projection predicts is the one a fresh evaluation finds (to the second-order term), and the chord
-/// iterations alone take it below the tolerance: no refactorization (the bound used before refactored in
-/// 86 % of `chain50_loops5`'s steps).
+/// iterations alone take it below the tolerance: no refactorization.
 #[test]
 fn predicted_residual_is_the_evaluated_one() {
     for scene in ["chain20_loops5", "chain50_loops5"] {

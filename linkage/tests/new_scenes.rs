@@ -551,11 +551,9 @@ fn free_run<S: Space>(model: &Model<S>, dt: f64, seconds: f64) -> Run {
 /// energy (the bound the other conservative built-ins meet), and truncation error, not a systematic leak:
 /// halving the step shrinks it by at least 8 (fourth order: 16) unless it is at round-off.
 ///
-/// Measured (dt = 1 ms): Stephenson 1.5e-8 J of 0.29 J, five-bar 6.2e-11 of 4.6e-3 J, RSSR 2.1e-9 of
-/// 1.6e-2 J, all shrinking 16-fold at dt/2. The Bennett linkage drifts 2.3e-6 J of 0.25 J, within 10 % of
-/// the bound: nearly all of it is gained where the loop swings through its flat configurations (θ1 = 0
-/// and ±π, every common normal on one line), where the closure error after projection jumps from 1e-15
-/// to 2e-10 m for a few steps. There the pivoted factorization of S keeps closure row 0 (the x gap of
+/// The Bennett linkage comes nearest the bound: nearly all its drift is gained where the loop swings through
+/// its flat configurations (θ1 = 0 and ±π, every common normal on one line), where the closure error after
+/// projection rises for a few steps. There the pivoted factorization of S keeps closure row 0 (the x gap of
 /// joint 4), whose row of W vanishes at the flat configuration (|W₀| ≈ 4e-4 against ≈ 1 for the rows it
 /// drops), because pivots are judged relative to each row's own S_ii.
 #[test]
