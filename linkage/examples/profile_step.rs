@@ -4,7 +4,7 @@
 //! machine, run under `valgrind --tool=callgrind --collect-atstart=no --toggle-collect='*run_calls*'`.
 
 use kinloop_linkage::bench::*;
-use kinloop_linkage::Integrator;
+use kinloop_linkage::algorithms::integrator::Integrator;
 
 #[inline(never)]
 fn run_calls(case: &mut Case, calls: usize, what: &str) {

@@ -11,7 +11,11 @@ use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpSpaceLoc
 use crate::algorithms::op_space::op_space_inertia;
 use crate::math::space::OpPose;
 use crate::model::builtin::{self, PAPER_WRENCH};
-use crate::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use crate::algorithms::dynamics::{forward_dynamics, OpWrench};
+use crate::algorithms::integrator::{step, Integrator, StepConfig};
+use crate::math::space::Planar;
+use crate::model::data::Data;
+use crate::Model;
 
 /// Timing of one benchmark case.
 #[derive(Clone, Copy, Debug, PartialEq)]

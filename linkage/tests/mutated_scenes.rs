@@ -9,11 +9,11 @@ mod common;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use common::Rng;
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::builtin::SCENE_FILES;
-use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::model::builtin::SCENE_FILES;
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::{
-    forward_dynamics, step, Data, Integrator, MatOps, Model, Planar, Scene, Space, Spatial, StepConfig,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, math::space::MatOps, model::Model, math::space::Planar, model::scene::Scene, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig,
 };
 use nalgebra::DVector;
 

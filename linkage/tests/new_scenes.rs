@@ -10,14 +10,14 @@ mod common;
 use std::f64::consts::PI;
 
 use common::*;
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::builtin::{self, SCENE_FILES};
-use kinloop_linkage::gravity::{kinetic_energy, potential_energy};
-use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::model::builtin::{self, SCENE_FILES};
+use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
+use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
 use kinloop_linkage::model::Attachment;
 use kinloop_linkage::{
-    forward_dynamics, step, Data, Integrator, Model, Planar, SceneKind, Space, Spatial, StepConfig, VecOps,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig, math::space::VecOps,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -507,7 +507,7 @@ fn free_run<S: Space>(model: &Model<S>, dt: f64, seconds: f64) -> Run {
     if !model.has_gravity {
         qd = DVector::from_fn(model.nq(), |i, _| [1.5, -1.0, 0.5, 2.0][i % 4]);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
-        kinloop_linkage::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
+        kinloop_linkage::algorithms::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
     }
     let energy = |data: &mut Data<S>, q: &DVector<f64>, qd: &DVector<f64>| {
         forward_kinematics(model, data, q);

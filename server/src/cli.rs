@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use kinloop_linkage::Integrator;
+use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
 
 use crate::bench::RealtimeRun;

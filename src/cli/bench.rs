@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::{ensure, Context, Result};
 use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, Timing};
-use kinloop_linkage::Integrator;
+use kinloop_linkage::algorithms::integrator::Integrator;
 use serde_json::{json, Value};
 
 /// Arguments of `kinloop bench`.

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use kinloop_client::core::ModelForm;
-use kinloop_linkage::{step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use kinloop_linkage::{algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, algorithms::integrator::StepConfig};
 use kinloop_server::core::AxisGains;
 use nalgebra::Vector3;
 use serde_json::{json, Value};
@@ -102,7 +102,7 @@ fn linkage_alone(
     let model: Model<Planar> = Model::compile(&plan.scene, &plan.scene.name)?;
     let mut data = Data::new(&model);
     let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
-    let wrench = Vector3::from(kinloop_linkage::builtin::PAPER_WRENCH);
+    let wrench = Vector3::from(kinloop_linkage::model::builtin::PAPER_WRENCH);
     let mut force = OpWrench::<Planar> { op: model.op_index("link2").context("OP link2")?, wrench };
     let dt = 1.0 / rate_hz;
     let cfg = StepConfig { integrator, dt, project: true, implicit_forces: false };

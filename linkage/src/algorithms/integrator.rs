@@ -391,7 +391,7 @@ mod tests {
     use crate::testing::{for_each_model, paper_testbed, random_state};
 
     /// `(‖h(q)‖, ‖W(q) q̇‖)` evaluated afresh.
-    fn residuals(model: &Model<crate::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
+    fn residuals(model: &Model<crate::math::space::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
         let mut data = Data::new(model);
         forward_poses(model, &mut data, q);
         closure_residual_and_jacobian(model, &mut data);
@@ -403,7 +403,7 @@ mod tests {
     /// The testbed at q0 with joint rates of `speed` times a fixed pattern (made consistent with the loop),
     /// after one semi-implicit Euler step of 1 ms without projection: a drift of order dt² q̇². The workspace
     /// holds the factors of the step's solve.
-    fn drifted(model: &Model<crate::Planar>, speed: f64) -> (Data<crate::Planar>, DVector<f64>, DVector<f64>) {
+    fn drifted(model: &Model<crate::math::space::Planar>, speed: f64) -> (Data<crate::math::space::Planar>, DVector<f64>, DVector<f64>) {
         let mut data = Data::new(model);
         let mut q = model.q0.clone();
         // A velocity on the manifold: project a raw one at q0 (the exact Newton step, factors at q0).
@@ -451,7 +451,7 @@ mod tests {
     fn a_step_that_ends_non_finite_leaves_the_state_as_it_was() {
         let model = paper_testbed();
         let mut data = Data::new(&model);
-        let mut push = crate::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
+        let mut push = crate::algorithms::dynamics::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
         for integrator in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler, Integrator::Rk4] {
             let (mut q, mut qd) = crate::testing::random_state(&model, 5);
             qd *= 1e10;

@@ -103,7 +103,7 @@ impl<S: Space> OpPose<S> {
 mod tests {
     use super::*;
     use crate::testing::{paper_testbed, random_state};
-    use crate::Planar;
+    use crate::math::space::Planar;
 
     /// The velocity of every COM equals the finite difference of its position.
     #[test]

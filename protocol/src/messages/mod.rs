@@ -23,9 +23,9 @@
 
 use std::fmt;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::reach::OpReach;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::algorithms::reach::OpReach;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use serde::{Deserialize, Serialize};
 
 use crate::shape::{SceneKind, SessionShape};

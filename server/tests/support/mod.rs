@@ -3,8 +3,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::builtin;
-use kinloop_linkage::{Model, Planar, Scene, Space};
+use kinloop_linkage::model::builtin;
+use kinloop_linkage::{model::Model, math::space::Planar, model::scene::Scene, math::space::Space};
 use kinloop_protocol::{DeviceCaps, LocalModelForm, MappingRequest, Role, Snapshot, Uplink};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 

@@ -1,7 +1,7 @@
 //! Small fixed-size vectors and matrices: the arithmetic the generic algorithms need.
 
 use std::fmt::Debug;
-use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
+use std::ops::{Add, AddAssign, Index, IndexMut, Mul, Neg, Sub, SubAssign};
 
 use nalgebra::{Matrix3, Matrix6, Vector2, Vector3, Vector6};
 
