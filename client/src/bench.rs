@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose};
+use kinloop_linkage::{algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::{model::builtin, algorithms::dynamics::forward_dynamics, model::data::Data, model::Model, math::space::Planar, math::space::SceneKind};
 use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Welcome};

@@ -13,7 +13,7 @@ use kinloop_client::core::safety::{force_ratio, WrenchLimits};
 use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm};
 use kinloop_client::device::{DevicePreset, DeviceState, HapticDevice, SimulatedRig};
 use kinloop_client::user::ConstantWrench;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::testing::TestRng;
 use kinloop_linkage::{model::builtin, math::space::Planar, math::space::SceneKind};
 use kinloop_protocol::codec::validate;

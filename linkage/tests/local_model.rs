@@ -5,9 +5,7 @@ mod common;
 
 use common::*;
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
-use kinloop_linkage::algorithms::local_model::{
-    op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpPose, OpSpaceLocalModel,
-};
+use kinloop_linkage::{algorithms::local_model::{op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::{algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, math::space::Space, algorithms::integrator::StepConfig, math::space::VecOps};
 use nalgebra::Vector3;

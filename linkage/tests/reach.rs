@@ -5,7 +5,7 @@
 use kinloop_linkage::model::builtin;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::reach::{static_op_load, survey_op, SurveyConfig};
 use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
 use nalgebra::{DMatrix, DVector, Vector2, Vector3};

@@ -5,7 +5,7 @@ mod support;
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::Planar;
 use kinloop_protocol::Role;
 use kinloop_server::core::AxisGains;

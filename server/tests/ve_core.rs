@@ -45,7 +45,7 @@ fn paper_manipulation_keeps_the_loop_closed_to_1e_9_m_for_10_s() {
 fn two_users_pulling_against_each_other_settle_at_the_static_equilibrium() {
     use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-    use kinloop_linkage::algorithms::local_model::OpPose;
+    use kinloop_linkage::math::space::OpPose;
     use kinloop_linkage::algorithms::loop_closure::loop_closure;
     use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
     use nalgebra::{DMatrix, DVector, Vector2};
@@ -720,7 +720,7 @@ fn users_are_found_by_id_across_joins_and_removals() {
 /// compensation it falls (1e-7 m against 0.19 m measured).
 #[test]
 fn gravity_compensation_holds_the_weight_at_the_users_op() {
-    use kinloop_linkage::algorithms::local_model::OpPose;
+    use kinloop_linkage::math::space::OpPose;
     use kinloop_linkage::math::space::Planar;
     let session = |compensated: bool| {
         let mut ve = core(model::<Planar>("fourbar-crank-rocker"), VeConfig::default());

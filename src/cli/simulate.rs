@@ -5,7 +5,7 @@ use std::time::Instant;
 use anyhow::{ensure, Context, Result};
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig, math::space::VecOps};
 use serde_json::json;
 

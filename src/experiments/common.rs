@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::{json, Value};
 
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
 use nalgebra::DVector;
 

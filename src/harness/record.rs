@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use kinloop_client::core::TickReport;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_server::core::VeState;
 

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use kinloop_linkage::algorithms::constraint_directions::scale_op;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::uplink_flags;
 

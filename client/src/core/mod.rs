@@ -40,7 +40,7 @@ mod passive_update;
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::op_path::{turn_between, OpPath, PathError};
 use kinloop_linkage::algorithms::passivity::{EnergyReports, PortBooks};
 use kinloop_linkage::math::space::{clip_wrench_parts, SceneKind, Space, VecOps};

@@ -10,7 +10,7 @@
 //!   nor are absurd ones: a device reading or a local-model state outside the protocol's ranges
 //!   ([`usable_state`]) is treated as non-finite.
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 pub use kinloop_linkage::math::space::PartScales;
 use kinloop_linkage::math::space::{clip_wrench_parts, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};

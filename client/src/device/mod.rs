@@ -12,7 +12,7 @@ pub mod simulated;
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space};
 use kinloop_protocol::DeviceCaps;
 

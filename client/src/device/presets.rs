@@ -3,7 +3,7 @@
 
 use std::f64::consts::PI;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::simulated::{SimulatedDevice, SimulatedDeviceError, SimulatedDeviceParams};

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::{DeviceError, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice};

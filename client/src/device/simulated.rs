@@ -10,7 +10,7 @@
 //! position and on the rotation vector of the handle's orientation (exact for planar θ; for spatial
 //! handles a per-component approximation that holds for the moderate rotations of gimbals).
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::DeviceSpec;

@@ -564,7 +564,7 @@ fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<Ha
 }
 
 fn empty_uplink<S: Space>() -> Uplink {
-    Uplink::at_rest(0, S::DIM, kinloop_linkage::algorithms::local_model::OpPose::<S>::wire_len())
+    Uplink::at_rest(0, S::DIM, kinloop_linkage::math::space::OpPose::<S>::wire_len())
 }
 
 async fn run<S: Space>(

@@ -30,7 +30,7 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{unwrap_rotation_near, Space, VecOps};
 use kinloop_protocol::Welcome;
 

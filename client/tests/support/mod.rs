@@ -12,7 +12,7 @@ use kinloop_client::user::{ConstantWrench, SimulatedUser};
 use kinloop_linkage::algorithms::constraint_directions::constraint_directions;
 use kinloop_linkage::model::data::Kinematics;
 use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
-use kinloop_linkage::algorithms::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms, OpPose};
+use kinloop_linkage::{algorithms::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::{model::builtin, algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::dynamics::Forces, model::Model, math::space::Planar, math::space::SceneKind, math::space::Space, algorithms::integrator::StepConfig};
 use kinloop_protocol::{

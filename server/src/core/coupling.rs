@@ -28,7 +28,7 @@
 use kinloop_linkage::algorithms::contact::PenaltyContacts;
 use kinloop_linkage::model::data::Kinematics;
 use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity, support};
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{algorithms::dynamics::Forces, model::Model, math::space::Space, math::space::VecOps};
 use nalgebra::{DMatrix, DVector};
 

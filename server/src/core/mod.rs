@@ -40,7 +40,7 @@ use std::time::Duration;
 use kinloop_linkage::algorithms::contact::{Contact, PenaltyContacts};
 use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::reach::{survey_op, OpReach, SurveyConfig};
 use kinloop_linkage::{algorithms::integrator::step, model::data::Data, model::Model, math::space::Space, algorithms::integrator::StepConfig, math::space::VecOps};
 use kinloop_protocol::{

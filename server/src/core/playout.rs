@@ -28,7 +28,7 @@
 
 use std::collections::VecDeque;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::Space;
 
 /// Uplinks kept waiting at most: 0.5 s of a 1 kHz stream, beyond the largest buffer.

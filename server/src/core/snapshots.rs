@@ -49,7 +49,7 @@ use kinloop_linkage::model::data::Data;
 use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::algorithms::jacobian::apply_wrench;
 use kinloop_linkage::algorithms::kkt::constrained_response;
-use kinloop_linkage::algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::{algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::{frame_point_inertia, op_space_inertia};
 use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::MatOps, model::Model, math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_WRENCH};

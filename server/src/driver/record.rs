@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use rtrb::{Consumer, Producer};
 

@@ -4,7 +4,7 @@
 
 use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
 use kinloop_linkage::model::{Obstacle, Shape};
 use kinloop_linkage::{model::data::Data, model::Model, math::space::SceneKind, math::space::Space, math::space::VecOps};

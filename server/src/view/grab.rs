@@ -19,7 +19,7 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Planar, math::space::Space, math::space::Spatial, math::space::VecOps};
 use kinloop_protocol::Snapshot;
 

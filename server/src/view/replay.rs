@@ -275,7 +275,7 @@ fn client_rows<'a>(
 mod tests {
     use kinloop_linkage::algorithms::assemble::assemble;
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-    use kinloop_linkage::algorithms::local_model::OpPose;
+    use kinloop_linkage::math::space::OpPose;
     use kinloop_linkage::{model::builtin, model::data::Data, model::Model, math::space::Planar};
 
     use super::*;

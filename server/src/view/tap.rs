@@ -12,7 +12,7 @@
 
 use std::sync::Arc;
 
-use kinloop_linkage::algorithms::local_model::OpPose;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::{Role, Snapshot};
 use rtrb::Producer;
