@@ -14,7 +14,7 @@ use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::ClientError;
 use kinloop_linkage::math::space::SceneKind;
 use kinloop_protocol::quic::{client_endpoint, recv_control, send_control, ConnectError, EndpointOptions, Trust};
-use kinloop_protocol::report::one_line;
+use kinloop_process::report::one_line;
 use kinloop_protocol::{Control, RefusalReason};
 use kinloop_server::{ServerConfig, ServerHandle, ServerStats};
 use tokio::runtime::Runtime;

@@ -7,8 +7,6 @@
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
 //! - [`passivity`]: the two-port's energy books both ends keep and send, the check of a peer's books, and the
 //!   output scale both ends' passivity controllers use;
-//! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
-//! - [`report`]: how the programs print an error (one line, each cause once);
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
@@ -17,8 +15,6 @@ pub mod emulator;
 pub mod messages;
 pub mod passivity;
 pub mod quic;
-pub mod realtime;
-pub mod report;
 mod shape;
 
 pub use messages::*;

@@ -9,7 +9,7 @@ use std::thread::Thread;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::math::space::Space;
-use kinloop_protocol::realtime::try_realtime_priority;
+use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::{Snapshot, Uplink};
 
 use super::record::TickRecord;

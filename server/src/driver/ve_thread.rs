@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec;
-use kinloop_protocol::realtime::try_realtime_priority;
+use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::RefusalReason;
 use rtrb::{Consumer, Producer};
 use tokio::sync::{oneshot, Notify};
