@@ -200,7 +200,8 @@ fn random_participants_and_networks_keep_sessions_sound() {
         // With the gains designed from each OP's inertia, the VE never has to restore itself.
         assert_eq!(s.ve_restores, 0, "{context}: {s:#?}");
         // The loop is never kept torn: a VE step that would start beyond the broken-closure limit is undone.
-        let model = kinloop_linkage::model::Model::<kinloop_linkage::math::space::Planar>::compile(&plan.scene, scene).unwrap();
+        let model =
+            kinloop_linkage::model::Model::<kinloop_linkage::math::space::Planar>::compile(&plan.scene, scene).unwrap();
         let broken = kinloop_server::core::BROKEN_CLOSURE_PER_LENGTH * model.length_scale;
         assert!(s.max_closure_error <= broken, "{context}: closure {:.3e} {s:#?}", s.max_closure_error);
         for c in &s.clients {

@@ -8,9 +8,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::{algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
-use kinloop_linkage::{model::builtin, algorithms::dynamics::forward_dynamics, model::data::Data, model::Model, math::space::Planar, math::space::SceneKind};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, math::space::Planar, math::space::SceneKind, model::builtin,
+    model::data::Data, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Welcome};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 

@@ -15,7 +15,7 @@ use kinloop_client::device::{DevicePreset, DeviceState, HapticDevice, SimulatedR
 use kinloop_client::user::ConstantWrench;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::testing::TestRng;
-use kinloop_linkage::{model::builtin, math::space::Planar, math::space::SceneKind};
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::builtin};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::Snapshot;
 use nalgebra::{UnitComplex, Vector2, Vector3};

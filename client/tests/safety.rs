@@ -9,7 +9,7 @@ use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm, UplinkDeadband
 use kinloop_client::device::{DevicePreset, DeviceState};
 use kinloop_client::user::ConstantWrench;
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::{model::builtin, math::space::Planar, math::space::SceneKind};
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::builtin};
 use kinloop_protocol::{uplink_flags, ContactTerm, Snapshot};
 use nalgebra::{Vector2, Vector3};
 use support::{paper_config, ClosedLoop, TestbedVe};

@@ -7,13 +7,13 @@ use std::time::{Duration, Instant};
 use nalgebra::{DVector, Vector3};
 
 use crate::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use crate::algorithms::dynamics::{forward_dynamics, OpWrench};
+use crate::algorithms::integrator::{step, Integrator, StepConfig};
 use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpSpaceLocalModel};
 use crate::algorithms::op_space::op_space_inertia;
 use crate::math::space::OpPose;
-use crate::model::builtin::{self, PAPER_WRENCH};
-use crate::algorithms::dynamics::{forward_dynamics, OpWrench};
-use crate::algorithms::integrator::{step, Integrator, StepConfig};
 use crate::math::space::Planar;
+use crate::model::builtin::{self, PAPER_WRENCH};
 use crate::model::data::Data;
 use crate::Model;
 

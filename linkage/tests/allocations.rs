@@ -5,11 +5,20 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::{algorithms::local_model::{op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
-use kinloop_linkage::{algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, algorithms::integrator::StepConfig};
+use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, model::data::Data,
+    model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{
+        op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel,
+    },
+    math::space::OpPose,
+};
 use nalgebra::Vector3;
 
 struct Counting;

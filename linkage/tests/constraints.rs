@@ -4,15 +4,17 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::bench::Case;
-use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
 use kinloop_linkage::algorithms::integrator::{project, CHORD_TOLERANCE};
 use kinloop_linkage::algorithms::kinematics::forward_poses;
 use kinloop_linkage::algorithms::loop_closure::closure_residual;
 use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
+use kinloop_linkage::bench::Case;
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::{
-    model::builtin, algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, math::space::Spatial, algorithms::integrator::StepConfig,
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, math::space::Spatial,
+    model::builtin, model::data::Data, model::Model,
 };
 use nalgebra::{DVector, Vector3};
 
@@ -229,8 +231,8 @@ fn benchmark_chains_compile_closed() {
 /// step must not see the first step's implicit terms (they are cleared whenever the flag drops).
 #[test]
 fn implicit_mass_never_leaks_between_solves() {
-    use kinloop_linkage::model::data::Kinematics;
     use kinloop_linkage::algorithms::dynamics::Forces;
+    use kinloop_linkage::model::data::Kinematics;
     struct Stiff;
     impl Forces<Planar> for Stiff {
         fn add_forces(&mut self, _: &Model<Planar>, _: &Kinematics<Planar>, _: &mut nalgebra::DVector<f64>) {}

@@ -11,7 +11,7 @@ use common::*;
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::model::scene::Scene;
-use kinloop_linkage::{algorithms::dynamics::forward_dynamics, model::data::Data, model::Model, math::space::Planar};
+use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::Planar, model::data::Data, model::Model};
 use nalgebra::{DMatrix, DVector, Matrix3};
 use std::f64::consts::PI;
 

@@ -4,10 +4,19 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::model::builtin::PAPER_WRENCH;
-use kinloop_linkage::{algorithms::local_model::{op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
-use kinloop_linkage::{algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, math::space::Space, algorithms::integrator::StepConfig, math::space::VecOps};
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, math::space::Space,
+    math::space::VecOps, model::data::Data, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{
+        op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel,
+    },
+    math::space::OpPose,
+};
 use nalgebra::Vector3;
 
 fn local_models<S: Space>(
@@ -38,7 +47,10 @@ fn both_local_model_forms_give_the_same_op_motion() {
     for name in ["paper-testbed", "watt-six-bar", "slider-crank"] {
         check_forms::<Planar>(&compile(&builtin_scene(name)), name);
     }
-    check_forms(&compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")), "spherical-four-bar");
+    check_forms(
+        &compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")),
+        "spherical-four-bar",
+    );
 }
 
 fn check_forms<S: Space>(model: &Model<S>, name: &str) {

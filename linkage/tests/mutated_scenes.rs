@@ -10,10 +10,12 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use common::Rng;
 use kinloop_linkage::algorithms::assemble::assemble;
-use kinloop_linkage::model::builtin::SCENE_FILES;
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::builtin::SCENE_FILES;
 use kinloop_linkage::{
-    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, math::space::MatOps, model::Model, math::space::Planar, model::scene::Scene, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::MatOps, math::space::Planar, math::space::Space,
+    math::space::Spatial, model::data::Data, model::scene::Scene, model::Model,
 };
 use nalgebra::DVector;
 

@@ -11,13 +11,15 @@ use std::f64::consts::PI;
 
 use common::*;
 use kinloop_linkage::algorithms::assemble::assemble;
-use kinloop_linkage::model::builtin::{self, SCENE_FILES};
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::model::builtin::{self, SCENE_FILES};
 use kinloop_linkage::model::Attachment;
 use kinloop_linkage::{
-    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig, math::space::VecOps,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    math::space::Spatial, math::space::VecOps, model::data::Data, model::Model,
 };
 use nalgebra::{DMatrix, DVector};
 

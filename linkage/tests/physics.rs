@@ -9,7 +9,11 @@ use kinloop_linkage::algorithms::gravity::{gravity_forces, kinetic_energy, poten
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::algorithms::mass_matrix::mass_matrix;
 use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
-use kinloop_linkage::{algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Space, algorithms::integrator::StepConfig};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Space, model::data::Data,
+    model::Model,
+};
 use nalgebra::{DMatrix, DVector};
 
 macro_rules! for_each_model {
@@ -198,7 +202,10 @@ fn rk4_conserves_energy_of_conservative_linkages() {
         let model = compile::<kinloop_linkage::math::space::Planar>(&builtin_scene(name));
         check_energy(name, &model);
     }
-    check_energy("spherical-four-bar", &compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")));
+    check_energy(
+        "spherical-four-bar",
+        &compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")),
+    );
 }
 
 fn check_energy<S: Space>(name: &str, model: &Model<S>) {

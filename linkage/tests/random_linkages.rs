@@ -7,7 +7,9 @@ use common::*;
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::model::scene::{BodySpec, CutKindSpec, CutSpec, JointKindSpec, JointSpec, Numbers, OpSpec};
 use kinloop_linkage::{
-    algorithms::dynamics::forward_dynamics, model::data::Data, math::space::MatOps, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, model::scene::Scene, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps,
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, math::space::MatOps, math::space::Planar,
+    math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps, model::data::Data,
+    model::scene::Scene, model::Model,
 };
 use nalgebra::DMatrix;
 use proptest::prelude::*;

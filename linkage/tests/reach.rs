@@ -2,12 +2,12 @@
 //! curve from circle intersections, a serial arm's static load from finite differences of its potential
 //! energy, and the groups an OP does not move in.
 
-use kinloop_linkage::model::builtin;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::reach::{static_op_load, survey_op, SurveyConfig};
-use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::model::builtin;
+use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::{DMatrix, DVector, Vector2, Vector3};
 
 fn planar(name: &str) -> Model<Planar> {

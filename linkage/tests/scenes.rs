@@ -4,7 +4,9 @@ mod common;
 
 use common::*;
 use kinloop_linkage::algorithms::assemble::assemble;
-use kinloop_linkage::{model::Model, math::space::Planar, model::scene::Scene, error::SceneError, math::space::Spatial};
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::Spatial, model::scene::Scene, model::Model,
+};
 
 fn error_for(text: &str) -> SceneError {
     let scene = Scene::from_toml_str(text, "bad.toml");

@@ -13,7 +13,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
-use kinloop_linkage::{model::Model, math::space::Planar, model::scene::Scene, error::SceneError, math::space::SceneKind, math::space::Space, math::space::Spatial};
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial,
+    model::scene::Scene, model::Model,
+};
 use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape, Snapshot};
 use rtrb::RingBuffer;
 use serde::Serialize;

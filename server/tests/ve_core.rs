@@ -45,9 +45,9 @@ fn paper_manipulation_keeps_the_loop_closed_to_1e_9_m_for_10_s() {
 fn two_users_pulling_against_each_other_settle_at_the_static_equilibrium() {
     use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-    use kinloop_linkage::math::space::OpPose;
     use kinloop_linkage::algorithms::loop_closure::loop_closure;
-    use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
+    use kinloop_linkage::math::space::OpPose;
+    use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
     use nalgebra::{DMatrix, DVector, Vector2};
 
     let base = testbed();
@@ -404,7 +404,7 @@ fn local_model_at_a_resting_contact_predicts_no_acceleration() {
 fn a_diverging_linkage_is_restored_with_its_loop_closed() {
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
     use kinloop_linkage::algorithms::loop_closure::loop_closure;
-    use kinloop_linkage::{model::data::Data, algorithms::integrator::Integrator};
+    use kinloop_linkage::{algorithms::integrator::Integrator, model::data::Data};
     use kinloop_server::core::BROKEN_CLOSURE_PER_LENGTH;
 
     let mut config = VeConfig::paper();
@@ -503,7 +503,7 @@ fn three_users_on_two_ops() -> (
 fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
     use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
     use kinloop_linkage::algorithms::op_space::op_space_inertia;
-    use kinloop_linkage::{algorithms::dynamics::forward_dynamics, model::data::Data, math::space::Planar};
+    use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::Planar, model::data::Data};
     use nalgebra::{Matrix3, Vector3};
 
     let (model, mut ve, ids, hands) = three_users_on_two_ops();
@@ -761,8 +761,10 @@ fn gravity_compensation_holds_the_weight_at_the_users_op() {
 fn a_linkage_nobody_holds_waits_at_rest() {
     let ms = Duration::from_millis;
     let unheld = |rest_unheld: bool| {
-        let mut ve =
-            core(model::<kinloop_linkage::math::space::Planar>("watt-six-bar"), VeConfig { rest_unheld, ..VeConfig::default() });
+        let mut ve = core(
+            model::<kinloop_linkage::math::space::Planar>("watt-six-bar"),
+            VeConfig { rest_unheld, ..VeConfig::default() },
+        );
         let q0 = ve.state().q.clone();
         run(&mut ve, ms(1000), &mut Vec::new(), |_, _, _| {});
         let moved = (ve.state().q - &q0).amax();

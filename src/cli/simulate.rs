@@ -6,7 +6,11 @@ use anyhow::{ensure, Context, Result};
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::{algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, algorithms::integrator::StepConfig, math::space::VecOps};
+use kinloop_linkage::{
+    algorithms::dynamics::OpWrench, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    math::space::Spatial, math::space::VecOps, model::data::Data, model::Model,
+};
 use serde_json::json;
 
 use super::inspect::{op_index, parse_wrench};

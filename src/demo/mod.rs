@@ -28,7 +28,7 @@ use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
-use kinloop_linkage::{model::scene::Scene, math::space::SceneKind};
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::Trust;
 use kinloop_server::driver::UserStats;

@@ -13,7 +13,7 @@ use serde_json::{json, Value};
 
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::{model::data::Data, model::Model, math::space::Planar};
+use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::DVector;
 
 use crate::charts::{self, Chart, HeatMap, StabilityMap};

@@ -17,10 +17,13 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
-use kinloop_linkage::bench::{measure, paper_wrench, Case};
-use kinloop_linkage::{algorithms::local_model::{ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
-use kinloop_linkage::{algorithms::integrator::Integrator, model::Model, math::space::Planar};
+use kinloop_linkage::bench::{measure, paper_wrench, Case};
+use kinloop_linkage::{algorithms::integrator::Integrator, math::space::Planar, model::Model};
+use kinloop_linkage::{
+    algorithms::local_model::{ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::codec::encode_datagram;
 use kinloop_protocol::{LocalModelForm, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};

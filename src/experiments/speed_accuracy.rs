@@ -24,7 +24,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use kinloop_client::core::ModelForm;
-use kinloop_linkage::{algorithms::integrator::step, model::data::Data, algorithms::integrator::Integrator, model::Model, algorithms::dynamics::OpWrench, math::space::Planar, algorithms::integrator::StepConfig};
+use kinloop_linkage::{
+    algorithms::dynamics::OpWrench, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, model::data::Data, model::Model,
+};
 use kinloop_server::core::AxisGains;
 use nalgebra::Vector3;
 use serde_json::{json, Value};

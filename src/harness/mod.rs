@@ -18,7 +18,10 @@ use kinloop_client::device::rig::SimulatedRig;
 use kinloop_client::device::{HapticDevice, SimulatedDevice};
 use kinloop_client::user::{UserContext, UserSpec};
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::{model::Model, math::space::Planar, model::scene::Scene, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps};
+use kinloop_linkage::{
+    math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps,
+    model::scene::Scene, model::Model,
+};
 use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
 use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
 use kinloop_protocol::{Datagram, LocalModelForm, MappingRequest, Role, SessionShape};

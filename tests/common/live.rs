@@ -11,7 +11,7 @@ use kinloop_client::driver::{Client, ClientConfig, ClientHandle};
 use kinloop_client::user::UserSpec;
 use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
 use kinloop_linkage::model::scene::OpSpec;
-use kinloop_linkage::{model::scene::Scene, math::space::SceneKind};
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, Endpoint, EndpointOptions, Trust,
 };

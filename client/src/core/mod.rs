@@ -40,11 +40,11 @@ mod passive_update;
 
 use std::time::Duration;
 
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::op_path::{turn_between, OpPath, PathError};
-use kinloop_protocol::passivity::{EnergyReports, PortBooks};
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{clip_wrench_parts, SceneKind, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_SPEED, MAX_WRENCH};
+use kinloop_protocol::passivity::{EnergyReports, PortBooks};
 use kinloop_protocol::{uplink_flags, Mapping, SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{

@@ -10,11 +10,18 @@ use kinloop_client::core::{ConstraintMode, CoreConfig, GainChoice, HapticCore, M
 use kinloop_client::device::{DevicePreset, DeviceState, HapticDevice, SimulatedRig};
 use kinloop_client::user::{ConstantWrench, SimulatedUser};
 use kinloop_linkage::algorithms::constraint_directions::constraint_directions;
-use kinloop_linkage::model::data::Kinematics;
 use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
-use kinloop_linkage::{algorithms::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
-use kinloop_linkage::{model::builtin, algorithms::dynamics::forward_dynamics, algorithms::integrator::step, model::data::Data, algorithms::dynamics::Forces, model::Model, math::space::Planar, math::space::SceneKind, math::space::Space, algorithms::integrator::StepConfig};
+use kinloop_linkage::model::data::Kinematics;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::Forces, algorithms::integrator::step,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    model::builtin, model::data::Data, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::{
     ConfigTerms, CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Uplink, Welcome,
 };
@@ -133,7 +140,8 @@ impl TestbedVe {
     /// The welcome a server would send for this scene: one-to-one mapping, the paper's graphics-controller
     /// gains, the surveyed reach of `link2`.
     pub fn welcome(&self) -> Welcome {
-        let reach = kinloop_linkage::algorithms::reach::survey_op(&self.model, self.op, &Default::default()).expect("survey");
+        let reach =
+            kinloop_linkage::algorithms::reach::survey_op(&self.model, self.op, &Default::default()).expect("survey");
         let mut data = Data::new(&self.model);
         kinloop_linkage::algorithms::kinematics::forward_kinematics(&self.model, &mut data, &self.q);
         let pose = OpPose::of_op(&self.model, &data, self.op);

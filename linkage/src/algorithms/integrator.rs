@@ -403,7 +403,10 @@ mod tests {
     /// The testbed at q0 with joint rates of `speed` times a fixed pattern (made consistent with the loop),
     /// after one semi-implicit Euler step of 1 ms without projection: a drift of order dt² q̇². The workspace
     /// holds the factors of the step's solve.
-    fn drifted(model: &Model<crate::math::space::Planar>, speed: f64) -> (Data<crate::math::space::Planar>, DVector<f64>, DVector<f64>) {
+    fn drifted(
+        model: &Model<crate::math::space::Planar>,
+        speed: f64,
+    ) -> (Data<crate::math::space::Planar>, DVector<f64>, DVector<f64>) {
         let mut data = Data::new(model);
         let mut q = model.q0.clone();
         // A velocity on the manifold: project a raw one at q0 (the exact Newton step, factors at q0).
@@ -451,7 +454,8 @@ mod tests {
     fn a_step_that_ends_non_finite_leaves_the_state_as_it_was() {
         let model = paper_testbed();
         let mut data = Data::new(&model);
-        let mut push = crate::algorithms::dynamics::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
+        let mut push =
+            crate::algorithms::dynamics::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
         for integrator in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler, Integrator::Rk4] {
             let (mut q, mut qd) = crate::testing::random_state(&model, 5);
             qd *= 1e10;

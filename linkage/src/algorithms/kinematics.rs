@@ -102,8 +102,8 @@ impl<S: Space> OpPose<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{paper_testbed, random_state};
     use crate::math::space::Planar;
+    use crate::testing::{paper_testbed, random_state};
 
     /// The velocity of every COM equals the finite difference of its position.
     #[test]

@@ -23,8 +23,8 @@
 
 use std::fmt;
 
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::reach::OpReach;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use serde::{Deserialize, Serialize};
 

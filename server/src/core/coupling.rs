@@ -26,10 +26,10 @@
 //! supporting joints, whatever order the users joined in.
 
 use kinloop_linkage::algorithms::contact::PenaltyContacts;
-use kinloop_linkage::model::data::Kinematics;
 use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity, support};
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::{algorithms::dynamics::Forces, model::Model, math::space::Space, math::space::VecOps};
+use kinloop_linkage::model::data::Kinematics;
+use kinloop_linkage::{algorithms::dynamics::Forces, math::space::Space, math::space::VecOps, model::Model};
 use nalgebra::{DMatrix, DVector};
 
 use super::playout::{Playout, Reference};
@@ -554,7 +554,7 @@ mod tests {
     use super::*;
     use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
     use kinloop_linkage::testing::{paper_testbed, random_state};
-    use kinloop_linkage::{model::data::Data, math::space::Planar};
+    use kinloop_linkage::{math::space::Planar, model::data::Data};
     use nalgebra::Vector3;
 
     /// The testbed at random state `seed`, with its kinematics (positions and velocities) evaluated.

@@ -9,8 +9,8 @@
 //! rating, direction kept, force and torque each on their own: a clipped value keeps the user coupled, a
 //! dropped uplink would leave the coupling to fade out.
 
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::clip_wrench_parts;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::{DeviceCaps, Mapping, Uplink};
 

@@ -38,11 +38,14 @@ pub mod users;
 use std::time::Duration;
 
 use kinloop_linkage::algorithms::contact::{Contact, PenaltyContacts};
-use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::reach::{survey_op, OpReach, SurveyConfig};
-use kinloop_linkage::{algorithms::integrator::step, model::data::Data, model::Model, math::space::Space, algorithms::integrator::StepConfig, math::space::VecOps};
+use kinloop_linkage::error::DynamicsError;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{
+    algorithms::integrator::step, algorithms::integrator::StepConfig, math::space::Space, math::space::VecOps,
+    model::data::Data, model::Model,
+};
 use kinloop_protocol::{
     Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
     Uplink, Welcome,

@@ -72,8 +72,8 @@
 //! client that overstates what it received buys at most an allowance per axis; one that understates only
 //! makes its own coupling stricter.
 
-use kinloop_protocol::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_protocol::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
 
 use super::guards::MAX_OP_DIM;
 

@@ -43,15 +43,22 @@
 //!   contacts' forces stay frozen in each contact's `bias_accel` (the local model has no contact-contact
 //!   cross inertia); contacts beyond the nearest `MAX_LOCAL_CONTACTS` stay frozen in b̂.
 
-use kinloop_linkage::algorithms::constraint_directions::{constraint_directions_from, ConstraintDirections, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::constraint_directions::{
+    constraint_directions_from, ConstraintDirections, DEFAULT_THRESHOLD,
+};
 use kinloop_linkage::algorithms::contact::detect_contacts;
-use kinloop_linkage::model::data::Data;
-use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::algorithms::jacobian::apply_wrench;
 use kinloop_linkage::algorithms::kkt::constrained_response;
-use kinloop_linkage::{algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS}, math::space::OpPose};
 use kinloop_linkage::algorithms::op_space::{frame_point_inertia, op_space_inertia};
-use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::MatOps, model::Model, math::space::Space, math::space::VecOps};
+use kinloop_linkage::error::DynamicsError;
+use kinloop_linkage::model::data::Data;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, math::space::MatOps, math::space::Space, math::space::VecOps, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS},
+    math::space::OpPose,
+};
 use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_WRENCH};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};

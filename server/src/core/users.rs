@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use kinloop_linkage::algorithms::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
-use kinloop_linkage::{model::Model, math::space::Space};
+use kinloop_linkage::{math::space::Space, model::Model};
 use kinloop_protocol::{
     ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Mapping, MappingRequest, OtherUsers,
     Role, Snapshot,

@@ -24,7 +24,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::{model::Model, math::space::Planar, model::scene::Scene, error::SceneError, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps};
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial,
+    math::space::VecOps, model::scene::Scene, model::Model,
+};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     close_codes, server_endpoint, Endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity,

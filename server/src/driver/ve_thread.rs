@@ -10,8 +10,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
-use kinloop_protocol::codec;
 use kinloop_process::realtime::try_realtime_priority;
+use kinloop_protocol::codec;
 use kinloop_protocol::RefusalReason;
 use rtrb::{Consumer, Producer};
 use tokio::sync::{oneshot, Notify};

@@ -4,10 +4,12 @@
 
 use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::model::{Obstacle, Shape};
-use kinloop_linkage::{model::data::Data, model::Model, math::space::SceneKind, math::space::Space, math::space::VecOps};
+use kinloop_linkage::{
+    math::space::SceneKind, math::space::Space, math::space::VecOps, model::data::Data, model::Model,
+};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -258,9 +260,16 @@ impl<S: Space> Drawer<S> {
 }
 
 /// A boxed [`Geometry`] for a model of either space.
-pub fn geometry(scene: &kinloop_linkage::model::scene::Scene, label: &str) -> Result<Box<dyn Geometry>, kinloop_linkage::error::SceneError> {
+pub fn geometry(
+    scene: &kinloop_linkage::model::scene::Scene,
+    label: &str,
+) -> Result<Box<dyn Geometry>, kinloop_linkage::error::SceneError> {
     Ok(match scene.kind {
-        SceneKind::Planar => Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Planar>::compile(scene, label)?)),
-        SceneKind::Spatial => Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Spatial>::compile(scene, label)?)),
+        SceneKind::Planar => {
+            Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Planar>::compile(scene, label)?))
+        }
+        SceneKind::Spatial => {
+            Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Spatial>::compile(scene, label)?))
+        }
     })
 }

@@ -39,7 +39,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use kinloop_linkage::{model::scene::Scene, error::SceneError};
+use kinloop_linkage::{error::SceneError, model::scene::Scene};
 use kinloop_protocol::SessionShape;
 use serde::Serialize;
 use tokio::sync::{watch, Notify};
@@ -312,7 +312,7 @@ pub fn tap_for_scene(
     ve_rate_hz: f64,
     config: &ViewConfig,
 ) -> Result<(ViewTap, TapReader), ViewError> {
-    use kinloop_linkage::{model::Model, math::space::Planar, math::space::SceneKind, math::space::Spatial};
+    use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::Spatial, model::Model};
     Ok(match scene.kind {
         SceneKind::Planar => {
             let n = Model::<Planar>::compile(scene, scene_label)?.nq();

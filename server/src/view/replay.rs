@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use kinloop_linkage::{model::scene::Scene, math::space::SceneKind};
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 
 use super::compose::{compose, UserInfo};
 use super::draw::{geometry, Geometry, SceneInfo};
@@ -276,7 +276,7 @@ mod tests {
     use kinloop_linkage::algorithms::assemble::assemble;
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
     use kinloop_linkage::math::space::OpPose;
-    use kinloop_linkage::{model::builtin, model::data::Data, model::Model, math::space::Planar};
+    use kinloop_linkage::{math::space::Planar, model::builtin, model::data::Data, model::Model};
 
     use super::*;
 
