@@ -1,3 +1,5 @@
+use nalgebra::{Matrix3, Rotation3, UnitComplex, Vector2, Vector3, Vector6};
+
 use super::*;
 
 /// The chord is 2 sin(θ/2) for the angle θ between two orientations, computed here from the angles the
