@@ -2,7 +2,7 @@
 
 use nalgebra::{Matrix3, UnitComplex, Vector2, Vector3};
 
-use super::algebra::{MatOps, VecOps};
+use super::algebra::VecOps;
 use super::definition::{SceneKind, Space};
 use crate::math::trig;
 

@@ -2,7 +2,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
-use super::algebra::{MatOps, VecOps};
+use super::algebra::VecOps;
 use super::definition::{SceneKind, Space};
 use crate::math::trig;
 
