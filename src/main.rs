@@ -47,7 +47,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // Errors only unless RUST_LOG asks for more; a failure on one line, as kinloop-server and kinloop-client say it.
-    kinloop_protocol::report::run_program("error", || run(&cli))
+    kinloop_process::report::run_program("error", || run(&cli))
 }
 
 fn run(cli: &Cli) -> Result<()> {

@@ -2,7 +2,7 @@
 //! (`paper-testbed`, `chain50_loops5`, ...).
 
 use anyhow::{Context, Result};
-use kinloop_linkage::{builtin, Scene};
+use kinloop_linkage::{model::builtin, model::scene::Scene};
 
 /// A scene and the label its errors should carry.
 pub struct LoadedScene {

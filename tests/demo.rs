@@ -15,8 +15,8 @@ use kinloop::experiments::common::{trajectory_at, ve_op_trajectory, Trajectory};
 use kinloop::harness::{self, ClientPlan, SessionPlan};
 use kinloop_client::device::DevicePreset;
 use kinloop_client::user::UserSpec;
-use kinloop_linkage::builtin::PAPER_WRENCH;
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use serde_json::Value;
 
 /// Real-time demos must not share the two cores with each other, nor with the timer-floor loop.

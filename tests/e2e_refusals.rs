@@ -12,9 +12,9 @@ use common::child::{ChildProcess, Program, Role};
 use common::live;
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::ClientError;
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
+use kinloop_process::report::one_line;
 use kinloop_protocol::quic::{client_endpoint, recv_control, send_control, ConnectError, EndpointOptions, Trust};
-use kinloop_protocol::report::one_line;
 use kinloop_protocol::{Control, RefusalReason};
 use kinloop_server::{ServerConfig, ServerHandle, ServerStats};
 use tokio::runtime::Runtime;
@@ -107,7 +107,7 @@ fn a_client_that_fails_after_its_welcome_leaves_the_server_at_once() {
 #[test]
 fn a_client_that_declines_the_scene_says_why_and_the_server_lets_go() {
     common::child::serve_if_child();
-    let scene = kinloop_linkage::builtin::scene("spherical-four-bar").expect("built in").expect("parses");
+    let scene = kinloop_linkage::model::builtin::scene("spherical-four-bar").expect("built in").expect("parses");
     let mut config = ServerConfig::new(scene, "spherical-four-bar", live::LOOPBACK);
     config.realtime = false;
     let (stderr, stats) = failing_client(

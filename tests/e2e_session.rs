@@ -9,7 +9,7 @@ use common::live::{self, OPS};
 use common::records::{self, linear};
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientError};
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 use kinloop_protocol::quic::{ConnectError, ServerIdentity, Trust, CERT_FILE};
 use kinloop_protocol::{Hello, RefusalReason, PROTOCOL_VERSION};
 use kinloop_server::driver::load_scene;
@@ -207,7 +207,7 @@ fn malformed_scene_files_are_refused_naming_the_file_and_the_key() {
     let _bounded =
         common::bounded("malformed_scene_files_are_refused_naming_the_file_and_the_key", Duration::from_secs(20));
     let dir = common::temp_dir();
-    let testbed = kinloop_linkage::builtin::SCENE_FILES
+    let testbed = kinloop_linkage::model::builtin::SCENE_FILES
         .iter()
         .find(|(name, _)| *name == "paper-testbed")
         .map(|(_, text)| *text)

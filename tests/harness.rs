@@ -156,7 +156,7 @@ fn random_participants_and_networks_keep_sessions_sound() {
         let mut rng = TestRng(seed + 1);
         let mut plan = SessionPlan::paper().unwrap();
         let scene = scenes[rng.below(scenes.len())];
-        plan.scene = kinloop_linkage::builtin::scene(scene).unwrap().unwrap();
+        plan.scene = kinloop_linkage::model::builtin::scene(scene).unwrap().unwrap();
         plan.duration = Duration::from_millis(1200);
         plan.record_every = 0;
         let ops: Vec<String> = plan.scene.ops.iter().map(|op| op.name.clone()).collect();
@@ -200,7 +200,8 @@ fn random_participants_and_networks_keep_sessions_sound() {
         // With the gains designed from each OP's inertia, the VE never has to restore itself.
         assert_eq!(s.ve_restores, 0, "{context}: {s:#?}");
         // The loop is never kept torn: a VE step that would start beyond the broken-closure limit is undone.
-        let model = kinloop_linkage::Model::<kinloop_linkage::Planar>::compile(&plan.scene, scene).unwrap();
+        let model =
+            kinloop_linkage::model::Model::<kinloop_linkage::math::space::Planar>::compile(&plan.scene, scene).unwrap();
         let broken = kinloop_server::core::BROKEN_CLOSURE_PER_LENGTH * model.length_scale;
         assert!(s.max_closure_error <= broken, "{context}: closure {:.3e} {s:#?}", s.max_closure_error);
         for c in &s.clients {
@@ -221,7 +222,7 @@ fn random_participants_and_networks_keep_sessions_sound() {
 fn the_per_axis_passivity_controller_steadies_stiff_couplings_on_a_turning_op() {
     let session = |passivity: bool| {
         let mut plan = SessionPlan::paper().unwrap();
-        plan.scene = kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap();
+        plan.scene = kinloop_linkage::model::builtin::scene("watt-six-bar").unwrap().unwrap();
         plan.record_every = 0;
         plan.ve.passivity = passivity;
         plan.ve.passivity_per_axis = passivity;
@@ -251,7 +252,7 @@ fn the_per_axis_passivity_controller_steadies_stiff_couplings_on_a_turning_op() 
 #[test]
 fn a_user_joining_a_swinging_linkage_over_a_delayed_link_renders() {
     use kinloop_client::device::DevicePreset;
-    let scene = kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap();
+    let scene = kinloop_linkage::model::builtin::scene("watt-six-bar").unwrap().unwrap();
     let mut late = ClientPlan::new("late", "link5", DevicePreset::Paper);
     late.user = UserSpec::Hand(HandSpec::touring(HandKind::Firm));
     late.join_at = Duration::from_millis(300);
@@ -287,7 +288,7 @@ fn default_sessions_at_300_ms_one_way_are_stable() {
         let client =
             client.with_link(LinkConfig { delay: Duration::from_millis(300), seed: 3, ..LinkConfig::default() });
         let plan = SessionPlan {
-            scene: kinloop_linkage::builtin::scene(scene).unwrap().unwrap(),
+            scene: kinloop_linkage::model::builtin::scene(scene).unwrap().unwrap(),
             ve: VeConfig::default(),
             clients: vec![client],
             duration: Duration::from_secs(8),
@@ -317,7 +318,7 @@ fn testbed_tour(
     client.configure = edit;
     let link = LinkConfig { delay: Duration::from_millis(delay_ms), seed, ..LinkConfig::default() };
     let plan = SessionPlan {
-        scene: kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap(),
+        scene: kinloop_linkage::model::builtin::scene("paper-testbed").unwrap().unwrap(),
         ve: VeConfig::default(),
         clients: vec![client.with_link(link)],
         duration: Duration::from_secs(10),
@@ -539,7 +540,7 @@ fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
             ..LinkConfig::default()
         };
         let plan = SessionPlan {
-            scene: kinloop_linkage::builtin::scene("watt-six-bar").unwrap().unwrap(),
+            scene: kinloop_linkage::model::builtin::scene("watt-six-bar").unwrap().unwrap(),
             ve: VeConfig { jitter_buffer, ..VeConfig::default() },
             clients: vec![client.with_link(link)],
             duration: Duration::from_secs(10),
@@ -584,7 +585,7 @@ fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillat
             })
             .collect();
         let plan = SessionPlan {
-            scene: kinloop_linkage::builtin::scene(scene).unwrap().unwrap(),
+            scene: kinloop_linkage::model::builtin::scene(scene).unwrap().unwrap(),
             ve: VeConfig { exchange_delay_s, ..VeConfig::default() },
             clients,
             duration: Duration::from_secs(10),
@@ -626,7 +627,7 @@ fn a_user_letting_go_of_a_shared_linkage_does_not_hold_the_others_back() {
         })
         .collect();
     let plan = SessionPlan {
-        scene: kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap(),
+        scene: kinloop_linkage::model::builtin::scene("paper-testbed").unwrap().unwrap(),
         ve: VeConfig::default(),
         clients,
         duration: Duration::from_secs(10),
@@ -658,7 +659,7 @@ fn a_pinned_grasp_follows_the_four_bars_path_by_position() {
         ..LinkConfig::default()
     };
     let plan = SessionPlan {
-        scene: kinloop_linkage::builtin::scene("fourbar-crank-rocker").unwrap().unwrap(),
+        scene: kinloop_linkage::model::builtin::scene("fourbar-crank-rocker").unwrap().unwrap(),
         ve: VeConfig::default(),
         clients: vec![client.with_link(link)],
         duration: Duration::from_secs(10),

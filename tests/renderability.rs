@@ -70,7 +70,7 @@ fn the_five_bar_effector_renders_under_a_firm_hand_with_the_damping_in_the_chann
     client.user = UserSpec::Hand(HandSpec::touring(HandKind::Firm));
     client.configure = Some(CoreEdit::new(move |c| c.gains = GainChoice::Custom(old_split.clone())));
     let plan = SessionPlan {
-        scene: kinloop_linkage::builtin::scene("five-bar-robot").unwrap().unwrap(),
+        scene: kinloop_linkage::model::builtin::scene("five-bar-robot").unwrap().unwrap(),
         ve: kinloop_server::core::VeConfig::default(),
         clients: vec![client],
         duration: std::time::Duration::from_secs_f64(SECONDS),

@@ -1,6 +1,6 @@
 //! Names of operational axes, shared by the CSV recorder and the replay user so a recording replays as is.
 
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 
 /// Pose components: planar `x, y, theta`; spatial `x, y, z, qw, qx, qy, qz`.
 pub fn pose_names(kind: SceneKind) -> &'static [&'static str] {

@@ -7,10 +7,16 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::local_model::{op_space_terms, op_twist, LocalModelTerms, OpPose};
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{builtin, forward_dynamics, Data, Model, Planar, SceneKind};
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, math::space::Planar, math::space::SceneKind, model::builtin,
+    model::data::Data, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Welcome};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
@@ -44,7 +50,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
     forward_dynamics(&model, &mut data, &model.q0, &model.qd0, &mut ()).map_err(|e| err(&e))?;
     op_space_inertia(&model, &mut data, op).map_err(|e| err(&e))?;
     let inverse = data.op.inverse_inertia;
-    let reach = kinloop_linkage::reach::survey_op(&model, op, &Default::default()).map_err(|e| err(&e))?;
+    let reach = kinloop_linkage::algorithms::reach::survey_op(&model, op, &Default::default()).map_err(|e| err(&e))?;
     let directions = constraint_directions::<Planar>(&inverse, model.length_scale, DEFAULT_THRESHOLD);
     let terms = op_space_terms(&data, &Vector3::zeros(), LocalModelTerms::full());
     let mut op_pose = vec![0.0; 3];

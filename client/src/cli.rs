@@ -175,7 +175,7 @@ fn not_started(error: ClientError) -> anyhow::Error {
     };
     match advice {
         Some(advice) => {
-            let said = kinloop_protocol::report::one_line(&error);
+            let said = kinloop_process::report::one_line(&error);
             anyhow::Error::new(error).context(format!("{said}; {advice}"))
         }
         None => error.into(),
@@ -273,5 +273,5 @@ where
     T: Into<OsString> + Clone,
 {
     let args = Args::try_parse_from(args).unwrap_or_else(|e| e.exit());
-    kinloop_protocol::report::run_program("kinloop_client=info", || run(args))
+    kinloop_process::report::run_program("kinloop_client=info", || run(args))
 }

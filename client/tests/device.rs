@@ -7,8 +7,8 @@ use kinloop_client::device::{
     DevicePreset, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice, SimulatedDeviceParams, SimulatedRig,
 };
 use kinloop_client::user::{HandKind, HandSpec, Intent, PathSpec, ReplayedWrench, SimulatedUser, UserSpec};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Planar, SceneKind, Spatial};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::Spatial};
 use nalgebra::{UnitComplex, Vector2, Vector3, Vector6};
 
 fn unit_spec(max_force: f64) -> DeviceSpec {

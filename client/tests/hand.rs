@@ -7,8 +7,8 @@ use kinloop_client::device::HapticDevice;
 use kinloop_client::device::{DevicePreset, DeviceSpec, SimulatedDevice, SimulatedDeviceParams, SimulatedRig};
 use kinloop_client::user::hand::{POKE_AT_S, POKE_DURATION_S, POKE_STEP_M, RELEASE_AT_S};
 use kinloop_client::user::{HandImpedance, HandKind, HandSpec, Intent, UserContext, UserSpec};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Planar, SceneKind};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
 /// A frictionless, undamped handle of `mass` kg per linear axis (and a heavy one in θ), no walls in reach.

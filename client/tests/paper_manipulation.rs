@@ -5,7 +5,7 @@ mod support;
 
 use kinloop_client::core::{ConstraintMode, ModelForm};
 use kinloop_client::user::ConstantWrench;
-use kinloop_linkage::{builtin, Planar};
+use kinloop_linkage::{math::space::Planar, model::builtin};
 use support::{paper_config, ClosedLoop, LoopSample};
 
 /// Runs `ms` ticks and keeps every sample.
@@ -103,7 +103,9 @@ fn impedance_mode_drives_the_local_model_no_harder_than_the_device_pushes_back()
         force = force.max(reaction.fixed_rows::<2>(0).norm());
         torque = torque.max(reaction[2].abs());
     }
-    let spec = kinloop_client::device::presets::DevicePreset::Paper.spec(kinloop_linkage::SceneKind::Planar).unwrap();
+    let spec = kinloop_client::device::presets::DevicePreset::Paper
+        .spec(kinloop_linkage::math::space::SceneKind::Planar)
+        .unwrap();
     println!("largest reaction on the local model: {force:.3} N, {torque:.4} N m");
     assert!(force <= spec.max_force_n && torque <= spec.max_torque_nm, "{force} N, {torque} N m");
 }

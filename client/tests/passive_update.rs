@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm, UPDATE_TANK_CAPACITY_J};
 use kinloop_client::device::DeviceState;
-use kinloop_linkage::Planar;
+use kinloop_linkage::math::space::Planar;
 use nalgebra::Vector3;
 use support::{paper_config, ClosedLoop, TestbedVe};
 

@@ -8,8 +8,8 @@ use kinloop_client::core::safety::{force_ratio, limit_wrench, limit_wrench_parts
 use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm, UplinkDeadband};
 use kinloop_client::device::{DevicePreset, DeviceState};
 use kinloop_client::user::ConstantWrench;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{builtin, Planar, SceneKind};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::builtin};
 use kinloop_protocol::{uplink_flags, ContactTerm, Snapshot};
 use nalgebra::{Vector2, Vector3};
 use support::{paper_config, ClosedLoop, TestbedVe};
@@ -313,7 +313,7 @@ fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
 #[test]
 fn a_welcome_whose_path_cannot_be_followed_is_refused_by_name() {
     use kinloop_client::core::CoreError;
-    use kinloop_linkage::op_path::PathError;
+    use kinloop_linkage::algorithms::op_path::PathError;
     let ve = TestbedVe::new(false);
     let config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
     let mut welcome = ve.welcome();

@@ -1,8 +1,8 @@
 //! Criterion benches of the linkage hot paths (development); `kinloop bench` reports the same cases.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_linkage::bench::{paper_wrench, Case};
-use kinloop_linkage::Integrator;
 
 fn benches(c: &mut Criterion) {
     for scene in ["paper-testbed", "chain20_loops1", "chain20_loops5", "chain50_loops1", "chain50_loops5"] {

@@ -3,8 +3,8 @@
 //! `perf record -g` shows where the time goes; for instruction counts, which do not suffer from a noisy
 //! machine, run under `valgrind --tool=callgrind --collect-atstart=no --toggle-collect='*run_calls*'`.
 
+use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_linkage::bench::*;
-use kinloop_linkage::Integrator;
 
 #[inline(never)]
 fn run_calls(case: &mut Case, calls: usize, what: &str) {

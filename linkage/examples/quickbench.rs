@@ -1,10 +1,10 @@
 //! Prints the median time per call of every benchmark case (one run, so medians compare within it).
 //! `quickbench scaling` times `ve_step/chainN_loopsL` for N ∈ {20, 50, 100} and L ∈ {1, 5, 10} instead.
 
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::bench::*;
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{Integrator, Planar};
+use kinloop_linkage::{algorithms::integrator::Integrator, math::space::Planar};
 use std::hint::black_box;
 use std::time::Duration;
 

@@ -1,6 +1,9 @@
-use kinloop_linkage::reach::{survey_op, SurveyConfig};
-use kinloop_linkage::{builtin, Model, Planar, SceneKind, Space, Spatial, VecOps};
-fn run<S: Space>(scene: &kinloop_linkage::Scene) {
+use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+use kinloop_linkage::{
+    math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps,
+    model::builtin, model::Model,
+};
+fn run<S: Space>(scene: &kinloop_linkage::model::scene::Scene) {
     let model: Model<S> = Model::compile(scene, &scene.name).unwrap();
     for op in 0..model.ops.len() {
         let t = std::time::Instant::now();

@@ -7,10 +7,15 @@ use std::time::{Duration, Instant};
 use nalgebra::{DVector, Vector3};
 
 use crate::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpPose, OpSpaceLocalModel};
+use crate::algorithms::dynamics::{forward_dynamics, OpWrench};
+use crate::algorithms::integrator::{step, Integrator, StepConfig};
+use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpSpaceLocalModel};
 use crate::algorithms::op_space::op_space_inertia;
+use crate::math::space::OpPose;
+use crate::math::space::Planar;
 use crate::model::builtin::{self, PAPER_WRENCH};
-use crate::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use crate::model::data::Data;
+use crate::Model;
 
 /// Timing of one benchmark case.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +88,7 @@ pub struct Case {
 
 /// Steps of one benchmark window: the paper's 3 s manipulation at 1 kHz. A constant wrench pumps energy into
 /// a conservative linkage without bound, so after a minute or two of simulated time the velocities outgrow
-/// the 1 ms step and the state diverges (the testbed after ≈80 s, `chain50_loops5` after ≈220 s); a timing
+/// the 1 ms step and the state diverges; a timing
 /// taken there measures failing steps. Rewinding every window keeps every measured step a valid one.
 pub const WINDOW_STEPS: usize = 3000;
 

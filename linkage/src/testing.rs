@@ -10,7 +10,7 @@ use crate::model::builtin;
 use crate::model::Model;
 
 /// A built-in scene file, parsed (panics if it is missing or broken: tests only).
-pub fn builtin_scene(name: &str) -> crate::Scene {
+pub fn builtin_scene(name: &str) -> crate::model::scene::Scene {
     builtin::scene(name).expect("built in").expect("parses")
 }
 
@@ -20,7 +20,7 @@ pub fn paper_testbed() -> Model<Planar> {
 }
 
 /// Compiles a scene, panicking with the error (tests only).
-pub fn compile<S: Space>(scene: &crate::Scene) -> Model<S> {
+pub fn compile<S: Space>(scene: &crate::model::scene::Scene) -> Model<S> {
     Model::compile(scene, &scene.name).unwrap_or_else(|e| panic!("{e}"))
 }
 
@@ -48,7 +48,7 @@ pub fn spatial_models() -> Vec<(String, Model<Spatial>)> {
 }
 
 /// The built-in scene files of one kind, parsed, in the order of [`builtin::SCENE_FILES`].
-fn builtin_files_of_kind(kind: SceneKind) -> impl Iterator<Item = (&'static str, crate::Scene)> {
+fn builtin_files_of_kind(kind: SceneKind) -> impl Iterator<Item = (&'static str, crate::model::scene::Scene)> {
     builtin::SCENE_FILES.iter().map(|(n, _)| (*n, builtin_scene(n))).filter(move |(_, scene)| scene.kind == kind)
 }
 
@@ -57,11 +57,11 @@ fn builtin_files_of_kind(kind: SceneKind) -> impl Iterator<Item = (&'static str,
 macro_rules! for_each_model {
     ($name:ident, $model:ident => $body:block) => {{
         for (n, m) in $crate::testing::planar_models().iter() {
-            let ($name, $model): (&str, &$crate::Model<$crate::Planar>) = (n.as_str(), m);
+            let ($name, $model): (&str, &$crate::model::Model<$crate::math::space::Planar>) = (n.as_str(), m);
             $body
         }
         for (n, m) in $crate::testing::spatial_models().iter() {
-            let ($name, $model): (&str, &$crate::Model<$crate::Spatial>) = (n.as_str(), m);
+            let ($name, $model): (&str, &$crate::model::Model<$crate::math::space::Spatial>) = (n.as_str(), m);
             $body
         }
     }};

@@ -5,13 +5,20 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use kinloop_linkage::builtin::{self, PAPER_WRENCH};
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::local_model::{
-    op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpPose, OpSpaceLocalModel,
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, model::data::Data,
+    model::Model,
 };
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use kinloop_linkage::{
+    algorithms::local_model::{
+        op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel,
+    },
+    math::space::OpPose,
+};
 use nalgebra::Vector3;
 
 struct Counting;
@@ -66,7 +73,7 @@ fn hot_paths_allocate_nothing() {
         let mut data = Data::new(&model);
         let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
         let mut user = OpWrench::<Planar> { op: 0, wrench: Vector3::from(PAPER_WRENCH) };
-        let mut contacts = kinloop_linkage::contact::PenaltyContacts::new(&model);
+        let mut contacts = kinloop_linkage::algorithms::contact::PenaltyContacts::new(&model);
         let mut terms = ConfigSpaceTerms::zeros(model.nq(), model.nc(), 3);
         let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nq(), model.nc());
         let mut reduced =

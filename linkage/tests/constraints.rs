@@ -4,15 +4,17 @@
 mod common;
 
 use common::*;
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::integrator::{project, CHORD_TOLERANCE};
+use kinloop_linkage::algorithms::kinematics::forward_poses;
+use kinloop_linkage::algorithms::loop_closure::closure_residual;
+use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
 use kinloop_linkage::bench::Case;
-use kinloop_linkage::builtin::PAPER_WRENCH;
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::integrator::{project, CHORD_TOLERANCE};
-use kinloop_linkage::kinematics::forward_poses;
-use kinloop_linkage::loop_closure::closure_residual;
-use kinloop_linkage::op_space::{op_space_inertia, open_inverse_inertia};
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::{
-    builtin, forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, Spatial, StepConfig,
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, math::space::Spatial,
+    model::builtin, model::data::Data, model::Model,
 };
 use nalgebra::{DVector, Vector3};
 
@@ -52,8 +54,7 @@ fn closure_error_stays_below_a_nanometre_in_the_paper_manipulation() {
 
 /// On the benchmark chains, moving fast after half a second of the paper's push (3 s of it), the residual
 /// the projection predicts is the one a fresh evaluation finds (to the second-order term), and the chord
-/// iterations alone take it below the tolerance: no refactorization (the bound used before refactored in
-/// 86 % of `chain50_loops5`'s steps).
+/// iterations alone take it below the tolerance: no refactorization.
 #[test]
 fn predicted_residual_is_the_evaluated_one() {
     for scene in ["chain20_loops5", "chain50_loops5"] {
@@ -107,7 +108,7 @@ fn redundant_closures_are_solved_without_nan() {
     run_free(&spherical, "spherical-four-bar");
 }
 
-fn run_free<S: kinloop_linkage::Space>(model: &Model<S>, name: &str) {
+fn run_free<S: kinloop_linkage::math::space::Space>(model: &Model<S>, name: &str) {
     let mut data = Data::new(model);
     let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nq()));
     for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
@@ -136,7 +137,7 @@ fn loop_free_scene_takes_the_plain_path() {
     assert_eq!(data.lambda.len(), 0);
     let (q, qd) = random_state(&model, 5);
     forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
-    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
+    kinloop_linkage::algorithms::mass_matrix::mass_matrix(&model, &mut data);
     let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
     let expected = data.mass_matrix.clone().lu().solve(&tau).unwrap();
     assert!((&data.qdd - expected).amax() < 1e-10);
@@ -150,7 +151,7 @@ fn serial_chain_gives_the_classic_inverse_inertia() {
     let (q, qd) = random_state(&model, 2);
     forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
     op_space_inertia(&model, &mut data, 0).unwrap();
-    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
+    kinloop_linkage::algorithms::mass_matrix::mass_matrix(&model, &mut data);
     let j = data.op.jacobian_t.transpose();
     let classic = &j * data.mass_matrix.clone().try_inverse().unwrap() * j.transpose();
     for r in 0..3 {
@@ -230,8 +231,8 @@ fn benchmark_chains_compile_closed() {
 /// step must not see the first step's implicit terms (they are cleared whenever the flag drops).
 #[test]
 fn implicit_mass_never_leaks_between_solves() {
-    use kinloop_linkage::data::Kinematics;
-    use kinloop_linkage::Forces;
+    use kinloop_linkage::algorithms::dynamics::Forces;
+    use kinloop_linkage::model::data::Kinematics;
     struct Stiff;
     impl Forces<Planar> for Stiff {
         fn add_forces(&mut self, _: &Model<Planar>, _: &Kinematics<Planar>, _: &mut nalgebra::DVector<f64>) {}

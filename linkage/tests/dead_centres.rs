@@ -8,10 +8,10 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::scene::Scene;
-use kinloop_linkage::{forward_dynamics, Data, Model, Planar};
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::scene::Scene;
+use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::Planar, model::data::Data, model::Model};
 use nalgebra::{DMatrix, DVector, Matrix3};
 use std::f64::consts::PI;
 

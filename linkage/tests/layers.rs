@@ -529,7 +529,7 @@ fn the_checker_catches_every_way_of_writing_an_upward_use() {
         "// use crate::model::Model;",
         "/// [`crate::algorithms::kinematics`]\nfn f() {}",
         "fn f() { let _ = \"crate::model::Model {\"; let _ = '{'; }",
-        "use crate::Planar; use super::space::Planar as P; use nalgebra::DVector;",
+        "use crate::math::space::Planar; use super::space::Planar as P; use nalgebra::DVector;",
         "mod tests { use super::*; use crate::math::space; }",
     ];
     for text in harmless {

@@ -4,12 +4,19 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::builtin::PAPER_WRENCH;
-use kinloop_linkage::local_model::{
-    op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpPose, OpSpaceLocalModel,
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, math::space::Space,
+    math::space::VecOps, model::data::Data, model::Model,
 };
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Planar, Space, StepConfig, VecOps};
+use kinloop_linkage::{
+    algorithms::local_model::{
+        op_space_terms, op_twist, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel,
+    },
+    math::space::OpPose,
+};
 use nalgebra::Vector3;
 
 fn local_models<S: Space>(
@@ -40,7 +47,10 @@ fn both_local_model_forms_give_the_same_op_motion() {
     for name in ["paper-testbed", "watt-six-bar", "slider-crank"] {
         check_forms::<Planar>(&compile(&builtin_scene(name)), name);
     }
-    check_forms(&compile::<kinloop_linkage::Spatial>(&builtin_scene("spherical-four-bar")), "spherical-four-bar");
+    check_forms(
+        &compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")),
+        "spherical-four-bar",
+    );
 }
 
 fn check_forms<S: Space>(model: &Model<S>, name: &str) {
@@ -131,8 +141,8 @@ fn memoized_pose_conversions_match_the_plain_ones() {
         p.integrate(&Vector3::new(0.1, -0.2, a), 1.0);
         p
     }));
-    check::<kinloop_linkage::Spatial>(angles.step_by(100).map(|a| {
-        let mut p = OpPose::<kinloop_linkage::Spatial>::identity();
+    check::<kinloop_linkage::math::space::Spatial>(angles.step_by(100).map(|a| {
+        let mut p = OpPose::<kinloop_linkage::math::space::Spatial>::identity();
         p.integrate(&nalgebra::Vector6::new(0.1, -0.2, 0.3, a, 0.5 * a, -0.2), 1.0);
         p
     }));

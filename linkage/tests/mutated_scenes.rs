@@ -9,11 +9,13 @@ mod common;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use common::Rng;
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::builtin::SCENE_FILES;
-use kinloop_linkage::op_space::op_space_inertia;
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::builtin::SCENE_FILES;
 use kinloop_linkage::{
-    forward_dynamics, step, Data, Integrator, MatOps, Model, Planar, Scene, Space, Spatial, StepConfig,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::MatOps, math::space::Planar, math::space::Space,
+    math::space::Spatial, model::data::Data, model::scene::Scene, model::Model,
 };
 use nalgebra::DVector;
 

@@ -10,14 +10,16 @@ mod common;
 use std::f64::consts::PI;
 
 use common::*;
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::builtin::{self, SCENE_FILES};
-use kinloop_linkage::gravity::{kinetic_energy, potential_energy};
-use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
+use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::model::builtin::{self, SCENE_FILES};
 use kinloop_linkage::model::Attachment;
 use kinloop_linkage::{
-    forward_dynamics, step, Data, Integrator, Model, Planar, SceneKind, Space, Spatial, StepConfig, VecOps,
+    algorithms::dynamics::forward_dynamics, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    math::space::Spatial, math::space::VecOps, model::data::Data, model::Model,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -507,7 +509,7 @@ fn free_run<S: Space>(model: &Model<S>, dt: f64, seconds: f64) -> Run {
     if !model.has_gravity {
         qd = DVector::from_fn(model.nq(), |i, _| [1.5, -1.0, 0.5, 2.0][i % 4]);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
-        kinloop_linkage::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
+        kinloop_linkage::algorithms::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
     }
     let energy = |data: &mut Data<S>, q: &DVector<f64>, qd: &DVector<f64>| {
         forward_kinematics(model, data, q);
@@ -551,11 +553,9 @@ fn free_run<S: Space>(model: &Model<S>, dt: f64, seconds: f64) -> Run {
 /// energy (the bound the other conservative built-ins meet), and truncation error, not a systematic leak:
 /// halving the step shrinks it by at least 8 (fourth order: 16) unless it is at round-off.
 ///
-/// Measured (dt = 1 ms): Stephenson 1.5e-8 J of 0.29 J, five-bar 6.2e-11 of 4.6e-3 J, RSSR 2.1e-9 of
-/// 1.6e-2 J, all shrinking 16-fold at dt/2. The Bennett linkage drifts 2.3e-6 J of 0.25 J, within 10 % of
-/// the bound: nearly all of it is gained where the loop swings through its flat configurations (θ1 = 0
-/// and ±π, every common normal on one line), where the closure error after projection jumps from 1e-15
-/// to 2e-10 m for a few steps. There the pivoted factorization of S keeps closure row 0 (the x gap of
+/// The Bennett linkage comes nearest the bound: nearly all its drift is gained where the loop swings through
+/// its flat configurations (θ1 = 0 and ±π, every common normal on one line), where the closure error after
+/// projection rises for a few steps. There the pivoted factorization of S keeps closure row 0 (the x gap of
 /// joint 4), whose row of W vanishes at the flat configuration (|W₀| ≈ 4e-4 against ≈ 1 for the rows it
 /// drops), because pivots are judged relative to each row's own S_ii.
 #[test]

@@ -4,12 +4,16 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::bias::bias_forces;
-use kinloop_linkage::gravity::{gravity_forces, kinetic_energy, potential_energy};
-use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::mass_matrix::mass_matrix;
-use kinloop_linkage::op_space::{op_space_inertia, open_inverse_inertia};
-use kinloop_linkage::{forward_dynamics, step, Data, Integrator, Model, OpWrench, Space, StepConfig};
+use kinloop_linkage::algorithms::bias::bias_forces;
+use kinloop_linkage::algorithms::gravity::{gravity_forces, kinetic_energy, potential_energy};
+use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::algorithms::mass_matrix::mass_matrix;
+use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Space, model::data::Data,
+    model::Model,
+};
 use nalgebra::{DMatrix, DVector};
 
 macro_rules! for_each_model {
@@ -132,7 +136,7 @@ fn check_kkt<S: Space>(name: &str, model: &Model<S>) {
         let (q, qd) = random_state(model, seed);
         // Project q onto the manifold first: the null-space method needs consistent w_stab rows when W is
         // rank deficient.
-        let q = kinloop_linkage::assemble::assemble(model, &q, 1e-13).map(|a| a.q).unwrap_or(q);
+        let q = kinloop_linkage::algorithms::assemble::assemble(model, &q, 1e-13).map(|a| a.q).unwrap_or(q);
         let mut wrench = OpWrench::<S> { op: 0, wrench: S::OpVec::zero() };
         for (i, x) in wrench.wrench.as_mut_slice().iter_mut().enumerate() {
             *x = 0.3 * (i as f64 + 1.0) * if seed % 2 == 0 { 1.0 } else { -1.0 };
@@ -155,7 +159,7 @@ fn check_kkt<S: Space>(name: &str, model: &Model<S>) {
     }
 }
 
-use kinloop_linkage::{MatOps, VecOps};
+use kinloop_linkage::{math::space::MatOps, math::space::VecOps};
 
 /// Λ⁻¹ (eq 9, through the rank-revealing KKT factors) equals the null-space formula J N (NᵀDN)⁻¹ NᵀJᵀ, and
 /// the open-chain Λ⁻¹ equals J D⁻¹ Jᵀ computed with nalgebra's inverse.
@@ -168,7 +172,7 @@ fn check_op_space<S: Space>(name: &str, model: &Model<S>) {
     let mut data = Data::new(model);
     for seed in 0..3 {
         let (q, qd) = random_state(model, seed);
-        let q = kinloop_linkage::assemble::assemble(model, &q, 1e-13).map(|a| a.q).unwrap_or(q);
+        let q = kinloop_linkage::algorithms::assemble::assemble(model, &q, 1e-13).map(|a| a.q).unwrap_or(q);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
         mass_matrix(model, &mut data);
         for op in 0..model.ops.len() {
@@ -195,10 +199,13 @@ fn check_op_space<S: Space>(name: &str, model: &Model<S>) {
 #[test]
 fn rk4_conserves_energy_of_conservative_linkages() {
     for name in ["fourbar-crank-rocker", "watt-six-bar", "parallelogram", "paper-testbed"] {
-        let model = compile::<kinloop_linkage::Planar>(&builtin_scene(name));
+        let model = compile::<kinloop_linkage::math::space::Planar>(&builtin_scene(name));
         check_energy(name, &model);
     }
-    check_energy("spherical-four-bar", &compile::<kinloop_linkage::Spatial>(&builtin_scene("spherical-four-bar")));
+    check_energy(
+        "spherical-four-bar",
+        &compile::<kinloop_linkage::math::space::Spatial>(&builtin_scene("spherical-four-bar")),
+    );
 }
 
 fn check_energy<S: Space>(name: &str, model: &Model<S>) {
@@ -222,7 +229,7 @@ fn energy_drift<S: Space>(model: &Model<S>, dt: f64, duration: f64) -> (f64, f64
         // No gravity: start with a velocity made consistent with the closures instead.
         qd = DVector::from_fn(model.nq(), |i, _| 0.5 + 0.1 * i as f64);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
-        kinloop_linkage::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
+        kinloop_linkage::algorithms::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
     }
     let (t0, v0) = energy(model, &mut data, &q, &qd);
     let cfg = StepConfig { integrator: Integrator::Rk4, dt, project: true, implicit_forces: false };

@@ -4,10 +4,12 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::scene::{BodySpec, CutKindSpec, CutSpec, JointKindSpec, JointSpec, Numbers, OpSpec};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::scene::{BodySpec, CutKindSpec, CutSpec, JointKindSpec, JointSpec, Numbers, OpSpec};
 use kinloop_linkage::{
-    forward_dynamics, Data, MatOps, Model, OpWrench, Planar, Scene, SceneKind, Space, Spatial, VecOps,
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, math::space::MatOps, math::space::Planar,
+    math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps, model::data::Data,
+    model::scene::Scene, model::Model,
 };
 use nalgebra::DMatrix;
 use proptest::prelude::*;
@@ -119,8 +121,8 @@ fn check<S: Space>(scene: &Scene, seed: u64) -> Result<(), TestCaseError> {
     let qd = if model.nc() == 0 {
         random
     } else {
-        kinloop_linkage::kinematics::forward_kinematics(&model, &mut data, &model.q0);
-        kinloop_linkage::loop_closure::closure_residual_and_jacobian(&model, &mut data);
+        kinloop_linkage::algorithms::kinematics::forward_kinematics(&model, &mut data, &model.q0);
+        kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian(&model, &mut data);
         let n = null_space(&data.closure_jacobian(), model.nq());
         &n * (n.transpose() * random)
     };
@@ -131,7 +133,7 @@ fn check<S: Space>(scene: &Scene, seed: u64) -> Result<(), TestCaseError> {
     forward_dynamics(&model, &mut data, &model.q0, &qd, &mut user).map_err(|e| TestCaseError::fail(e.to_string()))?;
     prop_assert!(data.qdd.iter().chain(data.lambda.iter()).all(|x| x.is_finite()));
     // D by composite rigid bodies: the dynamics factored it from articulated inertias without forming it.
-    kinloop_linkage::mass_matrix::mass_matrix(&model, &mut data);
+    kinloop_linkage::algorithms::mass_matrix::mass_matrix(&model, &mut data);
     let tau = &data.applied + &data.joint_force - &data.bias - &data.gravity;
     let residual = &data.mass_matrix * &data.qdd + &data.closure_jacobian_t * &data.lambda - &tau;
     prop_assert!(residual.amax() < 1e-8 * (1.0 + tau.amax() + data.lambda.amax()), "eq 4 residual {}", residual.amax());

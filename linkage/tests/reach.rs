@@ -1,13 +1,13 @@
-//! The reach survey (`kinloop_linkage::reach`) against independent computations: a crank-rocker's coupler
+//! The reach survey (`kinloop_linkage::algorithms::reach`) against independent computations: a crank-rocker's coupler
 //! curve from circle intersections, a serial arm's static load from finite differences of its potential
 //! energy, and the groups an OP does not move in.
 
-use kinloop_linkage::builtin;
-use kinloop_linkage::gravity::{kinetic_energy, potential_energy};
-use kinloop_linkage::kinematics::forward_kinematics;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::reach::{static_op_load, survey_op, SurveyConfig};
-use kinloop_linkage::{Data, Model, Planar};
+use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
+use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+use kinloop_linkage::algorithms::reach::{static_op_load, survey_op, SurveyConfig};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::model::builtin;
+use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::{DMatrix, DVector, Vector2, Vector3};
 
 fn planar(name: &str) -> Model<Planar> {
@@ -122,7 +122,7 @@ fn four_bar_motion_by_differences(model: &Model<Planar>, q: &DVector<f64>) -> DV
     let mut data = Data::new(model);
     let mut residual = |q: &DVector<f64>| {
         forward_kinematics(model, &mut data, q);
-        kinloop_linkage::loop_closure::loop_closure(model, &mut data);
+        kinloop_linkage::algorithms::loop_closure::loop_closure(model, &mut data);
         data.closure_residual.clone()
     };
     let h = 1e-7;
@@ -148,7 +148,7 @@ fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
     let mut data = Data::new(&model);
     let mut turned = model.q0.clone();
     turned[0] += 2.0;
-    let turned = kinloop_linkage::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
+    let turned = kinloop_linkage::algorithms::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
     for q in [model.q0.clone(), turned] {
         let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
         assert_eq!(directions.count, 2, "a 1-DOF linkage's coupler is free in one direction");
@@ -262,11 +262,11 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
         let target = model.q0[0] + turn;
         while q[0] < target {
             q[0] = (q[0] + 0.05).min(target);
-            q = kinloop_linkage::assemble::assemble(&model, &q, 1e-13).unwrap().q;
+            q = kinloop_linkage::algorithms::assemble::assemble(&model, &q, 1e-13).unwrap().q;
         }
         let n = four_bar_motion_by_differences(&model, &q);
         forward_kinematics(&model, &mut data, &q);
-        kinloop_linkage::kinematics::forward_velocity(&model, &mut data, &n);
+        kinloop_linkage::algorithms::kinematics::forward_velocity(&model, &mut data, &n);
         let mass_along = 2.0 * kinetic_energy(&model, &data);
         let g = gravity_by_differences(&model, &q);
         let qdd = &n * (-g.dot(&n) / mass_along);

@@ -3,8 +3,10 @@
 mod common;
 
 use common::*;
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::{Model, Planar, Scene, SceneError, Spatial};
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::Spatial, model::scene::Scene, model::Model,
+};
 
 fn error_for(text: &str) -> SceneError {
     let scene = Scene::from_toml_str(text, "bad.toml");
@@ -123,18 +125,18 @@ fn assembly_of_an_unreachable_loop_fails_cleanly() {
 
 #[test]
 fn every_builtin_scene_compiles_and_is_closed_at_q0() {
-    for (name, _) in kinloop_linkage::builtin::SCENE_FILES {
+    for (name, _) in kinloop_linkage::model::builtin::SCENE_FILES {
         let scene = builtin_scene(name);
         let residual = match scene.kind {
-            kinloop_linkage::SceneKind::Planar => closure_at_q0(&compile::<Planar>(&scene)),
-            kinloop_linkage::SceneKind::Spatial => closure_at_q0(&compile::<Spatial>(&scene)),
+            kinloop_linkage::math::space::SceneKind::Planar => closure_at_q0(&compile::<Planar>(&scene)),
+            kinloop_linkage::math::space::SceneKind::Spatial => closure_at_q0(&compile::<Spatial>(&scene)),
         };
         assert!(residual < 1e-12, "{name}: {residual}");
     }
 }
 
-fn closure_at_q0<S: kinloop_linkage::Space>(model: &Model<S>) -> f64 {
-    let mut data = kinloop_linkage::Data::new(model);
-    kinloop_linkage::forward_dynamics(model, &mut data, &model.q0, &model.qd0, &mut ()).unwrap();
+fn closure_at_q0<S: kinloop_linkage::math::space::Space>(model: &Model<S>) -> f64 {
+    let mut data = kinloop_linkage::model::data::Data::new(model);
+    kinloop_linkage::algorithms::dynamics::forward_dynamics(model, &mut data, &model.q0, &model.qd0, &mut ()).unwrap();
     data.closure_residual.amax()
 }

@@ -5,17 +5,16 @@
 //! - [`quic`]: QUIC endpoints, certificates and trust, the handshake, control framing and datagrams;
 //! - [`emulator`]: a seeded, sans-IO link emulator (delay, jitter, loss, bursts, reordering, duplication,
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
-//! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
-//! - [`report`]: how the programs print an error (one line, each cause once);
+//! - [`passivity`]: the two-port's energy books both ends keep and send, the check of a peer's books, and the
+//!   output scale both ends' passivity controllers use;
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
 pub mod codec;
 pub mod emulator;
 pub mod messages;
+pub mod passivity;
 pub mod quic;
-pub mod realtime;
-pub mod report;
 mod shape;
 
 pub use messages::*;

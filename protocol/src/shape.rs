@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Planar or spatial, with `op_dim()`, `point_dim()`, `angular_dim()`; the linkage crate owns it.
-pub use kinloop_linkage::SceneKind;
+pub use kinloop_linkage::math::space::SceneKind;
 
 /// Dimensions of one session: fixed by the `Welcome`, checked on every snapshot and uplink.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

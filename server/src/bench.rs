@@ -12,8 +12,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::builtin::{self, PAPER_WRENCH};
-use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial};
+use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial,
+    model::scene::Scene, model::Model,
+};
 use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape, Snapshot};
 use rtrb::RingBuffer;
 use serde::Serialize;

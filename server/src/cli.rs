@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use kinloop_linkage::Integrator;
+use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
 
 use crate::bench::RealtimeRun;
@@ -224,7 +224,7 @@ where
     T: Into<OsString> + Clone,
 {
     let cli = Cli::try_parse_from(args).unwrap_or_else(|e| e.exit());
-    kinloop_protocol::report::run_program("info", || run(cli))
+    kinloop_process::report::run_program("info", || run(cli))
 }
 
 /// The VE's settings from the flags (the rest are `VeConfig::default`).

@@ -40,7 +40,7 @@ fn benchmark_users_keep_the_linkage_moving() {
 
 #[test]
 fn realtime_run_reports_ticks_and_snapshots() {
-    let scene = kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap();
+    let scene = kinloop_linkage::model::builtin::scene("paper-testbed").unwrap().unwrap();
     let run = RealtimeRun {
         scene,
         scene_label: "paper-testbed".into(),
@@ -59,7 +59,7 @@ fn realtime_run_reports_ticks_and_snapshots() {
 /// scene (it divided by the number of OPs and panicked).
 #[test]
 fn realtime_run_without_an_op_is_refused() {
-    let mut scene = kinloop_linkage::builtin::scene("paper-testbed").unwrap().unwrap();
+    let mut scene = kinloop_linkage::model::builtin::scene("paper-testbed").unwrap().unwrap();
     scene.ops.clear();
     let run = RealtimeRun {
         scene,

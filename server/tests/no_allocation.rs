@@ -5,7 +5,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::time::Duration;
 
-use kinloop_linkage::{Model, Planar, Scene, Space};
+use kinloop_linkage::{math::space::Planar, math::space::Space, model::scene::Scene, model::Model};
 use kinloop_protocol::{codec, DeviceCaps, LocalModelForm, Role};
 use kinloop_server::core::{JoinRequest, UplinkSample, VeConfig, VeCore};
 
@@ -131,7 +131,7 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
 }
 
 fn scene(name: &str) -> Scene {
-    kinloop_linkage::builtin::scene(name).unwrap().unwrap()
+    kinloop_linkage::model::builtin::scene(name).unwrap().unwrap()
 }
 
 #[test]
@@ -145,7 +145,8 @@ fn ticks_and_snapshots_allocate_nothing_for_a_fixed_set_of_users() {
     // A scene with an obstacle: contact terms in every snapshot.
     let slider = Model::<Planar>::compile(&scene("slider-crank"), "slider-crank").unwrap();
     assert_eq!(calls_per_run(slider, &[OpSpace, OpSpace, ConfigSpace], false, 500), 0, "with contacts");
-    let spatial = Model::<kinloop_linkage::Spatial>::compile(&scene("spherical-four-bar"), "spherical").unwrap();
+    let spatial =
+        Model::<kinloop_linkage::math::space::Spatial>::compile(&scene("spherical-four-bar"), "spherical").unwrap();
     assert_eq!(calls_per_run(spatial, &[OpSpace, OpSpace], false, 500), 0, "spatial");
 }
 

@@ -5,8 +5,8 @@ mod support;
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::Planar;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::Planar;
 use kinloop_protocol::Role;
 use kinloop_server::core::AxisGains;
 use kinloop_server::core::VeConfig;

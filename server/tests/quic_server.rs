@@ -5,7 +5,7 @@ use std::future::Future;
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use kinloop_linkage::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
 use kinloop_protocol::quic::{
     client_endpoint, connect, recv_control, send_control, ConnectError, ConnectedSession, DatagramReceiver,
     DatagramSender, EndpointOptions, Trust,

@@ -9,9 +9,9 @@ mod support;
 
 use std::time::Duration;
 
-use kinloop_linkage::builtin::SCENE_FILES;
+use kinloop_linkage::model::builtin::SCENE_FILES;
 use kinloop_linkage::testing::TestRng;
-use kinloop_linkage::{Planar, Space, Spatial};
+use kinloop_linkage::{math::space::Planar, math::space::Space, math::space::Spatial};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{DeviceCaps, LocalModelForm, MappingRequest, Role, Snapshot};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore, VeEvent};

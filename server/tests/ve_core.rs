@@ -5,7 +5,7 @@ mod support;
 
 use std::time::Duration;
 
-use kinloop_linkage::builtin::PAPER_WRENCH;
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_protocol::Role;
 use kinloop_server::core::{AxisGains, VeConfig};
 
@@ -43,11 +43,11 @@ fn paper_manipulation_keeps_the_loop_closed_to_1e_9_m_for_10_s() {
 /// `h(q) = 0` (Newton on 6 unknowns).
 #[test]
 fn two_users_pulling_against_each_other_settle_at_the_static_equilibrium() {
-    use kinloop_linkage::jacobian::frame_jacobian_t;
-    use kinloop_linkage::kinematics::forward_kinematics;
-    use kinloop_linkage::local_model::OpPose;
-    use kinloop_linkage::loop_closure::loop_closure;
-    use kinloop_linkage::{Data, Model, Planar};
+    use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
+    use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+    use kinloop_linkage::algorithms::loop_closure::loop_closure;
+    use kinloop_linkage::math::space::OpPose;
+    use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
     use nalgebra::{DMatrix, DVector, Vector2};
 
     let base = testbed();
@@ -153,7 +153,7 @@ fn join_silence_and_leave_in_mid_motion_make_no_wrench_step() {
     run(&mut ve, ms(2500), &mut latest, |ve, now, latest| {
         let Some(Some(sa)) = latest.get(a as usize) else { return };
         seq += 1;
-        ve.handle_uplink(now, a, &following(sa, seq, &kinloop_linkage::builtin::PAPER_WRENCH)).unwrap();
+        ve.handle_uplink(now, a, &following(sa, seq, &kinloop_linkage::model::builtin::PAPER_WRENCH)).unwrap();
         if now == ms(300) {
             b = Some(ve.join(now, request("B", Role::Manipulator, "link2", 3)).unwrap().user_id);
         }
@@ -219,7 +219,7 @@ fn malformed_stale_duplicate_and_hostile_uplinks_change_nothing() {
         let mut rejected = 0;
         run(&mut ve, Duration::from_millis(800), &mut latest, |ve, now, latest| {
             let Some(Some(s)) = latest.get(a as usize) else { return };
-            let good = following(s, seq + 1, &kinloop_linkage::builtin::PAPER_WRENCH);
+            let good = following(s, seq + 1, &kinloop_linkage::model::builtin::PAPER_WRENCH);
             if hostile {
                 let mut bad = Vec::new();
                 let mut with = |f: &dyn Fn(&mut kinloop_protocol::Uplink)| {
@@ -362,7 +362,7 @@ fn observers_receive_snapshots_and_push_nothing() {
 /// contact's force may enter once: frozen in b̂ *or* live in the local model, not both.
 #[test]
 fn local_model_at_a_resting_contact_predicts_no_acceleration() {
-    let model = model::<kinloop_linkage::Planar>("slider-crank");
+    let model = model::<kinloop_linkage::math::space::Planar>("slider-crank");
     let mut ve = core(model, VeConfig::paper());
     let user = ve.join(Duration::ZERO, request("P", Role::Manipulator, "slider", 3)).unwrap().user_id;
     let push = [5.0, 0.0, 0.0];
@@ -402,9 +402,9 @@ fn local_model_at_a_resting_contact_predicts_no_acceleration() {
 /// torn-open state a diverging step passes through just before it turns non-finite.
 #[test]
 fn a_diverging_linkage_is_restored_with_its_loop_closed() {
-    use kinloop_linkage::kinematics::forward_kinematics;
-    use kinloop_linkage::loop_closure::loop_closure;
-    use kinloop_linkage::{Data, Integrator};
+    use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+    use kinloop_linkage::algorithms::loop_closure::loop_closure;
+    use kinloop_linkage::{algorithms::integrator::Integrator, model::data::Data};
     use kinloop_server::core::BROKEN_CLOSURE_PER_LENGTH;
 
     let mut config = VeConfig::paper();
@@ -478,8 +478,8 @@ fn snapshots_list_the_other_manipulators_hands_and_positions() {
 /// The testbed with a second OP at link 3's middle; A and C joined on link 2 and B on link 3 between them (in
 /// join order); their hand wrenches.
 fn three_users_on_two_ops() -> (
-    kinloop_linkage::Model<kinloop_linkage::Planar>,
-    kinloop_server::core::VeCore<kinloop_linkage::Planar>,
+    kinloop_linkage::model::Model<kinloop_linkage::math::space::Planar>,
+    kinloop_server::core::VeCore<kinloop_linkage::math::space::Planar>,
     Vec<u32>,
     [[f64; 3]; 3],
 ) {
@@ -501,9 +501,9 @@ fn three_users_on_two_ops() -> (
 /// see `sharing`).
 #[test]
 fn users_on_one_op_share_its_terms_and_keep_their_own_bias() {
-    use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-    use kinloop_linkage::op_space::op_space_inertia;
-    use kinloop_linkage::{forward_dynamics, Data, Planar};
+    use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+    use kinloop_linkage::algorithms::op_space::op_space_inertia;
+    use kinloop_linkage::{algorithms::dynamics::forward_dynamics, math::space::Planar, model::data::Data};
     use nalgebra::{Matrix3, Vector3};
 
     let (model, mut ve, ids, hands) = three_users_on_two_ops();
@@ -609,9 +609,9 @@ fn a_hand_off_its_handle_lets_go_only_when_another_hand_holds_the_linkage() {
 /// link 2 through the loop.
 #[test]
 fn an_unmeasured_round_trip_leaves_every_hand_out_of_the_bias() {
-    use kinloop_linkage::local_model::op_acceleration;
-    use kinloop_linkage::op_space::op_space_inertia;
-    use kinloop_linkage::{forward_dynamics, Data};
+    use kinloop_linkage::algorithms::local_model::op_acceleration;
+    use kinloop_linkage::algorithms::op_space::op_space_inertia;
+    use kinloop_linkage::{algorithms::dynamics::forward_dynamics, model::data::Data};
     use nalgebra::Vector3;
 
     let (model, mut ve, ids, hands) = three_users_on_two_ops();
@@ -647,7 +647,7 @@ fn an_unmeasured_round_trip_leaves_every_hand_out_of_the_bias() {
 /// the heavier links bound it.
 #[test]
 fn snapshots_failing_the_wire_checks_are_withheld_for_every_user_of_their_op() {
-    use kinloop_linkage::Scene;
+    use kinloop_linkage::model::scene::Scene;
     use kinloop_server::core::VeEvent;
     use nalgebra::Vector2;
 
@@ -660,8 +660,8 @@ fn snapshots_failing_the_wire_checks_are_withheld_for_every_user_of_their_op() {
     let light =
         text.replace(hand, "mass = 1e-10\ncom = [0.1, 0.0]\ninertia = 1e-12").replace(wrist_damping, "q0 = -0.9");
     let scene = Scene::from_toml_str(&light, "light-hand").expect("a valid scene");
-    let base: kinloop_linkage::Model<kinloop_linkage::Planar> =
-        kinloop_linkage::Model::compile(&scene, "light-hand").expect("compiles");
+    let base: kinloop_linkage::model::Model<kinloop_linkage::math::space::Planar> =
+        kinloop_linkage::model::Model::compile(&scene, "light-hand").expect("compiles");
     let model = base.with_op("upper", 0, Vector2::new(0.15, 0.0));
     let mut ve = core(model, VeConfig::paper());
     let observer = Role::Observer;
@@ -720,8 +720,8 @@ fn users_are_found_by_id_across_joins_and_removals() {
 /// compensation it falls (1e-7 m against 0.19 m measured).
 #[test]
 fn gravity_compensation_holds_the_weight_at_the_users_op() {
-    use kinloop_linkage::local_model::OpPose;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::OpPose;
+    use kinloop_linkage::math::space::Planar;
     let session = |compensated: bool| {
         let mut ve = core(model::<Planar>("fourbar-crank-rocker"), VeConfig::default());
         let mut join = request("u", Role::Manipulator, "coupler", 3);
@@ -761,8 +761,10 @@ fn gravity_compensation_holds_the_weight_at_the_users_op() {
 fn a_linkage_nobody_holds_waits_at_rest() {
     let ms = Duration::from_millis;
     let unheld = |rest_unheld: bool| {
-        let mut ve =
-            core(model::<kinloop_linkage::Planar>("watt-six-bar"), VeConfig { rest_unheld, ..VeConfig::default() });
+        let mut ve = core(
+            model::<kinloop_linkage::math::space::Planar>("watt-six-bar"),
+            VeConfig { rest_unheld, ..VeConfig::default() },
+        );
         let q0 = ve.state().q.clone();
         run(&mut ve, ms(1000), &mut Vec::new(), |_, _, _| {});
         let moved = (ve.state().q - &q0).amax();

@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use fantoccini::actions::{InputSource, MouseActions, PointerAction, MOUSE_BUTTON_LEFT};
 use fantoccini::Locator;
-use kinloop_linkage::builtin;
+use kinloop_linkage::model::builtin;
 use kinloop_server::view::replay::Replay;
 use kinloop_server::view::{self, ViewConfig};
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};

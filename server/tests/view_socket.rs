@@ -10,7 +10,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
-use kinloop_linkage::builtin;
+use kinloop_linkage::model::builtin;
 use kinloop_server::view::ViewConfig;
 use kinloop_server::{Server, ServerConfig, ServerHandle};
 use serde_json::{json, Value};

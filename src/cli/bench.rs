@@ -8,8 +8,8 @@ use std::fmt::Write as _;
 use std::time::Duration;
 
 use anyhow::{ensure, Context, Result};
+use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, Timing};
-use kinloop_linkage::Integrator;
 use serde_json::{json, Value};
 
 /// Arguments of `kinloop bench`.

@@ -1,10 +1,14 @@
 //! `kinloop inspect`: everything the linkage core knows at one configuration.
 
 use anyhow::{bail, ensure, Context, Result};
-use kinloop_linkage::assemble::assemble;
-use kinloop_linkage::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
-use kinloop_linkage::op_space::{op_space_inertia, open_inverse_inertia};
-use kinloop_linkage::{forward_dynamics, Data, MatOps, Model, OpWrench, Planar, SceneKind, Space, Spatial, VecOps};
+use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, math::space::MatOps, math::space::Planar,
+    math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps, model::data::Data,
+    model::Model,
+};
 use nalgebra::DVector;
 use serde_json::json;
 
@@ -88,7 +92,11 @@ fn rows<M: MatOps>(m: &M) -> Vec<Vec<f64>> {
     (0..M::DIM).map(|r| (0..M::DIM).map(|c| m[(r, c)]).collect()).collect()
 }
 
-fn inspect<S: Space>(args: &InspectArgs, scene: &kinloop_linkage::Scene, label: &str) -> Result<serde_json::Value> {
+fn inspect<S: Space>(
+    args: &InspectArgs,
+    scene: &kinloop_linkage::model::scene::Scene,
+    label: &str,
+) -> Result<serde_json::Value> {
     let model: Model<S> =
         if args.assemble { Model::compile_unclosed(scene, label)? } else { Model::compile(scene, label)? };
     let n = model.nq();

@@ -3,10 +3,14 @@
 use std::time::Instant;
 
 use anyhow::{ensure, Context, Result};
-use kinloop_linkage::gravity::{kinetic_energy, potential_energy};
-use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{step, Data, Integrator, Model, OpWrench, Planar, SceneKind, Space, Spatial, StepConfig, VecOps};
+use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
+use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{
+    algorithms::dynamics::OpWrench, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    math::space::Spatial, math::space::VecOps, model::data::Data, model::Model,
+};
 use serde_json::json;
 
 use super::inspect::{op_index, parse_wrench};
@@ -72,7 +76,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 fn simulate<S: Space>(
     args: &SimulateArgs,
     integrator: Integrator,
-    scene: &kinloop_linkage::Scene,
+    scene: &kinloop_linkage::model::scene::Scene,
     label: &str,
 ) -> Result<serde_json::Value> {
     let model: Model<S> = Model::compile(scene, label)?;
@@ -96,7 +100,7 @@ fn simulate<S: Space>(
     }
     let elapsed = start.elapsed();
     forward_kinematics(&model, &mut data, &q);
-    kinloop_linkage::loop_closure::closure_residual(&model, &mut data);
+    kinloop_linkage::algorithms::loop_closure::closure_residual(&model, &mut data);
     max_closure = max_closure.max(data.closure_residual.norm());
 
     // Pass 2: the same (deterministic) trajectory, checking energy where it is conserved.

@@ -27,8 +27,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
-use kinloop_linkage::builtin::PAPER_WRENCH;
-use kinloop_linkage::{Scene, SceneKind};
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::Trust;
 use kinloop_server::driver::UserStats;
@@ -87,7 +87,7 @@ pub struct DemoOptions {
 impl DemoOptions {
     /// The paper's testbed, one user, 3 s, a perfect network, results under `out`.
     pub fn new(out: impl Into<PathBuf>) -> Result<Self> {
-        let scene = kinloop_linkage::builtin::scene("paper-testbed").context("the built-in paper-testbed")??;
+        let scene = kinloop_linkage::model::builtin::scene("paper-testbed").context("the built-in paper-testbed")??;
         Ok(DemoOptions {
             scene,
             scene_label: "builtin:paper-testbed".into(),

@@ -14,7 +14,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use kinloop_client::axes::{pose_names, wrench_names};
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 
 use crate::harness::{ClientSample, VeSample};
 

@@ -11,9 +11,9 @@ use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::{json, Value};
 
-use kinloop_linkage::kinematics::forward_kinematics;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Data, Model, Planar};
+use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::DVector;
 
 use crate::charts::{self, Chart, HeatMap, StabilityMap};

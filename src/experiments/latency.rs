@@ -312,7 +312,7 @@ pub fn measure_intending(
     lead: Lead,
 ) -> Result<Measured> {
     let (scene_name, op, _) = TARGETS[p.target];
-    let scene = kinloop_linkage::builtin::scene(scene_name).context("built in")??;
+    let scene = kinloop_linkage::model::builtin::scene(scene_name).context("built in")??;
     let mut client = ClientPlan::new("user", op, DevicePreset::Paper);
     client.user = UserSpec::Hand(HandSpec { kind: p.hand, intent });
     client.configure = edit;

@@ -20,7 +20,7 @@ use serde_json::json;
 
 use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
-use kinloop_linkage::{builtin, SceneKind};
+use kinloop_linkage::{math::space::SceneKind, model::builtin};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::VeConfig;
 

@@ -17,10 +17,13 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
 use kinloop_linkage::bench::{measure, paper_wrench, Case};
-use kinloop_linkage::local_model::{ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpPose};
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{Integrator, Model, Planar};
+use kinloop_linkage::{algorithms::integrator::Integrator, math::space::Planar, model::Model};
+use kinloop_linkage::{
+    algorithms::local_model::{ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::codec::encode_datagram;
 use kinloop_protocol::{LocalModelForm, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
@@ -50,7 +53,7 @@ struct Measured {
 
 /// A VE with one user of `form` joined at `link2`; returns it after one tick with its snapshot's size.
 fn ve_with_user(scene: &str, form: LocalModelForm) -> Result<(VeCore<Planar>, usize)> {
-    let scene = kinloop_linkage::builtin::scene(scene).ok_or_else(|| anyhow!("no scene {scene}"))??;
+    let scene = kinloop_linkage::model::builtin::scene(scene).ok_or_else(|| anyhow!("no scene {scene}"))??;
     let model: Model<Planar> = Model::compile(&scene, &scene.name)?;
     let mut ve = VeCore::new(model, VeConfig::paper()).map_err(|e| anyhow!("{e}"))?;
     let request = JoinRequest {

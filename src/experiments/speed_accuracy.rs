@@ -24,7 +24,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use kinloop_client::core::ModelForm;
-use kinloop_linkage::{step, Data, Integrator, Model, OpWrench, Planar, StepConfig};
+use kinloop_linkage::{
+    algorithms::dynamics::OpWrench, algorithms::integrator::step, algorithms::integrator::Integrator,
+    algorithms::integrator::StepConfig, math::space::Planar, model::data::Data, model::Model,
+};
 use kinloop_server::core::AxisGains;
 use nalgebra::Vector3;
 use serde_json::{json, Value};
@@ -102,7 +105,7 @@ fn linkage_alone(
     let model: Model<Planar> = Model::compile(&plan.scene, &plan.scene.name)?;
     let mut data = Data::new(&model);
     let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
-    let wrench = Vector3::from(kinloop_linkage::builtin::PAPER_WRENCH);
+    let wrench = Vector3::from(kinloop_linkage::model::builtin::PAPER_WRENCH);
     let mut force = OpWrench::<Planar> { op: model.op_index("link2").context("OP link2")?, wrench };
     let dt = 1.0 / rate_hz;
     let cfg = StepConfig { integrator, dt, project: true, implicit_forces: false };

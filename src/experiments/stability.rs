@@ -19,7 +19,7 @@
 use anyhow::{Context, Result};
 use kinloop_client::core::{ControllerGains, GainChoice};
 use kinloop_client::device::presets::DevicePreset;
-use kinloop_linkage::{Model, Planar, SceneKind};
+use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::Model};
 use kinloop_server::core::AxisGains;
 use serde_json::{json, Value};
 

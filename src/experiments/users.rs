@@ -23,8 +23,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use kinloop_client::user::UserSpec;
-use kinloop_linkage::builtin::PAPER_WRENCH;
-use kinloop_linkage::scene::{GeometrySpec, OpSpec};
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
+use kinloop_linkage::model::scene::{GeometrySpec, OpSpec};
 use serde_json::{json, Value};
 
 use super::common::{
@@ -231,7 +231,7 @@ fn sharing_plan(p: &SharingPoint) -> Result<SessionPlan> {
         ve.exchange_delay_s = f64::INFINITY;
     }
     Ok(SessionPlan {
-        scene: kinloop_linkage::builtin::scene(scene).context("built in")??,
+        scene: kinloop_linkage::model::builtin::scene(scene).context("built in")??,
         ve,
         clients,
         duration: Duration::from_secs_f64(SHARING_S),

@@ -17,8 +17,11 @@ use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::device::rig::SimulatedRig;
 use kinloop_client::device::{HapticDevice, SimulatedDevice};
 use kinloop_client::user::{UserContext, UserSpec};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Model, Planar, Scene, SceneKind, Space, Spatial, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{
+    math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial, math::space::VecOps,
+    model::scene::Scene, model::Model,
+};
 use kinloop_protocol::codec::{decode_datagram, encode_datagram_into};
 use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
 use kinloop_protocol::{Datagram, LocalModelForm, MappingRequest, Role, SessionShape};
@@ -145,7 +148,7 @@ impl SessionPlan {
     /// The paper's session: the testbed, the paper's VE, one paper user, 3 s, recording every tick.
     pub fn paper() -> Result<Self> {
         Ok(SessionPlan {
-            scene: kinloop_linkage::builtin::scene("paper-testbed").context("built in")??,
+            scene: kinloop_linkage::model::builtin::scene("paper-testbed").context("built in")??,
             ve: VeConfig::paper(),
             clients: vec![ClientPlan::paper("user")],
             duration: Duration::from_secs(3),

@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use kinloop_client::core::TickReport;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_server::core::VeState;
 
 /// One client tick, in plain numbers (operational vectors flattened, linear part first).

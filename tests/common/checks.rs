@@ -3,7 +3,7 @@
 
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::ClientStats;
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 use kinloop_server::ServerStats;
 
 use super::records::{linear, Tick};

@@ -9,9 +9,9 @@ use std::time::Duration;
 use kinloop_client::device::DevicePreset;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle};
 use kinloop_client::user::UserSpec;
-use kinloop_linkage::builtin::{self, PAPER_WRENCH};
-use kinloop_linkage::scene::OpSpec;
-use kinloop_linkage::{Scene, SceneKind};
+use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::model::scene::OpSpec;
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, Endpoint, EndpointOptions, Trust,
 };

@@ -12,10 +12,10 @@
 //! singular values get equal weights, so a swap in the SVD's order changes nothing. The free-direction
 //! projector is `I − P̃_c = Σ (1 − wᵢ) ũᵢ ũᵢᵀ`.
 
-use kinloop_linkage::constraint_directions::{constraint_directions, scale_op, DEFAULT_THRESHOLD};
-use kinloop_linkage::local_model::{ContactTerm, MAX_LOCAL_CONTACTS};
-use kinloop_linkage::op_path::product;
-use kinloop_linkage::space::{MatOps, Space, VecOps};
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, scale_op, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::local_model::{ContactTerm, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::algorithms::op_path::product;
+use kinloop_linkage::math::space::{MatOps, Space, VecOps};
 
 use super::config::ConstraintWeighting;
 use super::intake::SnapshotTerms;
@@ -352,7 +352,7 @@ pub fn contact_feedforward<S: Space>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::Planar;
 
     type V = <Planar as Space>::OpVec;
     type M = <Planar as Space>::OpMat;
@@ -411,7 +411,7 @@ mod tests {
         };
         let start = frame_along(&from, unscaled(&from) * accel_along);
         let there = frame_along(&to, unscaled(&to) * accel_along);
-        let turn = kinloop_linkage::op_path::turn_between::<Planar>(&from, &to, 1.0);
+        let turn = kinloop_linkage::algorithms::op_path::turn_between::<Planar>(&from, &to, 1.0);
         let carried = start.turned(&turn, length_scale);
         let close = |a: &M, b: &M, what: &str| {
             let error = (a - b).norm() / b.norm().max(1e-300);

@@ -3,9 +3,9 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::constraint_directions::scale_op;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::algorithms::constraint_directions::scale_op;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::uplink_flags;
 
 use super::config::UplinkDeadband;

@@ -31,7 +31,7 @@
 //!    keep a quarter and a half of these (in VE units, `K_pc c_p / c_f ≤ m_op / T²`,
 //!    `B_pc c_p / c_f ≤ m_op / T`), so no OP is too light for its device's channels.
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::{Mapping, OpSummary};
 
 use super::config::ControllerGains;

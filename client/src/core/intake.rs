@@ -8,8 +8,11 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::{ConfigSpaceTerms, ContactTerm, OpPose, MAX_LOCAL_CONTACTS};
-use kinloop_linkage::space::{MatOps, Space, VecOps};
+use kinloop_linkage::math::space::{MatOps, Space, VecOps};
+use kinloop_linkage::{
+    algorithms::local_model::{ConfigSpaceTerms, ContactTerm, MAX_LOCAL_CONTACTS},
+    math::space::OpPose,
+};
 use kinloop_protocol::codec::{validate, DecodeError};
 use kinloop_protocol::{ConfigTerms, SessionShape, Snapshot};
 

@@ -40,11 +40,11 @@ mod passive_update;
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::op_path::{turn_between, OpPath, PathError};
-use kinloop_linkage::passivity::{EnergyReports, PortBooks};
-use kinloop_linkage::space::{clip_wrench_parts, SceneKind, Space, VecOps};
+use kinloop_linkage::algorithms::op_path::{turn_between, OpPath, PathError};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{clip_wrench_parts, SceneKind, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_SPEED, MAX_WRENCH};
+use kinloop_protocol::passivity::{EnergyReports, PortBooks};
 use kinloop_protocol::{uplink_flags, Mapping, SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
@@ -467,7 +467,7 @@ pub struct HapticCore<S: Space> {
     /// The energy the model's updates may still put into the coupling (`passive_update`).
     tank: UpdateTank,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
-    /// reaction) drives the model (`kinloop_linkage::passivity`); its books go up in every uplink.
+    /// reaction) drives the model (`kinloop_protocol::passivity`); its books go up in every uplink.
     port: PortBooks,
     /// The VE coupling's books, as the snapshots report them (checked).
     server_energy: EnergyReports,
@@ -787,7 +787,7 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// This end's two-port books (the local model's port) and the VE coupling's as last accepted from a
-    /// snapshot (`kinloop_linkage::passivity`).
+    /// snapshot (`kinloop_protocol::passivity`).
     pub fn energy_books(&self) -> (&PortBooks, &EnergyReports) {
         (&self.port, &self.server_energy)
     }
@@ -1088,7 +1088,7 @@ impl<S: Space> HapticCore<S> {
             self.model.step(dt_s, &wrench);
             wrench
         };
-        let mut power_out = [0.0; kinloop_linkage::passivity::MAX_AXES];
+        let mut power_out = [0.0; kinloop_protocol::passivity::MAX_AXES];
         let model_twist_after = self.model.twist();
         for (a, p) in power_out.iter_mut().enumerate().take(S::DIM) {
             // Power into the local model is energy this end of the two-port received.

@@ -2,10 +2,13 @@
 //! default, the paper's configuration-space form (eq 11/13) when configured and the snapshot carries its
 //! terms, and the pull toward the VE that keeps it near the simulation without stepping the force.
 
-use kinloop_linkage::local_model::{
-    ConfigSpaceLocalModel, ContactTerm, OpPose, OpSpaceLocalModel, OpSpaceTerms, MAX_LOCAL_CONTACTS,
+use kinloop_linkage::math::space::{MatOps, Space, VecOps};
+use kinloop_linkage::{
+    algorithms::local_model::{
+        ConfigSpaceLocalModel, ContactTerm, OpSpaceLocalModel, OpSpaceTerms, MAX_LOCAL_CONTACTS,
+    },
+    math::space::OpPose,
 };
-use kinloop_linkage::space::{MatOps, Space, VecOps};
 
 use super::controllers::project_twist;
 use super::intake::SnapshotTerms;

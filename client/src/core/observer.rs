@@ -4,7 +4,7 @@
 //! device's own friction and damping — so it is an estimate, used only where the paper's second manipulation
 //! needs the hand wrench and no sensor gives it.
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 
 /// The observer state.
 #[derive(Clone, Copy, Debug)]

@@ -25,7 +25,7 @@
 //! is held by the pull's time constant of at least two round trips (`CoreConfig::free_blend_round_trips`),
 //! not by the tank; the `latency` experiment's model-update rows show both.
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::controllers::{hadamard, project_as_stiffness};
 
@@ -134,7 +134,7 @@ pub(crate) fn damper_dissipation<S: Space>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::Planar;
     use nalgebra::{Matrix3, Vector3};
 
     fn springs<'a>(k: &'a Vector3<f64>, p: &'a Matrix3<f64>, m: &'a Matrix3<f64>) -> CouplingSprings<'a, Planar> {

@@ -10,9 +10,9 @@
 //!   nor are absurd ones: a device reading or a local-model state outside the protocol's ranges
 //!   ([`usable_state`]) is treated as non-finite.
 
-use kinloop_linkage::local_model::OpPose;
-pub use kinloop_linkage::space::PartScales;
-use kinloop_linkage::space::{clip_wrench_parts, Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+pub use kinloop_linkage::math::space::PartScales;
+use kinloop_linkage::math::space::{clip_wrench_parts, Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
 
 use super::config::SafetyConfig;

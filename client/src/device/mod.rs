@@ -12,8 +12,8 @@ pub mod simulated;
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{SceneKind, Space};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{SceneKind, Space};
 use kinloop_protocol::DeviceCaps;
 
 pub use presets::DevicePreset;

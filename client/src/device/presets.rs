@@ -3,8 +3,8 @@
 
 use std::f64::consts::PI;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{SceneKind, Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::simulated::{SimulatedDevice, SimulatedDeviceError, SimulatedDeviceParams};
 use super::DeviceSpec;

@@ -2,8 +2,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::{DeviceError, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice};
 use crate::user::SimulatedUser;

@@ -10,8 +10,8 @@
 //! position and on the rotation vector of the handle's orientation (exact for planar θ; for spatial
 //! handles a per-component approximation that holds for the moderate rotations of gimbals).
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::DeviceSpec;
 use crate::core::safety::{limit_wrench, WrenchLimits};
@@ -68,7 +68,7 @@ pub enum SimulatedDeviceError {
         /// Axes of the space.
         expected: usize,
         /// The space.
-        kind: kinloop_linkage::SceneKind,
+        kind: kinloop_linkage::math::space::SceneKind,
     },
     /// A value that makes no physical sense (non-positive mass, plant slower than 10 kHz...).
     #[error("device {device}: {what}")]

@@ -19,7 +19,7 @@ use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::space::{Planar, SceneKind, Space, Spatial, VecOps};
+use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     client_endpoint, connect, ConnectError, ConnectedSession, DatagramReceiver, DatagramSender, Endpoint,
@@ -564,7 +564,7 @@ fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<Ha
 }
 
 fn empty_uplink<S: Space>() -> Uplink {
-    Uplink::at_rest(0, S::DIM, kinloop_linkage::local_model::OpPose::<S>::wire_len())
+    Uplink::at_rest(0, S::DIM, kinloop_linkage::math::space::OpPose::<S>::wire_len())
 }
 
 async fn run<S: Space>(

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{SceneKind, Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use crate::axes::{pose_names, wrench_names};
 use crate::core::TickReport;

@@ -8,8 +8,8 @@ use std::sync::Arc;
 use std::thread::Thread;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::space::Space;
-use kinloop_protocol::realtime::try_realtime_priority;
+use kinloop_linkage::math::space::Space;
+use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::{Snapshot, Uplink};
 
 use super::record::TickRecord;
@@ -257,5 +257,5 @@ pub fn timer_floor(rate_hz: f64, duration: Duration, realtime_priority: bool) ->
 }
 
 fn zero<S: Space>() -> S::OpVec {
-    <S::OpVec as kinloop_linkage::space::VecOps>::zero()
+    <S::OpVec as kinloop_linkage::math::space::VecOps>::zero()
 }

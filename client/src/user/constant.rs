@@ -4,7 +4,7 @@
 use std::marker::PhantomData;
 use std::time::Duration;
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::{SimulatedUser, UserError};
 use crate::device::DeviceState;

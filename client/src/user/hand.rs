@@ -30,8 +30,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::{unwrap_rotation_near, Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{unwrap_rotation_near, Space, VecOps};
 use kinloop_protocol::Welcome;
 
 use super::path::{minimum_jerk, PathSpec};

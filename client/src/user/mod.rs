@@ -19,7 +19,7 @@ pub mod replay;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use crate::device::DeviceState;
 
@@ -131,7 +131,7 @@ impl std::str::FromStr for UserSpec {
 impl UserSpec {
     /// The paper's user: `(−0.5 N, 0 N, −0.0025 N m)`.
     pub fn paper() -> Self {
-        UserSpec::Constant(kinloop_linkage::builtin::PAPER_WRENCH.to_vec())
+        UserSpec::Constant(kinloop_linkage::model::builtin::PAPER_WRENCH.to_vec())
     }
 
     /// The default user: a relaxed hand touring the operational point's reach.

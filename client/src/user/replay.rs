@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use kinloop_linkage::space::{Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::SimulatedUser;
 use crate::axes::wrench_names;

@@ -9,12 +9,19 @@ use std::time::Duration;
 use kinloop_client::core::{ConstraintMode, CoreConfig, GainChoice, HapticCore, ModelForm, TickReport};
 use kinloop_client::device::{DevicePreset, DeviceState, HapticDevice, SimulatedRig};
 use kinloop_client::user::{ConstantWrench, SimulatedUser};
-use kinloop_linkage::constraint_directions::constraint_directions;
-use kinloop_linkage::data::Kinematics;
-use kinloop_linkage::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
-use kinloop_linkage::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms, OpPose};
-use kinloop_linkage::op_space::op_space_inertia;
-use kinloop_linkage::{builtin, forward_dynamics, step, Data, Forces, Model, Planar, SceneKind, Space, StepConfig};
+use kinloop_linkage::algorithms::constraint_directions::constraint_directions;
+use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity};
+use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::model::data::Kinematics;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::Forces, algorithms::integrator::step,
+    algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
+    model::builtin, model::data::Data, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_space_terms, ConfigSpaceTerms, LocalModelTerms},
+    math::space::OpPose,
+};
 use kinloop_protocol::{
     ConfigTerms, CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Uplink, Welcome,
 };
@@ -133,9 +140,10 @@ impl TestbedVe {
     /// The welcome a server would send for this scene: one-to-one mapping, the paper's graphics-controller
     /// gains, the surveyed reach of `link2`.
     pub fn welcome(&self) -> Welcome {
-        let reach = kinloop_linkage::reach::survey_op(&self.model, self.op, &Default::default()).expect("survey");
+        let reach =
+            kinloop_linkage::algorithms::reach::survey_op(&self.model, self.op, &Default::default()).expect("survey");
         let mut data = Data::new(&self.model);
-        kinloop_linkage::kinematics::forward_kinematics(&self.model, &mut data, &self.q);
+        kinloop_linkage::algorithms::kinematics::forward_kinematics(&self.model, &mut data, &self.q);
         let pose = OpPose::of_op(&self.model, &data, self.op);
         Welcome {
             session_id: 7,
@@ -186,7 +194,7 @@ impl TestbedVe {
 
     /// The OP pose now.
     pub fn op_pose(&mut self) -> OpPose<Planar> {
-        kinloop_linkage::kinematics::forward_kinematics(&self.model, &mut self.data, &self.q);
+        kinloop_linkage::algorithms::kinematics::forward_kinematics(&self.model, &mut self.data, &self.q);
         OpPose::of_op(&self.model, &self.data, self.op)
     }
 
@@ -201,7 +209,7 @@ impl TestbedVe {
         let pose = OpPose::of_op(&self.model, &self.data, self.op);
         let mut op_pose = vec![0.0; 3];
         pose.to_slice(&mut op_pose);
-        let twist = kinloop_linkage::local_model::op_twist(&self.model, &self.data, self.op);
+        let twist = kinloop_linkage::algorithms::local_model::op_twist(&self.model, &self.data, self.op);
         let mut triangle = Vec::new();
         for r in 0..3 {
             for c in r..3 {

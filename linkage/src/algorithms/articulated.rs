@@ -15,9 +15,8 @@
 //! column k of what remains is `S_iᵀ I^A_k S_k`, and LTL divides it by the square root of its diagonal.
 //!
 //! **Why faster.** D costs one dot product per nonzero of U plus the composite inertias, and factoring it
-//! `O(Σ_k depth_k²)` more. Here the factorization *is* the dot products, plus one `DIM×DIM` update per body:
-//! on `chain50_loops5` D and its factorization took 55k instructions a step, this takes 14k; on the testbed
-//! (n = 4, where `ltl_small` factors D in straight-line code) 820 against 600 (callgrind). D itself is then
+//! `O(Σ_k depth_k²)` more. Here the factorization *is* the dot products, plus one `DIM×DIM` update per body
+//! (the step benchmarks show what it saves, most on long chains). D itself is then
 //! computed only where it is read ([`crate::algorithms::mass_matrix::ensure`], called by
 //! [`crate::algorithms::local_model::ConfigSpaceTerms::fill_from`]), for `implicit_mass`, which is added to D, and for
 //! callers that set `Data::keep_mass_matrix`.

@@ -12,7 +12,7 @@ use crate::error::SceneError;
 use crate::math::space::{SceneKind, Space, VecOps};
 use crate::model::data::Data;
 use crate::model::scene::{
-    Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND,
+    ActuatorSpec, Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND,
 };
 use crate::model::{
     Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, Spring,
@@ -117,7 +117,72 @@ impl<S: Space> Compiler<'_, S> {
         Ok(())
     }
 
+    /// The stages in order; each validates its part of the file, so the first error met is the one a reader
+    /// of the file meets first (names, tree, bodies and joints in tree order, globals, ops, obstacles).
     fn compile(&self) -> Result<Model<S>, SceneError> {
+        let sc = self.scene;
+        self.check_names()?;
+        let file_names: Vec<&str> = sc.bodies.iter().map(|b| b.name.as_str()).collect();
+        let tree = self.tree(&file_names)?;
+        let new_index = |file_body: usize| tree.order.iter().position(|&b| b == file_body).unwrap_or(0);
+
+        let mut bodies = Vec::with_capacity(tree.order.len());
+        let mut joints = Vec::with_capacity(tree.order.len());
+        let mut q0 = DVector::zeros(tree.order.len());
+        let mut qd0 = DVector::zeros(tree.order.len());
+        for (i, &fb) in tree.order.iter().enumerate() {
+            bodies.push(self.body(fb)?);
+            let ji = tree.carrier[fb].unwrap_or(0);
+            let (joint, q, qd) = self.joint(ji, tree.parent_of[fb].map_or(NO_PARENT, new_index))?;
+            q0[i] = q;
+            qd0[i] = qd;
+            joints.push(joint);
+        }
+
+        let gravity = self.point("gravity", &sc.gravity, true)?;
+        let baumgarte = Baumgarte {
+            alpha: self.non_negative("baumgarte.alpha", sc.baumgarte.alpha)?,
+            beta: self.non_negative("baumgarte.beta", sc.baumgarte.beta)?,
+        };
+        let contact = ContactParams {
+            stiffness: self.non_negative("contact.stiffness", sc.contact.stiffness)?,
+            damping: self.non_negative("contact.damping", sc.contact.damping)?,
+        };
+        let length_scale = self.length_scale(&bodies)?;
+        let new_names: Vec<String> = bodies.iter().map(|b| b.name.clone()).collect();
+        let new_names: Vec<&str> = new_names.iter().map(|s| s.as_str()).collect();
+        let ops = self.ops(&new_names)?;
+        let obstacles = self.obstacles()?;
+        let chain_prefix = chain_prefix(&joints);
+
+        let mut model = Model {
+            name: if sc.name.is_empty() { self.file.to_string() } else { sc.name.clone() },
+            has_springs: joints.iter().any(|j| j.spring.is_some_and(|s| s.stiffness > 0.0)),
+            has_joint_forces: joints.iter().any(|j| j.damping > 0.0 || j.actuator.is_some()),
+            has_gravity: gravity.norm() > 0.0,
+            bodies,
+            joints,
+            chain_prefix_len: chain_prefix.iter().take_while(|c| **c).count(),
+            chain_prefix,
+            cuts: Vec::new(),
+            closure_rows: 0,
+            closure_rank: 0,
+            ops,
+            obstacles,
+            gravity,
+            baumgarte,
+            contact,
+            length_scale,
+            q0,
+            qd0,
+        };
+        self.compile_cuts(&mut model, &new_names)?;
+        model.closure_rank = generic_closure_rank(&model);
+        Ok(model)
+    }
+
+    /// The scene's kind matches `S`, names are unique and non-empty per section, and there is a body.
+    fn check_names(&self) -> Result<(), SceneError> {
         let sc = self.scene;
         if sc.kind != S::KIND {
             return Err(self.invalid("kind".into(), format!("expected a {:?} scene, got {:?}", S::KIND, sc.kind)));
@@ -130,18 +195,21 @@ impl<S: Space> Compiler<'_, S> {
         if sc.bodies.is_empty() {
             return Err(self.invalid("body".into(), "a scene needs at least one body"));
         }
+        Ok(())
+    }
 
-        let file_names: Vec<&str> = sc.bodies.iter().map(|b| b.name.as_str()).collect();
-
-        // Which joint carries each body (exactly one), and its parent.
+    /// The kinematic tree: which joint carries each body (exactly one) and its parent, with no cycle, and
+    /// the bodies in a stable topological order following the file's joint order.
+    fn tree(&self, file_names: &[&str]) -> Result<Tree, SceneError> {
+        let sc = self.scene;
         let mut carrier: Vec<Option<usize>> = vec![None; sc.bodies.len()];
         let mut parent_of: Vec<Option<usize>> = vec![None; sc.bodies.len()];
         for (ji, j) in sc.joints.iter().enumerate() {
             let key = format!("joint[{ji}] ({})", j.name);
             let child = self
-                .body_ref(&format!("{key}.child"), &j.child, &file_names)?
+                .body_ref(&format!("{key}.child"), &j.child, file_names)?
                 .ok_or_else(|| self.invalid(format!("{key}.child"), "ground cannot be a child"))?;
-            let parent = self.body_ref(&format!("{key}.parent"), &j.parent, &file_names)?;
+            let parent = self.body_ref(&format!("{key}.parent"), &j.parent, file_names)?;
             if parent == Some(child) {
                 return Err(SceneError::Cycle { file: self.file.into(), key, body: j.child.clone() });
             }
@@ -180,7 +248,6 @@ impl<S: Space> Compiler<'_, S> {
                 });
             }
         }
-        // Stable topological order following the file's joint order.
         let mut order: Vec<usize> = Vec::with_capacity(sc.bodies.len()); // file body indices
         let mut placed = vec![false; sc.bodies.len()];
         while order.len() < sc.bodies.len() {
@@ -195,137 +262,136 @@ impl<S: Space> Compiler<'_, S> {
                 }
             }
         }
-        let new_index = |file_body: usize| order.iter().position(|&b| b == file_body).unwrap_or(0);
+        Ok(Tree { carrier, parent_of, order })
+    }
 
-        let mut bodies = Vec::with_capacity(order.len());
-        let mut joints = Vec::with_capacity(order.len());
-        let mut q0 = DVector::zeros(order.len());
-        let mut qd0 = DVector::zeros(order.len());
-        for (i, &fb) in order.iter().enumerate() {
-            let b = &sc.bodies[fb];
-            let bkey = format!("body[{fb}] ({})", b.name);
-            let mass = self.finite(&format!("{bkey}.mass"), b.mass)?;
-            if mass <= 0.0 {
-                return Err(self.invalid(format!("{bkey}.mass"), format!("must be positive, got {mass}")));
-            }
-            for (k, x) in b.inertia.as_slice().iter().enumerate() {
-                self.finite(&format!("{bkey}.inertia[{k}]"), *x)?;
-            }
-            let inertia = S::rot_inertia_from_scene(b.inertia.as_slice())
-                .map_err(|p| self.invalid(format!("{bkey}.inertia"), p))?;
-            let com = self.point(&format!("{bkey}.com"), &b.com, true)?;
-            let mut geometry = Vec::with_capacity(b.geometry.len());
-            for (gi, g) in b.geometry.iter().enumerate() {
-                let gkey = format!("{bkey}.geometry[{gi}]");
-                geometry.push(match g {
-                    GeometrySpec::Capsule { from, to, radius } => Shape::Capsule {
-                        from: self.point(&format!("{gkey}.from"), from, false)?,
-                        to: self.point(&format!("{gkey}.to"), to, false)?,
-                        radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
-                    },
-                    GeometrySpec::Ball { center, radius } => Shape::Ball {
-                        center: self.point(&format!("{gkey}.center"), center, false)?,
-                        radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
-                    },
-                });
-            }
-            bodies.push(Body { name: b.name.clone(), mass, com, inertia, geometry });
-
-            let ji = carrier[fb].unwrap_or(0);
-            let j = &sc.joints[ji];
-            let jkey = format!("joint[{ji}] ({})", j.name);
-            let kind = match j.kind {
-                JointKindSpec::Revolute => JointKind::Revolute,
-                JointKindSpec::Prismatic => JointKind::Prismatic,
-            };
-            let placement_pos = self.point(&format!("{jkey}.origin"), &j.origin, true)?;
-            let placement_rot = match &j.rotation {
-                None => S::rot_identity(),
-                Some(r) => {
-                    for (k, x) in r.as_slice().iter().enumerate() {
-                        self.finite(&format!("{jkey}.rotation[{k}]"), *x)?;
-                    }
-                    S::rot_from_scene(r.as_slice()).map_err(|p| self.invalid(format!("{jkey}.rotation"), p))?
-                }
-            };
-            let axis = match (&j.axis, S::KIND, kind) {
-                (Some(_), SceneKind::Planar, JointKind::Revolute) => {
-                    return Err(self
-                        .invalid(format!("{jkey}.axis"), "planar revolute joints always turn about z; remove `axis`"))
-                }
-                (Some(a), _, _) => self.unit(&format!("{jkey}.axis"), a)?,
-                (None, _, _) => S::default_axis(),
-            };
-            let spring = match &j.spring {
-                None => None,
-                Some(s) => Some(Spring {
-                    stiffness: self.non_negative(&format!("{jkey}.spring.stiffness"), s.stiffness)?,
-                    rest: self.finite(&format!("{jkey}.spring.rest"), s.rest)?,
-                }),
-            };
-            let actuator = match &j.actuator {
-                None => None,
-                Some(a) => {
-                    let max_effort = match a.max_effort {
-                        None => f64::INFINITY,
-                        Some(e) => {
-                            let e = self.finite(&format!("{jkey}.actuator.max_effort"), e)?;
-                            if e <= 0.0 {
-                                return Err(self.invalid(format!("{jkey}.actuator.max_effort"), "must be positive"));
-                            }
-                            e
-                        }
-                    };
-                    Some(Actuator {
-                        kp: self.non_negative(&format!("{jkey}.actuator.kp"), a.kp)?,
-                        kd: self.non_negative(&format!("{jkey}.actuator.kd"), a.kd)?,
-                        target: self.finite(&format!("{jkey}.actuator.target"), a.target)?,
-                        max_effort,
-                    })
-                }
-            };
-            q0[i] = self.finite(&format!("{jkey}.q0"), j.q0)?;
-            qd0[i] = self.finite(&format!("{jkey}.qd0"), j.qd0)?;
-            joints.push(Joint {
-                name: j.name.clone(),
-                kind,
-                parent: parent_of[fb].map_or(NO_PARENT, new_index),
-                placement_rot,
-                placement_pos,
-                axis,
-                spring,
-                damping: self.non_negative(&format!("{jkey}.damping"), j.damping)?,
-                actuator,
+    /// The body at file index `fb`: mass, inertia, centre of mass and geometry.
+    fn body(&self, fb: usize) -> Result<Body<S>, SceneError> {
+        let b = &self.scene.bodies[fb];
+        let bkey = format!("body[{fb}] ({})", b.name);
+        let mass = self.finite(&format!("{bkey}.mass"), b.mass)?;
+        if mass <= 0.0 {
+            return Err(self.invalid(format!("{bkey}.mass"), format!("must be positive, got {mass}")));
+        }
+        for (k, x) in b.inertia.as_slice().iter().enumerate() {
+            self.finite(&format!("{bkey}.inertia[{k}]"), *x)?;
+        }
+        let inertia =
+            S::rot_inertia_from_scene(b.inertia.as_slice()).map_err(|p| self.invalid(format!("{bkey}.inertia"), p))?;
+        let com = self.point(&format!("{bkey}.com"), &b.com, true)?;
+        let mut geometry = Vec::with_capacity(b.geometry.len());
+        for (gi, g) in b.geometry.iter().enumerate() {
+            let gkey = format!("{bkey}.geometry[{gi}]");
+            geometry.push(match g {
+                GeometrySpec::Capsule { from, to, radius } => Shape::Capsule {
+                    from: self.point(&format!("{gkey}.from"), from, false)?,
+                    to: self.point(&format!("{gkey}.to"), to, false)?,
+                    radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
+                },
+                GeometrySpec::Ball { center, radius } => Shape::Ball {
+                    center: self.point(&format!("{gkey}.center"), center, false)?,
+                    radius: self.non_negative(&format!("{gkey}.radius"), *radius)?,
+                },
             });
         }
+        Ok(Body { name: b.name.clone(), mass, com, inertia, geometry })
+    }
 
-        let gravity = self.point("gravity", &sc.gravity, true)?;
-        let baumgarte = Baumgarte {
-            alpha: self.non_negative("baumgarte.alpha", sc.baumgarte.alpha)?,
-            beta: self.non_negative("baumgarte.beta", sc.baumgarte.beta)?,
+    /// The joint at file index `ji` (its parent already in tree indices), with its q0 and q̇0.
+    fn joint(&self, ji: usize, parent: usize) -> Result<(Joint<S>, f64, f64), SceneError> {
+        let j = &self.scene.joints[ji];
+        let jkey = format!("joint[{ji}] ({})", j.name);
+        let kind = match j.kind {
+            JointKindSpec::Revolute => JointKind::Revolute,
+            JointKindSpec::Prismatic => JointKind::Prismatic,
         };
-        let contact = ContactParams {
-            stiffness: self.non_negative("contact.stiffness", sc.contact.stiffness)?,
-            damping: self.non_negative("contact.damping", sc.contact.damping)?,
+        let placement_pos = self.point(&format!("{jkey}.origin"), &j.origin, true)?;
+        let placement_rot = match &j.rotation {
+            None => S::rot_identity(),
+            Some(r) => {
+                for (k, x) in r.as_slice().iter().enumerate() {
+                    self.finite(&format!("{jkey}.rotation[{k}]"), *x)?;
+                }
+                S::rot_from_scene(r.as_slice()).map_err(|p| self.invalid(format!("{jkey}.rotation"), p))?
+            }
         };
-        let length_scale = match sc.length_scale {
+        let axis = match (&j.axis, S::KIND, kind) {
+            (Some(_), SceneKind::Planar, JointKind::Revolute) => {
+                return Err(
+                    self.invalid(format!("{jkey}.axis"), "planar revolute joints always turn about z; remove `axis`")
+                )
+            }
+            (Some(a), _, _) => self.unit(&format!("{jkey}.axis"), a)?,
+            (None, _, _) => S::default_axis(),
+        };
+        let spring = match &j.spring {
+            None => None,
+            Some(s) => Some(Spring {
+                stiffness: self.non_negative(&format!("{jkey}.spring.stiffness"), s.stiffness)?,
+                rest: self.finite(&format!("{jkey}.spring.rest"), s.rest)?,
+            }),
+        };
+        let actuator = match &j.actuator {
+            None => None,
+            Some(a) => Some(self.actuator(&jkey, a)?),
+        };
+        let q0 = self.finite(&format!("{jkey}.q0"), j.q0)?;
+        let qd0 = self.finite(&format!("{jkey}.qd0"), j.qd0)?;
+        let joint = Joint {
+            name: j.name.clone(),
+            kind,
+            parent,
+            placement_rot,
+            placement_pos,
+            axis,
+            spring,
+            damping: self.non_negative(&format!("{jkey}.damping"), j.damping)?,
+            actuator,
+        };
+        Ok((joint, q0, qd0))
+    }
+
+    /// A joint's PD actuator; an omitted effort limit is unlimited.
+    fn actuator(&self, jkey: &str, a: &ActuatorSpec) -> Result<Actuator, SceneError> {
+        let max_effort = match a.max_effort {
+            None => f64::INFINITY,
+            Some(e) => {
+                let e = self.finite(&format!("{jkey}.actuator.max_effort"), e)?;
+                if e <= 0.0 {
+                    return Err(self.invalid(format!("{jkey}.actuator.max_effort"), "must be positive"));
+                }
+                e
+            }
+        };
+        Ok(Actuator {
+            kp: self.non_negative(&format!("{jkey}.actuator.kp"), a.kp)?,
+            kd: self.non_negative(&format!("{jkey}.actuator.kd"), a.kd)?,
+            target: self.finite(&format!("{jkey}.actuator.target"), a.target)?,
+            max_effort,
+        })
+    }
+
+    /// The scene's `length_scale`, or the default from the bodies when omitted.
+    fn length_scale(&self, bodies: &[Body<S>]) -> Result<f64, SceneError> {
+        match self.scene.length_scale {
             Some(l) => {
                 let l = self.finite("length_scale", l)?;
                 if l <= 0.0 {
                     return Err(self.invalid("length_scale".into(), format!("must be positive, got {l}")));
                 }
-                l
+                Ok(l)
             }
-            None => default_length_scale::<S>(&bodies),
-        };
-        let new_names: Vec<String> = bodies.iter().map(|b| b.name.clone()).collect();
-        let new_names: Vec<&str> = new_names.iter().map(|s| s.as_str()).collect();
+            None => Ok(default_length_scale::<S>(bodies)),
+        }
+    }
 
-        let mut ops = Vec::with_capacity(sc.ops.len());
-        for (oi, o) in sc.ops.iter().enumerate() {
+    /// The operational points, each on a moving body (`names` in tree order).
+    fn ops(&self, names: &[&str]) -> Result<Vec<OpPoint<S>>, SceneError> {
+        let mut ops = Vec::with_capacity(self.scene.ops.len());
+        for (oi, o) in self.scene.ops.iter().enumerate() {
             let key = format!("op[{oi}] ({})", o.name);
             let body = self
-                .body_ref(&format!("{key}.body"), &o.body, &new_names)?
+                .body_ref(&format!("{key}.body"), &o.body, names)?
                 .ok_or_else(|| self.invalid(format!("{key}.body"), "an operational point must be on a moving body"))?;
             ops.push(OpPoint {
                 name: o.name.clone(),
@@ -333,9 +399,13 @@ impl<S: Space> Compiler<'_, S> {
                 point: self.point(&format!("{key}.point"), &o.point, true)?,
             });
         }
+        Ok(ops)
+    }
 
-        let mut obstacles = Vec::with_capacity(sc.obstacles.len());
-        for (oi, o) in sc.obstacles.iter().enumerate() {
+    /// The obstacles, each of a shape the scene's kind has.
+    fn obstacles(&self) -> Result<Vec<Obstacle<S>>, SceneError> {
+        let mut obstacles = Vec::with_capacity(self.scene.obstacles.len());
+        for (oi, o) in self.scene.obstacles.iter().enumerate() {
             let key = format!("obstacle[{oi}] ({})", o.name());
             let wrong_kind = || self.invalid(format!("{key}.shape"), format!("not available in a {:?} scene", S::KIND));
             obstacles.push(match o {
@@ -364,46 +434,7 @@ impl<S: Space> Compiler<'_, S> {
                 }
             });
         }
-
-        let chain_prefix: Vec<bool> = (0..joints.len())
-            .map(|k| {
-                let mut expect = k;
-                let mut b = joints[k].parent;
-                while b != NO_PARENT {
-                    if expect == 0 || b != expect - 1 {
-                        return false;
-                    }
-                    expect -= 1;
-                    b = joints[b].parent;
-                }
-                expect == 0
-            })
-            .collect();
-
-        let mut model = Model {
-            name: if sc.name.is_empty() { self.file.to_string() } else { sc.name.clone() },
-            has_springs: joints.iter().any(|j| j.spring.is_some_and(|s| s.stiffness > 0.0)),
-            has_joint_forces: joints.iter().any(|j| j.damping > 0.0 || j.actuator.is_some()),
-            has_gravity: gravity.norm() > 0.0,
-            bodies,
-            joints,
-            chain_prefix_len: chain_prefix.iter().take_while(|c| **c).count(),
-            chain_prefix,
-            cuts: Vec::new(),
-            closure_rows: 0,
-            closure_rank: 0,
-            ops,
-            obstacles,
-            gravity,
-            baumgarte,
-            contact,
-            length_scale,
-            q0,
-            qd0,
-        };
-        self.compile_cuts(&mut model, &new_names)?;
-        model.closure_rank = generic_closure_rank(&model);
-        Ok(model)
+        Ok(obstacles)
     }
 
     /// Builds the closure primitives of every cut from the tree's kinematics at q0, filling in omitted
@@ -413,20 +444,7 @@ impl<S: Space> Compiler<'_, S> {
         let sc = self.scene;
         let mut data = Data::new(model);
         forward_kinematics(model, &mut data, &model.q0.clone());
-        let pose = |body: Option<usize>| match body {
-            None => (S::rot_identity(), S::Point::zero()),
-            Some(b) => (data.kin.body_rot[b], data.kin.body_pos[b]),
-        };
-        let to_world = |body: Option<usize>, p: &S::Point| {
-            let (r, o) = pose(body);
-            o + S::rotate(&r, p)
-        };
-        let to_local = |body: Option<usize>, p: &S::Point| {
-            let (r, o) = pose(body);
-            S::rotate(&S::rot_inverse(&r), &(*p - o))
-        };
-        let dir_to_local = |body: Option<usize>, d: &S::Point| S::rotate(&S::rot_inverse(&pose(body).0), d);
-        let dir_to_world = |body: Option<usize>, d: &S::Point| S::rotate(&pose(body).0, d);
+        let at_q0 = PosesAtQ0 { data: &data };
         let tolerance = sc.closure_tolerance.unwrap_or(1e-6) * model.length_scale;
 
         let mut row = 0;
@@ -449,10 +467,10 @@ impl<S: Space> Compiler<'_, S> {
                 return Err(self.invalid(format!("{key}.body_b"), "a cut joint must connect two different bodies"));
             }
             let point_a = self.point(&format!("{key}.point_a"), &c.point_a, true)?;
-            let world_a = to_world(body_a, &point_a);
+            let world_a = at_q0.to_world(body_a, &point_a);
             let (point_b, explicit_b) = match &c.point_b {
                 Some(p) => (self.point(&format!("{key}.point_b"), p, false)?, true),
-                None => (to_local(body_b, &world_a), false),
+                None => (at_q0.to_local(body_b, &world_a), false),
             };
             let a = Attachment { body: body_a, point: point_a };
             let b = Attachment { body: body_b, point: point_b };
@@ -466,57 +484,13 @@ impl<S: Space> Compiler<'_, S> {
                 }
                 (None, _) => None,
             };
-            let (rot_a, _) = pose(body_a);
-            let (rot_b, _) = pose(body_b);
-            let relative = S::rot_mul(&S::rot_inverse(&rot_b), &rot_a);
-            let mut primitives = Vec::new();
-            match c.kind {
-                CutKindSpec::Pin | CutKindSpec::Spherical => primitives.push(ClosurePrimitive::Coincident { a, b }),
-                CutKindSpec::Weld if S::KIND == SceneKind::Planar => {
-                    primitives.push(ClosurePrimitive::Coincident { a, b });
-                    primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
-                }
-                CutKindSpec::Slider => {
-                    let u = axis_a.unwrap_or_else(S::default_axis);
-                    // Planar normal: u turned by +90°.
-                    let n = S::ang_cross_point(&S::axis_as_angular(&u), &u);
-                    primitives.push(ClosurePrimitive::OnPlane { a, normal_a: n, b });
-                    primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
-                }
-                CutKindSpec::Weld | CutKindSpec::Revolute => {
-                    primitives.push(ClosurePrimitive::Coincident { a, b });
-                    // Directions fixed in a, and the matching directions in b at q0.
-                    let basis = orthonormal_basis::<S>(axis_a.as_ref());
-                    let in_b = |d: &S::Point| dir_to_local(body_b, &dir_to_world(body_a, d));
-                    if c.kind == CutKindSpec::Revolute {
-                        // The axis (basis[0]) stays perpendicular to the two directions normal to it in b.
-                        for e in &basis[1..] {
-                            primitives.push(ClosurePrimitive::Perpendicular {
-                                body_a,
-                                dir_a: basis[0],
-                                body_b,
-                                dir_b: in_b(e),
-                            });
-                        }
-                    } else {
-                        // x_a ⟂ y_b, y_a ⟂ z_b, z_a ⟂ x_b: independent rows near alignment.
-                        for k in 0..3 {
-                            primitives.push(ClosurePrimitive::Perpendicular {
-                                body_a,
-                                dir_a: basis[k],
-                                body_b,
-                                dir_b: in_b(&basis[(k + 1) % 3]),
-                            });
-                        }
-                    }
-                }
-            }
+            let primitives = cut_primitives(c.kind, a, b, axis_a.as_ref(), &at_q0);
             if explicit_b && self.check_closure {
-                let gap = to_world(body_b, &point_b) - world_a;
+                let gap = at_q0.to_world(body_b, &point_b) - world_a;
                 let residual = match c.kind {
                     CutKindSpec::Slider => {
                         let n = match &primitives[0] {
-                            ClosurePrimitive::OnPlane { normal_a, .. } => dir_to_world(body_a, normal_a),
+                            ClosurePrimitive::OnPlane { normal_a, .. } => at_q0.dir_to_world(body_a, normal_a),
                             _ => S::Point::zero(),
                         };
                         n.dot(&gap).abs()
@@ -541,6 +515,124 @@ impl<S: Space> Compiler<'_, S> {
         model.closure_rows = row;
         Ok(())
     }
+}
+
+/// The bodies' poses at q0, which the cuts' reference data is completed from (`None`: ground).
+struct PosesAtQ0<'d, S: Space> {
+    data: &'d Data<S>,
+}
+
+impl<S: Space> PosesAtQ0<'_, S> {
+    fn pose(&self, body: Option<usize>) -> (S::Rot, S::Point) {
+        match body {
+            None => (S::rot_identity(), S::Point::zero()),
+            Some(b) => (self.data.kin.body_rot[b], self.data.kin.body_pos[b]),
+        }
+    }
+
+    fn to_world(&self, body: Option<usize>, p: &S::Point) -> S::Point {
+        let (r, o) = self.pose(body);
+        o + S::rotate(&r, p)
+    }
+
+    fn to_local(&self, body: Option<usize>, p: &S::Point) -> S::Point {
+        let (r, o) = self.pose(body);
+        S::rotate(&S::rot_inverse(&r), &(*p - o))
+    }
+
+    fn dir_to_local(&self, body: Option<usize>, d: &S::Point) -> S::Point {
+        S::rotate(&S::rot_inverse(&self.pose(body).0), d)
+    }
+
+    fn dir_to_world(&self, body: Option<usize>, d: &S::Point) -> S::Point {
+        S::rotate(&self.pose(body).0, d)
+    }
+}
+
+/// The closure primitives of one cut of `kind` between attachments `a` and `b`, with the angle offsets and
+/// b's directions taken from the poses at q0 so the loop is closed there.
+fn cut_primitives<S: Space>(
+    kind: CutKindSpec,
+    a: Attachment<S>,
+    b: Attachment<S>,
+    axis_a: Option<&S::Point>,
+    at_q0: &PosesAtQ0<'_, S>,
+) -> Vec<ClosurePrimitive<S>> {
+    let (body_a, body_b) = (a.body, b.body);
+    let (rot_a, _) = at_q0.pose(body_a);
+    let (rot_b, _) = at_q0.pose(body_b);
+    let relative = S::rot_mul(&S::rot_inverse(&rot_b), &rot_a);
+    let mut primitives = Vec::new();
+    match kind {
+        CutKindSpec::Pin | CutKindSpec::Spherical => primitives.push(ClosurePrimitive::Coincident { a, b }),
+        CutKindSpec::Weld if S::KIND == SceneKind::Planar => {
+            primitives.push(ClosurePrimitive::Coincident { a, b });
+            primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
+        }
+        CutKindSpec::Slider => {
+            let u = axis_a.copied().unwrap_or_else(S::default_axis);
+            // Planar normal: u turned by +90°.
+            let n = S::ang_cross_point(&S::axis_as_angular(&u), &u);
+            primitives.push(ClosurePrimitive::OnPlane { a, normal_a: n, b });
+            primitives.push(ClosurePrimitive::SameAngle { body_a, body_b, offset: relative });
+        }
+        CutKindSpec::Weld | CutKindSpec::Revolute => {
+            primitives.push(ClosurePrimitive::Coincident { a, b });
+            // Directions fixed in a, and the matching directions in b at q0.
+            let basis = orthonormal_basis::<S>(axis_a);
+            let in_b = |d: &S::Point| at_q0.dir_to_local(body_b, &at_q0.dir_to_world(body_a, d));
+            if kind == CutKindSpec::Revolute {
+                // The axis (basis[0]) stays perpendicular to the two directions normal to it in b.
+                for e in &basis[1..] {
+                    primitives.push(ClosurePrimitive::Perpendicular {
+                        body_a,
+                        dir_a: basis[0],
+                        body_b,
+                        dir_b: in_b(e),
+                    });
+                }
+            } else {
+                // x_a ⟂ y_b, y_a ⟂ z_b, z_a ⟂ x_b: independent rows near alignment.
+                for k in 0..3 {
+                    primitives.push(ClosurePrimitive::Perpendicular {
+                        body_a,
+                        dir_a: basis[k],
+                        body_b,
+                        dir_b: in_b(&basis[(k + 1) % 3]),
+                    });
+                }
+            }
+        }
+    }
+    primitives
+}
+
+/// The kinematic tree read from the file, in file body indices.
+struct Tree {
+    /// The joint carrying each body.
+    carrier: Vec<Option<usize>>,
+    /// Each body's parent body (`None`: ground).
+    parent_of: Vec<Option<usize>>,
+    /// The bodies in topological order.
+    order: Vec<usize>,
+}
+
+/// Whether joints `0..=k` form a serial chain from ground (each the child of the one before), per `k`.
+fn chain_prefix<S: Space>(joints: &[Joint<S>]) -> Vec<bool> {
+    (0..joints.len())
+        .map(|k| {
+            let mut expect = k;
+            let mut b = joints[k].parent;
+            while b != NO_PARENT {
+                if expect == 0 || b != expect - 1 {
+                    return false;
+                }
+                expect -= 1;
+                b = joints[b].parent;
+            }
+            expect == 0
+        })
+        .collect()
 }
 
 /// The generic rank of W on the constraint manifold: the largest numerical rank (SVD, relative tolerance

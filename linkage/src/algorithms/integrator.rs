@@ -201,8 +201,7 @@ pub const CHORD_ITERATIONS: usize = 3;
 ///
 /// **The residual is predicted, not re-evaluated.** After a correction δ the residual is, to first order,
 /// `r ← r + W(q) δ` (m dot products; the second-order term is `O(|δ|²)` times the linkage's curvature, far
-/// below the tolerance: over 3 s of the fast-moving benchmark chains the residual evaluated afresh after the
-/// corrections agrees with the prediction to within 1.7e-12 m, 2 % of the tolerance). While the
+/// below the tolerance; `predicted_residual_is_the_evaluated_one` checks it on the benchmark chains). While the
 /// predicted `|r_q|` exceeds [`CHORD_TOLERANCE`] times the length scale, the chord is applied again, each time
 /// shrinking the residual by the factor `|I - W(q) D⁻¹ W_sᵀ S⁺|`, of the order of W's relative change
 /// since s: O(dt |q̇|), ~1e-3 at 1 kHz. The iterations thus solve the linearized constraint
@@ -211,16 +210,14 @@ pub const CHORD_ITERATIONS: usize = 3;
 /// new q and one exact correction takes the remaining predicted residual to zero. **Redundant closures**
 /// (`closure_rank < nc`: the spherical four-bar's revolute cut) always take the exact step: there the
 /// pivoting keeps only some rows, and with the rows and factors of the solve's state the drift of the dropped
-/// rows was not corrected (the spherical four-bar's closure error grew by 3 % a step, to 1e-7 m within 0.1 s
-/// of swinging).
+/// rows would not be corrected and the closure error would grow step by step.
 ///
 /// Why this is enough: any positive-definite metric gives a valid projection, and every step corrects what
-/// the last one left (the closure error measured at the start of the steps stays below 1e-10 m over the
-/// paper's 3 s on the testbed). The velocity is made to satisfy the constraint of the configuration it
+/// the last one left. The velocity is made to satisfy the constraint of the configuration it
 /// belongs to (the W of the step's start in place of W(q) would leave an O(dt) velocity error every step).
 /// What this saves: a refactorization costs the triangular solve of Wᵀ, the Schur complement and its
-/// pivoted factorization. With a bound instead of the prediction (`|Δq|∞ · |h|`), 29 % of the testbed's
-/// steps and 86 % of `chain50_loops5`'s refactored; with the prediction and the iterations, none.
+/// pivoted factorization; a bound instead of the prediction (`|Δq|∞ · |h|`) would refactor far more often
+/// than the prediction and the iterations do.
 ///
 /// **Violent motion.** The second-order term grows as `|δ|²`: a linkage spun at tens of rad/s drifts so far
 /// in a step that one pass leaves it above the tolerance. When the residual a pass starts from exceeds
@@ -250,13 +247,12 @@ pub fn project<S: Space>(
     projection
 }
 
-/// A closure residual above this fraction of the length scale L (2.0e-6 m on the testbed) is corrected by so
+/// A closure residual above this fraction of the length scale L is corrected by so
 /// large a δ that the correction's second-order remainder may exceed the tolerance: [`project`] then
 /// evaluates h again at the corrected q and projects again. The remainder of one pass from a residual r is
-/// about `c r²/L`, with c = 0.34 measured on the testbed spun at 30-200 rad/s (r = 5.8e-6 to 2.7e-4 m left
-/// 2.5e-10 to 5.5e-7 m); it stays under `CHORD_TOLERANCE · L` while `r ≤ L √(CHORD_TOLERANCE / c)`, and the
+/// about `c r²/L`, with c below 1 on the built-in linkages spun fast; it stays under `CHORD_TOLERANCE · L` while `r ≤ L √(CHORD_TOLERANCE / c)`, and the
 /// threshold takes c = 1 for linkages curved more tightly than their length scale says. Reached only in
-/// violent motion: on the testbed from about 18 rad/s, a hundred times the paper's manipulation.
+/// violent motion, far beyond the paper's manipulation.
 pub const SECOND_ORDER_RESIDUAL: f64 = 4.47e-5; // √CHORD_TOLERANCE
 
 /// Passes [`project`] takes at most (see [`SECOND_ORDER_RESIDUAL`]).
@@ -395,7 +391,7 @@ mod tests {
     use crate::testing::{for_each_model, paper_testbed, random_state};
 
     /// `(‖h(q)‖, ‖W(q) q̇‖)` evaluated afresh.
-    fn residuals(model: &Model<crate::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
+    fn residuals(model: &Model<crate::math::space::Planar>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
         let mut data = Data::new(model);
         forward_poses(model, &mut data, q);
         closure_residual_and_jacobian(model, &mut data);
@@ -407,7 +403,10 @@ mod tests {
     /// The testbed at q0 with joint rates of `speed` times a fixed pattern (made consistent with the loop),
     /// after one semi-implicit Euler step of 1 ms without projection: a drift of order dt² q̇². The workspace
     /// holds the factors of the step's solve.
-    fn drifted(model: &Model<crate::Planar>, speed: f64) -> (Data<crate::Planar>, DVector<f64>, DVector<f64>) {
+    fn drifted(
+        model: &Model<crate::math::space::Planar>,
+        speed: f64,
+    ) -> (Data<crate::math::space::Planar>, DVector<f64>, DVector<f64>) {
         let mut data = Data::new(model);
         let mut q = model.q0.clone();
         // A velocity on the manifold: project a raw one at q0 (the exact Newton step, factors at q0).
@@ -455,7 +454,8 @@ mod tests {
     fn a_step_that_ends_non_finite_leaves_the_state_as_it_was() {
         let model = paper_testbed();
         let mut data = Data::new(&model);
-        let mut push = crate::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
+        let mut push =
+            crate::algorithms::dynamics::OpWrench { op: 0, wrench: nalgebra::Vector3::new(-0.5, 0.0, -0.0025) };
         for integrator in [Integrator::SemiImplicitEuler, Integrator::ExplicitEuler, Integrator::Rk4] {
             let (mut q, mut qd) = crate::testing::random_state(&model, 5);
             qd *= 1e10;

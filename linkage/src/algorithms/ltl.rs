@@ -458,7 +458,10 @@ mod tests {
     #[test]
     fn factor_reproduces_the_mass_matrix_and_solves_invert_it() {
         for_each_model!(name, model => { check(name, model) });
-        check("chain30_loops3", &crate::testing::compile::<crate::Planar>(&crate::model::builtin::chain(30, 3)));
+        check(
+            "chain30_loops3",
+            &crate::testing::compile::<crate::math::space::Planar>(&crate::model::builtin::chain(30, 3)),
+        );
     }
 
     fn check<S: Space>(name: &str, model: &Model<S>) {

@@ -22,6 +22,5 @@ pub mod ltl;
 pub mod mass_matrix;
 pub mod op_path;
 pub mod op_space;
-pub mod passivity;
 pub mod reach;
 pub(crate) mod tree;

@@ -20,7 +20,7 @@
 //! branch the OP is on instead of jumping to the other).
 
 use crate::algorithms::constraint_directions::scale_op;
-use crate::algorithms::local_model::OpPose;
+use crate::math::space::OpPose;
 use crate::math::space::{MatOps, Space, VecOps};
 
 /// A sampled OP path: poses in order, closed or open.

@@ -37,7 +37,7 @@ use crate::model::Model;
 /// `constraint_directions` (so the rule, like the count, does not depend on units).
 ///
 /// **Why 1e-10.** What round-off leaves of a pinned OP is tiny: Ỹ's columns keep about ε_mach of Y's, so the
-/// ratio is ~1e-32 (1e-31 measured at slider-crank dead centres). It grows where the kept closures are
+/// ratio is of the order of ε_mach². It grows where the kept closures are
 /// nearly dependent: the projection's basis Q loses orthogonality as ε_mach·cond(R)², and with
 /// `kkt::RANK_TOLERANCE` = 1e-10 on the Schur pivots, cond(R) reaches 1e5, so up to ~1e-6 of Y survives,
 /// a ratio of ~1e-12. 1e-10 stays a hundred times above that. A genuinely mobile OP falls below it only

@@ -30,11 +30,12 @@ use crate::algorithms::constraint_directions::{constraint_directions, Constraint
 use crate::algorithms::contact::{contact_capacity, detect_contacts, Contact};
 use crate::algorithms::dynamics::forward_dynamics;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
-use crate::algorithms::local_model::{op_acceleration, OpPose};
+use crate::algorithms::local_model::op_acceleration;
 use crate::algorithms::loop_closure::loop_closure;
 use crate::algorithms::op_path::OpPath;
 use crate::algorithms::op_space::op_space_inertia;
 use crate::error::DynamicsError;
+use crate::math::space::OpPose;
 use crate::math::space::{Space, VecOps};
 use crate::model::data::Data;
 use crate::model::{JointKind, Model};
@@ -311,7 +312,6 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         return Err(SurveyError::UnknownOp { index: op, count: model.ops.len() });
     }
     let n = model.nq();
-    let lin = <S::Point as VecOps>::LEN;
     let mut walker = Walker {
         model,
         data: Data::new(model),
@@ -324,22 +324,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     close(model, &mut walker.data, &mut q0, &walker.zero);
     residual(model, &mut walker.data, &q0, &walker.zero);
     let start = OpPose::<S>::of_op(model, &walker.data, op);
-    let null_basis = {
-        let rows = walker.rows().unwrap_or_else(|| DMatrix::zeros(0, n));
-        // An orthonormal basis of the null space: the identity's columns projected and orthonormalized.
-        let mut basis: Vec<DVector<f64>> = Vec::new();
-        for i in 0..n {
-            let mut v = project_null(&rows, &DVector::from_fn(n, |r, _| f64::from(u8::from(r == i))));
-            for b in &basis {
-                v -= b * b.dot(&v);
-            }
-            let norm = v.norm();
-            if norm > 1e-6 {
-                basis.push(v / norm);
-            }
-        }
-        basis
-    };
+    let null_basis = null_space_basis(&walker.rows().unwrap_or_else(|| DMatrix::zeros(0, n)), n);
     let dof = null_basis.len();
 
     let mut reach = OpReach {
@@ -357,36 +342,17 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         dof,
         path: None,
     };
-    let mut forces = Vec::new();
-    let mut torques = Vec::new();
     let zero_qd = DVector::zeros(n);
-    let mut dynamics_data = Data::new(model);
-    let mut visit = |q: &DVector<f64>, pose: &OpPose<S>, with_inertia: bool, reach: &mut OpReach<S>| {
-        reach.samples += 1;
-        let p = pose.position.as_slice();
-        for (i, x) in p.iter().enumerate() {
-            let lo = &mut reach.position_min.as_mut_slice()[i];
-            *lo = lo.min(*x);
-            let hi = &mut reach.position_max.as_mut_slice()[i];
-            *hi = hi.max(*x);
-        }
-        reach.rotation_range = reach.rotation_range.max(S::op_ang(&pose.difference(&start)).norm());
-        if !with_inertia {
-            return;
-        }
-        if let Ok((load, _)) = static_op_load(model, &mut dynamics_data, q, &zero_qd, op) {
-            let inverse = dynamics_data.op.inverse_inertia;
-            reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
-            reach.inverse_rotational_inertia_max =
-                reach.inverse_rotational_inertia_max.max(block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
-            let (f, t) = (S::op_lin(&load).norm(), S::op_ang(&load).norm());
-            if f.is_finite() && t.is_finite() {
-                forces.push(f);
-                torques.push(t);
-            }
-        }
+    let mut samples = Samples {
+        model,
+        op,
+        start,
+        zero_qd: zero_qd.clone(),
+        data: Data::new(model),
+        forces: Vec::new(),
+        torques: Vec::new(),
     };
-    visit(&q0, &start, true, &mut reach);
+    samples.visit(&q0, &start, true, &mut reach);
     if dof == 0 {
         reach.tour.push(start);
     }
@@ -427,7 +393,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
                     direction = tangent;
                     failures = 0;
                     let pose = OpPose::<S>::of_op(model, &walker.data, op);
-                    visit(&q, &pose, step % config.inertia_every.max(1) == 0, &mut reach);
+                    samples.visit(&q, &pose, step % config.inertia_every.max(1) == 0, &mut reach);
                     let (mobility, accel) = at_rest(&q, &mut tour_data);
                     path.push((pose, mobility, accel));
                 }
@@ -446,11 +412,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         // from the dead points where the OP itself jams (a rocker driven from its output at the ends of its
         // swing, Λ⁻¹ → 0 there): a hand that means to go there meets a toggle, not the linkage's motion.
         if on_tour {
-            let mut mobilities: Vec<f64> = path.iter().map(|p| p.1).collect();
-            mobilities.sort_by(f64::total_cmp);
-            let median = mobilities[mobilities.len() / 2];
-            let mobile: Vec<OpPose<S>> = path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
-            reach.tour.extend(waypoints(&mobile, config.tour_points));
+            reach.tour.extend(mobile_waypoints(&path, config.tour_points));
         }
         if dof == 1 {
             halves.push(path[..first_turn.unwrap_or(path.len())].iter().map(|p| (p.0, p.2)).collect());
@@ -459,28 +421,104 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     if let [forth, back] = halves.as_slice() {
         reach.path = one_dof_path(forth, back, model.length_scale);
     }
-    let percentile = |values: &mut Vec<f64>| {
-        if values.is_empty() {
-            return 0.0;
-        }
-        values.sort_by(f64::total_cmp);
-        values[((values.len() - 1) as f64 * 0.9).round() as usize]
-    };
-    // A group the OP does not move in at all (a parallelogram's coupler never turns) shows an inverse
-    // inertia of round-off size, 1e-23 where the other group's is 1; read it as zero (an infinite inertia),
-    // comparing the groups in the unit-consistent coordinates `(v, L ω)`.
-    let l2 = model.length_scale * model.length_scale;
-    let scaled_largest = reach.inverse_mass_max.max(reach.inverse_rotational_inertia_max * l2);
-    if reach.inverse_mass_max <= IMMOBILE_GROUP * scaled_largest {
-        reach.inverse_mass_max = 0.0;
-    }
-    if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
-        reach.inverse_rotational_inertia_max = 0.0;
-    }
-    reach.static_force_max_n = forces.iter().fold(0.0, |a: f64, b| a.max(*b));
-    reach.static_force_n = percentile(&mut forces);
-    reach.static_torque_nm = percentile(&mut torques);
+    samples.settle(&mut reach);
     Ok(reach)
+}
+
+/// `count` waypoints along the poses of a walk's `path` (pose, mobility, acceleration) where the OP is
+/// mobile (at least [`TOUR_MOBILITY`] of the walk's median mobility).
+fn mobile_waypoints<S: Space>(path: &[(OpPose<S>, f64, S::OpVec)], count: usize) -> Vec<OpPose<S>> {
+    let mut mobilities: Vec<f64> = path.iter().map(|p| p.1).collect();
+    mobilities.sort_by(f64::total_cmp);
+    let median = mobilities[mobilities.len() / 2];
+    let mobile: Vec<OpPose<S>> = path.iter().filter(|p| p.1 >= TOUR_MOBILITY * median).map(|p| p.0).collect();
+    waypoints(&mobile, count)
+}
+
+/// An orthonormal basis of the null space of `rows` (`n` columns): the identity's columns projected and
+/// orthonormalized.
+fn null_space_basis(rows: &DMatrix<f64>, n: usize) -> Vec<DVector<f64>> {
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    for i in 0..n {
+        let mut v = project_null(rows, &DVector::from_fn(n, |r, _| f64::from(u8::from(r == i))));
+        for b in &basis {
+            v -= b * b.dot(&v);
+        }
+        let norm = v.norm();
+        if norm > 1e-6 {
+            basis.push(v / norm);
+        }
+    }
+    basis
+}
+
+/// The 90th percentile of `values` (sorted in place), 0 for none.
+fn percentile_90(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * 0.9).round() as usize]
+}
+
+/// What a survey gathers at the poses it visits: the OP's extent, and at some the inertia and static load.
+struct Samples<'m, S: Space> {
+    model: &'m Model<S>,
+    op: usize,
+    start: OpPose<S>,
+    zero_qd: DVector<f64>,
+    data: Data<S>,
+    forces: Vec<f64>,
+    torques: Vec<f64>,
+}
+
+impl<S: Space> Samples<'_, S> {
+    /// Books the pose at `q` into `reach`, with the OP's inertia and static load there when `with_inertia`.
+    fn visit(&mut self, q: &DVector<f64>, pose: &OpPose<S>, with_inertia: bool, reach: &mut OpReach<S>) {
+        let lin = <S::Point as VecOps>::LEN;
+        reach.samples += 1;
+        let p = pose.position.as_slice();
+        for (i, x) in p.iter().enumerate() {
+            let lo = &mut reach.position_min.as_mut_slice()[i];
+            *lo = lo.min(*x);
+            let hi = &mut reach.position_max.as_mut_slice()[i];
+            *hi = hi.max(*x);
+        }
+        reach.rotation_range = reach.rotation_range.max(S::op_ang(&pose.difference(&self.start)).norm());
+        if !with_inertia {
+            return;
+        }
+        if let Ok((load, _)) = static_op_load(self.model, &mut self.data, q, &self.zero_qd, self.op) {
+            let inverse = self.data.op.inverse_inertia;
+            reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
+            reach.inverse_rotational_inertia_max =
+                reach.inverse_rotational_inertia_max.max(block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
+            let (f, t) = (S::op_lin(&load).norm(), S::op_ang(&load).norm());
+            if f.is_finite() && t.is_finite() {
+                self.forces.push(f);
+                self.torques.push(t);
+            }
+        }
+    }
+
+    /// The survey's inertia bounds and static loads from what was visited.
+    fn settle(mut self, reach: &mut OpReach<S>) {
+        let model = self.model;
+        // A group the OP does not move in at all (a parallelogram's coupler never turns) shows an inverse
+        // inertia of round-off size, 1e-23 where the other group's is 1; read it as zero (an infinite inertia),
+        // comparing the groups in the unit-consistent coordinates `(v, L ω)`.
+        let l2 = model.length_scale * model.length_scale;
+        let scaled_largest = reach.inverse_mass_max.max(reach.inverse_rotational_inertia_max * l2);
+        if reach.inverse_mass_max <= IMMOBILE_GROUP * scaled_largest {
+            reach.inverse_mass_max = 0.0;
+        }
+        if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
+            reach.inverse_rotational_inertia_max = 0.0;
+        }
+        reach.static_force_max_n = self.forces.iter().fold(0.0, |a: f64, b| a.max(*b));
+        reach.static_force_n = percentile_90(&mut self.forces);
+        reach.static_torque_nm = percentile_90(&mut self.torques);
+    }
 }
 
 /// Where a walk's `path` first comes back near its start after having gone away (a crank-rocker's coupler

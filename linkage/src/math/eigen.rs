@@ -83,10 +83,8 @@ pub fn symmetric_eigen_from<S: Space>(a: &S::OpMat, guess: Option<&S::OpMat>) ->
 /// Orthonormal by construction, and robust to repeated eigenvalues (a 1-DOF linkage's two constrained
 /// directions share the eigenvalue 0: an orthonormal pair spanning that plane is returned). Eigenvalues
 /// are accurate to round-off of the largest, as with the warm start.
-/// About 2.5 times fewer instructions than cold Jacobi, which stays for warm starts (their signs follow
-/// the guess) and for 6x6. On the testbed's Λ̃⁻¹ one decomposition takes ~165 ns where the first version
-/// (normalized basis, library `acos`/`cos`, division by the largest entry) took ~245 ns with about as
-/// many instructions (~430 against ~540 with libm's): what changed is the length of the chain.
+/// Fewer instructions than cold Jacobi, which stays for warm starts (their signs follow the guess) and for
+/// 6x6; the arithmetic is arranged to keep the dependency chain short (the `eigen` benchmarks compare).
 fn closed_form_3(a: &[[f64; 3]; 3], values: &mut [f64], vectors: &mut [f64]) {
     // Entries within 2^±200 of one cannot overflow or underflow the cubic's coefficients or the squared
     // norms of cross products (fourth powers): decomposed as they are, so that the dependency chain does

@@ -5,8 +5,8 @@
 //! **Why.** On the paper's testbed (n = 4, m = 2) these three do about 150 floating-point operations a
 //! step, but their general forms (`kkt::z_and_schur_general`, `kkt::solve_general`,
 //! `integrator::correct_general`) are chains of small calls over run-time lengths: a support per column,
-//! groups of columns, a Schur solve on a vector moved out of the workspace and back. Those spent about
-//! 1,900 instructions a step on the testbed. Here each is one function whose columns are `[f64; N]`
+//! groups of columns, a Schur solve on a vector moved out of the workspace and back, many times the
+//! instructions of the arithmetic. Here each is one function whose columns are `[f64; N]`
 //! arrays held in registers; only m, the closure rows, is still a loop bound.
 //!
 //! **Same results.** The same operations in the same order as the general forms, which for n ≤ 8 also

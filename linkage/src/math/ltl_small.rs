@@ -3,9 +3,8 @@
 //!
 //! **Why.** The tree-sparse loops of `ltl` pay, per row, for what a small matrix does not need: walking the
 //! parent array off the chain prefix, blocks of 16/8/4/2/1 rows, bounds checks on run-time lengths. With n a
-//! constant the compiler unrolls the whole factorization and each solve into straight-line code. On the
-//! paper's testbed (n = 4, callgrind) the factorization went from about 560 instructions to 93, and a whole
-//! VE step from 7,789 to 6,636.
+//! constant the compiler unrolls the whole factorization and each solve into straight-line code (the
+//! `ltl` benchmarks compare the two paths).
 //!
 //! **Same results, same zeros.** The arithmetic is the dense textbook form of the same recurrences, so
 //! results agree with `ltl`'s to round-off (the tests of `ltl` run on both paths: the small scenes here,

@@ -371,7 +371,7 @@ fn non_negative_vector(field: Field, v: &[f64], expected: usize, bound: f64) -> 
 
 /// The energy books' lengths only: their values (finite, non-negative, never decreasing, no faster than a
 /// device can push) are judged against the stream's history by the receiver, which refuses a bad report and
-/// counts it without dropping the rest of the message (`kinloop_linkage::passivity::EnergyReports`).
+/// counts it without dropping the rest of the message (`crate::passivity::EnergyReports`).
 fn port_energy_shape(fields: (&'static str, &'static str), e: &PortEnergy, k: usize) -> Result<(), DecodeError> {
     length(Field::at(fields.0), e.received_j.len(), k)?;
     length(Field::at(fields.1), e.emitted_j.len(), k)

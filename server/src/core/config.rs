@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::{Integrator, Space, VecOps};
+use kinloop_linkage::{algorithms::integrator::Integrator, math::space::Space, math::space::VecOps};
 
 /// Gains along the operational axes: the same value on every linear axis and on every angular axis, or one
 /// value per axis (`k` of them, linear axes first).

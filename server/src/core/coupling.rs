@@ -25,11 +25,11 @@
 //! enters eq 4 once, as `Jᵀ Σ F` and `Jᵀ (Σ C) J`, the same sums as per user but with one pass over the
 //! supporting joints, whatever order the users joined in.
 
-use kinloop_linkage::contact::PenaltyContacts;
-use kinloop_linkage::data::Kinematics;
-use kinloop_linkage::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity, support};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Forces, Model, Space, VecOps};
+use kinloop_linkage::algorithms::contact::PenaltyContacts;
+use kinloop_linkage::algorithms::jacobian::{apply_wrench, frame_jacobian_t, frame_velocity, support};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::model::data::Kinematics;
+use kinloop_linkage::{algorithms::dynamics::Forces, math::space::Space, math::space::VecOps, model::Model};
 use nalgebra::{DMatrix, DVector};
 
 use super::playout::{Playout, Reference};
@@ -422,9 +422,9 @@ pub enum Evaluation {
 }
 
 /// Stage weights of an integrator's evaluations.
-pub fn stage_weights(integrator: kinloop_linkage::Integrator) -> &'static [f64] {
+pub fn stage_weights(integrator: kinloop_linkage::algorithms::integrator::Integrator) -> &'static [f64] {
     match integrator {
-        kinloop_linkage::Integrator::Rk4 => &[1.0 / 6.0, 2.0 / 6.0, 2.0 / 6.0, 1.0 / 6.0],
+        kinloop_linkage::algorithms::integrator::Integrator::Rk4 => &[1.0 / 6.0, 2.0 / 6.0, 2.0 / 6.0, 1.0 / 6.0],
         _ => &[1.0],
     }
 }
@@ -552,9 +552,9 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
+    use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
     use kinloop_linkage::testing::{paper_testbed, random_state};
-    use kinloop_linkage::{Data, Planar};
+    use kinloop_linkage::{math::space::Planar, model::data::Data};
     use nalgebra::Vector3;
 
     /// The testbed at random state `seed`, with its kinematics (positions and velocities) evaluated.

@@ -1,5 +1,5 @@
 //! What the server decides for each user at join, from the user's device and the surveyed reach of the
-//! operational point it holds (`kinloop_linkage::reach`): the mapping between device and VE (a position
+//! operational point it holds (`kinloop_linkage::algorithms::reach`): the mapping between device and VE (a position
 //! scale and a force scale) and the graphics controller's gains K_g, B_g (paper section IV, Fig 3).
 //!
 //! **The mapping.** A device is small and weak beside most linkages (a Touch's workspace is 16 × 12 cm
@@ -29,8 +29,8 @@
 //! not hold (README, Known limits of earlier versions): designed from the inertia, no OP gets a coupling
 //! stiffer than its own mass can follow.
 
-use kinloop_linkage::reach::OpReach;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::algorithms::reach::OpReach;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 

@@ -9,9 +9,9 @@
 //! rating, direction kept, force and torque each on their own: a clipped value keeps the user coupled, a
 //! dropped uplink would leave the coupling to fade out.
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::space::clip_wrench_parts;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::math::space::clip_wrench_parts;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::{DeviceCaps, Mapping, Uplink};
 
 use super::config::GuardLimits;
@@ -263,7 +263,7 @@ pub fn clip_hand_wrench<S: Space>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::Planar;
 
     type V = <Planar as Space>::OpVec;
     const RATING: WrenchLimits = WrenchLimits { max_force_n: 10.0, max_torque_nm: 0.2 };

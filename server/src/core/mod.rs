@@ -14,7 +14,7 @@
 //! ```
 //!
 //! A tick (`handle_timeout`) is the paper's section II and IV in order: each user's fade and passivity
-//! scale are updated, then one [`kinloop_linkage::step`] integrates eq 4 with every user's coupling
+//! scale are updated, then one [`kinloop_linkage::algorithms::integrator::step`] integrates eq 4 with every user's coupling
 //! ([`coupling`]) and the penalty contacts; a failed step restores the last good state. After the last
 //! tick due, if a snapshot is due, every user's local model of interaction is built ([`snapshots`]).
 //!
@@ -37,12 +37,15 @@ pub mod users;
 
 use std::time::Duration;
 
-use kinloop_linkage::contact::{Contact, PenaltyContacts};
+use kinloop_linkage::algorithms::contact::{Contact, PenaltyContacts};
+use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
+use kinloop_linkage::algorithms::reach::{survey_op, OpReach, SurveyConfig};
 use kinloop_linkage::error::DynamicsError;
-use kinloop_linkage::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::reach::{survey_op, OpReach, SurveyConfig};
-use kinloop_linkage::{step, Data, Model, Space, StepConfig, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{
+    algorithms::integrator::step, algorithms::integrator::StepConfig, math::space::Space, math::space::VecOps,
+    model::data::Data, model::Model,
+};
 use kinloop_protocol::{
     Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
     Uplink, Welcome,
@@ -175,7 +178,7 @@ impl<S: Space> VeState<'_, S> {
 /// Reusable buffers of the snapshot build (see `snapshots`).
 #[derive(Debug)]
 struct SnapshotScratch<S: Space> {
-    /// `Ỹ_h` of the user being built (n×k, see `kinloop_linkage::op_space`).
+    /// `Ỹ_h` of the user being built (n×k, see `kinloop_linkage::algorithms::op_space`).
     op_y: DMatrix<f64>,
     /// `Ỹ_c n` of a contact (n).
     contact_y: DVector<f64>,
@@ -289,7 +292,7 @@ impl<S: Space> VeCore<S> {
         let scratch = SnapshotScratch {
             op_y: DMatrix::zeros(n, k),
             contact_y: DVector::zeros(n),
-            near: Vec::with_capacity(kinloop_linkage::contact::contact_capacity(&model)),
+            near: Vec::with_capacity(kinloop_linkage::algorithms::contact::contact_capacity(&model)),
             others: {
                 let mut table = OtherUsers::default();
                 table.reserve(user_room, <S::Point as VecOps>::LEN, S::DIM);
@@ -691,7 +694,7 @@ impl<S: Space> VeCore<S> {
     }
 
     /// The static loads the VE holds for users with gravity compensation, at the current state (the OP wrench
-    /// that cancels gravity's acceleration in the OP's free directions, `kinloop_linkage::reach`), until the
+    /// that cancels gravity's acceleration in the OP's free directions, `kinloop_linkage::algorithms::reach`), until the
     /// next snapshot round. Allocates nothing.
     fn update_held_loads(&mut self) {
         let Some((data, at_rest)) = self.held.as_mut() else { return };
@@ -699,7 +702,7 @@ impl<S: Space> VeCore<S> {
             if !(u.mapping.gravity_compensation && u.role == Role::Manipulator) {
                 continue;
             }
-            let load = kinloop_linkage::reach::static_op_load(&self.model, data, &self.q, at_rest, u.op);
+            let load = kinloop_linkage::algorithms::reach::static_op_load(&self.model, data, &self.q, at_rest, u.op);
             c.held_load = match load {
                 Ok((load, _)) if load.is_finite() => load,
                 _ => S::OpVec::zero(),
@@ -853,8 +856,8 @@ impl<S: Space> VeCore<S> {
         forward_kinematics(&self.model, &mut self.data, &self.q);
         forward_velocity(&self.model, &mut self.data, &self.qd);
         (
-            kinloop_linkage::gravity::kinetic_energy(&self.model, &self.data),
-            kinloop_linkage::gravity::potential_energy(&self.model, &self.data, &self.q),
+            kinloop_linkage::algorithms::gravity::kinetic_energy(&self.model, &self.data),
+            kinloop_linkage::algorithms::gravity::potential_energy(&self.model, &self.data, &self.q),
         )
     }
 

@@ -64,7 +64,7 @@
 //! six-bar's start (20 of 864 unstable, 2.1 times the device-OP distance at 0 ms).
 //!
 //! **Across the network (two-port).** The coupling is one end of the two-port between the user's device and the
-//! VE (`kinloop_linkage::passivity`); the client's local model is the other, and its uplinks carry its books.
+//! VE (`kinloop_protocol::passivity`); the client's local model is the other, and its uplinks carry its books.
 //! The credit for what the hand put in trusts the client only as far as the server can check it: on each axis
 //! it is the smaller of the client's report (refused and counted when it is non-finite, negative, shrinking or
 //! faster than the device can push, see `EnergyReports`) and the server's own booking of the same flow from
@@ -72,8 +72,8 @@
 //! client that overstates what it received buys at most an allowance per axis; one that understates only
 //! makes its own coupling stricter.
 
-use kinloop_linkage::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_protocol::passivity::{output_scale, EnergyReports, PortBooks, MAX_AXES};
 
 use super::guards::MAX_OP_DIM;
 
@@ -229,7 +229,7 @@ impl PassivityObserver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::Planar;
     use std::f64::consts::PI;
 
     type V = <Planar as Space>::OpVec;

@@ -28,8 +28,8 @@
 
 use std::collections::VecDeque;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::Space;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::Space;
 
 /// Uplinks kept waiting at most: 0.5 s of a 1 kHz stream, beyond the largest buffer.
 pub const CAPACITY: usize = 512;
@@ -163,7 +163,7 @@ impl<S: Space> Default for Playout<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::{Planar, VecOps};
+    use kinloop_linkage::{math::space::Planar, math::space::VecOps};
 
     type V = <Planar as Space>::OpVec;
 

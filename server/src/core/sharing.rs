@@ -43,7 +43,7 @@
 //! max(Λ̂⁻¹_linear)` with a hand of [`HAND_MASS_KG`] (the simulated grasps' 0.55-0.8 kg) mapped into the
 //! VE ([`inertial_weight`]).
 
-use kinloop_linkage::VecOps;
+use kinloop_linkage::math::space::VecOps;
 
 /// The round trip (s) up to which one other user's hands are taken whole (`VeConfig::exchange_delay_s`'s
 /// default); shorter round trips allow proportionally more users.

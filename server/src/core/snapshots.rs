@@ -31,7 +31,7 @@
 //! **Contacts** within `contact_margin_m` (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
 //! loops carry a contact's force to any OP) enter the local model along their normal n. With
 //! `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (the KKT inverse's top-left block) and the factors of eq 9 (`Ỹ`: `U⁻¹ Jᵀ`
-//! with the kept closures' directions projected out, see `kinloop_linkage::op_space`), the cross inertia
+//! with the kept closures' directions projected out, see `kinloop_linkage::algorithms::op_space`), the cross inertia
 //! between the OP frame h and the contact point c is `Λ⁻¹_hc = J_h P J_cᵀ = Ỹ_hᵀ Ỹ_c`. The user's `Ỹ_h` is
 //! kept, `frame_point_inertia` at the contact point gives `Ỹ_c` and `Λ⁻¹_cc`, and:
 //! - `op_coupling = Λ⁻¹_hc n = Ỹ_hᵀ (Ỹ_c n)`: the OP acceleration per unit normal force and,
@@ -43,15 +43,22 @@
 //!   contacts' forces stay frozen in each contact's `bias_accel` (the local model has no contact-contact
 //!   cross inertia); contacts beyond the nearest `MAX_LOCAL_CONTACTS` stay frozen in b̂.
 
-use kinloop_linkage::constraint_directions::{constraint_directions_from, ConstraintDirections, DEFAULT_THRESHOLD};
-use kinloop_linkage::contact::detect_contacts;
-use kinloop_linkage::data::Data;
+use kinloop_linkage::algorithms::constraint_directions::{
+    constraint_directions_from, ConstraintDirections, DEFAULT_THRESHOLD,
+};
+use kinloop_linkage::algorithms::contact::detect_contacts;
+use kinloop_linkage::algorithms::jacobian::apply_wrench;
+use kinloop_linkage::algorithms::kkt::constrained_response;
+use kinloop_linkage::algorithms::op_space::{frame_point_inertia, op_space_inertia};
 use kinloop_linkage::error::DynamicsError;
-use kinloop_linkage::jacobian::apply_wrench;
-use kinloop_linkage::kkt::constrained_response;
-use kinloop_linkage::local_model::{op_acceleration, op_twist, LocalModelTerms, OpPose, MAX_LOCAL_CONTACTS};
-use kinloop_linkage::op_space::{frame_point_inertia, op_space_inertia};
-use kinloop_linkage::{forward_dynamics, MatOps, Model, Space, VecOps};
+use kinloop_linkage::model::data::Data;
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, math::space::MatOps, math::space::Space, math::space::VecOps, model::Model,
+};
+use kinloop_linkage::{
+    algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS},
+    math::space::OpPose,
+};
 use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_WRENCH};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
@@ -464,7 +471,7 @@ fn set_upper_triangle_of(out: &mut Vec<f64>, k: usize, at: impl Fn(usize, usize)
     }
 }
 
-fn write_config_terms(wire: &mut ConfigTerms, terms: &kinloop_linkage::local_model::ConfigSpaceTerms) {
+fn write_config_terms(wire: &mut ConfigTerms, terms: &kinloop_linkage::algorithms::local_model::ConfigSpaceTerms) {
     set(&mut wire.q, terms.q.as_slice());
     set(&mut wire.qd, terms.qd.as_slice());
     set_upper_triangle_dyn(&mut wire.mass_matrix, &terms.mass_matrix);
@@ -481,7 +488,7 @@ fn fill_contact_term<S: Space>(
     model: &Model<S>,
     data: &mut Data<S>,
     scratch: &mut SnapshotScratch<S>,
-    contact: &kinloop_linkage::contact::Contact<S>,
+    contact: &kinloop_linkage::algorithms::contact::Contact<S>,
     own_wrench: &S::OpVec,
     (stiffness, damping): (f64, f64),
     term: &mut ContactTerm,
@@ -540,7 +547,7 @@ fn within_wire_range<S: Space>(wrench: &S::OpVec) -> S::OpVec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kinloop_linkage::Planar;
+    use kinloop_linkage::math::space::Planar;
     use nalgebra::Vector3;
 
     /// A wrench past the wire's range is scaled into it with its direction kept and its largest component on

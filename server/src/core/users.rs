@@ -3,8 +3,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
-use kinloop_linkage::{Model, Space};
+use kinloop_linkage::algorithms::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
+use kinloop_linkage::{math::space::Space, model::Model};
 use kinloop_protocol::{
     ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Mapping, MappingRequest, OtherUsers,
     Role, Snapshot,
@@ -88,8 +88,8 @@ impl SnapshotSlot {
     /// Storage for a user of `model` with the given form.
     pub fn new<S: Space>(model: &Model<S>, user: UserId, form: LocalModelForm) -> Self {
         let (n, m, k) = (model.nq(), model.nc(), S::DIM);
-        let pose_len = kinloop_linkage::local_model::OpPose::<S>::wire_len();
-        let point = <S::Point as kinloop_linkage::VecOps>::LEN;
+        let pose_len = kinloop_linkage::math::space::OpPose::<S>::wire_len();
+        let point = <S::Point as kinloop_linkage::math::space::VecOps>::LEN;
         let config = (form == LocalModelForm::ConfigSpace).then(|| ConfigTerms {
             q: Vec::with_capacity(n),
             qd: Vec::with_capacity(n),

@@ -24,7 +24,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::{Model, Planar, Scene, SceneError, SceneKind, Space, Spatial, VecOps};
+use kinloop_linkage::{
+    error::SceneError, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial,
+    math::space::VecOps, model::scene::Scene, model::Model,
+};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     close_codes, server_endpoint, Endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity,
@@ -567,5 +570,5 @@ fn log_event(shared: &Shared, event: &VeEvent) {
     }
 }
 
-/// Loads a scene argument: a file, or a built-in name (see [`kinloop_linkage::builtin::load`]).
-pub use kinloop_linkage::builtin::load as load_scene;
+/// Loads a scene argument: a file, or a built-in name (see [`kinloop_linkage::model::builtin::load`]).
+pub use kinloop_linkage::model::builtin::load as load_scene;

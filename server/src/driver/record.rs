@@ -14,8 +14,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use rtrb::{Consumer, Producer};
 
 use crate::core::VeCore;

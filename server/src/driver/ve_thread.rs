@@ -9,9 +9,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::codec;
-use kinloop_protocol::realtime::try_realtime_priority;
 use kinloop_protocol::RefusalReason;
 use rtrb::{Consumer, Producer};
 use tokio::sync::{oneshot, Notify};
@@ -223,7 +223,7 @@ pub fn snapshot_size_bound<S: Space>(n: usize, m: usize) -> usize {
     let other = point + k;
     let config = 3 * n + n * (n + 1) / 2 + m * n + m + k * n + k;
     let numbers = fixed
-        + kinloop_linkage::local_model::MAX_LOCAL_CONTACTS * contact
+        + kinloop_linkage::algorithms::local_model::MAX_LOCAL_CONTACTS * contact
         + kinloop_protocol::codec::limits::MAX_LIST_ENTRIES * other
         + config;
     (numbers * 8 + 1024).min(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES)

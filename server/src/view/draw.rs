@@ -2,12 +2,14 @@
 //! operational points, by the view's own [`Model`] and [`Data`] (never the VE's: the hub runs on the
 //! network side and computes [`forward_kinematics`] itself).
 
-use kinloop_linkage::jacobian::frame_jacobian_t;
-use kinloop_linkage::kinematics::forward_kinematics;
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
+use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
+use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::model::{Obstacle, Shape};
-use kinloop_linkage::{Data, Model, SceneKind, Space, VecOps};
+use kinloop_linkage::{
+    math::space::SceneKind, math::space::Space, math::space::VecOps, model::data::Data, model::Model,
+};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -258,9 +260,16 @@ impl<S: Space> Drawer<S> {
 }
 
 /// A boxed [`Geometry`] for a model of either space.
-pub fn geometry(scene: &kinloop_linkage::Scene, label: &str) -> Result<Box<dyn Geometry>, kinloop_linkage::SceneError> {
+pub fn geometry(
+    scene: &kinloop_linkage::model::scene::Scene,
+    label: &str,
+) -> Result<Box<dyn Geometry>, kinloop_linkage::error::SceneError> {
     Ok(match scene.kind {
-        SceneKind::Planar => Box::new(Drawer::new(Model::<kinloop_linkage::Planar>::compile(scene, label)?)),
-        SceneKind::Spatial => Box::new(Drawer::new(Model::<kinloop_linkage::Spatial>::compile(scene, label)?)),
+        SceneKind::Planar => {
+            Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Planar>::compile(scene, label)?))
+        }
+        SceneKind::Spatial => {
+            Box::new(Drawer::new(Model::<kinloop_linkage::math::space::Spatial>::compile(scene, label)?))
+        }
     })
 }

@@ -19,8 +19,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Planar, Space, Spatial, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Planar, math::space::Space, math::space::Spatial, math::space::VecOps};
 use kinloop_protocol::Snapshot;
 
 use crate::core::guards::{MAX_OP_DIM, MAX_POSE_LEN};

@@ -9,7 +9,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 use tokio::sync::watch;
 
 use super::compose::{compose, UserInfo};

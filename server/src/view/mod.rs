@@ -39,7 +39,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use kinloop_linkage::{Scene, SceneError};
+use kinloop_linkage::{error::SceneError, model::scene::Scene};
 use kinloop_protocol::SessionShape;
 use serde::Serialize;
 use tokio::sync::{watch, Notify};
@@ -291,7 +291,7 @@ pub struct TapReader {
 
 /// A tap for the VE thread and its reader for [`start_live`], for a scene with `n` coordinates: one frame
 /// every `ve_rate_hz / frame_rate_hz` loop iterations.
-pub fn tap<S: kinloop_linkage::Space>(
+pub fn tap<S: kinloop_linkage::math::space::Space>(
     n: usize,
     max_users: usize,
     ve_rate_hz: f64,
@@ -312,7 +312,7 @@ pub fn tap_for_scene(
     ve_rate_hz: f64,
     config: &ViewConfig,
 ) -> Result<(ViewTap, TapReader), ViewError> {
-    use kinloop_linkage::{Model, Planar, SceneKind, Spatial};
+    use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::Spatial, model::Model};
     Ok(match scene.kind {
         SceneKind::Planar => {
             let n = Model::<Planar>::compile(scene, scene_label)?.nq();

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use kinloop_linkage::{Scene, SceneKind};
+use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 
 use super::compose::{compose, UserInfo};
 use super::draw::{geometry, Geometry, SceneInfo};
@@ -64,7 +64,7 @@ pub enum ReplayError {
     },
     /// The scene does not compile.
     #[error(transparent)]
-    Scene(#[from] kinloop_linkage::SceneError),
+    Scene(#[from] kinloop_linkage::error::SceneError),
 }
 
 /// A loaded recording and the scene to draw it in.
@@ -273,10 +273,10 @@ fn client_rows<'a>(
 
 #[cfg(test)]
 mod tests {
-    use kinloop_linkage::assemble::assemble;
-    use kinloop_linkage::kinematics::forward_kinematics;
-    use kinloop_linkage::local_model::OpPose;
-    use kinloop_linkage::{builtin, Data, Model, Planar};
+    use kinloop_linkage::algorithms::assemble::assemble;
+    use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+    use kinloop_linkage::math::space::OpPose;
+    use kinloop_linkage::{math::space::Planar, model::builtin, model::data::Data, model::Model};
 
     use super::*;
 

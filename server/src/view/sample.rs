@@ -1,7 +1,7 @@
 //! What one drawn frame is made of, whichever source it comes from: the live tap's ring
 //! ([`take_latest`]) or a recording (`replay`).
 
-use kinloop_linkage::SceneKind;
+use kinloop_linkage::math::space::SceneKind;
 use rtrb::Consumer;
 
 use super::tap::{user_group_len, HEAD};

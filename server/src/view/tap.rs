@@ -12,8 +12,8 @@
 
 use std::sync::Arc;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::{Role, Snapshot};
 use rtrb::Producer;
 use tokio::sync::Notify;

@@ -3,8 +3,8 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::builtin;
-use kinloop_linkage::{Model, Planar, Scene, Space};
+use kinloop_linkage::model::builtin;
+use kinloop_linkage::{math::space::Planar, math::space::Space, model::scene::Scene, model::Model};
 use kinloop_protocol::{DeviceCaps, LocalModelForm, MappingRequest, Role, Snapshot, Uplink};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use fantoccini::{Client, ClientBuilder, Locator};
-use kinloop_linkage::builtin::PAPER_WRENCH;
+use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_protocol::quic::{
     client_endpoint, connect, send_control, DatagramReceiver, DatagramSender, EndpointOptions, Trust,
 };

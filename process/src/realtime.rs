@@ -1,5 +1,5 @@
 //! What the two real-time loops (the server's VE thread and the client's haptic thread) ask of the operating
-//! system. It lives here, in the one crate both drivers depend on, so that they ask the same way.
+//! system, asked the same way by both.
 
 /// Why the calling thread could not be switched to SCHED_FIFO.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -8,18 +8,22 @@
 //! `kinloop-server` and `kinloop-client` run their bodies and end.
 
 use std::error::Error;
+use std::ffi::OsStr;
+use std::io::IsTerminal;
 use std::process::ExitCode;
 
 /// Runs a program's `body` as kinloop's programs run: logs go to stderr, filtered by `RUST_LOG` or else
 /// `default_filter` (a process that already has a subscriber, such as a test running the program in a
-/// child, keeps its own); a failure prints `error: ` and [`one_line`] on stderr and ends with failure.
+/// child, keeps its own), coloured only as [`log_colour`] says; a failure prints `error: ` and
+/// [`one_line`] on stderr and ends with failure.
 pub fn run_program<E>(default_filter: &str, body: impl FnOnce() -> Result<(), E>) -> ExitCode
 where
     E: Into<Box<dyn Error + Send + Sync>>,
 {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let colour = log_colour(std::io::stderr().is_terminal(), std::env::var_os("NO_COLOR").as_deref());
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(colour).try_init();
     match body().map_err(Into::into) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
@@ -27,6 +31,12 @@ where
             ExitCode::FAILURE
         }
     }
+}
+
+/// Whether logs are coloured: only on a terminal (a file or a pipe gets plain text, no escape codes), and
+/// never when `NO_COLOR` is set to anything but the empty string (<https://no-color.org>).
+pub fn log_colour(stderr_is_terminal: bool, no_color: Option<&OsStr>) -> bool {
+    stderr_is_terminal && no_color.is_none_or(OsStr::is_empty)
 }
 
 /// `error` and its causes on one line, joined by `": "`, leaving out every cause the line already says.
@@ -73,6 +83,15 @@ mod tests {
             one_line(&Context(Connect(Refusal))),
             "the client could not start: cannot connect to 127.0.0.1:4433: the server refused: no such point"
         );
+    }
+
+    #[test]
+    fn logs_are_coloured_only_on_a_terminal_without_no_color() {
+        assert!(log_colour(true, None));
+        assert!(log_colour(true, Some(OsStr::new(""))), "an empty NO_COLOR does not count");
+        assert!(!log_colour(true, Some(OsStr::new("1"))));
+        assert!(!log_colour(false, None));
+        assert!(!log_colour(false, Some(OsStr::new("1"))));
     }
 
     #[test]

@@ -1,15 +1,13 @@
-//! Golden byte vectors freeze the wire format of protocol version 5 (version 4 had no OP path in the welcome;
-//! version 3 had no energy books in snapshots and uplinks and no HAND_OFF flag; version 2 joined in one step, with a
-//! shorter device description and the server's recommended gains in the welcome; version 1 sent the other
-//! users as a list of entries, each with its own position and wrench vectors).
+//! Golden byte vectors: the wire format of [`PROTOCOL_VERSION`], frozen.
 //!
 //! The bytes below were written by hand from the format (bincode 2 standard config: varint integers and
 //! lengths, `u64` ≥ 251 as `fb` + u16 LE, enum variants as varint indices, `Option` as 0/1, `f64` as 8 LE
-//! bytes), not produced by the code under test. If one of these tests fails, the wire format changed: bump
-//! `PROTOCOL_VERSION` and write new vectors, or undo the change.
+//! bytes), not produced by the code under test. If one of these tests fails, the wire format changed: undo
+//! the change, or write new vectors here and bump [`PROTOCOL_VERSION`] (once per landing, see the module
+//! documentation of [`crate::messages`]).
 
-use kinloop_protocol::codec::{decode_control, decode_datagram, encode_control, encode_datagram};
-use kinloop_protocol::*;
+use crate::codec::{decode_control, decode_datagram, encode_control, encode_datagram};
+use crate::*;
 
 fn unhex(parts: &[&str]) -> Vec<u8> {
     let digits: String = parts.concat().chars().filter(|c| !c.is_whitespace()).collect();

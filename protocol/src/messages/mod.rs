@@ -6,33 +6,32 @@
 //! - [`Datagram`]s ([`Snapshot`] server → client, [`Uplink`] client → server) go as unreliable QUIC datagrams,
 //!   latest wins; an oversize snapshot travels on a unidirectional stream instead (see `quic::datagrams`).
 //!
-//! Conventions (see `shared/design.md`): SI units; operational-space vectors are linear part first, planar
+//! Conventions (see `docs/architecture.md`): SI units; operational-space vectors are linear part first, planar
 //! `(x, y, θ)` and spatial `(v, ω)`; poses are `[x, y, θ]` planar and `[x, y, z, qw, qx, qy, qz]` spatial;
 //! matrices are column-major unless a field says otherwise; symmetric matrices send their upper triangle
 //! row-major. Lengths are carried by `Vec`s and checked against the session's [`SessionShape`] by the codec,
 //! so one set of types serves planar and spatial scenes.
 //!
-//! Wire stability: the field order of these types *is* the format (bincode, no field names). Adding, removing
-//! or reordering a field needs a new [`PROTOCOL_VERSION`]; the golden byte tests fail loudly if that happens by
-//! accident.
+//! Wire stability: the field order of these types *is* the format (bincode, no field names). Every wire
+//! change lives here: the types in this file and their golden bytes in `golden.rs` (written by hand from the
+//! format, checked by its tests). **One version per landing:** a branch that changes the wire (a field added,
+//! removed or reordered, a message or variant added) bumps [`PROTOCOL_VERSION`] by one, once, however many
+//! changes it carries, and rewrites the golden bytes it changes; what changed in each version is said by the
+//! commit that bumped it, not here.
 //!
 //! [`SessionShape`]: crate::SessionShape
 
 use std::fmt;
 
-use kinloop_linkage::local_model::OpPose;
-use kinloop_linkage::reach::OpReach;
-use kinloop_linkage::{Space, VecOps};
+use kinloop_linkage::algorithms::reach::OpReach;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use serde::{Deserialize, Serialize};
 
 use crate::shape::{SceneKind, SessionShape};
 
-/// Version carried in [`Hello::version`]; bumped whenever the wire format changes. Version 3: the handshake
-/// takes two steps (the client learns the scene, then joins with its device), the device describes itself
-/// fully, and the welcome carries the mapping, the coupling gains and the OP's reach. Version 4: snapshots and
-/// uplinks carry their end's [`PortEnergy`] (the two-port passivity books), and an uplink says when the hand
-/// has let go of the handle ([`uplink_flags::HAND_OFF`]). Version 5: the welcome carries the OP's whole path on
-/// a linkage of one degree of freedom ([`OpSummary::path`]).
+/// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
+/// landing that changes the wire (see the module documentation).
 pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
@@ -516,8 +515,7 @@ pub struct ContactTerm {
 /// is user `user_ids[i]`, at `op_positions[i d..(i + 1) d]` (world, m; d the point dimension) applying
 /// `wrenches[i k..(i + 1) k]` (length `k`, linear first).
 ///
-/// One flat table, not an entry per user (protocol version 1 had `Vec<OtherUser>`, two heap vectors per
-/// row): a server with N users sends N snapshots a round holding N − 1 rows each, and its rows are copied
+/// One flat table, not an entry per user with its own heap vectors: a server with N users sends N snapshots a round holding N − 1 rows each, and its rows are copied
 /// and encoded as contiguous blocks.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct OtherUsers {
@@ -656,7 +654,7 @@ pub struct Snapshot {
 /// coupling; emitted: what the coupling gave the VE), booked while its passivity controller is on (zero
 /// otherwise). Both only grow. The server's controller bounds what its coupling emits by what both ends have
 /// received (time-domain passivity across the network, Ryu, Artigas & Preusche 2010); see
-/// `kinloop_linkage::passivity`.
+/// [`crate::passivity`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PortEnergy {
     /// Energy into the network at this end, per axis, length `k`.
@@ -687,8 +685,7 @@ pub mod uplink_flags {
     /// A safety check disabled the device output.
     pub const SAFETY_STOP: u32 = 1 << 5;
     /// The device's presence sensor says no hand holds the handle: the client has faded its output, brakes the
-    /// handle and holds its local model still, so the VE's coupling keeps the linkage where the hand left it
-    /// (version 4).
+    /// handle and holds its local model still, so the VE's coupling keeps the linkage where the hand left it.
     pub const HAND_OFF: u32 = 1 << 6;
     /// Every bit the protocol defines; the codec refuses others.
     pub const KNOWN: u32 =
@@ -753,3 +750,6 @@ pub enum Datagram {
     /// Client → server.
     Uplink(Uplink),
 }
+
+#[cfg(test)]
+mod golden;
