@@ -157,3 +157,132 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
         added
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::coupling::tests::testbed_in_motion;
+    use kinloop_linkage::local_model::OpPose;
+    use kinloop_linkage::Planar;
+    use nalgebra::Vector3;
+
+    /// Users on one OP evaluated as runs (module documentation) add exactly the per-user sums, in any order:
+    /// with couplings on links 2, 2, 2, 4, 2 (one of them not pushing), visited in join order (a run of three,
+    /// then two runs of one) or grouped by OP with the last one first (a run of four led by the last index,
+    /// then link 4), `τ` and the implicit terms equal `Σ Jᵀ F` and `Σ Jᵀ diag(c) J` formed densely from
+    /// Jacobians evaluated afresh for each coupling, and every coupling holds its own OP's pose, twist and
+    /// Jacobian.
+    #[test]
+    fn users_on_one_op_add_the_per_user_sums() {
+        let (model, data, qd) = testbed_in_motion(8);
+        let n = model.nq();
+        let point = nalgebra::Vector2::new(0.01, -0.002);
+        let joined: Vec<Coupling<Planar>> =
+            [(1, 0.7, true), (1, 1.0, false), (1, 0.5, true), (3, 0.4, true), (1, 0.9, true)]
+                .into_iter()
+                .enumerate()
+                .map(|(i, (body, weight, pushes))| {
+                    let k = 300.0 * (i + 1) as f64;
+                    let stiffness = Vector3::new(k, 0.8 * k, 0.02 * k);
+                    let mut c = Coupling::new(body, point, n, stiffness, stiffness * 0.05);
+                    c.pushes = pushes;
+                    c.weight = weight;
+                    c.hand_wrench = Vector3::new(0.3 - 0.1 * i as f64, 0.2 * i as f64, 0.001);
+                    c.target_pose =
+                        OpPose { position: nalgebra::Point2::new(0.02, 0.03 * i as f64).coords, ..OpPose::identity() };
+                    c
+                })
+                .collect();
+        let dt = 1e-3;
+        for order in [[0, 1, 2, 3, 4], [4, 0, 1, 2, 3]] {
+            let mut couplings = joined.clone();
+            let mut forces = VeForces {
+                couplings: &mut couplings,
+                order: &order,
+                contacts: None,
+                evaluation: Evaluation::Step(&[1.0]),
+                stage: 0,
+            };
+            let mut tau = DVector::zeros(n);
+            forces.add_forces(&model, &data.kin, &mut tau);
+            let (mut mass, mut tau_implicit) = (DMatrix::zeros(n, n), DVector::zeros(n));
+            assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau_implicit));
+
+            let (mut expected_tau, mut expected_mass, mut expected_implicit) =
+                (DVector::zeros(n), DMatrix::zeros(n, n), DVector::zeros(n));
+            for c in &couplings {
+                let mut fresh = c.clone();
+                fresh.jacobian_t.fill(f64::NAN);
+                fresh.evaluate(&model, &data.kin, true);
+                assert_eq!((c.op_pose, c.op_twist, c.wrench), (fresh.op_pose, fresh.op_twist, fresh.wrench));
+                if !c.is_active() {
+                    continue;
+                }
+                assert_eq!(c.jacobian_t, fresh.jacobian_t);
+                let jt = &fresh.jacobian_t;
+                expected_tau += jt * DVector::from_column_slice(fresh.wrench.as_slice());
+                let coefficient = DVector::from_column_slice(fresh.implicit_coefficient(dt).as_slice());
+                expected_mass += jt * DMatrix::from_diagonal(&coefficient) * jt.transpose();
+                expected_implicit -= jt * DVector::from_column_slice(fresh.implicit_spring(dt).as_slice());
+            }
+            let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() <= 1e-13 * b.amax();
+            assert!(
+                close(
+                    &DMatrix::from_column_slice(n, 1, tau.as_slice()),
+                    &DMatrix::from_column_slice(n, 1, expected_tau.as_slice())
+                ),
+                "{tau} vs {expected_tau}"
+            );
+            assert!(close(&mass, &expected_mass), "{mass} vs {expected_mass}");
+            assert_eq!(mass, mass.transpose());
+            let (got, want) = (&tau_implicit, &expected_implicit);
+            assert!((got - want).amax() <= 1e-13 * want.amax(), "{got} vs {want}");
+        }
+    }
+
+    /// The implicit terms of two couplings (on links 2 and 4, so their supports overlap and differ) against
+    /// the dense products `Σ Jᵀ diag(c) J` and `−Σ Jᵀ (h wβK ⊙ ẋ)` formed with nalgebra from each Jacobian:
+    /// the symmetric fill adds the same matrix, exactly symmetric.
+    #[test]
+    fn implicit_terms_are_the_dense_products() {
+        let (model, data, qd) = testbed_in_motion(5);
+        let n = model.nq();
+        let mut couplings: Vec<Coupling<Planar>> = [(1, 200.0, 0.7), (3, 3000.0, 0.3)]
+            .into_iter()
+            .map(|(body, k, weight)| {
+                let stiffness = Vector3::new(k, 1.3 * k, 0.01 * k);
+                let mut c = Coupling::new(body, nalgebra::Vector2::new(0.01, -0.002), n, stiffness, stiffness * 0.05);
+                c.pushes = true;
+                c.weight = weight;
+                c.pd_scale = Vector3::new(1.0, 0.5, 0.9);
+                c.evaluate(&model, &data.kin, true);
+                c
+            })
+            .collect();
+        let dt = 1e-3;
+        let (mut expected_mass, mut expected_tau) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        for c in &couplings {
+            let coefficient = c.implicit_coefficient(dt);
+            let spring = Vector3::from_fn(|a, _| dt * c.pd_weight(a) * c.stiffness[a] * c.op_twist[a]);
+            let jt = &c.jacobian_t;
+            expected_mass +=
+                jt * DMatrix::from_diagonal(&DVector::from_column_slice(coefficient.as_slice())) * jt.transpose();
+            expected_tau -= jt * DVector::from_column_slice(spring.as_slice());
+        }
+        let mut forces = VeForces {
+            couplings: &mut couplings,
+            order: &[0, 1],
+            contacts: None,
+            evaluation: Evaluation::ProbeHands,
+            stage: 0,
+        };
+        let (mut mass, mut tau) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        assert!(forces.add_implicit(&model, &data.kin, dt, &qd, &mut mass, &mut tau));
+        assert_eq!(mass, mass.transpose());
+        let scale = expected_mass.amax();
+        assert!((&mass - &expected_mass).amax() <= 1e-13 * scale, "{mass} vs {expected_mass}");
+        assert!((&tau - &expected_tau).amax() <= 1e-13 * expected_tau.amax(), "{tau} vs {expected_tau}");
+        // Link 4's coupling reaches every joint, link 2's only the first two.
+        assert!(mass[(3, 3)] > 0.0 && (mass[(1, 1)] - expected_mass[(1, 1)]).abs() <= 1e-13 * scale);
+    }
+}
