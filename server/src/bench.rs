@@ -22,8 +22,8 @@ use rtrb::RingBuffer;
 use serde::Serialize;
 
 use crate::core::{JoinRequest, UplinkSample, VeConfig, VeConfigError, VeCore};
-use crate::driver::ve_thread::{self, Command, UserLink, VeThreadIo};
-use crate::driver::VeLoopStats;
+use crate::driver::ve_thread::{self, VeThreadIo};
+use crate::gateway::{take_latest_frame, Command, UserLink, VeLoopStats, FRAME_HEADER};
 use crate::view::ViewTap;
 
 /// Why a measurement could not run.
@@ -296,7 +296,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
     let stop = Arc::new(AtomicBool::new(false));
     let mut clients = Vec::new();
     let mut replies = Vec::new();
-    let ring_bytes = 4 * (ve_thread::FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m));
+    let ring_bytes = 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m));
     for i in 0..run.users {
         let (uplink_tx, uplink_rx) = RingBuffer::new(64);
         let (snapshot_tx, snapshot_rx) = RingBuffer::new(ring_bytes);
@@ -328,7 +328,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
             while !client_stop.load(Ordering::Relaxed) {
                 seq += 1;
                 for (i, (uplinks, snapshots)) in clients.iter_mut().enumerate() {
-                    if ids[i].is_none() || ve_thread::take_latest_frame(snapshots, &mut frame) == 0 {
+                    if ids[i].is_none() || take_latest_frame(snapshots, &mut frame) == 0 {
                         continue;
                     }
                     received += 1;

@@ -89,7 +89,7 @@ struct Cli {
     /// one-way delay (half the shortest round trip), up to MS milliseconds ahead of the uplink heard and no
     /// further than the hand's recent accelerations make a safe guess, for users whose one-way delay is within
     /// --lead-delays-ms (0: follow what is heard, as the paper's VE does). Brings the VE's OP nearer the device
-    /// under delay (testbed, soft tour, 100 ms one way: 2.15 mm RMS against 4.6 mm).
+    /// under delay (docs/benchmarks.md has the figures).
     #[arg(long, value_name = "MS", default_value_t = DEFAULT_COUPLING_LEAD_MAX_S * 1e3, value_parser = parse_lead_ms)]
     lead_max_ms: f64,
     /// The one-way delays over which the VE leads, FROM..UNTIL in milliseconds (UNTIL may be left out: no

@@ -6,6 +6,8 @@
 //! - [`core`]: [`VeCore`], the virtual environment as a sans-IO state machine (users, couplings, passivity,
 //!   guards, snapshots), driven with time as an argument;
 //! - [`access`]: tokens and roles, compared in constant time;
+//! - [`gateway`]: what the driver and the view share, below both: the command ring to the VE thread, the
+//!   registry of admitted users, snapshot frames, the VE thread's timing statistics;
 //! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
 //! - [`view`]: the web page that draws the linkage live (and lets a visitor grab it) or replays a recording;
@@ -21,6 +23,7 @@ pub use crate::core::{
 };
 pub mod access;
 pub mod driver;
+pub mod gateway;
 pub mod view;
 
 pub use crate::access::Access;

@@ -1,6 +1,7 @@
 //! The view in a real browser (headless Chromium through chromedriver): the live page draws the VE's
 //! state as a QUIC client sees it in its snapshots, a mouse drag moves the linkage, a wrong token sees
-//! nothing but a refusal, an observer watches, and a recorded session replays at the slider's time.
+//! nothing but a refusal, an observer watches, a recorded session replays at the slider's time, and the
+//! panel shows the status bar's frame rate and its whole user table.
 //! Screenshots go to `target/tmp/view/`.
 
 mod support;
@@ -135,6 +136,62 @@ async fn the_page_draws_the_ve_live_and_a_mouse_drag_moves_the_linkage() {
         let stats = server.stats().view.expect("view statistics");
         assert_eq!((stats.grabs, stats.grabs_refused, stats.unknown_ops), (1, 0, 0), "{stats:?}");
         assert!(stats.frames_sent >= frames, "{stats:?}");
+        browser.close().await;
+        server.shutdown().await.unwrap();
+    })
+    .await;
+}
+
+/// What the page shows of its panel: the frame rate in the panel and in the status bar, and whether every
+/// cell of the user table lies within the panel (none cut off at its right edge, no sideways scrolling).
+const PANEL_PROBE: &str = r#"
+    const panel = document.getElementById("panel");
+    const box = panel.getBoundingClientRect();
+    const table = document.getElementById("users");
+    const cells = [...table.querySelectorAll("tr > th, tr > td")].map((c) => c.getBoundingClientRect());
+    const rate = document.getElementById("frame-rate");
+    return {
+        panel_rate: rate ? rate.textContent : null,
+        status_fps: JSON.parse(document.getElementById("status").dataset.state).fps,
+        rows: table.tBodies[0].rows.length,
+        columns: table.tHead.rows[0].cells.length,
+        panel: [box.left, box.right],
+        cells: [Math.min(...cells.map((c) => c.left)), Math.max(...cells.map((c) => c.right))],
+        panel_scroll: [panel.scrollWidth, panel.clientWidth],
+        table_right: table.getBoundingClientRect().right,
+    };
+"#;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_panel_shows_the_status_bars_frame_rate_and_its_whole_user_table() {
+    let _one = exclusive().await;
+    bounded(async {
+        let server = start_server(None);
+        let pusher = Pusher::start(&server, "hands-token", support::device(3)).await;
+        let browser = Browser::start().await;
+        let page = format!("http://{}/#token=watch-token", server.view_addr().unwrap());
+        browser.client.goto(&page).await.unwrap();
+        browser.wait_for("ten frames", Duration::from_secs(15), |s| s["frames"].as_u64().unwrap_or(0) >= 10).await;
+        // A wide window and one narrow enough that the stage and the panel compete for its width.
+        for (width, height) in [(1280, 800), (640, 600)] {
+            browser.client.set_window_size(width, height).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(1200)).await;
+            let probe = browser.client.execute(PANEL_PROBE, vec![]).await.unwrap();
+            let fps = probe["status_fps"].as_f64().unwrap_or_else(|| panic!("a rate in the status bar: {probe}"));
+            // The view serves 60 frames/s; over loopback the page sees at least a few dozen.
+            assert!(fps > 20.0, "{width} px: {probe}");
+            assert_eq!(probe["panel_rate"], format!("{fps:.1}"), "{width} px: one rate on the page: {probe}");
+            assert!(probe["rows"].as_u64() >= Some(1), "{width} px: the pusher in the table: {probe}");
+            assert_eq!(probe["columns"], 7, "{probe}");
+            let (left, right) = (num(&probe, &["panel", "0"]).unwrap(), num(&probe, &["panel", "1"]).unwrap());
+            let (first, last) = (num(&probe, &["cells", "0"]).unwrap(), num(&probe, &["cells", "1"]).unwrap());
+            assert!(first >= left && last <= right + 0.5, "{width} px: a cell outside the panel: {probe}");
+            let (scroll, client) =
+                (num(&probe, &["panel_scroll", "0"]).unwrap(), num(&probe, &["panel_scroll", "1"]).unwrap());
+            assert!(scroll <= client, "{width} px: the panel scrolls sideways: {probe}");
+            browser.screenshot(&output_dir(), &format!("panel-{width}.png")).await;
+        }
+        pusher.leave().await;
         browser.close().await;
         server.shutdown().await.unwrap();
     })

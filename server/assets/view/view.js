@@ -13,7 +13,7 @@ const GRAB_RADIUS_PX = 18;
 
 const view = {
   ws: null, hello: null, welcome: null, scene: null, planar: true, frame: null,
-  frames: 0, frameTimes: [], firstFrameMs: null, drawPending: false, panelAt: -Infinity,
+  frames: 0, frameTimes: [], framesPerS: null, firstFrameMs: null, drawPending: false, panelAt: -Infinity,
   cam2: { cx: 0, cy: 0, scale: 1 },
   cam3: { yaw: -0.9, pitch: 0.45, dist: 1, target: [0, 0, 0] },
   grab: null, // { op, user, target, dragging }
@@ -86,6 +86,7 @@ const handlers = {
     if (view.firstFrameMs === null) view.firstFrameMs = now;
     view.frameTimes.push(now);
     while (view.frameTimes.length && view.frameTimes[0] < now - 1000) view.frameTimes.shift();
+    view.framesPerS = frameRate(view.frameTimes);
     if (!view.drawPending) { view.drawPending = true; requestAnimationFrame(draw); }
     if (now - view.panelAt > 250) { view.panelAt = now; updatePanel(); }
     updateStatus();
@@ -373,7 +374,7 @@ function updatePanel() {
   const rows = [
     ["VE time", `${f.t.toFixed(3)} s (step ${f.step})`],
     ["closure error", f.closure_error == null ? "–" : `${f.closure_error.toExponential(2)} m`],
-    ["frames/s", view.frameTimes.length < 2 ? "–" : fps().toFixed(1)],
+    ["frames/s", fmt(view.framesPerS, 1)],
   ];
   if (f.loop) rows.push(["VE tick p50 / p99", `${f.loop.p50_us.toFixed(1)} / ${f.loop.p99_us.toFixed(1)} µs`], ["VE deadline misses", `${f.loop.misses}`]);
   $("summary").innerHTML = "";
@@ -382,6 +383,7 @@ function updatePanel() {
     div.innerHTML = "<span></span><span></span>";
     div.children[0].textContent = k;
     div.children[1].textContent = v;
+    if (k === "frames/s") div.children[1].id = "frame-rate";
     $("summary").appendChild(div);
   }
   const body = $("users").tBodies[0];
@@ -401,16 +403,17 @@ function updatePanel() {
   });
 }
 
-function fps() {
-  const t = view.frameTimes;
-  return t.length < 2 ? 0 : (1000 * (t.length - 1)) / Math.max(t[t.length - 1] - t[0], 1);
+// Frames per second over the arrival times `t` (ms) of the last second's frames; null before two arrived.
+// The one rate the panel and the status bar both show.
+function frameRate(t) {
+  return t.length < 2 ? null : (1000 * (t.length - 1)) / Math.max(t[t.length - 1] - t[0], 1);
 }
 
 // The state tests read: frames, rate, first frame time, and the drawn OPs (world and canvas pixels).
 function updateStatus() {
   const f = view.frame;
   const state = {
-    frames: view.frames, fps: fps(), first_frame_ms: view.firstFrameMs, refused: view.refused, error: view.error,
+    frames: view.frames, fps: view.framesPerS, first_frame_ms: view.firstFrameMs, refused: view.refused, error: view.error,
     role: view.welcome ? view.welcome.role : null, can_grab: view.welcome ? view.welcome.can_grab : false,
     size: size(), grabbed: view.grab ? view.grab.user : null, target: view.grab ? view.grab.target : null,
     scene: view.scene ? view.scene.name : null, camera: view.planar ? null : [view.cam3.yaw, view.cam3.pitch], replay_t: view.welcome && view.welcome.replay ? view.replay.t : null,
@@ -427,10 +430,13 @@ function updateStatus() {
     });
     state.users = f.users.map((u) => ({ id: u.id, pos: u.pose.slice(0, dim()), browser: u.browser, device: u.device }));
   }
+  // The panel's rate follows every frame, as the status bar does (the rest of the panel every 250 ms).
+  const rate = $("frame-rate");
+  if (rate) rate.textContent = fmt(view.framesPerS, 1);
   const el = $("status");
   el.dataset.state = JSON.stringify(state);
   el.textContent = view.refused ? `refused: ${view.refused}` :
-    `frames ${state.frames}  fps ${state.fps.toFixed(1)}  t ${f ? f.t.toFixed(3) : "–"}  ` +
+    `frames ${state.frames}  fps ${fmt(state.fps, 1)}  t ${f ? f.t.toFixed(3) : "–"}  ` +
     (f ? Object.entries(state.ops).map(([n, p]) => `${n} ${p.map((v) => v.toFixed(5)).join(",")}`).join("  ") : "");
 }
 

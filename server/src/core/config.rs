@@ -141,10 +141,8 @@ pub struct VeConfig {
     pub coupling_lead_delays_s: [f64; 2],
     /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
     /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
-    /// this through K_g. Leading without this bound left 22 of the lead rows' 168 sessions unstable (pokes and
-    /// releases). 1 mJ: testbed soft tour 2.8 mm from the OP at 100 ms one way; 2 mJ: 2.6 mm, still stable
-    /// everywhere, and the felt impedance a little farther from the linkage's (1.25 against 1.20 at 100 ms);
-    /// 0.5 mJ: 3.1 mm.
+    /// this through K_g: without the bound, pokes and releases under delay make energy. A larger bound leads
+    /// further (the OP nearer the device) and lets the felt impedance stray further from the linkage's.
     pub coupling_lead_guess_energy_j: f64,
     /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
     /// controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see `passivity`).
@@ -272,23 +270,15 @@ impl VeConfig {
 }
 
 /// The default longest lead (s; [`VeConfig::coupling_lead_max_s`]), over the one-way delays of
-/// [`DEFAULT_COUPLING_LEAD_DELAYS_S`]. Led by up to 100 ms the OP is nearer the device: the testbed's soft tour
-/// 2.21 mm RMS from it at 100 ms one way against 4.9 mm (6.3 against 9.7 at 200 ms, 12.8 against 14.9 at
-/// 300 ms; the four-bar's coupler and the Watt six-bar's link5 alike), with no session of the latency
-/// sweep unstable at those delays, over 10 s or whole tours (40 s).
+/// [`DEFAULT_COUPLING_LEAD_DELAYS_S`]: led by up to 100 ms the VE's OP stays nearer the device under delay
+/// without making any session of the latency sweep unstable (docs/benchmarks.md has the figures).
 pub const DEFAULT_COUPLING_LEAD_MAX_S: f64 = 0.1;
 
 /// The one-way delays (s) over which the VE leads by default ([`VeConfig::coupling_lead_delays_s`]): from
-/// 75 ms on. Below 75 ms the VE that follows is already within 2.3 mm of the testbed's soft tour at 50 ms, and
-/// the lead's guesses tipped four whole tours on the testbed over the energy criterion at its floor (27 mJ made
-/// on 27 mJ of flow) and the six-bar's light link5 with 30 ms of jitter (1.7 J). There is no upper edge: it
-/// was 400 ms while the four-bar's local model was held to its snapshot's tangent, where led at 500 ms the
-/// walls moved further from where they were set and firm and poking hands held the device at its limit (12
-/// more whole tours unstable); since the model follows its path, the lead at 500 ms to 1 s makes no session of
-/// the latency grid unstable, over 10 s or whole tours, and brings the OP 6-19 % nearer the device on the soft
-/// tours (the testbed's 47 mm from it at 1 s against 50). With the local model pulled at a fixed 200 ms (not
-/// the default, which slows with the round trip) it took the six-bar's link5 5 cm off the device in 3 of 36
-/// whole tours at 750 ms and beyond.
+/// 75 ms on. Below that the VE that follows is already near the device, and the lead's guesses, small as the
+/// gain is, can tip a session over the energy criterion. There is no upper edge: the client's local model
+/// follows its path, so a lead at long delays makes no session of the latency grid unstable and still brings
+/// the OP nearer the device.
 pub const DEFAULT_COUPLING_LEAD_DELAYS_S: [f64; 2] = [0.075, f64::INFINITY];
 
 impl Default for VeConfig {

@@ -36,7 +36,8 @@ use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
 pub const WORKSPACE_FILL: f64 = 0.8;
-/// Fraction of the device's continuous force the static load at the OP maps to (the 25-50 %).
+/// Fraction of the device's continuous force the static load at the OP maps to: a quarter to a half
+/// leaves the hand room to push against the load in either direction.
 pub const LOAD_FRACTION: f64 = 0.35;
 /// Natural frequency of the graphics controller on the OP's lightest effective mass (Hz).
 pub const COUPLING_HZ: f64 = 8.0;

@@ -33,7 +33,9 @@ pub mod playout;
 pub mod round_trip;
 pub mod sharing;
 mod snapshots;
+mod tick;
 pub mod users;
+pub mod ve_forces;
 
 use std::time::Duration;
 
@@ -62,10 +64,10 @@ pub use metrics::VeMetrics;
 pub use passivity::PassivityObserver;
 pub use users::{JoinRequest, Presence, UserId};
 
-use coupling::{stage_weights, Evaluation, VeForces};
 use events::EventQueue;
 use fade::Fade;
 use users::{RejectionBurst, SnapshotSlot, User};
+use ve_forces::{stage_weights, Evaluation, VeForces};
 
 /// A step that starts with a closure residual above this fraction of the scene's length scale (0.46 mm on the
 /// testbed; the paper's manipulation shows 1e-10 m with projection and 4e-6 m with Baumgarte alone) is treated
@@ -595,221 +597,6 @@ impl<S: Space> VeCore<S> {
     /// When the next tick is due.
     pub fn poll_timeout(&self) -> Duration {
         self.next_tick_at
-    }
-
-    /// Runs every tick due at or before `now` at the fixed VE period (at most `max_catch_up_ticks`; beyond
-    /// that the schedule skips ahead and the skip is counted), then builds snapshots if one is due.
-    pub fn handle_timeout(&mut self, now: Duration) {
-        let mut ran = 0;
-        while self.next_tick_at <= now {
-            if ran == self.config.max_catch_up_ticks {
-                let behind = (now - self.next_tick_at).as_nanos() / self.period.as_nanos().max(1) + 1;
-                let behind = u32::try_from(behind).unwrap_or(u32::MAX);
-                self.next_tick_at += self.period * behind;
-                self.metrics.skipped_ticks += u64::from(behind);
-                self.events.push(VeEvent::TicksSkipped { count: u64::from(behind) });
-                break;
-            }
-            let at = self.next_tick_at;
-            self.tick(at);
-            self.next_tick_at += self.period;
-            ran += 1;
-        }
-        if ran > 0 && self.last_tick_at >= self.next_snapshot_at {
-            self.build_snapshots();
-            self.update_held_loads();
-            while self.next_snapshot_at <= self.last_tick_at {
-                self.next_snapshot_at += self.snapshot_period;
-            }
-        }
-        self.metrics.events_dropped = self.events.dropped;
-    }
-
-    /// One VE step at time `at`.
-    ///
-    /// **Restore point.** A diverging linkage stays finite for a few steps while its loop tears open (the
-    /// 60 s demo, whose constant push spins the testbed up to 30 rad/s, went from 4e-11 m to a non-finite
-    /// step in a few ms and was restored to a configuration 4.8 cm open, where it then stayed). So the
-    /// restore point is the start of the last step that began with the loop closed (residual at most
-    /// [`BROKEN_CLOSURE_PER_LENGTH`] times the scene's length scale), and a step that begins torn open
-    /// counts as failed even if it is finite.
-    fn tick(&mut self, at: Duration) {
-        let dt = self.step_config.dt;
-        self.update_couplings(at, dt);
-        if self.config.rest_unheld && self.couplings.iter().all(|c| c.weight <= 0.0) {
-            // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`). The
-            // couplings' step wrenches were cleared by `update_couplings`.
-            self.qd.fill(0.0);
-            self.finish_tick(at);
-            return;
-        }
-        self.step_start_q.as_mut_slice().copy_from_slice(self.q.as_slice());
-        self.refresh_op_order();
-        let mut forces = VeForces {
-            couplings: &mut self.couplings,
-            order: &self.scratch.order,
-            contacts: self.contacts.as_mut(),
-            evaluation: Evaluation::Step(stage_weights(self.step_config.integrator)),
-            stage: 0,
-        };
-        let broken = BROKEN_CLOSURE_PER_LENGTH * self.model.length_scale;
-        let stepped = step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut forces, &self.step_config)
-            .and_then(|report| {
-                if report.closure_error <= broken {
-                    Ok(report)
-                } else {
-                    Err(DynamicsError::ClosureBroken { residual: report.closure_error, limit: broken })
-                }
-            });
-        match stepped {
-            Ok(report) => {
-                // The step began closed: its start is the new restore point (a swap, not a second copy).
-                std::mem::swap(&mut self.checkpoint_q, &mut self.step_start_q);
-                self.closure_error = report.closure_error;
-                self.metrics.closure_error = report.closure_error;
-                self.metrics.max_closure_error = self.metrics.max_closure_error.max(report.closure_error);
-                self.lambda.as_mut_slice().copy_from_slice(self.data.lambda.as_slice());
-                self.book_step_wrenches(dt);
-            }
-            Err(error) => {
-                // Restoring the velocity too would replay the same divergence: restore at rest.
-                self.q.copy_from(&self.checkpoint_q);
-                self.qd.fill(0.0);
-                for c in &mut self.couplings {
-                    c.step_wrench = S::OpVec::zero();
-                }
-                self.metrics.state_restores += 1;
-                self.events.push(VeEvent::StateRestored { step: self.step, error });
-            }
-        }
-        self.finish_tick(at);
-    }
-
-    /// The bookkeeping that ends every tick, stepped or at rest.
-    fn finish_tick(&mut self, at: Duration) {
-        self.remove_faded_users();
-        self.step += 1;
-        self.metrics.ticks += 1;
-        self.last_tick_at = at;
-    }
-
-    /// The static loads the VE holds for users with gravity compensation, at the current state (the OP wrench
-    /// that cancels gravity's acceleration in the OP's free directions, `kinloop_linkage::algorithms::reach`), until the
-    /// next snapshot round. Allocates nothing.
-    fn update_held_loads(&mut self) {
-        let Some((data, at_rest)) = self.held.as_mut() else { return };
-        for (u, c) in self.users.iter().zip(&mut self.couplings) {
-            if !(u.mapping.gravity_compensation && u.role == Role::Manipulator) {
-                continue;
-            }
-            let load = kinloop_linkage::algorithms::reach::static_op_load(&self.model, data, &self.q, at_rest, u.op);
-            c.held_load = match load {
-                Ok((load, _)) if load.is_finite() => load,
-                _ => S::OpVec::zero(),
-            };
-        }
-    }
-
-    /// Fade weights (join, silence, letting go, leave) and passivity scales for the coming step.
-    ///
-    /// A user whose hand is off its handle (`uplink_flags::HAND_OFF`, from a presence sensor) parks its local
-    /// model where the hand left it, and its coupling holds the linkage there: alone, the linkage stays put
-    /// rather than falling. With another user's hand on the linkage that hold would fight them (four users
-    /// on the testbed, one letting go: the other three clamped 15 % of their ticks pulling against it, and
-    /// the released handle ended 17 cm from the OP), so then it fades out like a silent user's, and fades
-    /// back in when the hand returns (its model restarts on the VE).
-    fn update_couplings(&mut self, at: Duration, dt: f64) {
-        let fade_s = self.config.fade_time.as_secs_f64();
-        let mut activations = 0;
-        let holding =
-            |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
-        let holders = self.users.iter().zip(&self.couplings).filter(|(u, c)| holding(u, c)).count();
-        let (lead_max_s, lead_delays_s) = (self.config.coupling_lead_max_s, self.config.coupling_lead_delays_s);
-        for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
-            if let Some(reference) = c.playout.due(at.as_secs_f64()) {
-                if lead_max_s > 0.0 {
-                    c.track_twist_rate(&reference);
-                }
-                c.follow(&reference);
-            }
-            if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
-                let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, lead_delays_s, dt);
-                c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
-            }
-            let silent = u.is_silent(at, self.config.silent_timeout);
-            let let_go = u.hand_off && holders > usize::from(holding(u, c));
-            let (faded, was_faded) = (silent || let_go, u.silent || u.let_go);
-            if faded != was_faded && u.presence == Presence::Present && c.pushes {
-                let reason = if silent { FadeReason::Silent } else { FadeReason::LetGo };
-                self.events.push(if faded {
-                    VeEvent::FadingOut { user: u.id, reason }
-                } else {
-                    VeEvent::Resumed { user: u.id }
-                });
-            }
-            u.silent = silent;
-            u.let_go = let_go;
-            u.fade.advance(u.presence == Presence::Present && c.pushes && !silent && !let_go, dt, fade_s);
-            c.weight = u.fade.weight();
-            c.step_wrench = S::OpVec::zero();
-            c.pd_scale = if self.config.passivity && c.pushes {
-                // The power the full PD would deliver, from the OP twist of the previous evaluation (one tick
-                // old at most) and the newest reference.
-                let pd = c.pd_wrench();
-                let mut power = S::OpVec::zero();
-                for a in 0..S::DIM {
-                    power[a] = c.weight * pd[a] * c.op_twist[a];
-                }
-                let before = u.passivity.activations;
-                let allowance = self.config.passivity_allowance_j;
-                let scale = if self.config.passivity_per_axis {
-                    u.passivity.pd_scale_per_axis::<S>(&power, allowance)
-                } else {
-                    u.passivity.pd_scale::<S>(&power, &c.spring_energy(), &c.pd_scale, allowance)
-                };
-                activations += u.passivity.activations - before;
-                scale
-            } else {
-                coupling::full_scale::<S>()
-            };
-        }
-        if activations > 0 {
-            self.metrics.passivity_activations += 1;
-        }
-    }
-
-    /// After a successful step: the wrench each coupling effectively applied, and the passivity books.
-    fn book_step_wrenches(&mut self, dt: f64) {
-        let implicit = self.data.use_implicit_mass;
-        for (u, c) in self.users.iter_mut().zip(&mut self.couplings) {
-            if !c.is_active() {
-                continue;
-            }
-            if implicit {
-                c.step_wrench += c.implicit_correction(&self.model, &self.data.qdd, dt);
-            }
-            if self.config.passivity {
-                // ẋ_op after the step, J q̇⁺: the velocity semi-implicit Euler moved the OP with. (Without the
-                // controller the books stay at zero, and the snapshots say so.)
-                let velocity_after = c.op_space_image(&self.model, &self.qd);
-                u.passivity.observe::<S>(&c.controller_part(&c.step_wrench), &c.hand_part(), &velocity_after, dt);
-            }
-        }
-    }
-
-    fn remove_faded_users(&mut self) {
-        let mut index = 0;
-        while index < self.users.len() {
-            if self.users[index].presence == Presence::Leaving && self.users[index].fade.is_off() {
-                let user = self.users.remove(index);
-                self.couplings.remove(index);
-                self.roster_version += 1;
-                self.metrics.users_left += 1;
-                self.events.push(VeEvent::UserRemoved { user: user.id });
-            } else {
-                index += 1;
-            }
-        }
     }
 
     /// The next snapshot not yet polled (one per present user after each snapshot tick).

@@ -1,47 +1,35 @@
 //! How much of the other users' pushes each user's local model takes from its snapshot's bias.
 //!
 //! A user's b̂ carries what moves its OP besides its own hand, the other users' hands above all, so that its
-//! device feels them push (without them the others reach it only through the pull toward the VE, and on the
-//! testbed 2 to 16 users sharing `link2` track 5-10 times worse at zero delay: 1.4-1.5 mm RMS against
-//! 0.15-0.2). But those pushes arrive a round trip late, and each hand answers what its device does: user
-//! i's hand moves user j's model a round trip later, whose hand answers at once and moves i's a round trip
-//! after that. With N users that exchange has N − 1 times the gain of one hand on its own model, and with
-//! delay it is a loop: the delayed hands' damping outweighs each user's own. Measured on the testbed's one
-//! OP (soft and firm touring hands, `paper` devices, the same delay both ways; "unstable" = devices
-//! saturated most of the time): two users were stable to 50 ms one way and unstable from 100 ms; four from
-//! 20 ms; sixteen from 4 ms of uplink delay alone. The four-bar's coupler and crank tip, two users on two
-//! OPs, were unstable at 20 ms: the exchange goes through the loops too, so it counts every pushing user.
+//! device feels them push (without them the others reach it only through the pull toward the VE). But those
+//! pushes arrive a round trip late, and each hand answers what its device does: user i's hand moves user j's
+//! model a round trip later, whose hand answers at once and moves i's a round trip after that. With N users
+//! that exchange has N − 1 times the gain of one hand on its own model, and with delay it is a loop: the
+//! delayed hands' damping can outweigh each user's own. The exchange goes through the linkage's loops too, so
+//! it counts every pushing user, on any OP.
 //!
 //! So the others' share of b̂ is weighted by `w = min(1, g / (N − 1))`, which holds the exchange's gain
 //! `(N − 1) w` at `g = exchange delay / round trip` (`VeConfig::exchange_delay_s`, [`EXCHANGE_DELAY_S`] by
-//! default). A fixed gain below one does not do: two users on the testbed at 100 ms one way with a gain of
-//! 0.5 or 0.25 no longer saturated, but their hands absorbed 0.07-0.3 J the system had made (the energy
-//! growth of `kinloop experiment`'s criterion), while with the others' hands left out none was made at any
-//! delay, and tracking was no worse from 50 ms on (3.5 mm RMS at 100 ms against 4.8 with half of them; 9.3
-//! against 9.0 at 300 ms). The whole push is kept only while the round trip is short enough that the loop's
-//! phase cannot turn: a gain of 1 up to a 5 ms round trip, 2.5 at 2 ms (two users on the Watt six-bar's
-//! light `link5` with a gain of 1 over a 10 ms round trip diverged; the testbed's 16 users over 4-10 ms track
-//! 0.5-0.9 mm RMS at this setting, 0.3-0.6 mm at twice it). The round trip is the longest of the pushing
-//! users' (`round_trip`), plus what the jitter buffer holds their uplinks, since every pair's exchange is a
-//! loop through both; one not measured yet counts as long. What the weight removes still reaches each user through the VE, which its
-//! model is kept on (`kinloop_client::core::sync`), as a correction of its state rather than a force.
+//! default). The whole push is kept only while the round trip is short enough that the loop's phase cannot
+//! turn; a fixed gain below one would still let the delayed hands make energy that the hands must absorb.
+//! The round trip is the longest of the pushing users' (`round_trip`), plus what the jitter buffer holds
+//! their uplinks, since every pair's exchange is a loop through both; one not measured yet counts as long.
+//! What the weight removes still reaches each user through the VE, which its model is kept on (the client's
+//! pull toward each snapshot), as a correction of its state rather than a force.
 //!
-//! **The load the others no longer carry.** On a linkage under a steady load (gravity on the four-bar and the
-//! six-bars) the hands hold it together; a model that takes only `w` of the others' hands would have its own
-//! hand hold what the others' hands held in the VE, and the VE, pushed by every hand whole, sits above every
-//! model: a steady discrepancy that the pull toward the VE corrects on and on, pumping energy the hands soak
-//! up (4.7 J over 10 s, four users on the four-bar at 20 ms). So each user's b̂ carries its share of the
-//! OP's acceleration without any hand (the load), `s = (1 + w (N − 1)) / N` of it: at `w = 1` all of it, at
-//! `w = 0` a 1/N share, and with every hand holding an equal share a model at rest stays at rest for any w
-//! ([`shared_bias`]). Four users on the four-bar or the Watt six-bar at 20-300 ms: no energy made.
+//! **The load the others no longer carry.** On a linkage under a steady load (gravity) the hands hold it
+//! together; a model that takes only `w` of the others' hands would have its own hand hold what the others'
+//! hands held in the VE, and the VE, pushed by every hand whole, sits above every model: a steady
+//! discrepancy that the pull toward the VE corrects on and on, pumping energy the hands soak up. So each
+//! user's b̂ carries its share of the OP's acceleration without any hand (the load), `s = (1 + w (N − 1)) / N`
+//! of it: at `w = 1` all of it, at `w = 0` a 1/N share, and with every hand holding an equal share a model at
+//! rest stays at rest for any w ([`shared_bias`]).
 //!
 //! **The others' hands' inertia.** A hand's sensed wrench carries its own mass's reaction, so the others'
-//! hands in b̂ feed each device's acceleration back to the others, through the OP's mobility Λ̂⁻¹: with
-//! two users on each end of the four-bar, light OPs that the mapping scales up, the devices chattered at
-//! their limits with no delay at all (10-26 % of ticks clamped on the four-bar and the Watt six-bar). The
-//! weight is also held to [`INERTIAL_EXCHANGE_GAIN`] over that loop's gain, `(N − 1) m_hand c_p / c_f
-//! max(Λ̂⁻¹_linear)` with a hand of [`HAND_MASS_KG`] (the simulated grasps' 0.55-0.8 kg) mapped into the
-//! VE ([`inertial_weight`]).
+//! hands in b̂ feed each device's acceleration back to the others, through the OP's mobility Λ̂⁻¹; light OPs
+//! that the mapping scales up make that loop's gain large even without delay. The weight is also held to
+//! [`INERTIAL_EXCHANGE_GAIN`] over that loop's gain, `(N − 1) m_hand c_p / c_f max(Λ̂⁻¹_linear)` with a hand
+//! of [`HAND_MASS_KG`] mapped into the VE ([`inertial_weight`]).
 
 use kinloop_linkage::math::space::VecOps;
 
@@ -49,13 +37,11 @@ use kinloop_linkage::math::space::VecOps;
 /// default); shorter round trips allow proportionally more users.
 pub const EXCHANGE_DELAY_S: f64 = 0.005;
 
-/// The mass of a grasping hand that rides on a handle (kg, device space): the simulated grasps' 0.55-0.8 kg.
+/// The mass of a grasping hand that rides on a handle (kg, device space), within the simulated grasps'.
 pub const HAND_MASS_KG: f64 = 0.6;
 /// The largest gain allowed to the loop of the others' hands' inertia through the OP (see the module
-/// documentation): measured stable at 12 (no clamped tick with four users on the four-bar, the Watt
-/// six-bar's two OPs or its `link5`) and chattering at 20 (the four-bar's users clamped 2 % of ticks and
-/// the six-bar's diverged); at 8.6 two users on the four-bar tracked three times worse (2.5 mm RMS against
-/// 0.85 mm).
+/// documentation): low enough that devices sharing a light OP do not chatter at their limits, high enough
+/// that the users still feel each other push.
 pub const INERTIAL_EXCHANGE_GAIN: f64 = 12.0;
 
 /// The largest weight of the others' hands that keeps the loop of their inertia through the OP at

@@ -64,10 +64,10 @@ use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
 use nalgebra::{DMatrix, DVector};
 
-use super::coupling::{Evaluation, VeForces};
 use super::events::VeEvent;
 use super::sharing::{inertial_weight, others_weight, shared_bias};
 use super::users::{Presence, User};
+use super::ve_forces::{Evaluation, VeForces};
 use super::{Coupling, SnapshotScratch, VeCore};
 
 impl<S: Space> VeCore<S> {

@@ -37,14 +37,15 @@ use rtrb::RingBuffer;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
+pub use crate::gateway::{LatencyHistogram, Percentiles, VeLoopStats};
 pub use record::RecordError;
-pub use stats::{LatencyHistogram, Percentiles, ServerStats, UserStats, VeLoopStats};
+pub use stats::{ServerStats, UserStats};
 
 use crate::access::Access;
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use crate::gateway::{CommandSender, Gateway, UserRegistry, FRAME_HEADER};
 use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
-use session::UserEntry;
-use ve_thread::{Command, VeThreadIo};
+use ve_thread::VeThreadIo;
 
 /// Commands waiting for the VE thread.
 const COMMAND_RING: usize = 64;
@@ -148,15 +149,13 @@ pub enum ServerError {
 
 /// State the network tasks share (the VE thread sees none of it).
 pub(crate) struct Shared {
-    commands: Mutex<rtrb::Producer<Command>>,
-    users: Mutex<Vec<UserEntry>>,
+    /// Commands, the user registry and the rings' sizes, which the view shares.
+    gateway: Arc<Gateway>,
     /// The server's endpoint, for the count of open connections.
     endpoint: Endpoint,
     ve_stats: Mutex<VeLoopStats>,
     started: Instant,
     ve_rate_hz: f64,
-    pub(crate) shape: SessionShape,
-    pub(crate) snapshot_ring_bytes: usize,
     access: Access,
     /// What a client learns before joining.
     scene_info: kinloop_protocol::SceneInfo,
@@ -165,108 +164,32 @@ pub(crate) struct Shared {
     view: std::sync::OnceLock<Arc<crate::view::Counters>>,
 }
 
-/// A full command ring for this long means the VE thread is gone.
-const COMMAND_PATIENCE: Duration = Duration::from_secs(2);
-
 impl Shared {
-    /// Hands a command to the VE thread, waiting (on the network side) while its ring is full.
-    pub(crate) async fn send_command(&self, mut command: Command) -> Result<(), ()> {
-        let give_up = Instant::now() + COMMAND_PATIENCE;
-        loop {
-            let pushed = match self.commands.lock() {
-                Ok(mut ring) => ring.push(command),
-                Err(_) => return Err(()),
-            };
-            match pushed {
-                Ok(()) => return Ok(()),
-                Err(rtrb::PushError::Full(back)) if Instant::now() < give_up => {
-                    command = back;
-                    tokio::time::sleep(Duration::from_millis(1)).await;
-                }
-                Err(_) => return Err(()),
-            }
-        }
-    }
-
-    /// Tells the VE thread that `user` left, from code that cannot wait (a drop): at once if the command
-    /// ring has room, else from a task.
-    pub(crate) fn leave_soon(self: &Arc<Self>, user: u32) {
-        let pushed = match self.commands.lock() {
-            Ok(mut ring) => ring.push(Command::Leave { user }).is_ok(),
-            Err(_) => return,
-        };
-        if !pushed {
-            if let Ok(runtime) = tokio::runtime::Handle::try_current() {
-                let shared = self.clone();
-                runtime.spawn(async move { shared.send_command(Command::Leave { user }).await });
-            }
-        }
-    }
-
-    /// What the sessions know of each connected user, for the view's panel.
-    pub(crate) fn user_infos(&self, out: &mut Vec<crate::view::compose::UserInfo>) {
-        let Ok(users) = self.users.lock() else { return };
-        for e in users.iter().filter(|e| e.counters.connected.load(Ordering::Relaxed)) {
-            let c = &e.counters;
-            let received = c.uplinks_received.load(Ordering::Relaxed);
-            let clamped = c.uplinks_clamped.load(Ordering::Relaxed);
-            let poses = c.poses.load();
-            out.push(crate::view::compose::UserInfo {
-                id: e.user_id,
-                name: e.name.clone(),
-                device: e.device.clone(),
-                op: e.op.clone(),
-                browser: false,
-                rtt_ms: Some(e.connection.rtt().as_secs_f64() * 1e3),
-                clamped: (received > 0).then(|| clamped as f64 / received as f64),
-                device_pose: poses.as_ref().map(|p| p.0.clone()),
-                model_pose: poses.map(|p| p.1),
-            });
-        }
-    }
-
-    fn register(&self, entry: UserEntry) {
-        if let Ok(mut users) = self.users.lock() {
-            users.push(entry);
-        }
-    }
-
-    fn user_name(&self, user: u32) -> String {
-        let users = self.users.lock();
-        users.ok().and_then(|u| u.iter().find(|e| e.user_id == user).map(|e| e.name.clone())).unwrap_or_default()
-    }
-
     fn stats(&self) -> ServerStats {
         let ve = self.ve_stats.lock().map(|s| *s).unwrap_or_default();
-        let per_user = self
-            .users
-            .lock()
-            .map(|users| {
-                users
-                    .iter()
-                    .map(|e| {
-                        let c = &e.counters;
-                        let load = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
-                        let (received, lost) = (load(&c.uplinks_received), load(&c.uplinks_lost));
-                        UserStats {
-                            user_id: e.user_id,
-                            name: e.name.clone(),
-                            role: format!("{:?}", e.role).to_lowercase(),
-                            rtt_ms: e.connection.rtt().as_secs_f64() * 1e3,
-                            uplinks_received: received,
-                            uplinks_lost: lost,
-                            uplink_loss: if received + lost > 0 { lost as f64 / (received + lost) as f64 } else { 0.0 },
-                            uplinks_undecodable: load(&c.uplinks_undecodable),
-                            snapshots_sent: load(&c.snapshots_sent),
-                            snapshot_bytes: load(&c.snapshot_bytes),
-                            snapshots_oversize: load(&c.snapshots_oversize),
-                            uplinks_clamped: load(&c.uplinks_clamped),
-                            connected: c.connected.load(Ordering::Relaxed),
-                        }
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let mut per_user = Vec::new();
+        self.gateway.users.for_each(|e| {
+            per_user.push({
+                let c = &e.counters;
+                let load = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+                let (received, lost) = (load(&c.uplinks_received), load(&c.uplinks_lost));
+                UserStats {
+                    user_id: e.user_id,
+                    name: e.name.clone(),
+                    role: format!("{:?}", e.role).to_lowercase(),
+                    rtt_ms: e.connection.rtt().as_secs_f64() * 1e3,
+                    uplinks_received: received,
+                    uplinks_lost: lost,
+                    uplink_loss: if received + lost > 0 { lost as f64 / (received + lost) as f64 } else { 0.0 },
+                    uplinks_undecodable: load(&c.uplinks_undecodable),
+                    snapshots_sent: load(&c.snapshots_sent),
+                    snapshot_bytes: load(&c.snapshot_bytes),
+                    snapshots_oversize: load(&c.snapshots_oversize),
+                    uplinks_clamped: load(&c.uplinks_clamped),
+                    connected: c.connected.load(Ordering::Relaxed),
+                }
+            });
+        });
         ServerStats {
             uptime_s: self.started.elapsed().as_secs_f64(),
             ve_rate_hz: self.ve_rate_hz,
@@ -438,14 +361,16 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
 
     let (shutdown, _) = watch::channel(false);
     let shared = Arc::new(Shared {
-        commands: Mutex::new(command_tx),
-        users: Mutex::new(Vec::new()),
+        gateway: Arc::new(Gateway {
+            commands: Arc::new(CommandSender::new(command_tx)),
+            users: UserRegistry::default(),
+            shape: SessionShape { kind: S::KIND, n, m },
+            snapshot_ring_bytes: 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
+        }),
         endpoint: endpoint.clone(),
         ve_stats: Mutex::new(VeLoopStats::default()),
         started: Instant::now(),
         ve_rate_hz: config.ve.ve_rate_hz,
-        shape: SessionShape { kind: S::KIND, n, m },
-        snapshot_ring_bytes: 4 * (ve_thread::FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
         access: config.access.clone(),
         scene_info,
         shutdown,
@@ -459,7 +384,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
                 reader,
                 access: config.access.clone(),
             };
-            match crate::view::start_live_with(view, source, Some(shared.clone())) {
+            match crate::view::start_live_with(view, source, Some(shared.gateway.clone())) {
                 Ok(handle) => {
                     let _ = shared.view.set(handle.counters());
                     Some(handle)
@@ -554,7 +479,9 @@ async fn collect(
 
 fn log_event(shared: &Shared, event: &VeEvent) {
     match event {
-        VeEvent::UserJoined { user } => tracing::info!(user, name = %shared.user_name(*user), "joined the VE"),
+        VeEvent::UserJoined { user } => {
+            tracing::info!(user, name = %shared.gateway.users.name_of(*user), "joined the VE")
+        }
         VeEvent::FadingOut { user, reason } => tracing::info!(user, ?reason, "coupling fading out"),
         VeEvent::Resumed { user } => tracing::info!(user, "uplinks resumed; coupling fading in"),
         VeEvent::UserRemoved { user } => tracing::info!(user, "left the VE"),

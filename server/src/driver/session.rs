@@ -1,84 +1,27 @@
 //! One client's session on the network side: handshake (token, then the VE thread's decision), then three
 //! tasks: uplinks in, snapshots out, and the control stream (ping, leave, shutdown).
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
-    accept_with, close_codes, recv_control, send_control, AcceptedSession, Connection, DatagramReceiver,
-    DatagramSender, Incoming, Route,
+    accept_with, close_codes, recv_control, send_control, AcceptedSession, DatagramReceiver, DatagramSender, Incoming,
+    Route,
 };
-use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused, Role};
+use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused};
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
-use super::ve_thread::{take_latest_frame, Command, UserLink};
 use super::Shared;
 use crate::core::{JoinRequest, UplinkSample};
+use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLink};
 
 /// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
 const UPLINK_RING: usize = 64;
 /// How long a leaving server waits for a client to close after telling it.
 const LEAVE_LINGER: Duration = Duration::from_secs(1);
-
-/// Network-side counters of one user, shared with `stats()`.
-#[derive(Debug, Default)]
-pub struct UserCounters {
-    pub uplinks_received: AtomicU64,
-    pub uplinks_lost: AtomicU64,
-    pub uplinks_undecodable: AtomicU64,
-    pub uplinks_dropped: AtomicU64,
-    pub snapshots_sent: AtomicU64,
-    pub snapshot_bytes: AtomicU64,
-    pub snapshots_oversize: AtomicU64,
-    pub uplinks_clamped: AtomicU64,
-    pub connected: AtomicBool,
-    /// The newest uplink's device and model poses, for the view.
-    pub poses: PoseTap,
-}
-
-/// The device and local-model poses of a user's newest uplink, as `f64` bits in atomics: the receive task
-/// writes them per uplink without a lock, the view's hub reads them a few dozen times per second (a read
-/// that straddles a write mixes two neighbouring uplinks, which a picture cannot show).
-#[derive(Debug, Default)]
-pub struct PoseTap {
-    len: AtomicU64,
-    device: [AtomicU64; 7],
-    model: [AtomicU64; 7],
-}
-
-impl PoseTap {
-    fn store(&self, device: &[f64], model: &[f64]) {
-        if device.len() != model.len() || device.len() > 7 {
-            return;
-        }
-        for (slot, v) in self.device.iter().zip(device).chain(self.model.iter().zip(model)) {
-            slot.store(v.to_bits(), Ordering::Relaxed);
-        }
-        self.len.store(device.len() as u64, Ordering::Release);
-    }
-
-    /// `(device pose, model pose)` of the newest uplink, if any came.
-    pub fn load(&self) -> Option<(Vec<f64>, Vec<f64>)> {
-        let len = self.len.load(Ordering::Acquire) as usize;
-        let read =
-            |slots: &[AtomicU64; 7]| slots[..len].iter().map(|s| f64::from_bits(s.load(Ordering::Relaxed))).collect();
-        (len > 0).then(|| (read(&self.device), read(&self.model)))
-    }
-}
-
-/// A user as the stats see it.
-pub struct UserEntry {
-    pub user_id: u32,
-    pub name: String,
-    pub role: Role,
-    pub device: String,
-    pub op: String,
-    pub connection: Connection,
-    pub counters: Arc<UserCounters>,
-}
 
 fn refused(reason: RefusalReason) -> Refused {
     Refused { reason, message: String::new() }
@@ -96,13 +39,13 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
     let handshake = accept_with(incoming, admit, move |hello, join| async move {
         let shared = shared_ref;
         let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
-        let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.snapshot_ring_bytes);
+        let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.gateway.snapshot_ring_bytes);
         let notify = Arc::new(Notify::new());
         let (reply_tx, reply_rx) = oneshot::channel();
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
         let command = Command::Join { request: JoinRequest::from_handshake(&hello, &join), link, reply: reply_tx };
         let shutting_down = || refused(RefusalReason::Malformed { what: "the server is shutting down".into() });
-        shared.send_command(command).await.map_err(|_| shutting_down())?;
+        shared.gateway.commands.send(command).await.map_err(|_| shutting_down())?;
         let joined = reply_rx.await.map_err(|_| shutting_down())?.map_err(refused)?;
         *slot = Some((joined.user_id, uplink_tx, snapshot_rx, notify));
         Ok(joined.welcome)
@@ -113,7 +56,7 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
             // The VE may have admitted the user before the handshake failed (the welcome could not be sent:
             // the client had gone); it leaves now, not at the next restart.
             if let Some((user, ..)) = ends {
-                let _ = shared.send_command(Command::Leave { user }).await;
+                let _ = shared.gateway.commands.send(Command::Leave { user }).await;
             }
             // Never the hello itself: it carries the token.
             tracing::info!(%remote, %error, "handshake ended without a session");
@@ -135,7 +78,7 @@ async fn run_session(
     let user = welcome.user_id;
     let counters = Arc::new(UserCounters::default());
     counters.connected.store(true, Ordering::Relaxed);
-    shared.register(UserEntry {
+    shared.gateway.users.register(UserEntry {
         user_id: user,
         name: hello.client_name.clone(),
         role: hello.role,
@@ -148,7 +91,7 @@ async fn run_session(
 
     let receive = {
         let counters = counters.clone();
-        let mut receiver = DatagramReceiver::new(connection.clone(), shared.shape);
+        let mut receiver = DatagramReceiver::new(connection.clone(), shared.gateway.shape);
         tokio::spawn(async move {
             let mut last_seq: Option<u64> = None;
             loop {
@@ -236,7 +179,7 @@ async fn run_session(
         }
     };
     // Best effort: if the VE thread is gone the user is gone with it.
-    let _ = shared.send_command(Command::Leave { user }).await;
+    let _ = shared.gateway.commands.send(Command::Leave { user }).await;
     connection.close(close_codes::NORMAL, b"bye");
     receive.abort();
     transmit.abort();

@@ -12,46 +12,11 @@ use std::time::{Duration, Instant};
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::codec;
-use kinloop_protocol::RefusalReason;
 use rtrb::{Consumer, Producer};
-use tokio::sync::{oneshot, Notify};
 
-use super::stats::{LatencyHistogram, VeLoopStats};
-use crate::core::{JoinRequest, Joined, UplinkSample, UserId, VeCore, VeEvent};
+use crate::core::{UserId, VeCore, VeEvent};
+use crate::gateway::{push_frame, Command, LatencyHistogram, UserLink, VeLoopStats};
 use crate::view::ViewTap;
-
-/// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
-pub const FRAME_HEADER: usize = 4;
-
-/// A request from the network side. Joins are rare and cross the ring by value; boxing them would only
-/// move the allocation elsewhere.
-#[allow(clippy::large_enum_variant)]
-pub enum Command {
-    /// Admit a user; the reply carries the welcome or the refusal.
-    Join {
-        /// What the client asked for.
-        request: JoinRequest,
-        /// The VE thread's ends of the user's rings.
-        link: UserLink,
-        /// Where the decision goes.
-        reply: oneshot::Sender<Result<Joined, RefusalReason>>,
-    },
-    /// The user's session ended.
-    Leave {
-        /// Who.
-        user: UserId,
-    },
-}
-
-/// The VE thread's ends of one user's rings.
-pub struct UserLink {
-    /// Uplinks from the user's receive task.
-    pub uplinks: Consumer<UplinkSample>,
-    /// Length-prefixed encoded snapshots to the user's send task.
-    pub snapshots: Producer<u8>,
-    /// Wakes the send task.
-    pub notify: Arc<Notify>,
-}
 
 struct ActiveLink {
     user: UserId,
@@ -180,39 +145,6 @@ fn serve_commands<S: Space>(
     }
 }
 
-/// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room.
-pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
-    let total = FRAME_HEADER + bytes.len();
-    let Ok(chunk) = ring.write_chunk_uninit(total) else { return false };
-    let header = (bytes.len() as u32).to_le_bytes();
-    chunk.fill_from_iter(header.iter().chain(bytes).copied()) == total
-}
-
-/// Reads every complete frame from a snapshot ring and keeps the newest in `out` (latest wins); returns
-/// how many frames were read.
-pub fn take_latest_frame(ring: &mut Consumer<u8>, out: &mut Vec<u8>) -> usize {
-    let mut frames = 0;
-    loop {
-        let len = {
-            let Ok(header) = ring.read_chunk(FRAME_HEADER) else { break };
-            let (a, b) = header.as_slices();
-            let mut bytes = [0u8; FRAME_HEADER];
-            for (dst, src) in bytes.iter_mut().zip(a.iter().chain(b)) {
-                *dst = *src;
-            }
-            u32::from_le_bytes(bytes) as usize
-        };
-        // The writer commits a frame whole, so the body is there whenever its header is.
-        let Ok(chunk) = ring.read_chunk(FRAME_HEADER + len) else { break };
-        let (a, b) = chunk.as_slices();
-        out.clear();
-        out.extend(a.iter().chain(b).skip(FRAME_HEADER));
-        chunk.commit_all();
-        frames += 1;
-    }
-    frames
-}
-
 /// An upper bound of a user's encoded snapshot (bytes) for a scene with `n` coordinates, `m` closure rows
 /// and operational dimension `k`: every number as 8 bytes plus generous framing.
 pub fn snapshot_size_bound<S: Space>(n: usize, m: usize) -> usize {
@@ -227,27 +159,4 @@ pub fn snapshot_size_bound<S: Space>(n: usize, m: usize) -> usize {
         + kinloop_protocol::codec::limits::MAX_LIST_ENTRIES * other
         + config;
     (numbers * 8 + 1024).min(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn frames_round_trip_and_the_newest_wins() {
-        let (mut tx, mut rx) = rtrb::RingBuffer::new(64);
-        assert!(push_frame(&mut tx, b"first"));
-        assert!(push_frame(&mut tx, b"second frame"));
-        assert!(!push_frame(&mut tx, &[0u8; 60]), "no room: refused whole");
-        let mut out = Vec::new();
-        assert_eq!(take_latest_frame(&mut rx, &mut out), 2);
-        assert_eq!(out, b"second frame");
-        assert_eq!(take_latest_frame(&mut rx, &mut out), 0);
-        // Wrapping around the ring's end.
-        for i in 0..20u8 {
-            assert!(push_frame(&mut tx, &[i; 13]));
-            assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
-            assert_eq!(out, [i; 13]);
-        }
-    }
 }

@@ -1,8 +1,11 @@
 //! A [`Frame`] from a [`Sample`], the scene's [`Geometry`] and what the network side knows of each user.
 
+use std::sync::atomic::Ordering;
+
 use super::draw::Geometry;
 use super::messages::{Frame, LoopView, UserView};
 use super::sample::Sample;
+use crate::gateway::{UserEntry, UserRegistry};
 
 /// What the network side knows of a user (the VE thread knows none of it).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -25,6 +28,36 @@ pub struct UserInfo {
     pub device_pose: Option<Vec<f64>>,
     /// Local-model pose from the newest uplink.
     pub model_pose: Option<Vec<f64>>,
+}
+
+impl UserInfo {
+    /// What a QUIC session knows of its user.
+    fn of_session(e: &UserEntry) -> Self {
+        let c = &e.counters;
+        let received = c.uplinks_received.load(Ordering::Relaxed);
+        let clamped = c.uplinks_clamped.load(Ordering::Relaxed);
+        let poses = c.poses.load();
+        UserInfo {
+            id: e.user_id,
+            name: e.name.clone(),
+            device: e.device.clone(),
+            op: e.op.clone(),
+            browser: false,
+            rtt_ms: Some(e.connection.rtt().as_secs_f64() * 1e3),
+            clamped: (received > 0).then(|| clamped as f64 / received as f64),
+            device_pose: poses.as_ref().map(|p| p.0.clone()),
+            model_pose: poses.map(|p| p.1),
+        }
+    }
+}
+
+/// Appends what the sessions know of each connected user to `out`, for the panel.
+pub fn connected_users(registry: &UserRegistry, out: &mut Vec<UserInfo>) {
+    registry.for_each(|e| {
+        if e.counters.connected.load(Ordering::Relaxed) {
+            out.push(UserInfo::of_session(e));
+        }
+    });
 }
 
 /// The frame for `sample`: the linkage drawn at its q, each user with what `info` adds.

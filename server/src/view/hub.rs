@@ -12,12 +12,12 @@ use std::time::Duration;
 use kinloop_linkage::math::space::SceneKind;
 use tokio::sync::watch;
 
-use super::compose::{compose, UserInfo};
+use super::compose::{compose, connected_users, UserInfo};
 use super::draw::Geometry;
 use super::messages::ToPage;
 use super::sample::{take_latest, Sample};
 use super::{Counter, FrameText, TapReader, ViewShared};
-use crate::driver::Shared;
+use crate::gateway::Gateway;
 
 /// Longest wait for the tap before the hub refreshes the last frame's panel anyway.
 const IDLE_REFRESH: Duration = Duration::from_millis(250);
@@ -27,7 +27,7 @@ pub(crate) struct Hub {
     pub reader: TapReader,
     pub kind: SceneKind,
     pub frames: watch::Sender<Option<FrameText>>,
-    pub server: Option<Arc<Shared>>,
+    pub server: Option<Arc<Gateway>>,
 }
 
 pub(crate) async fn run(mut hub: Hub, view: Arc<ViewShared>) {
@@ -47,7 +47,7 @@ pub(crate) async fn run(mut hub: Hub, view: Arc<ViewShared>) {
         let Some(sample) = &last else { continue };
         users.clear();
         if let Some(server) = &hub.server {
-            server.user_infos(&mut users);
+            connected_users(&server.users, &mut users);
         }
         if let Ok(browsers) = view.browsers.lock() {
             users.extend(browsers.iter().cloned());

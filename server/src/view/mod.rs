@@ -46,7 +46,7 @@ use tokio::sync::{watch, Notify};
 use tokio::task::JoinHandle;
 
 use crate::access::Access;
-use crate::driver::Shared;
+use crate::gateway::Gateway;
 use compose::UserInfo;
 use draw::SceneInfo;
 pub use tap::ViewTap;
@@ -216,7 +216,7 @@ pub(crate) enum Source {
         /// The hub's newest frame.
         frames: watch::Receiver<Option<FrameText>>,
         /// The server, for grabs (none for `--synthetic-users`, which has no command ring to share).
-        server: Option<Arc<Shared>>,
+        server: Option<Arc<Gateway>>,
         /// Dimensions of the VE's sessions (to decode a grab's snapshots).
         shape: SessionShape,
     },
@@ -346,7 +346,7 @@ pub fn start_live(config: &ViewConfig, source: LiveSource) -> Result<ViewHandle,
 pub(crate) fn start_live_with(
     config: &ViewConfig,
     source: LiveSource,
-    server: Option<Arc<Shared>>,
+    server: Option<Arc<Gateway>>,
 ) -> Result<ViewHandle, ViewError> {
     tokio::runtime::Handle::try_current().map_err(|_| ViewError::NoRuntime)?;
     check(config)?;

@@ -20,8 +20,7 @@ use super::grab::Grip;
 use super::messages::{FromPage, ToPage, Welcome, VERSION};
 use super::{short, Counter, Source, ViewShared, MAX_EVENTS_PER_S, MAX_MESSAGE_BYTES};
 use crate::core::{JoinRequest, UplinkSample};
-use crate::driver::ve_thread::{take_latest_frame, Command, UserLink};
-use crate::driver::Shared;
+use crate::gateway::{take_latest_frame, Command, Gateway, UserLink};
 
 /// A page has this long to send `auth`.
 const AUTH_PATIENCE: Duration = Duration::from_secs(30);
@@ -217,7 +216,7 @@ async fn write(mut sink: Sink, mut replies: mpsc::Receiver<Message>, view: Arc<V
 /// A grab in progress: the VE user and its rings. Dropping it (release, a closed page, a server shutting
 /// down) tells the VE the user left.
 struct Grab {
-    server: Arc<Shared>,
+    server: Arc<Gateway>,
     user: u32,
     op: String,
     uplinks: rtrb::Producer<UplinkSample>,
@@ -229,7 +228,7 @@ struct Grab {
 
 impl Drop for Grab {
     fn drop(&mut self) {
-        self.server.leave_soon(self.user);
+        self.server.commands.leave_soon(self.user);
     }
 }
 
@@ -374,7 +373,7 @@ impl Page {
         };
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
         let name = request.name.clone();
-        let decided = match server.send_command(Command::Join { request, link, reply }).await {
+        let decided = match server.commands.send(Command::Join { request, link, reply }).await {
             Ok(()) => tokio::time::timeout(JOIN_PATIENCE, decision).await,
             Err(()) => return self.reply(ToPage::Error { message: "the VE is not running".into() }),
         };

@@ -19,7 +19,7 @@ use rtrb::Producer;
 use tokio::sync::Notify;
 
 use crate::core::{Presence, VeCore};
-use crate::driver::VeLoopStats;
+use crate::gateway::VeLoopStats;
 
 /// Largest operational dimension.
 const K_MAX: usize = 6;

@@ -1,0 +1,63 @@
+//! Snapshot frames in a byte ring: the VE thread commits `[len: u32 LE][bytes]` whole, a session's send task
+//! (or the view's socket) reads them and keeps only the newest.
+
+use rtrb::{Consumer, Producer};
+
+/// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
+pub const FRAME_HEADER: usize = 4;
+
+/// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room.
+pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
+    let total = FRAME_HEADER + bytes.len();
+    let Ok(chunk) = ring.write_chunk_uninit(total) else { return false };
+    let header = (bytes.len() as u32).to_le_bytes();
+    chunk.fill_from_iter(header.iter().chain(bytes).copied()) == total
+}
+
+/// Reads every complete frame from a snapshot ring and keeps the newest in `out` (latest wins); returns
+/// how many frames were read.
+pub fn take_latest_frame(ring: &mut Consumer<u8>, out: &mut Vec<u8>) -> usize {
+    let mut frames = 0;
+    loop {
+        let len = {
+            let Ok(header) = ring.read_chunk(FRAME_HEADER) else { break };
+            let (a, b) = header.as_slices();
+            let mut bytes = [0u8; FRAME_HEADER];
+            for (dst, src) in bytes.iter_mut().zip(a.iter().chain(b)) {
+                *dst = *src;
+            }
+            u32::from_le_bytes(bytes) as usize
+        };
+        // The writer commits a frame whole, so the body is there whenever its header is.
+        let Ok(chunk) = ring.read_chunk(FRAME_HEADER + len) else { break };
+        let (a, b) = chunk.as_slices();
+        out.clear();
+        out.extend(a.iter().chain(b).skip(FRAME_HEADER));
+        chunk.commit_all();
+        frames += 1;
+    }
+    frames
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_round_trip_and_the_newest_wins() {
+        let (mut tx, mut rx) = rtrb::RingBuffer::new(64);
+        assert!(push_frame(&mut tx, b"first"));
+        assert!(push_frame(&mut tx, b"second frame"));
+        assert!(!push_frame(&mut tx, &[0u8; 60]), "no room: refused whole");
+        let mut out = Vec::new();
+        assert_eq!(take_latest_frame(&mut rx, &mut out), 2);
+        assert_eq!(out, b"second frame");
+        assert_eq!(take_latest_frame(&mut rx, &mut out), 0);
+        // Wrapping around the ring's end.
+        for i in 0..20u8 {
+            assert!(push_frame(&mut tx, &[i; 13]));
+            assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
+            assert_eq!(out, [i; 13]);
+        }
+    }
+}
