@@ -4,6 +4,7 @@
 use std::path::Path;
 use std::process::Command;
 
+use kinloop::experiments::delay_point::{Loss, PointSummary};
 use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
 
@@ -129,75 +130,73 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Latency, dir.path());
     let r = &report.summary["results"];
-    let points = r["points"].as_array().unwrap();
+    let points: Vec<PointSummary> = serde_json::from_value(r["points"].clone()).expect("typed points");
     assert_eq!(points.len(), r["grid"]["points"].as_u64().unwrap() as usize);
     let find = |hand: &str, delay: f64, method: &str| {
         points
             .iter()
             .find(|p| {
-                p["hand"] == hand
-                    && f(&p["delay_ms"]) == delay
-                    && p["method"] == method
-                    && f(&p["jitter_ms"]) == 0.0
-                    && p["loss"] == "none"
+                p.hand == hand
+                    && p.delay_ms == delay
+                    && p.method == method
+                    && p.jitter_ms == 0.0
+                    && p.loss == Loss::None
             })
             .unwrap_or_else(|| panic!("{hand} {delay} {method}: no such point"))
     };
     for method in ["plain", "passivity"] {
         let (first, last) = (find("soft", 0.0, method), find("soft", 1000.0, method));
-        assert_eq!(first["stable"], true, "{first}");
-        assert!(f(&first["device_op_rms_mm"]) < 1.0, "{first}");
-        // Without delay the session is passive: the linkage gains no more than the hand gives. (Booked with the
-        // encoders' filtered twist instead of the handle's, the hand's work drifted: 1 mJ on the four-bar,
-        // 5 mJ on the testbed, half the energy criterion's margin.)
-        assert!(f(&first["energy_excess_j"]) < 2e-4, "{first}");
-        assert!(f(&last["device_op_rms_mm"]) > 10.0 * f(&first["device_op_rms_mm"]), "{last} vs {first}");
+        assert!(first.stable, "{first:?}");
+        assert!(first.device_op_rms_mm < 1.0, "{first:?}");
+        // Without delay the session is passive: the linkage gains no more than the hand gives (booked with the
+        // handle's twist, not the encoders' filtered one, whose drift would eat the energy criterion's margin).
+        assert!(first.energy_excess_j < 2e-4, "{first:?}");
+        assert!(last.device_op_rms_mm > 10.0 * first.device_op_rms_mm, "{last:?} vs {first:?}");
     }
-    // What the hand feels drifts from what the linkage presents as the delay grows (0.41 and 2.8 on the
-    // four-bar's coupler when this was written); without delay the two agree within the device's residue.
+    // What the hand feels drifts from what the linkage presents as the delay grows; without delay the two
+    // agree within the device's residue.
     let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
-    let (near, far) = (f(&first["felt_vs_rendered_impedance_error"]), f(&last["felt_vs_rendered_impedance_error"]));
+    let felt = |p: &PointSummary| p.felt_vs_rendered_impedance_error.unwrap_or_else(|| panic!("{p:?}"));
+    let (near, far) = (felt(first), felt(last));
     assert!(near < 1.0 && far > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {far} at 1 s");
     // The feel against the same hand without delay: the undelayed session is its own reference (no change),
-    // and the delay moves the feel away from it (0.30 at 100 ms and 1.75 at 1 s on the four-bar's soft tour
-    // when this was written).
+    // and the delay moves the feel away from it.
+    let change = |p: &PointSummary| p.felt_change_from_undelayed.unwrap_or_else(|| panic!("{p:?}"));
     for method in ["plain", "passivity"] {
-        assert_eq!(f(&find("soft", 0.0, method)["felt_change_from_undelayed"]), 0.0);
-        let (near, far) = (find("soft", 100.0, method), find("soft", 1000.0, method));
-        let (near, far) = (f(&near["felt_change_from_undelayed"]), f(&far["felt_change_from_undelayed"]));
+        assert_eq!(change(find("soft", 0.0, method)), 0.0);
+        let (near, far) = (change(find("soft", 100.0, method)), change(find("soft", 1000.0, method)));
         assert!(near > 0.0 && far > 2.0 * near, "{method}: felt change {near} at 100 ms, {far} at 1 s");
     }
     for method in ["plain", "passivity"] {
-        assert_eq!(points.iter().filter(|p| p["method"] == method).count(), points.len() / 2, "both methods swept");
+        assert_eq!(points.iter().filter(|p| p.method == method).count(), points.len() / 2, "both methods swept");
     }
     let failures = r["first_failures"].as_array().unwrap();
     assert!(!failures.is_empty());
     for row in failures {
-        let of: Vec<&Value> = points
+        let of: Vec<&PointSummary> = points
             .iter()
-            .filter(|p| p["hand"] == row["hand"] && p["method"] == row["method"] && p["scene"] == row["scene"])
+            .filter(|p| {
+                row["hand"] == p.hand.as_str() && row["method"] == p.method.as_str() && row["scene"] == p.scene.as_str()
+            })
             .collect();
         assert_eq!(of.len() as u64, row["points"].as_u64().unwrap());
-        let first = of.iter().filter(|p| p["stable"] == false).map(|p| f(&p["delay_ms"])).reduce(f64::min);
+        let first = of.iter().filter(|p| !p.stable).map(|p| p.delay_ms).reduce(f64::min);
         assert_eq!(row["first_failure_ms"].as_f64(), first, "{row}");
         // An unstable point names the parts of the criterion that failed.
-        for p in of.iter().filter(|p| p["stable"] == false) {
-            assert!(p["reasons"].as_array().is_some_and(|r| !r.is_empty()), "{p}");
+        for p in of.iter().filter(|p| !p.stable) {
+            assert!(!p.reasons.is_empty(), "{p:?}");
         }
     }
-    // The passivity controller is the default (issue 22, item 3): the goals judge its points, and it costs
+    // The passivity controller is the default: the goals judge its points, and it costs
     // little without delay (the mean device-OP distance over the 0 ms points, recomputed here).
     assert_eq!(r["goals"]["default_method"], "passivity");
     assert_eq!(
         r["goals"]["no_unstable_point_with_defaults"],
-        points.iter().all(|p| p["method"] != "passivity" || p["stable"] == true)
+        points.iter().all(|p| p.method != "passivity" || p.stable)
     );
     let mean_at_0 = |method: &str| {
-        let at_0: Vec<f64> = points
-            .iter()
-            .filter(|p| p["method"] == method && f(&p["delay_ms"]) == 0.0)
-            .map(|p| f(&p["device_op_rms_mm"]))
-            .collect();
+        let at_0: Vec<f64> =
+            points.iter().filter(|p| p.method == method && p.delay_ms == 0.0).map(|p| p.device_op_rms_mm).collect();
         at_0.iter().sum::<f64>() / at_0.len() as f64
     };
     let cost = &r["goals"]["passivity_cost_at_0ms"];
@@ -207,13 +206,11 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     // Without delay the VE hears the device a tick late: it has hardly moved; at 1 s it has toured on, and the
     // VE, which follows what it heard, is no nearer than that on average (within the tour's turns).
     let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
-    assert!(f(&first["device_unheard_rms_mm"]) < 0.1, "{first}");
-    assert!(f(&last["device_unheard_rms_mm"]) > 10.0, "{last}");
-    assert!(f(&last["device_op_rms_mm"]) > 0.8 * f(&last["device_unheard_rms_mm"]), "{last}");
-    // The model-update rows (item 2): every way of pulling runs the same sessions, and the default pull (at
-    // least two round trips, paid from the tank) leaves none unstable. (While the free directions were
-    // compared with the model's own answered state, the fixed 200 ms pull made the testbed gain energy at
-    // 300 ms and 1 s one way; compared with the VE's state predicted to now, it no longer does.)
+    assert!(first.device_unheard_rms_mm < 0.1, "{first:?}");
+    assert!(last.device_unheard_rms_mm > 10.0, "{last:?}");
+    assert!(last.device_op_rms_mm > 0.8 * last.device_unheard_rms_mm, "{last:?}");
+    // The model-update rows: every way of pulling runs the same sessions, and the default pull (at least two
+    // round trips, paid from the tank) leaves none unstable.
     let rows = r["model_update"]["rows"].as_array().unwrap();
     let row = |name: &str| rows.iter().find(|row| row["update"] == name).unwrap_or_else(|| panic!("{name}"));
     assert_eq!(row("default")["unstable"], 0, "{rows:?}");
@@ -221,10 +218,9 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         assert_eq!(row("default")["sessions"], row(other)["sessions"], "{rows:?}");
     }
     // The lead rows (`--lead-max-ms`; quick: the whole delay as the cap): a VE that leads its target by the
-    // one-way delay is nearer the device than any VE that follows what it heard can be (2.8 against 5.2 mm at
-    // 100 ms when this was written); the lead is cut to what the heard motion supports, so none of these
-    // sessions is unstable (led by the whole delay without that bound, the poke at 100 ms and both hands at 1 s
-    // were); each row counts its own unstable sessions.
+    // one-way delay is nearer the device than any VE that follows what it heard can be; the lead is cut to
+    // what the heard motion supports, so none of these sessions is unstable; each row counts its own unstable
+    // sessions.
     let lead = &r["lead"];
     let lead_points = lead["points"].as_array().unwrap();
     let soft_100 = lead_points
@@ -289,7 +285,7 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
 }
 
 /// The delay goal in real time (`--quick`: the testbed on both devices with the default hand, and on
-/// `sim:paper` with the soft hand on the issue's circle, at 100, 300, 500 and 1000 ms one way, 3 s each):
+/// `sim:paper` with the soft hand on the 5 mm goal circle, at 100, 300, 500 and 1000 ms one way, 3 s each):
 /// every session reports what the goal is judged on, the answer counts the ones that meet it, and every one
 /// meets it (no VE restore, loops closed, at most 5 % of ticks clamped); the circle's tracking at 100 ms and
 /// 1 s is reported from its own sessions and judged against the tracking goals. Before the client took its
