@@ -5,6 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
+use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
 
@@ -54,17 +55,19 @@ fn paper_stiffness_rendering_keeps_the_device_on_the_op_and_impedance_drifts() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Paper, dir.path());
     let r = &report.summary["results"]["gains"]["paper"];
-    let (stiff, imp) = (&r["stiffness"], &r["impedance"]);
-    assert!(f(&stiff["device_op_rms_mm"]) < 3.0, "{stiff}");
-    assert!(f(&imp["device_op_rms_mm"]) > 5.0 * f(&stiff["device_op_rms_mm"]), "{imp} vs {stiff}");
-    let first = f(&stiff["first_time_two_constraints_s"]);
+    let mode = |name: &str| -> ModeSummary { serde_json::from_value(r[name].clone()).expect("typed mode summary") };
+    let (stiff, imp) = (mode("stiffness"), mode("impedance"));
+    assert!(stiff.device_op_rms_mm < 3.0, "{stiff:?}");
+    assert!(imp.device_op_rms_mm > 5.0 * stiff.device_op_rms_mm, "{imp:?} vs {stiff:?}");
+    let first = stiff.first_time_two_constraints_s.expect("the loop closure binds");
     assert!((0.7..1.3).contains(&first), "two constraints first at {first} s");
+    let force_with = |count: &Option<f64>| count.unwrap_or_else(|| panic!("{stiff:?}"));
     assert!(
-        f(&stiff["mean_joint_constraint_force_n_with_2_constraints"])
-            > f(&stiff["mean_joint_constraint_force_n_with_1_constraint"]),
-        "{stiff}"
+        force_with(&stiff.mean_joint_constraint_force_n_with_2_constraints)
+            > force_with(&stiff.mean_joint_constraint_force_n_with_1_constraint),
+        "{stiff:?}"
     );
-    assert!(f(&stiff["max_closure_error_m"]) < 1e-9);
+    assert!(stiff.max_closure_error_m < 1e-9);
     let again = run(Name::Paper, &dir.path().join("again"));
     assert_eq!(report.summary["results"], again.summary["results"], "deterministic");
 }
