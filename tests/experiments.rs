@@ -236,44 +236,42 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     }
     // Every session the grid ran with the default method, run again with the lead set the other way (unled,
     // as the default leads): the same sessions, each judged (the unstable ones listed,
-    // led and unled), and nearer the device on average under delay led than unled (4.3 against 5.8 mm at
-    // 100 ms over the full grid when this was written). The default side of each figure is recomputed from
+    // led and unled), and nearer the device on average under delay led than unled. The default side of each figure is recomputed from
     // the grid's points.
     let everywhere = &lead["everywhere"];
     let default_side = if everywhere["default_leads"] == true { "led" } else { "unled" };
-    let default_points = points.iter().filter(|p| p["method"] == "passivity").count();
+    let default_points = points.iter().filter(|p| p.method == "passivity").count();
     assert_eq!(everywhere["sessions"].as_u64().unwrap() as usize, default_points, "{everywhere}");
     for side in ["led", "unled"] {
         let listed = everywhere["unstable_points"][side].as_array().unwrap();
         assert_eq!(everywhere[format!("unstable_{side}")].as_u64().unwrap() as usize, listed.len());
         assert!(listed.iter().all(|p| p["stable"] == false && p["method"] == "passivity"), "{everywhere}");
     }
-    let grid_unstable = points.iter().filter(|p| p["method"] == "passivity" && p["stable"] == false).count();
+    let grid_unstable = points.iter().filter(|p| p.method == "passivity" && !p.stable).count();
     assert_eq!(everywhere[format!("unstable_{default_side}")].as_u64().unwrap() as usize, grid_unstable);
     let by_delay = everywhere["device_op_rms_mm_mean_by_delay"].as_array().unwrap();
     let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
     assert!(f(&at_100["led"]) < f(&at_100["unled"]), "{at_100}");
-    let default_100: Vec<f64> = points
-        .iter()
-        .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
-        .map(|p| f(&p["device_op_rms_mm"]))
-        .collect();
+    let default_100: Vec<f64> =
+        points.iter().filter(|p| p.method == "passivity" && p.delay_ms == 100.0).map(|p| p.device_op_rms_mm).collect();
     let default_mean = default_100.iter().sum::<f64>() / default_100.len() as f64;
     assert!((f(&at_100[default_side]) - default_mean).abs() < 2e-3, "{at_100} vs {default_mean}");
     // Beside it, what the hand feels, each recomputed from the grid's points: the touring hands' median
-    // felt-vs-rendered impedance error (led, it was 1.20 against 1.06 at 100 ms over the full grid), and their
-    // median change of the felt impedance from the same hand without delay.
+    // felt-vs-rendered impedance error, and their median change of the felt impedance from the same hand
+    // without delay.
+    let felt_error = |p: &PointSummary| p.felt_vs_rendered_impedance_error;
+    let felt_change = |p: &PointSummary| p.felt_change_from_undelayed;
     for (summary, point) in [
-        ("felt_vs_rendered_impedance_error_median_by_delay", "felt_vs_rendered_impedance_error"),
-        ("felt_change_from_undelayed_median_by_delay", "felt_change_from_undelayed"),
+        ("felt_vs_rendered_impedance_error_median_by_delay", &felt_error as &dyn Fn(&PointSummary) -> Option<f64>),
+        ("felt_change_from_undelayed_median_by_delay", &felt_change),
     ] {
         let by_delay = everywhere[summary].as_array().unwrap();
         let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
         let mut touring: Vec<f64> = points
             .iter()
-            .filter(|p| p["method"] == "passivity" && f(&p["delay_ms"]) == 100.0)
-            .filter(|p| p["hand"] == "soft" || p["hand"] == "firm")
-            .filter_map(|p| p[point].as_f64())
+            .filter(|p| p.method == "passivity" && p.delay_ms == 100.0)
+            .filter(|p| p.hand == "soft" || p.hand == "firm")
+            .filter_map(|p| point(p))
             .collect();
         touring.sort_by(f64::total_cmp);
         let median = touring[touring.len() / 2];
