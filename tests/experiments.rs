@@ -271,7 +271,7 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
             .iter()
             .filter(|p| p.method == "passivity" && p.delay_ms == 100.0)
             .filter(|p| p.hand == "soft" || p.hand == "firm")
-            .filter_map(|p| point(p))
+            .filter_map(point)
             .collect();
         touring.sort_by(f64::total_cmp);
         let median = touring[touring.len() / 2];
