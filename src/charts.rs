@@ -340,6 +340,42 @@ fn sorted_unique(mut v: Vec<f64>) -> Vec<f64> {
     v
 }
 
+/// The edges of a map's cells around the sorted grid values `v`: halfway between neighbours (geometric
+/// halfway on log axes), the outer cells as wide as their inner neighbours' half-widths.
+fn cell_edges(v: &[f64], log: bool) -> Vec<f64> {
+    let mid = |a: f64, b: f64| if log { (a * b).sqrt() } else { (a + b) / 2.0 };
+    let mut e = Vec::with_capacity(v.len() + 1);
+    let first = if v.len() > 1 {
+        if log {
+            v[0] * v[0] / mid(v[0], v[1])
+        } else {
+            2.0 * v[0] - mid(v[0], v[1])
+        }
+    } else if log {
+        v[0] / 2.0
+    } else {
+        v[0] - 0.5
+    };
+    e.push(first);
+    for w in v.windows(2) {
+        e.push(mid(w[0], w[1]));
+    }
+    let n = v.len();
+    let last = if n > 1 {
+        if log {
+            v[n - 1] * v[n - 1] / mid(v[n - 2], v[n - 1])
+        } else {
+            2.0 * v[n - 1] - mid(v[n - 2], v[n - 1])
+        }
+    } else if log {
+        v[0] * 2.0
+    } else {
+        v[0] + 0.5
+    };
+    e.push(last);
+    e
+}
+
 fn draw_map<DB: DrawingBackend>(map: &StabilityMap, area: DrawingArea<DB, Shift>) -> Result<()>
 where
     DB::ErrorType: 'static,
@@ -348,41 +384,7 @@ where
     let xs = sorted_unique(map.cells.iter().map(|c| c.0).collect());
     let ys = sorted_unique(map.cells.iter().map(|c| c.1).collect());
     anyhow::ensure!(!xs.is_empty() && !ys.is_empty(), "empty stability map");
-    // Cell edges halfway between grid values (geometric halfway on log axes).
-    let edges = |v: &[f64]| -> Vec<f64> {
-        let mid = |a: f64, b: f64| if map.log { (a * b).sqrt() } else { (a + b) / 2.0 };
-        let mut e = Vec::with_capacity(v.len() + 1);
-        let first = if v.len() > 1 {
-            if map.log {
-                v[0] * v[0] / mid(v[0], v[1])
-            } else {
-                2.0 * v[0] - mid(v[0], v[1])
-            }
-        } else if map.log {
-            v[0] / 2.0
-        } else {
-            v[0] - 0.5
-        };
-        e.push(first);
-        for w in v.windows(2) {
-            e.push(mid(w[0], w[1]));
-        }
-        let n = v.len();
-        let last = if n > 1 {
-            if map.log {
-                v[n - 1] * v[n - 1] / mid(v[n - 2], v[n - 1])
-            } else {
-                2.0 * v[n - 1] - mid(v[n - 2], v[n - 1])
-            }
-        } else if map.log {
-            v[0] * 2.0
-        } else {
-            v[0] + 0.5
-        };
-        e.push(last);
-        e
-    };
-    let (ex, ey) = (edges(&xs), edges(&ys));
+    let (ex, ey) = (cell_edges(&xs, map.log), cell_edges(&ys, map.log));
     let (x0, x1, y0, y1) = (ex[0], *ex.last().unwrap_or(&1.0), ey[0], *ey.last().unwrap_or(&1.0));
     let mut builder = ChartBuilder::on(&area);
     // Category rows name themselves: room for the longest name (about 7 px a character at this size).
@@ -587,7 +589,7 @@ where
             area.draw(&Rectangle::new([(x, y), (x + cell_w - 2, y + cell_h - 2)], colour.filled())).map_err(err)?;
             if let Some((value, _)) = cell {
                 let text = if value.is_finite() {
-                    format!("{:.3}", crate::experiments::common::significant(value, 3))
+                    format!("{:.3}", crate::rounding::significant(value, 3))
                 } else {
                     "n/a".into()
                 };

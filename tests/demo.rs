@@ -12,9 +12,9 @@ use std::time::Duration;
 
 use kinloop::demo::{self, records, DemoOptions, DemoReport, DemoSummary};
 use kinloop::experiments::common::{trajectory_at, ve_op_trajectory, Trajectory};
-use kinloop::harness::{self, ClientPlan, SessionPlan};
 use kinloop_client::device::DevicePreset;
 use kinloop_client::user::UserSpec;
+use kinloop_harness::{ClientPlan, SessionPlan};
 use kinloop_linkage::math::space::SceneKind;
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use serde_json::Value;
@@ -222,7 +222,7 @@ fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
             c
         })
         .collect();
-    let (_, recording) = harness::run(&plan, &mut |_| {}).unwrap();
+    let (_, recording) = kinloop_harness::run(&plan, &mut |_| {}).unwrap();
     let reference = ve_op_trajectory(&plan, &recording, "link2").unwrap();
     let path = demo_op_path(report, first.user_id);
     let travelled = {

@@ -3,7 +3,7 @@
 //! trip), a firm hand and then a poke on the testbed for 10 s each, each with its own server as a newcomer
 //! would start them. The session stays sound: snapshots keep coming, the VE never restores its state, the
 //! loops stay closed to 1e-6 m, no value goes non-finite, and the device is clamped on at most 5 % of the
-//! client's ticks (issue 22's goal). The last needs QUIC's congestion window open from the start
+//! client's ticks (the real-process goal). The last needs QUIC's congestion window open from the start
 //! (`quic::endpoint::INITIAL_WINDOW_BYTES`): with quinn's default, BBR's start-up let snapshots through with
 //! 170-270 ms gaps for the first seconds at this round trip, and the output faded and the model restarted over
 //! each gap (0-6 % of ticks clamped with the firm hand, 1-13 % with the poke).

@@ -2,13 +2,13 @@
 
 use std::time::Duration;
 
-use kinloop::harness::{run, ClientPlan, SessionPlan};
 use kinloop_client::core::ConstraintMode;
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_harness::{run, ClientPlan, SessionPlan};
 use kinloop_protocol::emulator::{GilbertElliott, LinkConfig};
 use kinloop_server::core::VeConfig;
 
-fn paper(mode: ConstraintMode) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
+fn paper(mode: ConstraintMode) -> (kinloop_harness::SessionSummary, kinloop_harness::Recording) {
     let mut plan = SessionPlan::paper().unwrap();
     plan.clients[0].constraint_mode = mode;
     run(&plan, &mut |_| {}).unwrap()
@@ -310,8 +310,8 @@ fn testbed_tour(
     hand: HandKind,
     delay_ms: u64,
     seed: u64,
-    edit: Option<kinloop::harness::CoreEdit>,
-) -> (kinloop::harness::SessionSummary, kinloop::harness::Recording) {
+    edit: Option<kinloop_harness::CoreEdit>,
+) -> (kinloop_harness::SessionSummary, kinloop_harness::Recording) {
     use kinloop_client::device::DevicePreset;
     let mut client = ClientPlan::new("user", "link2", DevicePreset::Paper);
     client.user = UserSpec::Hand(HandSpec::touring(hand));
@@ -327,7 +327,7 @@ fn testbed_tour(
     run(&plan, &mut |_| {}).unwrap()
 }
 
-/// The band the local model's update made (issue 22, item 2) is gone by construction. While the free
+/// The band the local model's update made is gone by construction. While the free
 /// directions were compared with the model's own state that the VE answered (a Smith predictor), a pull at a
 /// fixed 200 ms answered a 600 ms round trip late at 300 ms one way (`T / τ` = 3 > π/2) and the testbed under
 /// a soft hand gained energy. The model is now pulled toward the VE's state predicted to now, so the pull
@@ -336,7 +336,7 @@ fn testbed_tour(
 #[test]
 fn a_fixed_200_ms_pull_toward_the_ve_predicted_to_now_stays_stable_at_long_delays() {
     use kinloop::experiments::verdict::judge;
-    use kinloop::harness::CoreEdit;
+    use kinloop_harness::CoreEdit;
     for passive_update in [true, false] {
         for delay_ms in [300, 1000] {
             let fixed = CoreEdit::new(move |c| {
@@ -384,8 +384,8 @@ fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
 
 /// A core edit that trusts the local model's walls out to `reach` length scales
 /// (`CoreConfig::linearization_reach`).
-fn reach_edit(reach: f64) -> kinloop::harness::CoreEdit {
-    kinloop::harness::CoreEdit::new(move |c| c.linearization_reach = reach)
+fn reach_edit(reach: f64) -> kinloop_harness::CoreEdit {
+    kinloop_harness::CoreEdit::new(move |c| c.linearization_reach = reach)
 }
 
 /// A firm hand touring the testbed at 500 ms one way: the local model runs a round trip of motion ahead of
@@ -411,8 +411,8 @@ fn a_firm_hand_at_500_ms_is_not_pushed_into_saturation_by_a_stale_tangent_plane(
 
 /// A core edit that holds the local model to the tangent line at the snapshot's pose instead of the OP's path
 /// (`CoreConfig::follow_path` off), as every linkage's model did before the welcome carried the path.
-fn tangent_only() -> kinloop::harness::CoreEdit {
-    kinloop::harness::CoreEdit::new(|c| c.follow_path = false)
+fn tangent_only() -> kinloop_harness::CoreEdit {
+    kinloop_harness::CoreEdit::new(|c| c.follow_path = false)
 }
 
 /// The four-bar's coupler toured whole (40 s) by a firm hand, the latency grid's session. Under delay the local
@@ -424,7 +424,7 @@ fn tangent_only() -> kinloop::harness::CoreEdit {
 /// with no second saturated past a tenth, and at 500 ms the reach no longer matters.
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_tangent() {
-    use kinloop::experiments::latency::{measure_with, Network, Point, TARGETS};
+    use kinloop::experiments::delay_point::{measure_with, Network, Point, TARGETS};
     let target = TARGETS.iter().position(|t| t.0 == "fourbar-crank-rocker").unwrap();
     let at = |delay_ms: f64| Point { target, hand: HandKind::Firm, delay_ms, network: Network::CLEAN, passivity: true };
     let session = |delay_ms: f64, edit| measure_with(&at(delay_ms), 40.0, edit).unwrap().verdict;
@@ -436,7 +436,7 @@ fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_t
     assert!(wider.stable && wider.worst_saturation <= 0.1, "on the path at 500 ms, 0.3 L: {wider:?}");
     let wider_tangent = session(
         500.0,
-        Some(kinloop::harness::CoreEdit::new(|c| {
+        Some(kinloop_harness::CoreEdit::new(|c| {
             c.follow_path = false;
             c.linearization_reach = 0.3;
         })),
@@ -448,18 +448,18 @@ fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_t
 }
 
 /// The latency grid's testbed session with the soft hand on a clean network, defaults, at `delay_ms` one way.
-fn testbed_soft(delay_ms: f64) -> kinloop::experiments::latency::Point {
-    use kinloop::experiments::latency::{Network, Point};
+fn testbed_soft(delay_ms: f64) -> kinloop::experiments::delay_point::Point {
+    use kinloop::experiments::delay_point::{Network, Point};
     Point { target: 0, hand: HandKind::Soft, delay_ms, network: Network::CLEAN, passivity: true }
 }
 
 /// Where the VE leads by default (from 75 ms one way) the OP is nearer the device than a VE that follows
-/// what it hears can be: the testbed's soft tour at 100 ms one way is within issue 22's 3 mm (RMS) led and
+/// what it hears can be: the testbed's soft tour at 100 ms one way is within the goal's 3 mm (RMS) led and
 /// not without the lead, where it is no nearer than the device's own motion since the pose the VE heard of.
 /// Below the window (50 ms) the default follows: the same as no lead.
 #[test]
 fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
-    use kinloop::experiments::latency::{measure_leading, measure_with, Lead, GOAL_RMS_100MS_M};
+    use kinloop::experiments::delay_point::{measure_leading, measure_with, Lead, GOAL_RMS_100MS_M};
     let at = testbed_soft;
     let led = measure_with(&at(100.0), 10.0, None).unwrap();
     let following = measure_leading(&at(100.0), 10.0, None, Lead::NONE).unwrap();
@@ -477,7 +477,7 @@ fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
 /// written), while the OP that follows is no nearer than nine tenths of the device's own unheard motion.
 #[test]
 fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
-    use kinloop::experiments::latency::{measure_leading, measure_with, Lead};
+    use kinloop::experiments::delay_point::{measure_leading, measure_with, Lead};
     let at = testbed_soft;
     for delay_ms in [500.0, 1000.0] {
         let led = measure_with(&at(delay_ms), 10.0, None).unwrap();
@@ -493,7 +493,7 @@ fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
     }
 }
 
-/// Issue 22's tracking goals on the motion the issue measured them with (the soft hand on a 5 mm circle, a
+/// The tracking goals on the motion they were set on (the soft hand on a 5 mm circle, a
 /// turn every 2 s): the testbed's OP within 3 mm (RMS) of the device at 100 ms one way and within 25 mm at
 /// 1 s, both stable. At 1 s the OP still lags as a VE that hears the hand a second late must (no nearer than
 /// half the device's own motion in that second), and the touring hand's distance there is held up by the
@@ -501,7 +501,7 @@ fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
 /// no nearer than nine tenths of that.
 #[test]
 fn the_testbed_meets_the_tracking_goals_on_the_issues_circle_and_the_tour_is_held_by_its_unheard_floor() {
-    use kinloop::experiments::latency::{
+    use kinloop::experiments::delay_point::{
         goal_circle, measure_intending, measure_with, Lead, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
     };
     use kinloop_client::user::Intent;
@@ -535,7 +535,7 @@ fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
         let link = LinkConfig {
             delay: Duration::from_millis(100),
             jitter: Duration::from_millis(30),
-            // The sweep's seed for this point (`latency::Point::link`).
+            // The sweep's seed for this point (`delay_point::Point::link`).
             seed: 0x1a7e_0000 + 100 * 1_000_000 + 30 * 1000 + 2 * 10 + 3,
             ..LinkConfig::default()
         };

@@ -48,9 +48,9 @@ fn light_outputs_render_on_weak_devices_at_50_ms_over_a_whole_tour() {
 fn the_five_bar_effector_renders_under_a_firm_hand_with_the_damping_in_the_channels() {
     use kinloop::experiments::common::session;
     use kinloop::experiments::verdict::judge;
-    use kinloop::harness::{ClientPlan, CoreEdit, SessionPlan};
     use kinloop_client::core::config::{ControllerGains, GainChoice};
     use kinloop_client::user::{HandSpec, UserSpec};
+    use kinloop_harness::{ClientPlan, CoreEdit, SessionPlan};
     let p =
         Point { network: Network::Perfect, ..pair("five-bar-robot", "effector", DevicePreset::Paper, HandKind::Firm) };
     let designed = evaluate(&p, SECONDS).unwrap();

@@ -1,7 +1,7 @@
 //! `kinloop bench`: a fixed suite of the hot paths, each measured as the median over batches in one run.
 //! Three outputs of the same suite: plain lines (the default); with `--json`, one object per line
 //! (`{"name": ..., "ns_per_call": ..., ...}`); with `--markdown`, one Markdown table after a line naming the
-//! machine and the command (what docs/benchmarks.md is made of). Cases with a goal in the issues carry
+//! machine and the command (what docs/benchmarks.md is made of). Cases with a goal carry
 //! `goal_ns` and `meets_goal` (JSON) or a goal cell (Markdown).
 
 use std::fmt::Write as _;
@@ -40,7 +40,7 @@ pub struct Row {
     pub p10_ns: Option<f64>,
     /// See `p10_ns`.
     pub p90_ns: Option<f64>,
-    /// The goal from the issues, ns per call.
+    /// The goal, ns per call.
     pub goal_ns: Option<f64>,
     /// What else the case reports (snapshot bytes, a p99).
     pub note: Option<String>,
@@ -102,18 +102,18 @@ fn timing_fields(t: &Timing) -> Value {
     json!({ "p10_ns": t.p10_ns, "p90_ns": t.p90_ns, "calls": t.calls })
 }
 
-/// Users of the `server/ve_tick_users_N` cases (issue 4).
+/// Users of the `server/ve_tick_users_N` cases.
 const VE_TICK_USERS: [usize; 4] = [1, 4, 16, 64];
 
-/// Issue 4's goal for one VE tick: 1 µs with one user, 0.4 µs more per extra user.
+/// The goal for one VE tick: 1 µs with one user, 0.4 µs more per extra user.
 fn ve_tick_goal_ns(users: usize) -> f64 {
     1000.0 + 400.0 * users.saturating_sub(1) as f64
 }
 
-/// Issue 5's goal for one haptic tick on the testbed.
+/// The goal for one haptic tick on the testbed.
 const CLIENT_TICK_GOAL_NS: f64 = 500.0;
 
-/// The goals of the dynamics core (issue 2) and the wire (issue 3), ns per call.
+/// The goals of the dynamics core and the wire, ns per call.
 fn goal_ns(name: &str) -> Option<f64> {
     match name {
         "ve_step/testbed" => Some(400.0),

@@ -53,7 +53,7 @@ pub struct ExperimentArgs {
     /// Results go to DIR/NAME/.
     #[arg(long, default_value = "results", value_name = "DIR")]
     pub out: PathBuf,
-    /// The small grids (each experiment under a minute on two cores).
+    /// The small grids (fewer, shorter sessions).
     #[arg(long)]
     pub quick: bool,
     /// Worker threads that run a sweep's independent sessions side by side (1-64); the results are the same
@@ -67,8 +67,7 @@ pub struct ExperimentArgs {
     pub seconds: Option<f64>,
 }
 
-/// Longest session `--seconds` accepts (the latency grid's 864 points at this length take about an hour of
-/// simulation on two cores).
+/// Longest session `--seconds` accepts (the latency grid's 864 points at this length are hours of simulation).
 const MAX_SESSION_SECONDS: f64 = 600.0;
 
 /// Refuses a `--seconds` that is not a length or that the experiment(s) would ignore.

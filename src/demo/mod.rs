@@ -38,7 +38,7 @@ use serde::Serialize;
 
 use crate::charts::{self, Chart, Legend};
 use crate::experiments::paper::{count_chart, device_op_distance, distance_series, trajectory_chart, wrench_chart};
-use crate::harness::ClientSample;
+use kinloop_harness::ClientSample;
 
 /// Most users the demo starts (each is a 1 kHz thread on this machine).
 pub const MAX_USERS: usize = 64;

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use kinloop_client::axes::{pose_names, wrench_names};
 use kinloop_linkage::math::space::SceneKind;
 
-use crate::harness::{ClientSample, VeSample};
+use kinloop_harness::{ClientSample, VeSample};
 
 /// Why a recording could not be read.
 #[derive(Debug, thiserror::Error)]

@@ -17,14 +17,15 @@ use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::DVector;
 
 use crate::charts::{self, Chart, HeatMap, StabilityMap};
-use crate::harness::{self, Recording, SessionPlan, SessionSummary};
+use crate::rounding::{round, significant};
+use kinloop_harness::{Recording, SessionPlan, SessionSummary};
 
 /// How an experiment runs.
 #[derive(Clone, Debug)]
 pub struct Options {
     /// Results go to `out/NAME/`.
     pub out: PathBuf,
-    /// The small grid (under a minute on two cores).
+    /// The small grid (fewer, shorter sessions).
     pub quick: bool,
     /// Draw progress bars on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
@@ -223,7 +224,7 @@ where
 
 /// Runs a harness session without progress reports.
 pub fn session(plan: &SessionPlan) -> Result<(SessionSummary, Recording)> {
-    harness::run(plan, &mut |_| {})
+    kinloop_harness::run(plan, &mut |_| {})
 }
 
 /// Compute cost of a session: `(VE µs, haptic cores µs)` per simulated second, the best of `reps` runs
@@ -303,33 +304,6 @@ pub fn log_grid(lo: f64, hi: f64, per_decade: usize) -> Vec<f64> {
     let (a, b) = (lo.log10(), hi.log10());
     let n = ((b - a) * per_decade as f64).round() as usize;
     (0..=n).map(|i| significant(10f64.powf(a + (b - a) * i as f64 / n.max(1) as f64), 3)).collect()
-}
-
-/// `x` rounded to `digits` significant digits.
-pub fn significant(x: f64, digits: i32) -> f64 {
-    if x == 0.0 || !x.is_finite() {
-        return x;
-    }
-    let scale = 10f64.powi(digits - 1 - x.abs().log10().floor() as i32);
-    (x * scale).round() / scale
-}
-
-/// A number for a sentence: whole numbers without decimals, others to 3 significant digits; "n/a" when
-/// not finite.
-pub fn num(x: f64) -> String {
-    if !x.is_finite() {
-        "n/a".into()
-    } else if x == x.round() && x.abs() < 1e12 {
-        format!("{x:.0}")
-    } else {
-        format!("{}", significant(x, 3))
-    }
-}
-
-/// `x` rounded to `decimals` decimals (for summaries).
-pub fn round(x: f64, decimals: i32) -> f64 {
-    let scale = 10f64.powi(decimals);
-    (x * scale).round() / scale
 }
 
 /// Indices of the points not dominated in (cost, error), both minimized, sorted by cost. A point is dominated

@@ -14,7 +14,7 @@
 //! error of a session is the median over axes and frequencies of `|Z_f − Z_r| / |Z_r|`. The first
 //! [`SETTLE_S`] are left out (the join, the output's ramp-in).
 
-use crate::harness::Recording;
+use kinloop_harness::Recording;
 
 /// Frequencies of the estimate (Hz); each a whole, even number of cycles per segment, so a Hann window (whose
 /// spectrum is zero two bins away) keeps them apart.
@@ -106,7 +106,8 @@ pub fn estimate(rec: &Recording, client: usize, user_id: u32) -> Option<Impedanc
         let felt_velocity: Vec<f64> =
             samples.iter().map(|s| s.device_twist.get(axis).copied().unwrap_or(0.0)).collect();
         // The user's OP position and wrench at each VE tick (zero before it joined).
-        let op = |v: &crate::harness::VeSample| v.users.iter().find(|u| u.0 == user_id).map(|u| (u.1[axis], u.2[axis]));
+        let op =
+            |v: &kinloop_harness::VeSample| v.users.iter().find(|u| u.0 == user_id).map(|u| (u.1[axis], u.2[axis]));
         let rows: Vec<(f64, f64)> = ve.iter().map(|v| op(v).unwrap_or((f64::NAN, 0.0))).collect();
         let rendered_force: Vec<f64> = rows.iter().map(|r| r.1).collect();
         // Central differences of the OP's position (one-sided at the ends).

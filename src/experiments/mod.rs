@@ -17,8 +17,10 @@
 //! wall-clock and are the only numbers that vary between runs.
 
 pub mod common;
+pub mod delay_point;
 pub mod impedance;
 pub mod latency;
+pub mod latency_live;
 pub mod lead;
 pub mod model_update;
 pub mod paper;
@@ -127,6 +129,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Pauses => pauses::run(options),
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
-        Name::LatencyLive => latency::run_live(options),
+        Name::LatencyLive => latency_live::run(options),
     }
 }

@@ -1,4 +1,4 @@
-//! The `latency` experiment's model-update rows (issue 22, item 2): does the local model's pull toward the
+//! The `latency` experiment's model-update rows: does the local model's pull toward the
 //! delayed VE make energy?
 //!
 //! The pull compares the VE's state, predicted to now, with the model's (step 2 of the client core's tick)
@@ -21,9 +21,9 @@ use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
-use super::latency::{measure_with, point_json, seconds_per_point, Measured, Network, Point, TARGETS};
+use super::delay_point::{measure_with, point_json, seconds_per_point, Measured, Network, Point, TARGETS};
 use crate::charts::HeatMap;
-use crate::harness::CoreEdit;
+use kinloop_harness::CoreEdit;
 
 /// One-way delays of the rows (ms).
 pub const DELAYS_MS: [f64; 6] = [100.0, 200.0, 300.0, 500.0, 750.0, 1000.0];

@@ -29,8 +29,9 @@ use kinloop_protocol::{LocalModelForm, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 use serde_json::{json, Value};
 
-use super::common::{log_log_slope, round, sweep, Options, Output, Report};
+use super::common::{log_log_slope, sweep, Options, Output, Report};
 use crate::charts::{Chart, Legend, Series};
+use crate::rounding::round;
 
 /// Datagram payload quinn reported right after the handshake (see dependencies.md): a snapshot larger than
 /// this needs the stream path.
@@ -195,81 +196,11 @@ pub fn run(options: &Options) -> Result<Report> {
         .collect();
     let points: Vec<Measured> = results.into_iter().flatten().collect();
 
+    charts(&mut out, &points, &links, &loops)?;
+
     let us = |ns: f64| ns / 1e3;
-    let step_plain = |m: &Measured| us(m.ve_step_ns);
-    let ve_lines: Vec<Line<'_>> =
-        loops.iter().map(|&l| (format!("{l} loops"), l, &step_plain as &dyn Fn(&Measured) -> f64)).collect();
-    out.chart(
-        "ve_step_vs_links",
-        &by_links("VE step cost against links (semi-implicit Euler + projection)", "VE step (us)", &points, &ve_lines),
-    )?;
     let (l_lo, l_hi) = (loops[0], loops[loops.len() - 1]);
-    let tick_op = |m: &Measured| us(m.tick_op_ns);
-    let tick_config = |m: &Measured| us(m.tick_config_ns);
-    out.chart(
-        "ve_tick_with_snapshot_vs_links",
-        &by_links(
-            "VE tick with one user's snapshot against links",
-            "VE tick (us)",
-            &points,
-            &[
-                (format!("step only, {l_hi} loops"), l_hi, &step_plain),
-                (format!("step + op-form snapshot, {l_lo} loops"), l_lo, &tick_op),
-                (format!("step + op-form snapshot, {l_hi} loops"), l_hi, &tick_op),
-                (format!("step + config-form snapshot, {l_lo} loops"), l_lo, &tick_config),
-                (format!("step + config-form snapshot, {l_hi} loops"), l_hi, &tick_config),
-            ],
-        ),
-    )?;
-    let op_step = |m: &Measured| m.op_step_ns;
-    let config_step = |m: &Measured| m.config_step_ns;
-    let config_update = |m: &Measured| m.config_update_ns;
-    out.chart(
-        "local_model_vs_links",
-        &by_links(
-            "Local-model cost against links: op form vs configuration form (eq 11)",
-            "ns per call",
-            &points,
-            &[
-                (format!("op-form step, {l_hi} loops"), l_hi, &op_step),
-                (format!("config-form step, {l_lo} loops"), l_lo, &config_step),
-                (format!("config-form step, {l_hi} loops"), l_hi, &config_step),
-                (format!("config-form update (per snapshot), {l_lo} loops"), l_lo, &config_update),
-                (format!("config-form update (per snapshot), {l_hi} loops"), l_hi, &config_update),
-            ],
-        ),
-    )?;
-    let bytes_op = |m: &Measured| m.snapshot_op_bytes as f64;
-    let bytes_config = |m: &Measured| m.snapshot_config_bytes as f64;
-    let mut bytes = by_links(
-        "Snapshot datagram size against links",
-        "bytes per snapshot",
-        &points,
-        &[
-            (format!("op form, {l_hi} loops"), l_hi, &bytes_op),
-            (format!("config form, {l_lo} loops"), l_lo, &bytes_config),
-            (format!("config form, {l_hi} loops"), l_hi, &bytes_config),
-        ],
-    );
-    bytes = bytes.with(Series::reference(
-        "datagram budget after the QUIC handshake (1162 B)",
-        vec![(links[0] as f64, DATAGRAM_BUDGET_BYTES), (links[links.len() - 1] as f64, DATAGRAM_BUDGET_BYTES)],
-    ));
-    out.chart("snapshot_bytes_vs_links", &bytes)?;
     let largest = links[links.len() - 1];
-    let mut vs_loops = Chart::new(format!("Cost against loops at {largest} links"), "closed loops L", "us per call")
-        .legend(Legend::UpperLeft);
-    vs_loops.log_y = true;
-    let at_largest: Vec<&Measured> = points.iter().filter(|m| m.links == largest).collect();
-    for (label, f) in [
-        ("VE step", &step_plain as &dyn Fn(&Measured) -> f64),
-        ("VE tick + op-form snapshot", &tick_op),
-        ("VE tick + config-form snapshot", &tick_config),
-        ("config-form update", &|m: &Measured| us(m.config_update_ns)),
-    ] {
-        vs_loops = vs_loops.with(Series::line(label, at_largest.iter().map(|m| (m.loops as f64, f(m))).collect()));
-    }
-    out.chart("cost_vs_loops", &vs_loops)?;
 
     let find = |n: usize, l: usize| points.iter().find(|m| m.links == n && m.loops == l);
     let ve_exp = exponents(&points, &loops, |m| m.ve_step_ns);
@@ -320,7 +251,87 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Scaling: VE step, local-model step and snapshot size against links and loops",
-        "about 30 s on one core (45 chains, 7 timings of 0.1 s each); --quick about 2 s",
+        "45 chains, 7 timings of 0.1 s each; --quick fewer",
         results,
     )
+}
+
+/// The run's charts: VE step and tick, local-model step and update, and snapshot size against links; cost
+/// against loops at the largest chain.
+fn charts(out: &mut Output, points: &[Measured], links: &[usize], loops: &[usize]) -> Result<()> {
+    let us = |ns: f64| ns / 1e3;
+    let step_plain = |m: &Measured| us(m.ve_step_ns);
+    let ve_lines: Vec<Line<'_>> =
+        loops.iter().map(|&l| (format!("{l} loops"), l, &step_plain as &dyn Fn(&Measured) -> f64)).collect();
+    out.chart(
+        "ve_step_vs_links",
+        &by_links("VE step cost against links (semi-implicit Euler + projection)", "VE step (us)", points, &ve_lines),
+    )?;
+    let (l_lo, l_hi) = (loops[0], loops[loops.len() - 1]);
+    let tick_op = |m: &Measured| us(m.tick_op_ns);
+    let tick_config = |m: &Measured| us(m.tick_config_ns);
+    out.chart(
+        "ve_tick_with_snapshot_vs_links",
+        &by_links(
+            "VE tick with one user's snapshot against links",
+            "VE tick (us)",
+            points,
+            &[
+                (format!("step only, {l_hi} loops"), l_hi, &step_plain),
+                (format!("step + op-form snapshot, {l_lo} loops"), l_lo, &tick_op),
+                (format!("step + op-form snapshot, {l_hi} loops"), l_hi, &tick_op),
+                (format!("step + config-form snapshot, {l_lo} loops"), l_lo, &tick_config),
+                (format!("step + config-form snapshot, {l_hi} loops"), l_hi, &tick_config),
+            ],
+        ),
+    )?;
+    let op_step = |m: &Measured| m.op_step_ns;
+    let config_step = |m: &Measured| m.config_step_ns;
+    let config_update = |m: &Measured| m.config_update_ns;
+    out.chart(
+        "local_model_vs_links",
+        &by_links(
+            "Local-model cost against links: op form vs configuration form (eq 11)",
+            "ns per call",
+            points,
+            &[
+                (format!("op-form step, {l_hi} loops"), l_hi, &op_step),
+                (format!("config-form step, {l_lo} loops"), l_lo, &config_step),
+                (format!("config-form step, {l_hi} loops"), l_hi, &config_step),
+                (format!("config-form update (per snapshot), {l_lo} loops"), l_lo, &config_update),
+                (format!("config-form update (per snapshot), {l_hi} loops"), l_hi, &config_update),
+            ],
+        ),
+    )?;
+    let bytes_op = |m: &Measured| m.snapshot_op_bytes as f64;
+    let bytes_config = |m: &Measured| m.snapshot_config_bytes as f64;
+    let mut bytes = by_links(
+        "Snapshot datagram size against links",
+        "bytes per snapshot",
+        points,
+        &[
+            (format!("op form, {l_hi} loops"), l_hi, &bytes_op),
+            (format!("config form, {l_lo} loops"), l_lo, &bytes_config),
+            (format!("config form, {l_hi} loops"), l_hi, &bytes_config),
+        ],
+    );
+    bytes = bytes.with(Series::reference(
+        "datagram budget after the QUIC handshake (1162 B)",
+        vec![(links[0] as f64, DATAGRAM_BUDGET_BYTES), (links[links.len() - 1] as f64, DATAGRAM_BUDGET_BYTES)],
+    ));
+    out.chart("snapshot_bytes_vs_links", &bytes)?;
+    let largest = links[links.len() - 1];
+    let mut vs_loops = Chart::new(format!("Cost against loops at {largest} links"), "closed loops L", "us per call")
+        .legend(Legend::UpperLeft);
+    vs_loops.log_y = true;
+    let at_largest: Vec<&Measured> = points.iter().filter(|m| m.links == largest).collect();
+    for (label, f) in [
+        ("VE step", &step_plain as &dyn Fn(&Measured) -> f64),
+        ("VE tick + op-form snapshot", &tick_op),
+        ("VE tick + config-form snapshot", &tick_config),
+        ("config-form update", &|m: &Measured| us(m.config_update_ns)),
+    ] {
+        vs_loops = vs_loops.with(Series::line(label, at_largest.iter().map(|m| (m.loops as f64, f(m))).collect()));
+    }
+    out.chart("cost_vs_loops", &vs_loops)
 }

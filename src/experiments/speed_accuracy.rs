@@ -33,12 +33,13 @@ use nalgebra::Vector3;
 use serde_json::{json, Value};
 
 use super::common::{
-    op_position, paper_plan, pareto_front, rms_error, round, session, significant, sweep, timed_cost, ve_op_trajectory,
-    Options, Output, Report, Trajectory,
+    op_position, paper_plan, pareto_front, rms_error, session, sweep, timed_cost, ve_op_trajectory, Options, Output,
+    Report, Trajectory,
 };
 use super::verdict;
 use crate::charts::{Chart, Legend, Series};
-use crate::harness::SessionPlan;
+use crate::rounding::{round, significant};
+use kinloop_harness::SessionPlan;
 
 const PAPER_KG: f64 = 1000.0;
 const PAPER_BG: f64 = 100.0;
@@ -273,46 +274,7 @@ pub fn run(options: &Options) -> Result<Report> {
     };
     let front = front_of(&|m| m.op_error_rms_m);
     let numerical_front = front_of(&|m| m.numerical_error_rms_m);
-    out.chart(
-        "pareto_op_error_vs_cost",
-        &scatter(
-            "Accuracy vs cost: VE OP error against the ideal linkage (alone, RK4 at 10 kHz)",
-            "RMS OP trajectory error (m)",
-            &measured,
-            |m| m.op_error_rms_m,
-            &front,
-        ),
-    )?;
-    out.chart(
-        "pareto_numerical_error_vs_cost",
-        &scatter(
-            "Numerical accuracy vs cost: VE OP error against the same session with RK4 at 10 kHz",
-            "RMS OP trajectory error (m)",
-            &measured,
-            |m| m.numerical_error_rms_m,
-            &numerical_front,
-        ),
-    )?;
-    out.chart(
-        "closure_error_vs_cost",
-        &scatter(
-            "Loop-closure error vs cost (paper manipulation)",
-            "largest closure error (m)",
-            &measured,
-            |m| m.max_closure_error_m,
-            &[],
-        ),
-    )?;
-    out.chart(
-        "device_error_vs_cost",
-        &scatter(
-            "What the hand feels: device trajectory error against the reference vs cost",
-            "RMS device trajectory error (m)",
-            &measured,
-            |m| m.device_error_rms_m,
-            &[],
-        ),
-    )?;
+    scatter_charts(&mut out, &measured, &front, &numerical_front)?;
 
     // The linkage alone: integrators × rates.
     let alone_rates: Vec<f64> =
@@ -345,6 +307,83 @@ pub fn run(options: &Options) -> Result<Report> {
     let alone_pairs: Vec<(f64, f64)> = alone.iter().map(|&(e, c)| (c, e)).collect();
     let alone_front = pareto_front(&alone_pairs);
 
+    let answer = answer(&measured, &front, &numerical_front);
+    let results = json!({
+        "answer": answer,
+        "pareto_front": front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
+        "pareto_front_points": front.iter().map(|&i| point_json(&measured[i])).collect::<Vec<_>>(),
+        "numerical_pareto_front": numerical_front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
+        "setup": {
+            "session": format!("paper testbed and user, sim:paper device, 1 kHz haptic loop, perfect network, {seconds} s"),
+            "coupling": format!("K_g = 1000 N/m, B_g = 100 N s/m linear; angular K_g L^2, B_g L^2 with L = {:.4} m; implicit for semi-implicit Euler, explicit otherwise", length),
+            "reference": "the linkage alone under the paper's wrench (faded in over 0.2 s like the VE's coupling), RK4 at 10 kHz with projection",
+            "accuracy": "RMS distance between the VE's OP and the reference OP at every VE tick (op_error_rms_m); the same against the numerical reference, the whole session with RK4 at 10 kHz, op form, 1 kHz snapshots (numerical_error_rms_m); device error against the linkage reference at every haptic tick",
+            "cost": format!("VE + haptic-core wall-clock compute per simulated second, one thread, best of {reps} runs of {timing_s} s"),
+            "criterion": verdict::CRITERION,
+        },
+        "points": measured.iter().map(point_json).collect::<Vec<_>>(),
+        "linkage_alone": {
+            "pareto_front": alone_front.iter().map(|&i| format!("{} {} Hz", alone_points[i].0.name(), alone_points[i].1)).collect::<Vec<_>>(),
+            "points": alone_points.iter().zip(&alone).map(|(p, &(err, cost))| json!({
+                "integrator": p.0.name(), "rate_hz": p.1,
+                "op_error_rms_m": significant(err, 4), "cost_us_per_simulated_s": round(cost, 1),
+            })).collect::<Vec<_>>(),
+        },
+    });
+    out.finish(
+        "Speed against accuracy: integrators x VE rates x snapshot rates x local-model forms, with the Pareto front",
+        "84 sessions of 3 s, their timing pass, 18 linkage-alone runs; --quick fewer",
+        results,
+    )
+}
+
+/// The accuracy-vs-cost scatter charts of the sessions, the Pareto fronts marked.
+fn scatter_charts(out: &mut Output, measured: &[Measured], front: &[usize], numerical_front: &[usize]) -> Result<()> {
+    out.chart(
+        "pareto_op_error_vs_cost",
+        &scatter(
+            "Accuracy vs cost: VE OP error against the ideal linkage (alone, RK4 at 10 kHz)",
+            "RMS OP trajectory error (m)",
+            measured,
+            |m| m.op_error_rms_m,
+            front,
+        ),
+    )?;
+    out.chart(
+        "pareto_numerical_error_vs_cost",
+        &scatter(
+            "Numerical accuracy vs cost: VE OP error against the same session with RK4 at 10 kHz",
+            "RMS OP trajectory error (m)",
+            measured,
+            |m| m.numerical_error_rms_m,
+            numerical_front,
+        ),
+    )?;
+    out.chart(
+        "closure_error_vs_cost",
+        &scatter(
+            "Loop-closure error vs cost (paper manipulation)",
+            "largest closure error (m)",
+            measured,
+            |m| m.max_closure_error_m,
+            &[],
+        ),
+    )?;
+    out.chart(
+        "device_error_vs_cost",
+        &scatter(
+            "What the hand feels: device trajectory error against the reference vs cost",
+            "RMS device trajectory error (m)",
+            measured,
+            |m| m.device_error_rms_m,
+            &[],
+        ),
+    )?;
+    Ok(())
+}
+
+/// The run's answer: the error range of the stable sessions and what the two Pareto fronts hold.
+fn answer(measured: &[Measured], front: &[usize], numerical_front: &[usize]) -> String {
     let describe = |front: &[usize]| {
         let distinct = |f: &dyn Fn(&Config) -> String| {
             let mut v: Vec<String> = front.iter().map(|&i| f(&measured[i].config)).collect();
@@ -371,41 +410,14 @@ pub fn run(options: &Options) -> Result<Report> {
         (v.iter().copied().fold(f64::INFINITY, f64::min), v.iter().copied().fold(0.0, f64::max))
     };
     let (lo, hi) = error_range(&|m| m.op_error_rms_m);
-    let answer = format!(
+    format!(
         "Against the ideal linkage every stable configuration is {:.2}-{:.2} mm RMS off (the haptic coupling, not the \
          integrator, sets the error); the Pareto front of that error vs cost is {}. Against the numerical reference \
          (same session, RK4 at 10 kHz) the front is {}. Unstable configurations: {}.",
         lo * 1e3,
         hi * 1e3,
-        describe(&front),
-        describe(&numerical_front),
+        describe(front),
+        describe(numerical_front),
         measured.iter().filter(|m| !m.stable).count()
-    );
-    let results = json!({
-        "answer": answer,
-        "pareto_front": front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
-        "pareto_front_points": front.iter().map(|&i| point_json(&measured[i])).collect::<Vec<_>>(),
-        "numerical_pareto_front": numerical_front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
-        "setup": {
-            "session": format!("paper testbed and user, sim:paper device, 1 kHz haptic loop, perfect network, {seconds} s"),
-            "coupling": format!("K_g = 1000 N/m, B_g = 100 N s/m linear; angular K_g L^2, B_g L^2 with L = {:.4} m; implicit for semi-implicit Euler, explicit otherwise", length),
-            "reference": "the linkage alone under the paper's wrench (faded in over 0.2 s like the VE's coupling), RK4 at 10 kHz with projection",
-            "accuracy": "RMS distance between the VE's OP and the reference OP at every VE tick (op_error_rms_m); the same against the numerical reference, the whole session with RK4 at 10 kHz, op form, 1 kHz snapshots (numerical_error_rms_m); device error against the linkage reference at every haptic tick",
-            "cost": format!("VE + haptic-core wall-clock compute per simulated second, one thread, best of {reps} runs of {timing_s} s"),
-            "criterion": verdict::CRITERION,
-        },
-        "points": measured.iter().map(point_json).collect::<Vec<_>>(),
-        "linkage_alone": {
-            "pareto_front": alone_front.iter().map(|&i| format!("{} {} Hz", alone_points[i].0.name(), alone_points[i].1)).collect::<Vec<_>>(),
-            "points": alone_points.iter().zip(&alone).map(|(p, &(err, cost))| json!({
-                "integrator": p.0.name(), "rate_hz": p.1,
-                "op_error_rms_m": significant(err, 4), "cost_us_per_simulated_s": round(cost, 1),
-            })).collect::<Vec<_>>(),
-        },
-    });
-    out.finish(
-        "Speed against accuracy: integrators x VE rates x snapshot rates x local-model forms, with the Pareto front",
-        "about 5 s on this 2-core machine (84 sessions of 3 s, their timing pass, 18 linkage-alone runs); --quick about 1 s",
-        results,
     )
 }

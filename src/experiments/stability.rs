@@ -23,10 +23,11 @@ use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::Model}
 use kinloop_server::core::AxisGains;
 use serde_json::{json, Value};
 
-use super::common::{log_grid, num, paper_plan, round, session, significant, sweep, Options, Output, Report};
+use super::common::{log_grid, paper_plan, session, sweep, Options, Output, Report};
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, Legend, Series, StabilityMap};
-use crate::harness::{CoreEdit, SessionPlan};
+use crate::rounding::{num, round, significant};
+use kinloop_harness::{CoreEdit, SessionPlan};
 
 /// Simulated seconds per point.
 const DURATION_S: f64 = 3.0;
@@ -473,7 +474,7 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "Where methods fail: stability maps of joint-constraint gains, haptic rate, Baumgarte stabilization and coupling gains",
-        "about 30 s on this 2-core machine (about 1600 sessions of 3 s); --quick about 4 s",
+        "about 1600 sessions of 3 s; --quick fewer",
         results,
     )
 }

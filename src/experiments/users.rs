@@ -28,14 +28,15 @@ use kinloop_linkage::model::scene::{GeometrySpec, OpSpec};
 use serde_json::{json, Value};
 
 use super::common::{
-    paper_plan, path_length, rms_error, round, session, significant, sweep, timed_cost, ve_op_trajectory, Options,
-    Output, Report, Trajectory,
+    paper_plan, path_length, rms_error, session, sweep, timed_cost, ve_op_trajectory, Options, Output, Report,
+    Trajectory,
 };
 use super::verdict::{self, Verdict};
 use crate::charts::{Chart, Legend, Series, StabilityMap};
-use crate::harness::{ClientPlan, SessionPlan};
+use crate::rounding::{round, significant};
 use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::user::{HandKind, HandSpec};
+use kinloop_harness::{ClientPlan, SessionPlan};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::VeConfig;
 
@@ -382,61 +383,7 @@ pub fn run(options: &Options) -> Result<Report> {
         }
     }
 
-    let mut cost = line_per_layout(
-        Chart::new(
-            "VE compute per tick against the number of users (testbed, 1 kHz)",
-            "users",
-            "VE compute per tick (us)",
-        ),
-        &measured,
-        "VE step + every user's snapshot",
-        |m| m.ve_us_per_tick,
-    )
-    .legend(Legend::UpperLeft);
-    cost = line_per_layout(cost, &measured, "haptic core per user", |m| m.client_us_per_tick_per_user);
-    out.chart("ve_cost_per_tick_vs_users", &cost)?;
-    let tracking = line_per_layout(
-        Chart::new(
-            "Tracking against the number of users: device-OP distance (RMS over each user, then mean)",
-            "users",
-            "device-OP distance, RMS (mm)",
-        ),
-        &measured,
-        "mean over users",
-        |m| m.op_rms_mean_m * 1e3,
-    );
-    let tracking =
-        line_per_layout(tracking, &measured, "worst user", |m| m.op_rms_max_m * 1e3).legend(Legend::UpperRight);
-    out.chart("tracking_vs_users", &tracking)?;
-    let motion = line_per_layout(
-        Chart::new("Linkage motion when N users share the paper's push (link 2's COM, 3 s)", "users", "length (mm)"),
-        &measured,
-        "path travelled",
-        |m| m.link2_path_m * 1e3,
-    );
-    let motion = motion
-        .with(Series::line(
-            "RMS deviation from the one-user run, same OP",
-            measured.iter().filter_map(|m| m.deviation_from_one_user_m.map(|d| (m.users as f64, d * 1e3))).collect(),
-        ))
-        .legend(Legend::UpperRight);
-    out.chart("linkage_motion_vs_users", &motion)?;
-    out.map(
-        "stability_users",
-        &StabilityMap {
-            title: "Stability with 1 to 16 users, on one OP and spread over the links".into(),
-            x_label: "users".into(),
-            y_label: "layout".into(),
-            log: false,
-            cells: measured
-                .iter()
-                .map(|m| (m.users as f64, if m.layout == Layout::SameOp { 0.0 } else { 1.0 }, m.verdict.stable))
-                .collect(),
-            overlays: Vec::new(),
-            legend: Legend::UpperLeft,
-            y_categories: vec!["same OP".into(), "spread".into()],
-        },
-    )?;
+    charts(&mut out, &measured)?;
 
     let find = |layout: Layout, n: usize| measured.iter().find(|m| m.layout == layout && m.users == n);
     let max_n = counts.iter().copied().max().unwrap_or(1);
@@ -500,7 +447,67 @@ pub fn run(options: &Options) -> Result<Report> {
     });
     out.finish(
         "1 to 16 users on one linkage: stability, tracking and VE cost, and sharing it under delay",
-        "about 15 s on this 2-core machine (12 sessions of 3 s and their timing pass, 50 sharing sessions of 10 s); --quick about 5 s",
+        "12 sessions of 3 s and their timing pass, 50 sharing sessions of 10 s; --quick fewer",
         results,
+    )
+}
+
+/// The run's charts against the number of users: VE and haptic-core cost, tracking, the linkage's motion,
+/// stability.
+fn charts(out: &mut Output, measured: &[Measured]) -> Result<()> {
+    let mut cost = line_per_layout(
+        Chart::new(
+            "VE compute per tick against the number of users (testbed, 1 kHz)",
+            "users",
+            "VE compute per tick (us)",
+        ),
+        measured,
+        "VE step + every user's snapshot",
+        |m| m.ve_us_per_tick,
+    )
+    .legend(Legend::UpperLeft);
+    cost = line_per_layout(cost, measured, "haptic core per user", |m| m.client_us_per_tick_per_user);
+    out.chart("ve_cost_per_tick_vs_users", &cost)?;
+    let tracking = line_per_layout(
+        Chart::new(
+            "Tracking against the number of users: device-OP distance (RMS over each user, then mean)",
+            "users",
+            "device-OP distance, RMS (mm)",
+        ),
+        measured,
+        "mean over users",
+        |m| m.op_rms_mean_m * 1e3,
+    );
+    let tracking =
+        line_per_layout(tracking, measured, "worst user", |m| m.op_rms_max_m * 1e3).legend(Legend::UpperRight);
+    out.chart("tracking_vs_users", &tracking)?;
+    let motion = line_per_layout(
+        Chart::new("Linkage motion when N users share the paper's push (link 2's COM, 3 s)", "users", "length (mm)"),
+        measured,
+        "path travelled",
+        |m| m.link2_path_m * 1e3,
+    );
+    let motion = motion
+        .with(Series::line(
+            "RMS deviation from the one-user run, same OP",
+            measured.iter().filter_map(|m| m.deviation_from_one_user_m.map(|d| (m.users as f64, d * 1e3))).collect(),
+        ))
+        .legend(Legend::UpperRight);
+    out.chart("linkage_motion_vs_users", &motion)?;
+    out.map(
+        "stability_users",
+        &StabilityMap {
+            title: "Stability with 1 to 16 users, on one OP and spread over the links".into(),
+            x_label: "users".into(),
+            y_label: "layout".into(),
+            log: false,
+            cells: measured
+                .iter()
+                .map(|m| (m.users as f64, if m.layout == Layout::SameOp { 0.0 } else { 1.0 }, m.verdict.stable))
+                .collect(),
+            overlays: Vec::new(),
+            legend: Legend::UpperLeft,
+            y_categories: vec!["same OP".into(), "spread".into()],
+        },
     )
 }

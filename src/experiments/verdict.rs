@@ -26,8 +26,9 @@
 //! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`), so both comparisons are made there: about t minus the
 //! uplink's delay, later by jitter and loss, and at zero delay the plain comparisons. A VE that leads its target
 //! (`VeConfig::coupling_lead_max_s`) names the later client time it aims at, and is compared there: it is
-//! charged for what it guessed and the hand had not done by then. Compared with the device *now*, a VE that follows faithfully 1 s behind a 4 cm/s tour is
-//! 4-6 cm away, and was judged diverged, though the gap never grows; and a jab that the hand took back before
+//! charged for what it guessed and the hand had not done by then. Compared with the device *now*, a VE that
+//! follows faithfully 1 s behind a touring hand is centimetres away, and would be judged diverged, though the
+//! gap never grows; and a jab that the hand took back before
 //! its delayed copy reached the VE made the VE's energy look unpaid for. The device's distance to the VE's OP
 //! now is still measured and reported (`device_op_max_m`, the RMS figures): it is the transparency, not the
 //! stability.
@@ -35,7 +36,7 @@
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use crate::harness::{Recording, SessionSummary};
+use kinloop_harness::{Recording, SessionSummary};
 
 /// Device–OP distance beyond which a session has diverged (m).
 pub const DIVERGENCE_DISTANCE_M: f64 = 0.05;
@@ -146,7 +147,7 @@ fn exceeds(x: f64, limit: f64) -> bool {
 
 /// The largest fraction of clamped ticks in any window of [`SATURATION_WINDOW_S`] starting at or after
 /// [`RAMP_IN_S`] (one window over what remains when the run is shorter).
-fn worst_window(samples: &[crate::harness::ClientSample]) -> f64 {
+fn worst_window(samples: &[kinloop_harness::ClientSample]) -> f64 {
     let judged: Vec<(f64, bool)> =
         samples.iter().filter(|s| s.t >= RAMP_IN_S && s.gain > 0.0).map(|s| (s.t, s.clamp_scale < 1.0)).collect();
     if judged.is_empty() {
@@ -251,7 +252,7 @@ fn energy_balance(rec: &Recording) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::harness::{ClientSample, VeSample};
+    use kinloop_harness::{ClientSample, VeSample};
 
     fn sample(t: f64, clamped: bool, hand: f64, v: f64) -> ClientSample {
         ClientSample {

@@ -1,4 +1,4 @@
-//! What every session must end with, whatever was done to it (issue 7): no panic, no state restore in the
+//! What every session must end with, whatever was done to it: no panic, no state restore in the
 //! VE, the loop closed, no NaN reaching a device and no force above a device's limit.
 
 use kinloop_client::device::DevicePreset;
