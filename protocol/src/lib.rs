@@ -7,6 +7,7 @@
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
 //! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
 //! - [`report`]: how the programs print an error (one line, each cause once);
+//! - [`wrench_limits`]: a device's peak force and torque, and the clipping both ends do against them;
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod messages;
 pub mod quic;
 pub mod realtime;
 pub mod report;
+pub mod wrench_limits;
 mod shape;
 
 pub use messages::*;
