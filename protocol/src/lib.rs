@@ -17,8 +17,8 @@ pub mod messages;
 pub mod quic;
 pub mod realtime;
 pub mod report;
-pub mod wrench_limits;
 mod shape;
+pub mod wrench_limits;
 
 pub use messages::*;
 pub use shape::{triangle_len, SceneKind, SessionShape};

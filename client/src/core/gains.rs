@@ -32,9 +32,9 @@ pub struct ResolvedGains<S: Space> {
 /// max_stiffness` and `b_j + B_pc ≤ max_damping` on the linear axes; angular gains scale by the same
 /// factors) and converts them to VE units through the mapping.
 pub(super) fn resolve_gains<S: Space>(
-config: &CoreConfig,
-welcome: &Welcome,
-scales: &Scales,
+    config: &CoreConfig,
+    welcome: &Welcome,
+    scales: &Scales,
 ) -> Result<ResolvedGains<S>, CoreError> {
     let period_s = config.period.as_secs_f64();
     let chosen = match &config.gains {

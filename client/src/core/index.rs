@@ -40,7 +40,12 @@ impl<S: Space> DeviceIndex<S> {
     /// The workspace's centre onto the reach's centre: the whole reach then fits the workspace (the scale was
     /// chosen for it), wherever the OP is when the session starts. The orientation is indexed as in
     /// `between`.
-    pub(super) fn centred(device: &OpPose<S>, op: &OpPose<S>, frames: &(S::Point, S::Point), position_scale: f64) -> Self {
+    pub(super) fn centred(
+        device: &OpPose<S>,
+        op: &OpPose<S>,
+        frames: &(S::Point, S::Point),
+        position_scale: f64,
+    ) -> Self {
         DeviceIndex { device_origin: frames.0, ve_origin: frames.1, ..Self::between(device, op, position_scale) }
     }
 

@@ -325,7 +325,6 @@ impl<S: Space> HapticCore<S> {
         Ok(true)
     }
 
-
     /// One haptic tick at `now` with the device reading `device`: the stages in the order of the module
     /// documentation.
     pub fn tick(&mut self, now: Duration, device: &crate::device::DeviceState<S>) -> TickOutput<'_, S> {

@@ -28,9 +28,9 @@ pub(super) struct PathFollower<S: Space> {
 impl<S: Space> PathFollower<S> {
     /// The welcome's path, if it has one and the configuration follows it; `pinned`: the grasp renders no
     /// torque (`HapticCore::pinned`), so the model's angle is the linkage's business, not the hand's, and
-    /// the path is followed by position (`OpPath::positions_only`; by the whole pose, a model whose angle
-    /// had drifted found its point on the four-bar's coupler curve off where it was, and on a Falcon at
-    /// 500 ms one way the forces at rest taken there made 9 J).
+    /// the path is followed by position (`OpPath::positions_only`: by the whole pose, a model whose angle
+    /// had drifted would be found off where it is on the path, and the forces at rest taken there would
+    /// make energy).
     pub(super) fn of(welcome: &Welcome, config: &CoreConfig, pinned: bool) -> Result<Option<Self>, CoreError> {
         let op = &welcome.op;
         if !config.follow_path || op.path.is_empty() {

@@ -162,17 +162,15 @@ impl UplinkRejection {
 /// units (divided by the mapping's force and torque scales: uplinks carry VE wrenches), or the defaults where
 /// it announced none or no positive, finite one.
 pub fn wrench_limits_for_device(device: Option<&DeviceCaps>, mapping: &Mapping, limits: &GuardLimits) -> WrenchLimits {
-        let pick = |announced: Option<f64>, scale: f64, default: f64| match announced {
-            // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
-            Some(peak) if peak > 0.0 && peak.is_finite() && scale > 0.0 => {
-                peak * (1.0 + limits.device_cap_slack) / scale
-            }
-            _ => default,
-        };
-        WrenchLimits {
-            max_force_n: pick(device.map(|d| d.max_force_n), mapping.force_scale, limits.default_max_force_n),
-            max_torque_nm: pick(device.map(|d| d.max_torque_nm), mapping.torque_scale(), limits.default_max_torque_nm),
-        }
+    let pick = |announced: Option<f64>, scale: f64, default: f64| match announced {
+        // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
+        Some(peak) if peak > 0.0 && peak.is_finite() && scale > 0.0 => peak * (1.0 + limits.device_cap_slack) / scale,
+        _ => default,
+    };
+    WrenchLimits {
+        max_force_n: pick(device.map(|d| d.max_force_n), mapping.force_scale, limits.default_max_force_n),
+        max_torque_nm: pick(device.map(|d| d.max_torque_nm), mapping.torque_scale(), limits.default_max_torque_nm),
+    }
 }
 
 /// An uplink that passed the checks, in the VE's types.
