@@ -72,7 +72,7 @@ fn session(seed: u64, mode: ConstraintMode, form: ModelForm, preset: DevicePrese
     let shape = ve.welcome().scene.shape();
     let mut config = paper_config(mode, form);
     config.device = preset.spec(SceneKind::Planar).expect("planar spec");
-    let limits = WrenchLimits::of(&config.device);
+    let limits = config.device.wrench_limits();
     let mut core = HapticCore::<Planar>::new(config, &ve.welcome()).expect("core");
     let user = ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values");
     let mut rig = SimulatedRig::new(preset.build::<Planar>().expect("device"), Box::new(user));

@@ -15,7 +15,7 @@ use nalgebra::{Vector2, Vector3};
 use support::{paper_config, ClosedLoop, TestbedVe};
 
 fn paper_limits() -> WrenchLimits {
-    WrenchLimits::of(&DevicePreset::Paper.spec(SceneKind::Planar).expect("planar"))
+    DevicePreset::Paper.spec(SceneKind::Planar).expect("planar").wrench_limits()
 }
 
 /// Force and torque are each clamped to their peak, each keeping its direction: an excess in one never
@@ -33,7 +33,7 @@ fn clamping_keeps_each_parts_direction_and_zeroes_unactuated_axes() {
     assert_eq!((torque_heavy[0], torque_heavy[1]), (0.1, 0.0), "a force within its peak is left alone");
     assert_eq!(parts.force, 1.0);
     assert!((parts.torque - limits.max_torque_nm / 2.0).abs() < 1e-9);
-    let falcon = WrenchLimits::of(&DevicePreset::Falcon.spec(SceneKind::Planar).expect("planar"));
+    let falcon = DevicePreset::Falcon.spec(SceneKind::Planar).expect("planar").wrench_limits();
     let (w, scale) = limit_wrench::<Planar>(&Vector3::new(1.0, 2.0, 5.0), &falcon);
     assert_eq!((w, scale), (Vector3::new(1.0, 2.0, 0.0), 1.0), "no torque actuator: torque dropped, force kept");
     let (w, scale) = limit_wrench::<Planar>(&Vector3::new(f64::NAN, 0.0, 0.0), &limits);

@@ -7,6 +7,7 @@
 //!   bandwidth) for virtual-time harnesses and, through a socket wrapper, real QUIC traffic;
 //! - [`passivity`]: the two-port's energy books both ends keep and send, the check of a peer's books, and the
 //!   output scale both ends' passivity controllers use;
+//! - [`wrench_limits`]: a device's peak force and torque, and the clipping both ends do against them;
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod messages;
 pub mod passivity;
 pub mod quic;
 mod shape;
+pub mod wrench_limits;
 
 pub use messages::*;
 pub use shape::{triangle_len, SceneKind, SessionShape};

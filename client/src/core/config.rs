@@ -173,15 +173,12 @@ impl Default for UplinkDeadband {
     }
 }
 
-/// Default [`CoreConfig::linearization_reach`], in length scales: 0.25 L is 12-15 mm on the testbed, the
-/// four-bar and the Watt six-bar. With no softening a firm hand touring the testbed at 500 ms one way saturated
-/// the device's wrist 77 % of its worst second. On a linkage of one degree of freedom the frame is carried along
-/// the OP's path to the model (`follow_path`), so the distance this softens by stays near zero there and the
-/// reach matters on linkages of more degrees of freedom (the testbed, the five-bar, the serial arm). Held to
-/// the tangent line instead, the four-bar's coupler needed it: over whole tours (the latency grid at 40 s per
-/// session) 0.3 L left it saturated with firm and poking hands from 300 ms one way (40 of 864 sessions), 0.25 L
-/// only at 1 s (18 of 864), and 0.15 L let its OP diverge from its device at 1 s. The price is softer walls
-/// far from the linearization point; at 100 ms the tracking is unchanged.
+/// Default [`CoreConfig::linearization_reach`], in length scales: a fraction of the linkage's size, chosen by
+/// the `latency` experiment (docs/benchmarks.md) between walls that stay stiff too far from where they were
+/// linearized (the device saturates under long delays) and walls so soft the OP parts from the device. On a
+/// linkage of one degree of freedom the frame is carried along the OP's path to the model (`follow_path`),
+/// so the distance this softens by stays near zero there and the reach matters on linkages of more degrees
+/// of freedom. The price is softer walls far from the linearization point.
 pub const LINEARIZATION_REACH: f64 = 0.25;
 
 /// Everything a [`HapticCore`](super::HapticCore) needs besides the `Welcome`.

@@ -266,8 +266,8 @@ pub const TRUST_DEAD_ZONE: f64 = 0.05;
 ///
 /// The frozen terms describe the linkage's constraint as a plane through that pose; the linkage's motion
 /// curves away from the plane by about `κ d² / 2` at distance `d` (curvature `κ`). Under delay the model
-/// runs a round trip of motion ahead of the VE it was linearized at (at 500 ms one way, 4 cm/s: 4 cm), the
-/// hand follows the real curve, and a joint stiffness `k` held against the plane pushed back with
+/// runs a round trip of motion ahead of the VE it was linearized at (centimetres at slow hand speeds and long
+/// delays), the hand follows the real curve, and a joint stiffness `k` held against the plane pushed back with
 /// `k κ d² / 2`: several newtons, enough to saturate a device. Scaled by this trust the push is
 /// `k κ d² / (2 (1 + d²/reach²))`, never more than `k κ reach² / 2` however far the model runs; near the
 /// linearization point (no delay) the walls keep their full stiffness. The constraint degrades to a softer

@@ -1,6 +1,6 @@
-//! The local model's update toward the VE made passive toward the hand (issue 22, item 2): an energy tank.
+//! The local model's update toward the VE made passive toward the hand : an energy tank.
 //!
-//! The pull toward the VE (step 2 of `HapticCore::tick`) moves the local model's state by corrections the hand did not cause. A
+//! The pull toward the VE (`HapticCore::pull_model`) moves the local model's state by corrections the hand did not cause. A
 //! correction that stretches the device-model coupling, or speeds the model up, stores energy there that
 //! then flows into the hand: energy the network made. A VE that runs away from the model (a restore, a
 //! server out of step, another user's pull the model cannot explain) would drag a still hand after it with
@@ -21,8 +21,7 @@
 //!
 //! What the tank does not cover: the VE follows the model's pose, so a correction also moves the VE, and
 //! the energy that gives the linkage is made on the server's side of the network. The pull's own loop
-//! through the delay (the band where a fixed 200 ms pull made the testbed gain energy from 300 ms one way)
-//! is held by the pull's time constant of at least two round trips (`CoreConfig::free_blend_round_trips`),
+//! through the delay (a correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`) is held by the pull's time constant of at least two round trips (`CoreConfig::free_blend_round_trips`),
 //! not by the tank; the `latency` experiment's model-update rows show both.
 
 use kinloop_linkage::math::space::{Space, VecOps};

@@ -1,7 +1,6 @@
 //! The safety envelope around every command the core sends:
 //! - **limits**: the force and the torque are each scaled down, direction kept, until within the device's
-//!   peaks; components the device cannot actuate (a peak of 0) are zeroed first, so an unactuated axis never
-//!   shrinks the rest;
+//!   peaks ([`kinloop_protocol::wrench_limits`], shared with the server);
 //! - **gate**: an output level in [0, 1] that ramps up over `ramp_in` while the core is healthy and down over
 //!   `fade_out` while the newest snapshot is stale; the gain applied is the smoothstep of that level, so the
 //!   force starts and stops without a step in value or slope, and a stale link reaches exactly zero within
@@ -12,74 +11,14 @@
 
 use kinloop_linkage::math::space::OpPose;
 pub use kinloop_linkage::math::space::PartScales;
-use kinloop_linkage::math::space::{clip_wrench_parts, Space, VecOps};
+use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
+pub use kinloop_protocol::wrench_limits::{
+    force_ratio, limit_wrench, limit_wrench_parts, mask_unactuated, WrenchLimits,
+};
 
 use super::config::SafetyConfig;
 use crate::device::DeviceSpec;
-
-/// Peak force and torque of a device.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WrenchLimits {
-    /// N; 0 when the device renders no force.
-    pub max_force_n: f64,
-    /// N m; 0 when the device renders no torque.
-    pub max_torque_nm: f64,
-}
-
-impl WrenchLimits {
-    /// The limits of `spec` (non-finite or negative peaks read as 0: refuse to render rather than guess).
-    pub fn of(spec: &DeviceSpec) -> Self {
-        let sane = |x: f64| if x.is_finite() && x > 0.0 { x } else { 0.0 };
-        WrenchLimits { max_force_n: sane(spec.max_force_n), max_torque_nm: sane(spec.max_torque_nm) }
-    }
-
-    /// No torque is rendered: the grasp is a pin, its angle the linkage's business, not the hand's.
-    pub fn pins_the_grasp(&self) -> bool {
-        self.max_torque_nm == 0.0
-    }
-}
-
-/// Zeroes the linear or angular part of `w` when the device cannot actuate it.
-pub fn mask_unactuated<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> S::OpVec {
-    let linear = <S::Point as VecOps>::LEN;
-    let mut out = *w;
-    for i in 0..S::DIM {
-        let peak = if i < linear { limits.max_force_n } else { limits.max_torque_nm };
-        if peak == 0.0 {
-            out[i] = 0.0;
-        }
-    }
-    out
-}
-
-/// `max(|f| / f_max, |τ| / τ_max)` over the actuated parts: 1 means exactly at a limit.
-pub fn force_ratio<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> f64 {
-    let ratio = |norm: f64, peak: f64| if peak > 0.0 { norm / peak } else { 0.0 };
-    ratio(S::op_lin(w).norm(), limits.max_force_n).max(ratio(S::op_ang(w).norm(), limits.max_torque_nm))
-}
-
-/// The wrench within `limits` and the scales applied to its force and to its torque (1 where nothing was
-/// cut). Force and torque are limited apart, each keeping its direction: a device's peaks are rated apart,
-/// and scaling the whole wrench down when only the torque is over gives up the force that holds the joints
-/// (the testbed's firm wrist asking 0.65 N m of `sim:paper`'s 0.2 N m cut the joint-constraint force to a
-/// sixth, and the device broke through the closed loop by 4 cm). Unactuated parts are zeroed and do not
-/// count as a cut. A non-finite wrench gives zero and scales 0.
-pub fn limit_wrench_parts<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> (S::OpVec, PartScales) {
-    if !w.is_finite() {
-        return (S::OpVec::zero(), PartScales { force: 0.0, torque: 0.0 });
-    }
-    let actuated = mask_unactuated::<S>(w, limits);
-    // A hair under each limit, so rounding never leaves a part a few ulps above it.
-    let under = 1.0 - 1e-12;
-    clip_wrench_parts::<S>(&actuated, limits.max_force_n * under, limits.max_torque_nm * under)
-}
-
-/// [`limit_wrench_parts`]'s wrench and the smaller of its scales.
-pub fn limit_wrench<S: Space>(w: &S::OpVec, limits: &WrenchLimits) -> (S::OpVec, f64) {
-    let (limited, scales) = limit_wrench_parts::<S>(w, limits);
-    (limited, scales.min())
-}
 
 /// `3s² − 2s³`: 0 → 1 with zero slope at both ends.
 pub fn smoothstep(s: f64) -> f64 {
@@ -136,4 +75,16 @@ pub fn usable_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool {
     within(pose.position.as_slice(), MAX_POSITION)
         && S::rot_is_finite(&pose.rotation)
         && within(twist.as_slice(), MAX_SPEED)
+}
+
+/// The damper that holds a released handle: half the device's highest stable damping on each axis (linear and
+/// angular), against the handle's twist, in device units.
+pub fn brake<S: Space>(device: &DeviceSpec, twist: &S::OpVec) -> S::OpVec {
+    let lin = <S::Point as VecOps>::LEN;
+    let mut w = S::OpVec::zero();
+    for a in 0..S::DIM {
+        let b = if a < lin { device.max_damping } else { device.max_angular_damping };
+        w[a] = -0.5 * b * twist[a];
+    }
+    w
 }

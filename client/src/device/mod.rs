@@ -14,10 +14,11 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space};
+use kinloop_protocol::wrench_limits::WrenchLimits;
 use kinloop_protocol::DeviceCaps;
 
 pub use presets::DevicePreset;
-pub use rig::SimulatedRig;
+pub use rig::{SimulatedRig, SimulatedUser};
 pub use simulated::{SimulatedDevice, SimulatedDeviceParams};
 
 /// What a device can do, per operational axis (linear axes first, as everywhere in kinloop).
@@ -62,6 +63,12 @@ pub struct DeviceSpec {
 }
 
 impl DeviceSpec {
+    /// The peaks the device renders (non-finite or negative peaks read as 0: refuse to render rather than
+    /// guess).
+    pub fn wrench_limits(&self) -> WrenchLimits {
+        WrenchLimits::rated(self.max_force_n, self.max_torque_nm)
+    }
+
     /// The capabilities sent in the `Join`.
     pub fn caps(&self) -> DeviceCaps {
         DeviceCaps {

@@ -6,7 +6,6 @@ use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::{DeviceError, DeviceSpec, DeviceState, HapticDevice, SimulatedDevice};
-use crate::user::SimulatedUser;
 
 /// A [`SimulatedDevice`] and the [`SimulatedUser`] holding it. Each `read(now)` integrates the plant from
 /// the previous read to `now` under the held command and the hand wrench of the previous read, then samples
@@ -80,5 +79,23 @@ impl<S: Space> HapticDevice<S> for SimulatedRig<S> {
         }
         self.device.set_command(wrench);
         Ok(())
+    }
+}
+
+/// A simulated hand: what holds a [`SimulatedRig`]'s handle (the simulated users of `crate::user` implement
+/// it).
+pub trait SimulatedUser<S: Space>: Send {
+    /// The wrench the hand applies to the handle at `now`, given the device's state (the rig passes the
+    /// handle's true pose and twist: a hand feels the handle, not its encoders).
+    fn wrench(&mut self, now: Duration, device: &DeviceState<S>) -> S::OpVec;
+
+    /// Mass (and inertia) the hand adds to the handle per axis at `now`: a hand that holds it moves with it.
+    fn attached_mass(&self, _now: Duration) -> S::OpVec {
+        S::OpVec::zero()
+    }
+
+    /// Whether the hand holds the handle at `now` (what a presence sensor in the handle reports).
+    fn holds(&self, _now: Duration) -> bool {
+        true
     }
 }

@@ -13,8 +13,9 @@
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 
+use kinloop_protocol::wrench_limits::{limit_wrench, WrenchLimits};
+
 use super::DeviceSpec;
-use crate::core::safety::{limit_wrench, WrenchLimits};
 
 /// Plant parameters beyond the [`DeviceSpec`], per operational axis.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -173,7 +174,7 @@ impl<S: Space> SimulatedDevice<S> {
                 i >= linear && workspace_min[i] < -std::f64::consts::PI && workspace_max[i] > std::f64::consts::PI;
             inverse_mass[i] = 1.0 / mass[i];
         }
-        let limits = WrenchLimits::of(&spec);
+        let limits = spec.wrench_limits();
         let mut device = SimulatedDevice {
             spec,
             limits,

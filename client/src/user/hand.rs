@@ -224,8 +224,8 @@ impl<S: Space> Plan<S> {
             (0..waypoints.len()).map(|k| waypoints[(nearest + k) % waypoints.len()]).collect();
         // Angles continuous along the way: each displacement's rotation is a logarithm, within ±π of the
         // grasp, and an OP that turns a whole circle over its reach (the testbed's link 2) would otherwise
-        // have the wrist interpolate the long way round between two neighbours (0.65 N m of twist against
-        // sim:paper's 0.2 N m peak). Back retraces the same angles.
+        // have the wrist interpolate the long way round between two neighbours (a twist far beyond a
+        // device's torque). Back retraces the same angles.
         let mut previous = S::OpVec::zero();
         for w in &mut order {
             unwrap_rotation_near::<S>(w, &previous);

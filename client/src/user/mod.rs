@@ -17,33 +17,15 @@ pub mod path;
 pub mod replay;
 
 use std::path::PathBuf;
-use std::time::Duration;
 
 use kinloop_linkage::math::space::{Space, VecOps};
 
-use crate::device::DeviceState;
+pub use crate::device::SimulatedUser;
 
 pub use constant::ConstantWrench;
 pub use hand::{Hand, HandImpedance, HandKind, HandSpec, Intent, UserContext};
 pub use path::PathSpec;
 pub use replay::{ReplayError, ReplayedWrench};
-
-/// A simulated hand.
-pub trait SimulatedUser<S: Space>: Send {
-    /// The wrench the hand applies to the handle at `now`, given the device's state (the rig passes the
-    /// handle's true pose and twist: a hand feels the handle, not its encoders).
-    fn wrench(&mut self, now: Duration, device: &DeviceState<S>) -> S::OpVec;
-
-    /// Mass (and inertia) the hand adds to the handle per axis at `now`: a hand that holds it moves with it.
-    fn attached_mass(&self, _now: Duration) -> S::OpVec {
-        S::OpVec::zero()
-    }
-
-    /// Whether the hand holds the handle at `now` (what a presence sensor in the handle reports).
-    fn holds(&self, _now: Duration) -> bool {
-        true
-    }
-}
 
 /// A user as given on the command line, before the scene's space is known.
 #[derive(Clone, Debug, PartialEq)]

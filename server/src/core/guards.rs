@@ -12,6 +12,7 @@
 use kinloop_linkage::math::space::clip_wrench_parts;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
+pub use kinloop_protocol::wrench_limits::WrenchLimits;
 use kinloop_protocol::{DeviceCaps, Mapping, Uplink};
 
 use super::config::GuardLimits;
@@ -157,30 +158,18 @@ impl UplinkRejection {
     }
 }
 
-/// The largest hand force and torque a user's device may report.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WrenchLimits {
-    /// Force (N).
-    pub max_force_n: f64,
-    /// Torque (N·m).
-    pub max_torque_nm: f64,
-}
-
-impl WrenchLimits {
-    /// From the device's announced peaks (with slack) in VE units (divided by the mapping's force and torque
-    /// scales: uplinks carry VE wrenches), or the defaults where it announced none or no positive, finite one.
-    pub fn for_device(device: Option<&DeviceCaps>, mapping: &Mapping, limits: &GuardLimits) -> Self {
-        let pick = |announced: Option<f64>, scale: f64, default: f64| match announced {
-            // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
-            Some(peak) if peak > 0.0 && peak.is_finite() && scale > 0.0 => {
-                peak * (1.0 + limits.device_cap_slack) / scale
-            }
-            _ => default,
-        };
-        WrenchLimits {
-            max_force_n: pick(device.map(|d| d.max_force_n), mapping.force_scale, limits.default_max_force_n),
-            max_torque_nm: pick(device.map(|d| d.max_torque_nm), mapping.torque_scale(), limits.default_max_torque_nm),
-        }
+/// The largest hand force and torque a user's device may report: its announced peaks (with slack) in VE
+/// units (divided by the mapping's force and torque scales: uplinks carry VE wrenches), or the defaults where
+/// it announced none or no positive, finite one.
+pub fn wrench_limits_for_device(device: Option<&DeviceCaps>, mapping: &Mapping, limits: &GuardLimits) -> WrenchLimits {
+    let pick = |announced: Option<f64>, scale: f64, default: f64| match announced {
+        // An infinite peak (which the wire's checks refuse, but a direct caller may pass) is no rating.
+        Some(peak) if peak > 0.0 && peak.is_finite() && scale > 0.0 => peak * (1.0 + limits.device_cap_slack) / scale,
+        _ => default,
+    };
+    WrenchLimits {
+        max_force_n: pick(device.map(|d| d.max_force_n), mapping.force_scale, limits.default_max_force_n),
+        max_torque_nm: pick(device.map(|d| d.max_torque_nm), mapping.torque_scale(), limits.default_max_torque_nm),
     }
 }
 

@@ -439,7 +439,7 @@ impl<S: Space> VeCore<S> {
             role: request.role,
             op,
             form: request.form,
-            wrench_limits: WrenchLimits::for_device(request.device.as_ref(), &mapping, &self.config.guards),
+            wrench_limits: guards::wrench_limits_for_device(request.device.as_ref(), &mapping, &self.config.guards),
             mapping,
             presence: Presence::Present,
             last_seq: None,

@@ -1,0 +1,147 @@
+//! Stage 2 of a tick (paper Fig 3): the frame the controllers use and the local model's pull toward the VE.
+//!
+//! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
+//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`); and the
+//! model's OP is pulled toward the VE's OP predicted to now, fast along the constrained directions (onto
+//! the path when there is one), slowly in the free ones (`CoreConfig::free_blend_time_constant`), no faster
+//! than the device-model coupling's dampers allow when `CoreConfig::passive_update` is on.
+
+use std::time::Duration;
+
+use kinloop_linkage::algorithms::op_path::turn_between;
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{Space, VecOps};
+
+use super::controllers::{linearization_trust, project_twist, twist_turn};
+use super::passive_update::{energy_change, CouplingSprings};
+use super::stages::Intake;
+use super::{model, ConstraintMode, HapticCore};
+
+impl<S: Space> HapticCore<S> {
+    /// Filters the snapshot's terms over `dt_s`, places the frame, and pulls the model toward the VE (not on a
+    /// stale snapshot, nor while the hand is off, when the model stays parked); `sensed`: the device measures
+    /// the hand's wrench.
+    pub(super) fn pull_model(&mut self, now: Duration, dt_s: f64, intake: &Intake<S>, sensed: bool) {
+        let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
+        self.frame.filter(fraction(self.config.terms_time_constant));
+        let on_path = self.place_frame();
+        if !intake.stale && !intake.hand_off {
+            let (constrained, free) =
+                (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
+            let (p, l) = (&self.local.projector, self.length_scale);
+            // The model is pulled toward the VE's state predicted to now: along the constrained directions
+            // fast, where the frozen terms let it drift off the linkage's curve; along the free ones over
+            // round trips, as the VE follows the model there. Not toward the model's own state that the VE
+            // answered (a Smith predictor): that takes the delay out of the loop but puts the model's own
+            // corrections in it, which made the lighter outputs saturate and gain energy.
+            let predicted = self.predicted_op(now);
+            let (own, own_twist) = (self.model.pose(), self.model.twist());
+            let mut pose = predicted.difference(&own);
+            let mut ve_twist = self.active.op_twist;
+            if let Some((point, along, twist_turn)) = on_path {
+                // On a path the model belongs, along the constrained directions, on the path where it is
+                // (where the joints hold the OP), not on the tangent line through the VE's pose; and the
+                // VE's twist, along the path where the VE was, is turned to where the model is (both as far
+                // as `place_frame` carries the frame).
+                pose += project_twist::<S>(p, l, &(point.difference(&own) - pose)) * along;
+                ve_twist = twist_turn * ve_twist;
+            }
+            let twist = ve_twist - own_twist;
+            let (mut moved, mut sped) = model::split_correction::<S>(&pose, &twist, p, l, constrained, free);
+            if self.config.passive_update {
+                let fraction = self.tank.admit(self.update_cost(&intake.device_pose, sensed, &moved, &sped));
+                if fraction < 1.0 {
+                    self.stats.updates_limited += 1;
+                }
+                moved = moved * fraction;
+                sped = sped * fraction;
+            }
+            self.model.apply_correction(&moved, &sped);
+        }
+        self.model.set_inverse_inertia(&self.local.inverse_inertia);
+    }
+
+    /// How far the local model's constraint geometry is still trusted where the model is now, as this tick's
+    /// `place_frame` found it.
+    pub(super) fn linearization_trust(&self) -> f64 {
+        self.trust
+    }
+
+    /// What correcting the model by `moved` and `sped` would change in the energy the device-model coupling
+    /// and the model hold (`passive_update`), the device at `device_pose` (`sensed`: it measures the hand).
+    fn update_cost(&self, device_pose: &OpPose<S>, sensed: bool, moved: &S::OpVec, sped: &S::OpVec) -> f64 {
+        let error = self.controlled(device_pose.difference(&self.model.pose()));
+        let springs = self.coupling_springs(sensed);
+        energy_change::<S>(&springs, &error, &self.model.twist(), &self.controlled(*moved), sped)
+    }
+
+    /// The springs of the device-model coupling as the controllers render them now (`sensed`: the device
+    /// measures the hand's wrench).
+    fn coupling_springs(&self, sensed: bool) -> CouplingSprings<'_, S> {
+        // The acceleration-zeroing controller holds no spring, when it has a hand wrench to work with (see
+        // `HapticCore::controllers`); without one the joints are held stiff.
+        let hand_known = sensed || self.config.hand_observer_bandwidth > 0.0;
+        let joint_stiffness = match (self.config.constraint_mode, hand_known) {
+            (ConstraintMode::Impedance, true) => 0.0,
+            _ => self.gains.joint_stiffness * self.linearization_trust(),
+        };
+        CouplingSprings {
+            position_stiffness: &self.gains.position_stiffness,
+            joint_stiffness,
+            projector: &self.local.projector,
+            length_scale: self.length_scale,
+            inertia: &self.local.inertia,
+        }
+    }
+
+    /// Sets the frame the controllers use this tick and how far they trust its walls.
+    ///
+    /// The snapshot's frame was linearized at the VE's pose; under delay the model runs a round trip of motion
+    /// ahead of it, where the linkage's constraint has turned away from that tangent plane. The walls then
+    /// soften with the model's distance from the pose (`linearization_trust`), and on a linkage of one degree
+    /// of freedom whose path the welcome carries (`CoreConfig::follow_path`; the reduced form, whose Λ̂⁻¹ the
+    /// frame is) the frame is carried along the path toward the model's point on it, as far as the tangent is
+    /// no longer trusted (`w = 1 − trust`): turned by `w` of the angle between the tangents, the model pulled
+    /// that far onto the path, the forces at rest that far from where the model is, and the walls trusted as far
+    /// as either the tangent or the path is. Near the snapshot's pose (no delay) the frame is the snapshot's
+    /// own, which is exact where the path, sampled every few millimetres, is only interpolated; and a model
+    /// past the end of an open path (the Bennett linkage's walk stops where its closure does not converge,
+    /// and the linkage goes on) counts the path less as it goes on, as the tangent is counted less away from
+    /// its pose (followed whole, the path would pull such a model back to its end).
+    ///
+    /// Only for a user alone on the linkage: with others on it each local model runs ahead along its own OP's
+    /// path by its own hand, and models that disagree about the linkage's one coordinate pull the VE apart;
+    /// the snapshots' own tangents keep them together.
+    ///
+    /// Returns the model's point on the path, the fraction `w` and the turn as it acts on twists, or `None`
+    /// when the snapshot's frame is used as it is.
+    fn place_frame(&mut self) -> Option<(OpPose<S>, f64, S::OpMat)> {
+        self.local = self.frame;
+        let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
+        let linear = (pose.position - at.position).norm();
+        let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
+        self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
+        let alone = !self.active.shared;
+        let follower = self.path.as_mut().filter(|_| alone && !self.model.using_config() && self.trust < 1.0)?;
+        // A pinned grasp's path is its positions (`PathFollower::of`): its tangents are linear, as its frame's
+        // directions are.
+        let from = follower.snapshot_tangent?;
+        let on = follower.path.nearest(&follower.query(&pose), follower.model_segment);
+        follower.model_segment = Some(on.segment);
+        // A model past the end of an open path (where the survey's walk stopped) is not where the path says:
+        // the path counts as little there as a tangent that far from its pose.
+        let reach = self.config.linearization_reach * l;
+        let along = (1.0 - self.trust) * linearization_trust(on.past_end, reach);
+        let turn = turn_between::<S>(&from, &on.tangent, along);
+        let twist_turn = twist_turn::<S>(&turn, l);
+        self.local = self.frame.turned(&turn, l);
+        if follower.rest_where_model_is {
+            // b̂ holds the forces at rest where the snapshot was taken; the model feels them where it is.
+            // Carried along unchanged they are a spring felt a round trip late, which makes energy.
+            self.local.bias += (on.rest_acceleration - twist_turn * follower.snapshot_rest) * along;
+        }
+        // The walls are right as far as the tangent or the path is.
+        self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
+        Some((on.pose, along, twist_turn))
+    }
+}

@@ -1,0 +1,430 @@
+//! The stages of a tick other than the model's pull (`pull`): taking the newest snapshot and reading the
+//! device (intake), stepping the local model, the controllers, the safety envelope, the uplink and the
+//! report. `HapticCore::tick` conducts them in that order (see the module documentation of `core`).
+
+use std::time::Duration;
+
+use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::math::space::{clip_wrench_parts, Space, VecOps};
+use kinloop_protocol::codec::limits::MAX_WRENCH;
+use kinloop_protocol::passivity::MAX_AXES;
+use kinloop_protocol::uplink_flags;
+
+use super::controllers::{
+    contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
+    project_wrench,
+};
+use super::index::DeviceIndex;
+use super::passive_update::damper_dissipation;
+use super::safety::{brake, force_ratio, limit_wrench_parts, mask_unactuated, usable_state, within};
+use super::{ConstraintMode, ControllerWrenches, HapticCore, TickOutput, TickReport};
+use crate::device::DeviceState;
+
+/// What the intake read this tick: the device mapped into the VE, the active snapshot's age, and the flags
+/// known so far.
+pub(super) struct Intake<S: Space> {
+    /// Device pose in the VE.
+    pub device_pose: OpPose<S>,
+    /// Device twist in the VE.
+    pub device_twist: S::OpVec,
+    /// How long ago the active snapshot arrived.
+    pub age: Duration,
+    /// The active snapshot is older than `SafetyConfig::max_snapshot_age`.
+    pub stale: bool,
+    /// No hand holds the handle (the presence sensor says so).
+    pub hand_off: bool,
+    /// Uplink flags so far.
+    pub flags: u32,
+}
+
+/// The hand's wrench as the model step used it (VE units).
+pub(super) struct HandWrenches<S: Space> {
+    /// Measured by a force sensor, within range and the device's peaks.
+    pub sensed: Option<S::OpVec>,
+    /// The observer's estimate.
+    pub estimate: S::OpVec,
+    /// What the acceleration-zeroing controller cancels: the measured wrench, else the estimate when the
+    /// observer runs.
+    pub for_constraint: Option<S::OpVec>,
+    /// What drove the local model (and goes up in the uplink).
+    pub model: S::OpVec,
+}
+
+/// What the controllers ask for this tick (VE units).
+pub(super) struct Requests<S: Space> {
+    /// Model pose after the step.
+    pub model_pose: OpPose<S>,
+    /// `x_d ⊖ x_m` on the controlled axes.
+    pub error: S::OpVec,
+    /// Its rate.
+    pub error_rate: S::OpVec,
+    /// Position channels.
+    pub position_channel: S::OpVec,
+    /// Joint-constraint controller.
+    pub joint_constraint: S::OpVec,
+    /// Impedance controller.
+    pub impedance: S::OpVec,
+    /// Contact force channel.
+    pub contact: S::OpVec,
+    /// Their sum.
+    pub requested: S::OpVec,
+    /// What the device receives from the position channels once the joint-constraint controller has acted,
+    /// so what the local model gets back as their reaction.
+    pub position_felt: S::OpVec,
+    /// The same of the dampers, the joint-constraint controller's included.
+    pub damping_felt: S::OpVec,
+}
+
+/// What the safety envelope let through.
+pub(super) struct Commanded<S: Space> {
+    /// Device units.
+    pub command: S::OpVec,
+    /// Output gate gain.
+    pub gain: f64,
+    /// Smaller of the limits' scales (1 = not clamped).
+    pub clamp_scale: f64,
+    /// Flags the envelope raised.
+    pub flags: u32,
+}
+
+impl<S: Space> HapticCore<S> {
+    /// The tick's step in seconds (the period on the first tick, at most `MAX_STEP_S` after a stall).
+    pub(super) fn advance_clock(&mut self, now: Duration) -> f64 {
+        let dt_s = match self.last_now {
+            Some(last) => now.saturating_sub(last).as_secs_f64().min(super::MAX_STEP_S),
+            None => self.config.period.as_secs_f64(),
+        };
+        self.last_now = Some(now);
+        self.stats.ticks += 1;
+        dt_s
+    }
+
+    /// Stage 1: the device reading mapped into the VE, the active snapshot's age, and the flags they raise.
+    ///
+    /// No hand on the handle (a presence sensor says so): a free device must not be driven, so the output
+    /// fades as for stale data while a damper brakes the handle, and the local model parks where it is (no
+    /// one drives it), so the VE's coupling holds the linkage where the hand left it rather than letting it
+    /// fall. When the hand returns, the model restarts on the VE and the output ramps in again.
+    pub(super) fn intake(&mut self, now: Duration, device: &DeviceState<S>, hand_off: bool) -> Intake<S> {
+        self.stats.active_ticks += 1;
+        let mut flags = 0;
+        if self.config.constraint_mode == ConstraintMode::Impedance {
+            flags |= uplink_flags::IMPEDANCE_MODE;
+        }
+        let device_pose = self.index.apply(&device.pose);
+        let device_twist = self.scales.twist_to_ve::<S>(&device.twist);
+        let age = now.saturating_sub(self.active.received_at);
+        let stale = age > self.config.safety.max_snapshot_age;
+        if hand_off {
+            flags |= uplink_flags::HAND_OFF;
+            self.stats.hand_off_ticks += 1;
+        }
+        if stale {
+            flags |= uplink_flags::STALE_SNAPSHOT | uplink_flags::FADING;
+            self.stats.stale_ticks += 1;
+        }
+        Intake { device_pose, device_twist, age, stale, hand_off, flags }
+    }
+
+    /// The VE's OP predicted to `now`: the snapshot's pose moved along its twist for its age plus the one-way
+    /// delay (at most the staleness limit).
+    pub(super) fn predicted_op(&self, now: Duration) -> OpPose<S> {
+        let horizon =
+            (now.saturating_sub(self.active.received_at) + self.one_way_delay).min(self.config.safety.max_snapshot_age);
+        let mut pose = self.active.op_pose;
+        pose.integrate(&self.active.op_twist, horizon.as_secs_f64());
+        pose
+    }
+
+    /// Makes the pending snapshot the active one.
+    pub(super) fn apply_pending(&mut self, now: Duration, device: &OpPose<S>, hand_off: bool) {
+        std::mem::swap(&mut self.pending, &mut self.active);
+        self.pending_fresh = false;
+        let first = !self.has_snapshot;
+        // With the output fully faded (start, or a link that came back) nothing is felt, so the model may jump
+        // onto the VE instead of being pulled there; not while the hand is off, when the model stays parked
+        // where the VE holds it (jumping onto a VE that follows the model would walk both away).
+        let restart = first || (self.gate.gain() == 0.0 && !hand_off);
+        self.model.update(&self.active);
+        self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
+        if let Some(f) = self.path.as_mut() {
+            let on = f.path.nearest(&f.query(&self.active.op_pose), f.snapshot_segment);
+            f.snapshot_segment = Some(on.segment);
+            f.snapshot_tangent = Some(on.tangent);
+            f.snapshot_rest = on.rest_acceleration;
+        }
+        if restart {
+            // Until the VE has seen one of this client's uplinks it holds the OP where it was at the join
+            // (the grasp: pose held, twist zero), so the model starts there, at rest, where the device is
+            // indexed (extrapolating a linkage that was moving at the join would put the model ahead of the
+            // device by its speed times the delay, and both loops would fight over the gap). Later restarts
+            // (a link that came back) find a VE that moves by itself: the model starts where it is now.
+            if self.active.uplink_time_s > 0.0 {
+                self.model.set_state(self.predicted_op(now), self.active.op_twist);
+            } else {
+                self.model.set_state(self.active.op_pose, S::OpVec::zero());
+            }
+            self.model.set_inverse_inertia(&self.frame.inverse_inertia);
+            self.reaction = S::OpVec::zero();
+        }
+        if first && self.config.index_at_first_snapshot {
+            let (op, scale) = (&self.active.op_pose, self.scales.position);
+            self.index = match &self.boxes {
+                // Where the device is, if the reach fits from there (no start-up pull); else centred.
+                Some(boxes) if !boxes.fits_from(&device.position, &op.position, scale) => {
+                    DeviceIndex::centred(device, op, &boxes.centres(), scale)
+                }
+                _ => DeviceIndex::between(device, op, scale),
+            };
+        }
+        self.has_snapshot = true;
+    }
+
+    /// Stage 3: steps the local model (eq 11/13) under the user's wrench and books the power into it.
+    pub(super) fn step_model(&mut self, dt_s: f64, device: &DeviceState<S>, intake: &Intake<S>) -> HandWrenches<S> {
+        // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
+        // The sensor saturates at the device's peaks (a hand can push harder than the motors, but the
+        // linkage feels what the device can answer); a pin passes no torque (its limit is 0).
+        let sensed = device.hand_wrench.filter(|w| within(w.as_slice(), MAX_WRENCH)).map(|w| {
+            let (in_range, _) = clip_wrench_parts::<S>(&w, self.limits.max_force_n, self.limits.max_torque_nm);
+            self.scales.wrench_to_ve::<S>(&in_range)
+        });
+        let estimate = self.observer.update(dt_s, &intake.device_twist, &self.last_command);
+        let for_constraint = sensed.or((self.config.hand_observer_bandwidth > 0.0).then_some(estimate));
+        let model = if intake.hand_off {
+            self.model.set_state(self.model.pose(), S::OpVec::zero());
+            S::OpVec::zero()
+        } else {
+            let wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
+            self.model.step(dt_s, &wrench);
+            wrench
+        };
+        let mut power_out = [0.0; MAX_AXES];
+        let model_twist_after = self.model.twist();
+        for (a, p) in power_out.iter_mut().enumerate().take(S::DIM) {
+            // Power into the local model is energy this end of the two-port received.
+            *p = -model[a] * model_twist_after[a];
+        }
+        self.port.book(&power_out[..S::DIM], dt_s);
+        HandWrenches { sensed, estimate, for_constraint, model }
+    }
+
+    /// Stage 4: the controllers (section III, Fig 4), with `e = x_d ⊖ x_m`: joint constraint (stiffness or
+    /// impedance mode), impedance with Λ̂⁻¹ in the free directions, position channels, contact force channel.
+    pub(super) fn controllers(&self, intake: &Intake<S>, hand: &HandWrenches<S>) -> Requests<S> {
+        let model_pose = self.model.pose();
+        let model_twist = self.model.twist();
+        let error = self.controlled(intake.device_pose.difference(&model_pose));
+        let error_rate = self.controlled(intake.device_twist - model_twist);
+        let g = &self.gains;
+        let (l, p) = (self.length_scale, &self.local.projector);
+        // The constrained directions soften as the model runs away from where its terms were computed
+        // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
+        let trust = self.linearization_trust();
+        let soften = |w: S::OpVec| if trust < 1.0 { w - project_wrench::<S>(p, l, &w) * (1.0 - trust) } else { w };
+        let pc = soften(position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate));
+        // The dampers' part of it, which with the joint-constraint controller's fills the update's tank
+        // (`passive_update`).
+        let zero = S::OpVec::zero();
+        let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
+        let imp = match hand.sensed {
+            Some(hand) => {
+                impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &self.local.bias, &hand)
+            }
+            None => S::OpVec::zero(),
+        };
+        let (contacts, live) = self.model.contacts();
+        let contact = contact_feedforward::<S>(contacts, live, &self.local.free_inertia);
+        let (jc, position_felt, damping_felt) = match (self.config.constraint_mode, hand.for_constraint) {
+            (ConstraintMode::Impedance, Some(hand)) => (
+                joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact)),
+                // The acceleration-zeroing controller cancels the channels along the constrained directions:
+                // the device feels only their free part. Reacting to the cancelled part would push the local
+                // model (and, through the uplink, the VE) along directions the joints hold, with K_pc times a
+                // drift that grows without bound in this mode (Fig 7b).
+                pc - project_wrench::<S>(p, l, &pc),
+                pc_damping - project_wrench::<S>(p, l, &pc_damping),
+            ),
+            // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
+            _ => (
+                joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate),
+                pc,
+                pc_damping + joint_constraint_stiffness::<S>(p, l, 0.0, g.joint_damping, &zero, &error_rate) * trust,
+            ),
+        };
+        let jc = if trust < 1.0 { jc * trust } else { jc };
+        Requests {
+            model_pose,
+            error,
+            error_rate,
+            position_channel: pc,
+            joint_constraint: jc,
+            impedance: imp,
+            contact,
+            requested: pc + jc + imp + contact,
+            position_felt,
+            damping_felt,
+        }
+    }
+
+    /// Stage 5: the safety envelope: non-finite check, output gate (ramp in, fade out on stale snapshots or
+    /// a released handle, which is braked), device limits; then the position channels' reaction for the
+    /// next step, the update tank's fill and the counters.
+    pub(super) fn safety(
+        &mut self,
+        now: Duration,
+        dt_s: f64,
+        device_twist: &S::OpVec,
+        intake: &Intake<S>,
+        asked: &Requests<S>,
+    ) -> Commanded<S> {
+        let mut command = S::OpVec::zero();
+        let mut clamp_scale = 1.0;
+        let mut flags = 0;
+        let gain;
+        if !asked.requested.is_finite() || !usable_state::<S>(&self.model.pose(), &self.model.twist()) {
+            self.recover_from_non_finite(now);
+            flags |= uplink_flags::SAFETY_STOP;
+            gain = 0.0;
+        } else {
+            gain = self.gate.update(dt_s, !intake.stale && !intake.hand_off);
+            let mut on_device = self.scales.wrench_to_device::<S>(&(asked.requested * gain));
+            if intake.hand_off {
+                // A released handle is braked, not left to coast (as a dead-man switch engages a device's
+                // brakes): a damper is passive, and it comes in as the rendering fades.
+                on_device += brake::<S>(&self.config.device, device_twist) * (1.0 - gain);
+            }
+            let scales;
+            (command, scales) = limit_wrench_parts::<S>(&on_device, &self.limits);
+            clamp_scale = scales.min();
+            self.reaction = -scales.apply::<S>(&mask_unactuated::<S>(&asked.position_felt, &self.limits)) * gain;
+        }
+        self.tank.fill(damper_dissipation::<S>(&asked.error_rate, &asked.damping_felt, gain * clamp_scale, dt_s));
+        if clamp_scale < 1.0 {
+            flags |= uplink_flags::CLAMPED;
+            self.stats.clamped_ticks += 1;
+        }
+        // The observer and the report work on the VE side.
+        self.last_command = self.scales.wrench_to_ve::<S>(&command);
+        self.stats.max_force_ratio = self.stats.max_force_ratio.max(force_ratio::<S>(&command, &self.limits));
+        // Tracking as the hand feels it: in device space.
+        let distance = S::op_lin(&asked.error).norm() * self.scales.position;
+        if distance.is_finite() {
+            self.stats.tracking_error_sum_sq += distance * distance;
+            self.stats.tracking_error_max = self.stats.tracking_error_max.max(distance);
+        }
+        Commanded { command, gain, clamp_scale, flags }
+    }
+
+    /// Stage 6: the uplink, every tick or through the perceptual deadband. Adds `DEADBAND_SKIPPED` to
+    /// `flags` when the last one was held back; returns whether one leaves this tick.
+    pub(super) fn uplink(
+        &mut self,
+        now: Duration,
+        intake: &Intake<S>,
+        flags: &mut u32,
+        model_wrench: &S::OpVec,
+        model_pose: &OpPose<S>,
+    ) -> bool {
+        self.stats.uplinks_built += 1;
+        if self.deadband.skipped {
+            *flags |= uplink_flags::DEADBAND_SKIPPED;
+        }
+        let send = self.deadband.admit(now, model_wrench, model_pose, *flags, self.length_scale);
+        if send {
+            self.fill_uplink(now, intake, *flags, model_wrench);
+            self.deadband.skipped = false;
+            self.stats.uplinks_sent += 1;
+        } else {
+            self.deadband.skipped = true;
+        }
+        send
+    }
+
+    fn fill_uplink(&mut self, now: Duration, intake: &Intake<S>, flags: u32, model_wrench: &S::OpVec) {
+        let u = &mut self.uplink;
+        u.seq += 1;
+        u.client_time_s = now.as_secs_f64();
+        u.last_snapshot_seq = self.active.seq;
+        u.last_snapshot_age_s = intake.age.as_secs_f64();
+        u.hand_wrench.copy_from_slice(model_wrench.as_slice());
+        intake.device_pose.to_slice_memo(&mut u.device_pose, &mut self.pose_memos.uplink_device);
+        u.device_twist.copy_from_slice(intake.device_twist.as_slice());
+        self.model.pose().to_slice_memo(&mut u.model_pose, &mut self.pose_memos.uplink_model);
+        u.model_twist.copy_from_slice(self.model.twist().as_slice());
+        u.flags = flags;
+        u.energy.received_j.copy_from_slice(&self.port.received_j[..S::DIM]);
+        u.energy.emitted_j.copy_from_slice(&self.port.emitted_j[..S::DIM]);
+    }
+
+    /// The report of an active tick.
+    pub(super) fn record(
+        &mut self,
+        now: Duration,
+        intake: &Intake<S>,
+        hand: &HandWrenches<S>,
+        asked: &Requests<S>,
+        out: &Commanded<S>,
+        flags: u32,
+    ) {
+        self.report = TickReport {
+            time: now,
+            active: true,
+            device_pose: intake.device_pose,
+            device_twist: intake.device_twist,
+            model_pose: self.model.pose(),
+            model_twist: self.model.twist(),
+            hand_wrench: hand.sensed.unwrap_or(hand.estimate),
+            model_wrench: hand.model,
+            wrenches: ControllerWrenches {
+                position_channel: asked.position_channel,
+                joint_constraint: asked.joint_constraint,
+                impedance: asked.impedance,
+                contact: asked.contact,
+                requested: asked.requested,
+                command: out.command,
+            },
+            gain: out.gain,
+            clamp_scale: out.clamp_scale,
+            constraint_count: self.frame.count,
+            snapshot_constraint_count: self.active.constraint_count,
+            snapshot_seq: self.active.seq,
+            snapshot_age: Some(intake.age),
+            tracking_error: asked.error,
+            flags,
+        };
+    }
+
+    /// Zero output before the first snapshot or with an unusable device reading.
+    pub(super) fn idle_tick(&mut self, now: Duration, device_usable: bool) -> TickOutput<'_, S> {
+        self.report = TickReport::idle(now);
+        if !device_usable {
+            self.stats.non_finite_events += 1;
+            self.report.flags = uplink_flags::SAFETY_STOP;
+            self.gate.close();
+        }
+        self.last_command = S::OpVec::zero();
+        TickOutput { command: S::OpVec::zero(), uplink: None, report: &self.report }
+    }
+
+    /// A non-finite wrench or model state: command zero, count it, put the model back on the VE at rest and
+    /// ramp in again from zero.
+    fn recover_from_non_finite(&mut self, now: Duration) {
+        self.stats.non_finite_events += 1;
+        self.model.set_state(self.predicted_op(now), S::OpVec::zero());
+        self.reaction = S::OpVec::zero();
+        self.observer.reset();
+        self.gate.close();
+    }
+
+    /// `error` with the axes no controller acts on zeroed: held as through a pin (see
+    /// `ConstraintFrame::set_target`), no controller acts on angles the device can neither show nor push.
+    pub(super) fn controlled(&self, mut error: S::OpVec) -> S::OpVec {
+        if self.pinned() {
+            for i in <S::Point as VecOps>::LEN..S::DIM {
+                error[i] = 0.0;
+            }
+        }
+        error
+    }
+}

@@ -1,0 +1,411 @@
+//! The network thread: the first handshake, the session's haptic side (rig, core, haptic loop, uplink
+//! sender, recorder) and its rings, and reconnection with exponential backoff when the session is lost.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
+use kinloop_protocol::quic::{
+    client_endpoint, connect, ConnectError, ConnectedSession, DatagramSender, Endpoint, EndpointOptions,
+};
+use kinloop_protocol::{Hello, Join, LocalModelForm, Role, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION};
+
+use super::record::{self, TickRecord};
+use super::rt_loop::{self, LoopReport, LoopRings, LoopSettings, LoopShared};
+use super::session::{drain_reports, leave, send_uplinks, serve_session, Session};
+use super::{ClientConfig, ClientError, NetShared};
+use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
+use crate::device::presets::SimulatedDeviceBuildError;
+use crate::device::{DevicePreset, SimulatedRig};
+use crate::user::UserContext;
+
+pub(super) struct Started {
+    pub(super) loop_thread: JoinHandle<CoreStats>,
+    pub(super) helpers: Vec<JoinHandle<()>>,
+    pub(super) welcome: Welcome,
+    pub(super) device: DevicePreset,
+    pub(super) gains: ControllerGains,
+}
+
+/// The network side's ends of the rings.
+pub(super) struct NetRings<S: Space> {
+    pub(super) snapshots: rtrb::Producer<kinloop_protocol::Snapshot>,
+    pub(super) spent_snapshots: rtrb::Consumer<kinloop_protocol::Snapshot>,
+    pub(super) cores: rtrb::Producer<Box<HapticCore<S>>>,
+    pub(super) spent_cores: rtrb::Consumer<Box<HapticCore<S>>>,
+    pub(super) reports: rtrb::Consumer<LoopReport>,
+}
+
+/// Longest a client waits for its closing connection to tell the server. A process that exits sooner sends
+/// nothing, and the server keeps the user until its idle timeout.
+const CLOSE_LINGER: Duration = Duration::from_secs(1);
+
+/// Closes a session that will not run and waits (at most [`CLOSE_LINGER`]) for the server to be told, so it
+/// drops the user at once.
+async fn abandon(endpoint: &Endpoint, connection: &kinloop_protocol::quic::Connection, why: &'static [u8]) {
+    connection.close(kinloop_protocol::quic::close_codes::NORMAL, why);
+    let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
+}
+
+const SNAPSHOT_RING: usize = 16;
+const UPLINK_RING: usize = 64;
+const RECORD_RING: usize = 16_384;
+
+pub(super) fn network_thread(
+    config: ClientConfig,
+    address: SocketAddr,
+    shared: Arc<LoopShared>,
+    net: Arc<NetShared>,
+    started: mpsc::Sender<Result<Started, ClientError>>,
+) {
+    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+            return;
+        }
+    };
+    runtime.block_on(async move {
+        let opts = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
+        let endpoint = match client_endpoint(&config.trust, &opts) {
+            Ok(e) => e,
+            Err(e) => {
+                let _ = started.send(Err(e.into()));
+                return;
+            }
+        };
+        let mut chosen = None;
+        let session = match open_session(&endpoint, address, &config, &mut chosen).await {
+            Ok(s) => s,
+            Err(source) => {
+                // The handshake closed the connection; the server hears of it before the caller (who may exit
+                // at once) hears why.
+                let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
+                let _ = started.send(Err(ClientError::Connect { server: config.server.clone(), source }));
+                return;
+            }
+        };
+        // The session opened, so the chooser ran.
+        let Some(device) = chosen else { return };
+        let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
+        match session.welcome.scene.kind {
+            SceneKind::Planar => run::<Planar>(config, address, endpoint, session, shared, net, started).await,
+            SceneKind::Spatial => run::<Spatial>(config, address, endpoint, session, shared, net, started).await,
+        }
+    });
+}
+
+fn hello(config: &ClientConfig) -> Hello {
+    Hello {
+        version: PROTOCOL_VERSION,
+        token: config.token.clone(),
+        client_name: config.client_name.clone(),
+        role: Role::Manipulator,
+    }
+}
+
+/// The join for the scene the server described: the operational point asked for (or the scene's first)
+/// and the device asked for (or the scene's default), described in the scene's space. A device that cannot
+/// serve the scene's space is an error naming both.
+pub fn choose(config: &ClientConfig, scene: &SceneInfo) -> Result<(Join, DevicePreset), String> {
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(scene.kind));
+    let spec =
+        device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?;
+    let op = match &config.op {
+        Some(op) => op.clone(),
+        None => scene.ops.first().cloned().ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
+    };
+    let form = match config.form {
+        ModelForm::Op => LocalModelForm::OpSpace,
+        ModelForm::Config => LocalModelForm::ConfigSpace,
+    };
+    Ok((Join { op, device: spec.caps(), form, mapping: config.mapping.clone() }, device))
+}
+
+/// A space and its axes, for messages.
+fn kind_axes(kind: SceneKind) -> &'static str {
+    match kind {
+        SceneKind::Planar => "planar (axes x, y, θ)",
+        SceneKind::Spatial => "spatial (axes x, y, z, rx, ry, rz)",
+    }
+}
+
+async fn open_session(
+    endpoint: &Endpoint,
+    address: SocketAddr,
+    config: &ClientConfig,
+    chosen: &mut Option<DevicePreset>,
+) -> Result<ConnectedSession, ConnectError> {
+    connect(endpoint, address, &config.server_name, &hello(config), |scene| {
+        let (join, device) = choose(config, scene)?;
+        *chosen = Some(device);
+        Ok(join)
+    })
+    .await
+}
+
+fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<HapticCore<S>>, ClientError> {
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
+    let mut core_config = CoreConfig::new(device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?);
+    core_config.constraint_mode = config.constraint_mode;
+    core_config.form = config.form;
+    core_config.gains = config.gains.clone();
+    core_config.deadband = config.deadband;
+    core_config.period = Duration::from_secs_f64(1.0 / config.rate_hz);
+    let core = HapticCore::<S>::new(core_config, welcome)?;
+    let g = core.gains();
+    tracing::info!(
+        k_j = g.device.joint_stiffness,
+        b_j = g.device.joint_damping,
+        k_pc = ?g.device.position_stiffness,
+        b_pc = ?g.device.position_damping,
+        "controller gains (device units)"
+    );
+    if g.stiffness_cap < 1.0 || g.damping_cap < 1.0 {
+        tracing::warn!(
+            stiffness = g.stiffness_cap,
+            damping = g.damping_cap,
+            "gains scaled down to what the device renders stably"
+        );
+    }
+    Ok(Box::new(core))
+}
+
+fn empty_uplink<S: Space>() -> Uplink {
+    Uplink::at_rest(0, S::DIM, kinloop_linkage::math::space::OpPose::<S>::wire_len())
+}
+
+/// The session's haptic side: the rig and core, the rings, the recorder, the uplink sender and the haptic
+/// loop are started, the caller told, and the session served (and re-opened when lost) until the client stops.
+async fn run<S: Space>(
+    config: ClientConfig,
+    address: SocketAddr,
+    endpoint: Endpoint,
+    session: ConnectedSession,
+    shared: Arc<LoopShared>,
+    net: Arc<NetShared>,
+    started: mpsc::Sender<Result<Started, ClientError>>,
+) {
+    let (rig, core) = match rig_and_core::<S>(&config, &session.welcome) {
+        Ok(parts) => parts,
+        Err(e) => {
+            abandon(&endpoint, &session.connection, b"client cannot render").await;
+            let _ = started.send(Err(e));
+            return;
+        }
+    };
+    let gains = core.gains().device.clone();
+    let (snapshots_tx, snapshots_rx) = rtrb::RingBuffer::new(SNAPSHOT_RING);
+    let (spent_snapshots_tx, spent_snapshots_rx) = rtrb::RingBuffer::new(2 * SNAPSHOT_RING);
+    let (mut free_tx, free_rx) = rtrb::RingBuffer::new(UPLINK_RING);
+    for _ in 0..UPLINK_RING {
+        let _ = free_tx.push(empty_uplink::<S>());
+    }
+    let (uplinks_tx, uplinks_rx) = rtrb::RingBuffer::new(UPLINK_RING);
+    let (cores_tx, cores_rx) = rtrb::RingBuffer::new(2);
+    let (spent_cores_tx, spent_cores_rx) = rtrb::RingBuffer::new(4);
+    let (reports_tx, reports_rx) = rtrb::RingBuffer::new(64);
+    let mut helpers = Vec::new();
+    let records = config.record.as_ref().map(|path| {
+        let (writer, records) = spawn_recorder::<S>(path.clone(), shared.clone());
+        helpers.push(writer);
+        records
+    });
+    let sender_slot: Arc<Mutex<Option<DatagramSender>>> =
+        Arc::new(Mutex::new(Some(DatagramSender::new(session.connection.clone()))));
+    let uplink_thread = {
+        let (slot, shared, net) = (sender_slot.clone(), shared.clone(), net.clone());
+        let handle = tokio::runtime::Handle::current();
+        std::thread::Builder::new().name("kinloop-uplink".into()).spawn(move || {
+            let _guard = handle.enter();
+            send_uplinks(uplinks_rx, free_tx, slot, shared, net)
+        })
+    };
+    let uplink_thread = match uplink_thread {
+        Ok(t) => t,
+        Err(e) => {
+            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+            return;
+        }
+    };
+    let loop_rings = LoopRings {
+        snapshots: snapshots_rx,
+        spent_snapshots: spent_snapshots_tx,
+        uplinks: uplinks_tx,
+        free_uplinks: free_rx,
+        cores: cores_rx,
+        spent_cores: spent_cores_tx,
+        records,
+        reports: reports_tx,
+        uplink_sender: Some(uplink_thread.thread().clone()),
+    };
+    let settings = LoopSettings {
+        rate_hz: config.rate_hz,
+        duration: config.duration,
+        realtime_priority: config.realtime_priority,
+        busy_wait: config.busy_wait,
+        report_every: (config.rate_hz * config.report_interval.as_secs_f64()).max(1.0) as u64,
+    };
+    let loop_shared = shared.clone();
+    let loop_thread = std::thread::Builder::new()
+        .name("kinloop-haptic".into())
+        .spawn(move || rt_loop::run(rig, core, loop_rings, loop_shared, settings));
+    let loop_thread = match loop_thread {
+        Ok(t) => t,
+        Err(e) => {
+            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+            return;
+        }
+    };
+    helpers.push(uplink_thread);
+    let welcome = session.welcome.clone();
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
+    let session = Session::adopt(session);
+    let _ = started.send(Ok(Started { loop_thread, helpers, welcome, device, gains }));
+    let mut rings = NetRings {
+        snapshots: snapshots_tx,
+        spent_snapshots: spent_snapshots_rx,
+        cores: cores_tx,
+        spent_cores: spent_cores_rx,
+        reports: reports_rx,
+    };
+    let dialer = Dialer { config, address, endpoint };
+    keep_connected(&dialer, session, &mut rings, &sender_slot, &shared, &net).await;
+    drain_reports(&mut rings, &net);
+    // Give the close frame a moment to leave.
+    let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
+}
+
+/// The simulated rig (the hand grasps the handle where the linkage is) and the core for a session.
+fn rig_and_core<S: Space>(
+    config: &ClientConfig,
+    welcome: &Welcome,
+) -> Result<(SimulatedRig<S>, Box<HapticCore<S>>), ClientError> {
+    let core = core_for::<S>(config, welcome)?;
+    let op = S::Point::from_slice(&welcome.op.position);
+    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build_at::<S>(core.home(&op))?;
+    let user = config.user.build::<S>(&UserContext::from_welcome(welcome))?;
+    Ok((SimulatedRig::new(device, user), core))
+}
+
+/// The `--record` writer thread and the ring the loop feeds it through; it stops when the loop stops, after
+/// draining the ring.
+fn spawn_recorder<S: Space>(path: PathBuf, shared: Arc<LoopShared>) -> (JoinHandle<()>, rtrb::Producer<TickRecord>) {
+    let (tx, rx) = rtrb::RingBuffer::new(RECORD_RING);
+    let stop_flag = Arc::new(AtomicBool::new(false));
+    let writer_stop = stop_flag.clone();
+    let writer = std::thread::spawn(move || {
+        let watcher = std::thread::spawn(move || {
+            while !shared.stop.load(Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            writer_stop.store(true, Ordering::Release);
+        });
+        match record::write_records(&path, S::KIND, rx, stop_flag) {
+            Ok(rows) => tracing::info!(rows, file = %path.display(), "recording written"),
+            Err(e) => tracing::error!(error = %e, file = %path.display(), "recording failed"),
+        }
+        let _ = watcher.join();
+    });
+    (writer, tx)
+}
+
+/// What re-opens a lost session: the client's configuration, the server's address and the endpoint.
+struct Dialer {
+    config: ClientConfig,
+    address: SocketAddr,
+    endpoint: Endpoint,
+}
+
+impl Dialer {
+    async fn dial(&self) -> Result<ConnectedSession, ConnectError> {
+        open_session(&self.endpoint, self.address, &self.config, &mut None).await
+    }
+}
+
+/// Serves `session` and, each time it is lost, opens a new one and hands the loop a new core for it, until
+/// the client stops or the new session cannot be rendered.
+async fn keep_connected<S: Space>(
+    dialer: &Dialer,
+    mut session: Session,
+    rings: &mut NetRings<S>,
+    sender_slot: &Mutex<Option<DatagramSender>>,
+    shared: &LoopShared,
+    net: &NetShared,
+) {
+    let mut backoff = Duration::from_millis(100);
+    loop {
+        let ended = serve_session(&mut session, rings, shared, net).await;
+        if let Ok(mut slot) = sender_slot.lock() {
+            *slot = None;
+        }
+        if shared.stop.load(Ordering::Relaxed) {
+            leave(&mut session).await;
+            break;
+        }
+        tracing::warn!(why = %ended, "session lost; the force fades out while reconnecting");
+        let Some(next) = reconnect(dialer, rings, shared, net, &mut backoff).await else { break };
+        if next.welcome.scene.kind != S::KIND {
+            tracing::error!("the server now runs a scene of another space; stopping");
+            shared.stop.store(true, Ordering::Relaxed);
+            break;
+        }
+        match core_for::<S>(&dialer.config, &next.welcome) {
+            Ok(core) => {
+                while rings.spent_cores.pop().is_ok() {}
+                if rings.cores.push(core).is_err() {
+                    tracing::error!("the haptic loop did not take the new session's core");
+                }
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "cannot render the new session; stopping");
+                shared.stop.store(true, Ordering::Relaxed);
+                break;
+            }
+        }
+        session = Session::adopt(next);
+        if let Ok(mut slot) = sender_slot.lock() {
+            *slot = Some(DatagramSender::new(session.connection.clone()));
+        }
+        net.reconnects.fetch_add(1, Ordering::Relaxed);
+        backoff = Duration::from_millis(100);
+        tracing::info!(session = session.welcome.session_id, "reconnected");
+    }
+}
+
+/// Reconnects with exponential backoff until stopped; refusals and certificate problems are final (`None`:
+/// the client is stopped and the reason kept as fatal).
+async fn reconnect<S: Space>(
+    dialer: &Dialer,
+    rings: &mut NetRings<S>,
+    shared: &LoopShared,
+    net: &NetShared,
+    backoff: &mut Duration,
+) -> Option<ConnectedSession> {
+    loop {
+        if shared.stop.load(Ordering::Relaxed) {
+            return None;
+        }
+        drain_reports(rings, net);
+        tokio::time::sleep(*backoff).await;
+        *backoff = (*backoff * 2).min(Duration::from_secs(5));
+        match dialer.dial().await {
+            Ok(s) => return Some(s),
+            Err(e @ (ConnectError::Refused(_) | ConnectError::UntrustedCertificate { .. } | ConnectError::Alpn)) => {
+                tracing::error!(error = %e, "reconnection refused; giving up");
+                if let Ok(mut f) = net.fatal.lock() {
+                    *f = Some(e.to_string());
+                }
+                shared.stop.store(true, Ordering::Relaxed);
+                return None;
+            }
+            Err(e) => tracing::warn!(error = %e, retry_in = ?backoff, "reconnection failed"),
+        }
+    }
+}

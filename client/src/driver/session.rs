@@ -1,0 +1,175 @@
+//! One live session on the network thread: its control stream, the snapshots it receives for the haptic
+//! loop, the loop's reports it logs, and the uplink sender thread that sends what the loop produces.
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use kinloop_linkage::math::space::Space;
+use kinloop_protocol::quic::{ConnectedSession, DatagramReceiver, DatagramSender};
+use kinloop_protocol::{Control, Datagram, Uplink, Welcome};
+
+use super::network::NetRings;
+use super::rt_loop::LoopShared;
+use super::NetShared;
+
+pub(super) fn drain_reports<S: Space>(rings: &mut NetRings<S>, net: &NetShared) {
+    while let Ok(report) = rings.reports.pop() {
+        tracing::info!(
+            elapsed_s = report.elapsed.as_secs_f64(),
+            constraint_count = report.constraint_count,
+            gain = report.gain,
+            snapshot_age_ms = report.snapshot_age.map(|a| a.as_secs_f64() * 1e3),
+            tracking_rms_mm = report.core.tracking_error_rms() * 1e3,
+            max_force_ratio = report.core.max_force_ratio,
+            "haptic loop"
+        );
+        if let Ok(mut last) = net.last_report.lock() {
+            *last = Some(report);
+        }
+    }
+    while rings.spent_snapshots.pop().is_ok() {}
+    while rings.spent_cores.pop().is_ok() {}
+}
+
+/// A live session: the connection, the control stream's sending half, and a task reading its other half.
+pub(super) struct Session {
+    pub(super) connection: kinloop_protocol::quic::Connection,
+    send: kinloop_protocol::quic::SendStream,
+    control: tokio::sync::mpsc::Receiver<Result<Control, String>>,
+    reader: tokio::task::JoinHandle<()>,
+    pub(super) welcome: Welcome,
+}
+
+impl Session {
+    /// Takes over a connected session; its control stream is read by a task of its own so that a frame
+    /// half-read when another event wins a `select!` is never lost.
+    pub(super) fn adopt(connected: ConnectedSession) -> Self {
+        let ConnectedSession { connection, send, mut recv, welcome, .. } = connected;
+        let (tx, control) = tokio::sync::mpsc::channel(16);
+        let reader = tokio::spawn(async move {
+            loop {
+                let message = kinloop_protocol::quic::recv_control(&mut recv).await.map_err(|e| e.to_string());
+                let failed = message.is_err();
+                if tx.send(message).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Session { connection, send, control, reader, welcome }
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        self.reader.abort();
+    }
+}
+
+pub(super) async fn leave(session: &mut Session) {
+    let bye = Control::Leave { reason: "client shutting down".into() };
+    let _ =
+        tokio::time::timeout(Duration::from_millis(200), kinloop_protocol::quic::send_control(&mut session.send, &bye))
+            .await;
+    session.connection.close(kinloop_protocol::quic::close_codes::NORMAL, b"bye");
+}
+
+/// Receives snapshots and answers the control stream until the session ends or the client stops.
+pub(super) async fn serve_session<S: Space>(
+    session: &mut Session,
+    rings: &mut NetRings<S>,
+    shared: &LoopShared,
+    net: &NetShared,
+) -> String {
+    // The handshake and the join have measured the round trip already: the core knows the delay from the
+    // session's first tick rather than from the first pong, a round trip later (until then it would pull the
+    // local model toward the VE as fast as on a LAN).
+    shared.set_round_trip(session.connection.rtt());
+    let scene = &session.welcome.scene;
+    let shape = scene.shape();
+    let mut receiver = DatagramReceiver::new(session.connection.clone(), shape);
+    let mut ping = tokio::time::interval(Duration::from_millis(250));
+    let mut housekeeping = tokio::time::interval(Duration::from_millis(50));
+    let epoch = Instant::now();
+    let mut nonce = 0u64;
+    loop {
+        tokio::select! {
+            datagram = receiver.recv() => match datagram {
+                Ok(Datagram::Snapshot(snapshot)) => {
+                    net.snapshots_received.fetch_add(1, Ordering::Relaxed);
+                    while rings.spent_snapshots.pop().is_ok() {}
+                    // A full ring means the loop is behind: this snapshot is dropped, a newer one follows.
+                    let _ = rings.snapshots.push(snapshot);
+                }
+                Ok(Datagram::Uplink(_)) => {}
+                Err(e) if e.is_fatal() => return e.to_string(),
+                Err(e) => tracing::debug!(error = %e, "datagram refused"),
+            },
+            message = session.control.recv() => match message {
+                Some(Ok(Control::Pong { t_s, .. })) => {
+                    let rtt_ms = (epoch.elapsed().as_secs_f64() - t_s) * 1e3;
+                    if let Ok(rtt) = Duration::try_from_secs_f64(rtt_ms * 1e-3) {
+                        shared.set_round_trip(rtt);
+                        if let Ok(mut r) = net.rtt_ms.lock() {
+                            if r.len() < 100_000 {
+                                r.push(rtt_ms);
+                            }
+                        }
+                    }
+                }
+                Some(Ok(Control::Ping { nonce, t_s })) => {
+                    let _ = kinloop_protocol::quic::send_control(&mut session.send, &Control::Pong { nonce, t_s }).await;
+                }
+                Some(Ok(Control::Leave { reason })) => return format!("the server left: {reason}"),
+                Some(Ok(Control::Error { code, message })) => return format!("the server reported {code}: {message}"),
+                Some(Ok(_)) => {}
+                Some(Err(e)) => return format!("control stream: {e}"),
+                None => return "control stream closed".into(),
+            },
+            _ = ping.tick() => {
+                nonce += 1;
+                let message = Control::Ping { nonce, t_s: epoch.elapsed().as_secs_f64() };
+                if let Err(e) = kinloop_protocol::quic::send_control(&mut session.send, &message).await {
+                    return format!("control stream: {e}");
+                }
+            },
+            _ = housekeeping.tick() => {
+                drain_reports(rings, net);
+                if shared.stop.load(Ordering::Relaxed) {
+                    return "stopping".into();
+                }
+            },
+            reason = session.connection.closed() => return reason.to_string(),
+        }
+    }
+}
+
+/// The uplink sender thread: parked until the loop pushes, sends, returns the buffers.
+pub(super) fn send_uplinks(
+    mut uplinks: rtrb::Consumer<Uplink>,
+    mut free: rtrb::Producer<Uplink>,
+    sender: Arc<Mutex<Option<DatagramSender>>>,
+    shared: Arc<LoopShared>,
+    net: Arc<NetShared>,
+) {
+    loop {
+        while let Ok(uplink) = uplinks.pop() {
+            let message = Datagram::Uplink(uplink);
+            if let Ok(guard) = sender.lock() {
+                if let Some(s) = guard.as_ref() {
+                    if s.send(&message).is_ok() {
+                        net.uplinks_sent.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+            if let Datagram::Uplink(buffer) = message {
+                // Back to the loop for reuse: it never allocates a buffer of its own.
+                let _ = free.push(buffer);
+            }
+        }
+        if shared.stop.load(Ordering::Relaxed) && uplinks.is_empty() {
+            break;
+        }
+        std::thread::park_timeout(Duration::from_millis(10));
+    }
+}
