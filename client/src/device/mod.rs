@@ -6,6 +6,7 @@
 //! [`simulated`] holds a device plant integrated at ≥ 10 kHz inside each haptic tick; [`presets`] its
 //! published-spec parameter sets; [`rig`] couples a simulated device with a simulated user.
 
+pub mod dhd;
 pub mod presets;
 pub mod rig;
 pub mod simulated;
