@@ -34,7 +34,9 @@ use crate::core::{
     UplinkDeadband,
 };
 use crate::device::presets::SimulatedDeviceBuildError;
-use crate::device::{DevicePreset, SimulatedRig};
+use crate::device::dhd::specs::ModelSpec;
+use crate::device::dhd::{DhdError, DhdLibrary, OpenedDhd};
+use crate::device::{DevicePreset, DhdRequest, HapticDevice, SimulatedRig};
 use crate::user::{UserContext, UserError, UserSpec};
 use rt_loop::{LoopReport, LoopRings, LoopSettings, LoopShared};
 use timing::LatenessSummary;
@@ -54,6 +56,8 @@ pub struct ClientConfig {
     pub op: Option<String>,
     /// The simulated device; `None`: the one for the scene's space ([`DevicePreset::for_kind`]).
     pub device: Option<DevicePreset>,
+    /// A Force Dimension device through the DHD SDK instead of the simulated one (`--device dhd`).
+    pub dhd: Option<DhdRequest>,
     /// The simulated user.
     pub user: UserSpec,
     /// What to ask of the mapping between device and VE (scales, gravity compensation).
@@ -96,6 +100,7 @@ impl ClientConfig {
             trust,
             op: None,
             device: None,
+            dhd: None,
             user: UserSpec::soft_hand(),
             mapping: MappingRequest::default(),
             rate_hz: 1000.0,
@@ -142,6 +147,9 @@ pub enum ClientError {
     /// The device cannot serve the scene.
     #[error(transparent)]
     Device(#[from] SimulatedDeviceBuildError),
+    /// The DHD library or device cannot be used.
+    #[error(transparent)]
+    Dhd(#[from] DhdError),
     /// The user cannot be built.
     #[error(transparent)]
     User(#[from] UserError),
@@ -176,6 +184,8 @@ pub struct ClientStats {
     pub reconnects: u64,
     /// Record rows dropped.
     pub records_dropped: u64,
+    /// The device failed (its force was zeroed and the loop stopped).
+    pub device_lost: bool,
 }
 
 impl ClientStats {
@@ -203,6 +213,7 @@ impl ClientStats {
             "non_finite_events": core.non_finite_events,
             "reconnects": self.reconnects,
             "records_dropped": self.records_dropped,
+            "device_lost": self.device_lost,
         })
     }
 }
@@ -227,7 +238,7 @@ pub struct ClientHandle {
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
     welcome: Welcome,
-    device: DevicePreset,
+    device: String,
     gains: ControllerGains,
 }
 
@@ -237,18 +248,19 @@ pub struct Client;
 impl Client {
     /// Connects (the first handshake is awaited, so bad addresses, tokens or certificates fail here with a
     /// clear error), then starts the haptic loop and the network side.
-    pub fn start(config: ClientConfig) -> Result<ClientHandle, ClientError> {
+    pub fn start(mut config: ClientConfig) -> Result<ClientHandle, ClientError> {
         if !(config.rate_hz.is_finite() && (10.0..=20_000.0).contains(&config.rate_hz)) {
             return Err(ClientError::Setting(format!("rate {} Hz must be between 10 and 20000", config.rate_hz)));
         }
         let address = resolve(&config.server)?;
+        let dhd = open_dhd(&mut config)?;
         let shared = Arc::new(LoopShared::default());
         let net = Arc::new(NetShared::default());
         let (started_tx, started_rx) = mpsc::channel();
         let (thread_shared, thread_net) = (shared.clone(), net.clone());
         let net_thread = std::thread::Builder::new()
             .name("kinloop-net".into())
-            .spawn(move || network_thread(config, address, thread_shared, thread_net, started_tx))
+            .spawn(move || network_thread(config, dhd, address, thread_shared, thread_net, started_tx))
             .map_err(|e| ClientError::Runtime(e.to_string()))?;
         match started_rx.recv() {
             Ok(Ok(started)) => Ok(ClientHandle {
@@ -280,9 +292,9 @@ impl ClientHandle {
         &self.welcome
     }
 
-    /// The device in use (the one asked for, or the scene's default).
-    pub fn device(&self) -> DevicePreset {
-        self.device
+    /// The device in use (the one asked for, or the scene's default), by name.
+    pub fn device(&self) -> &str {
+        &self.device
     }
 
     /// The controller gains in use, as the device renders them.
@@ -297,7 +309,7 @@ impl ClientHandle {
         serde_json::json!({
             "scene": w.scene.name,
             "op": w.scene.op_name,
-            "device": self.device.name(),
+            "device": self.device,
             "position_scale": w.mapping.position_scale,
             "force_scale": w.mapping.force_scale,
             "torque_scale": w.mapping.torque_scale(),
@@ -327,6 +339,7 @@ impl ClientHandle {
             uplinks_dropped: self.shared.uplinks_dropped.load(Ordering::Relaxed),
             reconnects: self.net.reconnects.load(Ordering::Relaxed),
             records_dropped: self.shared.records_dropped.load(Ordering::Relaxed),
+            device_lost: self.shared.device_lost.load(Ordering::Relaxed),
         }
     }
 
@@ -415,8 +428,30 @@ struct Started {
     loop_thread: JoinHandle<CoreStats>,
     helpers: Vec<JoinHandle<()>>,
     welcome: Welcome,
-    device: DevicePreset,
+    device: String,
     gains: ControllerGains,
+}
+
+/// Opens the DHD device `config` asks for. When it cannot be used and a simulated fallback was asked for,
+/// says why and switches `config` to the fallback; otherwise the error.
+fn open_dhd(config: &mut ClientConfig) -> Result<Option<OpenedDhd>, ClientError> {
+    let Some(request) = config.dhd else { return Ok(None) };
+    let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open(Arc::new(library), request.index));
+    match (opened, request.fallback) {
+        (Ok(device), _) => {
+            if device.calibrated() == Some(false) {
+                tracing::warn!("the DHD device is not calibrated (drdIsInitialized false); calibrate it with the SDK's tools");
+            }
+            Ok(Some(device))
+        }
+        (Err(e), Some(fallback)) => {
+            tracing::warn!("{e}; using {} as asked", fallback.name());
+            config.dhd = None;
+            config.device = Some(fallback);
+            Ok(None)
+        }
+        (Err(e), None) => Err(e.into()),
+    }
 }
 
 /// The network side's ends of the rings.
@@ -445,6 +480,7 @@ const RECORD_RING: usize = 16_384;
 
 fn network_thread(
     config: ClientConfig,
+    dhd: Option<OpenedDhd>,
     address: SocketAddr,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
@@ -467,7 +503,8 @@ fn network_thread(
             }
         };
         let mut chosen = None;
-        let session = match open_session(&endpoint, address, &config, &mut chosen).await {
+        let model = dhd.as_ref().map(OpenedDhd::model);
+        let session = match open_session(&endpoint, address, &config, model, &mut chosen).await {
             Ok(s) => s,
             Err(source) => {
                 // The handshake closed the connection; the server hears of it before the caller (who may exit
@@ -481,8 +518,8 @@ fn network_thread(
         let Some(device) = chosen else { return };
         let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
         match session.welcome.scene.kind {
-            SceneKind::Planar => run::<Planar>(config, address, endpoint, session, shared, net, started).await,
-            SceneKind::Spatial => run::<Spatial>(config, address, endpoint, session, shared, net, started).await,
+            SceneKind::Planar => run::<Planar>(config, dhd, address, endpoint, session, shared, net, started).await,
+            SceneKind::Spatial => run::<Spatial>(config, dhd, address, endpoint, session, shared, net, started).await,
         }
     });
 }
@@ -497,12 +534,20 @@ fn hello(config: &ClientConfig) -> Hello {
 }
 
 /// The join for the scene the server described: the operational point asked for (or the scene's first)
-/// and the device asked for (or the scene's default), described in the scene's space. A device that cannot
-/// serve the scene's space is an error naming both.
-pub fn choose(config: &ClientConfig, scene: &SceneInfo) -> Result<(Join, DevicePreset), String> {
+/// and the device asked for (or the scene's default; `real`, an opened DHD device's model, before either),
+/// described in the scene's space. A device that cannot serve the scene's space is an error naming both.
+pub fn choose(
+    config: &ClientConfig,
+    scene: &SceneInfo,
+    real: Option<&ModelSpec>,
+) -> Result<(Join, DevicePreset), String> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(scene.kind));
-    let spec =
-        device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?;
+    let spec = match real {
+        Some(model) => model.device_spec(scene.kind),
+        None => {
+            device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?
+        }
+    };
     let op = match &config.op {
         Some(op) => op.clone(),
         None => scene.ops.first().cloned().ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
@@ -526,19 +571,28 @@ async fn open_session(
     endpoint: &Endpoint,
     address: SocketAddr,
     config: &ClientConfig,
+    real: Option<&ModelSpec>,
     chosen: &mut Option<DevicePreset>,
 ) -> Result<ConnectedSession, ConnectError> {
     connect(endpoint, address, &config.server_name, &hello(config), |scene| {
-        let (join, device) = choose(config, scene)?;
+        let (join, device) = choose(config, scene, real)?;
         *chosen = Some(device);
         Ok(join)
     })
     .await
 }
 
-fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<HapticCore<S>>, ClientError> {
+fn core_for<S: Space>(
+    config: &ClientConfig,
+    real: Option<&ModelSpec>,
+    welcome: &Welcome,
+) -> Result<Box<HapticCore<S>>, ClientError> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
-    let mut core_config = CoreConfig::new(device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?);
+    let spec = match real {
+        Some(model) => model.device_spec(S::KIND),
+        None => device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?,
+    };
+    let mut core_config = CoreConfig::new(spec);
     core_config.constraint_mode = config.constraint_mode;
     core_config.form = config.form;
     core_config.gains = config.gains.clone();
@@ -567,8 +621,10 @@ fn empty_uplink<S: Space>() -> Uplink {
     Uplink::at_rest(0, S::DIM, kinloop_linkage::local_model::OpPose::<S>::wire_len())
 }
 
+#[allow(clippy::too_many_arguments)]
 async fn run<S: Space>(
     config: ClientConfig,
+    dhd: Option<OpenedDhd>,
     address: SocketAddr,
     endpoint: Endpoint,
     session: ConnectedSession,
@@ -576,13 +632,17 @@ async fn run<S: Space>(
     net: Arc<NetShared>,
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
-    let setup = || -> Result<_, ClientError> {
-        let core = core_for::<S>(&config, &session.welcome)?;
+    let model = dhd.as_ref().map(OpenedDhd::model);
+    let setup = || -> Result<(Box<dyn HapticDevice<S>>, _), ClientError> {
+        let core = core_for::<S>(&config, model, &session.welcome)?;
+        if let Some(dhd) = dhd {
+            return Ok((Box::new(dhd.into_device::<S>()), core));
+        }
         // The simulated hand grasps the handle where the linkage is.
         let op = S::Point::from_slice(&session.welcome.op.position);
         let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build_at::<S>(core.home(&op))?;
         let user = config.user.build::<S>(&UserContext::from_welcome(&session.welcome))?;
-        Ok((SimulatedRig::new(device, user), core))
+        Ok((Box::new(SimulatedRig::new(device, user)), core))
     };
     let (rig, core, gains) = match setup().map(|(rig, core)| {
         let gains = core.gains().device.clone();
@@ -680,7 +740,10 @@ async fn run<S: Space>(
     };
     helpers.push(uplink_thread);
     let welcome = session.welcome.clone();
-    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
+    let device = match model {
+        Some(model) => format!("dhd ({})", model.name),
+        None => config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).name().to_owned(),
+    };
     let mut session = Session::adopt(session);
     let _ = started.send(Ok(Started { loop_thread, helpers, welcome, device, gains }));
     let mut rings = NetRings {
@@ -709,7 +772,7 @@ async fn run<S: Space>(
             drain_reports(&mut rings, &net);
             tokio::time::sleep(backoff).await;
             backoff = (backoff * 2).min(Duration::from_secs(5));
-            match open_session(&endpoint, address, &config, &mut None).await {
+            match open_session(&endpoint, address, &config, model, &mut None).await {
                 Ok(s) => break Some(s),
                 Err(
                     e @ (ConnectError::Refused(_) | ConnectError::UntrustedCertificate { .. } | ConnectError::Alpn),
@@ -730,7 +793,7 @@ async fn run<S: Space>(
             shared.stop.store(true, Ordering::Relaxed);
             break;
         }
-        match core_for::<S>(&config, &next.welcome) {
+        match core_for::<S>(&config, model, &next.welcome) {
             Ok(core) => {
                 while rings.spent_cores.pop().is_ok() {}
                 if rings.cores.push(core).is_err() {
