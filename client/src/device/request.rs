@@ -54,7 +54,10 @@ impl std::str::FromStr for DeviceRequest {
             _ => match first.strip_prefix("dhd:") {
                 Some(n) => n.parse().map_err(|_| DeviceRequestError::Index(s.to_owned()))?,
                 None if fallback.is_none() => {
-                    return s.parse().map(DeviceRequest::Simulated).map_err(|_| DeviceRequestError::Unknown(s.to_owned()))
+                    return s
+                        .parse()
+                        .map(DeviceRequest::Simulated)
+                        .map_err(|_| DeviceRequestError::Unknown(s.to_owned()))
                 }
                 None => return Err(DeviceRequestError::Unknown(s.to_owned())),
             },

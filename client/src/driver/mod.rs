@@ -33,9 +33,9 @@ use crate::core::{
     ConstraintMode, ControllerGains, CoreConfig, CoreError, CoreStats, GainChoice, HapticCore, ModelForm,
     UplinkDeadband,
 };
-use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::dhd::specs::ModelSpec;
 use crate::device::dhd::{DhdError, DhdLibrary, OpenedDhd};
+use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::{DevicePreset, DhdRequest, HapticDevice, SimulatedRig};
 use crate::user::{UserContext, UserError, UserSpec};
 use rt_loop::{LoopReport, LoopRings, LoopSettings, LoopShared};
@@ -440,7 +440,9 @@ fn open_dhd(config: &mut ClientConfig) -> Result<Option<OpenedDhd>, ClientError>
     match (opened, request.fallback) {
         (Ok(device), _) => {
             if device.calibrated() == Some(false) {
-                tracing::warn!("the DHD device is not calibrated (drdIsInitialized false); calibrate it with the SDK's tools");
+                tracing::warn!(
+                    "the DHD device is not calibrated (drdIsInitialized false); calibrate it with the SDK's tools"
+                );
             }
             Ok(Some(device))
         }

@@ -14,7 +14,7 @@
 //!   stalled process would);
 //! - `FAKE_DHD_RECORD`: a file that receives one line per call that changes the output: `F T FX FY FZ`
 //!   for every force commanded (T seconds since open), `E 0|1` for force enabling, `W TICKS` for the
-//!   watchdog, `C` at close.
+//!   watchdog, `X lost|nan|stall` when a fault strikes, `C` at close.
 
 mod plant;
 
@@ -218,14 +218,25 @@ pub unsafe extern "system" fn dhdGetPosition(px: *mut f64, py: *mut f64, pz: *mu
     let read = with_device(None, |d| {
         d.reads += 1;
         match d.fault {
-            Fault::Lost(n) if d.reads >= n => return None,
-            Fault::Stall(n, pause) if d.reads == n => std::thread::sleep(pause),
+            Fault::Lost(n) if d.reads >= n => {
+                if d.reads == n {
+                    d.note(format_args!("X lost"));
+                }
+                return None;
+            }
+            Fault::Stall(n, pause) if d.reads == n => {
+                std::thread::sleep(pause);
+                d.note(format_args!("X stall"));
+            }
             _ => {}
         }
         d.step();
         let p = d.plant.position();
         Some(match d.fault {
-            Fault::NotANumber(n) if d.reads == n => [f64::NAN, p[1], p[2]],
+            Fault::NotANumber(n) if d.reads == n => {
+                d.note(format_args!("X nan"));
+                [f64::NAN, p[1], p[2]]
+            }
             _ => p,
         })
     });
@@ -260,11 +271,11 @@ pub unsafe extern "system" fn dhdGetLinearVelocity(vx: *mut f64, vy: *mut f64, v
 #[no_mangle]
 pub extern "system" fn dhdSetForce(fx: f64, fy: f64, fz: f64, _id: c_char) -> c_int {
     with_device(-1, |d| {
+        let t = d.opened.elapsed().as_secs_f64();
+        d.note(format_args!("F {t:.6} {fx:e} {fy:e} {fz:e}"));
         if matches!(d.fault, Fault::Lost(n) if d.reads >= n) {
             return -1;
         }
-        let t = d.opened.elapsed().as_secs_f64();
-        d.note(format_args!("F {t:.6} {fx:e} {fy:e} {fz:e}"));
         let limit = d.plant.max_force();
         let norm = (fx * fx + fy * fy + fz * fz).sqrt();
         if !norm.is_finite() {
