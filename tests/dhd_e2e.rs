@@ -172,11 +172,14 @@ fn device_faults_leave_zero_force_from_the_tick_they_strike() {
     assert!(run.success, "stall: the session goes on:\n{}", run.stderr);
     assert_safe("stall", &run, OMEGA3_LIMIT_N);
     let fault_at = run.fault_line();
-    let before = run.forces().iter().filter(|f| f.0 < fault_at).last().map(|f| f.1).unwrap_or(0.0);
+    let before = run.forces().iter().rfind(|f| f.0 < fault_at).map(|f| f.1).unwrap_or(0.0);
     let next = run.forces().iter().filter(|f| f.0 > fault_at).nth(1).map(|f| f.1);
     assert!(before > 0.0, "stall: a force was being rendered before it ({before} N)");
     assert_eq!(next, Some(0.0), "stall: the command of the tick after it is zero");
 }
+
+/// What is wrong, the fake's environment, what the error line says and the library it names.
+type BadLibrary = (&'static str, Vec<(&'static str, String)>, &'static str, String);
 
 #[test]
 fn bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure() {
@@ -184,7 +187,7 @@ fn bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure() {
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
     let fake = fake_library().display().to_string();
-    let cases: [(&str, Vec<(&str, String)>, &str, String); 5] = [
+    let cases: [BadLibrary; 5] = [
         ("open fails", vec![("FAKE_DHD_FAULT", "open".into())], "cannot open device 0", fake.clone()),
         ("too old", vec![("FAKE_DHD_VERSION", "3.2.0".into())], "older than 3.14.0", fake.clone()),
         ("unknown model", vec![("FAKE_DHD_SYSTEM", "999".into())], "system type 999", fake.clone()),
