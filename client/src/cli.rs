@@ -14,7 +14,7 @@ use kinloop_protocol::quic::{ConnectError, Trust};
 use kinloop_protocol::{MappingRequest, RefusalReason};
 
 use crate::core::{ConstraintMode, ModelForm};
-use crate::device::DevicePreset;
+use crate::device::DeviceRequest;
 use crate::driver::{Client, ClientConfig, ClientError};
 use crate::user::UserSpec;
 
@@ -40,10 +40,12 @@ struct Args {
     /// Operational point to hold (default: the scene's first).
     #[arg(long)]
     op: Option<String>,
-    /// Simulated device: sim:paper (planar), sim:falcon or sim:touch (default: sim:paper for planar scenes,
-    /// sim:touch for spatial ones).
+    /// Device: simulated sim:paper (planar), sim:falcon or sim:touch (default: sim:paper for planar scenes,
+    /// sim:touch for spatial ones); dhd[:INDEX] a Force Dimension device through the DHD SDK (found through
+    /// KINLOOP_DHD_LIB, FORCEDIM_SDK or the usual install places); dhd,sim:NAME falls back to a simulated
+    /// device when the DHD one cannot be used.
     #[arg(long)]
-    device: Option<DevicePreset>,
+    device: Option<DeviceRequest>,
     /// Simulated user: a hand soft|firm|release|poke (touring the OP's reach; KIND:PATH or KIND:hold for a
     /// scripted one), path:line:X0,Y0,X1,Y1,T | path:circle:R,T | path:waypoints:T:X,Y;... (a soft hand),
     /// constant:FX,FY,TZ (planar: forces x, y then torque z) or constant:FX,FY,FZ,TX,TY,TZ (spatial: forces
@@ -122,7 +124,11 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
     config.server_name = args.server_name;
     config.token = args.token;
     config.op = args.op;
-    config.device = args.device;
+    match args.device {
+        Some(DeviceRequest::Simulated(preset)) => config.device = Some(preset),
+        Some(DeviceRequest::Dhd(request)) => config.dhd = Some(request),
+        None => {}
+    }
     config.user = args.user;
     config.rate_hz = args.rate;
     config.duration = duration;
@@ -192,7 +198,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         "kinloop-client: holding {} of {} with {}, user {user}; mapping: position ×{:.4}, force ×{:.4}{}",
         w.scene.op_name,
         w.scene.name,
-        client.device().name(),
+        client.device(),
         w.mapping.position_scale,
         w.mapping.force_scale,
         if w.mapping.gravity_compensation { ", gravity compensated" } else { "" },
@@ -260,6 +266,9 @@ fn run(args: Args) -> anyhow::Result<()> {
             core.uplink_saving() * 100.0,
             s.reconnects
         );
+    }
+    if stats.device_lost {
+        bail!("the device failed (said above): its force was zeroed and the session ended");
     }
     Ok(())
 }

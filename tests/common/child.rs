@@ -185,6 +185,11 @@ impl ChildProcess {
     /// Re-executes this test binary to run `role` inside the test named `test`, in `dir`; its log (stderr),
     /// stdout and ready file go to `dir` under `tag`.
     pub fn spawn(test: &str, role: &Role, dir: &Path, tag: &str) -> Self {
+        Self::spawn_with_env(test, role, dir, tag, &[])
+    }
+
+    /// [`ChildProcess::spawn`] with these environment variables set in the child.
+    pub fn spawn_with_env(test: &str, role: &Role, dir: &Path, tag: &str, env: &[(&str, String)]) -> Self {
         let log = dir.join(format!("{tag}.log"));
         let out = dir.join(format!("{tag}.out"));
         let ready = dir.join(format!("{tag}.ready"));
@@ -195,6 +200,7 @@ impl ChildProcess {
             .current_dir(dir)
             .env(ROLE_VAR, serde_json::to_string(role).expect("role as JSON"))
             .env(READY_VAR, &ready)
+            .envs(env.iter().map(|(k, v)| (k, v)))
             .stdin(Stdio::piped())
             .stdout(std::fs::File::create(&out).expect("child stdout file"))
             .stderr(std::fs::File::create(&log).expect("child log file"))

@@ -4,9 +4,12 @@
 //! communication error (the device is gone).
 //!
 //! [`simulated`] holds a device plant integrated at ≥ 10 kHz inside each haptic tick; [`presets`] its
-//! published-spec parameter sets; [`rig`] couples a simulated device with a simulated user.
+//! published-spec parameter sets; [`rig`] couples a simulated device with a simulated user; [`dhd`] drives
+//! Force Dimension devices through their SDK, loaded at run time; [`request`] is what `--device` asks for.
 
+pub mod dhd;
 pub mod presets;
+pub mod request;
 pub mod rig;
 pub mod simulated;
 
@@ -18,6 +21,7 @@ use kinloop_protocol::wrench_limits::WrenchLimits;
 use kinloop_protocol::DeviceCaps;
 
 pub use presets::DevicePreset;
+pub use request::{DeviceRequest, DhdRequest};
 pub use rig::{SimulatedRig, SimulatedUser};
 pub use simulated::{SimulatedDevice, SimulatedDeviceParams};
 
@@ -146,4 +150,19 @@ pub trait HapticDevice<S: Space>: Send {
     fn read(&mut self, now: Duration) -> Result<DeviceState<S>, DeviceError>;
     /// Commands `wrench` (held until the next command).
     fn command(&mut self, now: Duration, wrench: &S::OpVec) -> Result<(), DeviceError>;
+}
+
+/// A boxed device is a device: the loop drives a simulated rig or a real device through one type.
+impl<S: Space> HapticDevice<S> for Box<dyn HapticDevice<S>> {
+    fn spec(&self) -> &DeviceSpec {
+        (**self).spec()
+    }
+
+    fn read(&mut self, now: Duration) -> Result<DeviceState<S>, DeviceError> {
+        (**self).read(now)
+    }
+
+    fn command(&mut self, now: Duration, wrench: &S::OpVec) -> Result<(), DeviceError> {
+        (**self).command(now, wrench)
+    }
 }

@@ -26,8 +26,9 @@ use kinloop_protocol::quic::{ConnectError, EndpointError, Trust};
 use kinloop_protocol::{MappingRequest, Welcome};
 
 use crate::core::{ConstraintMode, ControllerGains, CoreError, CoreStats, GainChoice, ModelForm, UplinkDeadband};
+use crate::device::dhd::{DhdError, DhdLibrary, OpenedDhd};
 use crate::device::presets::SimulatedDeviceBuildError;
-use crate::device::DevicePreset;
+use crate::device::{DevicePreset, DhdRequest};
 use crate::user::{UserError, UserSpec};
 pub use network::choose;
 use network::network_thread;
@@ -49,6 +50,8 @@ pub struct ClientConfig {
     pub op: Option<String>,
     /// The simulated device; `None`: the one for the scene's space ([`DevicePreset::for_kind`]).
     pub device: Option<DevicePreset>,
+    /// A Force Dimension device through the DHD SDK instead of the simulated one (`--device dhd`).
+    pub dhd: Option<DhdRequest>,
     /// The simulated user.
     pub user: UserSpec,
     /// What to ask of the mapping between device and VE (scales, gravity compensation).
@@ -91,6 +94,7 @@ impl ClientConfig {
             trust,
             op: None,
             device: None,
+            dhd: None,
             user: UserSpec::soft_hand(),
             mapping: MappingRequest::default(),
             rate_hz: 1000.0,
@@ -137,6 +141,9 @@ pub enum ClientError {
     /// The device cannot serve the scene.
     #[error(transparent)]
     Device(#[from] SimulatedDeviceBuildError),
+    /// The DHD library or device cannot be used.
+    #[error(transparent)]
+    Dhd(#[from] DhdError),
     /// The user cannot be built.
     #[error(transparent)]
     User(#[from] UserError),
@@ -171,6 +178,8 @@ pub struct ClientStats {
     pub reconnects: u64,
     /// Record rows dropped.
     pub records_dropped: u64,
+    /// The device failed (its force was zeroed and the loop stopped).
+    pub device_lost: bool,
 }
 
 impl ClientStats {
@@ -198,6 +207,7 @@ impl ClientStats {
             "non_finite_events": core.non_finite_events,
             "reconnects": self.reconnects,
             "records_dropped": self.records_dropped,
+            "device_lost": self.device_lost,
         })
     }
 }
@@ -222,7 +232,7 @@ pub struct ClientHandle {
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
     welcome: Welcome,
-    device: DevicePreset,
+    device: String,
     gains: ControllerGains,
 }
 
@@ -232,18 +242,19 @@ pub struct Client;
 impl Client {
     /// Connects (the first handshake is awaited, so bad addresses, tokens or certificates fail here with a
     /// clear error), then starts the haptic loop and the network side.
-    pub fn start(config: ClientConfig) -> Result<ClientHandle, ClientError> {
+    pub fn start(mut config: ClientConfig) -> Result<ClientHandle, ClientError> {
         if !(config.rate_hz.is_finite() && (10.0..=20_000.0).contains(&config.rate_hz)) {
             return Err(ClientError::Setting(format!("rate {} Hz must be between 10 and 20000", config.rate_hz)));
         }
         let address = resolve(&config.server)?;
+        let dhd = open_dhd(&mut config)?;
         let shared = Arc::new(LoopShared::default());
         let net = Arc::new(NetShared::default());
         let (started_tx, started_rx) = mpsc::channel();
         let (thread_shared, thread_net) = (shared.clone(), net.clone());
         let net_thread = std::thread::Builder::new()
             .name("kinloop-net".into())
-            .spawn(move || network_thread(config, address, thread_shared, thread_net, started_tx))
+            .spawn(move || network_thread(config, dhd, address, thread_shared, thread_net, started_tx))
             .map_err(|e| ClientError::Runtime(e.to_string()))?;
         match started_rx.recv() {
             Ok(Ok(started)) => Ok(ClientHandle {
@@ -275,9 +286,9 @@ impl ClientHandle {
         &self.welcome
     }
 
-    /// The device in use (the one asked for, or the scene's default).
-    pub fn device(&self) -> DevicePreset {
-        self.device
+    /// The device in use (the one asked for, or the scene's default), by name.
+    pub fn device(&self) -> &str {
+        &self.device
     }
 
     /// The controller gains in use, as the device renders them.
@@ -292,7 +303,7 @@ impl ClientHandle {
         serde_json::json!({
             "scene": w.scene.name,
             "op": w.scene.op_name,
-            "device": self.device.name(),
+            "device": self.device,
             "position_scale": w.mapping.position_scale,
             "force_scale": w.mapping.force_scale,
             "torque_scale": w.mapping.torque_scale(),
@@ -322,6 +333,7 @@ impl ClientHandle {
             uplinks_dropped: self.shared.uplinks_dropped.load(Ordering::Relaxed),
             reconnects: self.net.reconnects.load(Ordering::Relaxed),
             records_dropped: self.shared.records_dropped.load(Ordering::Relaxed),
+            device_lost: self.shared.device_lost.load(Ordering::Relaxed),
         }
     }
 
@@ -404,4 +416,28 @@ fn resolve(server: &str) -> Result<SocketAddr, ClientError> {
         .map_err(|e| error(format!("{e} (write HOST:PORT, e.g. 127.0.0.1:4433)")))?
         .next()
         .ok_or_else(|| error("resolves to no address".into()))
+}
+
+/// Opens the DHD device `config` asks for. When it cannot be used and a simulated fallback was asked for,
+/// says why and switches `config` to the fallback; otherwise the error.
+fn open_dhd(config: &mut ClientConfig) -> Result<Option<OpenedDhd>, ClientError> {
+    let Some(request) = config.dhd else { return Ok(None) };
+    let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open(Arc::new(library), request.index));
+    match (opened, request.fallback) {
+        (Ok(device), _) => {
+            if device.calibrated() == Some(false) {
+                tracing::warn!(
+                    "the DHD device is not calibrated (drdIsInitialized false); calibrate it with the SDK's tools"
+                );
+            }
+            Ok(Some(device))
+        }
+        (Err(e), Some(fallback)) => {
+            tracing::warn!("{e}; using {} as asked", fallback.name());
+            config.dhd = None;
+            config.device = Some(fallback);
+            Ok(None)
+        }
+        (Err(e), None) => Err(e.into()),
+    }
 }

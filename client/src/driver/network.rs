@@ -19,15 +19,17 @@ use super::rt_loop::{self, LoopReport, LoopRings, LoopSettings, LoopShared};
 use super::session::{drain_reports, leave, send_uplinks, serve_session, Session};
 use super::{ClientConfig, ClientError, NetShared};
 use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
+use crate::device::dhd::specs::ModelSpec;
+use crate::device::dhd::OpenedDhd;
 use crate::device::presets::SimulatedDeviceBuildError;
-use crate::device::{DevicePreset, SimulatedRig};
+use crate::device::{DevicePreset, HapticDevice, SimulatedRig};
 use crate::user::UserContext;
 
 pub(super) struct Started {
     pub(super) loop_thread: JoinHandle<CoreStats>,
     pub(super) helpers: Vec<JoinHandle<()>>,
     pub(super) welcome: Welcome,
-    pub(super) device: DevicePreset,
+    pub(super) device: String,
     pub(super) gains: ControllerGains,
 }
 
@@ -57,6 +59,7 @@ const RECORD_RING: usize = 16_384;
 
 pub(super) fn network_thread(
     config: ClientConfig,
+    dhd: Option<OpenedDhd>,
     address: SocketAddr,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
@@ -79,7 +82,8 @@ pub(super) fn network_thread(
             }
         };
         let mut chosen = None;
-        let session = match open_session(&endpoint, address, &config, &mut chosen).await {
+        let model = dhd.as_ref().map(OpenedDhd::model);
+        let session = match open_session(&endpoint, address, &config, model, &mut chosen).await {
             Ok(s) => s,
             Err(source) => {
                 // The handshake closed the connection; the server hears of it before the caller (who may exit
@@ -93,8 +97,8 @@ pub(super) fn network_thread(
         let Some(device) = chosen else { return };
         let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
         match session.welcome.scene.kind {
-            SceneKind::Planar => run::<Planar>(config, address, endpoint, session, shared, net, started).await,
-            SceneKind::Spatial => run::<Spatial>(config, address, endpoint, session, shared, net, started).await,
+            SceneKind::Planar => run::<Planar>(config, dhd, address, endpoint, session, shared, net, started).await,
+            SceneKind::Spatial => run::<Spatial>(config, dhd, address, endpoint, session, shared, net, started).await,
         }
     });
 }
@@ -109,12 +113,20 @@ fn hello(config: &ClientConfig) -> Hello {
 }
 
 /// The join for the scene the server described: the operational point asked for (or the scene's first)
-/// and the device asked for (or the scene's default), described in the scene's space. A device that cannot
-/// serve the scene's space is an error naming both.
-pub fn choose(config: &ClientConfig, scene: &SceneInfo) -> Result<(Join, DevicePreset), String> {
+/// and the device asked for (or the scene's default; `real`, an opened DHD device's model, before either),
+/// described in the scene's space. A device that cannot serve the scene's space is an error naming both.
+pub fn choose(
+    config: &ClientConfig,
+    scene: &SceneInfo,
+    real: Option<&ModelSpec>,
+) -> Result<(Join, DevicePreset), String> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(scene.kind));
-    let spec =
-        device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?;
+    let spec = match real {
+        Some(model) => model.device_spec(scene.kind),
+        None => {
+            device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?
+        }
+    };
     let op = match &config.op {
         Some(op) => op.clone(),
         None => scene.ops.first().cloned().ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
@@ -138,19 +150,28 @@ async fn open_session(
     endpoint: &Endpoint,
     address: SocketAddr,
     config: &ClientConfig,
+    real: Option<&ModelSpec>,
     chosen: &mut Option<DevicePreset>,
 ) -> Result<ConnectedSession, ConnectError> {
     connect(endpoint, address, &config.server_name, &hello(config), |scene| {
-        let (join, device) = choose(config, scene)?;
+        let (join, device) = choose(config, scene, real)?;
         *chosen = Some(device);
         Ok(join)
     })
     .await
 }
 
-fn core_for<S: Space>(config: &ClientConfig, welcome: &Welcome) -> Result<Box<HapticCore<S>>, ClientError> {
+fn core_for<S: Space>(
+    config: &ClientConfig,
+    real: Option<&ModelSpec>,
+    welcome: &Welcome,
+) -> Result<Box<HapticCore<S>>, ClientError> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
-    let mut core_config = CoreConfig::new(device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?);
+    let spec = match real {
+        Some(model) => model.device_spec(S::KIND),
+        None => device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?,
+    };
+    let mut core_config = CoreConfig::new(spec);
     core_config.constraint_mode = config.constraint_mode;
     core_config.form = config.form;
     core_config.gains = config.gains.clone();
@@ -181,8 +202,10 @@ fn empty_uplink<S: Space>() -> Uplink {
 
 /// The session's haptic side: the rig and core, the rings, the recorder, the uplink sender and the haptic
 /// loop are started, the caller told, and the session served (and re-opened when lost) until the client stops.
+#[allow(clippy::too_many_arguments)]
 async fn run<S: Space>(
     config: ClientConfig,
+    dhd: Option<OpenedDhd>,
     address: SocketAddr,
     endpoint: Endpoint,
     session: ConnectedSession,
@@ -190,7 +213,8 @@ async fn run<S: Space>(
     net: Arc<NetShared>,
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
-    let (rig, core) = match rig_and_core::<S>(&config, &session.welcome) {
+    let model = dhd.as_ref().map(OpenedDhd::model);
+    let (rig, core) = match rig_and_core::<S>(&config, dhd, &session.welcome) {
         Ok(parts) => parts,
         Err(e) => {
             abandon(&endpoint, &session.connection, b"client cannot render").await;
@@ -265,7 +289,10 @@ async fn run<S: Space>(
     };
     helpers.push(uplink_thread);
     let welcome = session.welcome.clone();
-    let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
+    let device = match model {
+        Some(model) => format!("dhd ({})", model.name),
+        None => config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).name().to_owned(),
+    };
     let session = Session::adopt(session);
     let _ = started.send(Ok(Started { loop_thread, helpers, welcome, device, gains }));
     let mut rings = NetRings {
@@ -275,23 +302,28 @@ async fn run<S: Space>(
         spent_cores: spent_cores_rx,
         reports: reports_rx,
     };
-    let dialer = Dialer { config, address, endpoint };
+    let dialer = Dialer { config, model, address, endpoint };
     keep_connected(&dialer, session, &mut rings, &sender_slot, &shared, &net).await;
     drain_reports(&mut rings, &net);
     // Give the close frame a moment to leave.
     let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
 }
 
-/// The simulated rig (the hand grasps the handle where the linkage is) and the core for a session.
+/// The device (an opened DHD device, or the simulated rig whose hand grasps the handle where the linkage is)
+/// and the core for a session.
 fn rig_and_core<S: Space>(
     config: &ClientConfig,
+    dhd: Option<OpenedDhd>,
     welcome: &Welcome,
-) -> Result<(SimulatedRig<S>, Box<HapticCore<S>>), ClientError> {
-    let core = core_for::<S>(config, welcome)?;
+) -> Result<(Box<dyn HapticDevice<S>>, Box<HapticCore<S>>), ClientError> {
+    let core = core_for::<S>(config, dhd.as_ref().map(OpenedDhd::model), welcome)?;
+    if let Some(dhd) = dhd {
+        return Ok((Box::new(dhd.into_device::<S>()), core));
+    }
     let op = S::Point::from_slice(&welcome.op.position);
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build_at::<S>(core.home(&op))?;
     let user = config.user.build::<S>(&UserContext::from_welcome(welcome))?;
-    Ok((SimulatedRig::new(device, user), core))
+    Ok((Box::new(SimulatedRig::new(device, user)), core))
 }
 
 /// The `--record` writer thread and the ring the loop feeds it through; it stops when the loop stops, after
@@ -319,13 +351,15 @@ fn spawn_recorder<S: Space>(path: PathBuf, shared: Arc<LoopShared>) -> (JoinHand
 /// What re-opens a lost session: the client's configuration, the server's address and the endpoint.
 struct Dialer {
     config: ClientConfig,
+    /// An opened DHD device's model: the spec every re-join describes.
+    model: Option<&'static ModelSpec>,
     address: SocketAddr,
     endpoint: Endpoint,
 }
 
 impl Dialer {
     async fn dial(&self) -> Result<ConnectedSession, ConnectError> {
-        open_session(&self.endpoint, self.address, &self.config, &mut None).await
+        open_session(&self.endpoint, self.address, &self.config, self.model, &mut None).await
     }
 }
 
@@ -356,7 +390,7 @@ async fn keep_connected<S: Space>(
             shared.stop.store(true, Ordering::Relaxed);
             break;
         }
-        match core_for::<S>(&dialer.config, &next.welcome) {
+        match core_for::<S>(&dialer.config, dialer.model, &next.welcome) {
             Ok(core) => {
                 while rings.spent_cores.pop().is_ok() {}
                 if rings.cores.push(core).is_err() {

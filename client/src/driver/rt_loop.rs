@@ -146,6 +146,8 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         let state = match device.read(now) {
             Ok(state) => state,
             Err(e) if e.is_fatal() => {
+                // Said once: the loop ends here.
+                tracing::error!("{e}; the loop stops");
                 shared.device_lost.store(true, Ordering::Relaxed);
                 break;
             }
@@ -158,6 +160,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         let out = core.tick(now, &state);
         if let Err(e) = device.command(now, &out.command) {
             if e.is_fatal() {
+                tracing::error!("{e}; the loop stops");
                 shared.device_lost.store(true, Ordering::Relaxed);
                 break;
             }

@@ -1,0 +1,309 @@
+//! Finding and loading the Force Dimension DHD library at run time, and the calls kinloop makes through it.
+//!
+//! Signatures from the public `dhdc.h` (SDK 3.x) and `drdc.h`: `__SDK` is `__stdcall` on Windows and nothing
+//! elsewhere, hence `extern "system"`; the device ID is a C `char` (`c_char`, unsigned on aarch64 Linux), and
+//! every call passes it (C has no default argument). Calls return 0 on success, a positive status that is not
+//! an error (`DHD_TIMEGUARD` 1, `DHD_MOTOR_SATURATED` 2), or -1 on error. Required symbols must all be there;
+//! optional ones (the expert SDK's watchdog, the velocity estimate, DRD's calibration query) switch a feature
+//! off when absent, as CHAI3D's `CDeltaDevices.cpp` does with one "available" flag per function.
+
+use std::ffi::{c_char, c_int, c_uchar, CStr};
+use std::path::{Path, PathBuf};
+
+use super::DhdError;
+
+/// The variable naming the library file, before any search.
+pub const LIBRARY_VARIABLE: &str = "KINLOOP_DHD_LIB";
+/// The SDK's install folder, as Force Dimension's installers and Python's `forcedimension_core` use it.
+pub const SDK_VARIABLE: &str = "FORCEDIM_SDK";
+/// Oldest SDK accepted: `forcedimension_core` (`runtime.py`) refuses anything older than 3.14.0 too.
+pub const MINIMUM_VERSION: SdkVersion = SdkVersion { major: 3, minor: 14, release: 0, revision: 0 };
+
+/// `dhdGetSDKVersion`'s four numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct SdkVersion {
+    /// Major.
+    pub major: i32,
+    /// Minor.
+    pub minor: i32,
+    /// Release.
+    pub release: i32,
+    /// Revision.
+    pub revision: i32,
+}
+
+impl std::fmt::Display for SdkVersion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}.{}.{}-{}", self.major, self.minor, self.release, self.revision)
+    }
+}
+
+/// The library file names, DRD first (it exports the DHD calls too), as CHAI3D loads `drd64.dll` before
+/// `dhd64.dll`.
+pub fn library_names() -> &'static [&'static str] {
+    if cfg!(windows) {
+        &["drd64.dll", "dhd64.dll", "drd.dll", "dhd.dll"]
+    } else if cfg!(target_os = "macos") {
+        &["libdrd.dylib", "libdhd.dylib"]
+    } else {
+        &["libdrd.so", "libdhd.so"]
+    }
+}
+
+/// Where kinloop looks, in order: `KINLOOP_DHD_LIB`; `$FORCEDIM_SDK/lib`; `/usr/local/lib` and `/usr/lib`
+/// (as `forcedimension_core`); then each name through the system loader's own search path.
+pub fn candidates() -> Vec<PathBuf> {
+    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
+        return vec![PathBuf::from(path)];
+    }
+    let mut folders = Vec::new();
+    if let Some(sdk) = std::env::var_os(SDK_VARIABLE).filter(|p| !p.is_empty()) {
+        folders.push(PathBuf::from(sdk).join("lib"));
+    }
+    if !cfg!(windows) {
+        folders.extend([PathBuf::from("/usr/local/lib"), PathBuf::from("/usr/lib")]);
+    }
+    let mut found = Vec::new();
+    for folder in &folders {
+        found.extend(library_names().iter().map(|name| folder.join(name)));
+    }
+    found.extend(library_names().iter().map(PathBuf::from));
+    found
+}
+
+type GetVersion = unsafe extern "system" fn(*mut c_int, *mut c_int, *mut c_int, *mut c_int);
+type OpenId = unsafe extern "system" fn(c_char) -> c_int;
+type ById = unsafe extern "system" fn(c_char) -> c_int;
+type GetTriple = unsafe extern "system" fn(*mut f64, *mut f64, *mut f64, c_char) -> c_int;
+type SetForce = unsafe extern "system" fn(f64, f64, f64, c_char) -> c_int;
+type SetFlag = unsafe extern "system" fn(c_uchar, c_char) -> c_int;
+type GetButton = unsafe extern "system" fn(c_int, c_char) -> c_int;
+type LastError = unsafe extern "system" fn() -> *const c_char;
+type DeviceCount = unsafe extern "system" fn() -> c_int;
+type IsInitialized = unsafe extern "system" fn(c_char) -> bool;
+
+/// The calls kinloop makes, resolved once. Function pointers stay valid while `_library` is loaded, and it
+/// is never unloaded before them (they live in the same value).
+pub struct DhdLibrary {
+    path: PathBuf,
+    version: SdkVersion,
+    open_id: OpenId,
+    close: ById,
+    system_type: ById,
+    position: GetTriple,
+    set_force: SetForce,
+    enable_force: SetFlag,
+    button: GetButton,
+    last_error: LastError,
+    velocity: Option<GetTriple>,
+    watchdog: Option<SetFlag>,
+    device_count: Option<DeviceCount>,
+    is_initialized: Option<IsInitialized>,
+    _library: libloading::Library,
+}
+
+/// The required symbols, by name.
+pub const REQUIRED: [&str; 9] = [
+    "dhdGetSDKVersion",
+    "dhdOpenID",
+    "dhdClose",
+    "dhdGetSystemType",
+    "dhdGetPosition",
+    "dhdSetForce",
+    "dhdEnableForce",
+    "dhdGetButton",
+    "dhdErrorGetLastStr",
+];
+
+impl DhdLibrary {
+    /// The first candidate that loads (see [`candidates`]), checked: every required symbol present and the
+    /// SDK at least [`MINIMUM_VERSION`]. A candidate that exists but is refused is the error; when none
+    /// exists, the error lists where kinloop looked.
+    pub fn find() -> Result<DhdLibrary, DhdError> {
+        let candidates = candidates();
+        for path in &candidates {
+            // A bare name goes to the system loader's search; a path must exist.
+            let bare = path.components().count() == 1;
+            if !bare && !path.exists() {
+                continue;
+            }
+            match DhdLibrary::load(path) {
+                Err(DhdError::Load { .. }) if bare => continue,
+                result => return result,
+            }
+        }
+        Err(DhdError::NotFound { looked: candidates })
+    }
+
+    /// Loads the library at `path` and checks it.
+    pub fn load(path: &Path) -> Result<DhdLibrary, DhdError> {
+        let library = path.display().to_string();
+        // SAFETY: loading runs the library's initialisers; a DHD SDK's are the vendor's, trusted as any
+        // driver the user installed, and the fake's do nothing.
+        let loaded = unsafe { libloading::Library::new(path) }
+            .map_err(|e| DhdError::Load { library: library.clone(), reason: e.to_string() })?;
+        let mut missing = Vec::new();
+        // SAFETY: each type below is the signature `dhdc.h` declares for that name.
+        macro_rules! required {
+            ($name:literal) => {
+                match unsafe { loaded.get($name) } {
+                    Ok(symbol) => Some(*symbol),
+                    Err(_) => {
+                        missing.push($name);
+                        None
+                    }
+                }
+            };
+        }
+        macro_rules! optional {
+            ($name:literal) => {
+                unsafe { loaded.get($name) }.ok().map(|symbol| *symbol)
+            };
+        }
+        let get_version: Option<GetVersion> = required!("dhdGetSDKVersion");
+        let open_id: Option<OpenId> = required!("dhdOpenID");
+        let close: Option<ById> = required!("dhdClose");
+        let system_type: Option<ById> = required!("dhdGetSystemType");
+        let position: Option<GetTriple> = required!("dhdGetPosition");
+        let set_force: Option<SetForce> = required!("dhdSetForce");
+        let enable_force: Option<SetFlag> = required!("dhdEnableForce");
+        let button: Option<GetButton> = required!("dhdGetButton");
+        let last_error: Option<LastError> = required!("dhdErrorGetLastStr");
+        let (
+            Some(get_version),
+            Some(open_id),
+            Some(close),
+            Some(system_type),
+            Some(position),
+            Some(set_force),
+            Some(enable_force),
+            Some(button),
+            Some(last_error),
+        ) = (get_version, open_id, close, system_type, position, set_force, enable_force, button, last_error)
+        else {
+            return Err(DhdError::MissingSymbols { library, symbols: missing.join(", ") });
+        };
+        let (mut major, mut minor, mut release, mut revision) = (0, 0, 0, 0);
+        // SAFETY: four valid pointers, as the header asks.
+        unsafe { get_version(&mut major, &mut minor, &mut release, &mut revision) };
+        let version = SdkVersion { major, minor, release, revision };
+        if version < MINIMUM_VERSION {
+            return Err(DhdError::TooOld { library, found: version.to_string(), minimum: MINIMUM_VERSION.to_string() });
+        }
+        Ok(DhdLibrary {
+            path: path.to_owned(),
+            version,
+            open_id,
+            close,
+            system_type,
+            position,
+            set_force,
+            enable_force,
+            button,
+            last_error,
+            velocity: optional!("dhdGetLinearVelocity"),
+            watchdog: optional!("dhdSetWatchdog"),
+            device_count: optional!("dhdGetDeviceCount"),
+            is_initialized: optional!("drdIsInitialized"),
+            _library: loaded,
+        })
+    }
+
+    /// Where it was loaded from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Its SDK version.
+    pub fn version(&self) -> SdkVersion {
+        self.version
+    }
+
+    /// The SDK's last error, for messages.
+    pub fn last_error(&self) -> String {
+        // SAFETY: `dhdErrorGetLastStr` returns null or a NUL-terminated static string.
+        let text = unsafe { (self.last_error)() };
+        if text.is_null() {
+            return "no reason given".into();
+        }
+        // SAFETY: non-null and NUL-terminated, as above.
+        unsafe { CStr::from_ptr(text) }.to_string_lossy().into_owned()
+    }
+
+    /// `dhdGetDeviceCount`, when the library has it.
+    pub fn device_count(&self) -> Option<i32> {
+        // SAFETY: no arguments.
+        self.device_count.map(|count| unsafe { count() })
+    }
+
+    /// `dhdOpenID(index)`: the device ID, or -1.
+    pub fn open(&self, index: u8) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.open_id)(index as c_char) }
+    }
+
+    /// `dhdClose(id)`.
+    pub fn close(&self, id: c_char) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.close)(id) }
+    }
+
+    /// `dhdGetSystemType(id)`.
+    pub fn system_type(&self, id: c_char) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.system_type)(id) }
+    }
+
+    /// `dhdGetPosition`: metres in the device frame, or the failing return.
+    pub fn position(&self, id: c_char) -> Result<[f64; 3], i32> {
+        let mut p = [0.0; 3];
+        let [x, y, z] = &mut p;
+        // SAFETY: three valid pointers.
+        let status = unsafe { (self.position)(x, y, z, id) };
+        if status < 0 {
+            Err(status)
+        } else {
+            Ok(p)
+        }
+    }
+
+    /// `dhdGetLinearVelocity`, when the library has it: m/s in the device frame.
+    pub fn velocity(&self, id: c_char) -> Option<Result<[f64; 3], i32>> {
+        let call = self.velocity?;
+        let mut v = [0.0; 3];
+        let [x, y, z] = &mut v;
+        // SAFETY: three valid pointers.
+        let status = unsafe { call(x, y, z, id) };
+        Some(if status < 0 { Err(status) } else { Ok(v) })
+    }
+
+    /// `dhdSetForce`: newtons in the device frame.
+    pub fn set_force(&self, force: [f64; 3], id: c_char) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.set_force)(force[0], force[1], force[2], id) }
+    }
+
+    /// `dhdEnableForce`.
+    pub fn enable_force(&self, on: bool, id: c_char) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.enable_force)(c_uchar::from(on), id) }
+    }
+
+    /// `dhdGetButton(index, id)`: 1 pressed, 0 released, -1 on error.
+    pub fn button(&self, index: i32, id: c_char) -> i32 {
+        // SAFETY: plain values.
+        unsafe { (self.button)(index, id) }
+    }
+
+    /// `dhdSetWatchdog(ticks, id)` (ticks of 125 µs), when the library has it.
+    pub fn set_watchdog(&self, ticks: u8, id: c_char) -> Option<i32> {
+        // SAFETY: plain values.
+        self.watchdog.map(|call| unsafe { call(ticks, id) })
+    }
+
+    /// `drdIsInitialized(id)`, when the library is DRD.
+    pub fn is_initialized(&self, id: c_char) -> Option<bool> {
+        // SAFETY: plain values.
+        self.is_initialized.map(|call| unsafe { call(id) })
+    }
+}

@@ -1,0 +1,325 @@
+//! A fake Force Dimension DHD library: the C symbols of `dhdc.h` (SDK 3.x) that kinloop loads, with the
+//! same signatures and calling convention (`__stdcall` on Windows, hence `extern "system"`), behind a plant
+//! of its own. Written for kinloop's tests and tools only; it shares no code with kinloop's simulated
+//! devices, and speaks the vendor's units (metres, newtons, seconds) in the device's own frame (x towards
+//! the user, y to the right, z up, origin at the workspace centre).
+//!
+//! Configured by environment variables, read when the library opens a device:
+//! - `FAKE_DHD_SYSTEM`: the system type `dhdGetSystemType` answers (default 33, omega.3);
+//! - `FAKE_DHD_VERSION`: `MAJOR.MINOR.RELEASE` for `dhdGetSDKVersion` (default 3.17.6);
+//! - `FAKE_DHD_HAND`: `soft`, `firm` or `none`: a hand holding the handle by a spring towards a point that
+//!   tours a circle in the y-z plane (default soft);
+//! - `FAKE_DHD_FAULT`: `open` (`dhdOpen` fails), `lost:N` (every read from the N-th on fails: the device is
+//!   gone), `nan:N` (the N-th position read is NaN), `stall:N:MS` (the N-th read takes MS milliseconds, as a
+//!   stalled process would);
+//! - `FAKE_DHD_RECORD`: a file that receives one line per call that changes the output: `F T FX FY FZ`
+//!   for every force commanded (T seconds since open), `E 0|1` for force enabling, `W TICKS` for the
+//!   watchdog, `X lost|nan|stall` when a fault strikes, `C` at close.
+
+mod plant;
+
+use std::ffi::{c_char, c_int, c_uchar};
+use std::io::Write;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use plant::{Hand, Plant};
+
+/// `DHD_DEVICE_OMEGA3` in `dhdc.h`.
+const OMEGA3: c_int = 33;
+
+/// What a fault does, and when.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Fault {
+    None,
+    Open,
+    Lost(u64),
+    NotANumber(u64),
+    Stall(u64, Duration),
+}
+
+fn fault_from(text: &str) -> Fault {
+    let mut parts = text.split(':');
+    let kind = parts.next().unwrap_or("");
+    let n = parts.next().and_then(|n| n.parse().ok()).unwrap_or(1);
+    match kind {
+        "open" => Fault::Open,
+        "lost" => Fault::Lost(n),
+        "nan" => Fault::NotANumber(n),
+        "stall" => Fault::Stall(n, Duration::from_millis(parts.next().and_then(|m| m.parse().ok()).unwrap_or(100))),
+        _ => Fault::None,
+    }
+}
+
+/// The one device this library serves.
+struct Device {
+    system: c_int,
+    fault: Fault,
+    plant: Plant,
+    opened: Instant,
+    last_step: Instant,
+    reads: u64,
+    forces_enabled: bool,
+    force: [f64; 3],
+    record: Option<std::io::BufWriter<std::fs::File>>,
+}
+
+static DEVICE: Mutex<Option<Device>> = Mutex::new(None);
+static LAST_ERROR: &[u8] = b"fake DHD: no device\0";
+
+fn env(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.is_empty())
+}
+
+impl Device {
+    fn open() -> Option<Device> {
+        let fault = env("FAKE_DHD_FAULT").map_or(Fault::None, |f| fault_from(&f));
+        if fault == Fault::Open {
+            return None;
+        }
+        let system = env("FAKE_DHD_SYSTEM").and_then(|s| s.parse().ok()).unwrap_or(OMEGA3);
+        let hand = match env("FAKE_DHD_HAND").as_deref() {
+            Some("none") => Hand::Absent,
+            Some("firm") => Hand::holding(800.0, 8.0),
+            _ => Hand::holding(200.0, 2.0),
+        };
+        let record = env("FAKE_DHD_RECORD")
+            .and_then(|path| std::fs::File::create(path).ok())
+            .map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
+        let now = Instant::now();
+        Some(Device {
+            system,
+            fault,
+            plant: Plant::for_system(system, hand),
+            opened: now,
+            last_step: now,
+            reads: 0,
+            forces_enabled: false,
+            force: [0.0; 3],
+            record,
+        })
+    }
+
+    fn note(&mut self, line: std::fmt::Arguments) {
+        if let Some(r) = &mut self.record {
+            let _ = writeln!(r, "{line}");
+        }
+    }
+
+    /// Advances the plant to now under the force the device outputs.
+    fn step(&mut self) {
+        let now = Instant::now();
+        let dt = now.duration_since(self.last_step).as_secs_f64();
+        self.last_step = now;
+        let applied = if self.forces_enabled { self.force } else { [0.0; 3] };
+        self.plant.advance(now.duration_since(self.opened).as_secs_f64(), dt, applied);
+    }
+}
+
+fn with_device<T>(missing: T, f: impl FnOnce(&mut Device) -> T) -> T {
+    let mut guard = match DEVICE.lock() {
+        Ok(g) => g,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    match guard.as_mut() {
+        Some(d) => f(d),
+        None => missing,
+    }
+}
+
+/// `void dhdGetSDKVersion(int *major, int *minor, int *release, int *revision)`.
+///
+/// # Safety
+/// Each pointer is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "system" fn dhdGetSDKVersion(
+    major: *mut c_int,
+    minor: *mut c_int,
+    release: *mut c_int,
+    revision: *mut c_int,
+) {
+    let text = env("FAKE_DHD_VERSION").unwrap_or_else(|| "3.17.6".into());
+    let mut parts = text.split('.').map(|p| p.parse::<c_int>().unwrap_or(0));
+    for out in [major, minor, release, revision] {
+        let value = parts.next().unwrap_or(0);
+        if !out.is_null() {
+            // SAFETY: the caller passes valid pointers or null, as the header asks.
+            unsafe { *out = value };
+        }
+    }
+}
+
+/// `int dhdGetDeviceCount(void)`.
+#[no_mangle]
+pub extern "system" fn dhdGetDeviceCount() -> c_int {
+    if env("FAKE_DHD_FAULT").is_some_and(|f| f == "open") {
+        0
+    } else {
+        1
+    }
+}
+
+/// `int dhdOpen(void)`: the device ID, or -1.
+#[no_mangle]
+pub extern "system" fn dhdOpen() -> c_int {
+    dhdOpenID(0)
+}
+
+/// `int dhdOpenID(char ID)`: the device ID, or -1.
+#[no_mangle]
+pub extern "system" fn dhdOpenID(id: c_char) -> c_int {
+    if id != 0 {
+        return -1;
+    }
+    let mut guard = match DEVICE.lock() {
+        Ok(g) => g,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    match Device::open() {
+        Some(d) => {
+            *guard = Some(d);
+            0
+        }
+        None => -1,
+    }
+}
+
+/// `int dhdClose(char ID)`.
+#[no_mangle]
+pub extern "system" fn dhdClose(_id: c_char) -> c_int {
+    let mut guard = match DEVICE.lock() {
+        Ok(g) => g,
+        Err(poisoned) => poisoned.into_inner(),
+    };
+    match guard.take() {
+        Some(mut d) => {
+            d.note(format_args!("C"));
+            if let Some(r) = &mut d.record {
+                let _ = r.flush();
+            }
+            0
+        }
+        None => -1,
+    }
+}
+
+/// `int dhdGetSystemType(char ID)`.
+#[no_mangle]
+pub extern "system" fn dhdGetSystemType(_id: c_char) -> c_int {
+    with_device(-1, |d| d.system)
+}
+
+/// `int dhdGetPosition(double *px, double *py, double *pz, char ID)`.
+///
+/// # Safety
+/// Each pointer is valid for a write.
+#[no_mangle]
+pub unsafe extern "system" fn dhdGetPosition(px: *mut f64, py: *mut f64, pz: *mut f64, _id: c_char) -> c_int {
+    let read = with_device(None, |d| {
+        d.reads += 1;
+        match d.fault {
+            Fault::Lost(n) if d.reads >= n => {
+                if d.reads == n {
+                    d.note(format_args!("X lost"));
+                }
+                return None;
+            }
+            Fault::Stall(n, pause) if d.reads == n => {
+                std::thread::sleep(pause);
+                d.note(format_args!("X stall"));
+            }
+            _ => {}
+        }
+        d.step();
+        let p = d.plant.position();
+        Some(match d.fault {
+            Fault::NotANumber(n) if d.reads == n => {
+                d.note(format_args!("X nan"));
+                [f64::NAN, p[1], p[2]]
+            }
+            _ => p,
+        })
+    });
+    let Some(p) = read else { return -1 };
+    for (out, value) in [px, py, pz].into_iter().zip(p) {
+        if !out.is_null() {
+            // SAFETY: the caller passes valid pointers, as the header asks.
+            unsafe { *out = value };
+        }
+    }
+    0
+}
+
+/// `int dhdGetLinearVelocity(double *pvx, double *pvy, double *pvz, char ID)`.
+///
+/// # Safety
+/// Each pointer is valid for a write.
+#[no_mangle]
+pub unsafe extern "system" fn dhdGetLinearVelocity(vx: *mut f64, vy: *mut f64, vz: *mut f64, _id: c_char) -> c_int {
+    let Some(v) = with_device(None, |d| Some(d.plant.velocity())) else { return -1 };
+    for (out, value) in [vx, vy, vz].into_iter().zip(v) {
+        if !out.is_null() {
+            // SAFETY: the caller passes valid pointers, as the header asks.
+            unsafe { *out = value };
+        }
+    }
+    0
+}
+
+/// `int dhdSetForce(double fx, double fy, double fz, char ID)`: 0, `DHD_MOTOR_SATURATED` (2) when the
+/// force was limited, or -1.
+#[no_mangle]
+pub extern "system" fn dhdSetForce(fx: f64, fy: f64, fz: f64, _id: c_char) -> c_int {
+    with_device(-1, |d| {
+        let t = d.opened.elapsed().as_secs_f64();
+        d.note(format_args!("F {t:.6} {fx:e} {fy:e} {fz:e}"));
+        if matches!(d.fault, Fault::Lost(n) if d.reads >= n) {
+            return -1;
+        }
+        let limit = d.plant.max_force();
+        let norm = (fx * fx + fy * fy + fz * fz).sqrt();
+        if !norm.is_finite() {
+            d.force = [0.0; 3];
+            return -1;
+        }
+        let k = if norm > limit { limit / norm } else { 1.0 };
+        d.force = [fx * k, fy * k, fz * k];
+        if k < 1.0 {
+            2
+        } else {
+            0
+        }
+    })
+}
+
+/// `int dhdEnableForce(unsigned char val, char ID)`.
+#[no_mangle]
+pub extern "system" fn dhdEnableForce(val: c_uchar, _id: c_char) -> c_int {
+    with_device(-1, |d| {
+        d.forces_enabled = val != 0;
+        d.note(format_args!("E {}", u8::from(d.forces_enabled)));
+        0
+    })
+}
+
+/// `int dhdGetButton(int index, char ID)`: 1 pressed, 0 released, -1 on error. The fake's button 0 is
+/// held while its hand holds the handle.
+#[no_mangle]
+pub extern "system" fn dhdGetButton(index: c_int, _id: c_char) -> c_int {
+    with_device(-1, |d| c_int::from(index == 0 && d.plant.held()))
+}
+
+/// `int dhdSetWatchdog(unsigned char val, char ID)`: `val` in units of 125 µs.
+#[no_mangle]
+pub extern "system" fn dhdSetWatchdog(val: c_uchar, _id: c_char) -> c_int {
+    with_device(-1, |d| {
+        d.note(format_args!("W {val}"));
+        0
+    })
+}
+
+/// `const char *dhdErrorGetLastStr(void)`.
+#[no_mangle]
+pub extern "system" fn dhdErrorGetLastStr() -> *const c_char {
+    LAST_ERROR.as_ptr().cast()
+}

@@ -1,0 +1,219 @@
+//! `kinloop-client --device dhd` end to end, in real processes (`kinloop-server` and `kinloop-client` through
+//! their own `main`), against the fake DHD library (`fakes/fake-dhd`) found through `KINLOOP_DHD_LIB`: the
+//! same loading, checks and calls as with Force Dimension's library. Each fault the fake can stage is judged
+//! on the forces it received (its record): none above the model's limit, zero from the fault on. And every
+//! kind of bad library gets one line naming it and what was wrong, and a non-zero exit.
+//!
+//! The fake is a dev-dependency of this package, so cargo builds its cdylib beside this test's binary under
+//! any `cargo test`; the test fails (never skips) when it is not there.
+
+mod common;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use common::child::{listening, ChildProcess, Program, Role};
+
+/// The omega.3's published peak force, the limit kinloop's spec table gives it (N).
+const OMEGA3_LIMIT_N: f64 = 12.0;
+/// The Falcon's (N).
+const FALCON_LIMIT_N: f64 = 8.9;
+
+/// The fake library cargo built for this test.
+fn fake_library() -> PathBuf {
+    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let deps = exe.parent().expect("the test binary's folder");
+    let candidates = [deps.join(&name), deps.parent().map(|p| p.join(&name)).unwrap_or_default()];
+    candidates.iter().find(|p| p.is_file()).cloned().unwrap_or_else(|| {
+        panic!("the fake DHD library {name} is not in {candidates:?}: cargo builds it as a dev-dependency of kinloop")
+    })
+}
+
+/// What a client run left.
+struct Run {
+    success: bool,
+    stderr: String,
+    /// The fake's record, one line per call that changed its output.
+    record: Vec<String>,
+}
+
+impl Run {
+    /// The forces commanded, in order: (line index, |F| in N).
+    fn forces(&self) -> Vec<(usize, f64)> {
+        self.record
+            .iter()
+            .enumerate()
+            .filter_map(|(i, line)| {
+                let f: Vec<f64> = line.strip_prefix("F ")?.split(' ').skip(1).filter_map(|x| x.parse().ok()).collect();
+                Some((i, f.iter().map(|x| x * x).sum::<f64>().sqrt()))
+            })
+            .collect()
+    }
+
+    /// Where the fault struck in the record.
+    fn fault_line(&self) -> usize {
+        self.record.iter().position(|l| l.starts_with("X ")).unwrap_or_else(|| panic!("no fault in {:?}", self.record))
+    }
+
+    /// The error line the client ended with.
+    fn error_line(&self) -> String {
+        let lines: Vec<&str> = self.stderr.lines().filter(|l| l.contains("error:")).collect();
+        assert!(!lines.is_empty(), "no error line in:\n{}", self.stderr);
+        lines.last().map(|l| l.to_string()).unwrap_or_default()
+    }
+}
+
+/// A server for `scene` and `kinloop-client --device DEVICE` against it for `seconds`, the fake configured by
+/// `env` (`KINLOOP_DHD_LIB` defaults to the fake).
+fn run_client(test: &'static str, scene: &str, device: &str, seconds: &str, env: &[(&str, String)]) -> Run {
+    let dir = common::temp_dir();
+    let server_args = ["--scene", scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"].map(String::from).to_vec();
+    let mut server =
+        ChildProcess::spawn(test, &Role::Program { program: Program::Server, args: server_args }, dir.path(), "server");
+    let (addr, fingerprint) =
+        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let record = dir.path().join("forces.txt");
+    let mut vars = vec![
+        ("KINLOOP_DHD_LIB", fake_library().display().to_string()),
+        ("FAKE_DHD_RECORD", record.display().to_string()),
+    ];
+    for (k, v) in env {
+        vars.retain(|(name, _)| name != k);
+        vars.push((k, v.clone()));
+    }
+    let args = [
+        "--server",
+        &addr.to_string(),
+        "--fingerprint",
+        &fingerprint,
+        "--device",
+        device,
+        "--duration",
+        seconds,
+        "--no-realtime",
+    ]
+    .map(String::from)
+    .to_vec();
+    let mut client = ChildProcess::spawn_with_env(
+        test,
+        &Role::Program { program: Program::Client, args },
+        dir.path(),
+        "client",
+        &vars,
+    );
+    let status = client.exit_status(Duration::from_secs(40));
+    server.stop(Duration::from_secs(5));
+    let stderr = client.log();
+    assert!(!stderr.contains("panicked"), "{test}: the client panicked:\n{stderr}");
+    let record = std::fs::read_to_string(&record).unwrap_or_default().lines().map(String::from).collect();
+    Run { success: status.success(), stderr, record }
+}
+
+/// No force above `limit`, the watchdog armed before forces were enabled, and the device closed with zero
+/// force and forces off.
+fn assert_safe(what: &str, run: &Run, limit: f64) {
+    let forces = run.forces();
+    assert!(!forces.is_empty(), "{what}: no force was commanded: {:?}", &run.record[..run.record.len().min(10)]);
+    let max = forces.iter().map(|f| f.1).fold(0.0, f64::max);
+    assert!(max <= limit + 1e-9, "{what}: a force of {max} N, above the model's {limit} N");
+    let watchdog = run.record.iter().position(|l| l == "W 80");
+    let enabled = run.record.iter().position(|l| l == "E 1");
+    assert!(watchdog.is_some() && watchdog < enabled, "{what}: the watchdog is armed before forces are on");
+    let tail: Vec<&str> = run.record.iter().rev().take(3).map(String::as_str).collect();
+    assert_eq!(tail[0], "C", "{what}: the device is closed last: {tail:?}");
+    assert_eq!(tail[1], "E 0", "{what}: forces are disabled before closing: {tail:?}");
+    assert_eq!(forces.last().map(|f| f.1), Some(0.0), "{what}: the last force is zero");
+}
+
+#[test]
+fn a_dhd_device_renders_the_testbed_end_to_end_and_is_released() {
+    const NAME: &str = "a_dhd_device_renders_the_testbed_end_to_end_and_is_released";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(90));
+    for (system, limit) in [("33", OMEGA3_LIMIT_N), ("60", FALCON_LIMIT_N)] {
+        let run = run_client(NAME, "paper-testbed", "dhd", "3", &[("FAKE_DHD_SYSTEM", system.into())]);
+        assert!(run.success, "system {system}: the client fails:\n{}", run.stderr);
+        assert_safe(&format!("system {system}"), &run, limit);
+        // Forces ramp in: the first commands are small, later ones are not.
+        let forces = run.forces();
+        let first = forces.iter().find(|f| f.1 > 0.0).map(|f| f.1).unwrap_or(0.0);
+        let max = forces.iter().map(|f| f.1).fold(0.0, f64::max);
+        assert!(first < 0.05 * max && max > 0.5, "system {system}: ramp from {first} N to {max} N");
+        assert!(
+            run.stderr.contains("with dhd (") && run.stderr.contains(if system == "60" { "Falcon" } else { "omega.3" })
+        );
+    }
+}
+
+#[test]
+fn device_faults_leave_zero_force_from_the_tick_they_strike() {
+    const NAME: &str = "device_faults_leave_zero_force_from_the_tick_they_strike";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(120));
+    for fault in ["lost:1500", "nan:1500"] {
+        let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", fault.into())]);
+        assert!(!run.success, "{fault}: the client must fail:\n{}", run.stderr);
+        let fault_at = run.fault_line();
+        let after: Vec<f64> = run.forces().iter().filter(|f| f.0 > fault_at).map(|f| f.1).collect();
+        assert!(!after.is_empty() && after.iter().all(|&f| f == 0.0), "{fault}: forces after the fault {after:?}");
+        let max = run.forces().iter().map(|f| f.1).fold(0.0, f64::max);
+        assert!(max > 0.1 && max <= OMEGA3_LIMIT_N, "{fault}: forces before it reach {max} N");
+        // The reason, naming the device's library, is said once; the client's last line says it failed.
+        let library = fake_library().display().to_string();
+        let said = run.stderr.lines().filter(|l| l.contains("communication lost") && l.contains(&library)).count();
+        assert_eq!(said, 1, "{fault}:\n{}", run.stderr);
+        assert!(run.error_line().contains("the device failed"), "{fault}:\n{}", run.stderr);
+        assert_eq!(run.record.last().map(String::as_str), Some("C"), "{fault}: the device is closed");
+    }
+    // A read that stalls the loop longer than the watchdog: that tick's command (made from the fresh reading)
+    // goes out, and the next tick, seeing the gap, commands zero and ramps in again.
+    let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", "stall:2000:50".into())]);
+    assert!(run.success, "stall: the session goes on:\n{}", run.stderr);
+    assert_safe("stall", &run, OMEGA3_LIMIT_N);
+    let fault_at = run.fault_line();
+    let before = run.forces().iter().rfind(|f| f.0 < fault_at).map(|f| f.1).unwrap_or(0.0);
+    let next = run.forces().iter().filter(|f| f.0 > fault_at).nth(1).map(|f| f.1);
+    assert!(before > 0.0, "stall: a force was being rendered before it ({before} N)");
+    assert_eq!(next, Some(0.0), "stall: the command of the tick after it is zero");
+}
+
+/// What is wrong, the fake's environment, what the error line says and the library it names.
+type BadLibrary = (&'static str, Vec<(&'static str, String)>, &'static str, String);
+
+#[test]
+fn bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure() {
+    const NAME: &str = "bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(120));
+    let fake = fake_library().display().to_string();
+    let cases: [BadLibrary; 5] = [
+        ("open fails", vec![("FAKE_DHD_FAULT", "open".into())], "cannot open device 0", fake.clone()),
+        ("too old", vec![("FAKE_DHD_VERSION", "3.2.0".into())], "older than 3.14.0", fake.clone()),
+        ("unknown model", vec![("FAKE_DHD_SYSTEM", "999".into())], "system type 999", fake.clone()),
+        (
+            "missing",
+            vec![("KINLOOP_DHD_LIB", "/nonexistent/libdhd.so".into())],
+            "KINLOOP_DHD_LIB",
+            "/nonexistent/libdhd.so".into(),
+        ),
+        (
+            "not DHD",
+            vec![("KINLOOP_DHD_LIB", "libc.so.6".into())],
+            "lacks required symbols dhdGetSDKVersion",
+            "libc.so.6".into(),
+        ),
+    ];
+    for (what, env, says, library) in cases {
+        let run = run_client(NAME, "paper-testbed", "dhd", "2", &env);
+        assert!(!run.success, "{what}: the client must fail:\n{}", run.stderr);
+        let line = run.error_line();
+        assert!(line.contains(says) && line.contains(&library), "{what}: {line}");
+        assert_eq!(run.stderr.matches(says).count(), 1, "{what}: said once:\n{}", run.stderr);
+        assert!(run.forces().iter().all(|f| f.1 == 0.0), "{what}: no force to a device kinloop cannot use");
+    }
+    // A fallback only when asked.
+    let run = run_client(NAME, "paper-testbed", "dhd,sim:falcon", "1", &[("FAKE_DHD_FAULT", "open".into())]);
+    assert!(run.success && run.stderr.contains("using sim:falcon as asked"), "fallback:\n{}", run.stderr);
+    assert!(run.stderr.contains("with sim:falcon"), "fallback:\n{}", run.stderr);
+}
