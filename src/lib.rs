@@ -8,5 +8,6 @@ pub mod charts;
 pub mod cli;
 pub mod demo;
 pub mod experiments;
+pub mod generate;
 pub mod rounding;
 pub mod scene_arg;

@@ -40,6 +40,8 @@ enum Command {
     /// this floor has a problem of its own; one at the floor is limited by the machine (kernel, hypervisor,
     /// neighbours).
     TimerFloor(cli::timer_floor::TimerFloorArgs),
+    /// Write the seeded, reproducible linkage of a seed as a scene file (any class, any unit system).
+    Generate(cli::generate::GenerateArgs),
     /// Replay a recording (a server's or a client's --record CSV) in a web page with a timeline slider.
     View(cli::view::ViewArgs),
 }
@@ -59,5 +61,6 @@ fn run(cli: &Cli) -> Result<()> {
         Command::Experiment(a) => cli::experiment::run(a),
         Command::TimerFloor(a) => cli::timer_floor::run(a),
         Command::View(a) => cli::view::run(a),
+        Command::Generate(a) => cli::generate::run(a),
     }
 }

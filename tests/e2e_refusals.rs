@@ -210,3 +210,28 @@ fn an_impossible_device_is_refused_naming_what_is_wrong() {
     // The negative force is refused by the wire's checks, before the VE sees the join.
     assert_eq!((stats.ve.core.joins_refused, stats.ve.core.users_joined), (2, 0), "{messages:#?}");
 }
+
+/// The paper's testbed written in millimetres and grams (lengths ×1000, masses ×1000, inertias ×1e9) on
+/// `sim:paper`: the welcome the server designs breaks the wire's SI bounds (its static force). The client
+/// is refused with a typed reason naming the field, prints it once and exits with failure, instead of the
+/// bare "closed by peer: internal error" it met before; the server lets go of the user it had admitted.
+#[test]
+fn a_welcome_the_wire_rejects_is_refused_naming_the_field() {
+    common::child::serve_if_child();
+    let mm_g = kinloop::generate::units::UnitSystem {
+        length: kinloop::generate::units::LengthUnit::Mm,
+        mass: kinloop::generate::units::MassUnit::G,
+    };
+    let mut config = live::server_config();
+    config.scene = mm_g.rewrite(&live::testbed());
+    let (stderr, stats) = failing_client(
+        "a_welcome_the_wire_rejects_is_refused_naming_the_field",
+        config,
+        &["--op", "link2", "--device", "sim:paper", "--duration", "1"],
+    );
+    said_once(&stderr, "the server cannot serve this scene");
+    let error = error_line(&stderr);
+    assert!(error.contains("welcome.") && error.contains("is outside"), "{error}");
+    assert!(!stderr.contains("internal error"), "{stderr}");
+    assert_eq!(stats.ve.core.users, 0);
+}

@@ -169,6 +169,11 @@ fn remedy(reason: &RefusalReason) -> Option<String> {
         RefusalReason::Device { .. } => {
             "try another --device, or leave --position-scale and --force-scale to the server".into()
         }
+        RefusalReason::Unservable { .. } => {
+            "ask the server's operator: the scene as written cannot be served (values outside the protocol's \
+             SI bounds often mean a scene in millimetres or grams)"
+                .into()
+        }
         RefusalReason::Malformed { .. } => return None,
     })
 }

@@ -17,7 +17,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 11] = [
+const WHICH: [Which; 12] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -28,6 +28,7 @@ const WHICH: [Which; 11] = [
     Which::One(Name::Renderability),
     Which::One(Name::RenderabilityLive),
     Which::One(Name::LatencyLive),
+    Which::One(Name::Robustness),
     Which::All,
 ];
 
@@ -65,6 +66,20 @@ pub struct ExperimentArgs {
     /// experiments take it: latency, latency-live, renderability, renderability-live.
     #[arg(long, value_name = "S")]
     pub seconds: Option<f64>,
+    /// The generator seeds `robustness` runs, a half-open range `A..B` (default its fixed CI sample).
+    #[arg(long, value_name = "A..B", value_parser = parse_seeds)]
+    pub seeds: Option<std::ops::Range<u64>>,
+}
+
+/// Parses `A..B` (A < B) into the seeds A to B-1.
+fn parse_seeds(text: &str) -> Result<std::ops::Range<u64>, String> {
+    let (a, b) = text.split_once("..").ok_or_else(|| format!("expected A..B (e.g. 1..101), got {text:?}"))?;
+    let number = |s: &str| s.trim().parse::<u64>().map_err(|e| format!("{s:?} in {text:?}: {e}"));
+    let (a, b) = (number(a)?, number(b)?);
+    if a >= b {
+        return Err(format!("{text:?} holds no seed (A must be below B)"));
+    }
+    Ok(a..b)
 }
 
 /// Longest session `--seconds` accepts (the latency grid's 864 points at this length are hours of simulation).
@@ -108,7 +123,10 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     };
     for name in names {
         eprintln!("experiment {}{} ...", name.as_str(), if args.quick { " (quick)" } else { "" });
-        let report = experiments::run(name, &options)?;
+        let report = match (name, &args.seeds) {
+            (Name::Robustness, Some(seeds)) => experiments::robustness::run_seeds(&options, seeds.clone())?,
+            _ => experiments::run(name, &options)?,
+        };
         println!(
             "{}: {} files in {} ({:.1} s)",
             report.name,

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod demo;
 pub mod experiment;
+pub mod generate;
 pub mod inspect;
 pub mod simulate;
 pub mod timer_floor;

@@ -11,6 +11,7 @@
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
 //! | [`renderability`] | does every shipped linkage render with default settings, on every device? (`renderability-live`: the same in real time) |
+//! | [`robustness`] | do generated linkages of every class, in any units, render with default settings under delay? |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
 //! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
@@ -26,6 +27,7 @@ pub mod model_update;
 pub mod paper;
 pub mod pauses;
 pub mod renderability;
+pub mod robustness;
 pub mod scale;
 pub mod speed_accuracy;
 pub mod stability;
@@ -59,11 +61,13 @@ pub enum Name {
     RenderabilityLive,
     /// Delay in real time: three scenes x two devices x four delays.
     LatencyLive,
+    /// Generated linkages with default settings.
+    Robustness,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 10] = [
+    pub const ALL: [Name; 11] = [
         Name::Paper,
         Name::SpeedAccuracy,
         Name::Stability,
@@ -74,6 +78,7 @@ impl Name {
         Name::Renderability,
         Name::RenderabilityLive,
         Name::LatencyLive,
+        Name::Robustness,
     ];
 
     /// What the experiment answers, in a line (the command line's help).
@@ -91,13 +96,17 @@ impl Name {
             Name::LatencyLive => {
                 "3 scenes x 2 devices x 100-1000 ms one way in real time over loopback QUIC (about 5 min)"
             }
+            Name::Robustness => "generated linkages (--seeds A..B) x OPs x devices x hands x 0-1000 ms one way",
         }
     }
 
     /// Whether `--seconds` sets its sessions' length: the experiments whose sessions are hands touring a
     /// linkage (the others sweep ticks, rates or sizes, whose lengths are part of what they measure).
     pub fn takes_seconds(self) -> bool {
-        matches!(self, Name::Latency | Name::LatencyLive | Name::Renderability | Name::RenderabilityLive)
+        matches!(
+            self,
+            Name::Latency | Name::LatencyLive | Name::Renderability | Name::RenderabilityLive | Name::Robustness
+        )
     }
 
     /// The name on the command line and of the output directory.
@@ -113,6 +122,7 @@ impl Name {
             Name::Renderability => "renderability",
             Name::RenderabilityLive => "renderability-live",
             Name::LatencyLive => "latency-live",
+            Name::Robustness => "robustness",
         }
     }
 }
@@ -130,5 +140,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
         Name::LatencyLive => latency_live::run(options),
+        Name::Robustness => robustness::run(options),
     }
 }

@@ -194,6 +194,7 @@ fn refused(r: &Refused) -> Result<(), DecodeError> {
         }
         RefusalReason::Malformed { what } => text(Field::at("refused.reason.what"), what),
         RefusalReason::Device { what } => text(Field::at("refused.reason.what"), what),
+        RefusalReason::Unservable { what } => text(Field::at("refused.reason.what"), what),
         RefusalReason::UnsupportedVersion { .. }
         | RefusalReason::BadToken
         | RefusalReason::ServerFull { .. }

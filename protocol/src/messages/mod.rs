@@ -357,6 +357,13 @@ pub enum RefusalReason {
         /// What was wrong with it.
         what: String,
     },
+    /// The server cannot serve this scene to this client: what it would send breaks the wire's checks (a
+    /// scene whose numbers the protocol's SI bounds do not carry, a non-finite term). Appended last, so the
+    /// other reasons keep their encoding.
+    Unservable {
+        /// What the server could not send, naming the field and its bound.
+        what: String,
+    },
 }
 
 impl fmt::Display for RefusalReason {
@@ -378,6 +385,7 @@ impl fmt::Display for RefusalReason {
             RefusalReason::RoleNotAllowed => f.write_str("that role is not allowed on this server"),
             RefusalReason::Device { what } => write!(f, "the device cannot join: {what}"),
             RefusalReason::Malformed { what } => write!(f, "the request was malformed: {what}"),
+            RefusalReason::Unservable { what } => write!(f, "the server cannot serve this scene: {what}"),
         }
     }
 }

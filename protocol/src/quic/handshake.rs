@@ -12,7 +12,7 @@ use quinn::{Connection, ConnectionError, Endpoint, Incoming, RecvStream, SendStr
 use super::framing::{recv_control, recv_frame, send_control, ControlStreamError};
 use super::trust::FingerprintMismatch;
 use crate::codec::{self, validate, DecodeError};
-use crate::messages::{Control, ErrorCode, Hello, Join, RefusalReason, Refused, SceneInfo, Welcome, PROTOCOL_VERSION};
+use crate::messages::{Control, Hello, Join, RefusalReason, Refused, SceneInfo, Welcome, PROTOCOL_VERSION};
 
 /// Longest a handshake (QUIC and Hello/Welcome) may take on either side.
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -297,11 +297,9 @@ where
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
         if let Err(error) = validate::welcome(&welcome) {
-            let internal =
-                Control::Error { code: ErrorCode::Internal, message: "the server failed to welcome you".into() };
-            // Best effort: the session is being abandoned either way.
-            let _ = send_control(&mut send, &internal).await;
-            connection.close(close_codes::PROTOCOL, b"internal error");
+            // The client is told why, as any refused client is; the server's caller logs the cause.
+            let reason = RefusalReason::Unservable { what: format!("its welcome would be invalid: {error}") };
+            refuse(&connection, send, Refused { reason, message: String::new() }).await;
             return Err(AcceptError::InvalidWelcome(error));
         }
         send_control(&mut send, &Control::Welcome(welcome.clone())).await?;

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
-    accept_with, close_codes, recv_control, send_control, AcceptedSession, DatagramReceiver, DatagramSender, Incoming,
-    Route,
+    accept_with, close_codes, recv_control, send_control, AcceptError, AcceptedSession, Connection, DatagramReceiver,
+    DatagramSender, Incoming, Route,
 };
 use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused};
 use rtrb::RingBuffer;
@@ -25,6 +25,17 @@ const LEAVE_LINGER: Duration = Duration::from_secs(1);
 
 fn refused(reason: RefusalReason) -> Refused {
     Refused { reason, message: String::new() }
+}
+
+/// Says why a handshake closed without a session, at a level matching whose doing it was: the server's own
+/// failure (a welcome its wire checks reject) is an error, a refusal or a broken handshake a warning, a
+/// client that chose to leave an information.
+fn log_handshake_end(remote: std::net::SocketAddr, error: &AcceptError) {
+    match error {
+        AcceptError::InvalidWelcome(_) => tracing::error!(%remote, %error, "handshake ended without a session"),
+        AcceptError::Declined(_) => tracing::info!(%remote, %error, "handshake ended without a session"),
+        _ => tracing::warn!(%remote, %error, "handshake ended without a session"),
+    }
 }
 
 /// Serves one incoming connection to its end.
@@ -59,7 +70,7 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
                 let _ = shared.gateway.commands.send(Command::Leave { user }).await;
             }
             // Never the hello itself: it carries the token.
-            tracing::info!(%remote, %error, "handshake ended without a session");
+            log_handshake_end(remote, &error);
             return;
         }
     };
