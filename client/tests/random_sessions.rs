@@ -9,7 +9,7 @@ mod support;
 
 use std::time::Duration;
 
-use kinloop_client::core::safety::{force_ratio, WrenchLimits};
+use kinloop_client::core::safety::force_ratio;
 use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm};
 use kinloop_client::device::{DevicePreset, DeviceState, HapticDevice, SimulatedRig};
 use kinloop_client::user::ConstantWrench;

@@ -34,12 +34,13 @@ use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::VeConfig;
 
-use super::common::{num, round, session, sweep, Options, Output};
+use super::common::{session, sweep, Options, Output};
 use super::renderability::{CLAMPED_BOUND, DEVICES, RMS_DELAYED_M, RMS_PERFECT_M};
 use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::generate::{generate, Class, Generated};
-use crate::harness::{ClientPlan, SessionPlan};
+use crate::rounding::{num, round};
+use kinloop_harness::{ClientPlan, SessionPlan};
 
 /// Largest closure error of a session, as a fraction of the scene's length scale.
 pub const CLOSURE_RELATIVE: f64 = 1e-6;

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
-    accept_with, close_codes, recv_control, send_control, AcceptError, AcceptedSession, Connection, DatagramReceiver,
+    accept_with, close_codes, recv_control, send_control, AcceptError, AcceptedSession, DatagramReceiver,
     DatagramSender, Incoming, Route,
 };
 use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused};
