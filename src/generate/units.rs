@@ -126,14 +126,14 @@ mod tests {
     use super::*;
     use kinloop_linkage::model::builtin;
 
-    /// The testbed in mm+g: link 1 is 45 mm long, weighs 1000 g and has 0.0021 kg m² = 2.1e9 g mm².
+    /// The testbed in mm+g: link 1 is 45 mm long, weighs 1000 g and has 0.0021 kg m² = 0.0021 × 1e3 g × 1e6 mm² = 2.1e6 g mm².
     #[test]
     fn the_testbed_in_millimetres_and_grams_has_the_hand_computed_numbers() {
         let si = builtin::scene("paper-testbed").expect("built in").expect("parses");
         let mm_g = UnitSystem { length: LengthUnit::Mm, mass: MassUnit::G }.rewrite(&si);
         assert_eq!(mm_g.bodies[0].mass, 1000.0);
         assert!((mm_g.bodies[0].com[0] - 22.5).abs() < 1e-12);
-        assert!((mm_g.bodies[0].inertia.as_slice()[0] - 2.1e9).abs() < 1e-3);
+        assert!((mm_g.bodies[0].inertia.as_slice()[0] - 2.1e6).abs() < 1e-6);
         assert!((mm_g.joints[1].origin[0] - 45.0).abs() < 1e-12);
         assert_eq!(mm_g.joints[1].q0, si.joints[1].q0, "angles keep their unit");
         assert_eq!(UnitSystem::SI.rewrite(&si), si);
