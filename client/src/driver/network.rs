@@ -15,8 +15,8 @@ use kinloop_protocol::quic::{
 use kinloop_protocol::{Hello, Join, LocalModelForm, Role, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION};
 
 use super::record::{self, TickRecord};
-use super::rt_loop::{self, LoopReport, LoopRings, LoopSettings, LoopShared};
-use super::session::{drain_reports, leave, send_uplinks, serve_session, Session};
+use super::rt_loop::{self, LoopRings, LoopSettings, LoopShared};
+use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, Session};
 use super::{ClientConfig, ClientError, NetShared};
 use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
 use crate::device::dhd::specs::ModelSpec;
@@ -31,15 +31,6 @@ pub(super) struct Started {
     pub(super) welcome: Welcome,
     pub(super) device: String,
     pub(super) gains: ControllerGains,
-}
-
-/// The network side's ends of the rings.
-pub(super) struct NetRings<S: Space> {
-    pub(super) snapshots: rtrb::Producer<kinloop_protocol::Snapshot>,
-    pub(super) spent_snapshots: rtrb::Consumer<kinloop_protocol::Snapshot>,
-    pub(super) cores: rtrb::Producer<Box<HapticCore<S>>>,
-    pub(super) spent_cores: rtrb::Consumer<Box<HapticCore<S>>>,
-    pub(super) reports: rtrb::Consumer<LoopReport>,
 }
 
 /// Longest a client waits for its closing connection to tell the server. A process that exits sooner sends

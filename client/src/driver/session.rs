@@ -9,9 +9,18 @@ use kinloop_linkage::math::space::Space;
 use kinloop_protocol::quic::{ConnectedSession, DatagramReceiver, DatagramSender};
 use kinloop_protocol::{Control, Datagram, Uplink, Welcome};
 
-use super::network::NetRings;
-use super::rt_loop::LoopShared;
+use super::rt_loop::{LoopReport, LoopShared};
 use super::NetShared;
+use crate::core::HapticCore;
+
+/// The network side's ends of the rings.
+pub(super) struct NetRings<S: Space> {
+    pub(super) snapshots: rtrb::Producer<kinloop_protocol::Snapshot>,
+    pub(super) spent_snapshots: rtrb::Consumer<kinloop_protocol::Snapshot>,
+    pub(super) cores: rtrb::Producer<Box<HapticCore<S>>>,
+    pub(super) spent_cores: rtrb::Consumer<Box<HapticCore<S>>>,
+    pub(super) reports: rtrb::Consumer<LoopReport>,
+}
 
 pub(super) fn drain_reports<S: Space>(rings: &mut NetRings<S>, net: &NetShared) {
     while let Ok(report) = rings.reports.pop() {
