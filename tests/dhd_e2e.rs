@@ -9,7 +9,6 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::time::Duration;
 
 use common::child::{listening, ChildProcess, Program, Role};
@@ -18,17 +17,6 @@ use common::child::{listening, ChildProcess, Program, Role};
 const OMEGA3_LIMIT_N: f64 = 12.0;
 /// The Falcon's (N).
 const FALCON_LIMIT_N: f64 = 8.9;
-
-/// The fake library cargo built for this test.
-fn fake_library() -> PathBuf {
-    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
-    let exe = std::env::current_exe().expect("the test binary's path");
-    let deps = exe.parent().expect("the test binary's folder");
-    let candidates = [deps.join(&name), deps.parent().map(|p| p.join(&name)).unwrap_or_default()];
-    candidates.iter().find(|p| p.is_file()).cloned().unwrap_or_else(|| {
-        panic!("the fake DHD library {name} is not in {candidates:?}: cargo builds it as a dev-dependency of kinloop")
-    })
-}
 
 /// What a client run left.
 struct Run {
@@ -67,6 +55,29 @@ impl Run {
 /// A server for `scene` and `kinloop-client --device DEVICE` against it for `seconds`, the fake configured by
 /// `env` (`KINLOOP_DHD_LIB` defaults to the fake).
 fn run_client(test: &'static str, scene: &str, device: &str, seconds: &str, env: &[(&str, String)]) -> Run {
+    run_client_signalled(test, scene, device, seconds, env, None)
+}
+
+/// A signal sent to the client mid-session, as a person or a service manager stops it.
+#[derive(Clone, Copy, Debug)]
+enum StopSignal {
+    Interrupt,
+    Terminate,
+}
+
+/// How long a signalled client may take to leave: its loop stops within a tick, its session within the
+/// network side's close.
+const EXIT_AFTER_SIGNAL: Duration = Duration::from_secs(5);
+
+/// [`run_client`], with `signal` sent to the client once the fake's forces are on (mid-session) when given.
+fn run_client_signalled(
+    test: &'static str,
+    scene: &str,
+    device: &str,
+    seconds: &str,
+    env: &[(&str, String)],
+    signal: Option<StopSignal>,
+) -> Run {
     let dir = common::temp_dir();
     let server_args = ["--scene", scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"].map(String::from).to_vec();
     let mut server =
@@ -75,7 +86,7 @@ fn run_client(test: &'static str, scene: &str, device: &str, seconds: &str, env:
         server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
     let record = dir.path().join("forces.txt");
     let mut vars = vec![
-        ("KINLOOP_DHD_LIB", fake_library().display().to_string()),
+        ("KINLOOP_DHD_LIB", common::fake_dhd_library().display().to_string()),
         ("FAKE_DHD_RECORD", record.display().to_string()),
     ];
     for (k, v) in env {
@@ -102,12 +113,38 @@ fn run_client(test: &'static str, scene: &str, device: &str, seconds: &str, env:
         "client",
         &vars,
     );
-    let status = client.exit_status(Duration::from_secs(40));
+    let status = match signal {
+        None => client.exit_status(Duration::from_secs(40)),
+        Some(signal) => {
+            wait_for_forces_on(&record, Duration::from_secs(30));
+            match signal {
+                StopSignal::Interrupt => client.interrupt(),
+                StopSignal::Terminate => client.terminate(),
+            }
+            // exit_status panics (with the client's log) when the client outlives the limit.
+            client.exit_status(EXIT_AFTER_SIGNAL)
+        }
+    };
     server.stop(Duration::from_secs(5));
     let stderr = client.log();
     assert!(!stderr.contains("panicked"), "{test}: the client panicked:\n{stderr}");
     let record = std::fs::read_to_string(&record).unwrap_or_default().lines().map(String::from).collect();
     Run { success: status.success(), stderr, record }
+}
+
+/// Returns once the fake's record shows forces enabled (`E 1`) and some forces commanded after; panics after `limit`.
+fn wait_for_forces_on(record: &std::path::Path, limit: Duration) {
+    let start = std::time::Instant::now();
+    loop {
+        let text = std::fs::read_to_string(record).unwrap_or_default();
+        if let Some(on) = text.find("\nE 1\n") {
+            if text[on..].lines().filter(|l| l.starts_with("F ")).count() > 20 {
+                return;
+            }
+        }
+        assert!(start.elapsed() < limit, "forces were not enabled within {limit:?}: {text}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// No force above `limit`, the watchdog armed before forces were enabled, and the device closed with zero
@@ -160,7 +197,7 @@ fn device_faults_leave_zero_force_from_the_tick_they_strike() {
         let max = run.forces().iter().map(|f| f.1).fold(0.0, f64::max);
         assert!(max > 0.1 && max <= OMEGA3_LIMIT_N, "{fault}: forces before it reach {max} N");
         // The reason, naming the device's library, is said once; the client's last line says it failed.
-        let library = fake_library().display().to_string();
+        let library = common::fake_dhd_library().display().to_string();
         let said = run.stderr.lines().filter(|l| l.contains("communication lost") && l.contains(&library)).count();
         assert_eq!(said, 1, "{fault}:\n{}", run.stderr);
         assert!(run.error_line().contains("the device failed"), "{fault}:\n{}", run.stderr);
@@ -186,7 +223,7 @@ fn bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure() {
     const NAME: &str = "bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure";
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
-    let fake = fake_library().display().to_string();
+    let fake = common::fake_dhd_library().display().to_string();
     let cases: [BadLibrary; 5] = [
         ("open fails", vec![("FAKE_DHD_FAULT", "open".into())], "cannot open device 0", fake.clone()),
         ("too old", vec![("FAKE_DHD_VERSION", "3.2.0".into())], "older than 3.14.0", fake.clone()),
@@ -216,4 +253,17 @@ fn bad_dhd_libraries_get_one_line_naming_the_library_and_a_failure() {
     let run = run_client(NAME, "paper-testbed", "dhd,sim:falcon", "1", &[("FAKE_DHD_FAULT", "open".into())]);
     assert!(run.success && run.stderr.contains("using sim:falcon as asked"), "fallback:\n{}", run.stderr);
     assert!(run.stderr.contains("with sim:falcon"), "fallback:\n{}", run.stderr);
+}
+
+#[test]
+fn ctrl_c_and_sigterm_release_a_dhd_device_with_zero_force() {
+    const NAME: &str = "ctrl_c_and_sigterm_release_a_dhd_device_with_zero_force";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(120));
+    for signal in [StopSignal::Interrupt, StopSignal::Terminate] {
+        // A duration far beyond the test's: only the signal can end this run.
+        let run = run_client_signalled(NAME, "paper-testbed", "dhd", "600", &[], Some(signal));
+        assert!(!run.stderr.contains("panicked"), "{signal:?}: the client panicked:\n{}", run.stderr);
+        assert_safe(&format!("{signal:?}"), &run, OMEGA3_LIMIT_N);
+    }
 }

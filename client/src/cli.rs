@@ -195,7 +195,6 @@ fn not_started(error: ClientError) -> anyhow::Error {
 
 fn run(args: Args) -> anyhow::Result<()> {
     let (config, json) = config(args)?;
-    let bounded = config.duration.is_some();
     let user = config.user.label();
     let client = Client::start(config).map_err(not_started)?;
     let (w, g) = (client.welcome(), client.gains());
@@ -218,20 +217,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         rounded(&w.coupling.damping),
     );
     let session = client.session_json();
-    let stats = if bounded {
-        client.wait()
-    } else {
-        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-        runtime.block_on(async {
-            loop {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => break,
-                    _ = tokio::time::sleep(Duration::from_millis(200)) => if client.is_finished() { break },
-                }
-            }
-        });
-        client.shutdown()
-    };
+    let stats = client.run_until_stopped();
     let core = stats.core.unwrap_or_default();
     let clamped = if core.active_ticks > 0 { core.clamped_ticks as f64 / core.active_ticks as f64 } else { 0.0 };
     let warning = (clamped > CLAMPED_WARNING).then(|| {

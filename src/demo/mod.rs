@@ -295,9 +295,8 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     let ctrl_c = options.ctrl_c.then(|| {
         let cancel = cancel.clone();
         runtime.spawn(async move {
-            if tokio::signal::ctrl_c().await.is_ok() {
-                cancel.store(true, Ordering::Relaxed);
-            }
+            kinloop_client::driver::stop_signal::stop_requested().await;
+            cancel.store(true, Ordering::Relaxed);
         })
     });
     let clients = match start_clients(options, &server, &dir, ve_epoch) {

@@ -277,9 +277,18 @@ impl ChildProcess {
 
     /// SIGINT, what Ctrl-C in its terminal sends.
     pub fn interrupt(&self) {
+        self.signal("INT");
+    }
+
+    /// SIGTERM, what `kill PID`, systemd and container runtimes send.
+    pub fn terminate(&self) {
+        self.signal("TERM");
+    }
+
+    fn signal(&self, name: &str) {
         let pid = self.child.id().to_string();
-        let sent = Command::new("kill").args(["-INT", &pid]).status().expect("kill runs");
-        assert!(sent.success(), "kill -INT {pid} failed");
+        let sent = Command::new("kill").args([&format!("-{name}"), &pid]).status().expect("kill runs");
+        assert!(sent.success(), "kill -{name} {pid} failed");
     }
 
     /// SIGKILL: the process vanishes without a word. Returns when it is gone.

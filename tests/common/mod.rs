@@ -88,3 +88,15 @@ pub fn temp_dir() -> tempfile::TempDir {
     std::fs::create_dir_all(base).expect("target tmp dir");
     tempfile::Builder::new().prefix("e2e-").tempdir_in(base).expect("temp dir")
 }
+
+/// The fake DHD library (`fakes/fake-dhd`) cargo built beside this test's binary: a dev-dependency of
+/// kinloop, so always there under `cargo test`; panics (never skips) when it is not.
+pub fn fake_dhd_library() -> std::path::PathBuf {
+    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let deps = exe.parent().expect("the test binary's folder");
+    let candidates = [deps.join(&name), deps.parent().map(|p| p.join(&name)).unwrap_or_default()];
+    candidates.iter().find(|p| p.is_file()).cloned().unwrap_or_else(|| {
+        panic!("the fake DHD library {name} is not in {candidates:?}: cargo builds it as a dev-dependency of kinloop")
+    })
+}

@@ -12,6 +12,7 @@ mod network;
 pub mod record;
 pub mod rt_loop;
 mod session;
+pub mod stop_signal;
 pub mod timing;
 
 use std::net::{SocketAddr, ToSocketAddrs};
@@ -352,10 +353,31 @@ impl ClientHandle {
         self.started.elapsed()
     }
 
-    /// Waits for the loop to end by itself (its duration), then stops everything.
-    pub fn wait(mut self) -> ClientStats {
-        if let Some(t) = self.loop_thread.take() {
-            self.finish_with(t.join().ok());
+    /// Runs until the loop ends by itself (its duration, a lost device, a fatal error) or SIGINT/SIGTERM
+    /// arrives ([`stop_signal::stop_requested`]), then stops everything through [`Self::shutdown`], so the
+    /// device is commanded zero force and released however the run ends. Without a runtime for the signals
+    /// (an OS failure, said once) it waits for the loop alone.
+    pub fn run_until_stopped(self) -> ClientStats {
+        match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+            Ok(runtime) => runtime.block_on(async {
+                let mut signal = std::pin::pin!(stop_signal::stop_requested());
+                let mut poll = tokio::time::interval(Duration::from_millis(50));
+                while !self.is_finished() {
+                    tokio::select! {
+                        _ = &mut signal => {
+                            tracing::info!("asked to stop: zeroing the force and releasing the device");
+                            break;
+                        }
+                        _ = poll.tick() => {}
+                    }
+                }
+            }),
+            Err(e) => {
+                tracing::warn!("no runtime to handle Ctrl-C ({e}); running to the loop's end");
+                while !self.is_finished() {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
         }
         self.shutdown()
     }
