@@ -42,6 +42,9 @@ enum Command {
     TimerFloor(cli::timer_floor::TimerFloorArgs),
     /// Write the seeded, reproducible linkage of a seed as a scene file (any class, any unit system).
     Generate(cli::generate::GenerateArgs),
+    /// The haptic devices kinloop can drive here: vendor libraries found (or where it looked), each device's
+    /// model and spec; --check reads positions for a second with forces off.
+    Devices(cli::devices::DevicesArgs),
     /// Replay a recording (a server's or a client's --record CSV) in a web page with a timeline slider.
     View(cli::view::ViewArgs),
 }
@@ -62,5 +65,6 @@ fn run(cli: &Cli) -> Result<()> {
         Command::TimerFloor(a) => cli::timer_floor::run(a),
         Command::View(a) => cli::view::run(a),
         Command::Generate(a) => cli::generate::run(a),
+        Command::Devices(a) => cli::devices::run(a),
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod demo;
+pub mod devices;
 pub mod experiment;
 pub mod generate;
 pub mod inspect;

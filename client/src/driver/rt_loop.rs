@@ -251,12 +251,24 @@ impl Ticker {
 /// and whether SCHED_FIFO was granted.
 pub fn timer_floor(rate_hz: f64, duration: Duration, realtime_priority: bool) -> (LatenessSummary, bool) {
     let fifo = realtime_priority && try_realtime_priority().is_ok();
+    (paced(rate_hz, duration, |_| {}), fifo)
+}
+
+/// Calls `tick` (with the time since the start) at `rate_hz` for `duration` on the loop's own clock (absolute
+/// deadlines, spin_sleep), as [`run`] paces the haptic loop; returns the ticks' lateness. For work outside a
+/// session that must run at the loop's rate, such as `kinloop devices --check` reading a device.
+pub fn paced(rate_hz: f64, duration: Duration, mut tick: impl FnMut(Duration)) -> LatenessSummary {
     let lateness = LatenessHistogram::default();
     let mut ticker = Ticker::new(rate_hz, true);
-    while ticker.wait(&lateness) < duration {
+    loop {
+        let now = ticker.wait(&lateness);
+        if now >= duration {
+            break;
+        }
+        tick(now);
         ticker.advance();
     }
-    (lateness.summary(), fifo)
+    lateness.summary()
 }
 
 fn zero<S: Space>() -> S::OpVec {
