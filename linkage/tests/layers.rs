@@ -3,7 +3,8 @@
 //! within a crate; Cargo already keeps the crates themselves in order: linkage < protocol < server, client <
 //! the root crate).
 //!
-//! Each crate declares its ranks below ([`LINKAGE`], [`PROTOCOL`], [`SERVER`], [`CLIENT`], [`ROOT`]): a
+//! Each crate declares its ranks below ([`LINKAGE`], [`PROTOCOL`], [`PROCESS`], [`SERVER`], [`CLIENT`], [`HARNESS`],
+//! [`FAKE_DHD`], [`ROOT`]): a
 //! top-level module's rank, everything undeclared (`lib`, `bench`, `cli`) at the crate's top. A file may use
 //! modules of its own rank or below. Paths are resolved as the compiler would: `use` trees (groups, nesting,
 //! `self`, `as`), paths written in code, `$crate`, chains of `super::` counted from the file's module and any
@@ -25,12 +26,23 @@ struct Layers {
 const LINKAGE: Layers =
     Layers { dir: "linkage/src", ranks: &[("error", 0), ("math", 1), ("model", 2), ("algorithms", 3), ("testing", 3)] };
 
-/// The wire's shapes and messages < their codec and the link emulator < the QUIC transport; the real-time
-/// helpers and reports stand alone.
+/// The wire's shapes, a device's wrench limits and the energy books < the messages and their codec (the
+/// messages' golden bytes are checked through it) < the link emulator < the QUIC transport.
 const PROTOCOL: Layers = Layers {
     dir: "protocol/src",
-    ranks: &[("realtime", 0), ("report", 0), ("shape", 0), ("messages", 1), ("codec", 2), ("emulator", 2), ("quic", 3)],
+    ranks: &[
+        ("shape", 0),
+        ("wrench_limits", 0),
+        ("passivity", 0),
+        ("messages", 1),
+        ("codec", 1),
+        ("emulator", 2),
+        ("quic", 3),
+    ],
 };
+
+/// What the programs ask of the operating system: real-time priority and reports, side by side.
+const PROCESS: Layers = Layers { dir: "process/src", ranks: &[("realtime", 0), ("report", 0)] };
 
 /// The sans-IO VE and access control < the gateway the driver and the view share < the view < the driver.
 const SERVER: Layers =
@@ -40,11 +52,26 @@ const SERVER: Layers =
 const CLIENT: Layers =
     Layers { dir: "client/src", ranks: &[("axes", 0), ("device", 1), ("core", 2), ("user", 3), ("driver", 4)] };
 
-/// Scene arguments < the virtual-time harness < charts < experiments and the demo < the command line.
+/// Scene arguments and number rounding < the linkage generator < charts < experiments and the demo < the
+/// command line.
 const ROOT: Layers = Layers {
     dir: "src",
-    ranks: &[("scene_arg", 0), ("harness", 1), ("charts", 2), ("experiments", 3), ("demo", 3), ("cli", 4)],
+    ranks: &[
+        ("scene_arg", 0),
+        ("rounding", 0),
+        ("generate", 1),
+        ("charts", 2),
+        ("experiments", 3),
+        ("demo", 3),
+        ("cli", 4),
+    ],
 };
+
+/// The virtual-time harness: its tick records below the session runner.
+const HARNESS: Layers = Layers { dir: "harness/src", ranks: &[("record", 0)] };
+
+/// The fake DHD library: its plant below the exported C functions.
+const FAKE_DHD: Layers = Layers { dir: "fakes/fake-dhd/src", ranks: &[("plant", 0)] };
 
 /// The rank of a module path (its top-level segment) in `layers`.
 fn rank(layers: &Layers, module: &[String]) -> usize {
@@ -638,6 +665,20 @@ fn no_file_of_the_root_crate_uses_a_layer_above_its_own() {
 #[test]
 fn no_import_circle_in_the_root_crate() {
     assert_no_import_circle(&ROOT);
+}
+
+#[test]
+fn no_file_of_the_process_harness_or_fake_dhd_crates_uses_a_layer_above_its_own() {
+    for layers in [&PROCESS, &HARNESS, &FAKE_DHD] {
+        assert_layers_point_down(layers);
+    }
+}
+
+#[test]
+fn no_import_circle_in_the_process_harness_or_fake_dhd_crates() {
+    for layers in [&PROCESS, &HARNESS, &FAKE_DHD] {
+        assert_no_import_circle(layers);
+    }
 }
 
 /// The checker itself: a small fake crate with one use of each kind that must be caught, and the uses

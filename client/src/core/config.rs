@@ -5,6 +5,16 @@ use std::time::Duration;
 
 use crate::device::DeviceSpec;
 
+/// The free directions' pull toward the VE takes at least this many round trips as its time constant.
+///
+/// Along the free directions the VE follows the model, a one-way delay late, so what that pull corrects comes
+/// back a round trip `T` later. A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`; compared
+/// with the VE's state predicted to now (not with the model's own state that the VE answered) the pull is
+/// far from that bound, and `τ ≥ 2 T` keeps the margin the bound asks for anyway (crossover at `1/τ` with at
+/// most `T/τ` = 0.5 rad of delay phase). Slower only means the model and the VE part for longer before they
+/// meet again (`latency` experiment).
+pub const FREE_BLEND_PER_ROUND_TRIP: f64 = 2.0;
+
 /// How the joint-constraint controller renders the constrained directions (paper section VI).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -208,7 +218,7 @@ pub struct CoreConfig {
     /// `free_blend_round_trips` round trips.
     pub free_blend_time_constant: Duration,
     /// The free directions' pull takes at least this many round trips as its time constant
-    /// ([`FREE_BLEND_PER_ROUND_TRIP`](super::FREE_BLEND_PER_ROUND_TRIP) by default, see there); 0 leaves
+    /// ([`FREE_BLEND_PER_ROUND_TRIP`](FREE_BLEND_PER_ROUND_TRIP) by default, see there); 0 leaves
     /// `free_blend_time_constant` as it is at every delay.
     pub free_blend_round_trips: f64,
     /// Pay the pull toward the VE from an energy tank that only the coupling's dampers fill, so the model's
@@ -252,7 +262,7 @@ impl CoreConfig {
             period: Duration::from_millis(1),
             blend_time_constant: Duration::from_millis(20),
             free_blend_time_constant: Duration::from_millis(200),
-            free_blend_round_trips: super::FREE_BLEND_PER_ROUND_TRIP,
+            free_blend_round_trips: FREE_BLEND_PER_ROUND_TRIP,
             passive_update: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,

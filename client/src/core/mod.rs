@@ -56,7 +56,7 @@ use kinloop_protocol::{SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
     ConstraintMode, ConstraintWeighting, ControllerGains, CoreConfig, GainChoice, ModelForm, SafetyConfig,
-    UplinkDeadband,
+    UplinkDeadband, FREE_BLEND_PER_ROUND_TRIP,
 };
 pub use error::CoreError;
 pub use gains::ResolvedGains;
@@ -78,16 +78,6 @@ use safety::{usable_state, OutputGate, WrenchLimits};
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
-
-/// The free directions' pull toward the VE takes at least this many round trips as its time constant.
-///
-/// Along the free directions the VE follows the model, a one-way delay late, so what that pull corrects comes
-/// back a round trip `T` later. A correction `ẋ = −x(t − T) / τ` is stable only for `T < π τ / 2`; compared
-/// with the VE's state predicted to now (not with the model's own state that the VE answered) the pull is
-/// far from that bound, and `τ ≥ 2 T` keeps the margin the bound asks for anyway (crossover at `1/τ` with at
-/// most `T/τ` = 0.5 rad of delay phase). Slower only means the model and the VE part for longer before they
-/// meet again (`latency` experiment).
-pub const FREE_BLEND_PER_ROUND_TRIP: f64 = 2.0;
 
 /// The haptic core of one session (see the module documentation).
 pub struct HapticCore<S: Space> {

@@ -8,6 +8,7 @@
 //! When the server goes away the loop keeps running: its snapshots age, the core fades the force out, and
 //! a new session's core (re-indexed to the new first snapshot) is handed over when the client reconnects.
 
+mod config;
 mod network;
 pub mod record;
 pub mod rt_loop;
@@ -16,145 +17,21 @@ pub mod stop_signal;
 pub mod timing;
 
 use std::net::{SocketAddr, ToSocketAddrs};
-use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::atomic::Ordering;
+use std::sync::{mpsc, Arc};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use kinloop_protocol::emulator::LinkConfig;
-use kinloop_protocol::quic::{ConnectError, EndpointError, Trust};
-use kinloop_protocol::{MappingRequest, Welcome};
+use kinloop_protocol::Welcome;
 
-use crate::core::{ConstraintMode, ControllerGains, CoreError, CoreStats, GainChoice, ModelForm, UplinkDeadband};
-use crate::device::dhd::{DhdError, DhdLibrary, OpenedDhd};
-use crate::device::presets::SimulatedDeviceBuildError;
-use crate::device::{DevicePreset, DhdRequest};
-use crate::user::{UserError, UserSpec};
+use crate::core::{ControllerGains, CoreStats};
+use crate::device::dhd::{DhdLibrary, OpenedDhd};
+pub use config::{ClientConfig, ClientError};
 pub use network::choose;
 use network::network_thread;
 use rt_loop::{LoopReport, LoopShared};
+use session::NetShared;
 use timing::LatenessSummary;
-
-/// Everything a client needs.
-#[derive(Clone, Debug)]
-pub struct ClientConfig {
-    /// `host:port` of the server.
-    pub server: String,
-    /// Name the server's certificate must carry (with `Trust::CaFile`).
-    pub server_name: String,
-    /// Shared secret.
-    pub token: String,
-    /// How the server is trusted.
-    pub trust: Trust,
-    /// Operational point to hold; `None`: the scene's first.
-    pub op: Option<String>,
-    /// The simulated device; `None`: the one for the scene's space ([`DevicePreset::for_kind`]).
-    pub device: Option<DevicePreset>,
-    /// A Force Dimension device through the DHD SDK instead of the simulated one (`--device dhd`).
-    pub dhd: Option<DhdRequest>,
-    /// The simulated user.
-    pub user: UserSpec,
-    /// What to ask of the mapping between device and VE (scales, gravity compensation).
-    pub mapping: MappingRequest,
-    /// Loop rate (Hz).
-    pub rate_hz: f64,
-    /// Stop after this long (None: until shutdown).
-    pub duration: Option<Duration>,
-    /// Joint-constraint rendering.
-    pub constraint_mode: ConstraintMode,
-    /// Local model form.
-    pub form: ModelForm,
-    /// Gains.
-    pub gains: GainChoice,
-    /// Uplink deadband.
-    pub deadband: Option<UplinkDeadband>,
-    /// Emulated impairments on what this client sends.
-    pub link: Option<LinkConfig>,
-    /// CSV file, one row per tick.
-    pub record: Option<PathBuf>,
-    /// Try SCHED_FIFO for the loop.
-    pub realtime_priority: bool,
-    /// Spin before each deadline (see `rt_loop::LoopSettings::busy_wait`); false for many clients on a
-    /// small machine.
-    pub busy_wait: bool,
-    /// Name for the server's logs.
-    pub client_name: String,
-    /// Interval of the periodic timing log.
-    pub report_interval: Duration,
-}
-
-impl ClientConfig {
-    /// Defaults: the scene's first operational point, the device for the scene's space, a relaxed hand
-    /// touring the reach, the server's mapping, 1 kHz, stiffness mode, reduced local model, designed gains.
-    pub fn new(server: impl Into<String>, trust: Trust) -> Self {
-        ClientConfig {
-            server: server.into(),
-            server_name: "localhost".into(),
-            token: String::new(),
-            trust,
-            op: None,
-            device: None,
-            dhd: None,
-            user: UserSpec::soft_hand(),
-            mapping: MappingRequest::default(),
-            rate_hz: 1000.0,
-            duration: None,
-            constraint_mode: ConstraintMode::Stiffness,
-            form: ModelForm::Op,
-            gains: GainChoice::Designed,
-            deadband: None,
-            link: None,
-            record: None,
-            realtime_priority: true,
-            busy_wait: true,
-            client_name: "kinloop-client".into(),
-            report_interval: Duration::from_secs(5),
-        }
-    }
-}
-
-/// Why a client could not start or run.
-#[derive(Debug, thiserror::Error)]
-pub enum ClientError {
-    /// The server address does not resolve.
-    #[error("server address {address:?}: {why}")]
-    Address {
-        /// As given.
-        address: String,
-        /// Why.
-        why: String,
-    },
-    /// A setting out of range.
-    #[error("{0}")]
-    Setting(String),
-    /// The QUIC endpoint could not be made.
-    #[error(transparent)]
-    Endpoint(#[from] EndpointError),
-    /// The first connection failed.
-    #[error("cannot connect to {server}: {source}")]
-    Connect {
-        /// The server.
-        server: String,
-        /// Why.
-        source: ConnectError,
-    },
-    /// The device cannot serve the scene.
-    #[error(transparent)]
-    Device(#[from] SimulatedDeviceBuildError),
-    /// The DHD library or device cannot be used.
-    #[error(transparent)]
-    Dhd(#[from] DhdError),
-    /// The user cannot be built.
-    #[error(transparent)]
-    User(#[from] UserError),
-    /// The core refused the session.
-    #[error("the session cannot be rendered: {0}")]
-    Core(#[from] CoreError),
-    /// A thread or runtime could not start.
-    #[error("cannot start the client: {0}")]
-    Runtime(String),
-}
 
 /// What a client has measured.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
@@ -211,17 +88,6 @@ impl ClientStats {
             "device_lost": self.device_lost,
         })
     }
-}
-
-/// Counters the network side keeps.
-#[derive(Debug, Default)]
-struct NetShared {
-    snapshots_received: AtomicU64,
-    uplinks_sent: AtomicU64,
-    reconnects: AtomicU64,
-    rtt_ms: Mutex<Vec<f64>>,
-    last_report: Mutex<Option<LoopReport>>,
-    fatal: Mutex<Option<String>>,
 }
 
 /// A running client.

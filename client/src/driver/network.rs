@@ -14,10 +14,10 @@ use kinloop_protocol::quic::{
 };
 use kinloop_protocol::{Hello, Join, LocalModelForm, Role, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION};
 
+use super::config::{ClientConfig, ClientError};
 use super::record::{self, TickRecord};
 use super::rt_loop::{self, LoopRings, LoopSettings, LoopShared};
-use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, Session};
-use super::{ClientConfig, ClientError, NetShared};
+use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, NetShared, Session};
 use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
 use crate::device::dhd::specs::ModelSpec;
 use crate::device::dhd::OpenedDhd;

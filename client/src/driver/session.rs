@@ -1,7 +1,7 @@
 //! One live session on the network thread: its control stream, the snapshots it receives for the haptic
 //! loop, the loop's reports it logs, and the uplink sender thread that sends what the loop produces.
 
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -10,8 +10,18 @@ use kinloop_protocol::quic::{ConnectedSession, DatagramReceiver, DatagramSender}
 use kinloop_protocol::{Control, Datagram, Uplink, Welcome};
 
 use super::rt_loop::{LoopReport, LoopShared};
-use super::NetShared;
 use crate::core::HapticCore;
+
+/// Counters the network side keeps.
+#[derive(Debug, Default)]
+pub(super) struct NetShared {
+    pub(super) snapshots_received: AtomicU64,
+    pub(super) uplinks_sent: AtomicU64,
+    pub(super) reconnects: AtomicU64,
+    pub(super) rtt_ms: Mutex<Vec<f64>>,
+    pub(super) last_report: Mutex<Option<LoopReport>>,
+    pub(super) fatal: Mutex<Option<String>>,
+}
 
 /// The network side's ends of the rings.
 pub(super) struct NetRings<S: Space> {

@@ -32,7 +32,7 @@ use crate::shape::{SceneKind, SessionShape};
 
 /// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
 /// landing that changes the wire (see the module documentation).
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
 /// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.

@@ -14,9 +14,8 @@ use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::frames;
-use super::library::DhdLibrary;
+use super::library::{DhdError, DhdLibrary};
 use super::specs::{self, ModelSpec};
-use super::DhdError;
 use crate::device::{DeviceError, DeviceSpec, DeviceState, HapticDevice};
 
 /// Time over which forces ramp from zero to full after they are enabled or after a stall (s).
