@@ -6,8 +6,8 @@
 //! the change, or write new vectors here and bump [`PROTOCOL_VERSION`] (once per landing, see the module
 //! documentation of [`crate::messages`]).
 
-use crate::codec::{self, decode_control, decode_datagram, encode_control, encode_datagram};
 use super::*;
+use crate::codec::{self, decode_control, decode_datagram, encode_control, encode_datagram};
 use crate::shape::{SceneKind, SessionShape};
 
 fn unhex(parts: &[&str]) -> Vec<u8> {
