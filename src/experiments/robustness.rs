@@ -166,10 +166,10 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
     let Some(c) = summary.clients.first() else { return refused("the session had no client".into()) };
     let closure_relative = summary.max_closure_error / scale;
     let mut failures: Vec<String> = verdict.reasons.iter().map(|r| format!("unstable: {r}")).collect();
-    if !(closure_relative <= CLOSURE_RELATIVE) {
+    if closure_relative.is_nan() || closure_relative > CLOSURE_RELATIVE {
         failures.push(format!("closure: {closure_relative:.1e} of the length scale"));
     }
-    if !(c.saturated_fraction <= CLAMPED_BOUND) {
+    if c.saturated_fraction.is_nan() || c.saturated_fraction > CLAMPED_BOUND {
         failures.push(format!("saturation: {:.1} % clamped", c.saturated_fraction * 100.0));
     }
     let rms_bound = match point.delay_ms {
@@ -177,7 +177,7 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
         d if d <= 50 => RMS_DELAYED_M,
         _ => UNHEARD_FACTOR * c.device_unheard_rms_m,
     };
-    if !(c.device_op_rms_m <= rms_bound) {
+    if c.device_op_rms_m.is_nan() || c.device_op_rms_m > rms_bound {
         failures.push(format!("tracking: RMS {:.1} mm > {:.1} mm", c.device_op_rms_m * 1e3, rms_bound * 1e3));
     }
     Outcome {

@@ -285,7 +285,7 @@ fn decorate(rng: &mut TestRng, scene: &mut Scene, size: f64) -> Vec<&'static str
                 vec![g * angle.cos(), g * angle.sin()]
             }
             SceneKind::Spatial => {
-                let (az, el) = (uniform(rng, -3.14, 3.14), uniform(rng, -1.5, 1.5));
+                let (az, el) = (uniform(rng, -std::f64::consts::PI, std::f64::consts::PI), uniform(rng, -1.5, 1.5));
                 vec![g * el.cos() * az.cos(), g * el.cos() * az.sin(), g * el.sin()]
             }
         };

@@ -300,8 +300,8 @@ async fn run<S: Space>(
     let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
 }
 
-/// A session's device and haptic core.
-type RigAndCore<S> = (Box<dyn HapticDevice<S>>, Box<HapticCore<S>>);
+/// A session's device (whichever kind) and its haptic core.
+type DeviceAndCore<S> = (Box<dyn HapticDevice<S>>, Box<HapticCore<S>>);
 
 /// The device (an opened DHD device, or the simulated rig whose hand grasps the handle where the linkage is)
 /// and the core for a session.
@@ -309,7 +309,7 @@ fn rig_and_core<S: Space>(
     config: &ClientConfig,
     dhd: Option<OpenedDhd>,
     welcome: &Welcome,
-) -> Result<RigAndCore<S>, ClientError> {
+) -> Result<DeviceAndCore<S>, ClientError> {
     let core = core_for::<S>(config, dhd.as_ref().map(OpenedDhd::model), welcome)?;
     if let Some(dhd) = dhd {
         return Ok((Box::new(dhd.into_device::<S>()), core));
