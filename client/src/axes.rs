@@ -1,19 +1,4 @@
-//! Names of operational axes, shared by the CSV recorder and the replay user so a recording replays as is.
+//! Names of operational axes, shared by the CSV recorder and the replay user so a recording replays as is
+//! (the record crate owns them, with the rest of the record's columns).
 
-use kinloop_linkage::math::space::SceneKind;
-
-/// Pose components: planar `x, y, theta`; spatial `x, y, z, qw, qx, qy, qz`.
-pub fn pose_names(kind: SceneKind) -> &'static [&'static str] {
-    match kind {
-        SceneKind::Planar => &["x", "y", "theta"],
-        SceneKind::Spatial => &["x", "y", "z", "qw", "qx", "qy", "qz"],
-    }
-}
-
-/// Wrench components: planar `fx, fy, tz`; spatial `fx, fy, fz, tx, ty, tz`.
-pub fn wrench_names(kind: SceneKind) -> &'static [&'static str] {
-    match kind {
-        SceneKind::Planar => &["fx", "fy", "tz"],
-        SceneKind::Spatial => &["fx", "fy", "fz", "tx", "ty", "tz"],
-    }
-}
+pub use kinloop_record::axes::{pose_names, wrench_names};

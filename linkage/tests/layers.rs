@@ -1,12 +1,11 @@
 //! Every crate's layers point one way and no file is part of an import circle. Read from the sources, tests
 //! included, so that a convenient import cannot quietly bend the layering (the compiler accepts any direction
-//! within a crate; Cargo already keeps the crates themselves in order: linkage < protocol < server, client <
-//! the root crate).
+//! within a crate; Cargo already keeps the crates themselves in order: linkage < protocol, record < server,
+//! client < harness < the root crate).
 //!
-//! Each crate declares its ranks below ([`LINKAGE`], [`PROTOCOL`], [`PROCESS`], [`SERVER`], [`CLIENT`], [`HARNESS`],
-//! [`FAKE_DHD`], [`ROOT`]): a
-//! top-level module's rank, everything undeclared (`lib`, `bench`, `cli`) at the crate's top. A file may use
-//! modules of its own rank or below. Paths are resolved as the compiler would: `use` trees (groups, nesting,
+//! Each crate declares its ranks below ([`LINKAGE`], [`PROTOCOL`], [`PROCESS`], [`RECORD`], [`SERVER`],
+//! [`CLIENT`], [`HARNESS`], [`FAKE_DHD`], [`ROOT`]): a top-level module's rank, everything undeclared (`lib`,
+//! `bench`, `cli`) at the crate's top. A file may use modules of its own rank or below. Paths are resolved as the compiler would: `use` trees (groups, nesting,
 //! `self`, `as`), paths written in code, `$crate`, chains of `super::` counted from the file's module and any
 //! inline `mod` it sits in, paths relative to a module's own children, and every module's `pub use`
 //! re-exports, globs included (`crate::kinematics` is `crate::algorithms::kinematics`), so that a re-export
@@ -43,6 +42,10 @@ const PROTOCOL: Layers = Layers {
 
 /// What the programs ask of the operating system: real-time priority and reports, side by side.
 const PROCESS: Layers = Layers { dir: "process/src", ranks: &[("realtime", 0), ("report", 0)] };
+
+/// The record files: axis names and row types < the columns < the writer and the reader.
+const RECORD: Layers =
+    Layers { dir: "record/src", ranks: &[("axes", 0), ("rows", 0), ("schema", 1), ("write", 2), ("read", 2)] };
 
 /// The sans-IO VE and access control < the gateway the driver and the view share < the view < the driver.
 const SERVER: Layers =
@@ -668,15 +671,15 @@ fn no_import_circle_in_the_root_crate() {
 }
 
 #[test]
-fn no_file_of_the_process_harness_or_fake_dhd_crates_uses_a_layer_above_its_own() {
-    for layers in [&PROCESS, &HARNESS, &FAKE_DHD] {
+fn no_file_of_the_process_record_harness_or_fake_dhd_crates_uses_a_layer_above_its_own() {
+    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD] {
         assert_layers_point_down(layers);
     }
 }
 
 #[test]
-fn no_import_circle_in_the_process_harness_or_fake_dhd_crates() {
-    for layers in [&PROCESS, &HARNESS, &FAKE_DHD] {
+fn no_import_circle_in_the_process_record_harness_or_fake_dhd_crates() {
+    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD] {
         assert_no_import_circle(layers);
     }
 }

@@ -1,7 +1,10 @@
 //! The CSV recordings of planar sessions, read back by column name: the client's one row per haptic tick
-//! (`kinloop-client --record`) and the server's one row per VE step (`kinloop-server --record`).
+//! (`kinloop-client --record`) and the server's one row per VE step (`kinloop-server --record`), read by the
+//! record crate and kept to what the tests compare.
 
 use std::path::Path;
+
+use kinloop_linkage::math::space::SceneKind;
 
 /// One haptic tick.
 #[derive(Clone, Copy, Debug)]
@@ -40,66 +43,38 @@ pub struct Step {
     pub users: Vec<UserStep>,
 }
 
-fn read(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines();
-    let header = lines.next().unwrap_or_default().split(',').map(str::to_owned).collect();
-    let rows = lines
-        .enumerate()
-        .map(|(i, line)| {
-            line.split(',')
-                .map(|v| {
-                    v.parse().unwrap_or_else(|_| panic!("{} line {}: {v:?} is not a number", path.display(), i + 2))
-                })
-                .collect()
-        })
-        .collect();
-    (header, rows)
-}
-
-fn column(header: &[String], name: &str, path: &Path) -> usize {
-    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("{}: no column {name}", path.display()))
-}
-
-fn three(row: &[f64], first: usize) -> [f64; 3] {
-    [row[first], row[first + 1], row[first + 2]]
-}
-
 /// A client's recording.
 pub fn client_ticks(path: &Path) -> Vec<Tick> {
-    let (header, rows) = read(path);
-    let col = |name| column(&header, name, path);
-    let (t, device, command, age, gain) =
-        (col("time_s"), col("device_x"), col("cmd_fx"), col("snapshot_age_s"), col("gain"));
+    let rows = kinloop_record::read::read_client(path, SceneKind::Planar).unwrap_or_else(|e| panic!("{e}"));
     rows.iter()
         .map(|r| Tick {
-            t: r[t],
-            device: three(r, device),
-            command: three(r, command),
-            snapshot_age: r[age],
-            gain: r[gain],
+            t: r.time_s,
+            device: first_three(&r.device_pose),
+            command: first_three(&r.command),
+            snapshot_age: r.snapshot_age_s,
+            gain: r.gain,
         })
         .collect()
 }
 
 /// A server's recording.
 pub fn ve_steps(path: &Path) -> Vec<Step> {
-    let (header, rows) = read(path);
-    let col = |name| column(&header, name, path);
-    let (t, closure, users, first_group) = (col("t_s"), col("closure_error_m"), col("users"), col("user_id"));
-    let group = col("constraint_count") + 1 - first_group;
+    let (_, rows) = kinloop_record::read::read_ve(path, SceneKind::Planar).unwrap_or_else(|e| panic!("{e}"));
     rows.iter()
         .map(|r| Step {
-            t: r[t],
-            closure_error: r[closure],
-            users: (0..r[users] as usize)
-                .map(|u| {
-                    let g = first_group + u * group;
-                    UserStep { user_id: r[g] as u32, op: three(r, g + 1), wrench: three(r, g + 4) }
-                })
+            t: r.t_s,
+            closure_error: r.closure_error,
+            users: r
+                .users
+                .iter()
+                .map(|u| UserStep { user_id: u.user_id, op: first_three(&u.op_pose), wrench: first_three(&u.wrench) })
                 .collect(),
         })
         .collect()
+}
+
+fn first_three(v: &[f64]) -> [f64; 3] {
+    [v[0], v[1], v[2]]
 }
 
 /// Linear magnitude of a planar wrench or pose difference.

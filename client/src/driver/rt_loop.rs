@@ -184,7 +184,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
             }
         }
         if let Some(records) = rings.records.as_mut() {
-            if records.push(TickRecord::of(out.report)).is_err() {
+            if records.push(super::record::tick_record(out.report)).is_err() {
                 shared.records_dropped.fetch_add(1, Ordering::Relaxed);
             }
         }

@@ -4,11 +4,10 @@
 //! `t_s, step, q_0.., qd_0.., lambda_0.., closure_error_m, users,` then per user
 //! `user_id, op pose (x, y, θ or x, y, z, qw, qx, qy, qz), wrench (k values), constraint_count`.
 //! In the ring each row is preceded by its length, and written in one commit; a row that does not fit is
-//! dropped and counted (the VE thread never waits for the disk).
+//! dropped and counted (the VE thread never waits for the disk). The file's columns and its writer are the
+//! record crate's ([`kinloop_record::VeSchema`]).
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -16,9 +15,12 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_record::{RecordFile, VeSchema};
 use rtrb::{Consumer, Producer};
 
 use crate::core::VeCore;
+
+pub use kinloop_record::RecordError;
 
 /// Numbers a user group can take at most (id, 7 pose, 6 wrench, count).
 const USER_GROUP_MAX: usize = 15;
@@ -48,28 +50,7 @@ pub fn write_row<S: Space>(core: &VeCore<S>, ring: &mut Producer<f64>) -> bool {
 
 /// The CSV header for a scene of space `S` with `n` coordinates and `m` closure rows.
 pub fn header<S: Space>(n: usize, m: usize) -> String {
-    let mut columns = vec!["t_s".to_string(), "step".into()];
-    columns.extend((0..n).map(|i| format!("q_{i}")));
-    columns.extend((0..n).map(|i| format!("qd_{i}")));
-    columns.extend((0..m).map(|i| format!("lambda_{i}")));
-    columns.extend(["closure_error_m".to_string(), "users".into(), "user_id".into()]);
-    let pose: &[&str] = if S::DIM == 3 { &["x", "y", "theta"] } else { &["x", "y", "z", "qw", "qx", "qy", "qz"] };
-    let axes: &[&str] = if S::DIM == 3 { &["fx", "fy", "tz"] } else { &["fx", "fy", "fz", "tx", "ty", "tz"] };
-    columns.extend(pose.iter().map(|p| format!("op_{p}")));
-    columns.extend(axes.iter().map(|a| format!("wrench_{a}")));
-    columns.push("constraint_count".into());
-    columns.push("...(user group repeated per user)".into());
-    columns.join(",")
-}
-
-/// Why recording could not start.
-#[derive(Debug, thiserror::Error)]
-#[error("cannot record to {path}: {source}")]
-pub struct RecordError {
-    /// The file.
-    pub path: PathBuf,
-    /// Why.
-    pub source: std::io::Error,
+    VeSchema { kind: S::KIND, n, m }.header()
 }
 
 /// Starts the writer thread; it drains `ring` into `path` until `stop` is set and the ring is empty, and
@@ -80,17 +61,14 @@ pub fn spawn_writer(
     mut ring: Consumer<f64>,
     stop: Arc<AtomicBool>,
 ) -> Result<JoinHandle<std::io::Result<u64>>, RecordError> {
-    let file = File::create(path).map_err(|source| RecordError { path: path.to_owned(), source })?;
+    let mut out = RecordFile::create(path, &header)?;
     let spawned = std::thread::Builder::new().name("kinloop-record".into()).spawn(move || {
-        let mut out = BufWriter::new(file);
-        writeln!(out, "{header}")?;
         let mut rows = 0u64;
-        let mut line = String::new();
         loop {
             let stopping = stop.load(Ordering::Acquire);
             let mut wrote = false;
-            while let Some(()) = next_row(&mut ring, &mut line) {
-                out.write_all(line.as_bytes())?;
+            while let Some(written) = write_next_row(&mut ring, &mut out) {
+                written?;
                 rows += 1;
                 wrote = true;
             }
@@ -101,27 +79,18 @@ pub fn spawn_writer(
                 std::thread::sleep(Duration::from_millis(5));
             }
         }
-        out.flush()?;
+        out.finish()?;
         Ok(rows)
     });
     spawned.map_err(|source| RecordError { path: path.to_owned(), source })
 }
 
-/// Formats the next complete row into `line` (newline included).
-fn next_row(ring: &mut Consumer<f64>, line: &mut String) -> Option<()> {
-    use std::fmt::Write as _;
+/// Writes the next complete row of the ring, if there is one.
+fn write_next_row(ring: &mut Consumer<f64>, out: &mut RecordFile) -> Option<std::io::Result<()>> {
     let len = ring.peek().ok().copied()? as usize;
     let chunk = ring.read_chunk(len + 1).ok()?;
-    line.clear();
     let (a, b) = chunk.as_slices();
-    for (i, x) in a.iter().chain(b).skip(1).enumerate() {
-        if i > 0 {
-            line.push(',');
-        }
-        // Step, user ids and counts are integers; print them without a fraction.
-        let _ = if x.fract() == 0.0 && x.abs() < 1e15 { write!(line, "{}", *x as i64) } else { write!(line, "{x}") };
-    }
-    line.push('\n');
+    let written = out.write_ve_numbers(a.iter().chain(b).skip(1).copied());
     chunk.commit_all();
-    Some(())
+    Some(written)
 }

@@ -9,6 +9,7 @@
 use std::path::Path;
 
 use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
+use kinloop_record::{ReadError, Recording, TickRecord, VeRow};
 
 use super::compose::{compose, UserInfo};
 use super::draw::{geometry, Geometry, SceneInfo};
@@ -30,12 +31,6 @@ pub enum ReplayError {
         /// Why.
         source: std::io::Error,
     },
-    /// Neither a server's nor a client's recording.
-    #[error("{file}: not a kinloop recording (the header starts with neither t_s,step nor time_s,device_)")]
-    UnknownFormat {
-        /// The file.
-        file: String,
-    },
     /// A recording made on another scene.
     #[error("{file}: {what}; the scene {scene} does not match (pass the recording's scene with --scene)")]
     SceneMismatch {
@@ -46,16 +41,9 @@ pub enum ReplayError {
         /// The scene given.
         scene: String,
     },
-    /// A row that does not parse.
-    #[error("{file}:{line}: {what}")]
-    BadRow {
-        /// The file.
-        file: String,
-        /// 1-based line.
-        line: usize,
-        /// What is wrong.
-        what: String,
-    },
+    /// The file is not a recording, or a row of it does not parse.
+    #[error(transparent)]
+    Record(#[from] ReadError),
     /// No rows.
     #[error("{file}: no rows")]
     Empty {
@@ -93,29 +81,19 @@ impl Replay {
     /// Parses a recording's text; `file` names it in errors.
     pub fn parse(text: &str, file: &str, scene: &Scene, scene_label: &str) -> Result<Replay, ReplayError> {
         let mut geometry = geometry(scene, scene_label)?;
-        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-        let Some((_, header)) = lines.next() else { return Err(ReplayError::Empty { file: file.into() }) };
-        let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+        let recording = kinloop_record::parse(text, file)?;
         let mismatch = |what: String| ReplayError::SceneMismatch { file: file.into(), what, scene: scene_label.into() };
-        let server = columns.starts_with(&["t_s", "step"]);
-        let client = columns.first() == Some(&"time_s") && columns.get(1).is_some_and(|c| c.starts_with("device_"));
-        if !server && !client {
-            return Err(ReplayError::UnknownFormat { file: file.into() });
+        if recording.kind() != scene.kind {
+            return Err(mismatch(format!("it was recorded on a {:?} scene", recording.kind())));
         }
-        let recorded_kind =
-            if columns.iter().any(|c| c.ends_with("_theta")) { SceneKind::Planar } else { SceneKind::Spatial };
-        if recorded_kind != scene.kind {
-            return Err(mismatch(format!("it was recorded on a {recorded_kind:?} scene")));
-        }
-        let (source, rows) = if server {
-            let n = columns.iter().filter(|c| c.starts_with("q_")).count();
-            let m = columns.iter().filter(|c| c.starts_with("lambda_")).count();
-            if n != geometry.info().n {
-                return Err(mismatch(format!("it has {n} coordinates, the scene {}", geometry.info().n)));
+        let (source, rows) = match recording {
+            Recording::Ve { schema, rows } => {
+                if schema.n != geometry.info().n {
+                    return Err(mismatch(format!("it has {} coordinates, the scene {}", schema.n, geometry.info().n)));
+                }
+                ("server", rows.iter().map(|r| server_sample(r, scene.kind)).collect())
             }
-            ("server", server_rows(lines, file, scene.kind, n, m)?)
-        } else {
-            ("client", client_rows(lines, file, scene.kind, geometry.as_mut())?)
+            Recording::Client { rows, .. } => ("client", client_samples(&rows, scene.kind, geometry.as_mut())),
         };
         let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
             return Err(ReplayError::Empty { file: file.into() });
@@ -173,84 +151,39 @@ fn thin(rows: Vec<Sample>) -> Vec<Sample> {
     rows.into_iter().enumerate().filter(|(i, _)| i % every == 0 || *i == last).map(|(_, s)| s).collect()
 }
 
-fn numbers(line: &str, file: &str, index: usize) -> Result<Vec<f64>, ReplayError> {
-    line.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<Vec<f64>, _>>().map_err(|e| ReplayError::BadRow {
-        file: file.into(),
-        line: index + 1,
-        what: format!("not a number: {e}"),
-    })
+/// A server's row as a frame's sample.
+fn server_sample(r: &VeRow, kind: SceneKind) -> Sample {
+    let (k, pose) = (kind.op_dim(), pose_len(kind));
+    let users = r
+        .users
+        .iter()
+        .map(|u| SampleUser {
+            id: u.user_id,
+            present: true,
+            weight: 1.0,
+            op_pose: u.op_pose[..pose].to_vec(),
+            wrench: u.wrench[..k].to_vec(),
+            constraint_count: u.constraint_count,
+            ..SampleUser::default()
+        })
+        .collect();
+    Sample { t_s: r.t_s, step: r.step, q: r.q.clone(), closure_error: Some(r.closure_error), timing: None, users }
 }
 
-fn server_rows<'a>(
-    lines: impl Iterator<Item = (usize, &'a str)>,
-    file: &str,
-    kind: SceneKind,
-    n: usize,
-    m: usize,
-) -> Result<Vec<Sample>, ReplayError> {
+/// A client's rows as frames' samples: the linkage posed so that its first OP is on the recorded
+/// local-model OP, each row starting from the previous row's coordinates.
+fn client_samples(rows: &[TickRecord], kind: SceneKind, geometry: &mut dyn Geometry) -> Vec<Sample> {
     let (k, pose) = (kind.op_dim(), pose_len(kind));
-    let group = 1 + pose + k + 1;
-    let fixed = 2 + 2 * n + m + 2;
-    let mut rows = Vec::new();
-    for (index, line) in lines {
-        let v = numbers(line, file, index)?;
-        let bad = |what: String| ReplayError::BadRow { file: file.into(), line: index + 1, what };
-        if v.len() < fixed {
-            return Err(bad(format!("{} numbers; a row has at least {fixed}", v.len())));
-        }
-        let users = v[fixed - 1] as usize;
-        if v.len() != fixed + users * group {
-            return Err(bad(format!("{} numbers for {users} users; expected {}", v.len(), fixed + users * group)));
-        }
-        let users = v[fixed..]
-            .chunks_exact(group)
-            .map(|g| SampleUser {
-                id: g[0] as u32,
-                present: true,
-                weight: 1.0,
-                op_pose: g[1..1 + pose].to_vec(),
-                wrench: g[1 + pose..1 + pose + k].to_vec(),
-                constraint_count: g[group - 1] as u8,
-                ..SampleUser::default()
-            })
-            .collect();
-        rows.push(Sample {
-            t_s: v[0],
-            step: v[1] as u64,
-            q: v[2..2 + n].to_vec(),
-            closure_error: Some(v[fixed - 2]),
-            timing: None,
-            users,
-        });
-    }
-    Ok(rows)
-}
-
-fn client_rows<'a>(
-    lines: impl Iterator<Item = (usize, &'a str)>,
-    file: &str,
-    kind: SceneKind,
-    geometry: &mut dyn Geometry,
-) -> Result<Vec<Sample>, ReplayError> {
-    let (k, pose) = (kind.op_dim(), pose_len(kind));
-    let point = if kind == SceneKind::Planar { 2 } else { 3 };
-    // time, device pose, model pose, six wrenches, count, snapshot age, gain.
-    let len = 1 + 2 * pose + 6 * k + 3;
-    let mut rows = Vec::new();
+    let point = kind.point_dim();
     let mut q: Vec<f64> = Vec::new();
-    for (index, line) in lines {
-        let v = numbers(line, file, index)?;
-        if v.len() != len {
-            let what = format!("{} numbers; a client row of this scene has {len}", v.len());
-            return Err(ReplayError::BadRow { file: file.into(), line: index + 1, what });
-        }
-        let device = v[1..1 + pose].to_vec();
-        let model = v[1 + pose..1 + 2 * pose].to_vec();
+    let mut samples = Vec::with_capacity(rows.len());
+    for r in rows {
+        let model = r.model_pose[..pose].to_vec();
         if let Some(solved) = geometry.solve_for_op(&q, 0, &model[..point]) {
             q = solved;
         }
-        rows.push(Sample {
-            t_s: v[0],
+        samples.push(Sample {
+            t_s: r.time_s,
             step: 0,
             q: q.clone(),
             closure_error: None,
@@ -258,17 +191,17 @@ fn client_rows<'a>(
             users: vec![SampleUser {
                 id: 0,
                 present: true,
-                weight: v[len - 1],
+                weight: r.gain,
                 op_pose: model.clone(),
-                wrench: v[1 + 2 * pose..1 + 2 * pose + k].to_vec(),
-                constraint_count: v[len - 3] as u8,
-                device_pose: Some(device),
+                wrench: r.hand[..k].to_vec(),
+                constraint_count: r.constraint_count,
+                device_pose: Some(r.device_pose[..pose].to_vec()),
                 model_pose: Some(model),
                 ..SampleUser::default()
             }],
         });
     }
-    Ok(rows)
+    samples
 }
 
 #[cfg(test)]
@@ -277,6 +210,8 @@ mod tests {
     use kinloop_linkage::algorithms::kinematics::forward_kinematics;
     use kinloop_linkage::math::space::OpPose;
     use kinloop_linkage::{math::space::Planar, model::builtin, model::data::Data, model::Model};
+
+    use kinloop_record::{ClientSchema, VeSchema};
 
     use super::*;
 
@@ -327,14 +262,15 @@ mod tests {
         let other = |text: &str| Replay::parse(text, "x.csv", &scene, "paper-testbed").unwrap_err().to_string();
         assert!(other("").contains("no rows"));
         assert!(other("a,b,c\n1,2,3\n").contains("not a kinloop recording"));
-        let six = "t_s,step,q_0,q_1,q_2,q_3,q_4,q_5,op_x,op_y,op_theta\n";
-        assert!(other(six).contains("6 coordinates"), "{}", other(six));
-        let spatial = "time_s,device_x,device_y,device_z,device_qw\n";
-        assert!(other(spatial).contains("Spatial"), "{}", other(spatial));
-        let header = "t_s,step,q_0,q_1,q_2,q_3,qd_0,qd_1,qd_2,qd_3,lambda_0,lambda_1,closure_error_m,users,op_theta\n";
-        let bad = other(&format!("{header}0,1,0,0,0,0,0,0,0,0,0,0,0,0\n0,2,x\n"));
-        assert!(bad.starts_with("x.csv:3: not a number"), "{bad}");
-        let short = other(&format!("{header}0,1,0,0,0,0,0,0,0,0,0,0,0,1\n"));
-        assert!(short.contains("for 1 users"), "{short}");
+        let six = VeSchema { kind: SceneKind::Planar, n: 6, m: 4 }.header();
+        assert!(other(&six).contains("6 coordinates"), "{}", other(&six));
+        let spatial = ClientSchema { kind: SceneKind::Spatial }.header();
+        assert!(other(&spatial).contains("Spatial"), "{}", other(&spatial));
+        let header = VeSchema { kind: SceneKind::Planar, n: 4, m: 2 }.header();
+        let header_row = "0,1,0,0,0,0,0,0,0,0,0,0,0,0";
+        let bad = other(&format!("{header}\n{header_row}\n0,2,x\n"));
+        assert!(bad.starts_with("x.csv:3: column q_0: \"x\" is not a number"), "{bad}");
+        let short = other(&format!("{header}\n0,1,0,0,0,0,0,0,0,0,0,0,0,1\n"));
+        assert!(short.contains("14 fields, expected 22"), "{short}");
     }
 }
