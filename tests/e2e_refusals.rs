@@ -87,8 +87,8 @@ fn a_refusal_is_printed_once_with_what_to_do_and_the_server_lets_go() {
 }
 
 /// A client whose simulated user cannot start (a replay file that does not exist) fails after the server
-/// welcomed it: the server drops the user at once (it used to keep it until the connection's 5 s idle
-/// timeout, since the exiting client never sent its close), and the cause is printed once.
+/// welcomed it: the server drops the user at once (not at the connection's idle timeout: the exiting
+/// client never sends its close), and the cause is printed once.
 #[test]
 fn a_client_that_fails_after_its_welcome_leaves_the_server_at_once() {
     common::child::serve_if_child();

@@ -113,8 +113,8 @@ fn virtual_latency_sweep_tracking_error_grows_with_delay() {
 }
 
 /// Two users holding the same operational point (the second joining in mid-motion), with and without delay:
-/// both keep tracking it. Before snapshots left the PD couplings out of the other user's b̂ this session
-/// diverged (each user saw the other's coupling as a stiff spring one snapshot late).
+/// both keep tracking it. Snapshots leave the PD couplings out of the other user's b̂: with them in, each
+/// user would see the other's coupling as a stiff spring one snapshot late, and the pair would diverge.
 #[test]
 fn two_users_on_one_operational_point_stay_stable() {
     for delay_ms in [0u64, 20] {

@@ -61,8 +61,8 @@ pub enum BenchError {
 /// user only follows the VE (its target is where the VE's OP just was), so its coupling acts as a brake, and
 /// the couplings' angular gains (the paper's 10⁴ N m/rad and N m s/rad) make that brake stiff on the gripped
 /// link's orientation: followers on two different links take both of this 2-DOF linkage's freedoms and all
-/// but lock it (measured: |q̇| below 1e-3 rad/s with users spread over links 2 and 3, or with one on link 1
-/// or 4, against about 1 rad/s on link 2 alone), and a tick of a still linkage is not the tick to time. Real
+/// but lock it (users spread over links 2 and 3, or one on link 1 or 4, hold it nearly still; on link 2 alone
+/// it moves), and a tick of a still linkage is not the tick to time. Real
 /// users lead the VE with their local models and move it however they are spread (`experiment users`).
 pub fn testbed() -> Result<Model<Planar>, BenchError> {
     let scene = builtin::scene("paper-testbed").ok_or(BenchError::MissingScene("paper-testbed"))??;

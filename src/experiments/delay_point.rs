@@ -206,8 +206,8 @@ pub fn is_undelayed_reference(m: &Measured, of: &Point) -> bool {
 /// Fills each point's [`Measured::felt_change`] against its undelayed session among `references`: how far
 /// the delay, and whatever the VE and the client do about it, moved what the hand feels from what the same
 /// hand feels without a network. The felt-vs-rendered error compares the handle with the VE's OP, whose
-/// wrench-over-velocity depends on how the coupling drives it (on the testbed's soft tour, unled, its relative
-/// change from the undelayed session's is 1.2 at 50 ms and 6.8 at 1 s), so it cannot tell a change of feel
+/// wrench-over-velocity depends on how the coupling drives it (and changes with the delay even when the hand's
+/// feel does not), so it cannot tell a change of feel
 /// from a change in how the VE is driven; this can.
 pub fn fill_felt_changes(points: &mut [Measured], references: &[Measured]) {
     for m in points.iter_mut() {

@@ -455,7 +455,7 @@ fn goals_and_answer(grid: &Grid, all: &[Measured], circle: &[Measured], table: &
     let circle_goal_met = |rms: Option<f64>, goal_m: f64, delay_ms: f64| {
         rms.zip(on_circle(delay_ms)).map(|(r, m)| m.verdict.stable && r <= goal_m * 1e3)
     };
-    // Item 3: what the passivity layer costs without delay, over every 0 ms point of the grid.
+    // What the passivity layer costs without delay, over every 0 ms point of the grid.
     let mean_rms_at_0ms = |passivity: bool| {
         let at_0: Vec<f64> = all
             .iter()

@@ -19,9 +19,9 @@
 //!    along a constrained direction the device feels at most `K` and `B`. The damping goes mostly to the
 //!    channels because they alone hold the device to the local model in the free directions, while the
 //!    joints never act without them: a third of `K` with two thirds of `B` damps the device's mass at
-//!    ζ ≈ 0.8, where a third of each left it at 0.4 (0.3 with a firm hand's mass), and the five-bar robot's
-//!    effector on `sim:paper` under a firm hand made 29 mJ over its tour beyond the hand's work (13 mJ now,
-//!    within the energy criterion; the latency grid's tracking without delay 4 % further off). The
+//!    ζ ≈ 0.8, where a third of each leaves it at 0.4 (less with a firm hand's mass), which let a
+//!    five-bar robot's effector under a firm hand make more energy over its tour than the criterion allows.
+//!    The
 //!    joint-constraint controller acts through the unit-consistent coordinates `(v, L ω)`, so on the angular
 //!    axes the device feels `k_j (c_p L)²`; with torque actuation `k_j` and `b_j` also stay within the
 //!    angular budget's share.

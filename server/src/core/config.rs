@@ -108,20 +108,18 @@ pub struct VeConfig {
     pub contact_damping: Option<f64>,
     /// Contacts closer than this gap (m) are sent to clients as local-model contact terms.
     pub contact_margin_m: f64,
-    /// Time-domain passivity observer/controller on every coupling (see `passivity`). On by default: in the
-    /// latency sweep it costs nothing measurable (device-OP RMS at 0 ms within 1 % of off) and bounds what a
-    /// delayed coupling can give the VE; the paper's VE ([`VeConfig::paper`]) has none.
+    /// Time-domain passivity observer/controller on every coupling (see `passivity`). On by default: without
+    /// delay it leaves the tracking as it is, and it bounds what a delayed coupling can give the VE; the paper's VE ([`VeConfig::paper`]) has none.
     pub passivity: bool,
     /// With `passivity`: the per-axis controller instead of the port's (each OP axis on its own account, the
-    /// axis left free rather than braked when scaled; see `passivity`). Off by default: on the latency sweep
-    /// it makes 56 of 864 points unstable; it is the one that steadies the paper's stiff gains on the Watt
-    /// six-bar's turning link5, where the port controller does not.
+    /// axis left free rather than braked when scaled; see `passivity`). Off by default: under delay it
+    /// cuts axes that merely pass energy on; it is the one that steadies the paper's stiff angular gains on a
+    /// turning link, where the port controller does not.
     pub passivity_per_axis: bool,
     /// Play each user's uplinks out at the stream's steady delay (a jitter buffer, see `playout`) instead of
-    /// following the newest on arrival. On by default: in the latency sweep it steadies every point with
-    /// 30 ms of network jitter (5 of 864 unstable without it, none with it). (It was off while the 16-user
-    /// demo broke with it: its hold lengthened the loop through which users on one OP pushed each other,
-    /// which `sharing` now weights by the round trip including the hold.)
+    /// following the newest on arrival. On by default: network jitter reaches the VE as a shaking
+    /// reference otherwise. Its hold lengthens the loop through which users on one OP push each other, so
+    /// `sharing` weights that loop by the round trip including the hold.
     pub jitter_buffer: bool,
     /// The round trip (s) up to which a user's local model takes the other users' hands whole from its
     /// snapshot's b̂ (one other user; N − 1 others share it); longer round trips take proportionally less (see
@@ -162,9 +160,8 @@ pub struct VeConfig {
     pub session_seed: u64,
     /// Hold the linkage at rest while no manipulator's coupling holds it (the VE does not step, its
     /// velocity is zero). A linkage left to itself falls and swings for as long as the server runs, and the
-    /// first user to join then has to catch a moving linkage through the network's delay: a Watt six-bar
-    /// swinging for 1 s before the join went unstable at 50 ms one way (99 % of ticks saturated), the same
-    /// join at rest renders within 2 mm. Off (`kinloop-server --free-run`) the linkage moves on its own.
+    /// first user to join then has to catch a moving linkage through the network's delay, which can go
+    /// unstable where the same join at rest renders well. Off (`kinloop-server --free-run`) the linkage moves on its own.
     pub rest_unheld: bool,
 }
 

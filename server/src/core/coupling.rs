@@ -88,8 +88,8 @@ pub struct Coupling<S: Space> {
     /// implicit correction under semi-implicit Euler.
     pub step_wrench: S::OpVec,
     /// Anchors for this user's orientations on the wire, read from its uplinks and written to its
-    /// snapshots: both move a little each tick, so a short series replaces a library atan2 and sin_cos
-    /// (which with the fade's cosine were about 4 % of a 16-user tick).
+    /// snapshots: both move a little each tick, so a short series replaces a library atan2 and sin_cos,
+    /// which with the fade's cosine are a noticeable share of a many-user tick.
     pub pose_memo: S::RotParamsMemo,
     /// The user's uplinks waiting for their turn (the jitter buffer, see `playout`).
     pub playout: Playout<S>,

@@ -209,9 +209,9 @@ const MASS_REDUCTION: f64 = 4.0;
 
 /// Whether the user holds the OP rigidly: the device renders torque, and the OP's lightest rotational
 /// inertia, seen on the device (times the torque scale), is within what the device can be made to feel.
-/// Otherwise the OP is held as through a pin: a serial arm's tip, 0.004 kg m² in the VE and 5e-5 kg m² on
-/// the paper device at its scales, against the handle's own 0.005 kg m², turned faster than any
-/// controller of the handle could follow, and under 50 ms of delay its angular loop ran away.
+/// Otherwise the OP is held as through a pin: an OP whose rotational inertia on the device is far below the
+/// handle's own (a serial arm's tip) turns faster than any controller of the handle can follow, and under
+/// delay its angular loop runs away.
 fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_scale: f64) -> bool {
     let lin = <S::Point as VecOps>::LEN;
     let (_, inertia) = lightest(reach);

@@ -20,25 +20,24 @@
 //! ```
 //! the energy the VE has received through the coupling beyond what the hand put in is `−A`. It is one
 //! account for the port, not one per axis: passivity is a property of the port's total power, and the linkage
-//! moves energy from one OP axis to another (the testbed's coupler at 300 ms one way booked −6.8 mJ on y and
-//! +6.6 mJ on θ). Per-axis accounts cut y's PD off for good there: 56 of 864 latency-sweep points unstable.
+//! moves energy from one OP axis to another (a coupler turning under delay takes on one axis what it gives on
+//! another). Per-axis accounts would cut such an axis's PD off for good though the port as a whole is passive.
 //! What the client's end *emitted* (its local model's work on the hand) is not debited: the local model is a
 //! second copy of the linkage with its own gravity and synchronisation, and what it gives a holding hand is
-//! not energy the VE's coupling created (the six-bar's start booked 2.2 J given to the hand in 100 ms against
-//! 0.36 J the VE's PD absorbed; debited, it held the PD off at 0-50 ms). The bound the controller keeps is
+//! not energy the VE's coupling created (as a linkage starts it can give a holding hand far more than the
+//! VE's PD absorbs; debited, that would hold the PD off). The bound the controller keeps is
 //! therefore: the VE gains through the coupling at most what the hand put in, plus `E_allow`.
 //!
 //! **The controller scales the PD and brakes what it takes off.** The textbook controller for this causality
 //! is a damper `α ẋ_op` added to the PD, sized to dissipate the deficit. It fails here: the VE's OP is tied to
 //! the local model's by a stiff PD (K_g up to 10⁴), so a damper beside the PD only makes the OP lag, the PD
 //! pulls harder by the damper's force, and the deficit never shrinks while the damper keeps braking the motion
-//! the force channel drives (measured on the paper's session at 0 ms delay with α capped at 10 N·s/m: the
-//! damper dissipated 0.39 J against 0.06 J of work by the hand, and the device saturated). What generates the
-//! energy is the PD's *reference*, so the controller scales the PD, and what it takes off becomes a brake on
+//! the force channel drives (the damper dissipates more than the hand's work and the device saturates). What
+//! generates the energy is the PD's *reference*, so the controller scales the PD, and what it takes off becomes a brake on
 //! the OP with the PD's own damping (`−(1 − β) B_g ⊙ ẋ_op`, see `coupling`). The brake only dissipates: a PD
-//! scaled to zero leaves the VE damped rather than free (a six-bar left free under gravity with the hand's
-//! force still on ran away to 27 kJ; without the brake 4 of 864 latency-sweep points are unstable, with it
-//! none), and what the brake absorbs is booked, so the account recovers and the PD comes back. For the coming tick each axis gets
+//! scaled to zero leaves the VE damped rather than free (a linkage left free under gravity with the hand's
+//! force still on can run away), and what the brake absorbs is booked, so the account recovers and the PD
+//! comes back. For the coming tick each axis gets
 //! ```text
 //! β_a = clamp(1 + A / E_allow, 0, 1),
 //! ```
@@ -49,19 +48,18 @@
 //! "absorbing" be wrong). **Raising β is paid for**: a stiffer spring at the same stretch `e_a` holds
 //! `½ Δβ w K_a e_a²` more energy that no one put in and that the PD gives the VE as it relaxes, so a rise is
 //! limited to what the account holds above `−E_allow` (shared by the axes in order). The port thus generates
-//! about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong: 1.2
-//! allowances in the server's delayed-mass test): passive with that initial storage. The scale is continuous
+//! about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong): passive
+//! with that initial storage. The scale is continuous
 //! in the account, so the PD never switches on or off as a step.
 //!
 //! **Per axis, for stiff gains** (`VeConfig::passivity_per_axis`, off by default). The credit for what the
 //! hand put in counts what it received and not what it took back, so a client whose model shakes under a
-//! constant hand earns credit with every swing. With the paper's gains on the Watt six-bar's turning link5
-//! (K_g 10⁴ N·m/rad, 6 ms of jitter) that credit, earned on x and y, paid for 36 J generated on θ: 181 VE
-//! restores in 3 s. The per-axis controller (each axis on its own account plus the PD's surplus, no brake,
-//! no price on a rise; the first version of this module) scales only the axis that generates and leaves it
-//! free, and steadies that session; on the latency sweep it cuts axes that merely pass energy on (56 of 864
-//! points unstable). Debiting what the client's end emitted, the principled fix, holds the PD off at the
-//! six-bar's start (20 of 864 unstable, 2.1 times the device-OP distance at 0 ms).
+//! constant hand earns credit with every swing. With stiff gains on a turning link (the paper's K_g on a
+//! jittery network) credit earned on the linear axes can pay for energy generated on the angular one. The
+//! per-axis controller (each axis on its own account plus the PD's surplus, no brake, no price on a rise)
+//! scales only the axis that generates and leaves it free, which steadies such a link; under delay it also
+//! cuts axes that merely pass energy on, so it is off by default. Debiting what the client's end emitted
+//! instead would hold the PD off as a linkage starts (see the account above).
 //!
 //! **Across the network (two-port).** The coupling is one end of the two-port between the user's device and the
 //! VE (`kinloop_protocol::passivity`); the client's local model is the other, and its uplinks carry its books.

@@ -17,14 +17,11 @@
 //!
 //! The buffer holds uplinks only while it is at least [`ENGAGE_S`] (and until it falls below [`RELEASE_S`]):
 //! below that every uplink is used on arrival, as without the buffer. A loaded host makes lateness of its own
-//! (16 clients' loops on two cores stamp uplinks up to 17 ms before they leave), and holding for it did harm:
-//! 16 users on the testbed's one OP in real time (`kinloop demo --users 16`, 15 s) clamped 13,000-54,000 ticks
-//! with the buffer holding from 10 ms and 0-2,400 from 5 ms, against none in four runs used on arrival. The
-//! cause was the users' exchange of pushes through the VE, a loop the hold lengthened (see `sharing`, which
-//! now counts the hold in the round trip); the threshold stays, as holding for a host's own lateness buys
-//! nothing. With both, 60 s of that demo: no uplink rejected, no tick clamped, 0.3-2.4 mm RMS.
-//! On a clean link every uplink arrives `base` after it was sent and the buffer stays at zero. The played-out client time is what snapshots report as the
-//! uplink they answer (`Snapshot::uplink_time_s`).
+//! (many clients' loops on few cores stamp uplinks well before they leave), and holding for it buys nothing:
+//! it lengthens the loop through which users on one OP push each other through the VE (see `sharing`, which
+//! counts the hold in the round trip). On a clean link every uplink arrives `base` after it was sent and the
+//! buffer stays at zero. The played-out client time is what snapshots report as the uplink they answer
+//! (`Snapshot::uplink_time_s`).
 
 use std::collections::VecDeque;
 

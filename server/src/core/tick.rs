@@ -124,9 +124,8 @@ impl<S: Space> VeCore<S> {
     ///
     /// A user whose hand is off its handle (`uplink_flags::HAND_OFF`, from a presence sensor) parks its local
     /// model where the hand left it, and its coupling holds the linkage there: alone, the linkage stays put
-    /// rather than falling. With another user's hand on the linkage that hold would fight them (four users
-    /// on the testbed, one letting go: the other three clamped 15 % of their ticks pulling against it, and
-    /// the released handle ended 17 cm from the OP), so then it fades out like a silent user's, and fades
+    /// rather than falling. With another user's hand on the linkage that hold would fight them (the others
+    /// would pull against it at their devices' limits), so then it fades out like a silent user's, and fades
     /// back in when the hand returns (its model restarts on the VE).
     fn update_couplings(&mut self, at: Duration, dt: f64) {
         let fade_s = self.config.fade_time.as_secs_f64();

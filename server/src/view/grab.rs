@@ -5,8 +5,8 @@
 //! paper's graphics controller, angular K_g = B_g = 10⁴, made stable by an implicit step that adds
 //! `h B_g + h² K_g` ≈ 10 kg·m² to the OP's rotational inertia against any change of the angular velocity
 //! the uplink reports. A target that only moves the point therefore leaves the gripped link 5,000 times
-//! heavier to turn (the testbed's link2 has 0.0021 kg·m²): measured, a 1 cm drag moved link2 0.4 mm in
-//! 1.5 s. So the grip does what a haptic client does, in miniature:
+//! heavier to turn (the testbed's link2 has 0.0021 kg·m²), and a drag barely moves it. So the grip does what a
+//! haptic client does, in miniature:
 //! - the *force channel* carries the pull: `F_h = K_m (x_target − x_op) + B_m (v_target − v_op)` on the
 //!   linear axes, no torque, with the target pulled to within [`Grip::reach_m`] of the OP (so
 //!   `|F_h| ≤ K_m · reach`, well under the core's 100 N default for a user without a device);
