@@ -6,6 +6,8 @@ use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
 use kinloop::experiments::paper::ModeSummary;
+use kinloop::experiments::pauses::PausesSummary;
+use kinloop::experiments::scale::ScaleSummary;
 use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
 
@@ -334,10 +336,9 @@ fn sixteen_users_stay_stable_and_cost_grows_with_users() {
     let cost = |layout: &str, n: u64| {
         points.iter().find(|p| p["layout"] == layout && p["users"] == n).map(|p| f(&p["ve_us_per_tick"])).unwrap()
     };
-    // Users of one OP share its op-space terms, so the growth is modest on one OP: 16 users do 3.6x the
-    // instructions of one (43,221 against 12,148 a tick), spread over four OPs 4.1x. Wall-clock ratios of a
-    // quick run on a stalling host fall well short of those (a fresh clone's CI measured under 2x on one
-    // OP), so only the direction is asserted.
+    // Users of one OP share its op-space terms, so the growth is modest on one OP and larger spread over
+    // four OPs. Wall-clock ratios of a quick run move with the host's load, so only the direction is
+    // asserted.
     for layout in ["same_op", "spread"] {
         let (one, sixteen) = (cost(layout, 1), cost(layout, 16));
         assert!(sixteen > one, "{layout}: {sixteen} µs a tick with 16 users against {one} with 1");
@@ -368,15 +369,17 @@ fn sixteen_users_stay_stable_and_cost_grows_with_users() {
 fn scale_op_form_is_flat_and_ve_cost_grows_with_links() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Scale, dir.path());
-    let r = &report.summary["results"];
-    let growth = &r["growth_exponents_over_links"];
-    assert!(f(&growth["op_local_model_step"]["loops_1"]) < 0.5, "{growth}");
-    assert!(f(&growth["ve_step"]["loops_1"]) > 0.7, "{growth}");
-    let points = r["points"].as_array().unwrap();
-    let (small, large) = (&points[0], &points[points.len() - 1]);
-    assert!(f(&large["ve_step_us"]) > 10.0 * f(&small["ve_step_us"]));
-    assert_eq!(small["snapshot_bytes_op"], large["snapshot_bytes_op"], "op-form snapshots do not grow");
-    assert!(f(&large["snapshot_bytes_config"]) > 10.0 * f(&large["snapshot_bytes_op"]));
+    let r: ScaleSummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    let growth = &r.growth_exponents_over_links;
+    let exponent = |of: &std::collections::BTreeMap<String, Option<f64>>| of["loops_1"].expect("fitted");
+    assert!(exponent(&growth.op_local_model_step) < 0.5, "{growth:?}");
+    assert!(exponent(&growth.ve_step) > 0.7, "{growth:?}");
+    let (small, large) = (&r.points[0], &r.points[r.points.len() - 1]);
+    assert!(r.largest_chain.as_ref().is_none_or(|c| (c.links, c.loops) == (100, 10)), "{:?}", r.largest_chain);
+    assert!(large.ve_step_us > 10.0 * small.ve_step_us);
+    assert_eq!(small.snapshot_bytes_op, large.snapshot_bytes_op, "op-form snapshots do not grow");
+    assert!(large.snapshot_bytes_config > 10 * large.snapshot_bytes_op);
+    assert!(r.snapshot_over_datagram_budget.op_form_largest_bytes >= Some(large.snapshot_bytes_op));
 }
 
 /// Every point of the pauses experiment is a tick that ran: users, pauses and both ways of waiting, percentiles
@@ -386,24 +389,23 @@ fn scale_op_form_is_flat_and_ve_cost_grows_with_links() {
 fn pauses_time_each_tick_after_each_kind_of_pause() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Pauses, dir.path());
-    let r = &report.summary["results"];
-    let points = r["points"].as_array().unwrap();
+    let r: PausesSummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    let points = &r.points;
     // Quick grid: 1 and 4 users; pauses 0 (once), 100 and 900 us slept and spun.
     assert_eq!(points.len(), 2 * (1 + 2 * 2), "{points:?}");
     for p in points {
-        let (p10, p50, p90) = (f(&p["tick_us_p10"]), f(&p["tick_us_p50"]), f(&p["tick_us_p90"]));
-        assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90.is_finite(), "{p}");
-        assert!(p["how"] == "sleep" || p["how"] == "spin", "{p}");
+        let (p10, p50, p90) = (p.tick_us_p10, p.tick_us_p50, p.tick_us_p90);
+        assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90.is_finite(), "{p:?}");
+        assert!(p.how == "sleep" || p.how == "spin", "{p:?}");
     }
-    let ratios = r["ratios_at_longest_pause"].as_array().unwrap();
-    assert_eq!(ratios.len(), 2);
-    for ratio in ratios {
-        let users = ratio["users"].as_u64().unwrap();
+    assert_eq!(r.longest_pause_us, 900);
+    assert_eq!(r.ratios_at_longest_pause.len(), 2);
+    for ratio in &r.ratios_at_longest_pause {
         let find = |pause: u64, how: &str| {
-            points.iter().find(|p| p["users"] == users && p["pause_us"] == pause && p["how"] == how).unwrap()
+            points.iter().find(|p| p.users == ratio.users && p.pause_us == pause && p.how == how).unwrap()
         };
-        let (base, slept) = (f(&find(0, "sleep")["tick_us_p50"]), f(&find(900, "sleep")["tick_us_p50"]));
-        assert!((f(&ratio["sleep_over_back_to_back"]) - slept / base).abs() <= 0.01 + 1e-3 * slept / base, "{ratio}");
+        let (base, slept) = (find(0, "sleep").tick_us_p50, find(900, "sleep").tick_us_p50);
+        assert!((ratio.sleep_over_back_to_back - slept / base).abs() <= 0.01 + 1e-3 * slept / base, "{ratio:?}");
     }
 }
 

@@ -398,7 +398,10 @@ mod tests {
         let e = error(&format!("{client}\n0.1,x\n"));
         assert!(e.starts_with("x.csv:2: column device_x: \"x\" is not a number"), "{e}");
         let e = error("time_s,device_x,device_y,device_theta,model_x\n");
-        assert!(e.starts_with("x.csv:1: the header is not a client record's: column 6 is \"\", expected \"model_y\""), "{e}");
+        assert!(
+            e.starts_with("x.csv:1: the header is not a client record's: column 6 is \"\", expected \"model_y\""),
+            "{e}"
+        );
         let ve = VeSchema { kind: SceneKind::Planar, n: 1, m: 0 }.header();
         let e = error(&format!("{ve}\n0,1,0,0,0,1,7,0,0,0,0,0,0\n"));
         assert!(e.starts_with("x.csv:2: 13 fields, expected 14"), "{e}");

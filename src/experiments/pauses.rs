@@ -17,7 +17,8 @@ use std::time::Duration;
 use anyhow::{anyhow, Result};
 use kinloop_linkage::bench::quantile;
 use kinloop_server::bench::{ve_tick_after_pauses, Pause};
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 use super::common::{sweep, Options, Output, Report};
 use crate::charts::{Chart, Legend, Series};
@@ -48,15 +49,77 @@ fn measure(users: usize, pause_us: u64, how: Pause, ticks: usize) -> Result<Meas
     })
 }
 
-fn point_json(m: &Measured) -> Value {
-    json!({
-        "users": m.users,
-        "pause_us": m.pause_us,
-        "how": m.how.name(),
-        "tick_us_p10": round(m.p10_ns / 1e3, 3),
-        "tick_us_p50": round(m.p50_ns / 1e3, 3),
-        "tick_us_p90": round(m.p90_ns / 1e3, 3),
-    })
+/// `summary.json`'s `results` of the pauses experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PausesSummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// The longest pause of the grid (µs).
+    pub longest_pause_us: u64,
+    /// Per user count: the tick after the longest pause against the tick back to back.
+    pub ratios_at_longest_pause: Vec<PauseRatio>,
+    /// What was timed and how.
+    pub setup: PausesSetup,
+    /// Every point of the grid.
+    pub points: Vec<PausePoint>,
+}
+
+/// One point: a tick's percentiles after a pause (µs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PausePoint {
+    /// Users on the VE.
+    pub users: usize,
+    /// The pause before each timed tick (µs).
+    pub pause_us: u64,
+    /// How the pause was spent: `sleep` or `spin`.
+    pub how: String,
+    /// 10th percentile of the tick (µs).
+    pub tick_us_p10: f64,
+    /// Median tick (µs).
+    pub tick_us_p50: f64,
+    /// 90th percentile of the tick (µs).
+    pub tick_us_p90: f64,
+}
+
+/// The median tick after the longest pause against the median back to back, for one user count.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PauseRatio {
+    /// Users on the VE.
+    pub users: usize,
+    /// Median tick without a pause (µs).
+    pub back_to_back_us: f64,
+    /// Median tick after the longest pause, slept (µs).
+    pub after_sleep_us: f64,
+    /// Median tick after the longest pause, spun (µs).
+    pub after_spin_us: f64,
+    /// `after_sleep_us / back_to_back_us`.
+    pub sleep_over_back_to_back: f64,
+    /// `after_spin_us / back_to_back_us`.
+    pub spin_over_back_to_back: f64,
+}
+
+/// What each point times and how it waits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PausesSetup {
+    /// The timed tick.
+    pub tick: String,
+    /// Ticks timed per point.
+    pub ticks_per_point: usize,
+    /// How a slept pause is spent.
+    pub sleep: String,
+    /// How a spun pause is spent.
+    pub spin: String,
+}
+
+fn point_summary(m: &Measured) -> PausePoint {
+    PausePoint {
+        users: m.users,
+        pause_us: m.pause_us,
+        how: m.how.name().into(),
+        tick_us_p10: round(m.p10_ns / 1e3, 3),
+        tick_us_p50: round(m.p50_ns / 1e3, 3),
+        tick_us_p90: round(m.p90_ns / 1e3, 3),
+    }
 }
 
 /// Runs the experiment.
@@ -100,23 +163,24 @@ pub fn run(options: &Options) -> Result<Report> {
     out.chart("tick_vs_pause", &chart)?;
 
     let longest = pauses_us[pauses_us.len() - 1];
-    let ratios: Vec<Value> = users
+    let ratios: Vec<PauseRatio> = users
         .iter()
         .filter_map(|&n| {
             let base = at(n, 0, Pause::Sleep)?.p50_ns;
             let slept = at(n, longest, Pause::Sleep)?.p50_ns;
             let spun = at(n, longest, Pause::Spin)?.p50_ns;
-            Some(json!({
-                "users": n,
-                "back_to_back_us": round(base / 1e3, 3),
-                "after_sleep_us": round(slept / 1e3, 3),
-                "after_spin_us": round(spun / 1e3, 3),
-                "sleep_over_back_to_back": round(slept / base, 2),
-                "spin_over_back_to_back": round(spun / base, 2),
-            }))
+            Some(PauseRatio {
+                users: n,
+                back_to_back_us: round(base / 1e3, 3),
+                after_sleep_us: round(slept / 1e3, 3),
+                after_spin_us: round(spun / 1e3, 3),
+                sleep_over_back_to_back: round(slept / base, 2),
+                spin_over_back_to_back: round(spun / base, 2),
+            })
         })
         .collect();
-    let first = ratios.first().cloned().unwrap_or(Value::Null);
+    // The answer prints the numbers as the JSON does.
+    let first = ratios.first().map(serde_json::to_value).transpose()?.unwrap_or(Value::Null);
     let answer = format!(
         "After a {longest} us pause a {}-user tick took {} us (p50) slept and {} us spun, against {} us back to back \
          ({}x and {}x): a real-time loop pays for refetching its working set on every tick, which the benchmark's \
@@ -128,21 +192,21 @@ pub fn run(options: &Options) -> Result<Report> {
         first["sleep_over_back_to_back"],
         first["spin_over_back_to_back"],
     );
-    let results = json!({
-        "answer": answer,
-        "longest_pause_us": longest,
-        "ratios_at_longest_pause": ratios,
-        "setup": {
-            "tick": "kinloop_server::bench::TickBench on the paper's testbed: every user's uplink, the step, every user's snapshot",
-            "ticks_per_point": ticks,
-            "sleep": "std::thread::sleep(pause) before each timed tick",
-            "spin": "busy-wait on Instant::now() for the pause before each timed tick",
+    let results = PausesSummary {
+        answer,
+        longest_pause_us: longest,
+        ratios_at_longest_pause: ratios,
+        setup: PausesSetup {
+            tick: "kinloop_server::bench::TickBench on the paper's testbed: every user's uplink, the step, every user's snapshot".into(),
+            ticks_per_point: ticks,
+            sleep: "std::thread::sleep(pause) before each timed tick".into(),
+            spin: "busy-wait on Instant::now() for the pause before each timed tick".into(),
         },
-        "points": points.iter().map(point_json).collect::<Vec<_>>(),
-    });
+        points: points.iter().map(point_summary).collect(),
+    };
     out.finish(
         "A VE tick after the pause a real-time loop takes, against back-to-back ticks",
         "39 points of 2,000 ticks; --quick fewer",
-        results,
+        serde_json::to_value(&results)?,
     )
 }

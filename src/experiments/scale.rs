@@ -27,7 +27,10 @@ use kinloop_linkage::{
 use kinloop_protocol::codec::encode_datagram;
 use kinloop_protocol::{LocalModelForm, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
-use serde_json::{json, Value};
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+use serde_json::json;
 
 use super::common::{log_log_slope, sweep, Options, Output, Report};
 use crate::charts::{Chart, Legend, Series};
@@ -135,31 +138,126 @@ fn measure_chain(links: usize, loops: usize, budget: Duration) -> Result<Option<
     }))
 }
 
-fn point_json(m: &Measured) -> Value {
-    json!({
-        "links": m.links,
-        "loops": m.loops,
-        "ve_step_us": round(m.ve_step_ns / 1e3, 3),
-        "ve_tick_with_op_snapshot_us": round(m.tick_op_ns / 1e3, 3),
-        "ve_tick_with_config_snapshot_us": round(m.tick_config_ns / 1e3, 3),
-        "op_local_model_step_ns": round(m.op_step_ns, 1),
-        "config_local_model_step_ns": round(m.config_step_ns, 1),
-        "config_local_model_update_us": round(m.config_update_ns / 1e3, 3),
-        "snapshot_bytes_op": m.snapshot_op_bytes,
-        "snapshot_bytes_config": m.snapshot_config_bytes,
-    })
+/// `summary.json`'s `results` of the scale experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScaleSummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// How each cost grows with the links.
+    pub growth_exponents_over_links: Growth,
+    /// Which snapshots outgrow one datagram.
+    pub snapshot_over_datagram_budget: DatagramBudget,
+    /// The chains and how they were timed.
+    pub setup: ScaleSetup,
+    /// Chains of the grid that could not be measured (`chainN_loopsL`).
+    pub skipped: Vec<String>,
+    /// Every chain measured.
+    pub points: Vec<ScalePoint>,
+    /// The grid's largest chain with the most loops, if it was measured.
+    pub largest_chain: Option<ScalePoint>,
+}
+
+/// Power-law exponents of a cost against the links, by loop count (`loops_L`; none where no fit).
+pub type Exponents = BTreeMap<String, Option<f64>>;
+
+/// Each cost's power-law exponents over the links.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Growth {
+    /// How the exponents were fitted.
+    pub fit: String,
+    /// The VE's step.
+    pub ve_step: Exponents,
+    /// The VE's tick with an op-form user's snapshot.
+    pub ve_tick_with_op_snapshot: Exponents,
+    /// The VE's tick with a config-form user's snapshot.
+    pub ve_tick_with_config_snapshot: Exponents,
+    /// The op-form local model's step.
+    pub op_local_model_step: Exponents,
+    /// The config-form local model's step.
+    pub config_local_model_step: Exponents,
+    /// The config-form local model's update from a snapshot.
+    pub config_local_model_update: Exponents,
+    /// The config-form snapshot's size.
+    pub snapshot_bytes_config: Exponents,
+}
+
+/// Snapshot sizes against what one datagram carries.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatagramBudget {
+    /// Bytes one datagram carries.
+    pub budget_bytes: f64,
+    /// The first chain whose config-form snapshot is over the budget.
+    pub config_form_first_over: Option<String>,
+    /// The largest op-form snapshot (bytes).
+    pub op_form_largest_bytes: Option<usize>,
+}
+
+/// The chains and how they were timed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScaleSetup {
+    /// The scenes.
+    pub scenes: String,
+    /// How each number was timed.
+    pub timing: String,
+    /// The state timed.
+    pub state: String,
+}
+
+/// One chain's costs and snapshot sizes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScalePoint {
+    /// Links N.
+    pub links: usize,
+    /// Loops L.
+    pub loops: usize,
+    /// The VE's step (µs).
+    pub ve_step_us: f64,
+    /// The VE's tick with an op-form user's snapshot (µs).
+    pub ve_tick_with_op_snapshot_us: f64,
+    /// The VE's tick with a config-form user's snapshot (µs).
+    pub ve_tick_with_config_snapshot_us: f64,
+    /// The op-form local model's step (ns).
+    pub op_local_model_step_ns: f64,
+    /// The config-form local model's step (ns).
+    pub config_local_model_step_ns: f64,
+    /// The config-form local model's update (µs).
+    pub config_local_model_update_us: f64,
+    /// An op-form snapshot (bytes).
+    pub snapshot_bytes_op: usize,
+    /// A config-form snapshot (bytes).
+    pub snapshot_bytes_config: usize,
+}
+
+fn point_summary(m: &Measured) -> ScalePoint {
+    ScalePoint {
+        links: m.links,
+        loops: m.loops,
+        ve_step_us: round(m.ve_step_ns / 1e3, 3),
+        ve_tick_with_op_snapshot_us: round(m.tick_op_ns / 1e3, 3),
+        ve_tick_with_config_snapshot_us: round(m.tick_config_ns / 1e3, 3),
+        op_local_model_step_ns: round(m.op_step_ns, 1),
+        config_local_model_step_ns: round(m.config_step_ns, 1),
+        config_local_model_update_us: round(m.config_update_ns / 1e3, 3),
+        snapshot_bytes_op: m.snapshot_op_bytes,
+        snapshot_bytes_config: m.snapshot_config_bytes,
+    }
 }
 
 /// Power-law exponents over N ≥ 8 for each loop count.
-fn exponents(points: &[Measured], loops: &[usize], cost: impl Fn(&Measured) -> f64) -> Value {
-    let mut out = serde_json::Map::new();
+fn exponents(points: &[Measured], loops: &[usize], cost: impl Fn(&Measured) -> f64) -> Exponents {
+    let mut out = Exponents::new();
     for &l in loops {
         let sel: Vec<&Measured> = points.iter().filter(|m| m.loops == l && m.links >= 8).collect();
         let xs: Vec<f64> = sel.iter().map(|m| m.links as f64).collect();
         let ys: Vec<f64> = sel.iter().map(|m| cost(m)).collect();
-        out.insert(format!("loops_{l}"), json!(log_log_slope(&xs, &ys).map(|p| round(p, 2))));
+        out.insert(format!("loops_{l}"), log_log_slope(&xs, &ys).map(|p| round(p, 2)));
     }
-    Value::Object(out)
+    out
+}
+
+/// An exponent as the answer prints it (as the JSON does; `null` where there is no fit).
+fn exponent(exponents: &Exponents, loops: usize) -> serde_json::Value {
+    json!(exponents.get(&format!("loops_{loops}")).copied().flatten())
 }
 
 /// A line of a chart against links: label, loop count, the plotted value.
@@ -211,48 +309,55 @@ pub fn run(options: &Options) -> Result<Report> {
          and {:.1} us with {l_hi}. The op-form local-model step stays near {:.0} ns whatever the linkage (exponent {}), the \
          config-form step grows as N^{} ({:.0} ns at {largest} links). Snapshots: {} B (op form) vs {} B (config form) at \
          {largest} links and {l_hi} loops.",
-        ve_exp[format!("loops_{l_lo}")],
-        ve_exp[format!("loops_{l_hi}")],
+        exponent(&ve_exp, l_lo),
+        exponent(&ve_exp, l_hi),
         find(largest, l_lo).map_or(f64::NAN, |m| us(m.ve_step_ns)),
         find(largest, l_hi).map_or(f64::NAN, |m| us(m.ve_step_ns)),
         find(largest, l_hi).map_or(f64::NAN, |m| m.op_step_ns),
-        op_exp[format!("loops_{l_hi}")],
-        config_exp[format!("loops_{l_hi}")],
+        exponent(&op_exp, l_hi),
+        exponent(&config_exp, l_hi),
         find(largest, l_hi).map_or(f64::NAN, |m| m.config_step_ns),
         find(largest, l_hi).map_or(0, |m| m.snapshot_op_bytes),
         find(largest, l_hi).map_or(0, |m| m.snapshot_config_bytes),
     );
-    let results = json!({
-        "answer": answer,
-        "growth_exponents_over_links": {
-            "fit": "least squares of log cost against log N over N >= 8, per loop count",
-            "ve_step": ve_exp,
-            "ve_tick_with_op_snapshot": exponents(&points, &loops, |m| m.tick_op_ns),
-            "ve_tick_with_config_snapshot": exponents(&points, &loops, |m| m.tick_config_ns),
-            "op_local_model_step": op_exp,
-            "config_local_model_step": config_exp,
-            "config_local_model_update": exponents(&points, &loops, |m| m.config_update_ns),
-            "snapshot_bytes_config": exponents(&points, &loops, |m| m.snapshot_config_bytes as f64),
+    let results = ScaleSummary {
+        answer,
+        growth_exponents_over_links: Growth {
+            fit: "least squares of log cost against log N over N >= 8, per loop count".into(),
+            ve_step: ve_exp,
+            ve_tick_with_op_snapshot: exponents(&points, &loops, |m| m.tick_op_ns),
+            ve_tick_with_config_snapshot: exponents(&points, &loops, |m| m.tick_config_ns),
+            op_local_model_step: op_exp,
+            config_local_model_step: config_exp,
+            config_local_model_update: exponents(&points, &loops, |m| m.config_update_ns),
+            snapshot_bytes_config: exponents(&points, &loops, |m| m.snapshot_config_bytes as f64),
         },
-        "snapshot_over_datagram_budget": {
-            "budget_bytes": DATAGRAM_BUDGET_BYTES,
-            "config_form_first_over": points.iter().filter(|m| m.snapshot_config_bytes as f64 > DATAGRAM_BUDGET_BYTES)
-                .map(|m| format!("chain{}_loops{}", m.links, m.loops)).next(),
-            "op_form_largest_bytes": points.iter().map(|m| m.snapshot_op_bytes).max(),
+        snapshot_over_datagram_budget: DatagramBudget {
+            budget_bytes: DATAGRAM_BUDGET_BYTES,
+            config_form_first_over: points
+                .iter()
+                .filter(|m| m.snapshot_config_bytes as f64 > DATAGRAM_BUDGET_BYTES)
+                .map(|m| format!("chain{}_loops{}", m.links, m.loops))
+                .next(),
+            op_form_largest_bytes: points.iter().map(|m| m.snapshot_op_bytes).max(),
         },
-        "setup": {
-            "scenes": "builtin::chain(N, L): N links of 5 cm and 1 kg, L tips pinned to ground, OP at link 2's COM",
-            "timing": format!("kinloop_linkage::bench::measure, median over batches, {} ms per number, one thread", budget.as_millis()),
-            "state": "0.5 s into the paper's wrench at the OP, rewound every 3 s",
+        setup: ScaleSetup {
+            scenes: "builtin::chain(N, L): N links of 5 cm and 1 kg, L tips pinned to ground, OP at link 2's COM"
+                .into(),
+            timing: format!(
+                "kinloop_linkage::bench::measure, median over batches, {} ms per number, one thread",
+                budget.as_millis()
+            ),
+            state: "0.5 s into the paper's wrench at the OP, rewound every 3 s".into(),
         },
-        "skipped": skipped,
-        "points": points.iter().map(point_json).collect::<Vec<_>>(),
-        "largest_chain": find(largest, l_hi).map(point_json),
-    });
+        skipped,
+        points: points.iter().map(point_summary).collect(),
+        largest_chain: find(largest, l_hi).map(point_summary),
+    };
     out.finish(
         "Scaling: VE step, local-model step and snapshot size against links and loops",
         "45 chains, 7 timings of 0.1 s each; --quick fewer",
-        results,
+        serde_json::to_value(&results)?,
     )
 }
 
