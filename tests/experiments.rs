@@ -8,6 +8,7 @@ use kinloop::experiments::delay_point::{Loss, PointSummary};
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
 use kinloop::experiments::scale::ScaleSummary;
+use kinloop::experiments::users::UsersSummary;
 use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
 
@@ -328,13 +329,13 @@ fn latency_live_sessions_report_the_goal_and_meet_it() {
 fn sixteen_users_stay_stable_and_cost_grows_with_users() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Users, dir.path());
-    let r = &report.summary["results"];
-    assert_eq!(r["stable_with_max_users"]["users"], 16);
-    assert_eq!(r["stable_with_max_users"]["same_op"], true, "{}", r["answer"]);
-    assert_eq!(r["stable_with_max_users"]["spread"], true, "{}", r["answer"]);
-    let points = r["points"].as_array().unwrap();
-    let cost = |layout: &str, n: u64| {
-        points.iter().find(|p| p["layout"] == layout && p["users"] == n).map(|p| f(&p["ve_us_per_tick"])).unwrap()
+    let r: UsersSummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    assert_eq!(r.stable_with_max_users.users, 16);
+    assert_eq!(r.stable_with_max_users.same_op, Some(true), "{}", r.answer);
+    assert_eq!(r.stable_with_max_users.spread, Some(true), "{}", r.answer);
+    let points = &r.points;
+    let cost = |layout: &str, n: usize| {
+        points.iter().find(|p| p.layout == layout && p.users == n).map(|p| p.ve_us_per_tick).unwrap()
     };
     // Users of one OP share its op-space terms, so the growth is modest on one OP and larger spread over
     // four OPs. Wall-clock ratios of a quick run move with the host's load, so only the direction is
@@ -347,20 +348,24 @@ fn sixteen_users_stay_stable_and_cost_grows_with_users() {
     // the one user does (each device renders the OP's acceleration from every hand, not from its own only).
     let deviation = points
         .iter()
-        .find(|p| p["layout"] == "same_op" && p["users"] == 16)
-        .map(|p| f(&p["ve_link2_deviation_from_one_user_mm"]))
+        .find(|p| p.layout == "same_op" && p.users == 16)
+        .and_then(|p| p.ve_link2_deviation_from_one_user_mm)
         .unwrap();
     assert!(deviation < 20.0, "16 users moved link 2 {deviation} mm RMS away from the one-user path");
     // Sharing under delay (quick: 0 and 100 ms, up to 4 users): with the others' hands weighted by the round
     // trip every session is stable; taken whole, 100 ms is unstable for every layout and count.
-    let sharing = &r["sharing"];
-    assert_eq!(sharing["unstable_weighted"], 0, "{}", sharing["answer"]);
-    let points = sharing["points"].as_array().unwrap();
-    let whole_at_100: Vec<_> = points.iter().filter(|p| p["others_hands"] == "whole" && p["delay_ms"] == 100).collect();
+    let sharing = &r.sharing;
+    assert_eq!(sharing.unstable_weighted, 0, "{}", sharing.answer);
+    let whole_at_100: Vec<_> =
+        sharing.points.iter().filter(|p| p.others_hands == "whole" && p.delay_ms == 100).collect();
     assert!(!whole_at_100.is_empty());
     for p in whole_at_100 {
-        assert_eq!(p["stable"], false, "{p}");
+        assert!(!p.stable, "{p:?}");
     }
+    assert_eq!(
+        sharing.unstable_whole,
+        sharing.points.iter().filter(|p| p.others_hands == "whole" && !p.stable).count()
+    );
 }
 
 /// The reduced local model's step does not grow with the linkage; the VE step and the configuration form's

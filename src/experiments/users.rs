@@ -25,7 +25,8 @@ use anyhow::{Context, Result};
 use kinloop_client::user::UserSpec;
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::model::scene::{GeometrySpec, OpSpec};
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 use super::common::{
     paper_plan, path_length, rms_error, session, sweep, timed_cost, ve_op_trajectory, Options, Output, Report,
@@ -157,23 +158,172 @@ fn measure(layout: Layout, users: usize) -> Result<Measured> {
     })
 }
 
-fn point_json(m: &Measured) -> Value {
-    json!({
-        "layout": m.layout.key(),
-        "users": m.users,
-        "stable": m.verdict.stable,
-        "reasons": m.verdict.reasons,
-        "device_op_rms_mm_mean_over_users": round(m.op_rms_mean_m * 1e3, 3),
-        "device_op_rms_mm_worst_user": round(m.op_rms_max_m * 1e3, 3),
-        "device_op_max_mm": round(m.verdict.device_op_max_m * 1e3, 3),
-        "ve_link2_path_mm": round(m.link2_path_m * 1e3, 2),
-        "ve_link2_deviation_from_one_user_mm": m.deviation_from_one_user_m.map(|d| round(d * 1e3, 3)),
-        "ve_us_per_tick": round(m.ve_us_per_tick, 2),
-        "haptic_core_us_per_tick_per_user": round(m.client_us_per_tick_per_user, 3),
-        "worst_saturation": round(m.verdict.worst_saturation, 3),
-        "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
-        "uplinks_refused_by_server": m.uplinks_refused,
-    })
+/// `summary.json`'s `results` of the users experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UsersSummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// Users sharing a linkage under delay.
+    pub sharing: SharingSummary,
+    /// Whether the largest count of users stayed stable, per layout (none: not run).
+    pub stable_with_max_users: StableWithMaxUsers,
+    /// The VE's cost per extra user (µs a tick), per layout.
+    pub ve_us_per_extra_user: PerLayout,
+    /// How far link 2 travels with N users on one OP.
+    pub link2_path_mm_same_op: Vec<Link2Path>,
+    /// The stability criterion the sessions were judged by.
+    pub criterion: Value,
+    /// How the sessions ran.
+    pub setup: UsersSetup,
+    /// Every session of the count sweep.
+    pub points: Vec<UsersPoint>,
+}
+
+/// Whether the sessions with the most users stayed stable.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StableWithMaxUsers {
+    /// The most users.
+    pub users: usize,
+    /// All on one OP.
+    pub same_op: Option<bool>,
+    /// Spread over the links.
+    pub spread: Option<bool>,
+}
+
+/// A figure per layout (none where not run).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PerLayout {
+    /// All users on one OP.
+    pub same_op: Option<f64>,
+    /// Users spread over the links.
+    pub spread: Option<f64>,
+}
+
+/// Link 2's travel with N users on one OP.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Link2Path {
+    /// Users.
+    pub users: usize,
+    /// Path length of link 2's COM (mm).
+    pub path_mm: f64,
+}
+
+/// How the count sweep's sessions ran.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UsersSetup {
+    /// The session.
+    pub session: String,
+    /// The users' load.
+    pub load: String,
+    /// The spread layout's OPs.
+    pub spread_ops: String,
+    /// How the cost was timed.
+    pub cost: String,
+}
+
+/// One session of the count sweep.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UsersPoint {
+    /// `same_op` or `spread`.
+    pub layout: String,
+    /// Users.
+    pub users: usize,
+    /// The session's verdict.
+    pub stable: bool,
+    /// Why not, if not.
+    pub reasons: Vec<String>,
+    /// Device-OP RMS, mean over users (mm).
+    pub device_op_rms_mm_mean_over_users: f64,
+    /// Device-OP RMS of the worst user (mm).
+    pub device_op_rms_mm_worst_user: f64,
+    /// Largest device-OP distance (mm).
+    pub device_op_max_mm: f64,
+    /// Path length of link 2's COM (mm).
+    pub ve_link2_path_mm: f64,
+    /// RMS distance of link 2's path from the one-user session's (mm; one OP only).
+    pub ve_link2_deviation_from_one_user_mm: Option<f64>,
+    /// The VE's compute per tick (µs).
+    pub ve_us_per_tick: f64,
+    /// One haptic core's compute per tick (µs).
+    pub haptic_core_us_per_tick_per_user: f64,
+    /// The worst user's saturated fraction of ticks.
+    pub worst_saturation: f64,
+    /// Energy generated beyond the criterion's allowance (J).
+    pub energy_excess_j: f64,
+    /// Uplinks the server refused.
+    pub uplinks_refused_by_server: u64,
+}
+
+/// The sharing sweep's part of the summary.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SharingSummary {
+    /// The sweep's one-line answer.
+    pub answer: String,
+    /// Unstable sessions with the others' hands weighted by the round trip.
+    pub unstable_weighted: usize,
+    /// Unstable sessions with the others' hands whole.
+    pub unstable_whole: usize,
+    /// Per layout, count and method: the smallest unstable delay (none: all stable).
+    pub first_unstable: Vec<FirstUnstable>,
+    /// How the sessions ran.
+    pub setup: String,
+    /// Every session.
+    pub points: Vec<SharingPointSummary>,
+}
+
+/// The smallest unstable delay of one row of the sharing map.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FirstUnstable {
+    /// Layout, count and method.
+    pub row: String,
+    /// One-way delay (ms), none when every delay was stable.
+    pub first_unstable_delay_ms: Option<u64>,
+}
+
+/// One session of the sharing sweep.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SharingPointSummary {
+    /// The layout's name.
+    pub layout: String,
+    /// The OPs the users hold.
+    pub ops: Vec<String>,
+    /// Users.
+    pub users: usize,
+    /// One-way delay (ms).
+    pub delay_ms: u64,
+    /// `weighted` or `whole`.
+    pub others_hands: String,
+    /// The session's verdict.
+    pub stable: bool,
+    /// Why not, if not.
+    pub reasons: Vec<String>,
+    /// Device-OP RMS, mean over users (mm).
+    pub device_op_rms_mm_mean_over_users: f64,
+    /// Device-OP RMS of the worst user (mm).
+    pub device_op_rms_mm_worst_user: f64,
+    /// The worst user's saturated fraction of ticks.
+    pub worst_saturation: f64,
+    /// Energy generated beyond the criterion's allowance (J).
+    pub energy_excess_j: f64,
+}
+
+fn point_summary(m: &Measured) -> UsersPoint {
+    UsersPoint {
+        layout: m.layout.key().into(),
+        users: m.users,
+        stable: m.verdict.stable,
+        reasons: m.verdict.reasons.iter().map(|r| r.to_string()).collect(),
+        device_op_rms_mm_mean_over_users: round(m.op_rms_mean_m * 1e3, 3),
+        device_op_rms_mm_worst_user: round(m.op_rms_max_m * 1e3, 3),
+        device_op_max_mm: round(m.verdict.device_op_max_m * 1e3, 3),
+        ve_link2_path_mm: round(m.link2_path_m * 1e3, 2),
+        ve_link2_deviation_from_one_user_mm: m.deviation_from_one_user_m.map(|d| round(d * 1e3, 3)),
+        ve_us_per_tick: round(m.ve_us_per_tick, 2),
+        haptic_core_us_per_tick_per_user: round(m.client_us_per_tick_per_user, 3),
+        worst_saturation: round(m.verdict.worst_saturation, 3),
+        energy_excess_j: significant(m.verdict.energy_excess_j, 3),
+        uplinks_refused_by_server: m.uplinks_refused,
+    }
 }
 
 fn line_per_layout(chart: Chart, measured: &[Measured], label: &str, y: impl Fn(&Measured) -> f64) -> Chart {
@@ -253,7 +403,7 @@ fn sharing_measure(p: &SharingPoint) -> Result<SharingMeasured> {
 }
 
 /// The sharing sweep: its charts, and its part of the summary.
-fn sharing(options: &Options, out: &mut Output) -> Result<Value> {
+fn sharing(options: &Options, out: &mut Output) -> Result<SharingSummary> {
     let delays: Vec<u64> = options.pick(SHARING_DELAYS_MS.to_vec(), vec![0, 100]);
     let mut points = Vec::new();
     for (layout, (_, _, counts, _)) in SHARING_LAYOUTS.iter().enumerate() {
@@ -317,44 +467,44 @@ fn sharing(options: &Options, out: &mut Output) -> Result<Value> {
                 .filter(|m| !m.verdict.stable)
                 .map(|m| m.point.delay_ms)
                 .min();
-            json!({ "row": row, "first_unstable_delay_ms": first })
+            FirstUnstable { row: row.clone(), first_unstable_delay_ms: first }
         })
-        .collect::<Vec<_>>();
+        .collect();
     let unstable =
         |weighted: bool| measured.iter().filter(|m| m.point.weighted == weighted && !m.verdict.stable).count();
     let per_method = measured.len() / 2;
-    Ok(json!({
-        "answer": format!(
+    Ok(SharingSummary {
+        answer: format!(
             "Users sharing a linkage under delay (0-{} ms one way): {} of {per_method} sessions unstable with the \
              others' hands weighted by the round trip (the default), {} of {per_method} with them whole.",
             delays.iter().max().unwrap_or(&0),
             unstable(true),
             unstable(false),
         ),
-        "unstable_weighted": unstable(true),
-        "unstable_whole": unstable(false),
-        "first_unstable": first_unstable,
-        "setup": format!(
+        unstable_weighted: unstable(true),
+        unstable_whole: unstable(false),
+        first_unstable,
+        setup: format!(
             "{SHARING_S} s sessions, sim:paper devices, relaxed and firm touring hands in turn, the delay both ways; \
              whole = VeConfig::exchange_delay_s infinite"
         ),
-        "points": measured
+        points: measured
             .iter()
-            .map(|m| json!({
-                "layout": SHARING_LAYOUTS[m.point.layout].0,
-                "ops": SHARING_LAYOUTS[m.point.layout].1,
-                "users": m.point.users,
-                "delay_ms": m.point.delay_ms,
-                "others_hands": m.point.method(),
-                "stable": m.verdict.stable,
-                "reasons": m.verdict.reasons,
-                "device_op_rms_mm_mean_over_users": round(m.op_rms_mean_m * 1e3, 3),
-                "device_op_rms_mm_worst_user": round(m.op_rms_max_m * 1e3, 3),
-                "worst_saturation": round(m.verdict.worst_saturation, 3),
-                "energy_excess_j": significant(m.verdict.energy_excess_j, 3),
-            }))
-            .collect::<Vec<_>>(),
-    }))
+            .map(|m| SharingPointSummary {
+                layout: SHARING_LAYOUTS[m.point.layout].0.into(),
+                ops: SHARING_LAYOUTS[m.point.layout].1.iter().map(|op| op.to_string()).collect(),
+                users: m.point.users,
+                delay_ms: m.point.delay_ms,
+                others_hands: m.point.method().into(),
+                stable: m.verdict.stable,
+                reasons: m.verdict.reasons.iter().map(|r| r.to_string()).collect(),
+                device_op_rms_mm_mean_over_users: round(m.op_rms_mean_m * 1e3, 3),
+                device_op_rms_mm_worst_user: round(m.op_rms_max_m * 1e3, 3),
+                worst_saturation: round(m.verdict.worst_saturation, 3),
+                energy_excess_j: significant(m.verdict.energy_excess_j, 3),
+            })
+            .collect(),
+    })
 }
 
 /// Runs the experiment.
@@ -424,31 +574,34 @@ pub fn run(options: &Options) -> Result<Report> {
     }
     let sharing = sharing(options, &mut out)?;
     answer.push(' ');
-    answer.push_str(sharing["answer"].as_str().unwrap_or_default());
-    let results = json!({
-        "answer": answer,
-        "sharing": sharing,
-        "stable_with_max_users": {
-            "users": max_n,
-            "same_op": find(Layout::SameOp, max_n).map(|m| m.verdict.stable),
-            "spread": find(Layout::Spread, max_n).map(|m| m.verdict.stable),
+    answer.push_str(&sharing.answer);
+    let results = UsersSummary {
+        answer,
+        sharing,
+        stable_with_max_users: StableWithMaxUsers {
+            users: max_n,
+            same_op: find(Layout::SameOp, max_n).map(|m| m.verdict.stable),
+            spread: find(Layout::Spread, max_n).map(|m| m.verdict.stable),
         },
-        "ve_us_per_extra_user": { "same_op": per_user_cost(Layout::SameOp), "spread": per_user_cost(Layout::Spread) },
-        "link2_path_mm_same_op": measured.iter().filter(|m| m.layout == Layout::SameOp)
-            .map(|m| json!({ "users": m.users, "path_mm": round(m.link2_path_m * 1e3, 1) })).collect::<Vec<_>>(),
-        "criterion": verdict::criterion_json(),
-        "setup": {
-            "session": "paper testbed, sim:paper devices at 1 kHz, 1 kHz VE and snapshots, perfect network, 3 s, users join 10 ms apart",
-            "load": "each of N users pushes F/N with F the paper's (-0.5 N, 0, -0.0025 N m): the total is the paper's",
-            "spread_ops": "added at run time: every link at 0.5, then 0.25, 0.75, 0.9 of its length",
-            "cost": format!("single thread, best of {reps} runs of 2 s without recording"),
+        ve_us_per_extra_user: PerLayout { same_op: per_user_cost(Layout::SameOp), spread: per_user_cost(Layout::Spread) },
+        link2_path_mm_same_op: measured
+            .iter()
+            .filter(|m| m.layout == Layout::SameOp)
+            .map(|m| Link2Path { users: m.users, path_mm: round(m.link2_path_m * 1e3, 1) })
+            .collect(),
+        criterion: verdict::criterion_json(),
+        setup: UsersSetup {
+            session: "paper testbed, sim:paper devices at 1 kHz, 1 kHz VE and snapshots, perfect network, 3 s, users join 10 ms apart".into(),
+            load: "each of N users pushes F/N with F the paper's (-0.5 N, 0, -0.0025 N m): the total is the paper's".into(),
+            spread_ops: "added at run time: every link at 0.5, then 0.25, 0.75, 0.9 of its length".into(),
+            cost: format!("single thread, best of {reps} runs of 2 s without recording"),
         },
-        "points": measured.iter().map(point_json).collect::<Vec<_>>(),
-    });
+        points: measured.iter().map(point_summary).collect(),
+    };
     out.finish(
         "1 to 16 users on one linkage: stability, tracking and VE cost, and sharing it under delay",
         "12 sessions of 3 s and their timing pass, 50 sharing sessions of 10 s; --quick fewer",
-        results,
+        serde_json::to_value(&results)?,
     )
 }
 
