@@ -399,41 +399,57 @@ impl<S: Space> Session<S> {
         Ok(())
     }
 
-    /// Runs to the end of the plan.
+    /// The time of the next event: a VE tick, a client's tick or a datagram due on a link.
+    pub fn next_event(&self) -> Duration {
+        let mut next = self.ve.poll_timeout();
+        for p in &self.participants {
+            if !p.left {
+                next = next.min(p.next_tick);
+            }
+            for t in [p.up.poll_timeout(), p.down.poll_timeout()].into_iter().flatten() {
+                next = next.min(t);
+            }
+        }
+        next
+    }
+
+    /// Handles everything due at `now`: datagrams first, then the VE's tick (its tick happens "before"
+    /// clients read), then every client's tick. `now` never goes back; events not yet due wait.
+    pub fn step(&mut self, now: Duration) -> Result<()> {
+        self.deliver_links(now)?;
+        if self.ve.poll_timeout() <= now {
+            let t = Instant::now();
+            self.ve.handle_timeout(now);
+            self.ve_compute += t.elapsed();
+            self.after_ve_tick(now);
+            self.send_snapshots(now);
+        }
+        for i in 0..self.participants.len() {
+            if self.participants[i].left || self.participants[i].next_tick > now {
+                continue;
+            }
+            self.client_tick(i, now)?;
+        }
+        Ok(())
+    }
+
+    /// Participant `i`'s haptic core, once it has joined.
+    pub fn core(&self, i: usize) -> Option<&HapticCore<S>> {
+        self.participants.get(i).and_then(|p| p.core.as_ref())
+    }
+
+    /// Runs to the end of the plan: [`Session::step`] at each [`Session::next_event`].
     pub fn run(mut self, progress: &mut dyn FnMut(Duration)) -> Result<(SessionSummary, Recording)> {
         let wall = Instant::now();
         let mut now = Duration::ZERO;
         let mut last_progress = Duration::ZERO;
         loop {
-            // Deliver everything due, VE first at equal times (its tick happens "before" clients read).
-            let next_ve = self.ve.poll_timeout();
-            let mut next = next_ve;
-            for p in &self.participants {
-                if !p.left {
-                    next = next.min(p.next_tick);
-                }
-                for t in [p.up.poll_timeout(), p.down.poll_timeout()].into_iter().flatten() {
-                    next = next.min(t);
-                }
-            }
+            let next = self.next_event();
             if next > self.duration {
                 break;
             }
             now = next.max(now);
-            self.deliver_links(now)?;
-            if next_ve <= now {
-                let t = Instant::now();
-                self.ve.handle_timeout(now);
-                self.ve_compute += t.elapsed();
-                self.after_ve_tick(now);
-                self.send_snapshots(now);
-            }
-            for i in 0..self.participants.len() {
-                if self.participants[i].left || self.participants[i].next_tick > now {
-                    continue;
-                }
-                self.client_tick(i, now)?;
-            }
+            self.step(now)?;
             if now - last_progress >= Duration::from_millis(100) {
                 last_progress = now;
                 progress(now);
@@ -636,5 +652,33 @@ impl<S: Space> Session<S> {
             wall_s: wall.as_secs_f64(),
         };
         (summary, self.recording)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A session stepped event by event from outside ends where `run` ends: the same VE steps and the same
+    /// tracking, so a test that steps it sees the real thing.
+    #[test]
+    fn a_session_stepped_by_hand_ends_where_run_ends() {
+        let mut plan = SessionPlan::paper().unwrap();
+        plan.duration = Duration::from_millis(300);
+        let (ran, _) = run(&plan, &mut |_| {}).unwrap();
+        let mut session = Session::<Planar>::new(&plan).unwrap();
+        assert!(session.core(0).is_none(), "nobody has joined before the first step");
+        let mut now = Duration::ZERO;
+        while session.next_event() <= plan.duration {
+            now = session.next_event().max(now);
+            session.step(now).unwrap();
+        }
+        assert!(session.core(0).is_some_and(|core| core.stats().snapshots_accepted > 0));
+        let (stepped, _) = session.finish(Duration::ZERO);
+        assert!(ran.ve_steps > 0);
+        assert_eq!(stepped.ve_steps, ran.ve_steps);
+        assert_eq!(stepped.clients[0].ticks, ran.clients[0].ticks);
+        assert_eq!(stepped.clients[0].device_op_rms_m, ran.clients[0].device_op_rms_m);
+        assert_eq!(stepped.max_closure_error, ran.max_closure_error);
     }
 }
