@@ -5,6 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
+use kinloop::experiments::model_update::ModelUpdateSummary;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
 use kinloop::experiments::scale::ScaleSummary;
@@ -217,11 +218,18 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     assert!(last.device_op_rms_mm > 0.8 * last.device_unheard_rms_mm, "{last:?}");
     // The model-update rows: every way of pulling runs the same sessions, and the default pull (at least two
     // round trips, paid from the tank) leaves none unstable.
-    let rows = r["model_update"]["rows"].as_array().unwrap();
-    let row = |name: &str| rows.iter().find(|row| row["update"] == name).unwrap_or_else(|| panic!("{name}"));
-    assert_eq!(row("default")["unstable"], 0, "{rows:?}");
+    let model_update: ModelUpdateSummary =
+        serde_json::from_value(r["model_update"].clone()).expect("typed model-update summary");
+    let rows = &model_update.rows;
+    let row = |name: &str| rows.iter().find(|row| row.update == name).unwrap_or_else(|| panic!("{name}"));
+    assert_eq!(row("default").unstable, 0, "{rows:?}");
     for other in ["fixed pull, no tank", "fixed pull, tank", "default, no tank"] {
-        assert_eq!(row("default")["sessions"], row(other)["sessions"], "{rows:?}");
+        assert_eq!(row("default").sessions, row(other).sessions, "{rows:?}");
+    }
+    assert_eq!(model_update.points.len(), rows.iter().map(|row| row.sessions).sum::<usize>());
+    for row in rows {
+        let unstable = model_update.points.iter().filter(|p| p.update == row.update && !p.point.stable).count();
+        assert_eq!(unstable, row.unstable, "{row:?}");
     }
     // The lead rows (`--lead-max-ms`; quick: the whole delay as the cap): a VE that leads its target by the
     // one-way delay is nearer the device than any VE that follows what it heard can be; the lead is cut to

@@ -354,9 +354,9 @@ pub fn run(options: &Options) -> Result<Report> {
     let (table, first_failures) = first_failures(&grid, &all);
     let (goals, answer) = goals_and_answer(&grid, &all, &circle, &table);
     let results = json!({
-        "answer": format!("{answer} {} {}", model_update["answer"].as_str().unwrap_or_default(), lead.answer),
+        "answer": format!("{answer} {} {}", model_update.answer, lead.answer),
         "goals": goals,
-        "model_update": model_update,
+        "model_update": serde_json::to_value(&model_update)?,
         "lead": lead.summary,
         "first_failures": first_failures,
         "criterion": verdict::criterion_json(),

@@ -15,13 +15,13 @@
 //! - `default`: both, as `kinloop-client` runs.
 
 use anyhow::Result;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
 
 use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
-use super::delay_point::{measure_with, point_json, seconds_per_point, Measured, Network, Point, TARGETS};
+use super::delay_point::{measure_with, seconds_per_point, Measured, Network, Point, PointSummary, TARGETS};
 use crate::charts::HeatMap;
 use kinloop_harness::CoreEdit;
 
@@ -71,8 +71,44 @@ impl Update {
     }
 }
 
+/// The model-update rows' part of the latency summary.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelUpdateSummary {
+    /// The rows' one-line answer.
+    pub answer: String,
+    /// Per way of updating: its sessions and how many were unstable.
+    pub rows: Vec<UpdateRow>,
+    /// Every session.
+    pub points: Vec<UpdatePoint>,
+    /// How the sessions ran.
+    pub setup: String,
+}
+
+/// One way of updating the local model over its sessions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UpdateRow {
+    /// The way's name.
+    pub update: String,
+    /// Its unstable sessions.
+    pub unstable: usize,
+    /// Its sessions.
+    pub sessions: usize,
+    /// The smallest one-way delay with an unstable session (ms), none if all were stable.
+    pub first_unstable_delay_ms: Option<f64>,
+}
+
+/// One session: the delay experiments' point and the way of updating it ran with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UpdatePoint {
+    /// The point.
+    #[serde(flatten)]
+    pub point: PointSummary,
+    /// The way of updating.
+    pub update: String,
+}
+
 /// Runs the rows, draws their stability map, and returns their summary.
-pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
+pub fn run(out: &mut Output, options: &Options) -> Result<ModelUpdateSummary> {
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(vec![HandKind::Soft, HandKind::Firm], vec![HandKind::Soft]);
     let delays: Vec<f64> = options.pick(DELAYS_MS.to_vec(), vec![300.0, 1000.0]);
@@ -116,15 +152,13 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
     let first_unstable = |u: Update| {
         all.iter().filter(|(w, m)| *w == u && !m.verdict.stable).map(|(_, m)| m.point.delay_ms).reduce(f64::min)
     };
-    let rows_json: Vec<Value> = Update::ALL
+    let rows = Update::ALL
         .iter()
-        .map(|&u| {
-            json!({
-                "update": u.name(),
-                "unstable": unstable(u),
-                "sessions": per(u),
-                "first_unstable_delay_ms": first_unstable(u),
-            })
+        .map(|&u| UpdateRow {
+            update: u.name().into(),
+            unstable: unstable(u),
+            sessions: per(u),
+            first_unstable_delay_ms: first_unstable(u),
         })
         .collect();
     let answer = format!(
@@ -143,18 +177,11 @@ pub fn run(out: &mut Output, options: &Options) -> Result<Value> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let points_json: Vec<Value> = all
-        .iter()
-        .map(|(u, m)| {
-            let mut point = point_json(m);
-            point["update"] = json!(u.name());
-            point
-        })
-        .collect();
-    Ok(json!({
-        "answer": answer,
-        "rows": rows_json,
-        "points": points_json,
-        "setup": "clean network (no jitter or loss), the grid's sessions otherwise; fixed: CoreConfig::free_blend_round_trips = 0 (the free pull at its configured 200 ms at every delay); tank: CoreConfig::passive_update",
-    }))
+    let points = all.iter().map(|(u, m)| UpdatePoint { point: PointSummary::of(m), update: u.name().into() }).collect();
+    Ok(ModelUpdateSummary {
+        answer,
+        rows,
+        points,
+        setup: "clean network (no jitter or loss), the grid's sessions otherwise; fixed: CoreConfig::free_blend_round_trips = 0 (the free pull at its configured 200 ms at every delay); tank: CoreConfig::passive_update".into(),
+    })
 }
