@@ -31,6 +31,8 @@
 //! | [`bias`](algorithms::bias) | B(q, q̇) by Newton-Euler | eq 1 |
 //! | [`gravity`](algorithms::gravity) | G(q): gravity and springs; energies | eq 1 |
 //! | [`joint_forces`](algorithms::joint_forces) | damping, PD actuators (active linkages) | eq 1 |
+//! | [`cut_forces`](algorithms::cut_forces) | springs and dampers on the cuts' freedoms | eq 1 |
+//! | [`joint_limits`](algorithms::joint_limits) | range walls of joints and cuts | eq 1 |
 //! | [`loop_closure`](algorithms::loop_closure) | h, W, w = Ẇq̇ (analytic), Baumgarte w_stab | eq 2, 3 |
 //! | [`ltl`](algorithms::ltl) | tree-sparse factorization D = U Uᵀ | |
 //! | [`articulated`](algorithms::articulated) | the same U from articulated-body inertias, without D | |

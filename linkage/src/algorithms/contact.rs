@@ -79,6 +79,16 @@ pub fn detect_contacts<S: Space>(model: &Model<S>, kin: &Kinematics<S>, margin: 
     }
 }
 
+/// The penalty law of contacts and of the joints' range walls: the push `max(0, −k gap − b ġap)` (≥ 0) of a
+/// wall penetrated by `−gap` (zero when `gap ≥ 0`). The clamp keeps the wall from pulling, so with the damper
+/// it only ever takes energy: its work is the spring's `−d(½ k gap²)` plus a part that is never positive.
+pub fn penalty_force(stiffness: f64, damping: f64, gap: f64, gap_rate: f64) -> f64 {
+    if gap >= 0.0 {
+        return 0.0;
+    }
+    (-stiffness * gap - damping * gap_rate).max(0.0)
+}
+
 /// Penalty contact forces `f = max(0, -k gap - b ġap)` along each contact normal, as a [`Forces`] source.
 #[derive(Clone, Debug)]
 pub struct PenaltyContacts<S: Space> {
@@ -106,7 +116,7 @@ impl<S: Space> PenaltyContacts<S> {
             return 0.0;
         }
         let gap_rate = c.normal.dot(&kin.point_velocity(Some(c.body), &c.point));
-        (-self.stiffness * c.gap - self.damping * gap_rate).max(0.0)
+        penalty_force(self.stiffness, self.damping, c.gap, gap_rate)
     }
 }
 

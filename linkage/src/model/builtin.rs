@@ -101,6 +101,7 @@ pub fn chain(links: usize, loops: usize) -> Scene {
             spring: None,
             damping: 0.0,
             actuator: None,
+            range: None,
         })
         .collect();
     let cuts = (1..=loops)
@@ -114,6 +115,10 @@ pub fn chain(links: usize, loops: usize) -> Scene {
                 body_b: "ground".into(),
                 point_b: None,
                 axis: None,
+                axis_b: None,
+                spring: None,
+                damping: 0.0,
+                range: None,
             }
         })
         .collect();
