@@ -110,6 +110,11 @@ impl<S: Space> PenaltyContacts<S> {
         }
     }
 
+    /// The contacts of a scene with obstacles (`None` without): what the VE and `kinloop simulate` apply.
+    pub fn of_obstacles(model: &Model<S>) -> Option<Self> {
+        (!model.obstacles.is_empty()).then(|| PenaltyContacts::new(model))
+    }
+
     /// The normal force of a contact at the given kinematic state (≥ 0).
     pub fn normal_force(&self, kin: &Kinematics<S>, c: &Contact<S>) -> f64 {
         if c.gap >= 0.0 {
