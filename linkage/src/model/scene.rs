@@ -2,8 +2,9 @@
 //! the file and the key.
 //!
 //! A scene lists bodies, the tree joints that connect each body to its parent (from `ground` outwards),
-//! the cut joints that close kinematic loops, named operational points, and obstacles. See the README for
-//! the full format; [`Scene::from_toml_str`] parses, [`crate::Model::compile`] validates and compiles.
+//! the cut joints that close kinematic loops, named operational points, and obstacles. `docs/scene-format.md`
+//! gives every key with its unit and default; [`Scene::from_toml_str`] parses, [`crate::Model::compile`]
+//! validates and compiles.
 
 use std::path::Path;
 
