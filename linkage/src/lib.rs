@@ -43,6 +43,7 @@
 //! | [`constraint_directions`](algorithms::constraint_directions) | SVD of Λ⁻¹, unit-consistent constraint count | eq 10, 12 |
 //! | [`local_model`](algorithms::local_model) | configuration-space and reduced operational-space local models | eq 11, 13 |
 //! | [`contact`](algorithms::contact) | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
+//! | [`penalty`](algorithms::penalty) | the push-only penalty law of contacts and range walls | eq 1 (Fᵢ) |
 //! | [`assemble`](algorithms::assemble) | the nearest closed configuration | |
 //! | [`reach`](algorithms::reach) | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
 //! | [`op_path`](algorithms::op_path) | a 1-DOF linkage's OP path: nearest point, tangent (the free direction), turning a frame along it | eq 10 |

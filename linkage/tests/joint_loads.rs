@@ -37,37 +37,34 @@ fn bare(name: &str) -> Scene {
     scene
 }
 
-/// The four-bar with a torsion spring (and, with `damping`, a damper) in its coupler-rocker pin.
-fn four_bar_with_pin_spring(damping: f64) -> Scene {
-    let mut scene = bare("fourbar-crank-rocker");
-    scene.cuts[0].spring = Some(SpringSpec { stiffness: 0.8, rest: 0.3 });
+/// A built-in scene laid `bare`, with a spring `(stiffness, rest)` and `damping` on its first cut (and no
+/// range on its first joint).
+fn with_cut_loads(name: &str, (stiffness, rest): (f64, f64), damping: f64) -> Scene {
+    let mut scene = bare(name);
+    scene.joints[0].range = None;
+    scene.cuts[0].spring = Some(SpringSpec { stiffness, rest });
     scene.cuts[0].damping = damping;
     scene
+}
+
+/// The four-bar with a torsion spring (and, with `damping`, a damper) in its coupler-rocker pin.
+fn four_bar_with_pin_spring(damping: f64) -> Scene {
+    with_cut_loads("fourbar-crank-rocker", (0.8, 0.3), damping)
 }
 
 /// The guided slider-crank (its slide coordinate is the slider's x) with a spring on the guide.
 fn slider_with_guide_spring(damping: f64) -> Scene {
-    let mut scene = bare("guided-slider-crank");
-    scene.joints[0].range = None;
-    scene.cuts[0].spring = Some(SpringSpec { stiffness: 60.0, rest: 0.16 });
-    scene.cuts[0].damping = damping;
-    scene
+    with_cut_loads("guided-slider-crank", (60.0, 0.16), damping)
 }
 
 /// The Bennett linkage with a torsion spring on its revolute cut.
 fn bennett_with_hinge_spring(damping: f64) -> Scene {
-    let mut scene = bare("bennett-linkage");
-    scene.cuts[0].spring = Some(SpringSpec { stiffness: 0.05, rest: -0.2 });
-    scene.cuts[0].damping = damping;
-    scene
+    with_cut_loads("bennett-linkage", (0.05, -0.2), damping)
 }
 
 /// The RSSR four-bar with an isotropic torsion spring on its ball joint.
 fn rssr_with_ball_spring(damping: f64) -> Scene {
-    let mut scene = bare("rssr-four-bar");
-    scene.cuts[0].spring = Some(SpringSpec { stiffness: 5.0, rest: 0.0 });
-    scene.cuts[0].damping = damping;
-    scene
+    with_cut_loads("rssr-four-bar", (5.0, 0.0), damping)
 }
 
 fn body<S: Space>(model: &Model<S>, name: &str) -> usize {

@@ -5,6 +5,7 @@ use nalgebra::DVector;
 
 use crate::algorithms::dynamics::Forces;
 use crate::algorithms::jacobian::apply_wrench;
+use crate::algorithms::penalty::penalty_force;
 use crate::math::space::{Space, VecOps};
 use crate::model::data::Kinematics;
 use crate::model::{Model, Obstacle, Shape};
@@ -77,16 +78,6 @@ pub fn detect_contacts<S: Space>(model: &Model<S>, kin: &Kinematics<S>, margin: 
             }
         }
     }
-}
-
-/// The penalty law of contacts and of the joints' range walls: the push `max(0, −k gap − b ġap)` (≥ 0) of a
-/// wall penetrated by `−gap` (zero when `gap ≥ 0`). The clamp keeps the wall from pulling, so with the damper
-/// it only ever takes energy: its work is the spring's `−d(½ k gap²)` plus a part that is never positive.
-pub fn penalty_force(stiffness: f64, damping: f64, gap: f64, gap_rate: f64) -> f64 {
-    if gap >= 0.0 {
-        return 0.0;
-    }
-    (-stiffness * gap - damping * gap_rate).max(0.0)
 }
 
 /// Penalty contact forces `f = max(0, -k gap - b ġap)` along each contact normal, as a [`Forces`] source.

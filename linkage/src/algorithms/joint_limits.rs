@@ -1,7 +1,7 @@
 //! Ranges of tree joints and cut freedoms: penalty walls at both ends, generalized forces on the right-hand
 //! side of eq 1 beside the joint damping.
 //!
-//! A wall is a penalty spring-damper, the law the obstacle contacts use (`contact::penalty_force`), not a
+//! A wall is a penalty spring-damper, the law the obstacle contacts use (`penalty::penalty_force`), not a
 //! unilateral constraint: eq 4's KKT system holds equalities only, and a penalty force needs no
 //! complementarity solve, keeps every step's cost fixed, and reaches a client the way contacts' and
 //! springs' forces do, through the snapshot's bias. The price is a penetration of about `load / k` at rest
@@ -11,8 +11,8 @@
 
 use nalgebra::DVector;
 
-use crate::algorithms::contact::penalty_force;
 use crate::algorithms::cut_forces::{apply_along, freedom_state};
+use crate::algorithms::penalty::penalty_force;
 use crate::math::space::Space;
 use crate::model::data::Kinematics;
 use crate::model::{Model, Range};

@@ -24,5 +24,6 @@ pub mod ltl;
 pub mod mass_matrix;
 pub mod op_path;
 pub mod op_space;
+pub mod penalty;
 pub mod reach;
 pub(crate) mod tree;
