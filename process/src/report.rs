@@ -45,7 +45,10 @@ where
 fn end_quietly_when_stdout_closes() {
     let previous = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if info.payload_as_str().is_some_and(is_closed_stdout_panic) {
+        let payload = info.payload();
+        let message =
+            payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
+        if message.is_some_and(is_closed_stdout_panic) {
             std::process::exit(0);
         }
         previous(info);
