@@ -31,6 +31,8 @@
 //! | [`bias`](algorithms::bias) | B(q, q̇) by Newton-Euler | eq 1 |
 //! | [`gravity`](algorithms::gravity) | G(q): gravity and springs; energies | eq 1 |
 //! | [`joint_forces`](algorithms::joint_forces) | damping, PD actuators (active linkages) | eq 1 |
+//! | [`cut_forces`](algorithms::cut_forces) | springs and dampers on the cuts' freedoms | eq 1 |
+//! | [`joint_limits`](algorithms::joint_limits) | range walls of joints and cuts | eq 1 |
 //! | [`loop_closure`](algorithms::loop_closure) | h, W, w = Ẇq̇ (analytic), Baumgarte w_stab | eq 2, 3 |
 //! | [`ltl`](algorithms::ltl) | tree-sparse factorization D = U Uᵀ | |
 //! | [`articulated`](algorithms::articulated) | the same U from articulated-body inertias, without D | |
@@ -41,6 +43,7 @@
 //! | [`constraint_directions`](algorithms::constraint_directions) | SVD of Λ⁻¹, unit-consistent constraint count | eq 10, 12 |
 //! | [`local_model`](algorithms::local_model) | configuration-space and reduced operational-space local models | eq 11, 13 |
 //! | [`contact`](algorithms::contact) | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
+//! | [`penalty`](algorithms::penalty) | the push-only penalty law of contacts and range walls | eq 1 (Fᵢ) |
 //! | [`assemble`](algorithms::assemble) | the nearest closed configuration | |
 //! | [`reach`](algorithms::reach) | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
 //! | [`op_path`](algorithms::op_path) | a 1-DOF linkage's OP path: nearest point, tangent (the free direction), turning a frame along it | eq 10 |

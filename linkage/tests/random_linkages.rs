@@ -74,6 +74,7 @@ fn build(spec: &Spec, kind: SceneKind) -> Scene {
                 spring: None,
                 damping: 0.0,
                 actuator: None,
+                range: None,
             }
         })
         .collect();
@@ -92,6 +93,10 @@ fn build(spec: &Spec, kind: SceneKind) -> Scene {
                 body_b: if b == n || b == a { "ground".into() } else { name(b) },
                 point_b: None,
                 axis: None,
+                axis_b: None,
+                spring: None,
+                damping: 0.0,
+                range: None,
             }
         })
         .collect();

@@ -3,9 +3,12 @@
 use std::time::Instant;
 
 use anyhow::{ensure, Context, Result};
+use kinloop_linkage::algorithms::contact::PenaltyContacts;
+use kinloop_linkage::algorithms::dynamics::Forces;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::math::space::OpPose;
+use kinloop_linkage::model::data::Kinematics;
 use kinloop_linkage::{
     algorithms::dynamics::OpWrench, algorithms::integrator::step, algorithms::integrator::Integrator,
     algorithms::integrator::StepConfig, math::space::Planar, math::space::SceneKind, math::space::Space,
@@ -73,6 +76,23 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     Ok(())
 }
 
+/// What acts on a simulated scene from outside the linkage: the constant wrench and, when the scene has
+/// obstacles, the penalty contacts the VE applies (the same [`PenaltyContacts`], with the scene's
+/// `contact` parameters).
+struct SceneForces<S: Space> {
+    user: OpWrench<S>,
+    contacts: Option<PenaltyContacts<S>>,
+}
+
+impl<S: Space> Forces<S> for SceneForces<S> {
+    fn add_forces(&mut self, model: &Model<S>, kin: &Kinematics<S>, tau: &mut nalgebra::DVector<f64>) {
+        self.user.add_forces(model, kin, tau);
+        if let Some(contacts) = &mut self.contacts {
+            contacts.add_forces(model, kin, tau);
+        }
+    }
+}
+
 fn simulate<S: Space>(
     args: &SimulateArgs,
     integrator: Integrator,
@@ -85,7 +105,8 @@ fn simulate<S: Space>(
         Some("paper") => parse_wrench::<S>(Some("-0.5,0,-0.0025"))?,
         other => parse_wrench::<S>(other)?,
     };
-    let mut user = OpWrench::<S> { op, wrench };
+    let mut forces =
+        SceneForces::<S> { user: OpWrench { op, wrench }, contacts: PenaltyContacts::of_obstacles(&model) };
     let cfg = StepConfig { integrator, dt: args.dt, project: args.project, implicit_forces: false };
     let steps = (args.duration / args.dt).round() as usize;
 
@@ -95,7 +116,7 @@ fn simulate<S: Space>(
     let mut max_closure: f64 = 0.0;
     let start = Instant::now();
     for k in 0..steps {
-        let r = step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).with_context(|| format!("step {k}"))?;
+        let r = step(&model, &mut data, &mut q, &mut qd, &mut forces, &cfg).with_context(|| format!("step {k}"))?;
         max_closure = max_closure.max(r.closure_error);
     }
     let elapsed = start.elapsed();
@@ -104,13 +125,14 @@ fn simulate<S: Space>(
     max_closure = max_closure.max(data.closure_residual.norm());
 
     // Pass 2: the same (deterministic) trajectory, checking energy where it is conserved.
-    let energy_error = energy_error(&model, &cfg, &mut user, steps)?;
+    let energy_error = energy_error(&model, &cfg, &mut forces.user, steps)?;
     Ok(json!({
         "scene": model.name,
         "integrator": integrator.name(),
         "dt": args.dt,
         "project": args.project,
         "steps": steps,
+        "contacts": !model.obstacles.is_empty(),
         "q": q.as_slice(),
         "qd": qd.as_slice(),
         "max_closure_error": max_closure,

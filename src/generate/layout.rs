@@ -158,6 +158,7 @@ impl Layout {
                 spring: None,
                 damping: 0.0,
                 actuator: None,
+                range: None,
             });
         }
         let cuts = self
@@ -173,6 +174,10 @@ impl Layout {
                 // Written out (not left to be taken from q0), so that compiling checks the layout's geometry.
                 point_b: Some(pin.other.map_or(pin.at.to_vec(), |o| self.body_point(o, pin.at))),
                 axis: None,
+                axis_b: None,
+                spring: None,
+                damping: 0.0,
+                range: None,
             })
             .collect();
         Scene {

@@ -3,6 +3,8 @@
 //! the closure Jacobian. It needs the algorithms (poses at q0, assembly near q0), so it lives above them,
 //! apart from the model's definition.
 
+mod freedoms;
+
 use nalgebra::DVector;
 
 use crate::algorithms::assemble::assemble;
@@ -15,8 +17,7 @@ use crate::model::scene::{
     ActuatorSpec, Baumgarte, ContactParams, CutKindSpec, GeometrySpec, JointKindSpec, ObstacleSpec, Scene, GROUND,
 };
 use crate::model::{
-    Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, Spring,
-    NO_PARENT,
+    Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, NO_PARENT,
 };
 
 impl<S: Space> Model<S> {
@@ -149,6 +150,7 @@ impl<S: Space> Compiler<'_, S> {
             damping: self.non_negative("contact.damping", sc.contact.damping)?,
         };
         let length_scale = self.length_scale(&bodies)?;
+        self.joint_ranges(&mut joints, tree.order.iter().map(|&fb| tree.carrier[fb].unwrap_or(0)), &q0, length_scale)?;
         let new_names: Vec<String> = bodies.iter().map(|b| b.name.clone()).collect();
         let new_names: Vec<&str> = new_names.iter().map(|s| s.as_str()).collect();
         let ops = self.ops(&new_names)?;
@@ -177,6 +179,9 @@ impl<S: Space> Compiler<'_, S> {
             qd0,
         };
         self.compile_cuts(&mut model, &new_names)?;
+        model.has_springs |= model.cuts.iter().any(|c| c.spring.is_some_and(|s| s.stiffness > 0.0));
+        model.has_joint_forces |= model.joints.iter().any(|j| j.range.is_some())
+            || model.cuts.iter().any(|c| c.damping > 0.0 || c.range.is_some());
         model.closure_rank = generic_closure_rank(&model);
         Ok(model)
     }
@@ -326,10 +331,7 @@ impl<S: Space> Compiler<'_, S> {
         };
         let spring = match &j.spring {
             None => None,
-            Some(s) => Some(Spring {
-                stiffness: self.non_negative(&format!("{jkey}.spring.stiffness"), s.stiffness)?,
-                rest: self.finite(&format!("{jkey}.spring.rest"), s.rest)?,
-            }),
+            Some(s) => Some(self.spring(&format!("{jkey}.spring"), s)?),
         };
         let actuator = match &j.actuator {
             None => None,
@@ -347,6 +349,7 @@ impl<S: Space> Compiler<'_, S> {
             spring,
             damping: self.non_negative(&format!("{jkey}.damping"), j.damping)?,
             actuator,
+            range: None,
         };
         Ok((joint, q0, qd0))
     }
@@ -507,8 +510,23 @@ impl<S: Space> Compiler<'_, S> {
                     });
                 }
             }
+            if self.check_closure {
+                self.check_axis_b(&key, c, (body_a, body_b), axis_a.as_ref(), &at_q0)?;
+            }
+            let loads = self.cut_loads(&key, c, (a, b), axis_a.as_ref(), &at_q0, model.length_scale)?;
             let rows = primitives.iter().map(|p| p.rows()).sum();
-            cuts.push(Cut { name: c.name.clone(), kind: c.kind, primitives, row, rows });
+            let (freedom, spring, damping, range) = (loads.freedom, loads.spring, loads.damping, loads.range);
+            cuts.push(Cut {
+                name: c.name.clone(),
+                kind: c.kind,
+                primitives,
+                row,
+                rows,
+                freedom,
+                spring,
+                damping,
+                range,
+            });
             row += rows;
         }
         model.cuts = cuts;

@@ -5,6 +5,7 @@ use nalgebra::DVector;
 
 use crate::algorithms::dynamics::Forces;
 use crate::algorithms::jacobian::apply_wrench;
+use crate::algorithms::penalty::penalty_force;
 use crate::math::space::{Space, VecOps};
 use crate::model::data::Kinematics;
 use crate::model::{Model, Obstacle, Shape};
@@ -100,13 +101,18 @@ impl<S: Space> PenaltyContacts<S> {
         }
     }
 
+    /// The contacts of a scene with obstacles (`None` without): what the VE and `kinloop simulate` apply.
+    pub fn of_obstacles(model: &Model<S>) -> Option<Self> {
+        (!model.obstacles.is_empty()).then(|| PenaltyContacts::new(model))
+    }
+
     /// The normal force of a contact at the given kinematic state (≥ 0).
     pub fn normal_force(&self, kin: &Kinematics<S>, c: &Contact<S>) -> f64 {
         if c.gap >= 0.0 {
             return 0.0;
         }
         let gap_rate = c.normal.dot(&kin.point_velocity(Some(c.body), &c.point));
-        (-self.stiffness * c.gap - self.damping * gap_rate).max(0.0)
+        penalty_force(self.stiffness, self.damping, c.gap, gap_rate)
     }
 }
 

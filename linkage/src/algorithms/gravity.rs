@@ -1,7 +1,9 @@
-//! G(q) of eq 1: gravity and joint springs ("joint flexibility and gravitational effects").
+//! G(q) of eq 1: gravity and joint and cut springs ("joint flexibility and gravitational effects").
 
 use nalgebra::DVector;
 
+use crate::algorithms::cut_forces::{add_cut_springs, cut_spring_energy};
+use crate::algorithms::joint_limits::limit_wall_energy;
 use crate::algorithms::tree::subtree_sums;
 use crate::math::space::{Space, VecOps};
 use crate::model::data::Data;
@@ -27,10 +29,12 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
                 data.gravity[i] += spring.stiffness * (q[i] - spring.rest);
             }
         }
+        add_cut_springs(model, &data.kin, &mut data.gravity);
     }
 }
 
-/// Potential energy of gravity and springs at the configuration of the last `forward_kinematics`.
+/// Potential energy of gravity, springs and the range walls at the configuration of the last
+/// `forward_kinematics`.
 pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<f64>) -> f64 {
     let mut e = 0.0;
     for (i, body) in model.bodies.iter().enumerate() {
@@ -41,7 +45,7 @@ pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<
             e += 0.5 * s.stiffness * (q[i] - s.rest).powi(2);
         }
     }
-    e
+    e + cut_spring_energy(model, &data.kin) + limit_wall_energy(model, &data.kin, q)
 }
 
 /// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ` at the state of the last `forward_velocity`.

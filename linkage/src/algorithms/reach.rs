@@ -9,9 +9,10 @@
 //! around bends, and each step is pulled back onto `h = 0` by Gauss-Newton (`Δq = −W⁺ h`, as `assemble`).
 //! Starting from `q0` keeps the walk on q0's assembly branch: a four-bar's crossed branch, which no motion
 //! reaches, is never visited. A walk that cannot close (a rocker at its dead point, a slider at the end of
-//! its stroke) or that would push the linkage's geometry into an obstacle (the slider-crank's wall) reverses,
-//! as the linkage itself would. (Through the wall, the slider-crank's tour led the hand 22° of crank past
-//! where the slider meets it, and every device saturated against a hand that pressed on for its waypoints.)
+//! its stroke) or that would push the linkage's geometry into an obstacle (the slider-crank's wall) or a
+//! joint or cut past its `range` reverses, as the linkage itself would. (Through the wall, the
+//! slider-crank's tour led the hand 22° of crank past where the slider meets it, and every device saturated
+//! against a hand that pressed on for its waypoints.)
 //! Walks leave `q0` in several directions of the null space (one back and forth on a 1-DOF linkage, a star
 //! on a 2-DOF one).
 //!
@@ -29,6 +30,7 @@ use crate::algorithms::constraint_directions::scale_op;
 use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
 use crate::algorithms::contact::{contact_capacity, detect_contacts, Contact};
 use crate::algorithms::dynamics::forward_dynamics;
+use crate::algorithms::joint_limits::limit_wall_energy;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::local_model::op_acceleration;
 use crate::algorithms::loop_closure::loop_closure;
@@ -277,10 +279,12 @@ impl<S: Space> Walker<'_, S> {
 
     /// Moves `q` one step along `direction` (weighted coordinates), projected on the tangent space; the new
     /// direction, or `None` when the step does not close or would push the geometry deeper into an obstacle
-    /// (a wall stops the linkage as a dead point does; a `q0` already in contact may still leave it).
+    /// or a joint further past its range (a wall stops the linkage as a dead point does; a `q0` already in
+    /// contact may still leave it).
     fn step(&mut self, q: &mut DVector<f64>, direction: &DVector<f64>, length: f64) -> Option<DVector<f64>> {
         residual(self.model, &mut self.data, q, &self.zero);
         let depth_before = self.penetration();
+        let stops_before = limit_wall_energy(self.model, &self.data.kin, q);
         let rows = self.rows()?;
         let tangent = project_null(&rows, direction);
         let norm = tangent.norm();
@@ -299,6 +303,11 @@ impl<S: Space> Walker<'_, S> {
         // `close` leaves the kinematics of `trial` in `data`.
         let depth = self.penetration();
         if depth > 0.0 && depth > depth_before {
+            return None;
+        }
+        // Past a joint's or cut's range likewise: its walls' energy says how far, in one unit for all.
+        let stops = limit_wall_energy(self.model, &self.data.kin, &trial);
+        if stops > 0.0 && stops > stops_before {
             return None;
         }
         *q = trial;

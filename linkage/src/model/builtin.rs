@@ -20,6 +20,7 @@ pub const SCENE_FILES: &[(&str, &str)] = &[
     ("five-bar-robot", include_str!("../../../scenes/five-bar-robot.toml")),
     ("bennett-linkage", include_str!("../../../scenes/bennett-linkage.toml")),
     ("rssr-four-bar", include_str!("../../../scenes/rssr-four-bar.toml")),
+    ("guided-slider-crank", include_str!("../../../scenes/guided-slider-crank.toml")),
 ];
 
 /// The paper's user wrench on the testbed: (−0.5 N, 0 N, −0.0025 N m) at the COM of link 2.
@@ -101,6 +102,7 @@ pub fn chain(links: usize, loops: usize) -> Scene {
             spring: None,
             damping: 0.0,
             actuator: None,
+            range: None,
         })
         .collect();
     let cuts = (1..=loops)
@@ -114,6 +116,10 @@ pub fn chain(links: usize, loops: usize) -> Scene {
                 body_b: "ground".into(),
                 point_b: None,
                 axis: None,
+                axis_b: None,
+                spring: None,
+                damping: 0.0,
+                range: None,
             }
         })
         .collect();

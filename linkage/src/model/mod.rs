@@ -38,6 +38,19 @@ pub struct Spring {
     pub rest: f64,
 }
 
+/// The positions a joint or cut freedom is kept within, by penalty walls (see `algorithms::joint_limits`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Range {
+    /// Lower end, rad or m.
+    pub lo: f64,
+    /// Upper end, rad or m (> `lo`).
+    pub hi: f64,
+    /// The walls' stiffness, N m/rad or N/m.
+    pub stiffness: f64,
+    /// The walls' damping, N m s/rad or N s/m.
+    pub damping: f64,
+}
+
 /// A PD actuator on a joint: `τ = clamp(kp (target - q) - kd q̇, ±max_effort)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Actuator {
@@ -72,6 +85,8 @@ pub struct Joint<S: Space> {
     pub damping: f64,
     /// Optional PD actuator.
     pub actuator: Option<Actuator>,
+    /// Optional range of positions.
+    pub range: Option<Range>,
 }
 
 /// Geometry attached to a body, in its frame.
@@ -172,7 +187,45 @@ impl<S: Space> ClosurePrimitive<S> {
     }
 }
 
-/// A cut joint: a list of closure primitives occupying rows `row..row + rows` of h, W and w.
+/// The relative motion a cut leaves free between its two bodies, which its spring, damper and range act on
+/// (see `algorithms::cut_forces`). `relative` is `R_a⁻¹ R_b` at q0, the pose where angles are zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CutFreedom<S: Space> {
+    /// A weld: nothing moves.
+    Locked,
+    /// Point b slides along `axis_a` (unit, in body a) from point a: a length, m (planar slider).
+    Slide {
+        /// Point on body a.
+        a: Attachment<S>,
+        /// Point on body b.
+        b: Attachment<S>,
+        /// Unit slide direction in body a.
+        axis_a: S::Point,
+    },
+    /// Body b turns about `axis_a` (unit, in body a; planar: z): an angle from q0, rad (pin, revolute).
+    Hinge {
+        /// Body a (or ground).
+        body_a: Option<usize>,
+        /// Body b (or ground).
+        body_b: Option<usize>,
+        /// Unit hinge axis in body a.
+        axis_a: S::Point,
+        /// `R_a⁻¹ R_b` at q0.
+        relative: S::Rot,
+    },
+    /// Body b turns freely about point a: a rotation vector from q0, rad (spherical).
+    Rotation {
+        /// Body a (or ground).
+        body_a: Option<usize>,
+        /// Body b (or ground).
+        body_b: Option<usize>,
+        /// `R_a⁻¹ R_b` at q0.
+        relative: S::Rot,
+    },
+}
+
+/// A cut joint: a list of closure primitives occupying rows `row..row + rows` of h, W and w, and the
+/// spring, damper and range acting on the freedom it leaves.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cut<S: Space> {
     /// Name from the scene.
@@ -185,6 +238,14 @@ pub struct Cut<S: Space> {
     pub row: usize,
     /// Number of rows.
     pub rows: usize,
+    /// What the cut leaves free.
+    pub freedom: CutFreedom<S>,
+    /// Optional spring on the freedom.
+    pub spring: Option<Spring>,
+    /// Viscous damping on the freedom (0 when none).
+    pub damping: f64,
+    /// Optional range of the freedom (slides and hinges only).
+    pub range: Option<Range>,
 }
 
 /// A named operational point.
@@ -258,9 +319,9 @@ pub struct Model<S: Space> {
     pub q0: DVector<f64>,
     /// Initial velocity.
     pub qd0: DVector<f64>,
-    /// True when some joint has a spring.
+    /// True when some joint or cut has a spring.
     pub has_springs: bool,
-    /// True when some joint has damping or an actuator.
+    /// True when some joint has damping, an actuator or a range, or some cut has damping or a range.
     pub has_joint_forces: bool,
     /// True when gravity is non-zero.
     pub has_gravity: bool,

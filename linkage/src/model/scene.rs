@@ -2,8 +2,9 @@
 //! the file and the key.
 //!
 //! A scene lists bodies, the tree joints that connect each body to its parent (from `ground` outwards),
-//! the cut joints that close kinematic loops, named operational points, and obstacles. See the README for
-//! the full format; [`Scene::from_toml_str`] parses, [`crate::Model::compile`] validates and compiles.
+//! the cut joints that close kinematic loops, named operational points, and obstacles. `docs/scene-format.md`
+//! gives every key with its unit and default; [`Scene::from_toml_str`] parses, [`crate::Model::compile`]
+//! validates and compiles.
 
 use std::path::Path;
 
@@ -200,6 +201,9 @@ pub struct JointSpec {
     /// A PD actuator (makes the linkage active).
     #[serde(default)]
     pub actuator: Option<ActuatorSpec>,
+    /// `[lo, hi]`: the positions the joint is kept within by penalty walls, rad or m (lo < hi; q0 inside).
+    #[serde(default)]
+    pub range: Option<[f64; 2]>,
 }
 
 /// A linear joint spring `τ = -k (q - rest)`.
@@ -284,6 +288,27 @@ pub struct CutSpec {
     /// Slider direction (planar, in body a) or revolute axis (spatial, in body a).
     #[serde(default)]
     pub axis: Option<Vec<f64>>,
+    /// Spatial revolute only: the same axis in body b's frame. Omitted: `axis` carried into body b at q0;
+    /// given: it must agree with `axis` at q0 (checked, so a typo does not lock the loop silently).
+    #[serde(default)]
+    pub axis_b: Option<Vec<f64>>,
+    /// A spring on the cut's freedom: the slide along `axis` (slider), the angle about the hinge from q0
+    /// (pin, revolute), or the rotation from q0 (spherical, with `rest` 0).
+    #[serde(default)]
+    pub spring: Option<SpringSpec>,
+    /// Viscous damping on the same freedom, N s/m (slider) or N m s/rad (pin, revolute, spherical), ≥ 0.
+    #[serde(default)]
+    pub damping: f64,
+    /// `[lo, hi]` on the freedom of a slider, pin or revolute cut, m or rad, kept by penalty walls.
+    #[serde(default)]
+    pub range: Option<[f64; 2]>,
+}
+
+impl CutKindSpec {
+    /// True when the cut's freedom is a translation (its springs and ranges are in metres).
+    pub fn slides(self) -> bool {
+        self == CutKindSpec::Slider
+    }
 }
 
 /// A named operational point: where a user holds the linkage.
@@ -411,6 +436,7 @@ impl Scene {
                 JointKindSpec::Prismatic => {
                     j.q0 *= factor;
                     j.qd0 *= factor;
+                    j.range = j.range.map(|r| r.map(|x| x * factor));
                     if let Some(sp) = &mut j.spring {
                         sp.rest *= factor;
                     }
@@ -435,6 +461,17 @@ impl Scene {
         for c in &mut s.cuts {
             c.point_a = scale(&c.point_a);
             c.point_b = c.point_b.as_ref().map(scale);
+            if c.kind.slides() {
+                c.range = c.range.map(|r| r.map(|x| x * factor));
+                if let Some(sp) = &mut c.spring {
+                    sp.rest *= factor;
+                }
+            } else {
+                if let Some(sp) = &mut c.spring {
+                    sp.stiffness *= f2;
+                }
+                c.damping *= f2;
+            }
         }
         for o in &mut s.ops {
             o.point = scale(&o.point);

@@ -283,8 +283,7 @@ impl<S: Space> VeCore<S> {
         let qd = model.qd0.clone();
         forward_kinematics(&model, &mut data, &q);
         forward_velocity(&model, &mut data, &qd);
-        let contacts = (!model.obstacles.is_empty()).then(|| {
-            let mut contacts = PenaltyContacts::new(&model);
+        let contacts = PenaltyContacts::of_obstacles(&model).map(|mut contacts| {
             contacts.stiffness = config.contact_stiffness.unwrap_or(contacts.stiffness);
             contacts.damping = config.contact_damping.unwrap_or(contacts.damping);
             contacts
