@@ -337,7 +337,7 @@ pub fn judge_live(point: &Point, report: &crate::demo::DemoReport) -> Result<Poi
 }
 
 /// The bounds every pair is held to beyond stability: closure, clamped ticks, tracking.
-fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network) -> Vec<String> {
+pub fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network) -> Vec<String> {
     let mut failures = Vec::new();
     if !within(closure_m, CLOSURE_BOUND_M) {
         failures.push(format!("closure {closure_m:.1e} m"));
