@@ -114,39 +114,63 @@ pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DhdPoint>> {
     Ok(out)
 }
 
+/// How a program is started: its name (`kinloop-server`, `kinloop-client`) and arguments to a command.
+pub type Launch = dyn Fn(&str, &[String]) -> Command + Sync;
+
 /// The programs a pair runs: `kinloop-server`, `kinloop-client` and the fake library.
-#[derive(Clone, Debug)]
 pub struct Programs {
-    /// `kinloop-server`.
-    pub server: PathBuf,
-    /// `kinloop-client`.
-    pub client: PathBuf,
+    launch: Box<Launch>,
     /// The fake DHD library.
     pub fake: PathBuf,
 }
 
 impl Programs {
+    /// Programs started by `launch` (tests re-execute their own binary as each program), the fake at `fake`.
+    pub fn launched_by(launch: Box<Launch>, fake: PathBuf) -> Programs {
+        Programs { launch, fake }
+    }
+
     /// The programs beside this executable (cargo puts `kinloop`, `kinloop-server` and `kinloop-client` in
     /// one folder, and the fake library in it or in its `deps`), the library from `KINLOOP_DHD_LIB` when set.
     pub fn beside_this_program() -> Result<Programs> {
         let exe = std::env::current_exe().context("this program's path")?;
-        let dir = exe.parent().context("this program's folder")?;
-        let dir = if dir.ends_with("deps") { dir.parent().unwrap_or(dir) } else { dir };
-        let program = |name: &str| -> Result<PathBuf> {
+        let dir = exe.parent().context("this program's folder")?.to_owned();
+        for name in ["kinloop-server", "kinloop-client"] {
             let path = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-            path.is_file()
-                .then_some(path.clone())
-                .with_context(|| format!("{} is missing (cargo build --release)", path.display()))
+            if !path.is_file() {
+                bail!("{} is missing: build the workspace (cargo build --release --workspace)", path.display());
+            }
+        }
+        let fake = fake_library_beside_this_program()?;
+        let launch = move |program: &str, args: &[String]| {
+            let mut command = Command::new(dir.join(format!("{program}{}", std::env::consts::EXE_SUFFIX)));
+            command.args(args);
+            command
         };
-        let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
-        let fake = match std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
-            Some(path) => PathBuf::from(path),
-            None => [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(
-                || format!("the fake DHD library {name} is not in {} or its deps (cargo build --release -p kinloop-fake-dhd), and {LIBRARY_VARIABLE} is not set", dir.display()),
-            )?,
-        };
-        Ok(Programs { server: program("kinloop-server")?, client: program("kinloop-client")?, fake })
+        Ok(Programs { launch: Box::new(launch), fake })
     }
+
+    fn command(&self, program: &str, args: Vec<String>) -> Command {
+        (self.launch)(program, &args)
+    }
+}
+
+/// The fake DHD library: `KINLOOP_DHD_LIB` when set, else beside this executable or in its `deps` (where
+/// cargo builds it).
+pub fn fake_library_beside_this_program() -> Result<PathBuf> {
+    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
+        return Ok(PathBuf::from(path));
+    }
+    let exe = std::env::current_exe().context("this program's path")?;
+    let dir = exe.parent().context("this program's folder")?;
+    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(|| {
+        format!(
+            "the fake DHD library {name} is not in {} nor its deps (cargo build --release --workspace builds it), \
+             and {LIBRARY_VARIABLE} is not set",
+            dir.display()
+        )
+    })
 }
 
 /// The tour the pair's hand intends, in the device's frame (m): the OP's place in the workspace, then the
@@ -240,26 +264,35 @@ struct Ran {
 fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path) -> Result<Ran> {
     let tour = device_tour(point)?;
     let tour_text: Vec<String> = tour.iter().map(|p| format!("{:e},{:e},{:e}", p[0], p[1], p[2])).collect();
-    let mut server = Command::new(&programs.server)
-        .args(["--scene", &point.scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert", "--record", "ve.csv"])
-        .args(["--json", "--duration", &(seconds + SERVER_MARGIN_S).to_string(), "--stats-every", "0"])
-        .args(link_flags(point.network, 1))
+    let mut args: Vec<String> = ["--scene", &point.scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"]
+        .into_iter()
+        .chain(["--record", "ve.csv", "--json", "--stats-every", "0", "--duration"])
+        .map(String::from)
+        .collect();
+    args.push((seconds + SERVER_MARGIN_S).to_string());
+    args.extend(link_flags(point.network, 1));
+    let mut server = programs
+        .command("kinloop-server", args)
         .current_dir(dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::from(std::fs::File::create(dir.join("server.log"))?))
         .spawn()
-        .with_context(|| format!("starting {}", programs.server.display()))?;
+        .context("starting kinloop-server")?;
     let mut out = BufReader::new(server.stdout.take().context("the server's stdout")?);
-    let (mut address, mut fingerprint) = (String::new(), String::new());
-    out.read_line(&mut address)?;
+    let address = line_starting(&mut out, "kinloop-server listening on")?;
     let server_started = Instant::now();
-    out.read_line(&mut fingerprint)?;
+    let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
     let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
     let (address, fingerprint) = (last_word(&address), last_word(&fingerprint));
-    let mut client = Command::new(&programs.client)
-        .args(["--server", &address, "--fingerprint", &fingerprint, "--device", "dhd", "--op", &point.op])
-        .args(["--duration", &seconds.to_string(), "--no-realtime", "--json", "--record", "client.csv"])
-        .args(link_flags(point.network, 2))
+    let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", "dhd"]
+        .into_iter()
+        .chain(["--op", &point.op, "--no-realtime", "--json", "--record", "client.csv", "--duration"])
+        .map(String::from)
+        .collect();
+    args.push(seconds.to_string());
+    args.extend(link_flags(point.network, 2));
+    let mut client = programs
+        .command("kinloop-client", args)
         .env(LIBRARY_VARIABLE, &programs.fake)
         .env("FAKE_DHD_SYSTEM", point.system.to_string())
         .env("FAKE_DHD_HAND", point.hand.name())
@@ -268,7 +301,7 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .with_context(|| format!("starting {}", programs.client.display()))?;
+        .context("starting kinloop-client")?;
     let (log, reader) = collect_lines(client.stderr.take().context("the client's stderr")?);
     let mut client_out = String::new();
     client.stdout.take().context("the client's stdout")?.read_to_string(&mut client_out)?;
@@ -286,12 +319,32 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
         bail!("kinloop-server failed (see {})", dir.join("server.log").display());
     }
     Ok(Ran {
-        server: serde_json::from_str(&server_out).context("the server's JSON statistics")?,
-        client: serde_json::from_str(&client_out).unwrap_or(Value::Null),
+        server: json_in(&server_out).context("the server's JSON statistics")?,
+        client: json_in(&client_out).unwrap_or(Value::Null),
         client_ok: status.success() && holding.is_some(),
         client_log,
         offset_s,
     })
+}
+
+/// Reads lines from `out` until one starts with `prefix`; that line.
+fn line_starting(out: &mut impl BufRead, prefix: &str) -> Result<String> {
+    let mut line = String::new();
+    loop {
+        line.clear();
+        if out.read_line(&mut line)? == 0 {
+            bail!("the server ended before printing {prefix:?}");
+        }
+        if line.starts_with(prefix) {
+            return Ok(line.trim_end().to_owned());
+        }
+    }
+}
+
+/// The JSON object a program printed last on its stdout (anything before it is skipped).
+fn json_in(text: &str) -> Result<Value> {
+    let start = text.find('{').context("no JSON object")?;
+    Ok(serde_json::from_str(&text[start..])?)
 }
 
 /// Device-OP RMS in device space (m): the client's ticks with output against the VE's OP at the same
@@ -341,7 +394,7 @@ pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &P
     }
     let rms = if ran.client_ok { device_op_rms(&dir, kind, ran.offset_s, scale)? } else { f64::NAN };
     failures.extend(bound_failures(closure, clamped, rms, point.network));
-    Ok(DhdResult {
+    let result = DhdResult {
         point: point.clone(),
         renders: failures.is_empty(),
         failures,
@@ -350,7 +403,10 @@ pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &P
         device_model_rms_m: count(&c["tracking_error_rms_m"]),
         max_closure_error_m: closure,
         ve_restores: restores as u64,
-    })
+    };
+    // Each pair's verdict beside its records, so a long run can be read while it goes.
+    std::fs::write(dir.join("result.json"), serde_json::to_string_pretty(&result)?)?;
+    Ok(result)
 }
 
 /// Runs the experiment (see the module documentation), one pair at a time.

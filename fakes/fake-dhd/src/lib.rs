@@ -10,8 +10,8 @@
 //! - `FAKE_DHD_HAND`: `soft`, `firm` or `none`: the grasp of the hand holding the handle (default soft;
 //!   see [`hand`] for the impedances);
 //! - `FAKE_DHD_TOUR`: the waypoints the hand tours, `X,Y,Z;X,Y,Z;...` in metres in the device's frame; the
-//!   handle starts at the first, and the hand sets off when forces are first enabled (default: a circle in
-//!   the y-z plane from the centre, a smoke-test motion);
+//!   handle starts at the first, and the hand sets off when the device is first read at a haptic loop's
+//!   pace (default: a circle in the y-z plane from the centre, a smoke-test motion);
 //! - `FAKE_DHD_BUTTON`: `FROM:UNTIL`, seconds after the hand set off: button 0 is held over that span;
 //! - `FAKE_DHD_CALIBRATED`: `0` makes `drdIsInitialized` false until `drdAutoInit` runs (default calibrated);
 //! - `FAKE_DHD_FAULT`: `open` (`dhdOpen` fails), `lost:N` (every read from the N-th on fails: the device is
@@ -40,6 +40,10 @@ use plant::{Hand, Plant};
 
 /// `DHD_DEVICE_OMEGA3` in `dhdc.h`.
 const OMEGA3: c_int = 33;
+
+/// Reads closer together than this are a haptic loop's: the hand sets off on its intended motion at the
+/// first of them (a session has started; one read at open is a check, not a session).
+const LOOP_PACE: Duration = Duration::from_millis(10);
 
 /// What a fault does, and when.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -278,7 +282,12 @@ pub unsafe extern "system" fn dhdGetPosition(px: *mut f64, py: *mut f64, pz: *mu
             }
             _ => {}
         }
+        let since = d.last_step.elapsed();
         d.step();
+        if d.reads > 1 && since < LOOP_PACE {
+            // Reads at a haptic loop's pace: a session runs, and the hand sets off.
+            d.plant.start_moving();
+        }
         let p = d.plant.position();
         Some(match d.fault {
             Fault::NotANumber(n) if d.reads == n => {
@@ -340,15 +349,13 @@ pub extern "system" fn dhdSetForce(fx: f64, fy: f64, fz: f64, _id: c_char) -> c_
     })
 }
 
-/// `int dhdEnableForce(unsigned char val, char ID)`. The hand sets off on its intended motion when it first
-/// feels forces come on.
+/// `int dhdEnableForce(unsigned char val, char ID)`.
 #[no_mangle]
 pub extern "system" fn dhdEnableForce(val: c_uchar, _id: c_char) -> c_int {
     with_device(-1, |d| {
         d.forces_enabled = val != 0;
         if d.forces_enabled {
             d.force_off_cause = 0;
-            d.plant.start_moving();
         }
         d.note(format_args!("E {}", u8::from(d.forces_enabled)));
         0

@@ -74,7 +74,7 @@ impl Plant {
         self.velocity
     }
 
-    /// The hand starts its intended motion now (when it first feels the device's force), if not yet.
+    /// The hand starts its intended motion now, if not yet.
     pub fn start_moving(&mut self) {
         self.moving_from.get_or_insert(self.time);
     }
