@@ -31,6 +31,7 @@ use serde_json::{json, Value};
 use kinloop_client::core::{CoreConfig, HapticCore};
 use kinloop_client::device::dhd::specs::{self, ModelSpec};
 use kinloop_client::device::dhd::{frames, library::LIBRARY_VARIABLE};
+use kinloop_client::user::hand::tour_order;
 use kinloop_client::user::{HandKind, UserContext};
 use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
 use kinloop_linkage::model::{builtin, scene::Scene, Model};
@@ -201,7 +202,9 @@ fn tour_in<S: Space>(scene: &Scene, op: &str, model: &ModelSpec) -> Result<Vec<[
     let home = core.home(&S::Point::from_slice(&joined.welcome.op.position));
     let linear = S::KIND.point_dim();
     let mut tour = vec![frames::to_device(home.as_slice(), linear)];
-    for displacement in UserContext::<S>::from_welcome(&joined.welcome).tour {
+    // In the order the simulated hands tour it, there and back (the fake goes back along the list again).
+    let context = UserContext::<S>::from_welcome(&joined.welcome);
+    for displacement in tour_order::<S>(&context.tour) {
         let at = home + S::op_lin(&displacement);
         tour.push(frames::to_device(at.as_slice(), linear));
     }
