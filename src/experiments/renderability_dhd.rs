@@ -39,7 +39,7 @@ use kinloop_protocol::{LocalModelForm, MappingRequest, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 
 use super::common::{sweep, Options, Output};
-use super::renderability::{bound_failures, Network};
+use super::renderability::{bound_failures, scene_ops, Network};
 use crate::rounding::{num, round};
 
 /// The DHD models of the matrix: `dhdGetSystemType`'s omega.3 and Falcon.
@@ -97,17 +97,12 @@ pub struct DhdResult {
 
 /// Every pair for `scenes` (all built-in scenes when empty).
 pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DhdPoint>> {
-    let names: Vec<&str> =
-        if scenes.is_empty() { builtin::SCENE_FILES.iter().map(|(n, _)| *n).collect() } else { scenes.to_vec() };
     let mut out = Vec::new();
-    for name in names {
-        let scene = builtin::scene(name).context("built in")??;
-        for op in &scene.ops {
-            for system in SYSTEMS {
-                for network in Network::ALL {
-                    for &hand in hands {
-                        out.push(DhdPoint { scene: name.into(), op: op.name.clone(), system, network, hand });
-                    }
+    for (scene, op, _) in scene_ops(scenes)? {
+        for system in SYSTEMS {
+            for network in Network::ALL {
+                for &hand in hands {
+                    out.push(DhdPoint { scene: scene.clone(), op: op.clone(), system, network, hand });
                 }
             }
         }
@@ -282,7 +277,12 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
         .spawn()
         .context("starting kinloop-server")?;
     let mut out = BufReader::new(server.stdout.take().context("the server's stdout")?);
-    let address = line_starting(&mut out, "kinloop-server listening on")?;
+    let log_tail = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
+        text.lines().rev().take(5).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n")
+    };
+    let address = line_starting(&mut out, "kinloop-server listening on")
+        .with_context(|| format!("the server's log ends:\n{}", log_tail(dir)))?;
     let server_started = Instant::now();
     let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
     let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
@@ -316,7 +316,7 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
     let lines = log.lock().map_err(|_| anyhow!("the client's log"))?.clone();
     let client_log: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
     std::fs::write(dir.join("client.log"), &client_log)?;
-    let holding = lines.iter().find(|(_, l)| l.starts_with("kinloop-client: holding")).map(|(t, _)| *t);
+    let holding = lines.iter().find(|(_, l)| l.contains("kinloop-client: holding")).map(|(t, _)| *t);
     let offset_s = holding.map_or(0.0, |t| t.saturating_duration_since(server_started).as_secs_f64());
     if !server_status.success() {
         bail!("kinloop-server failed (see {})", dir.join("server.log").display());
@@ -330,7 +330,8 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
     })
 }
 
-/// Reads lines from `out` until one starts with `prefix`; that line.
+/// Reads lines from `out` until one holds `prefix`; that line from `prefix` on (a launcher may print
+/// before it, as a test harness does).
 fn line_starting(out: &mut impl BufRead, prefix: &str) -> Result<String> {
     let mut line = String::new();
     loop {
@@ -338,8 +339,8 @@ fn line_starting(out: &mut impl BufRead, prefix: &str) -> Result<String> {
         if out.read_line(&mut line)? == 0 {
             bail!("the server ended before printing {prefix:?}");
         }
-        if line.starts_with(prefix) {
-            return Ok(line.trim_end().to_owned());
+        if let Some(at) = line.find(prefix) {
+            return Ok(line[at..].trim_end().to_owned());
         }
     }
 }
