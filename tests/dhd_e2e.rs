@@ -193,9 +193,7 @@ fn device_faults_leave_zero_force_from_the_tick_they_strike() {
     const NAME: &str = "device_faults_leave_zero_force_from_the_tick_they_strike";
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
-    // The device's own watchdog expiring (`watchdog:N`): it switches its forces off and says why in
-    // `dhdGetStatus`; the client reads that in the same tick, commands zero and ends the device.
-    for fault in ["lost:1500", "nan:1500", "watchdog:1500"] {
+    for fault in ["lost:1500", "nan:1500"] {
         let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", fault.into())]);
         assert!(!run.success, "{fault}: the client must fail:\n{}", run.stderr);
         let fault_at = run.fault_line();
@@ -209,13 +207,23 @@ fn device_faults_leave_zero_force_from_the_tick_they_strike() {
         assert_eq!(said, 1, "{fault}:\n{}", run.stderr);
         assert!(run.error_line().contains("the device failed"), "{fault}:\n{}", run.stderr);
         assert_eq!(run.record.last().map(String::as_str), Some("C"), "{fault}: the device is closed");
-        if fault.starts_with("watchdog") {
-            // The first command after the expiry is already zero, and the reason names the watchdog.
-            let first_after = run.forces().iter().find(|f| f.0 > fault_at).map(|f| f.1);
-            assert_eq!(first_after, Some(0.0), "{fault}: zero from the tick the watchdog expired");
-            assert!(run.stderr.contains("watchdog expired"), "{fault}:\n{}", run.stderr);
-        }
     }
+    // The device's own watchdog expiring (`watchdog:N`): it switches its forces off and says why in
+    // `dhdGetStatus`. The client reads that in the same tick and commands zero; then, as after a stall,
+    // enables forces again and ramps them in from zero.
+    let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", "watchdog:1500".into())]);
+    assert!(run.success, "watchdog: the session goes on:\n{}", run.stderr);
+    assert_safe("watchdog", &run, OMEGA3_LIMIT_N);
+    let fault_at = run.fault_line();
+    let after: Vec<f64> = run.forces().iter().filter(|f| f.0 > fault_at).map(|f| f.1).collect();
+    assert_eq!(after.first().copied(), Some(0.0), "watchdog: zero from the tick it expired: {:?}", &after[..5]);
+    let again = run.record.iter().skip(fault_at).position(|l| l == "E 1").map(|i| i + fault_at);
+    let again = again.unwrap_or_else(|| panic!("watchdog: forces are enabled again: {:?}", &run.record[fault_at..]));
+    let ramp: Vec<f64> = run.forces().iter().filter(|f| f.0 > again).map(|f| f.1).take(400).collect();
+    let (first, peak) =
+        (ramp.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0), ramp.iter().copied().fold(0.0, f64::max));
+    assert!(first < 0.05 * peak, "watchdog: forces ramp in again, from {first} N to {peak} N");
+    assert!(run.stderr.contains("watchdog expired"), "watchdog:\n{}", run.stderr);
     // A read that stalls the loop longer than the watchdog: that tick's command (made from the fresh reading)
     // goes out, and the next tick, seeing the gap, commands zero and ramps in again.
     let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", "stall:2000:50".into())]);

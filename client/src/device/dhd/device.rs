@@ -3,8 +3,9 @@
 //! own watchdog armed where the SDK has it (`dhdSetWatchdog`), and the same rule in software (a read after
 //! a stalled loop commands zero and ramps in again); every command clamped to the model's peak force; a
 //! failing call or a non-finite reading commands zero and ends the device; so does the device switching
-//! its forces off by itself (`dhdGetStatus`: its watchdog expired, its force button, its velocity limit),
-//! with the cause said; `dhdClose` on every way out (the lease's `Drop` runs on return, on error and on a
+//! its forces off by itself (`dhdGetStatus`: its force button, its velocity limit), with the cause said,
+//! except for its watchdog expiring, which is a stalled loop: zero at once, then forces enabled and ramped
+//! in again as after a stall the software rule sees; `dhdClose` on every way out (the lease's `Drop` runs on return, on error and on a
 //! panic's unwinding).
 //!
 //! Button 0 (`dhdGetButton`) is a clutch: while it is held the hand counts as not grasping (`grasped`
@@ -215,8 +216,17 @@ impl<S: Space> HapticDevice<S> for DhdDevice<S> {
         if self.enabled {
             if let Some(Ok(status)) = library.status(self.lease.id) {
                 if status[library::STATUS_FORCE] == 0 {
-                    let cause = library::force_off_cause(status[library::STATUS_FORCE_OFF_CAUSE]);
-                    return Err(self.lost(format!("the device switched its forces off: {cause}")));
+                    let cause = status[library::STATUS_FORCE_OFF_CAUSE];
+                    let said = library::force_off_cause(cause);
+                    if cause != library::FORCE_OFF_WATCHDOG {
+                        return Err(self.lost(format!("the device switched its forces off: {said}")));
+                    }
+                    // Its watchdog saw a stalled loop, as the software rule does: zero now, and the next
+                    // command enables forces again and ramps them in from zero.
+                    tracing::warn!("{}: the device switched its forces off: {said}; ramping in again", self.label);
+                    self.lease.zero();
+                    self.enabled = false;
+                    self.ramp_from = None;
                 }
             }
         }

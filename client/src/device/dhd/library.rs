@@ -102,6 +102,9 @@ pub const STATUS_FORCE: usize = 5;
 /// `DHD_STATUS_FORCEOFFCAUSE`: why the device last switched its forces off (`DHD_FORCEOFF_*`).
 pub const STATUS_FORCE_OFF_CAUSE: usize = 14;
 
+/// `DHD_FORCEOFF_WATCHDOG`: the device's watchdog switched its forces off.
+pub const FORCE_OFF_WATCHDOG: i32 = 3;
+
 /// What a `DHD_FORCEOFF_*` value means, for messages.
 pub fn force_off_cause(cause: i32) -> &'static str {
     match cause {
