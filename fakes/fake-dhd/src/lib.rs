@@ -22,7 +22,8 @@
 //! - `FAKE_DHD_RECORD`: a file that receives one line per call that changes the output: `F T FX FY FZ`
 //!   for every force commanded (T seconds since open), `E 0|1` for force enabling, `W TICKS` for the
 //!   watchdog, `B 0|1` when button 0 changes, `A` for `drdAutoInit`, `X lost|nan|stall|watchdog` when a
-//!   fault strikes, `C` at close.
+//!   fault strikes, `O watchdog` when the armed watchdog (`dhdSetWatchdog`, units of 125 µs) expires because
+//!   no command came in time (the device then switches its forces off, as a real one does), `C` at close.
 //!
 //! Where the hand, tour or button value does not parse, `dhdOpen` fails: a test's typo is never a silent
 //! default.
@@ -82,6 +83,9 @@ struct Device {
     /// `DHD_FORCEOFF_*`: why the device last switched its forces off by itself (0: it did not).
     force_off_cause: c_int,
     force: [f64; 3],
+    /// The watchdog `dhdSetWatchdog` armed (none: off), and when the last command fed it.
+    watchdog: Option<Duration>,
+    last_command: Instant,
     /// Button 0 held over this span of the hand's motion (s).
     button_span: Option<(f64, f64)>,
     button: bool,
@@ -134,6 +138,8 @@ impl Device {
             forces_enabled: false,
             force_off_cause: 0,
             force: [0.0; 3],
+            watchdog: None,
+            last_command: now,
             button_span,
             button: false,
             calibrated: env("FAKE_DHD_CALIBRATED").as_deref() != Some("0"),
@@ -147,13 +153,24 @@ impl Device {
         }
     }
 
-    /// Advances the plant to now under the force the device outputs.
+    /// Advances the plant to now under the force the device outputs. An armed watchdog that no command fed
+    /// in time switches the forces off at the instant it expired, as the device does
+    /// (`DHD_FORCEOFF_WATCHDOG`); the record says `O watchdog`.
     fn step(&mut self) {
         let now = Instant::now();
-        let dt = now.duration_since(self.last_step).as_secs_f64();
+        let mut applied = if self.forces_enabled { self.force } else { [0.0; 3] };
+        let expiry = self.watchdog.filter(|_| self.forces_enabled).map(|w| self.last_command + w);
+        if let Some(expired) = expiry.filter(|t| *t < now) {
+            let until = expired.max(self.last_step);
+            self.plant.advance(until.duration_since(self.last_step).as_secs_f64(), applied);
+            self.last_step = until;
+            self.forces_enabled = false;
+            self.force_off_cause = FORCEOFF_WATCHDOG;
+            self.note(format_args!("O watchdog"));
+            applied = [0.0; 3];
+        }
+        self.plant.advance(now.duration_since(self.last_step).as_secs_f64(), applied);
         self.last_step = now;
-        let applied = if self.forces_enabled { self.force } else { [0.0; 3] };
-        self.plant.advance(dt, applied);
     }
 
     /// Whether button 0 is held now (the scripted span of the hand's motion).
@@ -330,6 +347,8 @@ pub extern "system" fn dhdSetForce(fx: f64, fy: f64, fz: f64, _id: c_char) -> c_
     with_device(-1, |d| {
         let t = d.opened.elapsed().as_secs_f64();
         d.note(format_args!("F {t:.6} {fx:e} {fy:e} {fz:e}"));
+        d.step();
+        d.last_command = Instant::now();
         if matches!(d.fault, Fault::Lost(n) if d.reads >= n) {
             return -1;
         }
@@ -356,6 +375,7 @@ pub extern "system" fn dhdEnableForce(val: c_uchar, _id: c_char) -> c_int {
         d.forces_enabled = val != 0;
         if d.forces_enabled {
             d.force_off_cause = 0;
+            d.last_command = Instant::now();
         }
         d.note(format_args!("E {}", u8::from(d.forces_enabled)));
         0
@@ -436,6 +456,7 @@ pub extern "system" fn drdAutoInit(_id: c_char) -> c_int {
 #[no_mangle]
 pub extern "system" fn dhdSetWatchdog(val: c_uchar, _id: c_char) -> c_int {
     with_device(-1, |d| {
+        d.watchdog = (val > 0).then(|| Duration::from_micros(125 * u64::from(val)));
         d.note(format_args!("W {val}"));
         0
     })
