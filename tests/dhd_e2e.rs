@@ -24,6 +24,8 @@ struct Run {
     stderr: String,
     /// The fake's record, one line per call that changed its output.
     record: Vec<String>,
+    /// Where the client ran (its `--record` file, when asked, is `client.csv` there).
+    dir: tempfile::TempDir,
 }
 
 impl Run {
@@ -55,7 +57,7 @@ impl Run {
 /// A server for `scene` and `kinloop-client --device DEVICE` against it for `seconds`, the fake configured by
 /// `env` (`KINLOOP_DHD_LIB` defaults to the fake).
 fn run_client(test: &'static str, scene: &str, device: &str, seconds: &str, env: &[(&str, String)]) -> Run {
-    run_client_signalled(test, scene, device, seconds, env, None)
+    run_client_signalled(test, scene, device, seconds, env, &[], None)
 }
 
 /// A signal sent to the client mid-session, as a person or a service manager stops it.
@@ -76,6 +78,7 @@ fn run_client_signalled(
     device: &str,
     seconds: &str,
     env: &[(&str, String)],
+    extra: &[&str],
     signal: Option<StopSignal>,
 ) -> Run {
     let dir = common::temp_dir();
@@ -104,8 +107,10 @@ fn run_client_signalled(
         seconds,
         "--no-realtime",
     ]
+    .into_iter()
+    .chain(extra.iter().copied())
     .map(String::from)
-    .to_vec();
+    .collect();
     let mut client = ChildProcess::spawn_with_env(
         test,
         &Role::Program { program: Program::Client, args },
@@ -129,7 +134,7 @@ fn run_client_signalled(
     let stderr = client.log();
     assert!(!stderr.contains("panicked"), "{test}: the client panicked:\n{stderr}");
     let record = std::fs::read_to_string(&record).unwrap_or_default().lines().map(String::from).collect();
-    Run { success: status.success(), stderr, record }
+    Run { success: status.success(), stderr, record, dir }
 }
 
 /// Returns once the fake's record shows forces enabled (`E 1`) and some forces commanded after; panics after `limit`.
@@ -203,6 +208,22 @@ fn device_faults_leave_zero_force_from_the_tick_they_strike() {
         assert!(run.error_line().contains("the device failed"), "{fault}:\n{}", run.stderr);
         assert_eq!(run.record.last().map(String::as_str), Some("C"), "{fault}: the device is closed");
     }
+    // The device's own watchdog expiring (`watchdog:N`): it switches its forces off and says why in
+    // `dhdGetStatus`. The client reads that in the same tick and commands zero; then, as after a stall,
+    // enables forces again and ramps them in from zero.
+    let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", "watchdog:1500".into())]);
+    assert!(run.success, "watchdog: the session goes on:\n{}", run.stderr);
+    assert_safe("watchdog", &run, OMEGA3_LIMIT_N);
+    let fault_at = run.fault_line();
+    let after: Vec<f64> = run.forces().iter().filter(|f| f.0 > fault_at).map(|f| f.1).collect();
+    assert_eq!(after.first().copied(), Some(0.0), "watchdog: zero from the tick it expired: {:?}", &after[..5]);
+    let again = run.record.iter().skip(fault_at).position(|l| l == "E 1").map(|i| i + fault_at);
+    let again = again.unwrap_or_else(|| panic!("watchdog: forces are enabled again: {:?}", &run.record[fault_at..]));
+    let ramp: Vec<f64> = run.forces().iter().filter(|f| f.0 > again).map(|f| f.1).take(400).collect();
+    let (first, peak) =
+        (ramp.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0), ramp.iter().copied().fold(0.0, f64::max));
+    assert!(first < 0.05 * peak, "watchdog: forces ramp in again, from {first} N to {peak} N");
+    assert!(run.stderr.contains("watchdog expired"), "watchdog:\n{}", run.stderr);
     // A read that stalls the loop longer than the watchdog: that tick's command (made from the fresh reading)
     // goes out, and the next tick, seeing the gap, commands zero and ramps in again.
     let run = run_client(NAME, "paper-testbed", "dhd", "4", &[("FAKE_DHD_FAULT", "stall:2000:50".into())]);
@@ -262,8 +283,67 @@ fn ctrl_c_and_sigterm_release_a_dhd_device_with_zero_force() {
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
     for signal in [StopSignal::Interrupt, StopSignal::Terminate] {
         // A duration far beyond the test's: only the signal can end this run.
-        let run = run_client_signalled(NAME, "paper-testbed", "dhd", "600", &[], Some(signal));
+        let run = run_client_signalled(NAME, "paper-testbed", "dhd", "600", &[], &[], Some(signal));
         assert!(!run.stderr.contains("panicked"), "{signal:?}: the client panicked:\n{}", run.stderr);
         assert_safe(&format!("{signal:?}"), &run, OMEGA3_LIMIT_N);
     }
+}
+
+#[test]
+fn button_zero_is_a_clutch_the_output_fades_while_it_is_held() {
+    const NAME: &str = "button_zero_is_a_clutch_the_output_fades_while_it_is_held";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(90));
+    // Button 0 held from 1.5 s to 2.5 s of the hand's motion.
+    let env = [("FAKE_DHD_BUTTON", "1.5:2.5".to_owned())];
+    let run = run_client_signalled(NAME, "paper-testbed", "dhd", "4", &env, &["--record", "client.csv"], None);
+    assert!(run.success, "the client fails:\n{}", run.stderr);
+    assert_safe("clutch", &run, OMEGA3_LIMIT_N);
+    let pressed = run.record.iter().position(|l| l == "B 1").expect("the button is pressed");
+    let released = run.record.iter().position(|l| l == "B 0").expect("the button is released");
+    assert!(pressed < released);
+    // The output gain of the client's ticks: full before the press, zero while held, full again after.
+    let csv = std::fs::read_to_string(run.dir.path().join("client.csv")).expect("the client's record");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let (t, gain) = (column(&header, "time_s"), column(&header, "gain"));
+    let rows: Vec<(f64, f64)> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .map(|f| (f[t].parse().unwrap_or(f64::NAN), f[gain].parse().unwrap_or(f64::NAN)))
+        .collect();
+    let first_full = rows.iter().position(|r| r.1 >= 1.0).expect("the output reaches full gain");
+    let faded = rows[first_full..].iter().position(|r| r.1 == 0.0).map(|i| i + first_full).expect("the clutch fades");
+    let back = rows[faded..].iter().position(|r| r.1 >= 1.0).map(|i| i + faded).expect("full gain again");
+    let held_s = rows[back].0 - rows[faded].0;
+    assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
+    // While faded, the fake received only small braking forces.
+    let forces = run.forces();
+    let during: Vec<f64> = forces.iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
+    assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
+}
+
+/// The index of `name` in a CSV header.
+fn column(header: &[&str], name: &str) -> usize {
+    header.iter().position(|c| *c == name).unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+}
+
+#[test]
+fn an_uncalibrated_device_is_refused_unless_auto_init_is_asked_for() {
+    const NAME: &str = "an_uncalibrated_device_is_refused_unless_auto_init_is_asked_for";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(90));
+    let env = [("FAKE_DHD_CALIBRATED", "0".to_owned())];
+    let run = run_client(NAME, "paper-testbed", "dhd", "1", &env);
+    assert!(!run.success, "an uncalibrated device must be refused:\n{}", run.stderr);
+    let line = run.error_line();
+    assert!(line.contains("not calibrated") && line.contains("--dhd-auto-init"), "{line}");
+    assert!(!run.record.iter().any(|l| l == "A"), "drdAutoInit never runs unasked: {:?}", run.record);
+    assert!(run.forces().iter().all(|f| f.1 == 0.0), "no force to an uncalibrated device");
+    // Asked for: drdAutoInit runs once, before forces come on, and the session renders.
+    let run = run_client_signalled(NAME, "paper-testbed", "dhd", "1", &env, &["--dhd-auto-init"], None);
+    assert!(run.success, "with --dhd-auto-init:\n{}", run.stderr);
+    let init = run.record.iter().position(|l| l == "A");
+    let enabled = run.record.iter().position(|l| l == "E 1");
+    assert!(init.is_some() && init < enabled, "drdAutoInit before forces: {:?}", &run.record[..8]);
+    assert_eq!(run.record.iter().filter(|l| *l == "A").count(), 1);
 }

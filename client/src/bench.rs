@@ -1,6 +1,7 @@
 //! Measurements `kinloop bench --json` reports for the client, kept here so the numbers come from the code
 //! that ships: `client/tick_testbed` (snapshot intake + local model + controllers + safety + uplink, no
-//! device plant) and the real-time loop's timing against a simulated device.
+//! device plant), the device exchange of a tick (`read` then `command`) on a simulated device and through
+//! a DHD library, and the real-time loop's timing against a simulated device.
 
 use std::hint::black_box;
 use std::sync::atomic::Ordering;
@@ -21,7 +22,8 @@ use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSumma
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
 use crate::core::{CoreConfig, GainChoice, HapticCore};
-use crate::device::{DevicePreset, DeviceState, SimulatedRig};
+use crate::device::dhd::{DhdLibrary, OpenedDhd};
+use crate::device::{DevicePreset, DeviceState, HapticDevice, SimulatedRig};
 use crate::driver::rt_loop::{self, LoopRings, LoopSettings, LoopShared};
 use crate::driver::timing::LatenessSummary;
 use crate::user::UserSpec;
@@ -125,6 +127,45 @@ pub fn client_tick_testbed(iters: u64) -> Result<f64, BenchError> {
         tick(iters / 10 + 1 + k);
     }
     Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
+}
+
+/// Mean nanoseconds of the device exchange a haptic tick makes, `read` then `command` (a 1 N push along x),
+/// over `iters` ticks 1 ms apart on the loop's clock.
+fn device_exchange(device: &mut dyn HapticDevice<Planar>, iters: u64) -> Result<f64, BenchError> {
+    let push = Vector3::new(1.0, 0.0, 0.0);
+    let mut tick = |k: u64| -> Result<(), BenchError> {
+        let now = Duration::from_millis(k);
+        let state = device.read(now).map_err(|e| BenchError::Testbed(e.to_string()))?;
+        black_box(state);
+        device.command(now, black_box(&push)).map_err(|e| BenchError::Testbed(e.to_string()))
+    };
+    for k in 0..iters / 10 + 1 {
+        tick(k)?;
+    }
+    let start = Instant::now();
+    for k in 0..iters {
+        tick(iters / 10 + 1 + k)?;
+    }
+    Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
+}
+
+/// [`device_exchange`] on a simulated Falcon (its plant integrated over each millisecond) held by a relaxed
+/// hand: what `--device sim:falcon` costs the loop.
+pub fn device_tick_sim_falcon(iters: u64) -> Result<f64, BenchError> {
+    let built = |e: &dyn std::fmt::Display| BenchError::Testbed(e.to_string());
+    let device = DevicePreset::Falcon.build::<Planar>().map_err(|e| built(&e))?;
+    let user = UserSpec::soft_hand().build::<Planar>(&Default::default()).map_err(|e| built(&e))?;
+    device_exchange(&mut SimulatedRig::new(device, user), iters)
+}
+
+/// [`device_exchange`] through the DHD library at `library` (device 0, a planar scene's axes): the calls a
+/// `--device dhd` tick makes across the FFI. Through the fake library this is the fake's cost (its plant
+/// included), not a USB device's.
+pub fn device_tick_dhd(library: &std::path::Path, iters: u64) -> Result<f64, BenchError> {
+    let failed = |e: &dyn std::fmt::Display| BenchError::Testbed(e.to_string());
+    let library = DhdLibrary::load(library).map_err(|e| failed(&e))?;
+    let opened = OpenedDhd::open(Arc::new(library), 0).map_err(|e| failed(&e))?;
+    device_exchange(&mut opened.into_device::<Planar>(), iters)
 }
 
 /// Runs the real-time loop for `duration` at `rate_hz` against a simulated `paper` device held by the

@@ -14,7 +14,7 @@ use kinloop_protocol::quic::{ConnectError, Trust};
 use kinloop_protocol::{MappingRequest, RefusalReason};
 
 use crate::core::{ConstraintMode, ModelForm};
-use crate::device::DeviceRequest;
+use crate::device::{DeviceRequest, DhdRequest};
 use crate::driver::{Client, ClientConfig, ClientError};
 use crate::user::UserSpec;
 
@@ -46,6 +46,10 @@ struct Args {
     /// device when the DHD one cannot be used.
     #[arg(long)]
     device: Option<DeviceRequest>,
+    /// With --device dhd: when the device is not calibrated (drdIsInitialized false), run drdAutoInit, which
+    /// moves the device on its own (let go of the handle first). Without it an uncalibrated device is refused.
+    #[arg(long)]
+    dhd_auto_init: bool,
     /// Simulated user: a hand soft|firm|release|poke (touring the OP's reach; KIND:PATH or KIND:hold for a
     /// scripted one), path:line:X0,Y0,X1,Y1,T | path:circle:R,T | path:waypoints:T:X,Y;... (a soft hand),
     /// constant:FX,FY,TZ (planar: forces x, y then torque z) or constant:FX,FY,FZ,TX,TY,TZ (spatial: forces
@@ -126,7 +130,9 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
     config.op = args.op;
     match args.device {
         Some(DeviceRequest::Simulated(preset)) => config.device = Some(preset),
-        Some(DeviceRequest::Dhd(request)) => config.dhd = Some(request),
+        Some(DeviceRequest::Dhd(request)) => {
+            config.dhd = Some(DhdRequest { auto_init: args.dhd_auto_init, ..request });
+        }
         None => {}
     }
     config.user = args.user;

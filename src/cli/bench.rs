@@ -193,6 +193,7 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
         let t = measure_batches(budget, kinloop_client::bench::client_tick_testbed).context("client/tick_testbed")?;
         r.timing_with_goal("client/tick_testbed", t, Some(CLIENT_TICK_GOAL_NS));
     }
+    device_exchanges(&mut r, budget)?;
     if r.wanted("codec/snapshot_testbed") {
         let mut bytes = 0;
         let t = measure_batches(budget, |calls| {
@@ -229,6 +230,39 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
         r.emit(row, json!({ "p50_us": p50, "p99_us": p99, "samples": samples }));
     }
     Ok(r.rows)
+}
+
+/// `device/tick_sim_falcon` and `device/tick_dhd_fake`: a haptic tick's device exchange (`read` then
+/// `command`) on a simulated Falcon and through the fake DHD library's FFI (the fake's own cost, its plant
+/// included: not what a USB device costs). The fake is found as `kinloop experiment renderability-dhd`
+/// finds it; without it that row says so and is left out.
+fn device_exchanges(r: &mut Reporter, budget: Duration) -> Result<()> {
+    if r.wanted("device/tick_sim_falcon") {
+        let t =
+            measure_batches(budget, kinloop_client::bench::device_tick_sim_falcon).context("device/tick_sim_falcon")?;
+        r.timing("device/tick_sim_falcon", t);
+    }
+    if r.wanted("device/tick_dhd_fake") {
+        let library = match crate::experiments::renderability_dhd::fake_library_beside_this_program() {
+            Ok(library) => library,
+            Err(e) => {
+                eprintln!("device/tick_dhd_fake left out: {e:#}");
+                return Ok(());
+            }
+        };
+        let t = measure_batches(budget, |calls| kinloop_client::bench::device_tick_dhd(&library, calls))
+            .context("device/tick_dhd_fake")?;
+        let row = Row {
+            name: "device/tick_dhd_fake".into(),
+            median_ns: t.median_ns,
+            p10_ns: Some(t.p10_ns),
+            p90_ns: Some(t.p90_ns),
+            goal_ns: None,
+            note: Some("read + command through the fake DHD library's FFI: the fake's cost, not USB's".into()),
+        };
+        r.emit(row, timing_fields(&t));
+    }
+    Ok(())
 }
 
 /// The Markdown table: a line naming the machine and the command, then one row per case.

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use kinloop_client::device::DevicePreset;
+use kinloop_client::device::{DeviceRequest, DhdRequest};
 use kinloop_client::user::{HandKind, HandSpec};
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
 
@@ -53,9 +53,13 @@ pub struct DemoArgs {
     #[arg(long)]
     pub paper_push: bool,
     /// The device every user holds: sim:paper, sim:falcon or sim:touch (default: the scene's, as
-    /// `kinloop-client` picks it).
+    /// `kinloop-client` picks it); or dhd[:INDEX] (dhd,sim:NAME to fall back): the first user holds that
+    /// Force Dimension device, as `kinloop-client --device dhd` does, the others the scene's simulated one.
     #[arg(long, value_name = "NAME")]
-    pub device: Option<DevicePreset>,
+    pub device: Option<DeviceRequest>,
+    /// With --device dhd: run drdAutoInit on an uncalibrated device (it moves on its own).
+    #[arg(long)]
+    pub dhd_auto_init: bool,
     /// The first user's operational point (default: the scene's first); further users take the next ones.
     #[arg(long, value_name = "NAME")]
     pub op: Option<String>,
@@ -106,7 +110,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         realtime: !args.no_realtime,
         view: args.view.map(|listen| ViewConfig { grab_without_token: args.view_grab, ..ViewConfig::new(listen) }),
         paper_push: args.paper_push,
-        device: args.device,
+        device: match args.device {
+            Some(DeviceRequest::Simulated(preset)) => Some(preset),
+            _ => None,
+        },
+        dhd: match args.device {
+            Some(DeviceRequest::Dhd(request)) => Some(DhdRequest { auto_init: args.dhd_auto_init, ..request }),
+            _ => None,
+        },
         first_op: args.op.clone(),
         hand: args.hand.map(HandSpec::touring),
     };

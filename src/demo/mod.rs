@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use kinloop_client::device::DevicePreset;
+use kinloop_client::device::{DevicePreset, DhdRequest};
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
@@ -78,6 +78,9 @@ pub struct DemoOptions {
     pub paper_push: bool,
     /// The device every user holds (`None`: the scene's default).
     pub device: Option<DevicePreset>,
+    /// A Force Dimension device the first user holds instead, through the same code as `kinloop-client
+    /// --device dhd`.
+    pub dhd: Option<DhdRequest>,
     /// The first user's OP (`None`: the scene's first; the others follow in turn from it).
     pub first_op: Option<String>,
     /// Every user's hand and what it intends (`None`: relaxed and firm in turn, touring the reach).
@@ -101,6 +104,7 @@ impl DemoOptions {
             view: None,
             paper_push: false,
             device: None,
+            dhd: None,
             first_op: None,
             hand: None,
         })
@@ -354,6 +358,9 @@ fn start_clients(
         config.op = Some(op.clone());
         config.user = user;
         config.device = options.device;
+        if i == 0 {
+            config.dhd = options.dhd;
+        }
         config.duration = Some(options.duration);
         config.link = side_link(&options.link, i as u64 + 1);
         config.record = Some(dir.join(format!("user{}.csv", i + 1)));

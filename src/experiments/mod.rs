@@ -11,6 +11,7 @@
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
 //! | [`renderability`] | does every shipped linkage render with default settings, on every device? (`renderability-live`: the same in real time) |
+//! | [`renderability_dhd`] | the same through a DHD device: the fake library as omega.3 and Falcon, in real processes (not in `all`: it needs the fake) |
 //! | [`robustness`] | do generated linkages of every class, in any units, render with default settings under delay? |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
@@ -27,6 +28,7 @@ pub mod model_update;
 pub mod paper;
 pub mod pauses;
 pub mod renderability;
+pub mod renderability_dhd;
 pub mod robustness;
 pub mod scale;
 pub mod speed_accuracy;
@@ -59,6 +61,8 @@ pub enum Name {
     Renderability,
     /// The same in real time over loopback QUIC.
     RenderabilityLive,
+    /// The matrix through a DHD device (the fake library), in real server and client processes.
+    RenderabilityDhd,
     /// Delay in real time: three scenes x two devices x four delays.
     LatencyLive,
     /// Generated linkages with default settings.
@@ -93,6 +97,9 @@ impl Name {
             Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
             Name::Renderability => "every scene x OP x device x network x hand with default settings",
             Name::RenderabilityLive => "the renderability matrix in real time over loopback QUIC (about 20 min)",
+            Name::RenderabilityDhd => {
+                "the renderability matrix through the fake DHD library as omega.3 and Falcon, real processes"
+            }
             Name::LatencyLive => {
                 "3 scenes x 2 devices x 100-1000 ms one way in real time over loopback QUIC (about 5 min)"
             }
@@ -105,7 +112,12 @@ impl Name {
     pub fn takes_seconds(self) -> bool {
         matches!(
             self,
-            Name::Latency | Name::LatencyLive | Name::Renderability | Name::RenderabilityLive | Name::Robustness
+            Name::Latency
+                | Name::LatencyLive
+                | Name::Renderability
+                | Name::RenderabilityLive
+                | Name::RenderabilityDhd
+                | Name::Robustness
         )
     }
 
@@ -121,6 +133,7 @@ impl Name {
             Name::Pauses => "pauses",
             Name::Renderability => "renderability",
             Name::RenderabilityLive => "renderability-live",
+            Name::RenderabilityDhd => "renderability-dhd",
             Name::LatencyLive => "latency-live",
             Name::Robustness => "robustness",
         }
@@ -139,6 +152,7 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Pauses => pauses::run(options),
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
+        Name::RenderabilityDhd => renderability_dhd::run(options),
         Name::LatencyLive => latency_live::run(options),
         Name::Robustness => robustness::run(options),
     }

@@ -133,22 +133,30 @@ pub struct PointResult {
     pub gains: Vec<f64>,
 }
 
-/// Every pair of the matrix for `scenes` (all built-in scenes with an operational point when empty).
-pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<Point>> {
+/// Every (scene, operational point, the scene's kind) of `scenes` (all built-in scenes when empty): the rows
+/// of the matrices.
+pub fn scene_ops(scenes: &[&str]) -> Result<Vec<(String, String, SceneKind)>> {
     let names: Vec<&str> =
         if scenes.is_empty() { builtin::SCENE_FILES.iter().map(|(n, _)| *n).collect() } else { scenes.to_vec() };
     let mut out = Vec::new();
     for name in names {
         let scene = builtin::scene(name).context("built in")??;
-        for op in &scene.ops {
-            for device in DEVICES {
-                if scene.kind == SceneKind::Spatial && device == DevicePreset::Paper {
-                    continue;
-                }
-                for network in Network::ALL {
-                    for &hand in hands {
-                        out.push(Point { scene: name.into(), op: op.name.clone(), device, network, hand });
-                    }
+        out.extend(scene.ops.iter().map(|op| (name.to_owned(), op.name.clone(), scene.kind)));
+    }
+    Ok(out)
+}
+
+/// Every pair of the matrix for `scenes` (all built-in scenes with an operational point when empty).
+pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<Point>> {
+    let mut out = Vec::new();
+    for (scene, op, kind) in scene_ops(scenes)? {
+        for device in DEVICES {
+            if kind == SceneKind::Spatial && device == DevicePreset::Paper {
+                continue;
+            }
+            for network in Network::ALL {
+                for &hand in hands {
+                    out.push(Point { scene: scene.clone(), op: op.clone(), device, network, hand });
                 }
             }
         }
@@ -337,7 +345,7 @@ pub fn judge_live(point: &Point, report: &crate::demo::DemoReport) -> Result<Poi
 }
 
 /// The bounds every pair is held to beyond stability: closure, clamped ticks, tracking.
-fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network) -> Vec<String> {
+pub fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network) -> Vec<String> {
     let mut failures = Vec::new();
     if !within(closure_m, CLOSURE_BOUND_M) {
         failures.push(format!("closure {closure_m:.1e} m"));

@@ -11,6 +11,9 @@ pub struct DhdRequest {
     pub index: u8,
     /// The simulated device used instead when the DHD one cannot be opened.
     pub fallback: Option<DevicePreset>,
+    /// Run `drdAutoInit` on an uncalibrated device (it moves on its own); never without the user's word
+    /// (`--dhd-auto-init`), so never from the `--device` value alone.
+    pub auto_init: bool,
 }
 
 /// A `--device` value.
@@ -66,7 +69,7 @@ impl std::str::FromStr for DeviceRequest {
             .map(|f| f.parse::<DevicePreset>())
             .transpose()
             .map_err(|source| DeviceRequestError::Fallback { given: s.to_owned(), source })?;
-        Ok(DeviceRequest::Dhd(DhdRequest { index, fallback }))
+        Ok(DeviceRequest::Dhd(DhdRequest { index, fallback, auto_init: false }))
     }
 }
 
@@ -78,11 +81,11 @@ mod tests {
     fn device_values_parse_to_what_they_say() {
         let parse = |s: &str| s.parse::<DeviceRequest>();
         assert_eq!(parse("sim:falcon"), Ok(DeviceRequest::Simulated(DevicePreset::Falcon)));
-        assert_eq!(parse("dhd"), Ok(DeviceRequest::Dhd(DhdRequest { index: 0, fallback: None })));
-        assert_eq!(parse("dhd:2"), Ok(DeviceRequest::Dhd(DhdRequest { index: 2, fallback: None })));
+        assert_eq!(parse("dhd"), Ok(DeviceRequest::Dhd(DhdRequest { index: 0, fallback: None, auto_init: false })));
+        assert_eq!(parse("dhd:2"), Ok(DeviceRequest::Dhd(DhdRequest { index: 2, fallback: None, auto_init: false })));
         assert_eq!(
             parse("dhd,sim:falcon"),
-            Ok(DeviceRequest::Dhd(DhdRequest { index: 0, fallback: Some(DevicePreset::Falcon) }))
+            Ok(DeviceRequest::Dhd(DhdRequest { index: 0, fallback: Some(DevicePreset::Falcon), auto_init: false }))
         );
         assert!(matches!(parse("dhd:300"), Err(DeviceRequestError::Index(_))));
         assert!(matches!(parse("dhd,dhd"), Err(DeviceRequestError::Fallback { .. })));

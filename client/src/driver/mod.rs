@@ -310,16 +310,9 @@ fn resolve(server: &str) -> Result<SocketAddr, ClientError> {
 /// says why and switches `config` to the fallback; otherwise the error.
 fn open_dhd(config: &mut ClientConfig) -> Result<Option<OpenedDhd>, ClientError> {
     let Some(request) = config.dhd else { return Ok(None) };
-    let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open(Arc::new(library), request.index));
+    let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open_for_rendering(Arc::new(library), &request));
     match (opened, request.fallback) {
-        (Ok(device), _) => {
-            if device.calibrated() == Some(false) {
-                tracing::warn!(
-                    "the DHD device is not calibrated (drdIsInitialized false); calibrate it with the SDK's tools"
-                );
-            }
-            Ok(Some(device))
-        }
+        (Ok(device), _) => Ok(Some(device)),
         (Err(e), Some(fallback)) => {
             tracing::warn!("{e}; using {} as asked", fallback.name());
             config.dhd = None;

@@ -194,6 +194,36 @@ impl<S: Space> UserContext<S> {
     }
 }
 
+/// The order in which a hand tours `waypoints` (displacements from its grasp): forth from the one nearest the
+/// grasp around the list, then back, so it follows the reach rather than cutting across it from the grasp
+/// to the list's first point. Simulated hands and the fake DHD library's hand (through
+/// `kinloop experiment renderability-dhd`) tour in this order.
+pub fn tour_order<S: Space>(waypoints: &[S::OpVec]) -> Vec<S::OpVec> {
+    if waypoints.is_empty() {
+        return Vec::new();
+    }
+    let distance = |a: &S::OpVec, b: &S::OpVec| S::op_lin(&(*a - *b)).norm();
+    let nearest = (0..waypoints.len())
+        .min_by(|&i, &j| {
+            distance(&waypoints[i], &S::OpVec::zero()).total_cmp(&distance(&waypoints[j], &S::OpVec::zero()))
+        })
+        .unwrap_or(0);
+    // Forth from the nearest point around the list, then back.
+    let mut order: Vec<S::OpVec> = (0..waypoints.len()).map(|k| waypoints[(nearest + k) % waypoints.len()]).collect();
+    // Angles continuous along the way: each displacement's rotation is a logarithm, within ±π of the
+    // grasp, and an OP that turns a whole circle over its reach (the testbed's link 2) would otherwise
+    // have the wrist interpolate the long way round between two neighbours (a twist far beyond a
+    // device's torque). Back retraces the same angles.
+    let mut previous = S::OpVec::zero();
+    for w in &mut order {
+        unwrap_rotation_near::<S>(w, &previous);
+        previous = *w;
+    }
+    let back: Vec<S::OpVec> = order.iter().rev().skip(1).copied().collect();
+    order.extend(back);
+    order
+}
+
 /// The intended motion as a function of time: minimum-jerk segments between displacements.
 #[derive(Clone, Debug)]
 struct Plan<S: Space> {
@@ -214,25 +244,7 @@ impl<S: Space> Plan<S> {
             return Self::hold();
         }
         let distance = |a: &S::OpVec, b: &S::OpVec| S::op_lin(&(*a - *b)).norm();
-        let nearest = (0..waypoints.len())
-            .min_by(|&i, &j| {
-                distance(&waypoints[i], &S::OpVec::zero()).total_cmp(&distance(&waypoints[j], &S::OpVec::zero()))
-            })
-            .unwrap_or(0);
-        // Forth from the nearest point around the list, then back.
-        let mut order: Vec<S::OpVec> =
-            (0..waypoints.len()).map(|k| waypoints[(nearest + k) % waypoints.len()]).collect();
-        // Angles continuous along the way: each displacement's rotation is a logarithm, within ±π of the
-        // grasp, and an OP that turns a whole circle over its reach (the testbed's link 2) would otherwise
-        // have the wrist interpolate the long way round between two neighbours (a twist far beyond a
-        // device's torque). Back retraces the same angles.
-        let mut previous = S::OpVec::zero();
-        for w in &mut order {
-            unwrap_rotation_near::<S>(w, &previous);
-            previous = *w;
-        }
-        let back: Vec<S::OpVec> = order.iter().rev().skip(1).copied().collect();
-        order.extend(back);
+        let order = tour_order::<S>(waypoints);
         let mut knots = vec![(0.0, S::OpVec::zero())];
         let mut t = 0.0;
         let mut last = S::OpVec::zero();

@@ -2,8 +2,19 @@
 //! first non-zero command (the core commands nothing before its first snapshot) and ramped in; the device's
 //! own watchdog armed where the SDK has it (`dhdSetWatchdog`), and the same rule in software (a read after
 //! a stalled loop commands zero and ramps in again); every command clamped to the model's peak force; a
-//! failing call or a non-finite reading commands zero and ends the device; `dhdClose` on every way out
-//! (the lease's `Drop` runs on return, on error and on a panic's unwinding).
+//! failing call or a non-finite reading commands zero and ends the device; so does the device switching
+//! its forces off by itself (`dhdGetStatus`: its force button, its velocity limit), with the cause said,
+//! except for its watchdog expiring, which is a stalled loop: zero at once, then forces enabled and ramped
+//! in again as after a stall the software rule sees; `dhdClose` on every way out (the lease's `Drop` runs on return, on error and on a
+//! panic's unwinding).
+//!
+//! Button 0 (`dhdGetButton`) is a clutch: while it is held the hand counts as not grasping (`grasped`
+//! false): the output fades to zero and the VE lets go of the OP, so the user can move the handle freely;
+//! released, the coupling takes hold again and forces fade back in.
+//!
+//! Calibration: a DRD library says whether the device knows where it is (`drdIsInitialized`). An
+//! uncalibrated device is refused with what to do, unless the user asked kinloop to run `drdAutoInit`
+//! (`--dhd-auto-init`): the device then moves on its own, which kinloop never starts unasked.
 
 use std::ffi::c_char;
 use std::marker::PhantomData;
@@ -14,9 +25,9 @@ use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::frames;
-use super::library::{DhdError, DhdLibrary};
+use super::library::{self, DhdError, DhdLibrary};
 use super::specs::{self, ModelSpec};
-use crate::device::{DeviceError, DeviceSpec, DeviceState, HapticDevice};
+use crate::device::{DeviceError, DeviceSpec, DeviceState, DhdRequest, HapticDevice};
 
 /// Time over which forces ramp from zero to full after they are enabled or after a stall (s).
 pub const RAMP_IN: Duration = Duration::from_millis(500);
@@ -78,6 +89,33 @@ impl OpenedDhd {
         }
         let calibrated = lease.library.is_initialized(lease.id);
         Ok(OpenedDhd { lease, index, model, calibrated })
+    }
+
+    /// Opens the device `request` names for rendering: as [`OpenedDhd::open`], and calibrated. An
+    /// uncalibrated device is refused unless the request asks for `drdAutoInit`, which then runs once.
+    pub fn open_for_rendering(library: Arc<DhdLibrary>, request: &DhdRequest) -> Result<OpenedDhd, DhdError> {
+        let mut opened = OpenedDhd::open(library, request.index)?;
+        if opened.calibrated != Some(false) {
+            return Ok(opened);
+        }
+        let name = opened.library().path().display().to_string();
+        let index = request.index;
+        if !request.auto_init {
+            return Err(DhdError::NotCalibrated { library: name, index });
+        }
+        let lease = &opened.lease;
+        let reason = match lease.library.auto_init(lease.id) {
+            None => "the library has no drdAutoInit (it is not Force Dimension's DRD library)".to_owned(),
+            Some(status) if status < 0 => format!("returned {status}: {}", lease.library.last_error()),
+            Some(_) => match lease.library.is_initialized(lease.id) {
+                Some(false) => "the device still reports itself uncalibrated".to_owned(),
+                _ => {
+                    opened.calibrated = Some(true);
+                    return Ok(opened);
+                }
+            },
+        };
+        Err(DhdError::AutoInit { library: name, index, reason })
     }
 
     /// The model's published figures.
@@ -175,6 +213,29 @@ impl<S: Space> HapticDevice<S> for DhdDevice<S> {
                 return Err(self.lost(why));
             }
         };
+        if self.enabled {
+            if let Some(Ok(status)) = library.status(self.lease.id) {
+                if status[library::STATUS_FORCE] == 0 {
+                    let cause = status[library::STATUS_FORCE_OFF_CAUSE];
+                    let said = library::force_off_cause(cause);
+                    if cause != library::FORCE_OFF_WATCHDOG {
+                        return Err(self.lost(format!("the device switched its forces off: {said}")));
+                    }
+                    // Its watchdog saw a stalled loop, as the software rule does: zero now, and the next
+                    // command enables forces again and ramps them in from zero.
+                    tracing::warn!("{}: the device switched its forces off: {said}; ramping in again", self.label);
+                    self.lease.zero();
+                    self.enabled = false;
+                    self.ramp_from = None;
+                }
+            }
+        }
+        // Button 0 is the clutch (see the module documentation); a failing button read leaves it alone.
+        let grasped = match library.button(0, self.lease.id) {
+            1 => Some(false),
+            0 => Some(true),
+            _ => None,
+        };
         let velocity = match library.velocity(self.lease.id) {
             Some(Ok(v)) if v.iter().all(|x| x.is_finite()) => v,
             Some(Ok(v)) => return Err(self.lost(format!("non-finite velocity {v:?} m/s from the DHD library"))),
@@ -203,7 +264,7 @@ impl<S: Space> HapticDevice<S> for DhdDevice<S> {
             pose: OpPose { position: point, rotation: S::rot_identity() },
             twist,
             hand_wrench: None,
-            grasped: None,
+            grasped,
         })
     }
 

@@ -4,8 +4,21 @@
 //! elsewhere, hence `extern "system"`; the device ID is a C `char` (`c_char`, unsigned on aarch64 Linux), and
 //! every call passes it (C has no default argument). Calls return 0 on success, a positive status that is not
 //! an error (`DHD_TIMEGUARD` 1, `DHD_MOTOR_SATURATED` 2), or -1 on error. Required symbols must all be there;
-//! optional ones (the expert SDK's watchdog, the velocity estimate, DRD's calibration query) switch a feature
-//! off when absent, as CHAI3D's `CDeltaDevices.cpp` does with one "available" flag per function.
+//! optional ones (the expert SDK's watchdog, the velocity estimate, the status array, DRD's calibration
+//! query and auto-initialisation) switch a feature off when absent, as CHAI3D's `CDeltaDevices.cpp` does
+//! with one "available" flag per function.
+//!
+//! Checked against the SDK 3.6.0 headers as published in `psh117/dyros_jet`
+//! (`dyros_jet_haptic/include/sdk-3.6.0/include/dhdc.h` and `dyros_jet_haptic/include/drdc.h`): every
+//! signature below matches those declarations (`int dhdGetPosition(double *px, double *py, double *pz, char
+//! ID = -1)`, `int dhdSetForce(double fx, double fy, double fz, char ID = -1)`, `int dhdEnableForce(uchar
+//! val, char ID = -1)`, `int dhdGetButton(int index, char ID = -1)`, `int dhdGetStatus(int
+//! status[DHD_MAX_STATUS], char ID = -1)`, `void dhdGetSDKVersion(int *, int *, int *, int *)`, `const
+//! char *dhdErrorGetLastStr()`, `bool drdIsInitialized(char ID = -1)`, `int drdAutoInit(char ID = -1)`), as
+//! do the constants used (`DHD_DEVICE_*`, `DHD_STATUS_FORCE` 5, `DHD_STATUS_FORCEOFFCAUSE` 14,
+//! `DHD_FORCEOFF_*`, `DHD_MAX_STATUS` 15 there), and `int dhdSetWatchdog(unsigned char val, char ID = -1)`
+//! in the expert SDK ("added in release 3.3.2"), hence optional. `bool` is C++'s one-byte `bool`, Rust's
+//! `bool`.
 
 use std::ffi::{c_char, c_int, c_uchar, CStr};
 use std::path::{Path, PathBuf};
@@ -79,6 +92,31 @@ type GetButton = unsafe extern "system" fn(c_int, c_char) -> c_int;
 type LastError = unsafe extern "system" fn() -> *const c_char;
 type DeviceCount = unsafe extern "system" fn() -> c_int;
 type IsInitialized = unsafe extern "system" fn(c_char) -> bool;
+type GetStatus = unsafe extern "system" fn(*mut c_int, c_char) -> c_int;
+
+/// Room for `dhdGetStatus`'s array: `DHD_MAX_STATUS` is 15 in SDK 3.6 and has grown since; twice that and
+/// more, so a newer SDK never writes past it.
+pub const STATUS_ROOM: usize = 32;
+/// `DHD_STATUS_FORCE`: 1 while the device outputs forces.
+pub const STATUS_FORCE: usize = 5;
+/// `DHD_STATUS_FORCEOFFCAUSE`: why the device last switched its forces off (`DHD_FORCEOFF_*`).
+pub const STATUS_FORCE_OFF_CAUSE: usize = 14;
+
+/// `DHD_FORCEOFF_WATCHDOG`: the device's watchdog switched its forces off.
+pub const FORCE_OFF_WATCHDOG: i32 = 3;
+
+/// What a `DHD_FORCEOFF_*` value means, for messages.
+pub fn force_off_cause(cause: i32) -> &'static str {
+    match cause {
+        1 => "its force button was pressed",
+        2 => "the handle moved faster than its safety limit",
+        3 => "its watchdog expired (no force command reached it in time)",
+        4 => "software switched them off",
+        5 => "its USB link was lost",
+        6 => "its dead-man switch was released",
+        _ => "no cause given",
+    }
+}
 
 /// The calls kinloop makes, resolved once. Function pointers stay valid while `_library` is loaded, and it
 /// is never unloaded before them (they live in the same value).
@@ -96,7 +134,9 @@ pub struct DhdLibrary {
     velocity: Option<GetTriple>,
     watchdog: Option<SetFlag>,
     device_count: Option<DeviceCount>,
+    status: Option<GetStatus>,
     is_initialized: Option<IsInitialized>,
+    auto_init: Option<ById>,
     _library: libloading::Library,
 }
 
@@ -202,7 +242,9 @@ impl DhdLibrary {
             velocity: optional!("dhdGetLinearVelocity"),
             watchdog: optional!("dhdSetWatchdog"),
             device_count: optional!("dhdGetDeviceCount"),
+            status: optional!("dhdGetStatus"),
             is_initialized: optional!("drdIsInitialized"),
+            auto_init: optional!("drdAutoInit"),
             _library: loaded,
         })
     }
@@ -304,6 +346,21 @@ impl DhdLibrary {
         // SAFETY: plain values.
         self.is_initialized.map(|call| unsafe { call(id) })
     }
+
+    /// `drdAutoInit(id)`, when the library is DRD: the device moves on its own to find its references.
+    pub fn auto_init(&self, id: c_char) -> Option<i32> {
+        // SAFETY: plain values.
+        self.auto_init.map(|call| unsafe { call(id) })
+    }
+
+    /// `dhdGetStatus(status, id)`, when the library has it: the status array, or the failing return.
+    pub fn status(&self, id: c_char) -> Option<Result<[c_int; STATUS_ROOM], i32>> {
+        let call = self.status?;
+        let mut status = [0; STATUS_ROOM];
+        // SAFETY: room for more entries than any SDK's DHD_MAX_STATUS.
+        let result = unsafe { call(status.as_mut_ptr(), id) };
+        Some(if result < 0 { Err(result) } else { Ok(status) })
+    }
 }
 
 /// Why the DHD library or a device behind it cannot be used. Each message names the library.
@@ -367,6 +424,28 @@ pub enum DhdError {
         system: i32,
         /// The known types.
         known: String,
+    },
+    /// The device does not know where it is, and the user did not ask kinloop to initialise it.
+    #[error(
+        "DHD library {library}: device {index} is not calibrated (drdIsInitialized is false), so its positions \
+         cannot be trusted; calibrate it with the Force Dimension SDK's tools, or pass --dhd-auto-init to let \
+         kinloop run drdAutoInit (the device moves on its own: let go of the handle and clear its workspace)"
+    )]
+    NotCalibrated {
+        /// The library.
+        library: String,
+        /// The device index.
+        index: u8,
+    },
+    /// `drdAutoInit` was asked for and failed, or the library has no DRD calls.
+    #[error("DHD library {library}: device {index}: drdAutoInit failed: {reason}")]
+    AutoInit {
+        /// The library.
+        library: String,
+        /// The device index.
+        index: u8,
+        /// Why.
+        reason: String,
     },
     /// The device's first reading is not usable.
     #[error("DHD library {library}: device {index} reads garbage ({what}); no force will be sent to it")]

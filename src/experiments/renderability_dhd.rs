@@ -1,0 +1,461 @@
+//! `renderability-dhd`: the renderability matrix ([`super::renderability`]) through a Force Dimension
+//! device, in real processes: for every shipped scene × operational point × device {omega.3, Falcon} ×
+//! network {perfect, 50 ms one way with 5 ms jitter} × hand {soft, firm}, a `kinloop-server --scene S`
+//! and a `kinloop-client --op OP --device dhd` with default flags, the client loading the fake DHD library
+//! (`fakes/fake-dhd`) as a vendor's, told which model to be (`FAKE_DHD_SYSTEM`).
+//!
+//! The fake's hand stands in for the simulated presets' hands: the same grasp impedances (soft and firm,
+//! `shared/haptics-facts.md`) and the same intention, a tour of the OP's reach. That tour is what the
+//! server's welcome gives a client (`Welcome::op::tour`), placed where the client's core puts the OP in the
+//! device's workspace (`HapticCore::home`) and written in the device's frame (`dhd::frames`): this module
+//! computes it ahead of the session with the server's and the client's own cores (same scene, same device
+//! spec, same defaults, so the same welcome), and hands it to the fake through `FAKE_DHD_TOUR`. The handle
+//! starts at the OP's place, as a simulated rig's does, and the hand sets off when forces come on.
+//!
+//! A pair renders by the matrix's bounds: the client ends well, no VE restore, no withheld snapshot, no
+//! non-finite value; loops closed; at most 5 % of ticks clamped; device-OP RMS (the device against the VE's
+//! OP at the same instant, in device space, from both programs' `--record` files) within 5 mm on a perfect
+//! network and 10 mm at 50 ms. The two clocks are matched by when each program said it started (the
+//! server's address line, the client's "holding" line), to a millisecond or so.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde::Serialize;
+use serde_json::{json, Value};
+
+use kinloop_client::core::{CoreConfig, HapticCore};
+use kinloop_client::device::dhd::specs::{self, ModelSpec};
+use kinloop_client::device::dhd::{frames, library::LIBRARY_VARIABLE};
+use kinloop_client::user::hand::tour_order;
+use kinloop_client::user::{HandKind, UserContext};
+use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
+use kinloop_linkage::model::{builtin, scene::Scene, Model};
+use kinloop_protocol::{LocalModelForm, MappingRequest, Role};
+use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
+
+use super::common::{sweep, Options, Output};
+use super::renderability::{bound_failures, scene_ops, Network};
+use crate::rounding::{num, round};
+
+/// The DHD models of the matrix: `dhdGetSystemType`'s omega.3 and Falcon.
+pub const SYSTEMS: [i32; 2] = [33, 60];
+/// The hands of the matrix.
+pub const HANDS: [HandKind; 2] = [HandKind::Soft, HandKind::Firm];
+/// A pair's session (s), as `renderability-live`'s; `--quick` halves it.
+pub const SECONDS: f64 = 4.0;
+/// How long the server outlives the client's session: its start-up, the connection and the leave (s).
+const SERVER_MARGIN_S: f64 = 2.5;
+
+/// One pair of the matrix.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DhdPoint {
+    /// Built-in scene name.
+    pub scene: String,
+    /// Operational point.
+    pub op: String,
+    /// `dhdGetSystemType` the fake answers.
+    pub system: i32,
+    /// Network.
+    pub network: Network,
+    /// Hand.
+    pub hand: HandKind,
+}
+
+impl DhdPoint {
+    /// `scene:op model network hand`.
+    pub fn label(&self) -> String {
+        let model = specs::model(self.system).map_or("unknown", |m| m.name);
+        format!("{}:{} {} {} {}", self.scene, self.op, model, self.network.name(), self.hand.name())
+    }
+}
+
+/// What one pair measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct DhdResult {
+    /// The pair.
+    pub point: DhdPoint,
+    /// Renders by every bound.
+    pub renders: bool,
+    /// Which bounds failed.
+    pub failures: Vec<String>,
+    /// Fraction of the client's active ticks clamped at the device's limit.
+    pub clamped_fraction: f64,
+    /// Device-OP RMS against the VE's OP, device space (m).
+    pub device_op_rms_m: f64,
+    /// The client's own device-to-local-model RMS, device space (m).
+    pub device_model_rms_m: f64,
+    /// Largest closure error (m).
+    pub max_closure_error_m: f64,
+    /// VE restores.
+    pub ve_restores: u64,
+}
+
+/// Every pair for `scenes` (all built-in scenes when empty).
+pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DhdPoint>> {
+    let mut out = Vec::new();
+    for (scene, op, _) in scene_ops(scenes)? {
+        for system in SYSTEMS {
+            for network in Network::ALL {
+                for &hand in hands {
+                    out.push(DhdPoint { scene: scene.clone(), op: op.clone(), system, network, hand });
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// How a program is started: its name (`kinloop-server`, `kinloop-client`) and arguments to a command.
+pub type Launch = dyn Fn(&str, &[String]) -> Command + Sync;
+
+/// The programs a pair runs: `kinloop-server`, `kinloop-client` and the fake library.
+pub struct Programs {
+    launch: Box<Launch>,
+    /// The fake DHD library.
+    pub fake: PathBuf,
+}
+
+impl Programs {
+    /// Programs started by `launch` (tests re-execute their own binary as each program), the fake at `fake`.
+    pub fn launched_by(launch: Box<Launch>, fake: PathBuf) -> Programs {
+        Programs { launch, fake }
+    }
+
+    /// The programs beside this executable (cargo puts `kinloop`, `kinloop-server` and `kinloop-client` in
+    /// one folder, and the fake library in it or in its `deps`), the library from `KINLOOP_DHD_LIB` when set.
+    pub fn beside_this_program() -> Result<Programs> {
+        let exe = std::env::current_exe().context("this program's path")?;
+        let dir = exe.parent().context("this program's folder")?.to_owned();
+        for name in ["kinloop-server", "kinloop-client"] {
+            let path = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+            if !path.is_file() {
+                bail!("{} is missing: build the workspace (cargo build --release --workspace)", path.display());
+            }
+        }
+        let fake = fake_library_beside_this_program()?;
+        let launch = move |program: &str, args: &[String]| {
+            let mut command = Command::new(dir.join(format!("{program}{}", std::env::consts::EXE_SUFFIX)));
+            command.args(args);
+            command
+        };
+        Ok(Programs { launch: Box::new(launch), fake })
+    }
+
+    fn command(&self, program: &str, args: Vec<String>) -> Command {
+        (self.launch)(program, &args)
+    }
+}
+
+/// The fake DHD library: `KINLOOP_DHD_LIB` when set, else beside this executable or in its `deps` (where
+/// cargo builds it).
+pub fn fake_library_beside_this_program() -> Result<PathBuf> {
+    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
+        return Ok(PathBuf::from(path));
+    }
+    let exe = std::env::current_exe().context("this program's path")?;
+    let dir = exe.parent().context("this program's folder")?;
+    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(|| {
+        format!(
+            "the fake DHD library {name} is not in {} nor its deps (cargo build --release --workspace builds it), \
+             and {LIBRARY_VARIABLE} is not set",
+            dir.display()
+        )
+    })
+}
+
+/// The tour the pair's hand intends, in the device's frame (m): the OP's place in the workspace, then the
+/// welcome's waypoints (see the module documentation).
+pub fn device_tour(point: &DhdPoint) -> Result<Vec<[f64; 3]>> {
+    let scene = builtin::scene(&point.scene).context("built in")??;
+    let model = specs::model(point.system).with_context(|| format!("no DHD model {}", point.system))?;
+    match scene.kind {
+        SceneKind::Planar => tour_in::<Planar>(&scene, &point.op, model),
+        SceneKind::Spatial => tour_in::<Spatial>(&scene, &point.op, model),
+    }
+}
+
+fn tour_in<S: Space>(scene: &Scene, op: &str, model: &ModelSpec) -> Result<Vec<[f64; 3]>> {
+    let compiled: Model<S> = Model::compile(scene, &scene.name)?;
+    let mut ve = VeCore::new(compiled, VeConfig::default()).map_err(|e| anyhow!("VE configuration: {e}"))?;
+    let spec = model.device_spec(S::KIND);
+    let request = JoinRequest {
+        name: "tour".into(),
+        role: Role::Manipulator,
+        op: op.into(),
+        form: LocalModelForm::OpSpace,
+        device: Some(spec.caps()),
+        mapping: MappingRequest::default(),
+    };
+    let joined = ve.join(Duration::ZERO, request).map_err(|e| anyhow!("the join is refused: {e}"))?;
+    let core = HapticCore::<S>::new(CoreConfig::new(spec), &joined.welcome).map_err(|e| anyhow!("{e}"))?;
+    let home = core.home(&S::Point::from_slice(&joined.welcome.op.position));
+    let linear = S::KIND.point_dim();
+    let mut tour = vec![frames::to_device(home.as_slice(), linear)];
+    // In the order the simulated hands tour it, there and back (the fake goes back along the list again).
+    let context = UserContext::<S>::from_welcome(&joined.welcome);
+    for displacement in tour_order::<S>(&context.tour) {
+        let at = home + S::op_lin(&displacement);
+        tour.push(frames::to_device(at.as_slice(), linear));
+    }
+    Ok(tour)
+}
+
+/// A child's lines on one stream, each with when it was read.
+type Lines = Arc<Mutex<Vec<(Instant, String)>>>;
+
+/// Reads `stream` line by line on a thread, timestamping each line.
+fn collect_lines(stream: impl Read + Send + 'static) -> (Lines, std::thread::JoinHandle<()>) {
+    let lines: Lines = Arc::new(Mutex::new(Vec::new()));
+    let sink = lines.clone();
+    let handle = std::thread::spawn(move || {
+        for line in BufReader::new(stream).lines().map_while(|l| l.ok()) {
+            if let Ok(mut v) = sink.lock() {
+                v.push((Instant::now(), line));
+            }
+        }
+    });
+    (lines, handle)
+}
+
+/// Waits for `child` up to `limit`, killing it after.
+fn wait_bounded(child: &mut Child, limit: Duration, what: &str) -> Result<std::process::ExitStatus> {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait()? {
+            return Ok(status);
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            bail!("{what} did not end within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The link flags of `network` for one side (`seed` differs per side).
+fn link_flags(network: Network, seed: u64) -> Vec<String> {
+    match network {
+        Network::Perfect => Vec::new(),
+        Network::Delayed50 => {
+            ["--delay", "50ms", "--jitter", "5ms", "--seed", &seed.to_string()].map(String::from).to_vec()
+        }
+    }
+}
+
+/// What the two programs left: the server's JSON statistics, the client's, its log, and the clock offset.
+struct Ran {
+    server: Value,
+    client: Value,
+    client_log: String,
+    client_ok: bool,
+    offset_s: f64,
+}
+
+/// Runs the server and the client of `point` for `seconds` in `dir`.
+fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path) -> Result<Ran> {
+    let tour = device_tour(point)?;
+    let tour_text: Vec<String> = tour.iter().map(|p| format!("{:e},{:e},{:e}", p[0], p[1], p[2])).collect();
+    let mut args: Vec<String> = ["--scene", &point.scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"]
+        .into_iter()
+        .chain(["--record", "ve.csv", "--json", "--stats-every", "0", "--duration"])
+        .map(String::from)
+        .collect();
+    args.push((seconds + SERVER_MARGIN_S).to_string());
+    args.extend(link_flags(point.network, 1));
+    let mut server = programs
+        .command("kinloop-server", args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::from(std::fs::File::create(dir.join("server.log"))?))
+        .spawn()
+        .context("starting kinloop-server")?;
+    let mut out = BufReader::new(server.stdout.take().context("the server's stdout")?);
+    let log_tail = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
+        text.lines().rev().take(5).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n")
+    };
+    let address = line_starting(&mut out, "kinloop-server listening on")
+        .with_context(|| format!("the server's log ends:\n{}", log_tail(dir)))?;
+    let server_started = Instant::now();
+    let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
+    let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
+    let (address, fingerprint) = (last_word(&address), last_word(&fingerprint));
+    let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", "dhd"]
+        .into_iter()
+        .chain(["--op", &point.op, "--no-realtime", "--json", "--record", "client.csv", "--duration"])
+        .map(String::from)
+        .collect();
+    args.push(seconds.to_string());
+    args.extend(link_flags(point.network, 2));
+    let mut client = programs
+        .command("kinloop-client", args)
+        .env(LIBRARY_VARIABLE, &programs.fake)
+        .env("FAKE_DHD_SYSTEM", point.system.to_string())
+        .env("FAKE_DHD_HAND", point.hand.name())
+        .env("FAKE_DHD_TOUR", tour_text.join(";"))
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting kinloop-client")?;
+    let (log, reader) = collect_lines(client.stderr.take().context("the client's stderr")?);
+    let mut client_out = String::new();
+    client.stdout.take().context("the client's stdout")?.read_to_string(&mut client_out)?;
+    let status = wait_bounded(&mut client, Duration::from_secs_f64(seconds + 30.0), "kinloop-client")?;
+    let _ = reader.join();
+    let server_status = wait_bounded(&mut server, Duration::from_secs_f64(seconds + 30.0), "kinloop-server")?;
+    let mut server_out = String::new();
+    out.read_to_string(&mut server_out)?;
+    let lines = log.lock().map_err(|_| anyhow!("the client's log"))?.clone();
+    let client_log: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
+    std::fs::write(dir.join("client.log"), &client_log)?;
+    let holding = lines.iter().find(|(_, l)| l.contains("kinloop-client: holding")).map(|(t, _)| *t);
+    let offset_s = holding.map_or(0.0, |t| t.saturating_duration_since(server_started).as_secs_f64());
+    if !server_status.success() {
+        bail!("kinloop-server failed (see {})", dir.join("server.log").display());
+    }
+    Ok(Ran {
+        server: json_in(&server_out).context("the server's JSON statistics")?,
+        client: json_in(&client_out).unwrap_or(Value::Null),
+        client_ok: status.success() && holding.is_some(),
+        client_log,
+        offset_s,
+    })
+}
+
+/// Reads lines from `out` until one holds `prefix`; that line from `prefix` on (a launcher may print
+/// before it, as a test harness does).
+fn line_starting(out: &mut impl BufRead, prefix: &str) -> Result<String> {
+    let mut line = String::new();
+    loop {
+        line.clear();
+        if out.read_line(&mut line)? == 0 {
+            bail!("the server ended before printing {prefix:?}");
+        }
+        if let Some(at) = line.find(prefix) {
+            return Ok(line[at..].trim_end().to_owned());
+        }
+    }
+}
+
+/// The JSON object a program printed last on its stdout (anything before it is skipped).
+fn json_in(text: &str) -> Result<Value> {
+    let start = text.find('{').context("no JSON object")?;
+    Ok(serde_json::from_str(&text[start..])?)
+}
+
+/// Device-OP RMS in device space (m): the client's ticks with output against the VE's OP at the same
+/// instant, over the scene's linear axes.
+fn device_op_rms(dir: &Path, kind: SceneKind, offset_s: f64, position_scale: f64) -> Result<f64> {
+    let mut samples = crate::demo::records::read_client(&dir.join("client.csv"), kind)?;
+    let ve = crate::demo::records::read_ve(&dir.join("ve.csv"), kind)?;
+    let user = ve.iter().find_map(|v| v.users.first().map(|u| u.0)).context("the user in the VE's record")?;
+    crate::demo::records::merge(&mut samples, &ve, user, offset_s);
+    let linear = kind.point_dim();
+    let squares: Vec<f64> = samples
+        .iter()
+        .filter(|s| s.gain > 0.0)
+        .filter_map(|s| {
+            let op = s.ve_op.as_ref()?;
+            Some((0..linear).map(|i| (s.device[i] - op[i]).powi(2)).sum::<f64>())
+        })
+        .collect();
+    if squares.is_empty() {
+        bail!("no tick with output to compare");
+    }
+    Ok((squares.iter().sum::<f64>() / squares.len() as f64).sqrt() * position_scale)
+}
+
+/// Runs one pair for `seconds` in a folder under `scratch` and judges it.
+pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &Path) -> Result<DhdResult> {
+    let dir = scratch.join(point.label().replace([' ', ':', '+'], "_"));
+    std::fs::create_dir_all(&dir)?;
+    let ran = run_programs(point, seconds, programs, &dir)?;
+    let kind = builtin::scene(&point.scene).context("built in")??.kind;
+    let core = &ran.server["ve"]["core"];
+    let count = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let (restores, withheld) = (count(&core["state_restores"]), count(&core["snapshots_withheld"]));
+    let closure = count(&core["max_closure_error"]);
+    let c = &ran.client;
+    let non_finite = count(&c["non_finite_events"]);
+    let clamped = count(&c["clamped_fraction"]);
+    let scale = count(&c["session"]["position_scale"]);
+    let mut failures = Vec::new();
+    if !ran.client_ok {
+        let last = ran.client_log.lines().rfind(|l| l.contains("error")).unwrap_or("no error line");
+        failures.push(format!("the client failed: {last}"));
+    }
+    if !(restores == 0.0 && withheld == 0.0 && non_finite == 0.0) {
+        failures
+            .push(format!("unstable: {restores} VE restores, {withheld} snapshots withheld, {non_finite} non-finite"));
+    }
+    let rms = if ran.client_ok { device_op_rms(&dir, kind, ran.offset_s, scale)? } else { f64::NAN };
+    failures.extend(bound_failures(closure, clamped, rms, point.network));
+    let result = DhdResult {
+        point: point.clone(),
+        renders: failures.is_empty(),
+        failures,
+        clamped_fraction: clamped,
+        device_op_rms_m: rms,
+        device_model_rms_m: count(&c["tracking_error_rms_m"]),
+        max_closure_error_m: closure,
+        ve_restores: restores as u64,
+    };
+    // Each pair's verdict beside its records, so a long run can be read while it goes.
+    std::fs::write(dir.join("result.json"), serde_json::to_string_pretty(&result)?)?;
+    Ok(result)
+}
+
+/// Runs the experiment (see the module documentation), one pair at a time.
+pub fn run(options: &Options) -> Result<super::Report> {
+    let out = Output::new("renderability-dhd", options)?;
+    let programs = Programs::beside_this_program()?;
+    let all = points(&[], &HANDS)?;
+    let seconds = options.session_seconds(SECONDS, SECONDS / 2.0);
+    let scratch = std::env::temp_dir().join("kinloop-renderability-dhd");
+    let results = sweep("renderability-dhd", &all, 1, options.progress, |p| evaluate(p, seconds, &programs, &scratch))?;
+    let rendering = results.iter().filter(|r| r.renders).count();
+    let worst = |f: fn(&DhdResult) -> f64| results.iter().map(f).fold(0.0, f64::max);
+    let (worst_rms, worst_clamped) = (worst(|r| r.device_op_rms_m), worst(|r| r.clamped_fraction));
+    let by_system: Vec<Value> = SYSTEMS
+        .iter()
+        .map(|&s| {
+            let of: Vec<&DhdResult> = results.iter().filter(|r| r.point.system == s).collect();
+            let name = specs::model(s).map_or("unknown", |m| m.name);
+            json!({"system": s, "model": name, "pairs": of.len(), "rendering": of.iter().filter(|r| r.renders).count()})
+        })
+        .collect();
+    let answer = format!(
+        "{rendering} of {} pairs render through the fake DHD library in real processes (stable, closure <= 1e-6 m, \
+         clamped <= 5 %, device-OP RMS <= 5 mm perfect / 10 mm at 50 ms); worst clamped {} %, worst RMS {} mm",
+        results.len(),
+        num(worst_clamped * 100.0),
+        num(worst_rms * 1e3)
+    );
+    out.finish(
+        "Every shipped linkage through a DHD device (the fake library as omega.3 and Falcon), real processes",
+        "one pair at a time, about 7 s each",
+        json!({
+            "answer": answer,
+            "seconds_per_pair": seconds,
+            "pairs": results.len(),
+            "rendering": rendering,
+            "by_system": by_system,
+            "failing": results.iter().filter(|r| !r.renders).map(|r| json!({"pair": r.point.label(), "failures": r.failures})).collect::<Vec<_>>(),
+            "points": results.iter().map(|r| json!({
+                "scene": r.point.scene, "op": r.point.op, "system": r.point.system, "network": r.point.network.name(),
+                "hand": r.point.hand.name(), "renders": r.renders, "failures": r.failures,
+                "clamped_fraction": round(r.clamped_fraction, 4), "device_op_rms_mm": round(r.device_op_rms_m * 1e3, 3),
+                "device_model_rms_mm": round(r.device_model_rms_m * 1e3, 3), "max_closure_error_m": r.max_closure_error_m,
+                "ve_restores": r.ve_restores,
+            })).collect::<Vec<_>>(),
+        }),
+    )
+}
