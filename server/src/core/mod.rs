@@ -24,6 +24,7 @@
 pub mod config;
 pub mod coupling;
 pub mod design;
+pub mod device_side;
 pub mod events;
 pub mod fade;
 pub mod guards;
@@ -48,6 +49,7 @@ use kinloop_linkage::{
     algorithms::integrator::step, algorithms::integrator::StepConfig, math::space::Space, math::space::VecOps,
     model::data::Data, model::Model,
 };
+use kinloop_protocol::codec::validate;
 use kinloop_protocol::{
     Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
     Uplink, Welcome,
@@ -433,6 +435,12 @@ impl<S: Space> VeCore<S> {
             coupling.heard_pose = coupling.op_pose;
         }
         let welcome = self.welcome(user_id, op, &mapping, &coupling);
+        // The wire's own checks, here rather than only in the network's handshake, so that every caller of the
+        // core (the virtual-time harness too) is refused what a client would be.
+        if let Err(error) = validate::welcome(&welcome) {
+            self.metrics.joins_refused += 1;
+            return Err(RefusalReason::Unservable { what: format!("its welcome would be invalid: {error}") });
+        }
         self.users.push(User {
             id: user_id,
             name: request.name,
@@ -440,6 +448,7 @@ impl<S: Space> VeCore<S> {
             op,
             form: request.form,
             wrench_limits: guards::wrench_limits_for_device(request.device.as_ref(), &mapping, &self.config.guards),
+            thresholds: device_side::user_thresholds(&self.config, &mapping),
             mapping,
             presence: Presence::Present,
             last_seq: None,
@@ -519,7 +528,7 @@ impl<S: Space> VeCore<S> {
             sample,
             &coupling.op_pose,
             &self.users[index].wrench_limits,
-            &self.config.guards,
+            &self.users[index].thresholds.guards,
             &mut coupling.pose_memo,
         );
         let checked = match checked {
@@ -562,7 +571,7 @@ impl<S: Space> VeCore<S> {
                 u.passivity.observe_client::<S>(t, &checked.hand_wrench, &checked.model_twist);
                 let k = S::DIM;
                 let limits = &u.wrench_limits;
-                let guards = &self.config.guards;
+                let guards = &u.thresholds.guards;
                 let max_power_w = limits.max_force_n.max(limits.max_torque_nm)
                     * guards.max_model_speed_m_per_s.max(guards.max_model_angular_speed_rad_per_s);
                 let report = u.passivity.client.check(
@@ -570,7 +579,7 @@ impl<S: Space> VeCore<S> {
                     &sample.energy_received_j[..k],
                     &sample.energy_emitted_j[..k],
                     max_power_w,
-                    self.config.passivity_allowance_j,
+                    u.thresholds.passivity_allowance,
                 );
                 if report.is_err() {
                     self.metrics.energy_reports_refused += 1;
