@@ -10,8 +10,7 @@ use kinloop::generate::units::UnitSystem;
 use kinloop_client::user::HandKind;
 
 /// Seed, and the OPs of its linkage that must render (`None`: every OP).
-const REGRESSIONS: [(u64, Option<&str>); 4] =
-    [(1, None), (6, None), (3, Some("op-rocker")), (4, Some("op-crank"))];
+const REGRESSIONS: [(u64, Option<&str>); 4] = [(1, None), (6, None), (3, Some("op-rocker")), (4, Some("op-crank"))];
 
 #[test]
 fn linkages_written_in_millimetres_and_centimetres_render_at_zero_delay() {
@@ -22,7 +21,14 @@ fn linkages_written_in_millimetres_and_centimetres_render_at_zero_delay() {
         let mut judged = 0;
         for p in sessions.iter().filter(|p| only.is_none_or(|op| p.op == op)) {
             let outcome = evaluate(&g, p, 10.0);
-            assert!(outcome.failures.is_empty(), "seed {seed} ({:?}) {} on {:?}: {:?}", g.units, p.op, p.device, outcome.failures);
+            assert!(
+                outcome.failures.is_empty(),
+                "seed {seed} ({:?}) {} on {:?}: {:?}",
+                g.units,
+                p.op,
+                p.device,
+                outcome.failures
+            );
             judged += 1;
         }
         assert!(judged >= 3, "seed {seed}: {judged} sessions");

@@ -306,8 +306,13 @@ impl<S: Space> HapticCore<S> {
         // The energy books are judged apart: a bad report is refused and counted (`EnergyReports::refused`, in
         // the stats), the state is still used.
         let e = &snapshot.energy;
-        let _ =
-            self.server_energy.check(snapshot.server_time_s, &e.received_j, &e.emitted_j, MAX_SCENE_WRENCH * MAX_SCENE_SPEED, 0.0);
+        let _ = self.server_energy.check(
+            snapshot.server_time_s,
+            &e.received_j,
+            &e.emitted_j,
+            MAX_SCENE_WRENCH * MAX_SCENE_SPEED,
+            0.0,
+        );
         std::mem::swap(&mut self.incoming, &mut self.pending);
         self.pending_fresh = true;
         self.newest_seq = Some(snapshot.seq);

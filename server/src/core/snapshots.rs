@@ -94,7 +94,12 @@ impl<S: Space> VeCore<S> {
         scratch.at_op.forget();
         let exchange = hands_share(&self.model, &self.data, &self.users, &self.couplings, scratch);
         if self.contacts.is_some() {
-            detect_contacts(&self.model, &self.data.kin, self.config.contact_margin * self.model.length_scale, &mut scratch.near);
+            detect_contacts(
+                &self.model,
+                &self.data.kin,
+                self.config.contact_margin * self.model.length_scale,
+                &mut scratch.near,
+            );
             scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
