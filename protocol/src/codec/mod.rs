@@ -66,18 +66,17 @@ pub mod limits {
     /// Largest position or force scale of a mapping for an SI scene.
     pub const MAX_SCALE: f64 = 1e4;
 
-    /// How far the units a scene is written in may stray from SI, either way, on every wire bound of a
-    /// scene-side quantity: its unit of length may be anything from a millimetre to a kilometre and its unit of
-    /// mass anything from a gram to a tonne (time is always in seconds). Device and hand quantities are SI
-    /// whatever the scene's units (the bounds above); a scene-side bound (the `SCENE_` ones below, and the
-    /// mapping's scales, which convert between the two) is the SI bound widened by this range to the power of
-    /// the quantity's dimension in length and mass, so it holds the same physical magnitudes in every unit
-    /// system of the range and still refuses garbage (a non-finite number, or one no such scene produces).
+    /// How much smaller than SI the units a scene is written in may be, on every wire bound of a scene-side
+    /// quantity: its unit of length may be anything from a metre down to a millimetre and its unit of mass from
+    /// a kilogram down to a gram (time is always in seconds). Device and hand quantities are SI whatever the
+    /// scene's units (the bounds above). A scene-side bound (the `SCENE_` ones below, and the mapping's
+    /// scales, which convert between the two) is the SI bound widened by this range to the power of the
+    /// quantity's dimension in length and mass, so it holds the same physical magnitudes in every unit system
+    /// of the range and still refuses garbage (a non-finite number, or one no such scene produces). Smaller
+    /// units make an inverse inertia's number smaller, so its SI bound holds in every unit system of the range.
     pub const UNIT_RANGE: f64 = 1e3;
     /// Largest scene position or angle component (length units, rad): `MAX_POSITION · UNIT_RANGE`.
     pub const MAX_SCENE_POSITION: f64 = MAX_POSITION * UNIT_RANGE;
-    /// Smallest scene length scale (length units).
-    pub const MIN_SCENE_LENGTH_SCALE: f64 = 1e-9 / UNIT_RANGE;
     /// Largest scene velocity component (length units/s, rad/s).
     pub const MAX_SCENE_SPEED: f64 = MAX_SPEED * UNIT_RANGE;
     /// Largest scene acceleration component (length units/s², rad/s²).
@@ -88,15 +87,19 @@ pub mod limits {
     /// Largest scene stiffness or damping gain (an angular one is a mass times a length squared):
     /// `MAX_GAIN · UNIT_RANGE³`.
     pub const MAX_SCENE_GAIN: f64 = MAX_GAIN * UNIT_RANGE * UNIT_RANGE * UNIT_RANGE;
-    /// Largest entry of a scene's inertia-like matrix, its inverse or a Jacobian (a rotational inertia is a
-    /// mass times a length squared): `MAX_MATRIX_ENTRY · UNIT_RANGE³`.
+    /// Largest entry of a scene's inertia-like matrix or Jacobian (a rotational inertia is a mass times a
+    /// length squared): `MAX_MATRIX_ENTRY · UNIT_RANGE³`.
     pub const MAX_SCENE_MATRIX_ENTRY: f64 = MAX_MATRIX_ENTRY * UNIT_RANGE * UNIT_RANGE * UNIT_RANGE;
+    /// Largest entry of a scene's inverse inertia (Λ⁻¹, its singular values, a contact's mobility): the SI
+    /// bound, which smaller units only move away from.
+    pub const MAX_SCENE_INVERSE_INERTIA: f64 = MAX_MATRIX_ENTRY;
     /// Smallest position or force scale of a mapping, asked for or chosen (device metres per scene length
     /// unit, device newtons per scene force unit: a force unit is a mass times a length, so
     /// `MIN_SCALE / UNIT_RANGE²`).
     pub const MIN_MAPPING_SCALE: f64 = MIN_SCALE / (UNIT_RANGE * UNIT_RANGE);
-    /// Largest position or force scale of a mapping, asked for or chosen: `MAX_SCALE · UNIT_RANGE²`.
-    pub const MAX_MAPPING_SCALE: f64 = MAX_SCALE * UNIT_RANGE * UNIT_RANGE;
+    /// Largest position or force scale of a mapping, asked for or chosen: `MAX_SCALE` (smaller units only make
+    /// the scales smaller).
+    pub const MAX_MAPPING_SCALE: f64 = MAX_SCALE;
 }
 
 use limits::{MAX_CONTROL_FRAME_BYTES, MAX_DATAGRAM_MESSAGE_BYTES};

@@ -125,7 +125,7 @@ pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
 fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
     text(Field::at("welcome.scene.name"), &s.name)?;
     text(Field::at("welcome.scene.op_name"), &s.op_name)?;
-    scalar(Field::at("welcome.scene.length_scale"), s.length_scale, MIN_SCENE_LENGTH_SCALE, MAX_SCENE_POSITION)?;
+    scalar(Field::at("welcome.scene.length_scale"), s.length_scale, 1e-9, MAX_SCENE_POSITION)?;
     count(Field::at("welcome.scene.n"), s.n as usize, MAX_COORDINATES)?;
     count(Field::at("welcome.scene.m"), s.m as usize, MAX_CLOSURE_ROWS)?;
     if usize::from(s.op_dim) != s.kind.op_dim() {
@@ -165,12 +165,12 @@ fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
     vector(Field::at("welcome.op.tour"), &o.tour, points * k, MAX_SCENE_POSITION)?;
     scalar(Field::at("welcome.op.static_force_n"), o.static_force_n, 0.0, MAX_SCENE_WRENCH)?;
     scalar(Field::at("welcome.op.static_torque_nm"), o.static_torque_nm, 0.0, MAX_SCENE_WRENCH)?;
-    scalar(Field::at("welcome.op.inverse_mass_max"), o.inverse_mass_max, 0.0, MAX_SCENE_MATRIX_ENTRY)?;
+    scalar(Field::at("welcome.op.inverse_mass_max"), o.inverse_mass_max, 0.0, MAX_SCENE_INVERSE_INERTIA)?;
     scalar(
         Field::at("welcome.op.inverse_rotational_inertia_max"),
         o.inverse_rotational_inertia_max,
         0.0,
-        MAX_SCENE_MATRIX_ENTRY,
+        MAX_SCENE_INVERSE_INERTIA,
     )?;
     let poses = o.path.len() / shape.pose_dim();
     count(Field::at("welcome.op.path"), poses, MAX_PATH_POSES)?;
@@ -223,7 +223,12 @@ pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
 pub fn snapshot_op_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = shape.op_dim();
     vector(Field::at("snapshot.op_twist"), &s.op_twist, k, MAX_SCENE_SPEED)?;
-    vector(Field::at("snapshot.inverse_inertia"), &s.inverse_inertia, shape.op_triangle_len(), MAX_SCENE_MATRIX_ENTRY)?;
+    vector(
+        Field::at("snapshot.inverse_inertia"),
+        &s.inverse_inertia,
+        shape.op_triangle_len(),
+        MAX_SCENE_INVERSE_INERTIA,
+    )?;
     vector(Field::at("snapshot.directions"), &s.directions, k * k, MAX_ORTHONORMAL_ENTRY)?;
     singular_values(&s.singular_values, k)?;
     if usize::from(s.constraint_count) > k {
@@ -257,7 +262,7 @@ pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
 
 fn singular_values(values: &[f64], k: usize) -> Result<(), DecodeError> {
     let field = Field::at("snapshot.singular_values");
-    non_negative_vector(field, values, k, MAX_SCENE_MATRIX_ENTRY)?;
+    non_negative_vector(field, values, k, MAX_SCENE_INVERSE_INERTIA)?;
     if values.windows(2).any(|pair| pair[0] < pair[1]) {
         return Err(DecodeError::Inconsistent { field, what: "singular values must not increase" });
     }
@@ -272,7 +277,7 @@ fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), Decode
     scalar(Field::in_item(LIST, i, "depth"), c.depth, -MAX_SCENE_POSITION, MAX_SCENE_POSITION)?;
     scalar(Field::in_item(LIST, i, "normal_velocity"), c.normal_velocity, -MAX_SCENE_SPEED, MAX_SCENE_SPEED)?;
     vector(Field::in_item(LIST, i, "op_coupling"), &c.op_coupling, shape.op_dim(), MAX_SCENE_MATRIX_ENTRY)?;
-    scalar(Field::in_item(LIST, i, "mobility"), c.mobility, 0.0, MAX_SCENE_MATRIX_ENTRY)?;
+    scalar(Field::in_item(LIST, i, "mobility"), c.mobility, 0.0, MAX_SCENE_INVERSE_INERTIA)?;
     scalar(Field::in_item(LIST, i, "bias_accel"), c.bias_accel, -MAX_SCENE_ACCEL, MAX_SCENE_ACCEL)?;
     scalar(Field::in_item(LIST, i, "stiffness"), c.stiffness, 0.0, MAX_SCENE_GAIN)?;
     scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_SCENE_GAIN)
