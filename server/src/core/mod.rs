@@ -49,7 +49,6 @@ use kinloop_linkage::{
     algorithms::integrator::step, algorithms::integrator::StepConfig, math::space::Space, math::space::VecOps,
     model::data::Data, model::Model,
 };
-use kinloop_protocol::codec::validate;
 use kinloop_protocol::{
     Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
     Uplink, Welcome,
@@ -435,12 +434,6 @@ impl<S: Space> VeCore<S> {
             coupling.heard_pose = coupling.op_pose;
         }
         let welcome = self.welcome(user_id, op, &mapping, &coupling);
-        // The wire's own checks, here rather than only in the network's handshake, so that every caller of the
-        // core (the virtual-time harness too) is refused what a client would be.
-        if let Err(error) = validate::welcome(&welcome) {
-            self.metrics.joins_refused += 1;
-            return Err(RefusalReason::Unservable { what: format!("its welcome would be invalid: {error}") });
-        }
         self.users.push(User {
             id: user_id,
             name: request.name,
