@@ -147,7 +147,12 @@ impl ClosureScales {
     /// The minimum-norm Gauss-Newton correction `Δq` (to subtract from q) that zeroes `h` to first order, the
     /// norm taken in length scales: `columns ⊙ W̃⁺ (rows ⊙ h)`.
     pub fn newton_step(&self, w: &DMatrix<f64>, h: &DVector<f64>) -> Result<DVector<f64>, &'static str> {
-        let svd = self.jacobian(w).svd(true, true);
+        let scaled = self.jacobian(w);
+        // The SVD panics on a NaN; a non-finite Jacobian (a configuration blown up) has no step.
+        if scaled.iter().any(|x| !x.is_finite()) {
+            return Err("the closure Jacobian is not finite");
+        }
+        let svd = scaled.svd(true, true);
         let step = svd.solve(&h.component_mul(&self.rows), 1e-12 * svd.singular_values.max())?;
         Ok(step.component_mul(&self.columns))
     }

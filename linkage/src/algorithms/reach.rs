@@ -267,7 +267,12 @@ impl<S: Space> Walker<'_, S> {
     fn rows(&self) -> Option<DMatrix<f64>> {
         // Work in weighted coordinates q̃ = diag(weights) q, W̃ = W diag(1/weights), its length rows in length
         // scales (`ClosureScales`: its coordinate scales are 1 / weights).
-        row_space(&ClosureScales::of(self.model).jacobian(&self.data.closure_jacobian()))
+        let scaled = ClosureScales::of(self.model).jacobian(&self.data.closure_jacobian());
+        // The SVD panics on a NaN: a configuration blown up has no row space.
+        if scaled.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        row_space(&scaled)
     }
 
     /// How deep the linkage's geometry is in the scene's obstacles at the kinematics in `data` (m, ≥ 0).
