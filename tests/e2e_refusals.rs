@@ -223,7 +223,8 @@ fn a_welcome_the_wire_rejects_is_refused_naming_the_field() {
         mass: kinloop::generate::units::MassUnit::G,
     };
     let mut config = live::server_config();
-    config.scene = mm_g.rewrite(&live::testbed());
+    // In nanometres and grams: positions past the range of units the wire holds (`limits::UNIT_RANGE`).
+    config.scene = mm_g.rewrite(&live::testbed()).scaled_lengths(1e6);
     let (stderr, stats) = failing_client(
         "a_welcome_the_wire_rejects_is_refused_naming_the_field",
         config,

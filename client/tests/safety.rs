@@ -62,9 +62,9 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
         Box::new(|_| {}),
         Box::new(|s| s.inverse_inertia = vec![9e5, 0.0, 0.0, 9e5, 0.0, 9e5]),
         Box::new(|s| s.op_pose[0] = f64::NAN),
-        Box::new(|s| s.op_pose = vec![1e3, -1e3, 0.0]),
-        Box::new(|s| s.op_twist = vec![1e4, 1e4, 1e4]),
-        Box::new(|s| s.bias_accel = vec![1e6, -1e6, 1e6]),
+        Box::new(|s| s.op_pose = vec![1e6, -1e6, 0.0]),
+        Box::new(|s| s.op_twist = vec![1e7, 1e7, 1e7]),
+        Box::new(|s| s.bias_accel = vec![1e9, -1e9, 1e9]),
         Box::new(|s| s.bias_accel[1] = f64::INFINITY),
         Box::new(|s| s.inverse_inertia[0] = -5.0),
         Box::new(|s| s.inverse_inertia[3] = 1e9),
@@ -118,7 +118,7 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
     assert_eq!(
         rejected,
         3 * 8,
-        "NaN pose, twist past the wire's 1e3, infinite bias, negative and huge Λ⁻¹, directions past unit length, \
+        "NaN pose, twist past the wire's scene range, infinite bias, negative and huge Λ⁻¹, directions past unit length, \
          bad count, short Λ⁻¹"
     );
     assert_eq!(stats.snapshots_rejected, rejected);

@@ -368,6 +368,12 @@ impl<S: Space> Session<S> {
             mapping: p.plan.mapping.clone(),
         };
         let joined = self.ve.join(now, request).map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
+        // The wire's checks on the welcome, as the network's handshake makes them: what a real client would be
+        // refused, a simulated one is too.
+        if let Err(error) = kinloop_protocol::codec::validate::welcome(&joined.welcome) {
+            let what = format!("its welcome would be invalid: {error}");
+            return Err(anyhow!("{} refused: {}", p.plan.name, kinloop_protocol::RefusalReason::Unservable { what }));
+        }
         let spec = p.device.take().context("a participant joins once")?.spec().clone();
         let mut config = CoreConfig::new(spec);
         config.constraint_mode = p.plan.constraint_mode;

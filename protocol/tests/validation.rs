@@ -45,13 +45,21 @@ fn infinity_is_refused_with_its_index() {
     }
 }
 
+/// A scene's wrench may be written in any units of the stated range (2e4 N·m is 2e13 g·mm²/s²), but not past
+/// it.
 #[test]
 fn absurd_wrench_is_out_of_range() {
+    use kinloop_protocol::codec::limits::MAX_SCENE_WRENCH;
+    let absurd = 2.0 * MAX_SCENE_WRENCH;
     let mut s = testbed_snapshot();
     s.others.push(2, &[0.0, 0.0], &[0.0, 0.0, 0.0]);
     s.others.push(3, &[0.0, 0.0], &[0.0, 2e4, 0.0]);
+    assert!(decode_snapshot(s.clone()).is_ok(), "2e4 in some scene's units");
+    let mut s = testbed_snapshot();
+    s.others.push(2, &[0.0, 0.0], &[0.0, 0.0, 0.0]);
+    s.others.push(3, &[0.0, 0.0], &[0.0, absurd, 0.0]);
     let error = decode_snapshot(s).unwrap_err();
-    assert!(matches!(error, DecodeError::OutOfRange { value, index: Some(1), .. } if value == 2e4), "{error:?}");
+    assert!(matches!(error, DecodeError::OutOfRange { value, index: Some(1), .. } if value == absurd), "{error:?}");
     assert_eq!(field_of(&error), "snapshot.others[1].wrench");
     assert_eq!(error.to_string().split(' ').next(), Some("snapshot.others[1].wrench[1]"));
 }

@@ -175,7 +175,7 @@ fn print_human(r: &serde_json::Value) {
         println!("  {}", fmt_row(row));
     }
     println!(
-        "singular values  {}   (scaled, L = {:.4} m)",
+        "singular values  {}   (scaled, L = {:.4} in the scene's length unit)",
         fmt_row(&r["singular_values"]),
         r["length_scale"].as_f64().unwrap_or(0.0)
     );

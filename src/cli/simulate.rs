@@ -62,14 +62,15 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         println!("{report}");
     } else {
         println!(
-            "{}: {} steps of {} s with {}{}: max closure error {:.3e} m, energy error {}, {:.0} ns per step",
+            "{}: {} steps of {} s with {}{}: max closure error {:.3e} (the scene's length unit), energy error {}, {:.0} \
+             ns per step",
             report["scene"].as_str().unwrap_or(""),
             report["steps"],
             args.dt,
             integrator.name(),
             if args.project { " + projection" } else { "" },
             report["max_closure_error"].as_f64().unwrap_or(f64::NAN),
-            report["energy_error"].as_f64().map_or("n/a (not conservative)".into(), |e| format!("{e:.3e} J")),
+            report["energy_error"].as_f64().map_or("n/a (not conservative)".into(), |e| format!("{e:.3e} (the scene's energy unit)")),
             report["ns_per_step"].as_f64().unwrap_or(f64::NAN),
         );
     }

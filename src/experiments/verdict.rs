@@ -4,7 +4,8 @@
 //! 1. **divergence** — a client commanded or computed a non-finite value, the VE restored a non-finite
 //!    state, the VE's operational point ended up more than [`DIVERGENCE_DISTANCE_M`] (5 cm) from its device
 //!    as the VE has heard of it (the device's position at the client time of the newest uplink it used), or the
-//!    loop-closure error exceeded [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
+//!    loop-closure error, seen on the device (times the mapping's position scale), exceeded
+//!    [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
 //! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
 //!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
@@ -12,7 +13,7 @@
 //!    the change of its potential energy since the start) than all hands together had done work on their
 //!    devices by the times the VE has heard of (each hand's work up to the client time of the newest uplink
 //!    the VE used from it), by more than [`ENERGY_FRACTION`] (half) of the largest energy that has flowed so far (the
-//!    hands' work or the potential energy's change, in absolute value) plus [`ENERGY_FLOOR_J`] (5 mJ): the
+//!    hands' work or the potential energy's change, in absolute value) plus [`ENERGY_FLOOR_J`] (5 mJ at the device): the
 //!    system made energy nobody put in. (A passive chain from hand to
 //!    linkage keeps `E_kin(t) + ΔE_pot(t) ≤ W_hand(t)`; the margin absorbs the device's own kinetic energy
 //!    and the springs of the couplings.)
@@ -21,6 +22,11 @@
 //! measured twist, both in VE units: a device mapped with scales does `c_f c_p` times this work itself),
 //! the linkage's kinetic energy `½ q̇ᵀ D q̇` and potential energy after every VE tick. Device-OP distances
 //! are in the device's space. The verdict needs a recording of every tick (`record_every = 1`).
+//!
+//! **In any units.** Every threshold is a figure at the device (metres and joules a hand at the handle would
+//! notice), and the VE's figures are brought there through the mapping (`c_p`, and `c_f c_p` for energy; the
+//! largest over the clients, the strictest), so a linkage written in millimetres and grams is judged exactly
+//! as its SI twin. Every figure the verdict reports is at the device too.
 //!
 //! **Like with like under delay.** The VE at time t has heard of each device, and of the work its hand did,
 //! only up to the client time its newest uplink carried (`Snapshot::uplink_time_s`), so both comparisons are made there: about t minus the
@@ -38,9 +44,9 @@ use serde_json::{json, Value};
 
 use kinloop_harness::{Recording, SessionSummary};
 
-/// Device–OP distance beyond which a session has diverged (m).
+/// Device–OP distance beyond which a session has diverged (device m).
 pub const DIVERGENCE_DISTANCE_M: f64 = 0.05;
-/// Closure error beyond which the loop has opened (m).
+/// Closure error beyond which the loop has opened (device m: the VE's closure error times the position scale).
 pub const CLOSURE_LIMIT_M: f64 = 1e-3;
 /// Length of the saturation window (s).
 pub const SATURATION_WINDOW_S: f64 = 1.0;
@@ -50,17 +56,17 @@ pub const SATURATION_FRACTION: f64 = 0.10;
 pub const RAMP_IN_S: f64 = 0.25;
 /// Energy made beyond the hands' work, as a fraction of the largest work done so far.
 pub const ENERGY_FRACTION: f64 = 0.5;
-/// Energy made beyond the hands' work that is never held against a session (J).
+/// Energy made beyond the hands' work that is never held against a session (J at the device).
 pub const ENERGY_FLOOR_J: f64 = 0.005;
 
 /// The criterion in one sentence, for summaries.
 pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, the VE's OP more than 5 \
 cm from its device as the VE has heard of it (at the client time of its newest uplink used), or a closure error \
-above 1 mm) OR sustained saturation (more than 10 % of a client's haptic \
+above 1 mm as seen on the device) OR sustained saturation (more than 10 % of a client's haptic \
 ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
 linkage's kinetic energy plus the change of its potential energy exceeds the work all hands had done on their \
 devices up to the client times of the newest uplinks the VE used by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
-absolute value) plus 5 mJ); stable otherwise";
+absolute value) plus 5 mJ, energies taken at the device through the mapping's scales); stable otherwise";
 
 /// The criterion as a JSON object (the sentence and its thresholds).
 pub fn criterion_json() -> Value {
@@ -88,16 +94,16 @@ pub struct Verdict {
     /// Largest distance between the VE's OP and its device as the VE has heard of it, over all clients
     /// (m): what the divergence test judges.
     pub device_op_heard_max_m: f64,
-    /// Largest closure error (m).
+    /// Largest closure error as seen on the device (device m).
     pub max_closure_error_m: f64,
     /// Largest fraction of clamped ticks in any window, over all clients.
     pub worst_saturation: f64,
-    /// Largest `E_kin(t) − W(t)` (J).
+    /// Largest `E_kin(t) − W(t)` (J at the device).
     pub energy_excess_j: f64,
     /// Largest energy that had flowed at any instant: the hands' total work or the potential energy's change,
-    /// in absolute value (J).
+    /// in absolute value (J at the device).
     pub energy_flow_max_j: f64,
-    /// Largest kinetic energy of the linkage (J).
+    /// Largest kinetic energy of the linkage (J at the device).
     pub kinetic_energy_max_j: f64,
 }
 
@@ -116,14 +122,18 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     if exceeds(device_op_heard_max_m, DIVERGENCE_DISTANCE_M) {
         reasons.push("divergence: OP more than 5 cm from its device as heard");
     }
-    if exceeds(summary.max_closure_error, CLOSURE_LIMIT_M) {
+    let to_device = DeviceFigures::of(summary);
+    let max_closure_error_m = summary.max_closure_error * to_device.length;
+    if exceeds(max_closure_error_m, CLOSURE_LIMIT_M) {
         reasons.push("divergence: closure error above 1 mm");
     }
     let worst_saturation = rec.clients.iter().map(|samples| worst_window(samples)).fold(0.0, f64::max);
     if worst_saturation > SATURATION_FRACTION {
         reasons.push("sustained saturation");
     }
-    let (energy_excess_j, energy_flow_max_j, kinetic_energy_max_j) = energy_balance(rec);
+    let (excess, flow, kinetic) = energy_balance(rec);
+    let (energy_excess_j, energy_flow_max_j, kinetic_energy_max_j) =
+        (excess * to_device.energy, flow * to_device.energy, kinetic * to_device.energy);
     if exceeds(energy_excess_j, ENERGY_FRACTION * energy_flow_max_j + ENERGY_FLOOR_J) {
         reasons.push("energy growth");
     }
@@ -132,11 +142,33 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         reasons,
         device_op_max_m,
         device_op_heard_max_m,
-        max_closure_error_m: summary.max_closure_error,
+        max_closure_error_m,
         worst_saturation,
         energy_excess_j,
         energy_flow_max_j,
         kinetic_energy_max_j,
+    }
+}
+
+/// How the VE's figures are seen at the devices: device metres per VE length unit (`c_p`) and device joules
+/// per VE energy unit (`c_f c_p`), the largest over the clients (the strictest reading); one to one for a
+/// client whose mapping the summary does not give.
+struct DeviceFigures {
+    length: f64,
+    energy: f64,
+}
+
+impl DeviceFigures {
+    fn of(summary: &SessionSummary) -> Self {
+        let usable = |x: f64| x > 0.0 && x.is_finite();
+        let mapped = summary.clients.iter().filter(|c| usable(c.position_scale) && usable(c.force_scale));
+        let (mut length, mut energy) = (0.0f64, 0.0f64);
+        for c in mapped {
+            length = length.max(c.position_scale);
+            energy = energy.max(c.position_scale * c.force_scale);
+        }
+        let or_one = |x: f64| if x > 0.0 { x } else { 1.0 };
+        DeviceFigures { length: or_one(length), energy: or_one(energy) }
     }
 }
 

@@ -164,12 +164,26 @@ impl Default for SafetyConfig {
 pub struct UplinkDeadband {
     /// Relative change of the wrench that is perceptible (Weber fraction), e.g. 0.1.
     pub weber_fraction: f64,
-    /// Smallest wrench change sent, N (scaled: torques divided by L), so a near-zero wrench does not chatter.
+    /// Smallest wrench change sent, device N (scaled: torques divided by L), so a near-zero wrench does not
+    /// chatter.
     pub wrench_floor_n: f64,
-    /// Smallest model pose change sent, m (scaled).
+    /// Smallest model pose change sent, device m (scaled).
     pub pose_threshold_m: f64,
     /// Longest gap between uplinks.
     pub max_interval: Duration,
+}
+
+impl UplinkDeadband {
+    /// The deadband with its floors, stated at the device, in the VE's units through the mapping's scales (a
+    /// device newton is `1 / c_f` VE force units, a device metre `1 / c_p` VE length units), so that it
+    /// passes the same uplinks whatever units the scene is written in.
+    pub fn in_ve_units(&self, scales: &super::scales::Scales) -> Self {
+        UplinkDeadband {
+            wrench_floor_n: self.wrench_floor_n / scales.force,
+            pose_threshold_m: self.pose_threshold_m / scales.position,
+            ..*self
+        }
+    }
 }
 
 impl Default for UplinkDeadband {

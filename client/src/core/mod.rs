@@ -50,7 +50,7 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
-use kinloop_protocol::codec::limits::{MAX_SPEED, MAX_WRENCH};
+use kinloop_protocol::codec::limits::{MAX_SCENE_SPEED, MAX_SCENE_WRENCH};
 use kinloop_protocol::passivity::{EnergyReports, PortBooks};
 use kinloop_protocol::{SessionShape, Snapshot, Uplink, Welcome};
 
@@ -74,7 +74,7 @@ use observer::HandObserver;
 use passive_update::UpdateTank;
 use path_follower::PathFollower;
 use pose_memos::PoseMemos;
-use safety::{usable_state, OutputGate, WrenchLimits};
+use safety::{usable_device_state, OutputGate, WrenchLimits};
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
@@ -202,8 +202,8 @@ impl<S: Space> HapticCore<S> {
             last_command: S::OpVec::zero(),
             last_now: None,
             one_way_delay: Duration::ZERO,
-            deadband: Deadband::new(config.deadband),
-            tank: UpdateTank::new(),
+            deadband: Deadband::new(config.deadband.map(|d| d.in_ve_units(&scales))),
+            tank: UpdateTank::new(scales.torque),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             uplink,
@@ -306,8 +306,13 @@ impl<S: Space> HapticCore<S> {
         // The energy books are judged apart: a bad report is refused and counted (`EnergyReports::refused`, in
         // the stats), the state is still used.
         let e = &snapshot.energy;
-        let _ =
-            self.server_energy.check(snapshot.server_time_s, &e.received_j, &e.emitted_j, MAX_WRENCH * MAX_SPEED, 0.0);
+        let _ = self.server_energy.check(
+            snapshot.server_time_s,
+            &e.received_j,
+            &e.emitted_j,
+            MAX_SCENE_WRENCH * MAX_SCENE_SPEED,
+            0.0,
+        );
         std::mem::swap(&mut self.incoming, &mut self.pending);
         self.pending_fresh = true;
         self.newest_seq = Some(snapshot.seq);
@@ -319,7 +324,7 @@ impl<S: Space> HapticCore<S> {
     /// documentation.
     pub fn tick(&mut self, now: Duration, device: &crate::device::DeviceState<S>) -> TickOutput<'_, S> {
         let dt_s = self.advance_clock(now);
-        let device_usable = usable_state::<S>(&device.pose, &device.twist);
+        let device_usable = usable_device_state::<S>(&device.pose, &device.twist);
         let hand_off = device.grasped == Some(false);
         if self.pending_fresh && device_usable {
             self.apply_pending(now, &device.pose, hand_off);

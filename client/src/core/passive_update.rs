@@ -28,9 +28,10 @@ use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::controllers::{hadamard, project_as_stiffness};
 
-/// Most energy the tank holds (J, in the VE's units). The coupling of the built-in scenes holds a few
-/// millijoules at their tour speeds; the tank can pay for a few such corrections at once but never store up
-/// more than a hand would notice as a kick.
+/// Most energy the tank holds (J at the device; in the VE's units it is this divided by the mapping's torque
+/// scale `c_f c_p`, so that it is the same physical budget whatever units the scene is written in). The
+/// coupling of the built-in scenes holds a few millijoules at their tour speeds; the tank can pay for a few
+/// such corrections at once but never store up more than a hand would notice as a kick.
 pub const TANK_CAPACITY_J: f64 = 0.01;
 
 /// The springs and the model motion whose stored energy a correction changes.
@@ -79,13 +80,19 @@ pub(crate) fn coupling_energy<S: Space>(springs: &CouplingSprings<S>, error: &S:
 /// The energy the model's updates may still put into the coupling.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct UpdateTank {
+    /// Energy held, VE units.
     level_j: f64,
+    /// [`TANK_CAPACITY_J`] in VE units.
+    capacity: f64,
 }
 
 impl UpdateTank {
-    /// A full tank: a session's first corrections find the model where the VE put it.
-    pub fn new() -> Self {
-        UpdateTank { level_j: TANK_CAPACITY_J }
+    /// A full tank of [`TANK_CAPACITY_J`] for a device whose energy is `device_per_ve` times the VE's (the
+    /// mapping's torque scale `c_f c_p`): a session's first corrections find the model where the VE put it.
+    pub fn new(device_per_ve: f64) -> Self {
+        let per = if device_per_ve > 0.0 && device_per_ve.is_finite() { device_per_ve } else { 1.0 };
+        let capacity = TANK_CAPACITY_J / per;
+        UpdateTank { level_j: capacity, capacity }
     }
 
     #[cfg(test)]
@@ -96,7 +103,7 @@ impl UpdateTank {
     /// Adds energy the controllers dissipated (a non-finite or negative amount adds nothing).
     pub fn fill(&mut self, joules: f64) {
         if joules > 0.0 && joules.is_finite() {
-            self.level_j = (self.level_j + joules).min(TANK_CAPACITY_J);
+            self.level_j = (self.level_j + joules).min(self.capacity);
         }
     }
 
@@ -107,7 +114,7 @@ impl UpdateTank {
             return 0.0;
         }
         if cost_j <= self.level_j {
-            self.level_j = (self.level_j - cost_j).min(TANK_CAPACITY_J);
+            self.level_j = (self.level_j - cost_j).min(self.capacity);
             return 1.0;
         }
         // Convex in the fraction α with no cost at α = 0: α = level / cost costs at most the level.
@@ -168,7 +175,7 @@ mod tests {
 
     #[test]
     fn the_tank_pays_corrections_only_from_what_was_dissipated() {
-        let mut tank = UpdateTank::new();
+        let mut tank = UpdateTank::new(1.0);
         // A costly correction empties the tank and is applied in part.
         let fraction = tank.admit(4.0 * TANK_CAPACITY_J);
         assert!((fraction - 0.25).abs() < 1e-12);
@@ -203,7 +210,7 @@ mod tests {
         let (moved, sped) = (Vector3::new(-0.02, 0.004, -0.1), Vector3::new(0.2, 0.0, 1.0));
         let before = coupling_energy(&s, &e, &v);
         let cost = coupling_energy(&s, &(e - moved), &(v + sped)) - before;
-        let mut tank = UpdateTank::new();
+        let mut tank = UpdateTank::new(1.0);
         tank.admit(TANK_CAPACITY_J - 1e-3);
         assert!(cost > tank.level_j());
         let level = tank.level_j();

@@ -7,12 +7,12 @@
 //!   `fade_out`;
 //! - **non-finite values** are never commanded: the caller sends zero, counts and flags it (see `HapticCore`);
 //!   nor are absurd ones: a device reading or a local-model state outside the protocol's ranges
-//!   ([`usable_state`]) is treated as non-finite.
+//!   ([`usable_device_state`], [`usable_model_state`]) is treated as non-finite.
 
 use kinloop_linkage::math::space::OpPose;
 pub use kinloop_linkage::math::space::PartScales;
 use kinloop_linkage::math::space::{Space, VecOps};
-use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
+use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SCENE_POSITION, MAX_SCENE_SPEED, MAX_SPEED};
 pub use kinloop_protocol::wrench_limits::{
     force_ratio, limit_wrench, limit_wrench_parts, mask_unactuated, WrenchLimits,
 };
@@ -67,14 +67,21 @@ pub fn within(values: &[f64], bound: f64) -> bool {
     values.iter().all(|x| x.abs() <= bound)
 }
 
-/// A pose and twist a device can read or a local model can hold: finite, the position within 1 km and the
-/// twist within 1 km/s or rad/s (the protocol's ranges, beyond which the server refuses the uplink that
-/// carries them). A corrupt device reading, or a local model driven off by terms at the edge of their own
-/// ranges (b̂ = 1e6 rad/s² spun one to 1,500 rad/s in 2 ms), fails it.
-pub fn usable_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool {
+/// A pose and twist a device can read (device units): finite, the position within 1 km and the twist within
+/// 1 km/s or rad/s (the protocol's device ranges). A corrupt device reading fails it.
+pub fn usable_device_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool {
     within(pose.position.as_slice(), MAX_POSITION)
         && S::rot_is_finite(&pose.rotation)
         && within(twist.as_slice(), MAX_SPEED)
+}
+
+/// A pose and twist a local model can hold (the scene's units): finite and within the protocol's scene
+/// ranges, beyond which the server refuses the uplink that carries them. A local model driven off by terms at
+/// the edge of their own ranges (b̂ = 1e6 rad/s² spun one to 1,500 rad/s in 2 ms) fails it.
+pub fn usable_model_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool {
+    within(pose.position.as_slice(), MAX_SCENE_POSITION)
+        && S::rot_is_finite(&pose.rotation)
+        && within(twist.as_slice(), MAX_SCENE_SPEED)
 }
 
 /// The damper that holds a released handle: half the device's highest stable damping on each axis (linear and

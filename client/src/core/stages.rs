@@ -16,7 +16,7 @@ use super::controllers::{
 };
 use super::index::DeviceIndex;
 use super::passive_update::damper_dissipation;
-use super::safety::{brake, force_ratio, limit_wrench_parts, mask_unactuated, usable_state, within};
+use super::safety::{brake, force_ratio, limit_wrench_parts, mask_unactuated, usable_model_state, within};
 use super::{ConstraintMode, ControllerWrenches, HapticCore, TickOutput, TickReport};
 use crate::device::DeviceState;
 
@@ -282,7 +282,7 @@ impl<S: Space> HapticCore<S> {
         let mut clamp_scale = 1.0;
         let mut flags = 0;
         let gain;
-        if !asked.requested.is_finite() || !usable_state::<S>(&self.model.pose(), &self.model.twist()) {
+        if !asked.requested.is_finite() || !usable_model_state::<S>(&self.model.pose(), &self.model.twist()) {
             self.recover_from_non_finite(now);
             flags |= uplink_flags::SAFETY_STOP;
             gain = 0.0;

@@ -26,6 +26,7 @@ use std::cmp::Ordering;
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::algorithms::assemble::ClosureScales;
 use crate::algorithms::constraint_directions::scale_op;
 use crate::algorithms::constraint_directions::{constraint_directions, ConstraintDirections, DEFAULT_THRESHOLD};
 use crate::algorithms::contact::{contact_capacity, detect_contacts, Contact};
@@ -183,22 +184,23 @@ fn residual<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>, ze
     data.closure_residual.norm()
 }
 
-/// Pulls `q` back onto the loops by Gauss-Newton; false when it does not converge in a few iterations (a
-/// dead point, or a step too long for the curvature).
+/// Pulls `q` back onto the loops by Gauss-Newton, in length scales (`ClosureScales`); false when it does not
+/// converge in a few iterations (a dead point, or a step too long for the curvature).
 fn close<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, zero: &DVector<f64>) -> bool {
-    let tolerance = 1e-11 * model.length_scale;
-    let mut r = residual(model, data, q, zero);
+    let scales = ClosureScales::of(model);
+    let tolerance = 1e-11;
+    residual(model, data, q, zero);
+    let mut r = scales.residual(&data.closure_residual);
     for _ in 0..12 {
         if r <= tolerance {
             return true;
         }
-        let w = data.closure_jacobian();
-        let svd = w.svd(true, true);
-        let Ok(step) = svd.solve(&data.closure_residual, 1e-12 * svd.singular_values.max()) else {
+        let Ok(step) = scales.newton_step(&data.closure_jacobian(), &data.closure_residual) else {
             return false;
         };
         let trial = &*q - step;
-        let r_trial = residual(model, data, &trial, zero);
+        residual(model, data, &trial, zero);
+        let r_trial = scales.residual(&data.closure_residual);
         // No smaller (a NaN residual included): the step does not help.
         if r_trial.partial_cmp(&r) != Some(Ordering::Less) {
             return false;
@@ -265,9 +267,13 @@ struct Walker<'a, S: Space> {
 impl<S: Space> Walker<'_, S> {
     /// The null-space basis at the configuration of the last `residual` (its W).
     fn rows(&self) -> Option<DMatrix<f64>> {
-        // Work in weighted coordinates q̃ = diag(weights) q: W̃ = W diag(1/weights).
-        let w = self.data.closure_jacobian();
-        let scaled = DMatrix::from_fn(w.nrows(), w.ncols(), |r, c| w[(r, c)] / self.weights[c]);
+        // Work in weighted coordinates q̃ = diag(weights) q, W̃ = W diag(1/weights), its length rows in length
+        // scales (`ClosureScales`: its coordinate scales are 1 / weights).
+        let scaled = ClosureScales::of(self.model).jacobian(&self.data.closure_jacobian());
+        // The SVD panics on a NaN: a configuration blown up has no row space.
+        if scaled.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
         row_space(&scaled)
     }
 

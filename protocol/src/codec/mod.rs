@@ -21,7 +21,7 @@ use crate::messages::{Control, Datagram};
 use crate::shape::SessionShape;
 
 /// Size and magnitude limits the codec enforces. Magnitudes are far beyond anything a real linkage or haptic
-/// device produces; hitting one means a broken or hostile peer.
+/// device produces, in any unit system of [`limits::UNIT_RANGE`]; hitting one means a broken or hostile peer.
 pub mod limits {
     /// Largest control frame body (bytes).
     pub const MAX_CONTROL_FRAME_BYTES: usize = 64 * 1024;
@@ -39,17 +39,17 @@ pub mod limits {
     pub const MAX_COORDINATES: usize = 1024;
     /// Most loop-closure rows of a scene.
     pub const MAX_CLOSURE_ROWS: usize = 1024;
-    /// Largest position or angle component (m, rad).
+    /// Largest position or angle component (m, rad) of a device.
     pub const MAX_POSITION: f64 = 1e3;
-    /// Largest velocity component (m/s, rad/s).
+    /// Largest velocity component (m/s, rad/s) of a device.
     pub const MAX_SPEED: f64 = 1e3;
-    /// Largest acceleration component (m/s², rad/s²).
+    /// Largest acceleration component (m/s², rad/s²) of a device.
     pub const MAX_ACCEL: f64 = 1e6;
-    /// Largest force or torque component (N, N·m).
+    /// Largest force or torque component (N, N·m) of a device or a hand on it.
     pub const MAX_WRENCH: f64 = 1e4;
-    /// Largest stiffness or damping gain.
+    /// Largest stiffness or damping gain of a device.
     pub const MAX_GAIN: f64 = 1e9;
-    /// Largest entry of an inertia-like matrix or Jacobian.
+    /// Largest entry of a device's inertia-like matrix.
     pub const MAX_MATRIX_ENTRY: f64 = 1e9;
     /// Largest entry of an orthonormal matrix, allowing for rounding.
     pub const MAX_ORTHONORMAL_ENTRY: f64 = 1.0 + UNIT_TOLERANCE;
@@ -61,10 +61,45 @@ pub mod limits {
     pub const MIN_RATE_HZ: f64 = 1.0;
     /// Highest loop or device rate (Hz).
     pub const MAX_RATE_HZ: f64 = 100_000.0;
-    /// Smallest position or force scale of a mapping (device units per VE unit).
+    /// Smallest position or force scale of a mapping for an SI scene (device units per VE unit).
     pub const MIN_SCALE: f64 = 1e-4;
-    /// Largest position or force scale of a mapping.
+    /// Largest position or force scale of a mapping for an SI scene.
     pub const MAX_SCALE: f64 = 1e4;
+
+    /// How much smaller than SI the units a scene is written in may be, on every wire bound of a scene-side
+    /// quantity: its unit of length may be anything from a metre down to a millimetre and its unit of mass from
+    /// a kilogram down to a gram (time is always in seconds). Device and hand quantities are SI whatever the
+    /// scene's units (the bounds above). A scene-side bound (the `SCENE_` ones below, and the mapping's
+    /// scales, which convert between the two) is the SI bound widened by this range to the power of the
+    /// quantity's dimension in length and mass, so it holds the same physical magnitudes in every unit system
+    /// of the range and still refuses garbage (a non-finite number, or one no such scene produces). Smaller
+    /// units make an inverse inertia's number smaller, so its SI bound holds in every unit system of the range.
+    pub const UNIT_RANGE: f64 = 1e3;
+    /// Largest scene position or angle component (length units, rad): `MAX_POSITION · UNIT_RANGE`.
+    pub const MAX_SCENE_POSITION: f64 = MAX_POSITION * UNIT_RANGE;
+    /// Largest scene velocity component (length units/s, rad/s).
+    pub const MAX_SCENE_SPEED: f64 = MAX_SPEED * UNIT_RANGE;
+    /// Largest scene acceleration component (length units/s², rad/s²).
+    pub const MAX_SCENE_ACCEL: f64 = MAX_ACCEL * UNIT_RANGE;
+    /// Largest scene force or torque component: a torque is a mass times a length squared (over s²), so
+    /// `MAX_WRENCH · UNIT_RANGE³`.
+    pub const MAX_SCENE_WRENCH: f64 = MAX_WRENCH * UNIT_RANGE * UNIT_RANGE * UNIT_RANGE;
+    /// Largest scene stiffness or damping gain (an angular one is a mass times a length squared):
+    /// `MAX_GAIN · UNIT_RANGE³`.
+    pub const MAX_SCENE_GAIN: f64 = MAX_GAIN * UNIT_RANGE * UNIT_RANGE * UNIT_RANGE;
+    /// Largest entry of a scene's inertia-like matrix or Jacobian (a rotational inertia is a mass times a
+    /// length squared): `MAX_MATRIX_ENTRY · UNIT_RANGE³`.
+    pub const MAX_SCENE_MATRIX_ENTRY: f64 = MAX_MATRIX_ENTRY * UNIT_RANGE * UNIT_RANGE * UNIT_RANGE;
+    /// Largest entry of a scene's inverse inertia (Λ⁻¹, its singular values, a contact's mobility): the SI
+    /// bound, which smaller units only move away from.
+    pub const MAX_SCENE_INVERSE_INERTIA: f64 = MAX_MATRIX_ENTRY;
+    /// Smallest position or force scale of a mapping, asked for or chosen (device metres per scene length
+    /// unit, device newtons per scene force unit: a force unit is a mass times a length, so
+    /// `MIN_SCALE / UNIT_RANGE²`).
+    pub const MIN_MAPPING_SCALE: f64 = MIN_SCALE / (UNIT_RANGE * UNIT_RANGE);
+    /// Largest position or force scale of a mapping, asked for or chosen: `MAX_SCALE` (smaller units only make
+    /// the scales smaller).
+    pub const MAX_MAPPING_SCALE: f64 = MAX_SCALE;
 }
 
 use limits::{MAX_CONTROL_FRAME_BYTES, MAX_DATAGRAM_MESSAGE_BYTES};

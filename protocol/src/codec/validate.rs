@@ -105,7 +105,7 @@ pub fn mapping_request(m: &MappingRequest) -> Result<(), DecodeError> {
         (Field::at("join.mapping.force_scale"), m.force_scale),
     ] {
         if let Some(value) = scale {
-            scalar(field, value, MIN_SCALE, MAX_SCALE)?;
+            scalar(field, value, MIN_MAPPING_SCALE, MAX_MAPPING_SCALE)?;
         }
     }
     Ok(())
@@ -125,7 +125,7 @@ pub fn welcome(w: &Welcome) -> Result<(), DecodeError> {
 fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
     text(Field::at("welcome.scene.name"), &s.name)?;
     text(Field::at("welcome.scene.op_name"), &s.op_name)?;
-    scalar(Field::at("welcome.scene.length_scale"), s.length_scale, 1e-9, MAX_POSITION)?;
+    scalar(Field::at("welcome.scene.length_scale"), s.length_scale, 1e-9, MAX_SCENE_POSITION)?;
     count(Field::at("welcome.scene.n"), s.n as usize, MAX_COORDINATES)?;
     count(Field::at("welcome.scene.m"), s.m as usize, MAX_CLOSURE_ROWS)?;
     if usize::from(s.op_dim) != s.kind.op_dim() {
@@ -138,21 +138,21 @@ fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
 }
 
 fn mapping(m: &Mapping) -> Result<(), DecodeError> {
-    scalar(Field::at("welcome.mapping.position_scale"), m.position_scale, MIN_SCALE, MAX_SCALE)?;
-    scalar(Field::at("welcome.mapping.force_scale"), m.force_scale, MIN_SCALE, MAX_SCALE)
+    scalar(Field::at("welcome.mapping.position_scale"), m.position_scale, MIN_MAPPING_SCALE, MAX_MAPPING_SCALE)?;
+    scalar(Field::at("welcome.mapping.force_scale"), m.force_scale, MIN_MAPPING_SCALE, MAX_MAPPING_SCALE)
 }
 
 fn coupling(g: &CouplingGains, k: usize) -> Result<(), DecodeError> {
-    non_negative_vector(Field::at("welcome.coupling.stiffness"), &g.stiffness, k, MAX_GAIN)?;
-    non_negative_vector(Field::at("welcome.coupling.damping"), &g.damping, k, MAX_GAIN)
+    non_negative_vector(Field::at("welcome.coupling.stiffness"), &g.stiffness, k, MAX_SCENE_GAIN)?;
+    non_negative_vector(Field::at("welcome.coupling.damping"), &g.damping, k, MAX_SCENE_GAIN)
 }
 
 fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
     let kind = shape.kind;
     let d = kind.point_dim();
-    vector(Field::at("welcome.op.position"), &o.position, d, MAX_POSITION)?;
-    vector(Field::at("welcome.op.reach_min"), &o.reach_min, d, MAX_POSITION)?;
-    vector(Field::at("welcome.op.reach_max"), &o.reach_max, d, MAX_POSITION)?;
+    vector(Field::at("welcome.op.position"), &o.position, d, MAX_SCENE_POSITION)?;
+    vector(Field::at("welcome.op.reach_min"), &o.reach_min, d, MAX_SCENE_POSITION)?;
+    vector(Field::at("welcome.op.reach_max"), &o.reach_max, d, MAX_SCENE_POSITION)?;
     if o.reach_min.iter().zip(&o.reach_max).any(|(lo, hi)| lo > hi) {
         return Err(DecodeError::Inconsistent {
             field: Field::at("welcome.op.reach_min"),
@@ -162,15 +162,15 @@ fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = kind.op_dim();
     let points = o.tour.len() / k;
     count(Field::at("welcome.op.tour"), points, MAX_LIST_ENTRIES)?;
-    vector(Field::at("welcome.op.tour"), &o.tour, points * k, MAX_POSITION)?;
-    scalar(Field::at("welcome.op.static_force_n"), o.static_force_n, 0.0, MAX_WRENCH)?;
-    scalar(Field::at("welcome.op.static_torque_nm"), o.static_torque_nm, 0.0, MAX_WRENCH)?;
-    scalar(Field::at("welcome.op.inverse_mass_max"), o.inverse_mass_max, 0.0, MAX_MATRIX_ENTRY)?;
+    vector(Field::at("welcome.op.tour"), &o.tour, points * k, MAX_SCENE_POSITION)?;
+    scalar(Field::at("welcome.op.static_force_n"), o.static_force_n, 0.0, MAX_SCENE_WRENCH)?;
+    scalar(Field::at("welcome.op.static_torque_nm"), o.static_torque_nm, 0.0, MAX_SCENE_WRENCH)?;
+    scalar(Field::at("welcome.op.inverse_mass_max"), o.inverse_mass_max, 0.0, MAX_SCENE_INVERSE_INERTIA)?;
     scalar(
         Field::at("welcome.op.inverse_rotational_inertia_max"),
         o.inverse_rotational_inertia_max,
         0.0,
-        MAX_MATRIX_ENTRY,
+        MAX_SCENE_INVERSE_INERTIA,
     )?;
     let poses = o.path.len() / shape.pose_dim();
     count(Field::at("welcome.op.path"), poses, MAX_PATH_POSES)?;
@@ -178,7 +178,7 @@ fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
     for (i, p) in o.path.chunks(shape.pose_dim()).enumerate() {
         pose(Field::in_item("welcome.op.path", i, "pose"), p, shape)?;
     }
-    vector(Field::at("welcome.op.path_rest_acceleration"), &o.path_rest_acceleration, poses, MAX_ACCEL)
+    vector(Field::at("welcome.op.path_rest_acceleration"), &o.path_rest_acceleration, poses, MAX_SCENE_ACCEL)
 }
 
 fn refused(r: &Refused) -> Result<(), DecodeError> {
@@ -222,8 +222,13 @@ pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
 /// [`snapshot_user_terms`].
 pub fn snapshot_op_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = shape.op_dim();
-    vector(Field::at("snapshot.op_twist"), &s.op_twist, k, MAX_SPEED)?;
-    vector(Field::at("snapshot.inverse_inertia"), &s.inverse_inertia, shape.op_triangle_len(), MAX_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.op_twist"), &s.op_twist, k, MAX_SCENE_SPEED)?;
+    vector(
+        Field::at("snapshot.inverse_inertia"),
+        &s.inverse_inertia,
+        shape.op_triangle_len(),
+        MAX_SCENE_INVERSE_INERTIA,
+    )?;
     vector(Field::at("snapshot.directions"), &s.directions, k * k, MAX_ORTHONORMAL_ENTRY)?;
     singular_values(&s.singular_values, k)?;
     if usize::from(s.constraint_count) > k {
@@ -242,7 +247,7 @@ pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
     scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
     scalar(Field::at("snapshot.uplink_time_s"), s.uplink_time_s, 0.0, MAX_TIME_S)?;
     pose(Field::at("snapshot.op_pose"), &s.op_pose, shape)?;
-    vector(Field::at("snapshot.bias_accel"), &s.bias_accel, shape.op_dim(), MAX_ACCEL)?;
+    vector(Field::at("snapshot.bias_accel"), &s.bias_accel, shape.op_dim(), MAX_SCENE_ACCEL)?;
     count(Field::at("snapshot.contacts"), s.contacts.len(), MAX_LIST_ENTRIES)?;
     for (i, c) in s.contacts.iter().enumerate() {
         contact(i, c, shape)?;
@@ -257,7 +262,7 @@ pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
 
 fn singular_values(values: &[f64], k: usize) -> Result<(), DecodeError> {
     let field = Field::at("snapshot.singular_values");
-    non_negative_vector(field, values, k, MAX_MATRIX_ENTRY)?;
+    non_negative_vector(field, values, k, MAX_SCENE_INVERSE_INERTIA)?;
     if values.windows(2).any(|pair| pair[0] < pair[1]) {
         return Err(DecodeError::Inconsistent { field, what: "singular values must not increase" });
     }
@@ -267,15 +272,15 @@ fn singular_values(values: &[f64], k: usize) -> Result<(), DecodeError> {
 fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), DecodeError> {
     const LIST: &str = "snapshot.contacts";
     let d = shape.point_dim();
-    vector(Field::in_item(LIST, i, "point"), &c.point, d, MAX_POSITION)?;
+    vector(Field::in_item(LIST, i, "point"), &c.point, d, MAX_SCENE_POSITION)?;
     unit_vector(Field::in_item(LIST, i, "normal"), &c.normal, d)?;
-    scalar(Field::in_item(LIST, i, "depth"), c.depth, -MAX_POSITION, MAX_POSITION)?;
-    scalar(Field::in_item(LIST, i, "normal_velocity"), c.normal_velocity, -MAX_SPEED, MAX_SPEED)?;
-    vector(Field::in_item(LIST, i, "op_coupling"), &c.op_coupling, shape.op_dim(), MAX_MATRIX_ENTRY)?;
-    scalar(Field::in_item(LIST, i, "mobility"), c.mobility, 0.0, MAX_MATRIX_ENTRY)?;
-    scalar(Field::in_item(LIST, i, "bias_accel"), c.bias_accel, -MAX_ACCEL, MAX_ACCEL)?;
-    scalar(Field::in_item(LIST, i, "stiffness"), c.stiffness, 0.0, MAX_GAIN)?;
-    scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_GAIN)
+    scalar(Field::in_item(LIST, i, "depth"), c.depth, -MAX_SCENE_POSITION, MAX_SCENE_POSITION)?;
+    scalar(Field::in_item(LIST, i, "normal_velocity"), c.normal_velocity, -MAX_SCENE_SPEED, MAX_SCENE_SPEED)?;
+    vector(Field::in_item(LIST, i, "op_coupling"), &c.op_coupling, shape.op_dim(), MAX_SCENE_MATRIX_ENTRY)?;
+    scalar(Field::in_item(LIST, i, "mobility"), c.mobility, 0.0, MAX_SCENE_INVERSE_INERTIA)?;
+    scalar(Field::in_item(LIST, i, "bias_accel"), c.bias_accel, -MAX_SCENE_ACCEL, MAX_SCENE_ACCEL)?;
+    scalar(Field::in_item(LIST, i, "stiffness"), c.stiffness, 0.0, MAX_SCENE_GAIN)?;
+    scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_SCENE_GAIN)
 }
 
 const OTHERS: &str = "snapshot.others";
@@ -284,8 +289,8 @@ const OTHERS: &str = "snapshot.others";
 /// and wrench; a bad value is named by row, e.g. `snapshot.others[3].wrench[1]`.
 pub fn other_users(o: &OtherUsers, shape: &SessionShape) -> Result<(), DecodeError> {
     other_users_shape(o, shape)?;
-    rows(OTHERS, "op_position", &o.op_positions, shape.point_dim(), MAX_POSITION)?;
-    rows(OTHERS, "wrench", &o.wrenches, shape.op_dim(), MAX_WRENCH)
+    rows(OTHERS, "op_position", &o.op_positions, shape.point_dim(), MAX_SCENE_POSITION)?;
+    rows(OTHERS, "wrench", &o.wrenches, shape.op_dim(), MAX_SCENE_WRENCH)
 }
 
 /// At most [`MAX_LIST_ENTRIES`] rows, and d positions and k wrench numbers for each.
@@ -309,14 +314,14 @@ fn rows(list: &'static str, member: &'static str, v: &[f64], width: usize, bound
 
 fn config_terms(c: &ConfigTerms, shape: &SessionShape) -> Result<(), DecodeError> {
     let (n, m, k) = (shape.n, shape.m, shape.op_dim());
-    vector(Field::at("snapshot.config.q"), &c.q, n, MAX_POSITION)?;
-    vector(Field::at("snapshot.config.qd"), &c.qd, n, MAX_SPEED)?;
-    vector(Field::at("snapshot.config.mass_matrix"), &c.mass_matrix, triangle_len(n), MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.config.closure_jacobian"), &c.closure_jacobian, m * n, MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.config.closure_bias_stab"), &c.closure_bias_stab, m, MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.config.generalized_bias"), &c.generalized_bias, n, MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.config.op_jacobian"), &c.op_jacobian, k * n, MAX_MATRIX_ENTRY)?;
-    vector(Field::at("snapshot.config.op_bias"), &c.op_bias, k, MAX_MATRIX_ENTRY)
+    vector(Field::at("snapshot.config.q"), &c.q, n, MAX_SCENE_POSITION)?;
+    vector(Field::at("snapshot.config.qd"), &c.qd, n, MAX_SCENE_SPEED)?;
+    vector(Field::at("snapshot.config.mass_matrix"), &c.mass_matrix, triangle_len(n), MAX_SCENE_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.closure_jacobian"), &c.closure_jacobian, m * n, MAX_SCENE_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.closure_bias_stab"), &c.closure_bias_stab, m, MAX_SCENE_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.generalized_bias"), &c.generalized_bias, n, MAX_SCENE_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.op_jacobian"), &c.op_jacobian, k * n, MAX_SCENE_MATRIX_ENTRY)?;
+    vector(Field::at("snapshot.config.op_bias"), &c.op_bias, k, MAX_SCENE_MATRIX_ENTRY)
 }
 
 /// Checks an uplink against the session shape.
@@ -324,11 +329,11 @@ pub fn uplink(u: &Uplink, shape: &SessionShape) -> Result<(), DecodeError> {
     let k = shape.op_dim();
     scalar(Field::at("uplink.client_time_s"), u.client_time_s, 0.0, MAX_TIME_S)?;
     scalar(Field::at("uplink.last_snapshot_age_s"), u.last_snapshot_age_s, 0.0, MAX_TIME_S)?;
-    vector(Field::at("uplink.hand_wrench"), &u.hand_wrench, k, MAX_WRENCH)?;
+    vector(Field::at("uplink.hand_wrench"), &u.hand_wrench, k, MAX_SCENE_WRENCH)?;
     pose(Field::at("uplink.device_pose"), &u.device_pose, shape)?;
-    vector(Field::at("uplink.device_twist"), &u.device_twist, k, MAX_SPEED)?;
+    vector(Field::at("uplink.device_twist"), &u.device_twist, k, MAX_SCENE_SPEED)?;
     pose(Field::at("uplink.model_pose"), &u.model_pose, shape)?;
-    vector(Field::at("uplink.model_twist"), &u.model_twist, k, MAX_SPEED)?;
+    vector(Field::at("uplink.model_twist"), &u.model_twist, k, MAX_SCENE_SPEED)?;
     port_energy_shape(("uplink.energy.received_j", "uplink.energy.emitted_j"), &u.energy, k)?;
     let unknown = u.flags & !uplink_flags::KNOWN;
     if unknown != 0 {
@@ -339,7 +344,7 @@ pub fn uplink(u: &Uplink, shape: &SessionShape) -> Result<(), DecodeError> {
 
 /// A pose: bounded position (and planar angle); spatial poses end in a unit quaternion.
 fn pose(field: Field, p: &[f64], shape: &SessionShape) -> Result<(), DecodeError> {
-    vector(field, p, shape.pose_dim(), MAX_POSITION)?;
+    vector(field, p, shape.pose_dim(), MAX_SCENE_POSITION)?;
     if shape.kind == SceneKind::Spatial {
         let norm = p[3..].iter().map(|x| x * x).sum::<f64>().sqrt();
         if (norm - 1.0).abs() > UNIT_TOLERANCE {

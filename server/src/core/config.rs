@@ -45,18 +45,20 @@ impl AxisGains {
     }
 }
 
-/// Sanity limits on what a client may report (see `guards`).
+/// Sanity limits on what a client may report (see `guards`). Stated in SI at the user's device; the VE holds
+/// each user to them in the scene's units, through the user's mapping (`device_side`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GuardLimits {
-    /// Largest distance between a client's local-model OP and the VE's OP (m): farther is a broken client.
+    /// Largest distance between a client's local-model OP and the VE's OP (device m): farther is a broken
+    /// client.
     pub max_model_offset_m: f64,
-    /// Largest linear speed of a local-model OP (m/s).
+    /// Largest linear speed of a local-model OP (device m/s).
     pub max_model_speed_m_per_s: f64,
     /// Largest angular speed of a local-model OP (rad/s).
     pub max_model_angular_speed_rad_per_s: f64,
-    /// Hand force limit when the device announced none (N).
+    /// Hand force limit when the device announced none (device N).
     pub default_max_force_n: f64,
-    /// Hand torque limit when the device announced none (N·m).
+    /// Hand torque limit when the device announced none (device N·m).
     pub default_max_torque_nm: f64,
     /// Slack over the device's announced peak force and torque before a hand wrench is clipped (fraction).
     pub device_cap_slack: f64,
@@ -106,10 +108,12 @@ pub struct VeConfig {
     pub contact_stiffness: Option<f64>,
     /// Penalty contact damping (N·s/m); `None` takes the scene's (paper: 300 N·s/m).
     pub contact_damping: Option<f64>,
-    /// Contacts closer than this gap (m) are sent to clients as local-model contact terms.
-    pub contact_margin_m: f64,
+    /// Contacts closer than this gap, in the scene's length scales (`Model::length_scale`), are sent to
+    /// clients as local-model contact terms.
+    pub contact_margin: f64,
     /// Time-domain passivity observer/controller on every coupling (see `passivity`). On by default: without
-    /// delay it leaves the tracking as it is, and it bounds what a delayed coupling can give the VE; the paper's VE ([`VeConfig::paper`]) has none.
+    /// delay it leaves the tracking as it is, and it bounds what a delayed coupling can give the VE; the paper's
+    /// VE ([`VeConfig::paper`]) has none.
     pub passivity: bool,
     /// With `passivity`: the per-axis controller instead of the port's (each OP axis on its own account, the
     /// axis left free rather than braked when scaled; see `passivity`). Off by default: under delay it
@@ -137,13 +141,15 @@ pub struct VeConfig {
     /// user whose link is faster or slower is followed as heard. The default is
     /// [`DEFAULT_COUPLING_LEAD_DELAYS_S`].
     pub coupling_lead_delays_s: [f64; 2],
-    /// The spring energy a lead's guess may hold at its worst (J, ≥ 0; see `Coupling::trusted_lead_s`): the
+    /// The spring energy a lead's guess may hold at its worst (J at the user's device, ≥ 0, held in the scene's
+    /// units through the user's mapping, `device_side`; see `Coupling::trusted_lead_s`): the
     /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
     /// this through K_g: without the bound, pokes and releases under delay make energy. A larger bound leads
     /// further (the OP nearer the device) and lets the felt impedance stray further from the linkage's.
     pub coupling_lead_guess_energy_j: f64,
     /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
-    /// controller has scaled its PD to zero (J, ≥ 0; zero scales it to zero at once; see `passivity`).
+    /// controller has scaled its PD to zero (J at the user's device, ≥ 0, held in the scene's units through the
+    /// user's mapping, `device_side`; zero scales it to zero at once; see `passivity`).
     pub passivity_allowance_j: f64,
     /// Duration of a coupling's fade in or out (raised cosine).
     pub fade_time: Duration,
@@ -180,7 +186,8 @@ impl VeConfig {
             coupling_damping: Some(AxisGains::Uniform { linear: 100.0, angular: 10_000.0 }),
             contact_stiffness: None,
             contact_damping: None,
-            contact_margin_m: 0.005,
+            // 5 mm on the slider-crank (L = 28.7 mm), the scene whose wall this margin was first chosen on.
+            contact_margin: 0.175,
             passivity: false,
             passivity_per_axis: false,
             jitter_buffer: true,
@@ -221,7 +228,7 @@ impl VeConfig {
             return Err(VeConfigError::Rate { what: "snapshot_rate_hz", value: self.snapshot_rate_hz });
         }
         let non_negative = [
-            ("contact_margin_m", self.contact_margin_m),
+            ("contact_margin", self.contact_margin),
             ("passivity_allowance_j", self.passivity_allowance_j),
             ("coupling_lead_max_s", self.coupling_lead_max_s),
             ("coupling_lead_guess_energy_j", self.coupling_lead_guess_energy_j),

@@ -31,6 +31,7 @@
 
 use kinloop_linkage::algorithms::reach::OpReach;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_protocol::codec::limits::{MAX_MAPPING_SCALE, MIN_MAPPING_SCALE};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 
@@ -179,12 +180,13 @@ pub fn choose_mapping<S: Space>(
         force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
     }
     if let Some(asked) = request.force_scale {
-        let most = device.max_force_n / reach.static_force_n.max(1e-12);
         if renders_force && asked * reach.static_force_n > device.max_force_n {
+            // The load is positive here (a zero load fits any scale).
+            let most = device.max_force_n / reach.static_force_n;
             return Err(DesignError::Scale {
                 what: format!(
-                    "force scale {asked} would need {:.2} N of device {} to hold the OP's static load of {:.2} N \
-                     (peak {} N); at most {most:.4}",
+                    "force scale {asked} would need {:.2} N of device {} to hold the OP's static load of {:.4e} \
+                     scene force units (peak {} N); at most {most:.4e}",
                     asked * reach.static_force_n,
                     device.name,
                     reach.static_force_n,
@@ -194,7 +196,9 @@ pub fn choose_mapping<S: Space>(
         }
         force_scale = asked;
     }
-    let (position_scale, force_scale) = (position_scale.clamp(1e-4, 1e4), force_scale.clamp(1e-4, 1e4));
+    // The wire's range for a mapping, which holds a scene written in any units of `limits::UNIT_RANGE`.
+    let in_range = |scale: f64| scale.clamp(MIN_MAPPING_SCALE, MAX_MAPPING_SCALE);
+    let (position_scale, force_scale) = (in_range(position_scale), in_range(force_scale));
     Ok(Mapping {
         position_scale,
         force_scale,

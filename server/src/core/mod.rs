@@ -24,6 +24,7 @@
 pub mod config;
 pub mod coupling;
 pub mod design;
+pub mod device_side;
 pub mod events;
 pub mod fade;
 pub mod guards;
@@ -439,6 +440,7 @@ impl<S: Space> VeCore<S> {
             op,
             form: request.form,
             wrench_limits: guards::wrench_limits_for_device(request.device.as_ref(), &mapping, &self.config.guards),
+            thresholds: device_side::user_thresholds(&self.config, &mapping),
             mapping,
             presence: Presence::Present,
             last_seq: None,
@@ -518,7 +520,7 @@ impl<S: Space> VeCore<S> {
             sample,
             &coupling.op_pose,
             &self.users[index].wrench_limits,
-            &self.config.guards,
+            &self.users[index].thresholds.guards,
             &mut coupling.pose_memo,
         );
         let checked = match checked {
@@ -561,7 +563,7 @@ impl<S: Space> VeCore<S> {
                 u.passivity.observe_client::<S>(t, &checked.hand_wrench, &checked.model_twist);
                 let k = S::DIM;
                 let limits = &u.wrench_limits;
-                let guards = &self.config.guards;
+                let guards = &u.thresholds.guards;
                 let max_power_w = limits.max_force_n.max(limits.max_torque_nm)
                     * guards.max_model_speed_m_per_s.max(guards.max_model_angular_speed_rad_per_s);
                 let report = u.passivity.client.check(
@@ -569,7 +571,7 @@ impl<S: Space> VeCore<S> {
                     &sample.energy_received_j[..k],
                     &sample.energy_emitted_j[..k],
                     max_power_w,
-                    self.config.passivity_allowance_j,
+                    u.thresholds.passivity_allowance,
                 );
                 if report.is_err() {
                     self.metrics.energy_reports_refused += 1;

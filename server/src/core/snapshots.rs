@@ -28,7 +28,7 @@
 //! - OP pose and twist, the other users' OP positions and wrenches, and the configuration-space terms of
 //!   eq 11 when the user asked for them.
 //!
-//! **Contacts** within `contact_margin_m` (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
+//! **Contacts** within `contact_margin` length scales (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
 //! loops carry a contact's force to any OP) enter the local model along their normal n. With
 //! `P = D⁻¹ − D⁻¹Wᵀ S⁺ W D⁻¹` (the KKT inverse's top-left block) and the factors of eq 9 (`Ỹ`: `U⁻¹ Jᵀ`
 //! with the kept closures' directions projected out, see `kinloop_linkage::algorithms::op_space`), the cross inertia
@@ -59,7 +59,7 @@ use kinloop_linkage::{
     algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS},
     math::space::OpPose,
 };
-use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_WRENCH};
+use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_SCENE_WRENCH};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
 use nalgebra::{DMatrix, DVector};
@@ -94,7 +94,12 @@ impl<S: Space> VeCore<S> {
         scratch.at_op.forget();
         let exchange = hands_share(&self.model, &self.data, &self.users, &self.couplings, scratch);
         if self.contacts.is_some() {
-            detect_contacts(&self.model, &self.data.kin, self.config.contact_margin_m, &mut scratch.near);
+            detect_contacts(
+                &self.model,
+                &self.data.kin,
+                self.config.contact_margin * self.model.length_scale,
+                &mut scratch.near,
+            );
             scratch.near.sort_unstable_by(|a, b| a.gap.total_cmp(&b.gap));
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
@@ -528,17 +533,17 @@ fn fill_contact_term<S: Space>(
 }
 
 /// A user's wrench as the others' table carries it: scaled down, its direction kept, until no component
-/// exceeds the wire's `MAX_WRENCH`. The coupling's PD may legitimately go past it for a moment (a user
+/// exceeds the wire's `MAX_SCENE_WRENCH`. The coupling's PD may legitimately go past it for a moment (a user
 /// yanking the local model far from the VE), and one row out of range would fail the table, and with it
 /// every other user's snapshot. A non-finite component stays non-finite, for the checks to withhold.
 fn within_wire_range<S: Space>(wrench: &S::OpVec) -> S::OpVec {
     let largest = wrench.as_slice().iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let mut fitted = *wrench;
-    if largest > MAX_WRENCH && largest.is_finite() {
-        let scale = MAX_WRENCH / largest;
+    if largest > MAX_SCENE_WRENCH && largest.is_finite() {
+        let scale = MAX_SCENE_WRENCH / largest;
         for x in fitted.as_mut_slice() {
             // The clamp only catches the rounding of the largest component's product.
-            *x = (*x * scale).clamp(-MAX_WRENCH, MAX_WRENCH);
+            *x = (*x * scale).clamp(-MAX_SCENE_WRENCH, MAX_SCENE_WRENCH);
         }
     }
     fitted
@@ -554,13 +559,13 @@ mod tests {
     /// the limit; one within range is left as it is, and a non-finite component stays non-finite.
     #[test]
     fn the_others_wrenches_are_fitted_to_the_wire_range() {
-        let yank = Vector3::new(-3.0 * MAX_WRENCH, 0.5 * MAX_WRENCH, 7.0);
+        let yank = Vector3::new(-3.0 * MAX_SCENE_WRENCH, 0.5 * MAX_SCENE_WRENCH, 7.0);
         let fitted = within_wire_range::<Planar>(&yank);
-        assert_eq!(fitted.amax(), MAX_WRENCH);
+        assert_eq!(fitted.amax(), MAX_SCENE_WRENCH);
         assert!((fitted.normalize() - yank.normalize()).amax() <= 1e-15, "{fitted}");
-        let calm = Vector3::new(MAX_WRENCH, -0.3, 0.002);
+        let calm = Vector3::new(MAX_SCENE_WRENCH, -0.3, 0.002);
         assert_eq!(within_wire_range::<Planar>(&calm), calm);
-        let bad = Vector3::new(f64::NAN, 2.0 * MAX_WRENCH, 0.0);
+        let bad = Vector3::new(f64::NAN, 2.0 * MAX_SCENE_WRENCH, 0.0);
         assert!(within_wire_range::<Planar>(&bad)[0].is_nan());
     }
 }

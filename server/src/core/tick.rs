@@ -143,7 +143,7 @@ impl<S: Space> VeCore<S> {
             }
             if lead_max_s > 0.0 && c.heard_time_s > 0.0 {
                 let wanted = coupling::target_lead_s(u.round_trip.shortest_s(), lead_max_s, lead_delays_s, dt);
-                c.steer_lead(wanted, self.config.coupling_lead_guess_energy_j, dt);
+                c.steer_lead(wanted, u.thresholds.lead_guess_energy, dt);
             }
             let silent = u.is_silent(at, self.config.silent_timeout);
             let let_go = u.hand_off && holders > usize::from(holding(u, c));
@@ -170,7 +170,7 @@ impl<S: Space> VeCore<S> {
                     power[a] = c.weight * pd[a] * c.op_twist[a];
                 }
                 let before = u.passivity.activations;
-                let allowance = self.config.passivity_allowance_j;
+                let allowance = u.thresholds.passivity_allowance;
                 let scale = if self.config.passivity_per_axis {
                     u.passivity.pd_scale_per_axis::<S>(&power, allowance)
                 } else {

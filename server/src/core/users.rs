@@ -183,6 +183,8 @@ pub struct User {
     pub form: LocalModelForm,
     /// Limits on the hand wrench (VE units: the device's rating divided by the mapping's scales).
     pub wrench_limits: WrenchLimits,
+    /// The VE's per-user thresholds in the VE's units (see `device_side`).
+    pub thresholds: super::device_side::UserThresholds,
     /// The mapping between the user's device and the VE.
     pub mapping: Mapping,
     /// Present or leaving.

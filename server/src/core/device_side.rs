@@ -1,0 +1,92 @@
+//! Thresholds stated on the device's side, in the VE's units for one user.
+//!
+//! The physics is unit-invariant; a threshold is only if it is stated in the scene's own scales. The VE's
+//! per-user thresholds (the guards' distances, speeds and default wrench limits, the passivity controller's
+//! allowance, the lead's guessing budget) are physical figures about what a hand at a device may do or
+//! feel: metres, newtons, joules at the handle. [`VeConfig`](super::VeConfig) states them so, in SI at the
+//! device, and this module converts them through the user's mapping (`protocol::Mapping`: device metres per
+//! VE length unit `c_p`, device newtons per VE force unit `c_f`, torques and energies by `c_f c_p`, angles
+//! one to one) into the units the scene is written in. A scene rewritten from metres into millimetres gets
+//! `c_p` a thousand times smaller and every length threshold a thousand times larger in its numbers: the same
+//! physical threshold, so the same behaviour. A user without a device is mapped one to one.
+
+use kinloop_protocol::Mapping;
+
+use super::config::{GuardLimits, VeConfig};
+
+/// One user's thresholds, in the VE's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UserThresholds {
+    /// The guards, their lengths, speeds, forces and torques in the VE's units (their names keep the SI
+    /// units they have on the device's side).
+    pub guards: GuardLimits,
+    /// `VeConfig::passivity_allowance_j` in the VE's units of energy.
+    pub passivity_allowance: f64,
+    /// `VeConfig::coupling_lead_guess_energy_j` in the VE's units of energy.
+    pub lead_guess_energy: f64,
+}
+
+/// How many VE units one device unit is, per kind of quantity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct DeviceToVe {
+    /// VE length units per device metre: `1 / c_p`.
+    length: f64,
+    /// VE force units per device newton: `1 / c_f`.
+    force: f64,
+    /// VE torque (and energy) units per device newton-metre (joule): `1 / (c_f c_p)`.
+    energy: f64,
+}
+
+impl DeviceToVe {
+    fn of(mapping: &Mapping) -> Self {
+        let inverse = |scale: f64| if scale > 0.0 && scale.is_finite() { 1.0 / scale } else { 1.0 };
+        DeviceToVe {
+            length: inverse(mapping.position_scale),
+            force: inverse(mapping.force_scale),
+            energy: inverse(mapping.torque_scale()),
+        }
+    }
+}
+
+/// The thresholds of `config` for a user mapped by `mapping`.
+pub fn user_thresholds(config: &VeConfig, mapping: &Mapping) -> UserThresholds {
+    let to_ve = DeviceToVe::of(mapping);
+    let g = &config.guards;
+    UserThresholds {
+        guards: GuardLimits {
+            max_model_offset_m: g.max_model_offset_m * to_ve.length,
+            max_model_speed_m_per_s: g.max_model_speed_m_per_s * to_ve.length,
+            default_max_force_n: g.default_max_force_n * to_ve.force,
+            default_max_torque_nm: g.default_max_torque_nm * to_ve.energy,
+            ..*g
+        },
+        passivity_allowance: config.passivity_allowance_j * to_ve.energy,
+        lead_guess_energy: config.coupling_lead_guess_energy_j * to_ve.energy,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A device mapped at `c_p = 0.002` (a scene in millimetres, half size on the device) and `c_f = 0.5`:
+    /// a device metre is 500 VE units, a device newton 2, a joule 1000; angular speeds are not scaled.
+    #[test]
+    fn device_figures_become_ve_figures_through_the_mapping() {
+        let config = VeConfig::default();
+        let mapping = Mapping { position_scale: 0.002, force_scale: 0.5, ..Mapping::identity() };
+        let t = user_thresholds(&config, &mapping);
+        let g = &config.guards;
+        assert_eq!(t.guards.max_model_offset_m, g.max_model_offset_m * 500.0);
+        assert_eq!(t.guards.max_model_speed_m_per_s, g.max_model_speed_m_per_s * 500.0);
+        assert_eq!(t.guards.max_model_angular_speed_rad_per_s, g.max_model_angular_speed_rad_per_s);
+        assert_eq!(t.guards.default_max_force_n, g.default_max_force_n * 2.0);
+        assert!((t.guards.default_max_torque_nm - g.default_max_torque_nm * 1000.0).abs() < 1e-9);
+        assert!((t.passivity_allowance - config.passivity_allowance_j * 1000.0).abs() < 1e-12);
+        assert!((t.lead_guess_energy - config.coupling_lead_guess_energy_j * 1000.0).abs() < 1e-12);
+        // One to one, nothing changes.
+        let same = user_thresholds(&config, &Mapping::identity());
+        assert_eq!(same.guards, config.guards);
+        assert_eq!(same.passivity_allowance, config.passivity_allowance_j);
+    }
+}
