@@ -4,7 +4,7 @@
 use std::process::Command;
 
 const HEADER: &str = "t_s,step,q_0,q_1,q_2,q_3,qd_0,qd_1,qd_2,qd_3,lambda_0,lambda_1,closure_error_m,users,\
-                      user_id,op_x,op_y,op_theta,wrench_fx,wrench_fy,wrench_tz,constraint_count,...\n";
+                      user_id,op_x,op_y,op_theta,wrench_fx,wrench_fy,wrench_tz,constraint_count,...(user group repeated per user)\n";
 
 fn kinloop(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_kinloop")).args(args).output().expect("kinloop runs")

@@ -74,7 +74,7 @@ const ROOT: Layers = Layers {
 const HARNESS: Layers = Layers { dir: "harness/src", ranks: &[("record", 0)] };
 
 /// The fake DHD library: its plant below the exported C functions.
-const FAKE_DHD: Layers = Layers { dir: "fakes/fake-dhd/src", ranks: &[("plant", 0)] };
+const FAKE_DHD: Layers = Layers { dir: "fakes/fake-dhd/src", ranks: &[("hand", 0), ("plant", 1)] };
 
 /// The rank of a module path (its top-level segment) in `layers`.
 fn rank(layers: &Layers, module: &[String]) -> usize {
