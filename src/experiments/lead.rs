@@ -8,8 +8,8 @@
 //! one-way delays of `VeConfig::coupling_lead_delays_s`, from 75 ms on by default) aims each
 //! graphics controller at the heard model pose moved along its twist by the one-way delay, up to the cap
 //! and no longer than the heard motion supports (`Coupling::trusted_lead_s`: the twist's recent rates of
-//! change, held over the lead, may miss by no more than `VeConfig::coupling_lead_guess_energy_j` through the
-//! PD's spring); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions
+//! change, held over the lead, may put no more into the PD's spring than it holds stretched
+//! `VeConfig::coupling_lead_guess_miss_m` at the device); what it guesses wrong is energy the hand never put in. Each row runs the grid's sessions
 //! (every scene and hand, [`DELAYS_MS`]) on a clean network and on the grid's worst (30 ms of jitter, 20 %
 //! bursty loss) with one lead ([`leads`]: none, at most 100 ms or the whole delay at every delay, and the
 //! default), the rest as `kinloop-server` and
@@ -183,7 +183,7 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
             "rows": rows_json,
             "points": points_json,
             "everywhere": everywhere_json,
-            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each lead, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_energy_j (1 mJ), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
+            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each lead, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_miss_m (the PD spring's energy at a 1 mm miss at the device), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
         }),
         answer,
     })

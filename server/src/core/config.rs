@@ -133,7 +133,7 @@ pub struct VeConfig {
     /// Longest lead of a coupling's target over its newest uplink (s; see `Coupling::steer_lead`): the VE aims
     /// each graphics controller at where the local model was predicted to be the network's one-way delay after
     /// the uplink left, up to this and no further than the heard motion supports
-    /// (`coupling_lead_guess_energy_j`), and only while that delay is within `coupling_lead_delays_s`. 0
+    /// (`coupling_lead_guess_miss_m`), and only while that delay is within `coupling_lead_delays_s`. 0
     /// follows what it has heard (the paper's VE, [`VeConfig::paper`]); the default is
     /// [`DEFAULT_COUPLING_LEAD_MAX_S`].
     pub coupling_lead_max_s: f64,
@@ -141,12 +141,13 @@ pub struct VeConfig {
     /// user whose link is faster or slower is followed as heard. The default is
     /// [`DEFAULT_COUPLING_LEAD_DELAYS_S`].
     pub coupling_lead_delays_s: [f64; 2],
-    /// The spring energy a lead's guess may hold at its worst (J at the user's device, ≥ 0, held in the scene's
-    /// units through the user's mapping, `device_side`; see `Coupling::trusted_lead_s`): the
-    /// lead is cut so that the heard twist's recent rates of change, held over the lead, miss by no more than
-    /// this through K_g: without the bound, pokes and releases under delay make energy. A larger bound leads
-    /// further (the OP nearer the device) and lets the felt impedance stray further from the linkage's.
-    pub coupling_lead_guess_energy_j: f64,
+    /// How far a lead's guess may miss the hand at its worst (m at the user's device, ≥ 0; see
+    /// `Coupling::trusted_lead_s`): the lead is cut so that the heard twist's recent rates of change, held over
+    /// the lead, put no more energy into the coupling's spring K_g than its linear part holds stretched this far
+    /// at the device (in the scene's units through the user's mapping and coupling, `device_side`): without
+    /// the bound, pokes and releases under delay make energy. A larger bound leads further (the OP nearer the
+    /// device) and lets the felt impedance stray further from the linkage's.
+    pub coupling_lead_guess_miss_m: f64,
     /// Energy a coupling may generate (beyond what it absorbed and its client put in) before the passivity
     /// controller has scaled its PD to zero (J at the user's device, ≥ 0, held in the scene's units through the
     /// user's mapping, `device_side`; zero scales it to zero at once; see `passivity`).
@@ -197,7 +198,8 @@ impl VeConfig {
             passivity_allowance_j: 2.0e-3,
             coupling_lead_max_s: 0.0,
             coupling_lead_delays_s: DEFAULT_COUPLING_LEAD_DELAYS_S,
-            coupling_lead_guess_energy_j: 1.0e-3,
+            // A millimetre at the handle, the order of the device-OP distance stiffness rendering keeps.
+            coupling_lead_guess_miss_m: 1.0e-3,
             fade_time: Duration::from_millis(200),
             silent_timeout: Duration::from_millis(250),
             max_users: 16,
@@ -231,7 +233,7 @@ impl VeConfig {
             ("contact_margin", self.contact_margin),
             ("passivity_allowance_j", self.passivity_allowance_j),
             ("coupling_lead_max_s", self.coupling_lead_max_s),
-            ("coupling_lead_guess_energy_j", self.coupling_lead_guess_energy_j),
+            ("coupling_lead_guess_miss_m", self.coupling_lead_guess_miss_m),
             ("contact_stiffness", self.contact_stiffness.unwrap_or(0.0)),
             ("contact_damping", self.contact_damping.unwrap_or(0.0)),
             ("guards.max_model_offset_m", self.guards.max_model_offset_m),
@@ -371,7 +373,7 @@ mod tests {
         type WithValue = fn(f64) -> VeConfig;
         let set: [(&str, WithValue); 2] = [
             ("coupling_lead_max_s", |v| VeConfig { coupling_lead_max_s: v, ..VeConfig::default() }),
-            ("coupling_lead_guess_energy_j", |v| VeConfig { coupling_lead_guess_energy_j: v, ..VeConfig::default() }),
+            ("coupling_lead_guess_miss_m", |v| VeConfig { coupling_lead_guess_miss_m: v, ..VeConfig::default() }),
         ];
         for (name, with) in set {
             assert_eq!(with(0.0).validate(), Ok(()), "{name}");

@@ -440,7 +440,7 @@ impl<S: Space> VeCore<S> {
             op,
             form: request.form,
             wrench_limits: guards::wrench_limits_for_device(request.device.as_ref(), &mapping, &self.config.guards),
-            thresholds: device_side::user_thresholds(&self.config, &mapping),
+            thresholds: device_side::user_thresholds::<S>(&self.config, &mapping, &stiffness),
             mapping,
             presence: Presence::Present,
             last_seq: None,
