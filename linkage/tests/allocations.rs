@@ -74,8 +74,8 @@ fn hot_paths_allocate_nothing() {
         let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
         let mut user = OpWrench::<Planar> { op: 0, wrench: Vector3::from(PAPER_WRENCH) };
         let mut contacts = kinloop_linkage::algorithms::contact::PenaltyContacts::new(&model);
-        let mut terms = ConfigSpaceTerms::zeros(model.nq(), model.nc(), 3);
-        let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nq(), model.nc());
+        let mut terms = ConfigSpaceTerms::zeros(model.nv(), model.nc(), 3);
+        let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nv(), model.nc());
         let mut reduced =
             OpSpaceLocalModel::new(op_space_terms(&data, &user.wrench, LocalModelTerms::full()), OpPose::identity());
         for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {

@@ -6,6 +6,7 @@
 pub mod articulated;
 pub mod assemble;
 pub mod bias;
+pub mod configuration;
 mod compile;
 pub mod constraint_directions;
 pub mod contact;
