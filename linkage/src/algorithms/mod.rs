@@ -13,6 +13,7 @@ pub mod contact;
 pub mod cut_forces;
 pub mod dynamics;
 pub mod gravity;
+pub mod idle_freedoms;
 pub mod integrator;
 pub mod jacobian;
 pub mod joint_forces;

@@ -12,6 +12,7 @@ use nalgebra::DVector;
 
 pub mod builtin;
 pub mod data;
+pub mod revolute_built;
 pub mod scene;
 
 use crate::math::space::{SceneKind, Space, VecOps};
