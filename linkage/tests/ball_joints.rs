@@ -34,6 +34,24 @@ fn ball_models() -> Vec<(&'static str, Model<Spatial>)> {
     vec![("rssr-ball", compile(&scene(RSSR, "rssr-ball.toml"))), ("delta-ball", compile(&scene(DELTA, "delta-ball.toml")))]
 }
 
+/// On the models without ball joints, integrating is adding and the difference subtracting.
+#[test]
+fn without_balls_the_configuration_update_adds() {
+    fn check<S: Space>(name: &str, model: &Model<S>) {
+        let n = model.nv();
+        let a = DVector::from_fn(n, |i, _| 0.1 * i as f64);
+        let v = DVector::from_fn(n, |i, _| 1.0 - 0.3 * i as f64);
+        let mut b = a.clone();
+        integrate(model, &mut b, &v, 0.5);
+        assert!((&b - (&a + &v * 0.5)).norm() < 1e-15, "{name}");
+        let mut d = DVector::zeros(n);
+        difference(model, &a, &b, &mut d);
+        assert!((d - &v * 0.5).norm() < 1e-15, "{name}");
+    }
+    planar_models().iter().for_each(|(name, model)| check(name, model));
+    spatial_models().iter().for_each(|(name, model)| check(name, model));
+}
+
 /// The sizes: a ball joint is 4 coordinates and 3 rates; the Delta has fewer scene bodies and joints than
 /// its revolute-built version.
 #[test]

@@ -5,6 +5,7 @@
 
 mod freedoms;
 mod multi_rate;
+mod multi_rate_keys;
 
 use nalgebra::DVector;
 

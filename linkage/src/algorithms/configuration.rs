@@ -69,25 +69,3 @@ pub fn check<S: Space>(model: &Model<S>, q: &[f64]) -> Result<(), String> {
     }
     Ok(())
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::testing::for_each_model;
-
-    /// On the models without ball joints, integrating is adding and the difference subtracting.
-    #[test]
-    fn without_balls_integrate_adds() {
-        for_each_model!(name, model => {
-            let n = model.nv();
-            let a = DVector::from_fn(n, |i, _| 0.1 * i as f64);
-            let v = DVector::from_fn(n, |i, _| 1.0 - 0.3 * i as f64);
-            let mut b = a.clone();
-            integrate(model, &mut b, &v, 0.5);
-            assert!((&b - (&a + &v * 0.5)).norm() < 1e-15, "{name}");
-            let mut d = DVector::zeros(n);
-            difference(model, &a, &b, &mut d);
-            assert!((d - &v * 0.5).norm() < 1e-15, "{name}");
-        });
-    }
-}

@@ -302,7 +302,7 @@ impl Drop for ServerHandle {
 
 fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerError> {
     let model = Model::<S>::compile(&config.scene, &config.scene_label)?;
-    let (n, m) = (model.nq(), model.nc());
+    let (n, m) = (model.nv(), model.nc());
     let core = VeCore::new(model, config.ve.clone())?;
     let scene_info = core.scene_info();
     for op in 0..core.model().ops.len() {
