@@ -31,7 +31,10 @@ fn scene(text: &str, file: &str) -> Scene {
 }
 
 fn ball_models() -> Vec<(&'static str, Model<Spatial>)> {
-    vec![("rssr-ball", compile(&scene(RSSR, "rssr-ball.toml"))), ("delta-ball", compile(&scene(DELTA, "delta-ball.toml")))]
+    vec![
+        ("rssr-ball", compile(&scene(RSSR, "rssr-ball.toml"))),
+        ("delta-ball", compile(&scene(DELTA, "delta-ball.toml"))),
+    ]
 }
 
 /// On the models without ball joints, integrating is adding and the difference subtracting.
@@ -125,9 +128,17 @@ fn jacobians_match_finite_differences_along_the_manifold() {
                 let ang = Spatial::rot_log(&(rp * rm.inverse())) * (0.5 / h);
                 for r in 0..6 {
                     let fd = if r < 3 { lin[r] } else { ang[r - 3] };
-                    assert!((fd - v[r]).abs() < 1e-6 * (1.0 + v[r].abs()), "{name} body {body} row {r}: {fd} vs {}", v[r]);
+                    assert!(
+                        (fd - v[r]).abs() < 1e-6 * (1.0 + v[r].abs()),
+                        "{name} body {body} row {r}: {fd} vs {}",
+                        v[r]
+                    );
                     let acc = (vp[r] - vm[r]) / (2.0 * h);
-                    assert!((acc - jdqd[r]).abs() < 1e-5 * (1.0 + jdqd[r].abs()), "{name} body {body}: J̇q̇ {acc} vs {}", jdqd[r]);
+                    assert!(
+                        (acc - jdqd[r]).abs() < 1e-5 * (1.0 + jdqd[r].abs()),
+                        "{name} body {body}: J̇q̇ {acc} vs {}",
+                        jdqd[r]
+                    );
                 }
             }
         }
@@ -200,8 +211,10 @@ fn trajectory(model: &Model<Spatial>, names: &[&str]) -> Vec<Vec<f64>> {
 /// lightest link, two parametrisations integrated independently).
 #[test]
 fn ball_jointed_linkages_move_as_their_revolute_built_versions() {
-    let cases: [(&str, &str, &[&str]); 2] =
-        [("rssr-ball", RSSR, &["crank-pivot", "rocker-pivot"]), ("delta-ball", DELTA, &["arm0-pivot", "arm1-pivot", "arm2-pivot"])];
+    let cases: [(&str, &str, &[&str]); 2] = [
+        ("rssr-ball", RSSR, &["crank-pivot", "rocker-pivot"]),
+        ("delta-ball", DELTA, &["arm0-pivot", "arm1-pivot", "arm2-pivot"]),
+    ];
     for (name, text, shared) in cases {
         let balls = scene(text, name);
         let a = trajectory(&compile(&balls), shared);
@@ -273,7 +286,9 @@ fn bad_ball_and_universal_joints_are_named_errors() {
     let e = with("kind = \"ball\"\n", "kind = \"ball\"\nq0 = 0.3\n");
     assert!(e.contains("joint[1] (s1).q0"), "{e}");
     let planar = "kind = \"planar\"\n[[body]]\nname = \"a\"\nmass = 1.0\ninertia = 0.1\n[[joint]]\nname = \"j\"\nkind = \"ball\"\nparent = \"ground\"\nchild = \"a\"\n";
-    let e = Model::<kinloop_linkage::math::space::Planar>::compile(&scene(planar, "flat.toml"), "flat.toml").unwrap_err().to_string();
+    let e = Model::<kinloop_linkage::math::space::Planar>::compile(&scene(planar, "flat.toml"), "flat.toml")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("flat.toml") && e.contains("joint[0] (j).kind") && e.contains("spatial"), "{e}");
 }
 
@@ -282,7 +297,8 @@ fn bad_ball_and_universal_joints_are_named_errors() {
 /// giving the spider to neither, so compare against the universal's own revolute-built version).
 #[test]
 fn universal_joint_moves_as_two_revolutes() {
-    let text = RSSR.replacen("kind = \"ball\"\n", "kind = \"universal\"\naxes = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]\n", 1);
+    let text =
+        RSSR.replacen("kind = \"ball\"\n", "kind = \"universal\"\naxes = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]\n", 1);
     let universal = scene(&text, "universal.toml");
     let model = compile::<Spatial>(&universal);
     assert_eq!((model.nq(), model.nv()), (4, 4));

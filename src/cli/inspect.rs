@@ -84,7 +84,11 @@ fn vector(flag: &str, text: Option<&str>, n: usize, default: &DVector<f64>) -> R
         None => Ok(default.clone()),
         Some(t) => {
             let v = parse_numbers(flag, t)?;
-            ensure!(v.len() == n, "{flag}: expected {n} numbers (one per coordinate; a ball joint has 4 positions, 3 rates), got {}", v.len());
+            ensure!(
+                v.len() == n,
+                "{flag}: expected {n} numbers (one per coordinate; a ball joint has 4 positions, 3 rates), got {}",
+                v.len()
+            );
             Ok(DVector::from_vec(v))
         }
     }
@@ -121,9 +125,7 @@ fn inspect<S: Space>(
     let cd = constraint_directions::<S>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
     let idle: Vec<serde_json::Value> = idle_freedoms(&model, &q)
         .iter()
-        .map(|f| {
-            json!({ "body": model.bodies[f.body].name, "axis": f.axis.as_slice(), "through": f.point.as_slice() })
-        })
+        .map(|f| json!({ "body": model.bodies[f.body].name, "axis": f.axis.as_slice(), "through": f.point.as_slice() }))
         .collect();
     Ok(json!({
         "scene": model.name,

@@ -14,7 +14,6 @@ use crate::algorithms::configuration;
 use crate::algorithms::kinematics::forward_kinematics;
 use crate::algorithms::loop_closure::closure_residual_and_jacobian;
 use crate::error::SceneError;
-use multi_rate::Entries;
 use crate::math::space::{SceneKind, Space, VecOps};
 use crate::model::data::Data;
 use crate::model::scene::{
@@ -23,6 +22,7 @@ use crate::model::scene::{
 use crate::model::{
     Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, NO_PARENT,
 };
+use multi_rate::Entries;
 
 impl<S: Space> Model<S> {
     /// Validates and compiles a scene; `file` names the source in errors.

@@ -64,7 +64,11 @@ pub fn check<S: Space>(model: &Model<S>, q: &[f64]) -> Result<(), String> {
         let k = joint.q_index;
         let norm = q[k..k + 4].iter().map(|x| x * x).sum::<f64>().sqrt();
         if (norm - 1.0).abs() > 1e-6 {
-            return Err(format!("ball joint '{}': q[{k}..{}] has norm {norm}, not a unit quaternion", joint.name, k + 4));
+            return Err(format!(
+                "ball joint '{}': q[{k}..{}] has norm {norm}, not a unit quaternion",
+                joint.name,
+                k + 4
+            ));
         }
     }
     Ok(())

@@ -58,7 +58,8 @@ pub fn idle_freedoms<S: Space>(model: &Model<S>, q: &DVector<f64>) -> Vec<IdleFr
             }
         }
         for v in null_space(a, n) {
-            let velocity = support(model, Some(b)).fold(S::Spatial::zero(), |acc, j| acc + data.kin.motion_subspace[j] * v[j]);
+            let velocity =
+                support(model, Some(b)).fold(S::Spatial::zero(), |acc, j| acc + data.kin.motion_subspace[j] * v[j]);
             if let Some(freedom) = as_idle_turn(model, &data, b, &velocity) {
                 found.push(freedom);
             }
@@ -72,10 +73,7 @@ fn null_space(a: DMatrix<f64>, n: usize) -> Vec<DVector<f64>> {
     let svd = a.svd(false, true);
     let Some(v_t) = svd.v_t else { return Vec::new() };
     let max = svd.singular_values.max();
-    (0..n)
-        .filter(|&i| svd.singular_values[i] <= TOLERANCE * max)
-        .map(|i| v_t.row(i).transpose())
-        .collect()
+    (0..n).filter(|&i| svd.singular_values[i] <= TOLERANCE * max).map(|i| v_t.row(i).transpose()).collect()
 }
 
 /// `Some` when the spatial velocity `velocity` of body b is a turn leaving two of b's connection points at

@@ -12,8 +12,8 @@ use crate::algorithms::ltl;
 use crate::error::DynamicsError;
 use crate::math::dense::{self, by_size, dot, sub_scaled};
 use crate::math::kkt_small;
-use crate::math::space::Space;
 use crate::math::quaternion;
+use crate::math::space::Space;
 use crate::model::data::Data;
 use crate::model::{JointKind, Model};
 

@@ -323,7 +323,11 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
     /// Returns false (keeping the previous terms) if D̂ is not positive definite or sizes differ.
     pub fn update(&mut self, terms: &ConfigSpaceTerms, pose: OpPose<S>) -> bool {
         let (n, m) = (self.qd.len(), self.tmp_m.len());
-        if terms.q.len() != self.q.len() || terms.qd.len() != n || terms.closure_bias_stab.len() != m || terms.op_bias.len() != S::DIM {
+        if terms.q.len() != self.q.len()
+            || terms.qd.len() != n
+            || terms.closure_bias_stab.len() != m
+            || terms.op_bias.len() != S::DIM
+        {
             return false;
         }
         self.factor.copy_from(&terms.mass_matrix);

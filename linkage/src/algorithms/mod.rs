@@ -6,8 +6,8 @@
 pub mod articulated;
 pub mod assemble;
 pub mod bias;
-pub mod configuration;
 mod compile;
+pub mod configuration;
 pub mod constraint_directions;
 pub mod contact;
 pub mod cut_forces;

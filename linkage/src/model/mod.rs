@@ -5,7 +5,8 @@
 //! `error`).
 //!
 //! Bodies are stored in topological order (every parent before its children); body `i` is moved by tree
-//! joint `i`, so `q[i]` is the position of the joint that carries body `i`. The order follows the file's
+//! joint `i`, so `q̇[i]` is the rate of the joint that carries body `i` and `q[joints[i].q_index]` its
+//! position (a ball joint's three entries share a quaternion, see [`JointKind::Ball`]). The order follows the file's
 //! `[[joint]]` order wherever that is already topological.
 
 use nalgebra::DVector;

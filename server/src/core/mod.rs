@@ -50,8 +50,8 @@ use kinloop_linkage::{
     model::data::Data, model::Model,
 };
 use kinloop_protocol::{
-    Datagram, LocalModelForm, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
-    Uplink, Welcome,
+    Datagram, LocalModelForm, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary,
+    SessionShape, Snapshot, Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 

@@ -21,7 +21,7 @@ pub struct SceneInfo {
     pub name: String,
     /// `planar` or `spatial`.
     pub kind: &'static str,
-    /// Coordinates.
+    /// Configuration coordinates (nq: a ball joint takes four).
     pub n: usize,
     /// Characteristic length L (m): directions are in `(v, L ω)`.
     pub length_scale: f64,

@@ -35,7 +35,14 @@ impl<S: Space> Entries<S> {
 
     /// Appends scene joint `ji` (validated: `joint` has its placement, parent, damping; `axes` are the
     /// universal joint's) carrying `body`; returns the index of the entry that carries `body`.
-    pub fn push(&mut self, ji: usize, joint: Joint<S>, (q, qd): (f64, f64), body: Body<S>, axes: Option<[S::Point; 2]>) -> usize {
+    pub fn push(
+        &mut self,
+        ji: usize,
+        joint: Joint<S>,
+        (q, qd): (f64, f64),
+        body: Body<S>,
+        axes: Option<[S::Point; 2]>,
+    ) -> usize {
         let mut joint = joint;
         joint.q_index = self.q0.len();
         match (joint.kind, axes) {

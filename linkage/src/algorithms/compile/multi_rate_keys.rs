@@ -18,7 +18,9 @@ impl<S: Space> Compiler<'_, S> {
             JointKindSpec::Universal => "universal",
             _ => {
                 return match j.axes {
-                    Some(_) => Err(self.invalid(format!("{jkey}.axes"), "only universal joints take `axes`; use `axis`")),
+                    Some(_) => {
+                        Err(self.invalid(format!("{jkey}.axes"), "only universal joints take `axes`; use `axis`"))
+                    }
                     None => Ok(None),
                 }
             }
@@ -38,15 +40,22 @@ impl<S: Space> Compiler<'_, S> {
         }
         if let Some(axis) = &j.axis {
             let hint = if j.kind == JointKindSpec::Ball { "it turns about every axis" } else { "give its two `axes`" };
-            return Err(self.invalid(format!("{jkey}.axis"), format!("a {name} joint takes no `axis` {axis:?}: {hint}")));
+            return Err(
+                self.invalid(format!("{jkey}.axis"), format!("a {name} joint takes no `axis` {axis:?}: {hint}"))
+            );
         }
         if j.kind == JointKindSpec::Ball {
             return match j.axes {
-                Some(_) => Err(self.invalid(format!("{jkey}.axes"), "a ball joint takes no `axes`: it turns about every axis")),
+                Some(_) => {
+                    Err(self.invalid(format!("{jkey}.axes"), "a ball joint takes no `axes`: it turns about every axis"))
+                }
                 None => Ok(None),
             };
         }
-        let axes = j.axes.as_ref().ok_or_else(|| self.invalid(format!("{jkey}.axes"), "a universal joint needs two `axes`"))?;
+        let axes = j
+            .axes
+            .as_ref()
+            .ok_or_else(|| self.invalid(format!("{jkey}.axes"), "a universal joint needs two `axes`"))?;
         if axes.len() != 2 {
             return Err(self.invalid(format!("{jkey}.axes"), format!("expected two axes, got {}", axes.len())));
         }
@@ -57,7 +66,10 @@ impl<S: Space> Compiler<'_, S> {
         if cos.abs() > 1.0 - 1e-6 {
             return Err(self.invalid(
                 format!("{jkey}.axes"),
-                format!("the two axes {:?} and {:?} are parallel; a universal joint needs two different ones", axes[0], axes[1]),
+                format!(
+                    "the two axes {:?} and {:?} are parallel; a universal joint needs two different ones",
+                    axes[0], axes[1]
+                ),
             ));
         }
         Ok(Some([first, second]))
