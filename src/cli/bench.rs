@@ -176,9 +176,14 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
     for (name, balls) in [("ve_step/delta-ball", true), ("ve_step/delta-revolute-built", false)] {
         if r.wanted(name) {
             let mut case = DeltaCase::new(balls).ok_or_else(|| anyhow::anyhow!("{name}"))?;
-            let (bodies, joints) = (case.model.bodies.len(), case.model.nv());
+            let model = &case.model;
+            let bodies = (0..model.nv()).filter(|&b| !model.is_internal_body(b)).count();
+            // A ball or universal joint's entries share its name: count names, not entries.
+            let joints =
+                (0..model.nv()).filter(|&i| i == 0 || model.joints[i].name != model.joints[i - 1].name).count();
+            let note = format!("{bodies} bodies, {joints} joints; nq = {}, nv = {}", model.nq(), model.nv());
             let t = measure(budget, || case.ve_step());
-            r.timing_noted(name, t, format!("{bodies} bodies, nv = {joints}"));
+            r.timing_noted(name, t, note);
         }
     }
     if r.wanted("ve_step_rk4/testbed") {

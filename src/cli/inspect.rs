@@ -176,7 +176,7 @@ fn print_human(r: &serde_json::Value) {
     );
     for f in &idle {
         println!(
-            "idle freedom: body '{}' spins about [{}] through [{}], moving nothing else (kept: finite inertia, no OP sees it)",
+            "idle freedom: body '{}' spins about [{}] through [{}], moving nothing else (kept in the model, with the body's own inertia about it)",
             text(&f["body"]),
             fmt_row(&f["axis"]).trim(),
             fmt_row(&f["through"]).trim()

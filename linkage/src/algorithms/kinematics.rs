@@ -103,12 +103,12 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
         // three axes are all fixed in its child: Σ_k Ṡ_k q̇_k = v_child × ω_rel = v_parent × ω_rel, as
         // ω_rel × ω_rel = 0; so each slot adds v_parent × S_k q̇_k (not its internal body's partial velocity).
         let carrier = match joint.kind {
+            JointKind::Revolute | JointKind::Prismatic => v,
             JointKind::Ball { slot: 0 } => {
                 ball_parent_velocity = v_parent;
                 v
             }
             JointKind::Ball { .. } => ball_parent_velocity,
-            _ => v,
         };
         let a = a_parent + S::cross_motion(&carrier, &s_qd);
         kin.body_velocity[i] = v;
