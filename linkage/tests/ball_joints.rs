@@ -9,6 +9,7 @@ mod common;
 
 use common::*;
 use kinloop_linkage::algorithms::configuration::{difference, integrate};
+use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
 use kinloop_linkage::algorithms::dynamics::forward_dynamics;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::idle_freedoms::idle_freedoms;
@@ -266,6 +267,10 @@ fn idle_spins_are_found_counted_and_harmless() {
     let built = inverse_inertia(&compile(&revolute_built(&delta_scene, 1e-9)));
     assert!(with_balls.iter().all(|x| x.is_finite()));
     assert!((with_balls - built).amax() < 1e-6 * built.amax(), "{with_balls} vs {built}");
+    // The parallelograms hold the platform level: its three rotations constrained, its translations free
+    // (eq 10, 12), the spins notwithstanding.
+    let count = constraint_directions::<Spatial>(&with_balls, delta.length_scale, DEFAULT_THRESHOLD).count;
+    assert_eq!(count, 3);
 }
 
 /// A ball joint with an axis, a universal joint with parallel axes or without them, and a ball joint in a
