@@ -208,7 +208,7 @@ fn trajectory(model: &Model<Spatial>, names: &[&str]) -> Vec<Vec<f64>> {
 }
 
 /// The RSSR four-bar and the Delta robot with ball joints move as their revolute-built versions: the
-/// crank, rocker and arm angles agree to 1e-6 rad over 3 s (gimbals of 1 µg, a millionth of the
+/// crank, rocker and arm angles agree to 1e-6 rad over 3 s (gimbals of 1 µg, under a millionth of the
 /// lightest link, two parametrisations integrated independently).
 #[test]
 fn ball_jointed_linkages_move_as_their_revolute_built_versions() {
