@@ -27,7 +27,7 @@ fn closure_and_mobility<S: Space>(scene: &Scene) -> (f64, usize) {
     let w = data.closure_jacobian_t.clone();
     let largest = w.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(f64::MIN_POSITIVE);
     let rank = if w.ncols() == 0 { 0 } else { w.svd(false, false).rank(1e-9 * largest) };
-    (residual, model.nq() - rank)
+    (residual, model.nv() - rank)
 }
 
 #[test]

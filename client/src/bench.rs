@@ -64,7 +64,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         scene: SceneSummary {
             name: "paper-testbed".into(),
             kind: SceneKind::Planar,
-            n: model.nq() as u32,
+            n: model.nv() as u32,
             m: model.nc() as u32,
             op_dim: 3,
             op_name: "link2".into(),

@@ -13,8 +13,11 @@ use crate::algorithms::local_model::{op_space_terms, LocalModelTerms, OpSpaceLoc
 use crate::algorithms::op_space::op_space_inertia;
 use crate::math::space::OpPose;
 use crate::math::space::Planar;
+use crate::math::space::Spatial;
 use crate::model::builtin::{self, PAPER_WRENCH};
 use crate::model::data::Data;
+use crate::model::revolute_built::revolute_built;
+use crate::model::scene::Scene;
 use crate::Model;
 
 /// Timing of one benchmark case.
@@ -147,4 +150,46 @@ impl Case {
 /// The paper's wrench as an operational vector.
 pub fn paper_wrench() -> Vector3<f64> {
     Vector3::from(PAPER_WRENCH)
+}
+
+/// The Delta robot written with ball joints (the linkage tests' scene).
+const DELTA_BALL: &str = include_str!("../tests/scenes/delta-ball.toml");
+
+/// Mass of each gimbal in the Delta's revolute-built version: what a user had to write before ball joints.
+pub const DELTA_GIMBAL_MASS: f64 = 0.005;
+
+/// The Delta robot falling under gravity from q0 (damped arms), with ball joints or revolute-built (three
+/// revolutes and two 5 g gimbals per ball), for the VE step's cost beside each other.
+pub struct DeltaCase {
+    /// The model.
+    pub model: Model<Spatial>,
+    data: Data<Spatial>,
+    q: DVector<f64>,
+    qd: DVector<f64>,
+    steps_in_window: usize,
+}
+
+impl DeltaCase {
+    /// The ball-jointed Delta, or its revolute-built version.
+    pub fn new(balls: bool) -> Option<DeltaCase> {
+        let scene = Scene::from_toml_str(DELTA_BALL, "delta-ball.toml").ok()?;
+        let scene = if balls { scene } else { revolute_built(&scene, DELTA_GIMBAL_MASS) };
+        let model: Model<Spatial> = Model::compile(&scene, &scene.name).ok()?;
+        let data = Data::new(&model);
+        let (q, qd) = (model.q0.clone(), model.qd0.clone());
+        Some(DeltaCase { model, data, q, qd, steps_in_window: 0 })
+    }
+
+    /// One VE step (semi-implicit Euler with projection at 1 kHz); rewinds to q0 every [`WINDOW_STEPS`].
+    pub fn ve_step(&mut self) {
+        if self.steps_in_window == WINDOW_STEPS {
+            self.q.copy_from(&self.model.q0);
+            self.qd.copy_from(&self.model.qd0);
+            self.steps_in_window = 0;
+        }
+        self.steps_in_window += 1;
+        let cfg = StepConfig::euler(1e-3);
+        let r = step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut (), &cfg);
+        black_box(r.ok());
+    }
 }

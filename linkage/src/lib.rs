@@ -9,7 +9,7 @@
 //! **Layers.** As Pinocchio separates spatial algebra, the multibody model and the algorithms, the sources
 //! sit in three folders whose uses point one way (`tests/layers.rs` checks it, and that no files import
 //! each other in a circle):
-//! - [`math`]: spatial algebra ([`space`](math::space)), trigonometry ([`trig`](math::trig)), dense kernels and their SIMD lanes
+//! - [`math`]: spatial algebra ([`space`](math::space)), the ball joints' unit quaternions ([`quaternion`](math::quaternion)), trigonometry ([`trig`](math::trig)), dense kernels and their SIMD lanes
 //!   ([`dense`](math::dense)), the fixed-size factorizations and KKT kernels for small linkages, a symmetric
 //!   eigensolver ([`eigen`](math::eigen)). Uses nothing of the layers above.
 //! - [`model`]: the scene file ([`scene`](model::scene)), the built-in scenes ([`builtin`](model::builtin)), the [`Model`] and the
@@ -25,6 +25,7 @@
 //!
 //! | module | computes | paper |
 //! |---|---|---|
+//! | [`configuration`](algorithms::configuration) | q ⊕ v on the manifold (ball joints' quaternions), its inverse | |
 //! | [`kinematics`](algorithms::kinematics) | body poses, world-frame motion subspaces, velocities | |
 //! | [`jacobian`](algorithms::jacobian) | point/frame Jacobians, J̇q̇, Jᵀ F | |
 //! | [`mass_matrix`](algorithms::mass_matrix) | D(q) by composite rigid bodies | eq 1 |
@@ -45,9 +46,14 @@
 //! | [`contact`](algorithms::contact) | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
 //! | [`penalty`](algorithms::penalty) | the push-only penalty law of contacts and range walls | eq 1 (Fᵢ) |
 //! | [`assemble`](algorithms::assemble) | the nearest closed configuration | |
+//! | [`idle_freedoms`](algorithms::idle_freedoms) | freedoms turning one body and moving nothing else (a rod's spin between two balls) | eq 2 |
 //! | [`reach`](algorithms::reach) | an OP's reachable region, lightest effective masses, static gravity load | eq 4, 9, 10 |
 //! | [`op_path`](algorithms::op_path) | a 1-DOF linkage's OP path: nearest point, tangent (the free direction), turning a frame along it | eq 10 |
 //! | `algorithms::compile` | scene → [`Model`]: validation, topological order, cut primitives, closure rank | |
+//!
+//! Tree joints are revolute, prismatic, universal (two revolute entries around a massless cross-piece) or ball
+//! (three entries sharing a unit quaternion): q has `Model::nq` coordinates and q̇, q̈, D and W's columns
+//! `Model::nv`, equal without ball joints; every update of q by a velocity goes through `configuration`.
 //!
 //! Planar scenes use 3-D spatial algebra and a 3-DOF operational space (x, y, θ); spatial scenes 6-D
 //! (see [`space`](math::space)). A scene without loops takes the plain path (no KKT, no multipliers); a scene without

@@ -27,8 +27,10 @@ pub fn compile<S: Space>(scene: &crate::model::scene::Scene) -> Model<S> {
 /// A state near q0 (±0.1 rad or m) with velocities in ±1, deterministic in `seed`.
 pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVector<f64>) {
     let mut rng = TestRng(seed.wrapping_mul(7919).wrapping_add(17));
-    let q = DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.1 * rng.signed());
-    let qd = DVector::from_fn(model.nq(), |_, _| rng.signed());
+    let step = DVector::from_fn(model.nv(), |_, _| 0.1 * rng.signed());
+    let mut q = model.q0.clone();
+    crate::algorithms::configuration::integrate(model, &mut q, &step, 1.0);
+    let qd = DVector::from_fn(model.nv(), |_, _| rng.signed());
     (q, qd)
 }
 

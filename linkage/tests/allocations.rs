@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
 use kinloop_linkage::algorithms::op_space::op_space_inertia;
+use kinloop_linkage::math::space::Spatial;
 use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::model::scene::Scene;
 use kinloop_linkage::{
     algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
     algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, model::data::Data,
@@ -19,7 +21,7 @@ use kinloop_linkage::{
     },
     math::space::OpPose,
 };
-use nalgebra::Vector3;
+use nalgebra::{Vector3, Vector6};
 
 struct Counting;
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
@@ -74,8 +76,8 @@ fn hot_paths_allocate_nothing() {
         let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
         let mut user = OpWrench::<Planar> { op: 0, wrench: Vector3::from(PAPER_WRENCH) };
         let mut contacts = kinloop_linkage::algorithms::contact::PenaltyContacts::new(&model);
-        let mut terms = ConfigSpaceTerms::zeros(model.nq(), model.nc(), 3);
-        let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nq(), model.nc());
+        let mut terms = ConfigSpaceTerms::zeros(model.nv(), model.nc(), 3);
+        let mut config = ConfigSpaceLocalModel::<Planar>::new(model.nv(), model.nc());
         let mut reduced =
             OpSpaceLocalModel::new(op_space_terms(&data, &user.wrench, LocalModelTerms::full()), OpPose::identity());
         for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
@@ -105,4 +107,38 @@ fn hot_paths_allocate_nothing() {
         });
         assert_eq!(n, 0, "{name}: op space, SVD and local models allocated {n} times");
     }
+    ball_joints_allocate_nothing();
+}
+
+/// The same with ball joints (nq ≠ nv: the configuration update on the manifold, RKMK, the projection's
+/// correction through a displacement): the Delta robot of `tests/scenes`.
+fn ball_joints_allocate_nothing() {
+    let scene = Scene::from_toml_str(include_str!("scenes/delta-ball.toml"), "delta-ball.toml").unwrap();
+    let model: Model<Spatial> = Model::compile(&scene, "delta-ball").unwrap();
+    let mut data = Data::new(&model);
+    let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
+    let mut user = OpWrench::<Spatial> { op: 0, wrench: Vector6::new(0.5, -0.2, 1.0, 0.0, 0.0, 0.0) };
+    let mut terms = ConfigSpaceTerms::zeros_nq(model.nq(), model.nv(), model.nc(), 6);
+    let mut config = ConfigSpaceLocalModel::<Spatial>::new_nq(model.nq(), model.nv(), model.nc());
+    for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
+        let cfg = StepConfig { integrator, dt: 1e-3, project: true, implicit_forces: true };
+        step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).unwrap();
+        let n = allocations_during(|| {
+            for _ in 0..100 {
+                step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).unwrap();
+            }
+        });
+        assert_eq!(n, 0, "delta-ball: {integrator:?} step allocated {n} times");
+    }
+    let n = allocations_during(|| {
+        forward_dynamics(&model, &mut data, &q, &qd, &mut user).unwrap();
+        op_space_inertia(&model, &mut data, 0).unwrap();
+        constraint_directions::<Spatial>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+        terms.fill_from(&model, &mut data, &q, &qd, &user.wrench, LocalModelTerms::full());
+        assert!(config.update(&terms, OpPose::of_op(&model, &data, 0)));
+        for _ in 0..100 {
+            config.step(1e-3, &user.wrench);
+        }
+    });
+    assert_eq!(n, 0, "delta-ball: op space, SVD and local model allocated {n} times");
 }

@@ -110,7 +110,7 @@ fn redundant_closures_are_solved_without_nan() {
 
 fn run_free<S: kinloop_linkage::math::space::Space>(model: &Model<S>, name: &str) {
     let mut data = Data::new(model);
-    let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nq()));
+    let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nv()));
     for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
         let cfg = StepConfig { integrator, dt: 1e-3, project: true, implicit_forces: false };
         let mut max_err: f64 = 0.0;
@@ -220,7 +220,7 @@ fn constraint_count_and_directions_do_not_depend_on_units() {
 fn benchmark_chains_compile_closed() {
     for (n, l) in [(20, 1), (20, 5), (50, 1), (50, 5)] {
         let model: Model<Planar> = compile(&builtin::chain(n, l));
-        assert_eq!((model.nq(), model.nc(), model.closure_rank), (n, 2 * l, 2 * l));
+        assert_eq!((model.nv(), model.nc(), model.closure_rank), (n, 2 * l, 2 * l));
         let mut data = Data::new(&model);
         forward_dynamics(&model, &mut data, &model.q0, &model.qd0, &mut ()).unwrap();
         assert!(data.closure_residual.amax() < 1e-15);

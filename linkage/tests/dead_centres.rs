@@ -66,10 +66,10 @@ fn mobility(w: &DMatrix<f64>, j_op: &DMatrix<f64>) -> usize {
 fn counts(scene: &Scene, w: &DMatrix<f64>) -> Vec<(usize, Matrix3<f64>)> {
     let model: Model<Planar> = compile(scene);
     let mut data = Data::new(&model);
-    forward_dynamics(&model, &mut data, &model.q0, &DVector::zeros(model.nq()), &mut ()).unwrap();
+    forward_dynamics(&model, &mut data, &model.q0, &DVector::zeros(model.nv()), &mut ()).unwrap();
     let (compiled, hand) = (data.closure_jacobian(), w);
-    assert!((&compiled * null_space(hand, model.nq())).amax() < 1e-12, "{}: W is not the scene's", model.name);
-    assert!((hand * null_space(&compiled, model.nq())).amax() < 1e-12, "{}: W is not the scene's", model.name);
+    assert!((&compiled * null_space(hand, model.nv())).amax() < 1e-12, "{}: W is not the scene's", model.name);
+    assert!((hand * null_space(&compiled, model.nv())).amax() < 1e-12, "{}: W is not the scene's", model.name);
     (0..model.ops.len())
         .map(|op| {
             op_space_inertia(&model, &mut data, op).unwrap();

@@ -131,7 +131,7 @@ fn closed_velocity<S: Space>(model: &Model<S>, q: &DVector<f64>, seed: u64) -> D
     forward_kinematics(model, &mut data, q);
     closure_residual_and_jacobian(model, &mut data);
     let w = data.closure_jacobian();
-    let basis = null_space(&w, model.nq());
+    let basis = null_space(&w, model.nv());
     let (_, made_up) = random_state(model, seed);
     &basis * (basis.transpose() * made_up)
 }
@@ -156,8 +156,8 @@ fn check_spring<S: Space>(name: &str, model: &Model<S>, by_hand: &dyn Fn(&DVecto
         forward_kinematics(model, &mut data, &q);
         gravity_forces(model, &mut data, &q);
         let h = 1e-6;
-        for i in 0..model.nq() {
-            let mut e = DVector::zeros(model.nq());
+        for i in 0..model.nv() {
+            let mut e = DVector::zeros(model.nv());
             e[i] = h;
             let fd = (potential(model, &(&q + &e)) - potential(model, &(&q - &e))) / (2.0 * h);
             let g = data.gravity[i];

@@ -32,9 +32,9 @@ fn local_models<S: Space>(
     let pose = OpPose::of_op(model, data, user.op);
     let mut reduced = OpSpaceLocalModel::new(op_space_terms(data, &user.wrench, terms), pose);
     reduced.twist = op_twist(model, data, user.op);
-    let mut cterms = ConfigSpaceTerms::zeros(model.nq(), model.nc(), S::DIM);
+    let mut cterms = ConfigSpaceTerms::zeros(model.nv(), model.nc(), S::DIM);
     cterms.fill_from(model, data, q, qd, &user.wrench, terms);
-    let mut config = ConfigSpaceLocalModel::new(model.nq(), model.nc());
+    let mut config = ConfigSpaceLocalModel::new(model.nv(), model.nc());
     assert!(config.update(&cterms, pose));
     (reduced, config)
 }

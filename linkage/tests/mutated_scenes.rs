@@ -95,7 +95,7 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
 /// Steps, inertias and assembly of a compiled mutant: each returns a typed error or finite numbers.
 fn exercise<S: Space>(model: &Model<S>) -> Result<(), String> {
     let mut data = Data::new(model);
-    let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nq()));
+    let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nv()));
     if forward_dynamics(model, &mut data, &q, &qd, &mut ()).is_ok() && !data.qdd.iter().all(|x| x.is_finite()) {
         return Err(format!("forward dynamics returned Ok with q̈ = {}", data.qdd));
     }

@@ -63,7 +63,7 @@ fn op_position<S: Space>(model: &Model<S>, q: &DVector<f64>, name: &str) -> Vec<
 /// Re-closes the loops with the joints in `fixed` held (Newton steps on the others through nalgebra's SVD
 /// least-squares solve, which copes with redundant closure rows).
 fn close_with_fixed<S: Space>(model: &Model<S>, start: &DVector<f64>, fixed: &[usize]) -> DVector<f64> {
-    let free: Vec<usize> = (0..model.nq()).filter(|j| !fixed.contains(j)).collect();
+    let free: Vec<usize> = (0..model.nv()).filter(|j| !fixed.contains(j)).collect();
     let mut q = start.clone();
     for _ in 0..60 {
         let mut data = Data::new(model);
@@ -161,8 +161,8 @@ fn check_mobility<S: Space>(name: &str, second: &DVector<f64>) {
     for (label, q) in [("q0", &model.q0), ("second configuration", second)] {
         let (residual, w) = closure(&model, q);
         assert!(residual <= 1e-12, "{name} at {label}: closure residual {residual:.3e} m");
-        let (dof, rank) = svd_mobility(name, model.nq(), &w);
-        assert_eq!(dof as i64, expected, "{name} at {label}: n - rank W = {} - {rank}", model.nq());
+        let (dof, rank) = svd_mobility(name, model.nv(), &w);
+        assert_eq!(dof as i64, expected, "{name} at {label}: n - rank W = {} - {rank}", model.nv());
         assert_eq!(rank, model.closure_rank, "{name} at {label}: the model's generic rank");
     }
 }
@@ -185,11 +185,11 @@ fn new_scenes_are_closed_at_q0_and_have_the_mobility_of_their_theory() {
         match name {
             "stephenson-six-bar" | "five-bar-robot" => {
                 let m = model::<Planar>(name);
-                (m.nq(), m.nc(), m.closure_rank)
+                (m.nv(), m.nc(), m.closure_rank)
             }
             _ => {
                 let m = model::<Spatial>(name);
-                (m.nq(), m.nc(), m.closure_rank)
+                (m.nv(), m.nc(), m.closure_rank)
             }
         }
     };
@@ -313,7 +313,7 @@ fn stephenson_six_bar_follows_its_closed_form_all_the_way_round() {
     let swing = (output.1 - output.0).to_degrees();
     assert!((48.0..54.0).contains(&swing), "output swing {swing}°");
 
-    let start = DVector::from_fn(model.nq(), |i, _| model.q0[i] + [0.6, -0.2, 0.15, 0.1, -0.25][i]);
+    let start = DVector::from_fn(model.nv(), |i, _| model.q0[i] + [0.6, -0.2, 0.15, 0.1, -0.25][i]);
     let assembled = assemble(&model, &start, 1e-14).unwrap_or_else(|e| panic!("{e}"));
     assert!((assembled.q[st.o1] - model.q0[st.o1]).abs() > 0.1, "assembly went back to q0");
     st.assert_closed_form("assembled", &assembled.q);
@@ -377,7 +377,7 @@ fn five_bar_effector_is_the_circle_intersection_of_its_proximal_angles() {
     // A region, not a curve: several centimetres both ways.
     assert!(hi[0] - lo[0] > 0.03 && hi[1] - lo[1] > 0.03, "effector range {lo:?} to {hi:?}");
 
-    let start = DVector::from_fn(model.nq(), |i, _| model.q0[i] + [0.2, -0.1, -0.15, 0.3][i]);
+    let start = DVector::from_fn(model.nv(), |i, _| model.q0[i] + [0.2, -0.1, -0.15, 0.3][i]);
     let assembled = assemble(&model, &start, 1e-14).unwrap_or_else(|e| panic!("{e}"));
     check("assembled", &assembled.q);
 }
@@ -505,9 +505,9 @@ struct Run {
 fn free_run<S: Space>(model: &Model<S>, dt: f64, seconds: f64) -> Run {
     let mut data = Data::new(model);
     let mut q = model.q0.clone();
-    let mut qd = DVector::zeros(model.nq());
+    let mut qd = DVector::zeros(model.nv());
     if !model.has_gravity {
-        qd = DVector::from_fn(model.nq(), |i, _| [1.5, -1.0, 0.5, 2.0][i % 4]);
+        qd = DVector::from_fn(model.nv(), |i, _| [1.5, -1.0, 0.5, 2.0][i % 4]);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
         kinloop_linkage::algorithms::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
     }

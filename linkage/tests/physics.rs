@@ -44,7 +44,7 @@ fn mass_matrix_is_spd_and_the_hessian_of_kinetic_energy() {
 
 fn check_mass_matrix<S: Space>(name: &str, model: &Model<S>) {
     let mut data = Data::new(model);
-    let n = model.nq();
+    let n = model.nv();
     for seed in 0..3 {
         let (q, _) = random_state(model, seed);
         forward_kinematics(model, &mut data, &q);
@@ -75,7 +75,7 @@ fn coriolis_terms_match_lagrange_equations() {
 
 fn check_bias<S: Space>(name: &str, model: &Model<S>) {
     let mut data = Data::new(model);
-    let n = model.nq();
+    let n = model.nv();
     for seed in 0..3 {
         let (q, qd) = random_state(model, seed);
         forward_kinematics(model, &mut data, &q);
@@ -110,7 +110,7 @@ fn gravity_and_springs_are_the_gradient_of_potential_energy() {
 
 fn check_gravity<S: Space>(name: &str, model: &Model<S>) {
     let mut data = Data::new(model);
-    let n = model.nq();
+    let n = model.nv();
     let (q, qd) = random_state(model, 11);
     forward_kinematics(model, &mut data, &q);
     gravity_forces(model, &mut data, &q);
@@ -148,8 +148,8 @@ fn check_kkt<S: Space>(name: &str, model: &Model<S>) {
         let w = data.closure_jacobian();
         // Make the velocity consistent too, so w_stab is in the range of W.
         let expected = null_space_accelerations(&data.mass_matrix, &w, &data.closure_bias_stab, &tau);
-        let qdd = DMatrix::from_column_slice(model.nq(), 1, data.qdd.as_slice());
-        let exp = DMatrix::from_column_slice(model.nq(), 1, expected.as_slice());
+        let qdd = DMatrix::from_column_slice(model.nv(), 1, data.qdd.as_slice());
+        let exp = DMatrix::from_column_slice(model.nv(), 1, expected.as_slice());
         if model.nc() == 0 || data.kkt.schur_rank == model.nc() {
             assert_close(&format!("{name}: q̈ (seed {seed})"), &qdd, &exp, 1e-8);
         }
@@ -224,10 +224,10 @@ fn check_energy<S: Space>(name: &str, model: &Model<S>) {
 fn energy_drift<S: Space>(model: &Model<S>, dt: f64, duration: f64) -> (f64, f64) {
     let mut data = Data::new(model);
     let mut q = model.q0.clone();
-    let mut qd = DVector::zeros(model.nq());
+    let mut qd = DVector::zeros(model.nv());
     if model.gravity.norm() == 0.0 {
         // No gravity: start with a velocity made consistent with the closures instead.
-        qd = DVector::from_fn(model.nq(), |i, _| 0.5 + 0.1 * i as f64);
+        qd = DVector::from_fn(model.nv(), |i, _| 0.5 + 0.1 * i as f64);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
         kinloop_linkage::algorithms::integrator::project(model, &mut data, &mut q.clone(), &mut qd);
     }

@@ -69,6 +69,7 @@ fn build(spec: &Spec, kind: SceneKind) -> Scene {
                 origin: v(parent_len, 0.02 * i as f64),
                 rotation: if d == 2 { None } else { Some(Numbers::Many(vec![0.3 * i as f64, -0.2, 0.1])) },
                 axis: if d == 3 { Some(vec![0.1 * i as f64, 0.5, 1.0]) } else { None },
+                axes: None,
                 q0: if prismatic { 0.1 * q0 } else { q0 },
                 qd0: 0.0,
                 spring: None,
@@ -122,13 +123,13 @@ fn check<S: Space>(scene: &Scene, seed: u64) -> Result<(), TestCaseError> {
     let mut rng = Rng(seed);
     // A velocity consistent with the closures (W q̇ = 0), as every real state has: with an inconsistent one,
     // redundant rows would be contradictory at acceleration level.
-    let random = nalgebra::DVector::from_fn(model.nq(), |_, _| rng.signed());
+    let random = nalgebra::DVector::from_fn(model.nv(), |_, _| rng.signed());
     let qd = if model.nc() == 0 {
         random
     } else {
         kinloop_linkage::algorithms::kinematics::forward_kinematics(&model, &mut data, &model.q0);
         kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian(&model, &mut data);
-        let n = null_space(&data.closure_jacobian(), model.nq());
+        let n = null_space(&data.closure_jacobian(), model.nv());
         &n * (n.transpose() * random)
     };
     let mut user = OpWrench::<S> { op: 0, wrench: S::OpVec::zero() };

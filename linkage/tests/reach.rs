@@ -126,8 +126,8 @@ fn four_bar_motion_by_differences(model: &Model<Planar>, q: &DVector<f64>) -> DV
         data.closure_residual.clone()
     };
     let h = 1e-7;
-    let mut w = DMatrix::zeros(model.nc(), model.nq());
-    for i in 0..model.nq() {
+    let mut w = DMatrix::zeros(model.nc(), model.nv());
+    for i in 0..model.nv() {
         let (mut up, mut down) = (q.clone(), q.clone());
         up[i] += h;
         down[i] -= h;
@@ -144,7 +144,7 @@ fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
     // all come from finite differences here (of the potential energy, the coupler's pose, the loop residual).
     let model = planar("fourbar-crank-rocker");
     let op = model.op_index("coupler").unwrap();
-    let at_rest = DVector::zeros(model.nq());
+    let at_rest = DVector::zeros(model.nv());
     let mut data = Data::new(&model);
     let mut turned = model.q0.clone();
     turned[0] += 2.0;

@@ -176,7 +176,7 @@ pub fn parse(text: &str, file: &str) -> Result<Recording, ReadError> {
     let kind = kind_of(&columns);
     if columns.starts_with(&["t_s", "step"]) {
         let count = |prefix: &str| columns.iter().filter(|c| c.starts_with(prefix)).count();
-        let schema = VeSchema { kind, n: count("q_"), m: count("lambda_") };
+        let schema = VeSchema { kind, nq: count("q_"), n: count("qd_"), m: count("lambda_") };
         check_header(file, "server", &columns, &schema.header())?;
         let rows = lines.map(|(line, text)| ve_row(&Fields { file, line, text }, &schema)).collect::<Result<_, _>>()?;
         Ok(Recording::Ve { schema, rows })
@@ -286,7 +286,7 @@ fn ve_row(fields: &Fields, schema: &VeSchema) -> Result<VeRow, ReadError> {
     }
     let users = fields.count(v[fixed - 1], f64::from(u32::MAX), "users")? as usize;
     fields.width(v.len(), fixed + users * group)?;
-    let (n, m, pose_len, k) = (schema.n, schema.m, pose_names(schema.kind).len(), schema.kind.op_dim());
+    let (nq, n, m, pose_len, k) = (schema.nq, schema.n, schema.m, pose_names(schema.kind).len(), schema.kind.op_dim());
     let users = v[fixed..]
         .chunks_exact(group)
         .enumerate()
@@ -305,9 +305,9 @@ fn ve_row(fields: &Fields, schema: &VeSchema) -> Result<VeRow, ReadError> {
     Ok(VeRow {
         t_s: v[0],
         step: fields.count(v[1], u64::MAX as f64, "step")? as u64,
-        q: v[2..2 + n].to_vec(),
-        qd: v[2 + n..2 + 2 * n].to_vec(),
-        lambda: v[2 + 2 * n..2 + 2 * n + m].to_vec(),
+        q: v[2..2 + nq].to_vec(),
+        qd: v[2 + nq..2 + nq + n].to_vec(),
+        lambda: v[2 + nq + n..2 + nq + n + m].to_vec(),
         closure_error: v[fixed - 2],
         users,
     })
@@ -355,7 +355,7 @@ mod tests {
     fn a_written_ve_record_reads_back_with_every_user() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("ve.csv");
-        let schema = VeSchema { kind: SceneKind::Planar, n: 1, m: 1 };
+        let schema = VeSchema { kind: SceneKind::Planar, nq: 1, n: 1, m: 1 };
         let mut file = RecordFile::create(&path, &schema.header()).unwrap();
         file.write_ve_numbers([0.001, 1.0, 0.5, 0.0, 0.0, 1e-12, 1.0, 7.0, 0.1, 0.2, 0.3, 1.0, 2.0, 3.0, 1.0]).unwrap();
         let two =
@@ -402,7 +402,7 @@ mod tests {
             e.starts_with("x.csv:1: the header is not a client record's: column 6 is \"\", expected \"model_y\""),
             "{e}"
         );
-        let ve = VeSchema { kind: SceneKind::Planar, n: 1, m: 0 }.header();
+        let ve = VeSchema { kind: SceneKind::Planar, nq: 1, n: 1, m: 0 }.header();
         let e = error(&format!("{ve}\n0,1,0,0,0,1,7,0,0,0,0,0,0\n"));
         assert!(e.starts_with("x.csv:2: 13 fields, expected 14"), "{e}");
         let e = error(&format!("{ve}\n0,1,0,0,0,1,7,0,0,0,0,0,0,0.5\n"));

@@ -66,7 +66,10 @@ pub const USER_GROUP_REPEATS: &str = "...(user group repeated per user)";
 pub struct VeSchema {
     /// The scene's kind: the user group's pose and wrench columns.
     pub kind: SceneKind,
-    /// Coordinates.
+    /// Configuration coordinates (the `q_*` columns): `n`, or more with ball joints (a unit quaternion's four
+    /// per three rates).
+    pub nq: usize,
+    /// Velocity coordinates (the `qd_*` columns).
     pub n: usize,
     /// Closure rows.
     pub m: usize,
@@ -79,7 +82,7 @@ impl VeSchema {
     /// The columns before the user groups: `t_s, step, q_*, qd_*, lambda_*, closure_error_m, users`.
     pub fn fixed_columns(&self) -> Vec<String> {
         let mut columns = vec!["t_s".to_string(), "step".into()];
-        columns.extend((0..self.n).map(|i| format!("q_{i}")));
+        columns.extend((0..self.nq).map(|i| format!("q_{i}")));
         columns.extend((0..self.n).map(|i| format!("qd_{i}")));
         columns.extend((0..self.m).map(|i| format!("lambda_{i}")));
         columns.extend(["closure_error_m".to_string(), "users".into()]);
@@ -97,7 +100,7 @@ impl VeSchema {
 
     /// Numbers before the user groups.
     pub fn fixed_len(&self) -> usize {
-        2 + 2 * self.n + self.m + 2
+        2 + self.nq + self.n + self.m + 2
     }
 
     /// Numbers in one user group.
@@ -152,7 +155,7 @@ mod tests {
 
     #[test]
     fn the_ve_header_names_one_user_group_and_says_it_repeats() {
-        let schema = VeSchema { kind: SceneKind::Planar, n: 2, m: 1 };
+        let schema = VeSchema { kind: SceneKind::Planar, nq: 2, n: 2, m: 1 };
         assert_eq!(
             schema.header(),
             "t_s,step,q_0,q_1,qd_0,qd_1,lambda_0,closure_error_m,users,user_id,op_x,op_y,op_theta,wrench_fx,\

@@ -285,7 +285,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
     if model.ops.is_empty() && run.users > 0 {
         return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
     }
-    let (n, m) = (model.nq(), model.nc());
+    let (n, m) = (model.nv(), model.nc());
     let shape = SessionShape { kind: S::KIND, n, m };
     let mut ve = run.ve.clone();
     ve.max_users = ve.max_users.max(run.users);

@@ -155,7 +155,7 @@ fn ticks_and_snapshots_allocate_nothing_for_a_fixed_set_of_users() {
 #[test]
 fn the_view_tap_allocates_nothing_per_tick() {
     let model = Model::<Planar>::compile(&scene("paper-testbed"), "paper-testbed").unwrap();
-    let n = model.nq();
+    let n = model.nv();
     let mut core = VeCore::new(model, VeConfig::paper()).unwrap();
     for (i, role) in [Role::Manipulator, Role::Observer].into_iter().enumerate() {
         let request = JoinRequest {

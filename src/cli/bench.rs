@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::{ensure, Context, Result};
 use kinloop_linkage::algorithms::integrator::Integrator;
-use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, Timing};
+use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, DeltaCase, Timing};
 use serde_json::{json, Value};
 
 /// Arguments of `kinloop bench`.
@@ -96,6 +96,21 @@ impl Reporter<'_> {
         };
         self.emit(row, timing_fields(&t));
     }
+
+    /// A timing without a goal, with a note (the case's size).
+    fn timing_noted(&mut self, name: &str, t: Timing, note: String) {
+        let row = Row {
+            name: name.to_owned(),
+            median_ns: t.median_ns,
+            p10_ns: Some(t.p10_ns),
+            p90_ns: Some(t.p90_ns),
+            goal_ns: None,
+            note: Some(note.clone()),
+        };
+        let mut extra = timing_fields(&t);
+        extra["note"] = json!(note);
+        self.emit(row, extra);
+    }
 }
 
 fn timing_fields(t: &Timing) -> Value {
@@ -157,6 +172,19 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
             .ok_or_else(|| anyhow::anyhow!("benchmark scene {scene}"))?;
         let t = measure(budget, || case.ve_step(Integrator::SemiImplicitEuler));
         r.timing(&name, t);
+    }
+    for (name, balls) in [("ve_step/delta-ball", true), ("ve_step/delta-revolute-built", false)] {
+        if r.wanted(name) {
+            let mut case = DeltaCase::new(balls).ok_or_else(|| anyhow::anyhow!("{name}"))?;
+            let model = &case.model;
+            let bodies = (0..model.nv()).filter(|&b| !model.is_internal_body(b)).count();
+            // A ball or universal joint's entries share its name: count names, not entries.
+            let joints =
+                (0..model.nv()).filter(|&i| i == 0 || model.joints[i].name != model.joints[i - 1].name).count();
+            let note = format!("{bodies} bodies, {joints} joints; nq = {}, nv = {}", model.nq(), model.nv());
+            let t = measure(budget, || case.ve_step());
+            r.timing_noted(name, t, note);
+        }
     }
     if r.wanted("ve_step_rk4/testbed") {
         let mut case = Case::new("paper-testbed").ok_or_else(|| anyhow::anyhow!("testbed"))?;

@@ -2,7 +2,9 @@
 
 use anyhow::{bail, ensure, Context, Result};
 use kinloop_linkage::algorithms::assemble::assemble;
+use kinloop_linkage::algorithms::configuration;
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};
+use kinloop_linkage::algorithms::idle_freedoms::idle_freedoms;
 use kinloop_linkage::algorithms::op_space::{op_space_inertia, open_inverse_inertia};
 use kinloop_linkage::{
     algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, math::space::MatOps, math::space::Planar,
@@ -82,7 +84,11 @@ fn vector(flag: &str, text: Option<&str>, n: usize, default: &DVector<f64>) -> R
         None => Ok(default.clone()),
         Some(t) => {
             let v = parse_numbers(flag, t)?;
-            ensure!(v.len() == n, "{flag}: expected {n} numbers (one per joint), got {}", v.len());
+            ensure!(
+                v.len() == n,
+                "{flag}: expected {n} numbers (one per coordinate; a ball joint has 4 positions, 3 rates), got {}",
+                v.len()
+            );
             Ok(DVector::from_vec(v))
         }
     }
@@ -99,8 +105,11 @@ fn inspect<S: Space>(
 ) -> Result<serde_json::Value> {
     let model: Model<S> =
         if args.assemble { Model::compile_unclosed(scene, label)? } else { Model::compile(scene, label)? };
-    let n = model.nq();
-    let mut q = vector("--q", args.q.as_deref(), n, &model.q0)?;
+    let (n, nq) = (model.nv(), model.nq());
+    let mut q = vector("--q", args.q.as_deref(), nq, &model.q0)?;
+    if let Err(problem) = configuration::check(&model, q.as_slice()) {
+        bail!("--q: {problem}");
+    }
     let qd = vector("--qd", args.qd.as_deref(), n, &DVector::zeros(n))?;
     let op = op_index(&model, args.op.as_deref())?;
     let mut assembly = serde_json::Value::Null;
@@ -114,13 +123,19 @@ fn inspect<S: Space>(
     forward_dynamics(&model, &mut data, &q, &qd, &mut user)?;
     op_space_inertia(&model, &mut data, op)?;
     let cd = constraint_directions::<S>(&data.op.inverse_inertia, model.length_scale, DEFAULT_THRESHOLD);
+    let idle: Vec<serde_json::Value> = idle_freedoms(&model, &q)
+        .iter()
+        .map(|f| json!({ "body": model.bodies[f.body].name, "axis": f.axis.as_slice(), "through": f.point.as_slice() }))
+        .collect();
     Ok(json!({
         "scene": model.name,
         "kind": S::KIND,
         "n": n,
+        "nq": nq,
         "m": model.nc(),
         "closure_rank": model.closure_rank,
         "dof": n - model.closure_rank,
+        "idle_freedoms": idle,
         "op": model.ops[op].name,
         "length_scale": model.length_scale,
         "q": q.as_slice(),
@@ -146,8 +161,11 @@ fn print_human(r: &serde_json::Value) {
             .unwrap_or_default()
     };
     let text = |v: &serde_json::Value| v.as_str().unwrap_or("").to_string();
+    let idle = r["idle_freedoms"].as_array().cloned().unwrap_or_default();
+    let nq = if r["nq"] == r["n"] { String::new() } else { format!(" (nq = {})", r["nq"]) };
+    let idle_count = if idle.is_empty() { String::new() } else { format!(", {} of them idle", idle.len()) };
     println!(
-        "scene {} ({}), n = {}, m = {} (rank {}), {} DOF; OP '{}'",
+        "scene {} ({}), n = {}{nq}, m = {} (rank {}), {} DOF{idle_count}; OP '{}'",
         text(&r["scene"]),
         text(&r["kind"]),
         r["n"],
@@ -156,6 +174,14 @@ fn print_human(r: &serde_json::Value) {
         r["dof"],
         text(&r["op"])
     );
+    for f in &idle {
+        println!(
+            "idle freedom: body '{}' spins about [{}] through [{}], moving nothing else (kept in the model, with the body's own inertia about it)",
+            text(&f["body"]),
+            fmt_row(&f["axis"]).trim(),
+            fmt_row(&f["through"]).trim()
+        );
+    }
     if !r["assembly"].is_null() {
         println!(
             "assembled in {} Newton steps: residual {} -> {}",

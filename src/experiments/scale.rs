@@ -105,7 +105,7 @@ fn measure_chain(links: usize, loops: usize, budget: Duration) -> Result<Option<
 
     case.prepare_op_space();
     op_space_inertia(&case.model, &mut case.data, 0).with_context(|| format!("{name}: op-space inertia"))?;
-    let (n, m) = (case.model.nq(), case.model.nc());
+    let (n, m) = (case.model.nv(), case.model.nc());
     let mut terms = ConfigSpaceTerms::zeros(n, m, 3);
     terms.fill_from(&case.model, &mut case.data, &case.q, &case.qd, &f, LocalModelTerms::full());
     let pose = OpPose::<Planar>::of_op(&case.model, &case.data, 0);

@@ -153,6 +153,7 @@ impl Layout {
                 origin,
                 rotation,
                 axis,
+                axes: None,
                 q0,
                 qd0: 0.0,
                 spring: None,

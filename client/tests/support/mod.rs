@@ -113,7 +113,7 @@ impl TestbedVe {
         let model: Model<Planar> = Model::compile(&scene, "paper-testbed").expect("compiles");
         let data = Data::new(&model);
         let op = model.op_index("link2").expect("op link2");
-        let (n, m) = (model.nq(), model.nc());
+        let (n, m) = (model.nv(), model.nc());
         TestbedVe {
             q: model.q0.clone(),
             qd: model.qd0.clone(),
@@ -151,7 +151,7 @@ impl TestbedVe {
             scene: SceneSummary {
                 name: "paper-testbed".into(),
                 kind: SceneKind::Planar,
-                n: self.model.nq() as u32,
+                n: self.model.nv() as u32,
                 m: self.model.nc() as u32,
                 op_dim: 3,
                 op_name: "link2".into(),

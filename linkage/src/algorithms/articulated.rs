@@ -32,7 +32,7 @@ use crate::model::{Model, NO_PARENT};
 /// Needs `forward_kinematics` (body inertias and motion subspaces). Errors when a pivot is not positive
 /// (a body without inertia along its joint's motion), as `ltl::factor_sum` does.
 pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
-    let n = model.nq();
+    let n = model.nv();
     let kin = &data.kin;
     let articulated = &mut data.articulated_inertia;
     articulated.copy_from_slice(&kin.body_inertia);
@@ -110,7 +110,7 @@ mod tests {
     #[test]
     fn factor_is_ltl_of_the_mass_matrix() {
         fn check<S: Space>(name: &str, model: &Model<S>) {
-            let n = model.nq();
+            let n = model.nv();
             let mut data = Data::new(model);
             for seed in 0..5 {
                 let (q, _) = random_state(model, seed);

@@ -11,6 +11,7 @@
 use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
 
+use crate::algorithms::configuration;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::loop_closure::loop_closure;
 use crate::math::space::Space;
@@ -50,13 +51,11 @@ pub enum AssembleError {
 /// `tolerance / length_scale` (default use: `tolerance = 1e-12 · length_scale`). The residuals reported are
 /// `‖h‖` in the scene's units.
 pub fn assemble<S: Space>(model: &Model<S>, q_start: &DVector<f64>, tolerance: f64) -> Result<Assembly, AssembleError> {
-    if q_start.len() != model.nq() || q_start.iter().any(|x| !x.is_finite()) {
-        return Err(AssembleError::BadStart(format!("expected {} finite numbers", model.nq())));
-    }
+    configuration::check(model, q_start.as_slice()).map_err(AssembleError::BadStart)?;
     let scales = ClosureScales::of(model);
     let mut data = Data::new(model);
     let mut q = q_start.clone();
-    let zero = DVector::zeros(model.nq());
+    let zero = DVector::zeros(model.nv());
     // (‖h‖ read in length scales, ‖h‖ in the scene's units)
     let eval = |data: &mut Data<S>, q: &DVector<f64>| {
         forward_kinematics(model, data, q);
@@ -77,7 +76,8 @@ pub fn assemble<S: Space>(model: &Model<S>, q_start: &DVector<f64>, tolerance: f
         // Halve the step until the residual decreases (robust far from the manifold).
         let mut scale = 1.0;
         loop {
-            let trial = &q - &step * scale;
+            let mut trial = q.clone();
+            configuration::integrate(model, &mut trial, &step, -scale);
             let (r, plain) = eval(&mut data, &trial);
             if r < scaled || scale < 1e-6 {
                 q = trial;
@@ -128,7 +128,7 @@ impl ClosureScales {
             }
         }
         let columns = DVector::from_iterator(
-            model.nq(),
+            model.nv(),
             model.joints.iter().map(|j| if j.kind == JointKind::Prismatic { length } else { 1.0 }),
         );
         ClosureScales { length, rows, columns }

@@ -8,7 +8,7 @@ use crate::model::Model;
 
 /// Fills `data.bias`. Needs `forward_kinematics` and `forward_velocity`.
 pub fn bias_forces<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    let n = model.nq();
+    let n = model.nv();
     let kin = &data.kin;
     for i in 0..n {
         let inertia = &kin.body_inertia[i];

@@ -4,10 +4,13 @@
 //! apart from the model's definition.
 
 mod freedoms;
+mod multi_rate;
+mod multi_rate_keys;
 
 use nalgebra::DVector;
 
 use crate::algorithms::assemble::assemble;
+use crate::algorithms::configuration;
 use crate::algorithms::kinematics::forward_kinematics;
 use crate::algorithms::loop_closure::closure_residual_and_jacobian;
 use crate::error::SceneError;
@@ -19,6 +22,7 @@ use crate::model::scene::{
 use crate::model::{
     Actuator, Attachment, Body, ClosurePrimitive, Cut, Joint, JointKind, Model, Obstacle, OpPoint, Shape, NO_PARENT,
 };
+use multi_rate::Entries;
 
 impl<S: Space> Model<S> {
     /// Validates and compiles a scene; `file` names the source in errors.
@@ -125,20 +129,19 @@ impl<S: Space> Compiler<'_, S> {
         self.check_names()?;
         let file_names: Vec<&str> = sc.bodies.iter().map(|b| b.name.as_str()).collect();
         let tree = self.tree(&file_names)?;
-        let new_index = |file_body: usize| tree.order.iter().position(|&b| b == file_body).unwrap_or(0);
 
-        let mut bodies = Vec::with_capacity(tree.order.len());
-        let mut joints = Vec::with_capacity(tree.order.len());
-        let mut q0 = DVector::zeros(tree.order.len());
-        let mut qd0 = DVector::zeros(tree.order.len());
-        for (i, &fb) in tree.order.iter().enumerate() {
-            bodies.push(self.body(fb)?);
+        // The entry carrying each file body, once placed (parents come first in `tree.order`).
+        let mut entry_of = vec![NO_PARENT; file_names.len()];
+        let mut entries = Entries::with_capacity(tree.order.len());
+        for &fb in &tree.order {
+            let body = self.body(fb)?;
             let ji = tree.carrier[fb].unwrap_or(0);
-            let (joint, q, qd) = self.joint(ji, tree.parent_of[fb].map_or(NO_PARENT, new_index))?;
-            q0[i] = q;
-            qd0[i] = qd;
-            joints.push(joint);
+            let (joint, q, qd) = self.joint(ji, tree.parent_of[fb].map_or(NO_PARENT, |p| entry_of[p]))?;
+            let axes = self.multi_rate_axes(ji)?;
+            entry_of[fb] = entries.push(ji, joint, (q, qd), body, axes);
         }
+        let (q0, qd0) = entries.initial_state();
+        let Entries { bodies, mut joints, file_joint, .. } = entries;
 
         let gravity = self.point("gravity", &sc.gravity, true)?;
         let baumgarte = Baumgarte {
@@ -150,7 +153,7 @@ impl<S: Space> Compiler<'_, S> {
             damping: self.non_negative("contact.damping", sc.contact.damping)?,
         };
         let length_scale = self.length_scale(&bodies)?;
-        self.joint_ranges(&mut joints, tree.order.iter().map(|&fb| tree.carrier[fb].unwrap_or(0)), &q0, length_scale)?;
+        self.joint_ranges(&mut joints, file_joint.into_iter(), &q0, length_scale)?;
         let new_names: Vec<String> = bodies.iter().map(|b| b.name.clone()).collect();
         let new_names: Vec<&str> = new_names.iter().map(|s| s.as_str()).collect();
         let ops = self.ops(&new_names)?;
@@ -307,8 +310,9 @@ impl<S: Space> Compiler<'_, S> {
         let j = &self.scene.joints[ji];
         let jkey = format!("joint[{ji}] ({})", j.name);
         let kind = match j.kind {
-            JointKindSpec::Revolute => JointKind::Revolute,
+            JointKindSpec::Revolute | JointKindSpec::Universal => JointKind::Revolute,
             JointKindSpec::Prismatic => JointKind::Prismatic,
+            JointKindSpec::Ball => JointKind::Ball { slot: 0 },
         };
         let placement_pos = self.point(&format!("{jkey}.origin"), &j.origin, true)?;
         let placement_rot = match &j.rotation {
@@ -326,8 +330,11 @@ impl<S: Space> Compiler<'_, S> {
                     self.invalid(format!("{jkey}.axis"), "planar revolute joints always turn about z; remove `axis`")
                 )
             }
-            (Some(a), _, _) => self.unit(&format!("{jkey}.axis"), a)?,
-            (None, _, _) => S::default_axis(),
+            // Ball and universal joints reject `axis` in `multi_rate_axes`.
+            (Some(a), _, _) if matches!(j.kind, JointKindSpec::Revolute | JointKindSpec::Prismatic) => {
+                self.unit(&format!("{jkey}.axis"), a)?
+            }
+            _ => S::default_axis(),
         };
         let spring = match &j.spring {
             None => None,
@@ -342,6 +349,7 @@ impl<S: Space> Compiler<'_, S> {
         let joint = Joint {
             name: j.name.clone(),
             kind,
+            q_index: 0,
             parent,
             placement_rot,
             placement_pos,
@@ -670,8 +678,9 @@ fn generic_closure_rank<S: Space>(model: &Model<S>) -> usize {
     };
     let mut rank = rank_at(&model.q0);
     for k in 1..=3 {
-        let perturbed =
-            DVector::from_fn(model.nq(), |i, _| model.q0[i] + 0.02 * ((i * 7 + k * 13) % 11) as f64 / 11.0 - 0.01);
+        let step = DVector::from_fn(model.nv(), |i, _| 0.02 * ((i * 7 + k * 13) % 11) as f64 / 11.0 - 0.01);
+        let mut perturbed = model.q0.clone();
+        configuration::integrate(model, &mut perturbed, &step, 1.0);
         if let Ok(a) = assemble(model, &perturbed, 1e-12 * model.length_scale) {
             rank = rank.max(rank_at(&a.q));
         }

@@ -63,8 +63,7 @@ impl<S: Space> Forces<S> for OpWrench<S> {
 
 /// Checks a state's length and finiteness.
 pub fn check_state<S: Space>(model: &Model<S>, q: &DVector<f64>, qd: &DVector<f64>) -> Result<(), DynamicsError> {
-    let n = model.nq();
-    for (what, v) in [("q", q), ("q̇", qd)] {
+    for (what, v, n) in [("q", q, model.nq()), ("q̇", qd, model.nv())] {
         if v.len() != n {
             return Err(DynamicsError::WrongLength { what, got: v.len(), expected: n });
         }
@@ -136,8 +135,8 @@ mod tests {
 
     /// `(q̈, λ)` of the last solve.
     fn solved<S: Space>(model: &Model<S>, data: &Data<S>) -> DVector<f64> {
-        let mut out = data.qdd.clone().resize_vertically(model.nq() + model.nc(), 0.0);
-        out.rows_mut(model.nq(), model.nc()).copy_from(&data.lambda);
+        let mut out = data.qdd.clone().resize_vertically(model.nv() + model.nc(), 0.0);
+        out.rows_mut(model.nv(), model.nc()).copy_from(&data.lambda);
         out
     }
 
@@ -213,7 +212,7 @@ mod tests {
     fn the_constrained_response_is_what_a_force_adds_to_the_solve() {
         crate::testing::for_each_model!(name, model => {
             let (q, qd) = random_state(model, 5);
-            let n = model.nq();
+            let n = model.nv();
             let tau = DVector::from_fn(n, |i, _| ((i * 7 + 3) % 5) as f64 - 2.0);
             let mut data = Data::new(model);
             forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();

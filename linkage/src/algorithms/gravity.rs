@@ -11,7 +11,7 @@ use crate::model::Model;
 
 /// Fills `data.gravity` with G(q) (so that `D q̈ + B + G = τ`). Needs `forward_kinematics`.
 pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
-    let n = model.nq();
+    let n = model.nv();
     if model.has_gravity {
         for i in 0..n {
             // The weight m g acting at the COM, as a spatial force about the world origin.
@@ -26,7 +26,7 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
     if model.has_springs {
         for (i, joint) in model.joints.iter().enumerate() {
             if let Some(spring) = joint.spring {
-                data.gravity[i] += spring.stiffness * (q[i] - spring.rest);
+                data.gravity[i] += spring.stiffness * (q[joint.q_index] - spring.rest);
             }
         }
         add_cut_springs(model, &data.kin, &mut data.gravity);
@@ -40,9 +40,9 @@ pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<
     for (i, body) in model.bodies.iter().enumerate() {
         e -= body.mass * model.gravity.dot(&data.kin.com[i]);
     }
-    for (i, joint) in model.joints.iter().enumerate() {
+    for joint in &model.joints {
         if let Some(s) = joint.spring {
-            e += 0.5 * s.stiffness * (q[i] - s.rest).powi(2);
+            e += 0.5 * s.stiffness * (q[joint.q_index] - s.rest).powi(2);
         }
     }
     e + cut_spring_energy(model, &data.kin) + limit_wall_energy(model, &data.kin, q)
@@ -50,7 +50,7 @@ pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<
 
 /// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ` at the state of the last `forward_velocity`.
 pub fn kinetic_energy<S: Space>(model: &Model<S>, data: &Data<S>) -> f64 {
-    (0..model.nq())
+    (0..model.nv())
         .map(|i| {
             let v = &data.kin.body_velocity[i];
             0.5 * v.dot(&S::inertia_mul(&data.kin.body_inertia[i], v))

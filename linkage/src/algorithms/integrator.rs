@@ -3,6 +3,7 @@
 
 use nalgebra::DVector;
 
+use crate::algorithms::configuration;
 use crate::algorithms::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
 use crate::algorithms::kinematics::forward_poses;
 use crate::algorithms::kkt;
@@ -11,9 +12,10 @@ use crate::algorithms::ltl;
 use crate::error::DynamicsError;
 use crate::math::dense::{self, by_size, dot, sub_scaled};
 use crate::math::kkt_small;
+use crate::math::quaternion;
 use crate::math::space::Space;
 use crate::model::data::Data;
-use crate::model::Model;
+use crate::model::{JointKind, Model};
 
 /// Which integration scheme.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -115,9 +117,9 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             kkt::solve(model, data)?;
             if cfg.integrator == Integrator::SemiImplicitEuler {
                 add_scaled(qd, dt, &data.qdd);
-                add_scaled(q, dt, qd);
+                advance(model, q, dt, qd);
             } else {
-                add_scaled(q, dt, qd);
+                advance(model, q, dt, qd);
                 add_scaled(qd, dt, &data.qdd);
             }
         }
@@ -131,7 +133,7 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
                 q_stage.copy_from(&data.integ.q_start);
                 qd_stage.copy_from(&data.integ.qd_start);
                 if stage > 0 {
-                    q_stage.axpy(c * dt, &data.integ.k_q[stage - 1], 1.0);
+                    advance(model, &mut q_stage, c * dt, &data.integ.k_q[stage - 1]);
                     qd_stage.axpy(c * dt, &data.integ.k_qd[stage - 1], 1.0);
                 }
                 let solved = (|| {
@@ -143,14 +145,31 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
                     kkt::solve(model, data)
                 })();
                 data.integ.k_q[stage].copy_from(&qd_stage);
+                if model.has_balls() && stage > 0 {
+                    let mut theta = std::mem::replace(&mut data.integ.dq, DVector::zeros(0));
+                    theta.copy_from(&data.integ.k_q[stage - 1]);
+                    ball_rates(model, &theta, c * dt, &mut data.integ.k_q[stage]);
+                    data.integ.dq = theta;
+                }
                 data.integ.k_qd[stage].copy_from(&data.qdd);
                 put_stage(data, q_stage, qd_stage);
                 solved?;
             }
-            let ws = &data.integ;
-            for i in 0..model.nq() {
-                q[i] =
-                    ws.q_start[i] + dt / 6.0 * (ws.k_q[0][i] + 2.0 * ws.k_q[1][i] + 2.0 * ws.k_q[2][i] + ws.k_q[3][i]);
+            let ws = &mut data.integ;
+            if model.has_balls() {
+                // RKMK: the weighted stage rates, all in the tangent space at the step's start, applied once.
+                for i in 0..model.nv() {
+                    ws.dq[i] = ws.k_q[0][i] + 2.0 * ws.k_q[1][i] + 2.0 * ws.k_q[2][i] + ws.k_q[3][i];
+                }
+                q.copy_from(&ws.q_start);
+                configuration::integrate(model, q, &ws.dq, dt / 6.0);
+            } else {
+                for i in 0..model.nv() {
+                    q[i] = ws.q_start[i]
+                        + dt / 6.0 * (ws.k_q[0][i] + 2.0 * ws.k_q[1][i] + 2.0 * ws.k_q[2][i] + ws.k_q[3][i]);
+                }
+            }
+            for i in 0..model.nv() {
                 qd[i] = ws.qd_start[i]
                     + dt / 6.0 * (ws.k_qd[0][i] + 2.0 * ws.k_qd[1][i] + 2.0 * ws.k_qd[2][i] + ws.k_qd[3][i]);
             }
@@ -166,6 +185,31 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
         return Err(DynamicsError::NonFiniteResult { what: "state after the step" });
     }
     Ok(report)
+}
+
+/// `q ← q ⊕ h v` (see `configuration::integrate`; a plain `axpy` without ball joints).
+fn advance<S: Space>(model: &Model<S>, q: &mut DVector<f64>, h: f64, v: &DVector<f64>) {
+    if model.has_balls() {
+        configuration::integrate(model, q, v, h);
+    } else {
+        add_scaled(q, h, v);
+    }
+}
+
+/// RK4 on the ball joints' spheres as Runge-Kutta-Munthe-Kaas: a stage at `q_start ⊕ θ`, `θ = c dt k`,
+/// turns at the body rate ω = q̇; what it contributes to the step is the rate of θ, `J_r⁻¹(θ) ω`
+/// (`math::quaternion`), which keeps the scheme fourth order (plain ω would leave an `O(dt²)` commutator per
+/// step). `theta` holds the previous stage's rates, scaled here by `c dt`; `rates` holds ω and is converted
+/// in place on the ball joints' entries.
+fn ball_rates<S: Space>(model: &Model<S>, theta: &DVector<f64>, c_dt: f64, rates: &mut DVector<f64>) {
+    for (i, joint) in model.joints.iter().enumerate() {
+        if matches!(joint.kind, JointKind::Ball { slot: 0 }) {
+            let t = nalgebra::Vector3::new(theta[i], theta[i + 1], theta[i + 2]) * c_dt;
+            let w = nalgebra::Vector3::new(rates[i], rates[i + 1], rates[i + 2]);
+            let r = quaternion::right_jacobian_inv_mul(&t, &w);
+            rates.as_mut_slice()[i..i + 3].copy_from_slice(r.as_slice());
+        }
+    }
 }
 
 /// `x ← x + h v`.
@@ -267,7 +311,7 @@ fn project_once<S: Space>(
 ) -> Projection {
     forward_poses(model, data, q);
     closure_residual_and_jacobian(model, data);
-    let n = model.nq();
+    let n = model.nv();
     let kkt = &mut data.kkt;
     // (`factor_closures` needs tmp_m, `schur_solve` tmp_m2.)
     let mut r_q = std::mem::replace(&mut kkt.tmp_m3, DVector::zeros(0));
@@ -339,7 +383,27 @@ pub(crate) fn correct<S: Space>(
     q: &mut DVector<f64>,
     qd: &mut DVector<f64>,
 ) {
-    by_size!(model.nq(), N => {
+    if model.has_balls() {
+        // The correction is a displacement in velocity coordinates: gather it, then turn q by it.
+        let mut dq = std::mem::replace(&mut data.integ.dq, DVector::zeros(0));
+        dense::zero(dq.as_mut_slice());
+        correct_small_or_general(model, data, r_q, r_v, &mut dq, qd);
+        configuration::integrate(model, q, &dq, 1.0);
+        data.integ.dq = dq;
+    } else {
+        correct_small_or_general(model, data, r_q, r_v, q, qd);
+    }
+}
+
+fn correct_small_or_general<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    r_q: &mut DVector<f64>,
+    r_v: &mut DVector<f64>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+) {
+    by_size!(model.nv(), N => {
         let mut s = std::mem::replace(&mut data.kkt.tmp_m, DVector::zeros(0));
         let (r, x) = ([r_q.as_mut_slice(), r_v.as_mut_slice()], [q.as_mut_slice(), qd.as_mut_slice()]);
         kkt_small::correct::<N>(&data.kkt, data.closure_jacobian_t.as_slice(), r, x, s.as_mut_slice());
@@ -356,7 +420,7 @@ pub(crate) fn correct_general<S: Space>(
     q: &mut DVector<f64>,
     qd: &mut DVector<f64>,
 ) {
-    let n = model.nq();
+    let n = model.nv();
     let kkt = &mut data.kkt;
     dense::zero(kkt.tmp_n2.as_mut_slice());
     // t = -Z S⁺ r per right-hand side (S⁺ on a copy: r is updated below), then U⁻ᵀ t for both together.
@@ -395,7 +459,7 @@ mod tests {
         let mut data = Data::new(model);
         forward_poses(model, &mut data, q);
         closure_residual_and_jacobian(model, &mut data);
-        let n = model.nq();
+        let n = model.nv();
         let w_qd = data.closure_jacobian_t.as_slice().chunks_exact(n).map(|c| dot(c, qd.as_slice()).powi(2));
         (data.closure_residual.norm(), w_qd.sum::<f64>().sqrt())
     }
@@ -410,7 +474,7 @@ mod tests {
         let mut data = Data::new(model);
         let mut q = model.q0.clone();
         // A velocity on the manifold: project a raw one at q0 (the exact Newton step, factors at q0).
-        let mut qd = DVector::from_fn(model.nq(), |i, _| speed * [1.0, -0.4, 0.7, 0.2][i]);
+        let mut qd = DVector::from_fn(model.nv(), |i, _| speed * [1.0, -0.4, 0.7, 0.2][i]);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
         project(model, &mut data, &mut q.clone(), &mut qd);
         forward_dynamics(model, &mut data, &q, &qd, &mut ()).unwrap();
@@ -504,7 +568,7 @@ mod tests {
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         let mut compared = 0;
         for_each_model!(name, model => {
-            if model.nq() <= 8 && model.nc() > 0 {
+            if model.nv() <= 8 && model.nc() > 0 {
                 for seed in 0..5 {
                     let (q, qd) = random_state(model, seed);
                     let mut small = Data::new(model);

@@ -112,7 +112,7 @@ mod tests {
 
     fn check_frame_jacobian<S: Space>(name: &str, model: &Model<S>) {
         let mut data = Data::new(model);
-        let n = model.nq();
+        let n = model.nv();
         for seed in 0..3 {
             let (q, qd) = random_state(model, seed);
             for body in 0..n {

@@ -20,7 +20,7 @@ pub fn joint_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<
     for (i, joint) in model.joints.iter().enumerate() {
         let mut tau = -joint.damping * qd[i];
         if let Some(a) = joint.actuator {
-            tau += (a.kp * (a.target - q[i]) - a.kd * qd[i]).clamp(-a.max_effort, a.max_effort);
+            tau += (a.kp * (a.target - q[joint.q_index]) - a.kd * qd[i]).clamp(-a.max_effort, a.max_effort);
         }
         data.joint_force[i] = tau;
     }

@@ -41,7 +41,7 @@ pub fn add_limit_walls<S: Space>(
 ) {
     for (i, joint) in model.joints.iter().enumerate() {
         if let Some(range) = &joint.range {
-            tau[i] += wall_force(range, q[i], qd[i]);
+            tau[i] += wall_force(range, q[joint.q_index], qd[i]);
         }
     }
     for cut in &model.cuts {
@@ -56,8 +56,7 @@ pub fn add_limit_walls<S: Space>(
 
 /// Energy held by every range wall at `q`, whose positions are in `kin`.
 pub fn limit_wall_energy<S: Space>(model: &Model<S>, kin: &Kinematics<S>, q: &DVector<f64>) -> f64 {
-    let joints: f64 =
-        model.joints.iter().enumerate().filter_map(|(i, j)| j.range.as_ref().map(|r| wall_energy(r, q[i]))).sum();
+    let joints: f64 = model.joints.iter().filter_map(|j| j.range.as_ref().map(|r| wall_energy(r, q[j.q_index]))).sum();
     let cuts: f64 = model
         .cuts
         .iter()

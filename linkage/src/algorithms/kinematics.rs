@@ -41,10 +41,10 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
         };
         let frame_rot = S::rot_mul(&parent_rot, &joint.placement_rot);
         let origin = parent_pos + S::rotate(&parent_rot, &joint.placement_pos);
-        let axis_world = S::rotate(&frame_rot, &joint.axis);
         match joint.kind {
             JointKind::Revolute => {
-                let (sin, cos) = kin.sin_cos[i].eval(q[i]);
+                let axis_world = S::rotate(&frame_rot, &joint.axis);
+                let (sin, cos) = kin.sin_cos[i].eval(q[joint.q_index]);
                 let rot = S::rot_mul(&frame_rot, &S::rot_about_axis(&joint.axis, cos, sin));
                 kin.body_rot[i] = rot;
                 kin.body_pos[i] = origin;
@@ -54,11 +54,26 @@ pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector
                 kin.motion_subspace[i] = S::spatial(w, -S::ang_cross_point(&w, &origin));
             }
             JointKind::Prismatic => {
-                let pos = origin + axis_world * q[i];
+                let axis_world = S::rotate(&frame_rot, &joint.axis);
+                let pos = origin + axis_world * q[joint.q_index];
                 kin.body_rot[i] = frame_rot;
                 kin.body_pos[i] = pos;
                 previous = (frame_rot, pos);
                 kin.motion_subspace[i] = S::spatial(S::Angular::zero(), axis_world);
+            }
+            JointKind::Ball { slot } => {
+                // Slot 0 turns the joint frame by the quaternion; slots 1 and 2 hang from it with an identity
+                // placement and share its pose. Rate k turns the body about its own axis k, through the centre.
+                let rot = if slot == 0 {
+                    S::rot_mul(&frame_rot, &S::rot_from_quaternion(&q[joint.q_index..joint.q_index + 4]))
+                } else {
+                    frame_rot
+                };
+                kin.body_rot[i] = rot;
+                kin.body_pos[i] = origin;
+                previous = (rot, origin);
+                let w = S::axis_as_angular(&S::rotate(&rot, &joint.axis));
+                kin.motion_subspace[i] = S::spatial(w, -S::ang_cross_point(&w, &origin));
             }
         }
     }
@@ -72,6 +87,8 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
     let qd = qd.as_slice();
     // Joint i - 1's values in registers for a child that follows its parent (see `forward_poses`).
     let mut previous = (S::Spatial::zero(), S::Spatial::zero());
+    // The velocity of the body a ball joint hangs from, set at its slot 0 (slots 1 and 2 follow at once).
+    let mut ball_parent_velocity = S::Spatial::zero();
     for (i, joint) in model.joints.iter().enumerate() {
         let (v_parent, a_parent) = if follows_parent(joint.parent, i) {
             previous
@@ -82,8 +99,18 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
         };
         let s_qd = kin.motion_subspace[i] * qd[i];
         let v = v_parent + s_qd;
-        // In the world frame Ṡ_i = v_i × S_i (the axis moves with the body that carries it).
-        let a = a_parent + S::cross_motion(&v, &s_qd);
+        // In the world frame Ṡ_i = v_i × S_i (the axis moves with the body that carries it). A ball joint's
+        // three axes are all fixed in its child: Σ_k Ṡ_k q̇_k = v_child × ω_rel = v_parent × ω_rel, as
+        // ω_rel × ω_rel = 0; so each slot adds v_parent × S_k q̇_k (not its internal body's partial velocity).
+        let carrier = match joint.kind {
+            JointKind::Revolute | JointKind::Prismatic => v,
+            JointKind::Ball { slot: 0 } => {
+                ball_parent_velocity = v_parent;
+                v
+            }
+            JointKind::Ball { .. } => ball_parent_velocity,
+        };
+        let a = a_parent + S::cross_motion(&carrier, &s_qd);
         kin.body_velocity[i] = v;
         kin.bias_acceleration[i] = a;
         previous = (v, a);
@@ -114,12 +141,12 @@ mod tests {
         forward_kinematics(&model, &mut data, &q);
         forward_velocity(&model, &mut data, &qd);
         let coms = data.kin.com.clone();
-        let velocities: Vec<_> = (0..model.nq()).map(|i| data.kin.point_velocity(Some(i), &coms[i])).collect();
+        let velocities: Vec<_> = (0..model.nv()).map(|i| data.kin.point_velocity(Some(i), &coms[i])).collect();
         let h = 1e-7;
         forward_kinematics(&model, &mut data, &(&q + &qd * h));
         let plus = data.kin.com.clone();
         forward_kinematics(&model, &mut data, &(&q - &qd * h));
-        for i in 0..model.nq() {
+        for i in 0..model.nv() {
             let fd = (plus[i] - data.kin.com[i]) / (2.0 * h);
             assert!((fd - velocities[i]).norm() < 1e-7, "body {i}: {fd} vs {}", velocities[i]);
         }

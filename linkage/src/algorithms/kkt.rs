@@ -60,7 +60,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     if m == 0 {
         return;
     }
-    let n = model.nq();
+    let n = model.nv();
     by_size!(n, N => kkt_small::z_and_schur::<N>(&mut data.kkt, data.closure_jacobian_t.as_slice(), m),
         _ => z_and_schur_general(model, data));
     let kkt = &mut data.kkt;
@@ -78,7 +78,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
 /// `Z = U⁻¹ Wᵀ` and `S = Zᵀ Z` for any n (models of at most 8 joints take `kkt_small`, with the same
 /// results), with the supports `z_rows`.
 pub(crate) fn z_and_schur_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    let (n, m) = (model.nq(), model.nc());
+    let (n, m) = (model.nv(), model.nc());
     let kkt = &mut data.kkt;
     dense::copy(kkt.z.as_mut_slice(), data.closure_jacobian_t.as_slice());
     let z = kkt.z.as_mut_slice();
@@ -158,7 +158,7 @@ pub fn schur_solve<S: Space>(data: &mut Data<S>, r: &mut DVector<f64>) {
 /// With `y = U⁻¹ τ`: `λ = S⁺ (Zᵀ y + w_stab)` (= `S⁺ (W q̈_free + w_stab)`) and `q̈ = U⁻ᵀ (y - Z λ)`
 /// (= `q̈_free - D⁻¹ Wᵀ λ`): one solve with U and one with Uᵀ.
 pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), DynamicsError> {
-    by_size!(model.nq(), N => {
+    by_size!(model.nv(), N => {
         let column = |v: &DVector<f64>| -> [f64; N] { v.as_slice()[..N].try_into().expect("n entries") };
         let (a, f, b, g) = (column(&data.applied), column(&data.joint_force), column(&data.bias), column(&data.gravity));
         let tau = std::array::from_fn(|i| a[i] + f[i] - b[i] - g[i]);
@@ -177,7 +177,7 @@ pub fn solve<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dynam
 /// adding `τ` to the applied forces adds to a [`solve`] at the same state, eq 4 being linear in them.
 /// Needs [`factorize`]. `x` holds τ (n entries) on entry and q̈ on return; `scratch` has at least 2m entries.
 pub fn constrained_response<S: Space>(model: &Model<S>, data: &Data<S>, x: &mut [f64], scratch: &mut [f64]) {
-    let (n, m) = (model.nq(), model.nc());
+    let (n, m) = (model.nv(), model.nc());
     let (zeros, lambda) = scratch[..2 * m].split_at_mut(m);
     zeros.fill(0.0);
     by_size!(n, N => {
@@ -199,7 +199,7 @@ pub fn constrained_response<S: Space>(model: &Model<S>, data: &Data<S>, x: &mut 
 
 /// [`solve`] for any n (models of at most 8 joints take `kkt_small`, with the same results).
 pub(crate) fn solve_general<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    let n = model.nq();
+    let n = model.nv();
     let tau = data.applied.as_slice().iter().zip(data.joint_force.as_slice()).zip(data.bias.as_slice());
     for ((x, ((a, f), b)), g) in data.qdd.as_mut_slice().iter_mut().zip(tau).zip(data.gravity.as_slice()) {
         *x = a + f - b - g;

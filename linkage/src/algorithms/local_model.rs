@@ -196,10 +196,15 @@ pub struct ConfigSpaceTerms {
 }
 
 impl ConfigSpaceTerms {
-    /// Zeroed terms for n joints, m closure rows, k operational dimensions.
+    /// Zeroed terms for n joints, m closure rows, k operational dimensions (nq = nv = n: no ball joints).
     pub fn zeros(n: usize, m: usize, k: usize) -> Self {
+        Self::zeros_nq(n, n, m, k)
+    }
+
+    /// Zeroed terms for nq configuration and n velocity coordinates (ball joints: nq > n).
+    pub fn zeros_nq(nq: usize, n: usize, m: usize, k: usize) -> Self {
         ConfigSpaceTerms {
-            q: DVector::zeros(n),
+            q: DVector::zeros(nq),
             qd: DVector::zeros(n),
             mass_matrix: DMatrix::zeros(n, n),
             closure_jacobian: DMatrix::zeros(m, n),
@@ -231,7 +236,7 @@ impl ConfigSpaceTerms {
         data.op.jacobian_t.transpose_to(&mut self.op_jacobian);
         if terms.bias {
             self.closure_bias_stab.copy_from(&data.closure_bias_stab);
-            for i in 0..model.nq() {
+            for i in 0..model.nv() {
                 self.generalized_bias[i] = data.bias[i] + data.gravity[i] - data.joint_force[i] - data.applied[i];
             }
             // The user's own wrench is part of `applied`; give it back (the local model applies it itself).
@@ -269,7 +274,7 @@ pub struct ConfigSpaceLocalModel<S: Space> {
     tmp_n: DVector<f64>,
     tmp_m: DVector<f64>,
     tmp_m2: DVector<f64>,
-    /// Local joint positions.
+    /// Local joint positions (nq).
     pub q: DVector<f64>,
     /// Local joint velocities.
     pub qd: DVector<f64>,
@@ -282,9 +287,14 @@ pub struct ConfigSpaceLocalModel<S: Space> {
 impl<S: Space> ConfigSpaceLocalModel<S> {
     /// Allocates for n joints and m closure rows.
     pub fn new(n: usize, m: usize) -> Self {
+        Self::new_nq(n, n, m)
+    }
+
+    /// Allocates for nq configuration and n velocity coordinates (ball joints: nq > n) and m closure rows.
+    pub fn new_nq(nq: usize, n: usize, m: usize) -> Self {
         let k = S::DIM;
         ConfigSpaceLocalModel {
-            terms: ConfigSpaceTerms::zeros(n, m, k),
+            terms: ConfigSpaceTerms::zeros_nq(nq, n, m, k),
             factor: DMatrix::zeros(n, n),
             z: DMatrix::zeros(n, m),
             schur: DMatrix::zeros(m, m),
@@ -297,7 +307,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
             tmp_n: DVector::zeros(n),
             tmp_m: DVector::zeros(m),
             tmp_m2: DVector::zeros(m),
-            q: DVector::zeros(n),
+            q: DVector::zeros(nq),
             qd: DVector::zeros(n),
             pose: OpPose::identity(),
             twist: S::OpVec::zero(),
@@ -312,8 +322,12 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
     /// Takes new frozen terms and resets the local state to them (q, q̇ and the OP pose `pose`).
     /// Returns false (keeping the previous terms) if D̂ is not positive definite or sizes differ.
     pub fn update(&mut self, terms: &ConfigSpaceTerms, pose: OpPose<S>) -> bool {
-        let (n, m) = (self.q.len(), self.tmp_m.len());
-        if terms.q.len() != n || terms.closure_bias_stab.len() != m || terms.op_bias.len() != S::DIM {
+        let (n, m) = (self.qd.len(), self.tmp_m.len());
+        if terms.q.len() != self.q.len()
+            || terms.qd.len() != n
+            || terms.closure_bias_stab.len() != m
+            || terms.op_bias.len() != S::DIM
+        {
             return false;
         }
         self.factor.copy_from(&terms.mass_matrix);
@@ -367,7 +381,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
 
     /// `tmp_n ← q̈` solving `D̂ q̈ + Ŵᵀ λ = tmp_n`, `Ŵ q̈ = -closure_weight · ŵ_stab`.
     fn constrained_solve(&mut self, closure_weight: f64) {
-        let n = self.q.len();
+        let n = self.qd.len();
         dense::solve_lower(&self.factor, self.tmp_n.as_mut_slice());
         if self.tmp_m.is_empty() {
             dense::solve_lower_t(&self.factor, self.tmp_n.as_mut_slice());
@@ -400,7 +414,11 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
             acc[c] = row_dot(&self.terms.op_jacobian, c, &self.tmp_n) + self.terms.op_bias[c];
         }
         self.qd.axpy(dt, &self.tmp_n, 1.0);
-        self.q.axpy(dt, &self.qd, 1.0);
+        // With ball joints (q longer than q̇) the frozen terms carry no joint layout to turn quaternions by:
+        // q stays at the update's, and what is rendered, the OP pose, comes from the twist as always.
+        if self.q.len() == self.qd.len() {
+            self.q.axpy(dt, &self.qd, 1.0);
+        }
         // The OP twist is integrated from ẍ (not recomputed as Ĵ q̇) so that the frozen J̇q̇ counts, exactly
         // as in the reduced form.
         self.twist += acc * dt;

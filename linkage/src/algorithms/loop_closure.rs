@@ -314,8 +314,8 @@ mod tests {
                 );
             }
             // Column by column too (catches errors that cancel along q̇).
-            for j in 0..model.nq() {
-                let mut e = DVector::zeros(model.nq());
+            for j in 0..model.nv() {
+                let mut e = DVector::zeros(model.nv());
                 e[j] = hstep;
                 let (hp, _, _) = eval(&mut data, &(&q + &e));
                 let (hm, _, _) = eval(&mut data, &(&q - &e));

@@ -465,7 +465,7 @@ mod tests {
     }
 
     fn check<S: Space>(name: &str, model: &Model<S>) {
-        let n = model.nq();
+        let n = model.nv();
         let mut data = Data::new(model);
         let (q, _) = random_state(model, 3);
         forward_kinematics(model, &mut data, &q);
@@ -518,7 +518,7 @@ mod tests {
     /// The blocked multi-column solves agree with the reference solves, for 1 to 7 columns and supports
     /// ending at every body.
     fn check_columns<S: Space>(name: &str, model: &Model<S>, u: &DMatrix<f64>) {
-        let n = model.nq();
+        let n = model.nv();
         let mut inv = vec![0.0; n];
         inverse_diagonal(u, &mut inv);
         for cols in 1..=7 {

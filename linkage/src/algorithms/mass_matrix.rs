@@ -19,7 +19,7 @@ pub fn ensure<S: Space>(model: &Model<S>, data: &mut Data<S>) {
 
 /// Fills `data.mass_matrix` (symmetric, n×n). Needs `forward_kinematics`.
 pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
-    let n = model.nq();
+    let n = model.nv();
     let composite = &mut data.composite_inertia;
     composite.copy_from_slice(&data.kin.body_inertia);
     subtree_sums(model, composite, |_, _| ());

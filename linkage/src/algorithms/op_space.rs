@@ -63,7 +63,7 @@ pub fn frame_point_inertia<S: Space>(
     body: usize,
     p: &S::Point,
 ) -> Result<(), DynamicsError> {
-    let n = model.nq();
+    let n = model.nv();
     let ws = &mut data.op;
     // Jᵀ is built in Y, which the solve then overwrites, and copied to `jacobian_t` beside the solve: the other
     // way round the solve waited for a copy that reloads the Jacobian's just-written entries.
@@ -112,7 +112,7 @@ pub fn frame_point_inertia<S: Space>(
 /// Λ⁻¹ with the loops cut open, `J D⁻¹ Jᵀ = Yᵀ Y`, from the Y of the last [`op_space_inertia`] or
 /// [`frame_point_inertia`].
 pub fn open_inverse_inertia<S: Space>(model: &Model<S>, data: &Data<S>) -> S::OpMat {
-    let n = model.nq();
+    let n = model.nv();
     gram::<S>(data.op.y.as_slice(), n, n)
 }
 

@@ -147,9 +147,9 @@ pub enum SurveyError {
 /// joint by a comparable amount.
 fn joint_weights<S: Space>(model: &Model<S>) -> DVector<f64> {
     DVector::from_iterator(
-        model.nq(),
+        model.nv(),
         model.joints.iter().map(|j| match j.kind {
-            JointKind::Revolute => 1.0,
+            JointKind::Revolute | JointKind::Ball { .. } => 1.0,
             JointKind::Prismatic => 1.0 / model.length_scale,
         }),
     )
@@ -198,7 +198,8 @@ fn close<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &mut DVector<f64>, z
         let Ok(step) = scales.newton_step(&data.closure_jacobian(), &data.closure_residual) else {
             return false;
         };
-        let trial = &*q - step;
+        let mut trial = q.clone();
+        crate::algorithms::configuration::integrate(model, &mut trial, &step, -1.0);
         residual(model, data, &trial, zero);
         let r_trial = scales.residual(&data.closure_residual);
         // No smaller (a NaN residual included): the step does not help.
@@ -300,9 +301,8 @@ impl<S: Space> Walker<'_, S> {
         }
         let tangent = tangent / norm;
         let mut trial = q.clone();
-        for i in 0..trial.len() {
-            trial[i] += length * tangent[i] / self.weights[i];
-        }
+        let displacement = tangent.component_div(&self.weights) * length;
+        crate::algorithms::configuration::integrate(self.model, &mut trial, &displacement, 1.0);
         if !close(self.model, &mut self.data, &mut trial, &self.zero) {
             return None;
         }
@@ -326,7 +326,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     if op >= model.ops.len() {
         return Err(SurveyError::UnknownOp { index: op, count: model.ops.len() });
     }
-    let n = model.nq();
+    let n = model.nv();
     let mut walker = Walker {
         model,
         data: Data::new(model),

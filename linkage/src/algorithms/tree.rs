@@ -25,7 +25,7 @@ pub(crate) fn subtree_sums<S: Space, T: Copy + std::ops::AddAssign>(
     mut visit: impl FnMut(usize, &T),
 ) {
     let mut from_next: Option<T> = None;
-    for i in (0..model.nq()).rev() {
+    for i in (0..model.nv()).rev() {
         let mut total = parts[i];
         if let Some(child) = from_next.take() {
             total += child;

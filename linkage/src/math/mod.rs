@@ -8,6 +8,7 @@ pub mod eigen;
 pub(crate) mod kkt_factors;
 pub(crate) mod kkt_small;
 pub(crate) mod ltl_small;
+pub mod quaternion;
 #[doc(hidden)]
 pub mod rng;
 pub(crate) mod simd;

@@ -91,6 +91,7 @@ pub fn chain(links: usize, loops: usize) -> Scene {
             origin: if i == 0 { vec![0.0, 0.0] } else { vec![LENGTH, 0.0] },
             rotation: None,
             axis: None,
+            axes: None,
             q0: if i == 0 {
                 0.3
             } else if i % 2 == 0 {

@@ -119,7 +119,8 @@ pub struct IntegratorWorkspace {
     pub q_start: DVector<f64>,
     /// Saved velocity at the start of a step.
     pub qd_start: DVector<f64>,
-    /// RK4 stage velocities.
+    /// RK4 stage rates of q in the tangent space at the step's start (q̇ itself but for ball joints, whose
+    /// entries are the rotation vector's rate, see `integrator`), nv each.
     pub k_q: [DVector<f64>; 4],
     /// RK4 stage accelerations.
     pub k_qd: [DVector<f64>; 4],
@@ -127,6 +128,9 @@ pub struct IntegratorWorkspace {
     pub q_stage: DVector<f64>,
     /// Scratch velocity.
     pub qd_stage: DVector<f64>,
+    /// Scratch tangent displacement (nv) for models with ball joints: a correction or step in velocity
+    /// coordinates, applied to q by `integrator::integrate`.
+    pub dq: DVector<f64>,
 }
 
 /// Everything the algorithms compute, preallocated.
@@ -195,8 +199,8 @@ pub(crate) struct TermsMemo {
 }
 
 impl TermsMemo {
-    fn new(n: usize) -> Self {
-        TermsMemo { q: DVector::zeros(n), qd: DVector::zeros(n), valid: false }
+    fn new(nq: usize, nv: usize) -> Self {
+        TermsMemo { q: DVector::zeros(nq), qd: DVector::zeros(nv), valid: false }
     }
 
     /// True when the terms were evaluated at exactly `(q, q̇)` and nothing has touched them since.
@@ -224,7 +228,8 @@ impl TermsMemo {
 impl<S: Space> Data<S> {
     /// Allocates every buffer for `model`.
     pub fn new(model: &Model<S>) -> Self {
-        let n = model.nq();
+        let n = model.nv();
+        let nq = model.nq();
         let m = model.nc();
         let k = S::DIM;
         Data {
@@ -241,7 +246,7 @@ impl<S: Space> Data<S> {
             applied: DVector::zeros(n),
             implicit_mass: DMatrix::zeros(n, n),
             use_implicit_mass: false,
-            terms_at: TermsMemo::new(n),
+            terms_at: TermsMemo::new(nq, n),
             closure_residual: DVector::zeros(m),
             closure_jacobian_t: DMatrix::zeros(n, m),
             closure_bias: DVector::zeros(m),
@@ -258,12 +263,13 @@ impl<S: Space> Data<S> {
                 inverse_inertia: S::OpMat::zero(),
             },
             integ: IntegratorWorkspace {
-                q_start: DVector::zeros(n),
+                q_start: DVector::zeros(nq),
                 qd_start: DVector::zeros(n),
                 k_q: std::array::from_fn(|_| DVector::zeros(n)),
                 k_qd: std::array::from_fn(|_| DVector::zeros(n)),
-                q_stage: DVector::zeros(n),
+                q_stage: DVector::zeros(nq),
                 qd_stage: DVector::zeros(n),
+                dq: DVector::zeros(n),
             },
         }
     }

@@ -5,13 +5,15 @@
 //! `error`).
 //!
 //! Bodies are stored in topological order (every parent before its children); body `i` is moved by tree
-//! joint `i`, so `q[i]` is the position of the joint that carries body `i`. The order follows the file's
+//! joint `i`, so `q̇[i]` is the rate of the joint that carries body `i` and `q[joints[i].q_index]` its
+//! position (a ball joint's three entries share a quaternion, see [`JointKind::Ball`]). The order follows the file's
 //! `[[joint]]` order wherever that is already topological.
 
 use nalgebra::DVector;
 
 pub mod builtin;
 pub mod data;
+pub mod revolute_built;
 pub mod scene;
 
 use crate::math::space::{SceneKind, Space, VecOps};
@@ -27,6 +29,15 @@ pub enum JointKind {
     Revolute,
     /// Translation along the axis.
     Prismatic,
+    /// One of the three rotation rates of a ball (spherical) joint, about body axis `slot` (0, 1, 2). A ball
+    /// joint is three consecutive entries sharing one unit quaternion `(w, x, y, z)` at
+    /// `q[q_index..q_index + 4]` (nq = 4, nv = 3, as in Pinocchio and MuJoCo: no gimbal singularity). Its
+    /// velocity is the body's angular velocity relative to the joint frame, in body axes; slots 0 and 1 carry
+    /// massless internal bodies with the pose of slot 2's body, which is the scene's child body.
+    Ball {
+        /// Body axis of this rate: 0, 1 or 2.
+        slot: usize,
+    },
 }
 
 /// A spring on a joint: `τ = -stiffness (q - rest)`.
@@ -69,8 +80,11 @@ pub struct Actuator {
 pub struct Joint<S: Space> {
     /// Name from the scene.
     pub name: String,
-    /// Revolute or prismatic.
+    /// Revolute, prismatic or one rate of a ball joint.
     pub kind: JointKind,
+    /// Where this joint's position starts in q: equal to the joint's index (its velocity's) until the first
+    /// ball joint, whose quaternion takes one coordinate more than its three rates.
+    pub q_index: usize,
     /// Index of the parent body, or [`NO_PARENT`].
     pub parent: usize,
     /// Orientation of the joint frame in the parent frame.
@@ -328,9 +342,22 @@ pub struct Model<S: Space> {
 }
 
 impl<S: Space> Model<S> {
-    /// Number of configuration coordinates n (one per tree joint).
+    /// Number of configuration coordinates: one per revolute or prismatic joint, four per ball joint.
     pub fn nq(&self) -> usize {
+        self.q0.len()
+    }
+    /// Number of velocity coordinates n (one per tree joint entry; three per ball joint): the size of D, W's
+    /// columns, q̇ and q̈.
+    pub fn nv(&self) -> usize {
         self.joints.len()
+    }
+    /// True when some joint is a ball joint (nq > nv: q moves on a manifold, see `integrator::integrate`).
+    pub fn has_balls(&self) -> bool {
+        self.nq() != self.nv()
+    }
+    /// True when body `i` is a ball joint's internal body (massless, no geometry, not in the scene file).
+    pub fn is_internal_body(&self, i: usize) -> bool {
+        matches!(self.joints[i].kind, JointKind::Ball { slot } if slot < 2)
     }
     /// Number of closure equations m.
     pub fn nc(&self) -> usize {

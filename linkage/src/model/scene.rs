@@ -161,6 +161,12 @@ pub enum JointKindSpec {
     Revolute,
     /// Translation along the joint axis.
     Prismatic,
+    /// Spatial only: free rotation about the joint frame's origin (a unit quaternion, no axis; starts at
+    /// the joint frame's `rotation`).
+    Ball,
+    /// Spatial only: a Hooke joint, rotation about `axes[0]` (fixed in the parent) then `axes[1]` (carried by
+    /// the cross-piece), two non-parallel axes in the joint frame.
+    Universal,
 }
 
 /// A tree joint: connects `child` to `parent` (a body or `ground`).
@@ -169,7 +175,7 @@ pub enum JointKindSpec {
 pub struct JointSpec {
     /// Unique name.
     pub name: String,
-    /// `revolute` or `prismatic`.
+    /// `revolute`, `prismatic`, `ball` or `universal`.
     pub kind: JointKindSpec,
     /// Parent body or `ground`.
     pub parent: String,
@@ -186,6 +192,9 @@ pub struct JointSpec {
     /// planar revolute: always z, must be omitted).
     #[serde(default)]
     pub axis: Option<Vec<f64>>,
+    /// Universal joints only: their two axes in the joint frame, `[[x, y, z], [x, y, z]]` (not parallel).
+    #[serde(default)]
+    pub axes: Option<Vec<Vec<f64>>>,
     /// Initial position, rad or m.
     #[serde(default)]
     pub q0: f64,
@@ -445,7 +454,7 @@ impl Scene {
                         a.max_effort = a.max_effort.map(|e| e * factor);
                     }
                 }
-                JointKindSpec::Revolute => {
+                JointKindSpec::Revolute | JointKindSpec::Ball | JointKindSpec::Universal => {
                     if let Some(sp) = &mut j.spring {
                         sp.stiffness *= f2;
                     }

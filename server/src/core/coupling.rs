@@ -594,7 +594,7 @@ pub(crate) mod tests {
         let (model, data, _) = testbed_in_motion(5);
         let stiffness = Vector3::new(800.0, 900.0, 2.0);
         let mut c =
-            Coupling::<Planar>::new(1, nalgebra::Vector2::new(0.01, -0.002), model.nq(), stiffness, stiffness * 0.05);
+            Coupling::<Planar>::new(1, nalgebra::Vector2::new(0.01, -0.002), model.nv(), stiffness, stiffness * 0.05);
         c.pushes = true;
         c.weight = 0.8;
         c.hand_wrench = Vector3::new(0.3, -0.2, 0.001);

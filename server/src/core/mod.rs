@@ -50,8 +50,8 @@ use kinloop_linkage::{
     model::data::Data, model::Model,
 };
 use kinloop_protocol::{
-    Datagram, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
-    Uplink, Welcome,
+    Datagram, LocalModelForm, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary,
+    SessionShape, Snapshot, Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -289,7 +289,7 @@ impl<S: Space> VeCore<S> {
             contacts.damping = config.contact_damping.unwrap_or(contacts.damping);
             contacts
         });
-        let (n, m, k) = (model.nq(), model.nc(), S::DIM);
+        let (n, m, k) = (model.nv(), model.nc(), S::DIM);
         let user_room = 2 * config.max_users;
         let scratch = SnapshotScratch {
             op_y: DMatrix::zeros(n, k),
@@ -394,6 +394,18 @@ impl<S: Space> VeCore<S> {
                 available: self.model.ops.iter().map(|o| o.name.clone()).collect(),
             });
         };
+        // The wire's configuration terms carry one position per rate (`snapshot.config.q` of length n = nv):
+        // a ball joint's quaternion does not fit, and the operational-space form needs no q.
+        if request.form == LocalModelForm::ConfigSpace && self.model.has_balls() {
+            self.metrics.joins_refused += 1;
+            return Err(RefusalReason::Unservable {
+                what: format!(
+                    "snapshot.config.q: the configuration-space local model sends n = {} positions, but this scene's ball joints take nq = {}; ask for the operational-space form",
+                    self.model.nv(),
+                    self.model.nq()
+                ),
+            });
+        }
         let reach = &self.reaches[op];
         let manipulator = request.role == Role::Manipulator;
         let designed = match &request.device {
@@ -424,7 +436,7 @@ impl<S: Space> VeCore<S> {
         let user_id = self.next_user_id;
         self.next_user_id += 1;
         let point = &self.model.ops[op];
-        let mut coupling = Coupling::new(point.body, point.point, self.model.nq(), stiffness, damping);
+        let mut coupling = Coupling::new(point.body, point.point, self.model.nv(), stiffness, damping);
         coupling.brakes = !self.config.passivity_per_axis;
         coupling.evaluate(&self.model, &self.data.kin, true);
         if manipulator {
@@ -459,7 +471,7 @@ impl<S: Space> VeCore<S> {
         self.couplings.push(coupling);
         if manipulator && self.users.last().is_some_and(|u| u.mapping.gravity_compensation) {
             if self.held.is_none() {
-                self.held = Some((Data::new(&self.model), DVector::zeros(self.model.nq())));
+                self.held = Some((Data::new(&self.model), DVector::zeros(self.model.nv())));
             }
             self.update_held_loads();
         }
@@ -678,7 +690,7 @@ impl<S: Space> VeCore<S> {
             scene: SceneSummary {
                 name: self.model.name.clone(),
                 kind: S::KIND,
-                n: self.model.nq() as u32,
+                n: self.model.nv() as u32,
                 m: self.model.nc() as u32,
                 op_dim: S::DIM as u8,
                 op_name: self.model.ops[op].name.clone(),

@@ -502,7 +502,7 @@ fn fill_contact_term<S: Space>(
     let normal = contact.normal.as_slice();
     let lin = normal.len();
     let ws = &data.op;
-    for i in 0..model.nq() {
+    for i in 0..model.nv() {
         scratch.contact_y[i] = (0..lin).map(|a| ws.y_closed[(i, a)] * normal[a]).sum();
     }
     let mut coupling = S::OpVec::zero();

@@ -87,7 +87,7 @@ pub struct SnapshotSlot {
 impl SnapshotSlot {
     /// Storage for a user of `model` with the given form.
     pub fn new<S: Space>(model: &Model<S>, user: UserId, form: LocalModelForm) -> Self {
-        let (n, m, k) = (model.nq(), model.nc(), S::DIM);
+        let (n, m, k) = (model.nv(), model.nc(), S::DIM);
         let pose_len = kinloop_linkage::math::space::OpPose::<S>::wire_len();
         let point = <S::Point as kinloop_linkage::math::space::VecOps>::LEN;
         let config = (form == LocalModelForm::ConfigSpace).then(|| ConfigTerms {

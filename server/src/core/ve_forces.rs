@@ -175,7 +175,7 @@ mod tests {
     #[test]
     fn users_on_one_op_add_the_per_user_sums() {
         let (model, data, qd) = testbed_in_motion(8);
-        let n = model.nq();
+        let n = model.nv();
         let point = nalgebra::Vector2::new(0.01, -0.002);
         let joined: Vec<Coupling<Planar>> =
             [(1, 0.7, true), (1, 1.0, false), (1, 0.5, true), (3, 0.4, true), (1, 0.9, true)]
@@ -246,7 +246,7 @@ mod tests {
     #[test]
     fn implicit_terms_are_the_dense_products() {
         let (model, data, qd) = testbed_in_motion(5);
-        let n = model.nq();
+        let n = model.nv();
         let mut couplings: Vec<Coupling<Planar>> = [(1, 200.0, 0.7), (3, 3000.0, 0.3)]
             .into_iter()
             .map(|(body, k, weight)| {

@@ -302,7 +302,7 @@ impl Drop for ServerHandle {
 
 fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerError> {
     let model = Model::<S>::compile(&config.scene, &config.scene_label)?;
-    let (n, m) = (model.nq(), model.nc());
+    let (nq, n, m) = (model.nq(), model.nv(), model.nc());
     let core = VeCore::new(model, config.ve.clone())?;
     let scene_info = core.scene_info();
     for op in 0..core.model().ops.len() {
@@ -329,7 +329,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         Some(path) => {
             let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
             let done = Arc::new(AtomicBool::new(false));
-            let thread = record::spawn_writer(path, record::header::<S>(n, m), row_rx, done.clone())?;
+            let thread = record::spawn_writer(path, record::header::<S>(nq, n, m), row_rx, done.clone())?;
             Some((row_tx, (done, thread)))
         }
         None => None,

@@ -48,9 +48,10 @@ pub fn write_row<S: Space>(core: &VeCore<S>, ring: &mut Producer<f64>) -> bool {
     chunk.fill_from_iter(values) == len + 1
 }
 
-/// The CSV header for a scene of space `S` with `n` coordinates and `m` closure rows.
-pub fn header<S: Space>(n: usize, m: usize) -> String {
-    VeSchema { kind: S::KIND, n, m }.header()
+/// The CSV header for a scene of space `S` with `nq` configuration and `n` velocity coordinates and `m`
+/// closure rows.
+pub fn header<S: Space>(nq: usize, n: usize, m: usize) -> String {
+    VeSchema { kind: S::KIND, nq, n, m }.header()
 }
 
 /// Starts the writer thread; it drains `ring` into `path` until `stop` is set and the ring is empty, and

@@ -2,6 +2,7 @@
 //! operational points, by the view's own [`Model`] and [`Data`] (never the VE's: the hub runs on the
 //! network side and computes [`forward_kinematics`] itself).
 
+use kinloop_linkage::algorithms::configuration;
 use kinloop_linkage::algorithms::jacobian::frame_jacobian_t;
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
 use kinloop_linkage::algorithms::loop_closure::closure_residual_and_jacobian;
@@ -20,7 +21,7 @@ pub struct SceneInfo {
     pub name: String,
     /// `planar` or `spatial`.
     pub kind: &'static str,
-    /// Coordinates.
+    /// Configuration coordinates (nq: a ball joint takes four).
     pub n: usize,
     /// Characteristic length L (m): directions are in `(v, L ω)`.
     pub length_scale: f64,
@@ -217,13 +218,14 @@ const SOLVE_DAMPING: f64 = 1e-8;
 
 impl<S: Space> Drawer<S> {
     fn solve(&mut self, start: &[f64], op: usize, position: &[f64]) -> Option<Vec<f64>> {
-        let (n, m, d) = (self.model.nq(), self.model.nc(), <S::Point as VecOps>::LEN);
+        let (n, m, d) = (self.model.nv(), self.model.nc(), <S::Point as VecOps>::LEN);
         let o = self.model.ops.get(op)?;
         let (body, point) = (o.body, o.point);
         if position.len() != d {
             return None;
         }
-        let mut q = if start.len() == n { DVector::from_column_slice(start) } else { self.model.q0.clone() };
+        let mut q =
+            if start.len() == self.model.nq() { DVector::from_column_slice(start) } else { self.model.q0.clone() };
         let mut jt = DMatrix::zeros(n, S::DIM);
         let mut jac = DMatrix::zeros(m + d, n);
         let mut residual = DVector::zeros(m + d);
@@ -253,7 +255,7 @@ impl<S: Space> Drawer<S> {
                 normal[(i, i)] += SOLVE_DAMPING;
             }
             let step = jac.transpose() * normal.cholesky()?.solve(&residual);
-            q += step;
+            configuration::integrate(&self.model, &mut q, &step, 1.0);
         }
         q.iter().all(|v| v.is_finite()).then(|| q.as_slice().to_vec())
     }

@@ -88,8 +88,8 @@ impl Replay {
         }
         let (source, rows) = match recording {
             Recording::Ve { schema, rows } => {
-                if schema.n != geometry.info().n {
-                    return Err(mismatch(format!("it has {} coordinates, the scene {}", schema.n, geometry.info().n)));
+                if schema.nq != geometry.info().n {
+                    return Err(mismatch(format!("it has {} coordinates, the scene {}", schema.nq, geometry.info().n)));
                 }
                 ("server", rows.iter().map(|r| server_sample(r, scene.kind)).collect())
             }
@@ -262,11 +262,11 @@ mod tests {
         let other = |text: &str| Replay::parse(text, "x.csv", &scene, "paper-testbed").unwrap_err().to_string();
         assert!(other("").contains("no rows"));
         assert!(other("a,b,c\n1,2,3\n").contains("not a kinloop recording"));
-        let six = VeSchema { kind: SceneKind::Planar, n: 6, m: 4 }.header();
+        let six = VeSchema { kind: SceneKind::Planar, nq: 6, n: 6, m: 4 }.header();
         assert!(other(&six).contains("6 coordinates"), "{}", other(&six));
         let spatial = ClientSchema { kind: SceneKind::Spatial }.header();
         assert!(other(&spatial).contains("Spatial"), "{}", other(&spatial));
-        let header = VeSchema { kind: SceneKind::Planar, n: 4, m: 2 }.header();
+        let header = VeSchema { kind: SceneKind::Planar, nq: 4, n: 4, m: 2 }.header();
         let header_row = "0,1,0,0,0,0,0,0,0,0,0,0,0,0";
         let bad = other(&format!("{header}\n{header_row}\n0,2,x\n"));
         assert!(bad.starts_with("x.csv:3: column q_0: \"x\" is not a number"), "{bad}");

@@ -59,7 +59,7 @@ impl<S: Space> Compiler<'_, S> {
             let j = &self.scene.joints[ji];
             let key = format!("joint[{ji}] ({}).range", j.name);
             let angular = joints[i].kind == JointKind::Revolute;
-            joints[i].range = self.range(&key, j.range, angular, q0[i], length_scale)?;
+            joints[i].range = self.range(&key, j.range, angular, q0[joints[i].q_index], length_scale)?;
         }
         Ok(())
     }

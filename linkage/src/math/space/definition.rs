@@ -107,11 +107,17 @@ pub trait Space: Copy + Clone + Debug + Default + PartialEq + Send + Sync + 'sta
         Self::rot_from_params(p)
     }
 
+    /// The orientation of a ball joint's unit quaternion `[w, x, y, z]` (see `math::quaternion`; planar
+    /// scenes have no ball joints, and take the quaternion's turn about z).
+    fn rot_from_quaternion(q: &[f64]) -> Self::Rot;
+
     // --- reading scenes ----------------------------------------------------------------------
     /// Orientation from a scene's `rotation` numbers (planar: one angle; spatial: roll, pitch, yaw).
     fn rot_from_scene(v: &[f64]) -> Result<Self::Rot, String>;
     /// Rotational inertia about the COM from a scene's `inertia` numbers; checks it is positive definite.
     fn rot_inertia_from_scene(v: &[f64]) -> Result<Self::RotInertia, String>;
+    /// The zero rotational inertia (a ball or universal joint's internal, massless bodies).
+    fn rot_inertia_zero() -> Self::RotInertia;
     /// A scalar size of a rotational inertia (planar: I; spatial: trace / 3), for the length scale.
     fn rot_inertia_size(i: &Self::RotInertia) -> f64;
     /// Default joint axis in the joint frame (spatial: z; planar prismatic: x).

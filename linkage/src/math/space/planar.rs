@@ -96,6 +96,12 @@ impl Space for Planar {
         }
     }
 
+    fn rot_from_quaternion(q: &[f64]) -> Self::Rot {
+        // (w + z k)² as a complex number: the turn about z, twice the half angle.
+        let c = nalgebra::Complex::new(q[0] * q[0] - q[3] * q[3], 2.0 * q[0] * q[3]);
+        UnitComplex::from_complex(c)
+    }
+
     fn rot_from_scene(v: &[f64]) -> Result<Self::Rot, String> {
         match v {
             [angle] => Ok(UnitComplex::new(*angle)),
@@ -108,6 +114,10 @@ impl Space for Planar {
             [i] => Err(format!("inertia must be positive, got {i}")),
             _ => Err(format!("expected one number (kg m² about z) for a planar scene, got {}", v.len())),
         }
+    }
+    #[inline]
+    fn rot_inertia_zero() -> f64 {
+        0.0
     }
     #[inline]
     fn rot_inertia_size(i: &f64) -> f64 {

@@ -102,6 +102,11 @@ impl Space for Spatial {
         }
     }
 
+    #[inline]
+    fn rot_from_quaternion(q: &[f64]) -> Self::Rot {
+        Rotation3::from_matrix_unchecked(crate::math::quaternion::to_matrix(q))
+    }
+
     fn rot_from_scene(v: &[f64]) -> Result<Self::Rot, String> {
         match v {
             [r, p, y] => Ok(Rotation3::from_euler_angles(*r, *p, *y)),
@@ -123,6 +128,10 @@ impl Space for Spatial {
             return Err(format!("inertia {v:?} is not positive definite"));
         }
         Ok(m)
+    }
+    #[inline]
+    fn rot_inertia_zero() -> Matrix3<f64> {
+        Matrix3::zeros()
     }
     #[inline]
     fn rot_inertia_size(i: &Matrix3<f64>) -> f64 {

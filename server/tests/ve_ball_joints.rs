@@ -1,0 +1,51 @@
+//! The VE with ball joints (nq ≠ nv): the Delta robot of the linkage tests, pushed by a user.
+
+mod support;
+
+use std::time::Duration;
+
+use kinloop_protocol::Role;
+use kinloop_server::core::VeConfig;
+
+use support::*;
+
+/// A Delta robot written with ball joints (nq = 31, nv = 24) runs in the VE: a manipulator pushing its
+/// platform with the operational-space local model moves it for a second with the loops closed to 1e-9 m and
+/// every snapshot finite, and asking for the configuration-space form is refused (its wire q holds one
+/// position per rate) naming the field and both sizes.
+#[test]
+fn a_ball_jointed_delta_runs_in_the_ve() {
+    use kinloop_linkage::math::space::Spatial;
+    use kinloop_linkage::model::scene::Scene;
+    use kinloop_protocol::{LocalModelForm, RefusalReason};
+    let text = include_str!("../../linkage/tests/scenes/delta-ball.toml");
+    let scene = Scene::from_toml_str(text, "delta-ball.toml").unwrap();
+    let model: kinloop_linkage::model::Model<Spatial> =
+        kinloop_linkage::model::Model::compile(&scene, "delta").unwrap();
+    let mut ve = core(model, VeConfig::default());
+    let mut config_form = request("c", Role::Manipulator, "platform", 6);
+    config_form.form = LocalModelForm::ConfigSpace;
+    match ve.join(Duration::ZERO, config_form).unwrap_err() {
+        RefusalReason::Unservable { what } => {
+            assert!(what.contains("snapshot.config.q") && what.contains("24") && what.contains("31"), "{what}")
+        }
+        other => panic!("expected Unservable, got {other:?}"),
+    }
+    let user = ve.join(Duration::ZERO, request("u", Role::Manipulator, "platform", 6)).unwrap().user_id;
+    let push = [0.0, 0.0, 2.0, 0.0, 0.0, 0.0];
+    let (mut latest, mut seq, mut worst, mut snapshots) = (Vec::new(), 0, 0.0_f64, 0);
+    run(&mut ve, Duration::from_secs(1), &mut latest, |ve, now, latest| {
+        if let Some(Some(s)) = latest.get(user as usize) {
+            assert!(s.op_pose.iter().chain(&s.inverse_inertia).all(|x| x.is_finite()));
+            seq += 1;
+            snapshots += 1;
+            ve.handle_uplink(now, user, &following(s, seq, &push)).unwrap();
+        }
+        worst = worst.max(ve.state().closure_error);
+    });
+    assert!(snapshots > 100, "{snapshots} snapshots");
+    assert_eq!(ve.metrics().state_restores, 0);
+    assert!(worst <= 1e-9, "closure error reached {worst:e} m");
+    let moved = (ve.state().q.rows(0, 3) - ve.model().q0.rows(0, 3)).norm();
+    assert!(moved > 0.01, "the arms barely moved ({moved} rad)");
+}
