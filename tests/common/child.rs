@@ -20,6 +20,7 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use kinloop_client::driver::Client;
+use kinloop_protocol::room_key::RoomKey;
 use kinloop_server::Identity;
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +36,9 @@ const LIFETIME: Duration = Duration::from_secs(90);
 pub enum Role {
     /// `kinloop-server --scene paper-testbed(+ops) --listen LISTEN --cert-dir CERT_DIR`.
     Server { listen: SocketAddr, cert_dir: PathBuf },
+    /// A server of a room: `kinloop-server --scene paper-testbed(+ops) --listen LISTEN --cert CERT --key KEY
+    /// --room-key ROOM_KEY --record RECORD`.
+    RoomServer { listen: SocketAddr, cert: PathBuf, key: PathBuf, room_key: PathBuf, record: PathBuf },
     /// `kinloop-client --server SERVER --fingerprint FP --op OP --user constant:WRENCH`.
     Client { server: SocketAddr, fingerprint: String, name: String, op: String, wrench: Vec<f64> },
     /// `PROGRAM ARGS...` through the program's own `main` (`kinloop_server::cli::main` or
@@ -132,6 +136,22 @@ fn run(role: Role, ready: &Path) -> Result<i32, String> {
             let mut config = live::server_config();
             config.listen = listen;
             config.identity = Identity::CertDir(cert_dir);
+            let server = {
+                let _inside = rt.enter();
+                kinloop_server::Server::start(config).map_err(|e| e.to_string())?
+            };
+            let fingerprint = server.fingerprint().to_owned();
+            announce(ready, &Ready { addr: server.local_addr(), fingerprint, user_id: 0 })?;
+            until_parent_lets_go();
+            live::stop_server(&rt, server);
+        }
+        Role::RoomServer { listen, cert, key, room_key, record } => {
+            let rt = live::runtime();
+            let mut config = live::server_config();
+            config.listen = listen;
+            config.identity = Identity::Files { cert, key };
+            config.room_key = Some(RoomKey::load(&room_key).map_err(|e| e.to_string())?);
+            config.record = Some(record);
             let server = {
                 let _inside = rt.enter();
                 kinloop_server::Server::start(config).map_err(|e| e.to_string())?
