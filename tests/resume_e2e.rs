@@ -132,16 +132,26 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
         b_steps.iter().find_map(|s| s.users.iter().find(|u| u.user_id == b_user)).expect("the client on B").op;
     let offset_m = (resumed[0] - was[0]).hypot(resumed[1] - was[1]);
     let offset_rad = angle_between(resumed[2], was[2]);
-    // The force the device was commanded, tick to tick, from just before the kill to the end.
+    // The force the device was commanded, tick to tick: at the reconnection (from the first tick at zero force
+    // after the kill, through the fade-in on B, to the end) and, apart, in the fade-out on losing A (the
+    // client's stale-snapshot fade, whose steps grow with the force held and with the host's stalls).
     let ticks = records::client_ticks(&path("client.csv"));
-    let window: Vec<[f64; 3]> = ticks.iter().filter(|t| t.t >= t_kill - 0.05).map(|t| t.command).collect();
-    let step_n = window.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).fold(0.0, f64::max);
-    let held_n = window.first().map_or(0.0, |c| c[0].hypot(c[1]));
+    let zero = ticks.iter().position(|t| t.t >= t_kill && t.gain == 0.0).expect("the force faded out");
+    let largest_step = |ticks: &[records::Tick]| {
+        ticks
+            .windows(2)
+            .map(|w| (w[1].command[0] - w[0].command[0]).hypot(w[1].command[1] - w[0].command[1]))
+            .fold(0.0, f64::max)
+    };
+    let step_n = largest_step(&ticks[zero..]);
+    let before = ticks.iter().position(|t| t.t >= t_kill - 0.05).unwrap_or(zero);
+    let fade_out_n = largest_step(&ticks[before..=zero]);
+    let held_n = ticks[before].command[0].hypot(ticks[before].command[1]);
     let end = ticks.last().expect("ticks");
     println!(
         "resume: the hand moved the OP {:.1} mm from its start; linkage {:.3} mm and {:.3} deg from where it was (A at {was:.4?}, B resumed at {resumed:.4?}); \
-         client back on B {back_s:.2} s after the kill; largest force step {step_n:.4} N (holding {held_n:.3} N \
-         before the kill); B counted {} resumes and {} refusals",
+         client back on B {back_s:.2} s after the kill; largest force step at the reconnection {step_n:.4} N \
+         (in the fade-out on losing A {fade_out_n:.4} N, holding {held_n:.3} N before the kill); B counted {} resumes and {} refusals",
         moved_m * 1e3,
         offset_m * 1e3,
         offset_rad.to_degrees(),
