@@ -224,7 +224,7 @@ async fn run<S: Space>(
     let (rig, core) = match rig_and_core::<S>(config, dhd, &session.welcome) {
         Ok(parts) => parts,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot render").await;
+            abandon(endpoint, &session.connection, b"client cannot render").await;
             let _ = started.send(Err(e));
             return;
         }
@@ -259,7 +259,7 @@ async fn run<S: Space>(
     let uplink_thread = match uplink_thread {
         Ok(t) => t,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            abandon(endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
@@ -289,7 +289,7 @@ async fn run<S: Space>(
     let loop_thread = match loop_thread {
         Ok(t) => t,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            abandon(endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
