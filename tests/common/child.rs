@@ -210,12 +210,31 @@ impl ChildProcess {
 
     /// [`ChildProcess::spawn`] with these environment variables set in the child.
     pub fn spawn_with_env(test: &str, role: &Role, dir: &Path, tag: &str, env: &[(&str, String)]) -> Self {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        Self::spawn_command(Command::new(exe), test, role, dir, tag, env)
+    }
+
+    /// [`ChildProcess::spawn`] inside the network namespace `netns` (`ip netns exec`; needs root).
+    pub fn spawn_in_netns(test: &str, role: &Role, dir: &Path, tag: &str, netns: &str) -> Self {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        let mut command = Command::new("ip");
+        command.args(["netns", "exec", netns]).arg(exe);
+        Self::spawn_command(command, test, role, dir, tag, &[])
+    }
+
+    fn spawn_command(
+        mut command: Command,
+        test: &str,
+        role: &Role,
+        dir: &Path,
+        tag: &str,
+        env: &[(&str, String)],
+    ) -> Self {
         let log = dir.join(format!("{tag}.log"));
         let out = dir.join(format!("{tag}.out"));
         let ready = dir.join(format!("{tag}.ready"));
         let _ = std::fs::remove_file(&ready);
-        let exe = std::env::current_exe().expect("the test binary's path");
-        let child = Command::new(exe)
+        let child = command
             .args([test, "--exact", "--nocapture", "--test-threads=1"])
             .current_dir(dir)
             .env(ROLE_VAR, serde_json::to_string(role).expect("role as JSON"))
