@@ -114,7 +114,7 @@ async fn run_session(
     session: AcceptedSession,
     shared: Arc<Shared>,
     mut uplinks: rtrb::Producer<UplinkSample>,
-    mut snapshots: rtrb::Consumer<u8>,
+    snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
 ) {
     let AcceptedSession { connection, mut send, mut recv, hello, join, welcome } = session;
@@ -168,36 +168,7 @@ async fn run_session(
             }
         })
     };
-    let transmit = {
-        let counters = counters.clone();
-        let connection = connection.clone();
-        tokio::spawn(async move {
-            let sender = DatagramSender::new(connection.clone());
-            let mut frame = Vec::new();
-            loop {
-                tokio::select! {
-                    _ = notify.notified() => {}
-                    _ = connection.closed() => break,
-                }
-                if take_latest_frame(&mut snapshots, &mut frame) == 0 {
-                    continue;
-                }
-                match sender.send_encoded(Bytes::copy_from_slice(&frame)) {
-                    Ok(route) => {
-                        counters.snapshots_sent.fetch_add(1, Ordering::Relaxed);
-                        counters.snapshot_bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
-                        if route == Route::Stream {
-                            counters.snapshots_oversize.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
-                    Err(error) => {
-                        tracing::debug!(user, %error, "snapshot not sent; ending the sender");
-                        break;
-                    }
-                }
-            }
-        })
-    };
+    let transmit = spawn_transmit(user, connection.clone(), counters.clone(), snapshots, notify);
 
     let mut shutdown = shared.shutdown.subscribe();
     let mut room_tick = tokio::time::interval(super::room::ROOM_STATE_PERIOD);
@@ -238,4 +209,41 @@ async fn run_session(
     transmit.abort();
     counters.connected.store(false, Ordering::Relaxed);
     tracing::info!(user, reason, "session ended");
+}
+
+/// The user's snapshot sender: on each notification, the newest encoded snapshot the VE thread left in the
+/// user's ring goes out as a datagram (or a stream when too large), counted.
+fn spawn_transmit(
+    user: u32,
+    connection: kinloop_protocol::quic::Connection,
+    counters: Arc<UserCounters>,
+    mut snapshots: rtrb::Consumer<u8>,
+    notify: Arc<Notify>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let sender = DatagramSender::new(connection.clone());
+        let mut frame = Vec::new();
+        loop {
+            tokio::select! {
+                _ = notify.notified() => {}
+                _ = connection.closed() => break,
+            }
+            if take_latest_frame(&mut snapshots, &mut frame) == 0 {
+                continue;
+            }
+            match sender.send_encoded(Bytes::copy_from_slice(&frame)) {
+                Ok(route) => {
+                    counters.snapshots_sent.fetch_add(1, Ordering::Relaxed);
+                    counters.snapshot_bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
+                    if route == Route::Stream {
+                        counters.snapshots_oversize.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(error) => {
+                    tracing::debug!(user, %error, "snapshot not sent; ending the sender");
+                    break;
+                }
+            }
+        }
+    })
 }
