@@ -22,9 +22,10 @@ use crate::user::UserSpec;
 #[derive(Debug, Parser)]
 #[command(name = "kinloop-client", version)]
 struct Args {
-    /// Server address, HOST:PORT.
-    #[arg(long, value_name = "ADDR")]
-    server: String,
+    /// Server address, HOST:PORT. Repeat it to name the other servers of the room, tried in order when
+    /// the session is lost (the room resumes where it was on the one reached; trust them with --ca).
+    #[arg(long, value_name = "ADDR", required = true)]
+    server: Vec<String>,
     /// Access token the server was started with.
     #[arg(long, default_value = "")]
     token: String,
@@ -124,7 +125,9 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
         Some(s) => bail!("--duration {s}: must be a positive number of seconds"),
         None => None,
     };
-    let mut config = ClientConfig::new(args.server, trust);
+    let mut servers = args.server.into_iter();
+    let mut config = ClientConfig::new(servers.next().unwrap_or_default(), trust);
+    config.fallback_servers = servers.collect();
     config.server_name = args.server_name;
     config.token = args.token;
     config.op = args.op;

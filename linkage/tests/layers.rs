@@ -26,7 +26,8 @@ const LINKAGE: Layers =
     Layers { dir: "linkage/src", ranks: &[("error", 0), ("math", 1), ("model", 2), ("algorithms", 3), ("testing", 3)] };
 
 /// The wire's shapes, a device's wrench limits and the energy books < the messages and their codec (the
-/// messages' golden bytes are checked through it) < the link emulator < the QUIC transport.
+/// messages' golden bytes are checked through it) < the link emulator and the room key that signs states <
+/// the QUIC transport.
 const PROTOCOL: Layers = Layers {
     dir: "protocol/src",
     ranks: &[
@@ -36,6 +37,7 @@ const PROTOCOL: Layers = Layers {
         ("messages", 1),
         ("codec", 1),
         ("emulator", 2),
+        ("room_key", 2),
         ("quic", 3),
     ],
 };

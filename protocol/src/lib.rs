@@ -16,6 +16,7 @@ pub mod emulator;
 pub mod messages;
 pub mod passivity;
 pub mod quic;
+pub mod room_key;
 mod shape;
 pub mod wrench_limits;
 

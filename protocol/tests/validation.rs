@@ -279,3 +279,25 @@ fn split_snapshot_check_covers_what_the_whole_check_does() {
     }
     assert!(matches!(validate::snapshot_but_others(&s, &shape), Err(DecodeError::TooMany { .. })));
 }
+
+/// An offered room state that is truncated (velocities shorter than coordinates), not finite or carries an
+/// oversized signature is refused by the codec, naming the field, before any server looks at it.
+#[test]
+fn a_malformed_room_state_is_refused_naming_the_field() {
+    let state =
+        RoomState { scene_hash: 1, taken_unix_ms: 2, ve_step: 3, q: vec![0.5; 4], qd: vec![0.0; 4], tag: vec![7; 32] };
+    let decode = |state: RoomState| decode_control(&encode_control(&Control::Resume(state)).unwrap());
+    assert!(decode(state.clone()).is_ok());
+    let mut truncated = state.clone();
+    truncated.qd.pop();
+    let error = decode(truncated).unwrap_err();
+    assert!(matches!(error, DecodeError::WrongLength { got: 3, expected: 4, .. }), "{error:?}");
+    assert_eq!(field_of(&error), "room_state.qd");
+    let mut nan = state.clone();
+    nan.q[2] = f64::NAN;
+    let error = decode(nan).unwrap_err();
+    assert!(matches!(error, DecodeError::NonFinite { index: Some(2), .. }), "{error:?}");
+    let mut long_tag = state;
+    long_tag.tag = vec![0; 65];
+    assert_eq!(field_of(&decode(long_tag).unwrap_err()), "room_state.tag");
+}

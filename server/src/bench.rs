@@ -309,8 +309,15 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
         clients.push((uplink_tx, snapshot_rx));
         replies.push(reply_rx);
     }
-    let io =
-        VeThreadIo { commands: command_rx, events: event_tx, stats: stats_tx, record: None, view, stop: stop.clone() };
+    let io = VeThreadIo {
+        commands: command_rx,
+        events: event_tx,
+        stats: stats_tx,
+        record: None,
+        view,
+        room: None,
+        stop: stop.clone(),
+    };
     let ve_thread = std::thread::Builder::new()
         .name("kinloop-ve".into())
         .spawn(move || ve_thread::run(core, io, true))

@@ -12,6 +12,7 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_protocol::emulator::LinkArgs;
+use kinloop_protocol::room_key::RoomKey;
 
 use crate::bench::RealtimeRun;
 use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_DELAYS_S, DEFAULT_COUPLING_LEAD_MAX_S};
@@ -61,6 +62,16 @@ struct Cli {
     /// Directory of the server certificate (created on first start; the fingerprint stays the same).
     #[arg(long, value_name = "D", default_value = ".kinloop-server")]
     cert_dir: PathBuf,
+    /// Certificate chain (PEM) instead of --cert-dir's, e.g. one issued by the room's CA (with --key).
+    #[arg(long, value_name = "FILE", requires = "key")]
+    cert: Option<PathBuf>,
+    /// Private key (PEM) of --cert.
+    #[arg(long, value_name = "FILE", requires = "cert")]
+    key: Option<PathBuf>,
+    /// The room's key, shared by the servers of a room: the server signs its state for its clients and
+    /// resumes from a state a client brings back from a server that died (docs/resume.md).
+    #[arg(long, value_name = "FILE")]
+    room_key: Option<PathBuf>,
     #[command(flatten)]
     link: LinkArgs,
     /// Write one CSV row per VE step to this file.
@@ -291,7 +302,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         listen: cli.listen,
         ve,
         access,
-        identity: Identity::CertDir(cli.cert_dir.clone()),
+        identity: match (&cli.cert, &cli.key) {
+            (Some(cert), Some(key)) => Identity::Files { cert: cert.clone(), key: key.clone() },
+            _ => Identity::CertDir(cli.cert_dir.clone()),
+        },
+        room_key: cli.room_key.as_deref().map(RoomKey::load).transpose()?,
         link: cli.link.emulated_link()?,
         record: cli.record.clone(),
         stats_every: Some(seconds("--stats-every", cli.stats_every)?),

@@ -20,6 +20,7 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use kinloop_client::driver::Client;
+use kinloop_protocol::room_key::RoomKey;
 use kinloop_server::Identity;
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +36,9 @@ const LIFETIME: Duration = Duration::from_secs(90);
 pub enum Role {
     /// `kinloop-server --scene paper-testbed(+ops) --listen LISTEN --cert-dir CERT_DIR`.
     Server { listen: SocketAddr, cert_dir: PathBuf },
+    /// A server of a room: `kinloop-server --scene paper-testbed(+ops) --listen LISTEN --cert CERT --key KEY
+    /// --room-key ROOM_KEY --record RECORD`.
+    RoomServer { listen: SocketAddr, cert: PathBuf, key: PathBuf, room_key: PathBuf, record: PathBuf },
     /// `kinloop-client --server SERVER --fingerprint FP --op OP --user constant:WRENCH`.
     Client { server: SocketAddr, fingerprint: String, name: String, op: String, wrench: Vec<f64> },
     /// `PROGRAM ARGS...` through the program's own `main` (`kinloop_server::cli::main` or
@@ -141,6 +145,22 @@ fn run(role: Role, ready: &Path) -> Result<i32, String> {
             until_parent_lets_go();
             live::stop_server(&rt, server);
         }
+        Role::RoomServer { listen, cert, key, room_key, record } => {
+            let rt = live::runtime();
+            let mut config = live::server_config();
+            config.listen = listen;
+            config.identity = Identity::Files { cert, key };
+            config.room_key = Some(RoomKey::load(&room_key).map_err(|e| e.to_string())?);
+            config.record = Some(record);
+            let server = {
+                let _inside = rt.enter();
+                kinloop_server::Server::start(config).map_err(|e| e.to_string())?
+            };
+            let fingerprint = server.fingerprint().to_owned();
+            announce(ready, &Ready { addr: server.local_addr(), fingerprint, user_id: 0 })?;
+            until_parent_lets_go();
+            live::stop_server(&rt, server);
+        }
         Role::Client { server, fingerprint, name, op, wrench } => {
             let client = Client::start(live::client_config(server, &fingerprint, &name, &op, &wrench))
                 .map_err(|e| e.to_string())?;
@@ -190,12 +210,31 @@ impl ChildProcess {
 
     /// [`ChildProcess::spawn`] with these environment variables set in the child.
     pub fn spawn_with_env(test: &str, role: &Role, dir: &Path, tag: &str, env: &[(&str, String)]) -> Self {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        Self::spawn_command(Command::new(exe), test, role, dir, tag, env)
+    }
+
+    /// [`ChildProcess::spawn`] inside the network namespace `netns` (`ip netns exec`; needs root).
+    pub fn spawn_in_netns(test: &str, role: &Role, dir: &Path, tag: &str, netns: &str) -> Self {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        let mut command = Command::new("ip");
+        command.args(["netns", "exec", netns]).arg(exe);
+        Self::spawn_command(command, test, role, dir, tag, &[])
+    }
+
+    fn spawn_command(
+        mut command: Command,
+        test: &str,
+        role: &Role,
+        dir: &Path,
+        tag: &str,
+        env: &[(&str, String)],
+    ) -> Self {
         let log = dir.join(format!("{tag}.log"));
         let out = dir.join(format!("{tag}.out"));
         let ready = dir.join(format!("{tag}.ready"));
         let _ = std::fs::remove_file(&ready);
-        let exe = std::env::current_exe().expect("the test binary's path");
-        let child = Command::new(exe)
+        let child = command
             .args([test, "--exact", "--nocapture", "--test-threads=1"])
             .current_dir(dir)
             .env(ROLE_VAR, serde_json::to_string(role).expect("role as JSON"))

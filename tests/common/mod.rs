@@ -7,6 +7,7 @@ pub mod checks;
 pub mod child;
 pub mod live;
 pub mod records;
+pub mod resume;
 pub mod workspace;
 
 use std::sync::mpsc;

@@ -13,11 +13,18 @@ use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::{DevicePreset, DhdRequest};
 use crate::user::{UserError, UserSpec};
 
+/// With fallback servers, a session whose server sent nothing for this long is lost and the next server is
+/// tried: longer than any scheduling stall of a live server, short enough to move within 2 s of a crash.
+pub const SILENT_SERVER: Duration = Duration::from_millis(600);
+
 /// Everything a client needs.
 #[derive(Clone, Debug)]
 pub struct ClientConfig {
     /// `host:port` of the server.
     pub server: String,
+    /// More servers of the same room (`host:port`), tried in order after `server` when a session is lost
+    /// (and when the first connection fails); with any, a server silent for [`SILENT_SERVER`] is lost.
+    pub fallback_servers: Vec<String>,
     /// Name the server's certificate must carry (with `Trust::CaFile`).
     pub server_name: String,
     /// Shared secret.
@@ -67,6 +74,7 @@ impl ClientConfig {
     pub fn new(server: impl Into<String>, trust: Trust) -> Self {
         ClientConfig {
             server: server.into(),
+            fallback_servers: Vec::new(),
             server_name: "localhost".into(),
             token: String::new(),
             trust,

@@ -58,6 +58,10 @@ pub struct ClientStats {
     pub records_dropped: u64,
     /// The device failed (its force was zeroed and the loop stopped).
     pub device_lost: bool,
+    /// Reconnections on which the server resumed the room from the state this client kept.
+    pub resumes: u64,
+    /// Reconnections on which the server refused that state.
+    pub resumes_refused: u64,
 }
 
 impl ClientStats {
@@ -113,15 +117,19 @@ impl Client {
         if !(config.rate_hz.is_finite() && (10.0..=20_000.0).contains(&config.rate_hz)) {
             return Err(ClientError::Setting(format!("rate {} Hz must be between 10 and 20000", config.rate_hz)));
         }
-        let address = resolve(&config.server)?;
+        let addresses = std::iter::once(&config.server)
+            .chain(&config.fallback_servers)
+            .map(|server| resolve(server))
+            .collect::<Result<Vec<_>, _>>()?;
         let dhd = open_dhd(&mut config)?;
         let shared = Arc::new(LoopShared::default());
-        let net = Arc::new(NetShared::default());
+        let silence_limit = (addresses.len() > 1).then_some(config::SILENT_SERVER);
+        let net = Arc::new(NetShared { silence_limit, ..NetShared::default() });
         let (started_tx, started_rx) = mpsc::channel();
         let (thread_shared, thread_net) = (shared.clone(), net.clone());
         let net_thread = std::thread::Builder::new()
             .name("kinloop-net".into())
-            .spawn(move || network_thread(config, dhd, address, thread_shared, thread_net, started_tx))
+            .spawn(move || network_thread(config, dhd, addresses, thread_shared, thread_net, started_tx))
             .map_err(|e| ClientError::Runtime(e.to_string()))?;
         match started_rx.recv() {
             Ok(Ok(started)) => Ok(ClientHandle {
@@ -201,7 +209,14 @@ impl ClientHandle {
             reconnects: self.net.reconnects.load(Ordering::Relaxed),
             records_dropped: self.shared.records_dropped.load(Ordering::Relaxed),
             device_lost: self.shared.device_lost.load(Ordering::Relaxed),
+            resumes: self.net.resumes.load(Ordering::Relaxed),
+            resumes_refused: self.net.resumes_refused.load(Ordering::Relaxed),
         }
+    }
+
+    /// The newest signed room state a server sent this client (what it offers when it reconnects).
+    pub fn room_state(&self) -> Option<kinloop_protocol::RoomState> {
+        self.net.room_state.lock().ok().and_then(|s| s.clone())
     }
 
     /// True once the loop has stopped (duration over, device lost, or shut down).

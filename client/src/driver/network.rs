@@ -10,9 +10,11 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
 use kinloop_protocol::quic::{
-    client_endpoint, connect, ConnectError, ConnectedSession, DatagramSender, Endpoint, EndpointOptions,
+    client_endpoint, connect_resuming, ConnectError, ConnectedSession, DatagramSender, Endpoint, EndpointOptions,
 };
-use kinloop_protocol::{Hello, Join, LocalModelForm, Role, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION};
+use kinloop_protocol::{
+    Hello, Join, LocalModelForm, ResumeAnswer, Role, RoomState, SceneInfo, Uplink, Welcome, PROTOCOL_VERSION,
+};
 
 use super::config::{ClientConfig, ClientError};
 use super::record::{self, TickRecord};
@@ -51,7 +53,7 @@ const RECORD_RING: usize = 16_384;
 pub(super) fn network_thread(
     config: ClientConfig,
     dhd: Option<OpenedDhd>,
-    address: SocketAddr,
+    addresses: Vec<SocketAddr>,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
     started: mpsc::Sender<Result<Started, ClientError>>,
@@ -74,7 +76,15 @@ pub(super) fn network_thread(
         };
         let mut chosen = None;
         let model = dhd.as_ref().map(OpenedDhd::model);
-        let session = match open_session(&endpoint, address, &config, model, &mut chosen).await {
+        let mut first = Err(ConnectError::Declined("no server address".into()));
+        for (i, address) in addresses.iter().enumerate() {
+            first = open_session(&endpoint, *address, &config, model, None, &mut chosen).await.map(|s| (i, s));
+            match &first {
+                Ok(_) | Err(ConnectError::Refused(_) | ConnectError::Declined(_)) => break,
+                Err(e) => tracing::warn!(server = %address, error = %e, "cannot connect; trying the next server"),
+            }
+        }
+        let (current, session) = match first {
             Ok(s) => s,
             Err(source) => {
                 // The handshake closed the connection; the server hears of it before the caller (who may exit
@@ -88,8 +98,14 @@ pub(super) fn network_thread(
         let Some(device) = chosen else { return };
         let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
         match session.welcome.scene.kind {
-            SceneKind::Planar => run::<Planar>(config, dhd, address, endpoint, session, shared, net, started).await,
-            SceneKind::Spatial => run::<Spatial>(config, dhd, address, endpoint, session, shared, net, started).await,
+            SceneKind::Planar => {
+                let dialer = Dialer { config, model: None, addresses, current, endpoint };
+                run::<Planar>(dialer, dhd, session, shared, net, started).await
+            }
+            SceneKind::Spatial => {
+                let dialer = Dialer { config, model: None, addresses, current, endpoint };
+                run::<Spatial>(dialer, dhd, session, shared, net, started).await
+            }
         }
     });
 }
@@ -142,9 +158,10 @@ async fn open_session(
     address: SocketAddr,
     config: &ClientConfig,
     real: Option<&ModelSpec>,
+    offer: Option<&RoomState>,
     chosen: &mut Option<DevicePreset>,
 ) -> Result<ConnectedSession, ConnectError> {
-    connect(endpoint, address, &config.server_name, &hello(config), |scene| {
+    connect_resuming(endpoint, address, &config.server_name, &hello(config), offer, |scene| {
         let (join, device) = choose(config, scene, real)?;
         *chosen = Some(device);
         Ok(join)
@@ -193,22 +210,21 @@ fn empty_uplink<S: Space>() -> Uplink {
 
 /// The session's haptic side: the rig and core, the rings, the recorder, the uplink sender and the haptic
 /// loop are started, the caller told, and the session served (and re-opened when lost) until the client stops.
-#[allow(clippy::too_many_arguments)]
 async fn run<S: Space>(
-    config: ClientConfig,
+    mut dialer: Dialer,
     dhd: Option<OpenedDhd>,
-    address: SocketAddr,
-    endpoint: Endpoint,
     session: ConnectedSession,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
     let model = dhd.as_ref().map(OpenedDhd::model);
-    let (rig, core) = match rig_and_core::<S>(&config, dhd, &session.welcome) {
+    dialer.model = model;
+    let (config, endpoint) = (&dialer.config, &dialer.endpoint);
+    let (rig, core) = match rig_and_core::<S>(config, dhd, &session.welcome) {
         Ok(parts) => parts,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot render").await;
+            abandon(endpoint, &session.connection, b"client cannot render").await;
             let _ = started.send(Err(e));
             return;
         }
@@ -243,7 +259,7 @@ async fn run<S: Space>(
     let uplink_thread = match uplink_thread {
         Ok(t) => t,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            abandon(endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
@@ -273,7 +289,7 @@ async fn run<S: Space>(
     let loop_thread = match loop_thread {
         Ok(t) => t,
         Err(e) => {
-            abandon(&endpoint, &session.connection, b"client cannot start").await;
+            abandon(endpoint, &session.connection, b"client cannot start").await;
             let _ = started.send(Err(ClientError::Runtime(e.to_string())));
             return;
         }
@@ -293,8 +309,7 @@ async fn run<S: Space>(
         spent_cores: spent_cores_rx,
         reports: reports_rx,
     };
-    let dialer = Dialer { config, model, address, endpoint };
-    keep_connected(&dialer, session, &mut rings, &sender_slot, &shared, &net).await;
+    keep_connected(&mut dialer, session, &mut rings, &sender_slot, &shared, &net).await;
     drain_reports(&mut rings, &net);
     // Give the close frame a moment to leave.
     let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
@@ -342,25 +357,77 @@ fn spawn_recorder<S: Space>(path: PathBuf, shared: Arc<LoopShared>) -> (JoinHand
     (writer, tx)
 }
 
-/// What re-opens a lost session: the client's configuration, the server's address and the endpoint.
+/// What re-opens a lost session: the client's configuration, the room's server addresses (the one of the
+/// current session at `current`) and the endpoint.
 struct Dialer {
     config: ClientConfig,
     /// An opened DHD device's model: the spec every re-join describes.
     model: Option<&'static ModelSpec>,
-    address: SocketAddr,
+    addresses: Vec<SocketAddr>,
+    current: usize,
     endpoint: Endpoint,
 }
 
 impl Dialer {
-    async fn dial(&self) -> Result<ConnectedSession, ConnectError> {
-        open_session(&self.endpoint, self.address, &self.config, self.model, &mut None).await
+    /// One round over the room's servers in order, starting after the one lost (which is tried last), each
+    /// offered the newest signed room state; the first session opened, or the last error with every
+    /// server tried. A refusal or an untrusted certificate ends the round (it is final).
+    async fn dial(&mut self, net: &NetShared) -> Result<ConnectedSession, ConnectError> {
+        let offer = net.room_state.lock().ok().and_then(|s| s.clone());
+        let count = self.addresses.len();
+        let mut last = Err(ConnectError::Timeout);
+        for step in 1..=count {
+            let index = (self.current + step) % count;
+            let address = self.addresses[index];
+            let mut chosen = None;
+            let attempt = open_session(&self.endpoint, address, &self.config, self.model, offer.as_ref(), &mut chosen);
+            // A dead server never answers: with others to try, each gets a short while.
+            let attempt = if count > 1 {
+                tokio::time::timeout(DIAL_PATIENCE, attempt).await.unwrap_or(Err(ConnectError::Timeout))
+            } else {
+                attempt.await
+            };
+            match attempt {
+                Ok(session) => {
+                    self.current = index;
+                    note_resume(&session, address, net);
+                    return Ok(session);
+                }
+                Err(
+                    e @ (ConnectError::Refused(_) | ConnectError::UntrustedCertificate { .. } | ConnectError::Alpn),
+                ) => return Err(e),
+                Err(e) => {
+                    tracing::warn!(server = %address, error = %e, "no session there");
+                    last = Err(e);
+                }
+            }
+        }
+        last
+    }
+}
+
+/// How long a reconnecting client with several servers waits for each to answer.
+const DIAL_PATIENCE: Duration = Duration::from_millis(1500);
+
+/// Says and counts what the server did with the offered room state.
+fn note_resume(session: &ConnectedSession, address: SocketAddr, net: &NetShared) {
+    match &session.resume {
+        Some(ResumeAnswer::Resumed { ve_step }) => {
+            net.resumes.fetch_add(1, Ordering::Relaxed);
+            tracing::info!(server = %address, ve_step, "the server resumed the room from the state this client kept");
+        }
+        Some(ResumeAnswer::Refused(why)) => {
+            net.resumes_refused.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(server = %address, %why, "the server refused the room state this client kept");
+        }
+        None => {}
     }
 }
 
 /// Serves `session` and, each time it is lost, opens a new one and hands the loop a new core for it, until
 /// the client stops or the new session cannot be rendered.
 async fn keep_connected<S: Space>(
-    dialer: &Dialer,
+    dialer: &mut Dialer,
     mut session: Session,
     rings: &mut NetRings<S>,
     sender_slot: &Mutex<Option<DatagramSender>>,
@@ -410,7 +477,7 @@ async fn keep_connected<S: Space>(
 /// Reconnects with exponential backoff until stopped; refusals and certificate problems are final (`None`:
 /// the client is stopped and the reason kept as fatal).
 async fn reconnect<S: Space>(
-    dialer: &Dialer,
+    dialer: &mut Dialer,
     rings: &mut NetRings<S>,
     shared: &LoopShared,
     net: &NetShared,
@@ -423,7 +490,7 @@ async fn reconnect<S: Space>(
         drain_reports(rings, net);
         tokio::time::sleep(*backoff).await;
         *backoff = (*backoff * 2).min(Duration::from_secs(5));
-        match dialer.dial().await {
+        match dialer.dial(net).await {
             Ok(s) => return Some(s),
             Err(e @ (ConnectError::Refused(_) | ConnectError::UntrustedCertificate { .. } | ConnectError::Alpn)) => {
                 tracing::error!(error = %e, "reconnection refused; giving up");
@@ -433,7 +500,10 @@ async fn reconnect<S: Space>(
                 shared.stop.store(true, Ordering::Relaxed);
                 return None;
             }
-            Err(e) => tracing::warn!(error = %e, retry_in = ?backoff, "reconnection failed"),
+            Err(e) => {
+                let looked: Vec<String> = dialer.addresses.iter().map(|a| a.to_string()).collect();
+                tracing::warn!(error = %e, looked = %looked.join(", "), retry_in = ?backoff, "reconnection failed; force stays at zero")
+            }
         }
     }
 }

@@ -21,6 +21,13 @@ pub(super) struct NetShared {
     pub(super) rtt_ms: Mutex<Vec<f64>>,
     pub(super) last_report: Mutex<Option<LoopReport>>,
     pub(super) fatal: Mutex<Option<String>>,
+    /// The newest signed room state a server sent (`Control::RoomState`), offered to the next server.
+    pub(super) room_state: Mutex<Option<kinloop_protocol::RoomState>>,
+    /// Offered states a server resumed from, and ones it refused.
+    pub(super) resumes: AtomicU64,
+    pub(super) resumes_refused: AtomicU64,
+    /// A session whose server sends nothing for this long is lost (`None`: only when QUIC says so).
+    pub(super) silence_limit: Option<Duration>,
 }
 
 /// The network side's ends of the rings.
@@ -111,10 +118,12 @@ pub(super) async fn serve_session<S: Space>(
     let mut housekeeping = tokio::time::interval(Duration::from_millis(50));
     let epoch = Instant::now();
     let mut nonce = 0u64;
+    let mut heard = Instant::now();
     loop {
         tokio::select! {
             datagram = receiver.recv() => match datagram {
                 Ok(Datagram::Snapshot(snapshot)) => {
+                    heard = Instant::now();
                     net.snapshots_received.fetch_add(1, Ordering::Relaxed);
                     while rings.spent_snapshots.pop().is_ok() {}
                     // A full ring means the loop is behind: this snapshot is dropped, a newer one follows.
@@ -139,6 +148,11 @@ pub(super) async fn serve_session<S: Space>(
                 Some(Ok(Control::Ping { nonce, t_s })) => {
                     let _ = kinloop_protocol::quic::send_control(&mut session.send, &Control::Pong { nonce, t_s }).await;
                 }
+                Some(Ok(Control::RoomState(state))) => {
+                    if let Ok(mut newest) = net.room_state.lock() {
+                        *newest = Some(state);
+                    }
+                }
                 Some(Ok(Control::Leave { reason })) => return format!("the server left: {reason}"),
                 Some(Ok(Control::Error { code, message })) => return format!("the server reported {code}: {message}"),
                 Some(Ok(_)) => {}
@@ -156,6 +170,9 @@ pub(super) async fn serve_session<S: Space>(
                 drain_reports(rings, net);
                 if shared.stop.load(Ordering::Relaxed) {
                     return "stopping".into();
+                }
+                if let Some(limit) = net.silence_limit.filter(|limit| heard.elapsed() > *limit) {
+                    return format!("the server sent nothing for {:.2} s (limit {:.2} s)", heard.elapsed().as_secs_f64(), limit.as_secs_f64());
                 }
             },
             reason = session.connection.closed() => return reason.to_string(),

@@ -5,8 +5,8 @@ use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
     uplink_flags, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram, DeviceCaps, Hello, Join, Mapping,
-    MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused, SceneInfo, SceneSummary, Snapshot,
-    Uplink, Welcome, MAX_PATH_POSES,
+    MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused, ResumeAnswer, ResumeRefusal, RoomState,
+    SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -22,6 +22,8 @@ pub fn control(msg: &Control) -> Result<(), DecodeError> {
         Control::Pong { t_s, .. } => scalar(Field::at("pong.t_s"), *t_s, 0.0, MAX_TIME_S),
         Control::SceneInfo(info) => self::scene_info(info),
         Control::Join(join) => self::join(join),
+        Control::RoomState(state) | Control::Resume(state) => self::room_state(state),
+        Control::ResumeAnswer(answer) => self::resume_answer(answer),
     }
 }
 
@@ -381,6 +383,34 @@ fn non_negative_vector(field: Field, v: &[f64], expected: usize, bound: f64) -> 
 fn port_energy_shape(fields: (&'static str, &'static str), e: &PortEnergy, k: usize) -> Result<(), DecodeError> {
     length(Field::at(fields.0), e.received_j.len(), k)?;
     length(Field::at(fields.1), e.emitted_j.len(), k)
+}
+
+/// Longest signature a room state may carry (HMAC-SHA256 makes 32 bytes).
+const MAX_TAG_BYTES: usize = 64;
+
+/// A room state: coordinates and velocities of one length, within the wire's position and speed bounds, and
+/// a signature no longer than an HMAC's. Whether it fits a scene is the receiving server's question.
+pub fn room_state(s: &RoomState) -> Result<(), DecodeError> {
+    count(Field::at("room_state.q"), s.q.len(), MAX_COORDINATES)?;
+    length(Field::at("room_state.qd"), s.qd.len(), s.q.len())?;
+    elements(Field::at("room_state.q"), &s.q, -MAX_POSITION, MAX_POSITION)?;
+    elements(Field::at("room_state.qd"), &s.qd, -MAX_SPEED, MAX_SPEED)?;
+    count(Field::at("room_state.tag"), s.tag.len(), MAX_TAG_BYTES)
+}
+
+fn resume_answer(a: &ResumeAnswer) -> Result<(), DecodeError> {
+    match a {
+        ResumeAnswer::Refused(ResumeRefusal::Shape { what }) => text(Field::at("resume_answer.what"), what),
+        ResumeAnswer::Refused(ResumeRefusal::Stale { age_s, max_age_s }) => {
+            scalar(Field::at("resume_answer.age_s"), *age_s, f64::MIN, f64::MAX)?;
+            scalar(Field::at("resume_answer.max_age_s"), *max_age_s, 0.0, f64::MAX)
+        }
+        ResumeAnswer::Refused(ResumeRefusal::Loops { residual_m, tolerance_m }) => {
+            scalar(Field::at("resume_answer.residual_m"), *residual_m, 0.0, f64::MAX)?;
+            scalar(Field::at("resume_answer.tolerance_m"), *tolerance_m, 0.0, f64::MAX)
+        }
+        _ => Ok(()),
+    }
 }
 
 fn length(field: Field, got: usize, expected: usize) -> Result<(), DecodeError> {

@@ -42,6 +42,39 @@ const SCENE_INFO_BYTES: &[&str] = &[
     "04 6b6e6565", // "knee"
 ];
 
+fn resume() -> Control {
+    Control::Resume(RoomState {
+        scene_hash: 7,
+        taken_unix_ms: 300,
+        ve_step: 2,
+        q: vec![1.0],
+        qd: vec![-0.5],
+        tag: vec![0xab, 0xcd],
+    })
+}
+
+const RESUME_BYTES: &[&str] = &[
+    "0a",                  // Control::Resume
+    "07",                  // scene_hash 7
+    "fb 2c01",             // taken_unix_ms 300 (≥ 251: fb + u16 LE)
+    "02",                  // ve_step 2
+    "01 000000000000f03f", // q [1.0]
+    "01 000000000000e0bf", // qd [-0.5]
+    "02 abcd",             // tag, 2 bytes
+];
+
+fn resume_answer() -> Control {
+    Control::ResumeAnswer(ResumeAnswer::Refused(ResumeRefusal::Stale { age_s: 40.0, max_age_s: 30.0 }))
+}
+
+const RESUME_ANSWER_BYTES: &[&str] = &[
+    "0b",               // Control::ResumeAnswer
+    "01",               // ResumeAnswer::Refused
+    "04",               // ResumeRefusal::Stale
+    "0000000000004440", // age_s 40.0
+    "0000000000003e40", // max_age_s 30.0
+];
+
 fn join() -> Control {
     Control::Join(Join {
         op: "ee".into(),
@@ -302,6 +335,15 @@ const UPLINK_BYTES: &[&str] = &[
     "03", // energy.emitted_j
     "0000000000000000 000000000000e03f 0000000000000000",
 ];
+
+#[test]
+fn resume_and_its_answer_match_golden_bytes() {
+    for (message, bytes) in [(resume(), RESUME_BYTES), (resume_answer(), RESUME_ANSWER_BYTES)] {
+        let golden = unhex(bytes);
+        assert_eq!(encode_control(&message).unwrap(), golden);
+        assert_eq!(decode_control(&golden).unwrap(), message);
+    }
+}
 
 #[test]
 fn hello_matches_golden_bytes() {

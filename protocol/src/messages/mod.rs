@@ -30,9 +30,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::shape::{SceneKind, SessionShape};
 
+mod room;
+pub use room::{ResumeAnswer, ResumeRefusal, RoomState};
+
 /// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
 /// landing that changes the wire (see the module documentation).
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
 /// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.
@@ -477,6 +480,13 @@ pub enum Control {
     SceneInfo(SceneInfo),
     /// Client → server, after the scene info.
     Join(Join),
+    /// Server → client, every few VE steps when the server has a room key: the VE's state, signed.
+    RoomState(RoomState),
+    /// Client → server, between the scene info and the join: the newest signed state the client holds,
+    /// offered for the room to resume from. The server answers [`Control::ResumeAnswer`].
+    Resume(RoomState),
+    /// Server → client, the answer to [`Control::Resume`].
+    ResumeAnswer(ResumeAnswer),
 }
 
 impl Control {
@@ -492,6 +502,9 @@ impl Control {
             Control::Pong { .. } => "Pong",
             Control::SceneInfo(_) => "SceneInfo",
             Control::Join(_) => "Join",
+            Control::RoomState(_) => "RoomState",
+            Control::Resume(_) => "Resume",
+            Control::ResumeAnswer(_) => "ResumeAnswer",
         }
     }
 }

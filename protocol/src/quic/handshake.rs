@@ -12,7 +12,10 @@ use quinn::{Connection, ConnectionError, Endpoint, Incoming, RecvStream, SendStr
 use super::framing::{recv_control, recv_frame, send_control, ControlStreamError};
 use super::trust::FingerprintMismatch;
 use crate::codec::{self, validate, DecodeError};
-use crate::messages::{Control, Hello, Join, RefusalReason, Refused, SceneInfo, Welcome, PROTOCOL_VERSION};
+use crate::messages::{
+    Control, Hello, Join, RefusalReason, Refused, ResumeAnswer, ResumeRefusal, RoomState, SceneInfo, Welcome,
+    PROTOCOL_VERSION,
+};
 
 /// Longest a handshake (QUIC and Hello/Welcome) may take on either side.
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -54,6 +57,8 @@ pub struct ConnectedSession {
     pub join: Join,
     /// What the server granted.
     pub welcome: Welcome,
+    /// The server's answer to the state the client offered (`None`: none offered).
+    pub resume: Option<ResumeAnswer>,
 }
 
 /// Why a client could not start a session. Each cause a user can fix has its own variant.
@@ -139,6 +144,20 @@ pub async fn connect(
     hello: &Hello,
     choose: impl FnOnce(&SceneInfo) -> Result<Join, String>,
 ) -> Result<ConnectedSession, ConnectError> {
+    connect_resuming(endpoint, addr, server_name, hello, None, choose).await
+}
+
+/// [`connect`], offering the room's signed `offer` (the newest state a previous server of the room sent)
+/// between the scene info and the join, so the server resumes the room from it; its answer is in
+/// [`ConnectedSession::resume`].
+pub async fn connect_resuming(
+    endpoint: &Endpoint,
+    addr: SocketAddr,
+    server_name: &str,
+    hello: &Hello,
+    offer: Option<&RoomState>,
+    choose: impl FnOnce(&SceneInfo) -> Result<Join, String>,
+) -> Result<ConnectedSession, ConnectError> {
     let attempt = async {
         let connection = endpoint.connect(addr, server_name)?.await?;
         let (mut send, mut recv) = connection.open_bi().await?;
@@ -152,6 +171,17 @@ pub async fn connect(
             Control::SceneInfo(scene) => scene,
             other => return Err(unexpected(&connection, "hello", other)),
         };
+        let mut resume = None;
+        if let Some(offer) = offer {
+            let reply = async {
+                send_control(&mut send, &Control::Resume(offer.clone())).await?;
+                recv_control(&mut recv).await
+            };
+            resume = match reply.await.map_err(failed)? {
+                Control::ResumeAnswer(answer) => Some(answer),
+                other => return Err(unexpected(&connection, "resume", other)),
+            };
+        }
         let join = match choose(&scene) {
             Ok(join) => join,
             Err(why) => {
@@ -171,7 +201,7 @@ pub async fn connect(
             recv_control(&mut recv).await
         };
         match reply.await.map_err(failed)? {
-            Control::Welcome(welcome) => Ok(ConnectedSession { connection, send, recv, scene, join, welcome }),
+            Control::Welcome(welcome) => Ok(ConnectedSession { connection, send, recv, scene, join, welcome, resume }),
             other => Err(unexpected(&connection, "join", other)),
         }
     };
@@ -260,6 +290,26 @@ where
     F: FnOnce(Hello, Join) -> Fut,
     Fut: std::future::Future<Output = Result<Welcome, Refused>>,
 {
+    let no_key = |_| std::future::ready(ResumeAnswer::Refused(ResumeRefusal::NoRoomKey));
+    accept_resuming(incoming, admit, no_key, decide).await
+}
+
+/// [`accept_with`] for a server of a room: a client may offer a signed [`RoomState`] between the scene info
+/// and the join, which `resume` decides on (before the join, so the welcome describes the resumed room);
+/// the client is told the answer and goes on to join either way.
+pub async fn accept_resuming<A, R, RFut, F, Fut>(
+    incoming: Incoming,
+    admit: A,
+    resume: R,
+    decide: F,
+) -> Result<AcceptedSession, AcceptError>
+where
+    A: FnOnce(&Hello) -> Result<SceneInfo, Refused>,
+    R: FnOnce(RoomState) -> RFut,
+    RFut: std::future::Future<Output = ResumeAnswer>,
+    F: FnOnce(Hello, Join) -> Fut,
+    Fut: std::future::Future<Output = Result<Welcome, Refused>>,
+{
     let handshake = async {
         let connection = incoming.await?;
         let (mut send, mut recv) = connection.accept_bi().await?;
@@ -276,7 +326,13 @@ where
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };
         send_control(&mut send, &Control::SceneInfo(scene)).await?;
-        let join = match recv_control(&mut recv).await {
+        let mut next = recv_control(&mut recv).await;
+        if let Ok(Control::Resume(offer)) = next {
+            let answer = resume(offer).await;
+            send_control(&mut send, &Control::ResumeAnswer(answer)).await?;
+            next = recv_control(&mut recv).await;
+        }
+        let join = match next {
             Ok(Control::Join(join)) => join,
             Ok(Control::Leave { reason }) => {
                 connection.close(close_codes::NORMAL, b"declined");

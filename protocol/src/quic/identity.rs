@@ -148,7 +148,7 @@ fn bad_pem(path: &Path, error: impl std::fmt::Display) -> IdentityError {
 }
 
 /// Writes a secret readable by its owner only.
-fn write_private(path: &Path, contents: &[u8]) -> Result<(), IdentityError> {
+pub(super) fn write_private(path: &Path, contents: &[u8]) -> Result<(), IdentityError> {
     let io = |source| IdentityError::Io { path: path.to_owned(), source };
     let mut options = fs::OpenOptions::new();
     options.write(true).create_new(true);

@@ -9,6 +9,7 @@ mod endpoint;
 mod framing;
 mod handshake;
 mod identity;
+mod room_ca;
 mod trust;
 
 pub use datagrams::{DatagramReceiver, DatagramSender, DeliveryStats, RecvError, Route, SendError};
@@ -21,12 +22,13 @@ pub use framing::{
     body_len, encode_frame, recv_control, recv_frame, send_control, ControlStreamError, FRAME_HEADER_BYTES,
 };
 pub use handshake::{
-    accept, accept_with, close_codes, connect, AcceptError, AcceptedSession, ConnectError, ConnectedSession,
-    HANDSHAKE_TIMEOUT,
+    accept, accept_resuming, accept_with, close_codes, connect, connect_resuming, AcceptError, AcceptedSession,
+    ConnectError, ConnectedSession, HANDSHAKE_TIMEOUT,
 };
 pub use identity::{
     fingerprint_hex, normalize_fingerprint, IdentityError, ServerIdentity, CERT_FILE, DEFAULT_NAMES, KEY_FILE,
 };
+pub use room_ca::RoomCa;
 pub use trust::{FingerprintMismatch, Trust, TrustError};
 
 /// Re-exported so callers need not depend on quinn for the types this API hands out.

@@ -44,6 +44,11 @@ pub enum VeEvent {
         /// Who.
         user: UserId,
     },
+    /// The room resumed from a state a client offered (see `docs/resume.md`).
+    RoomResumed {
+        /// The VE's step counter then.
+        step: u64,
+    },
     /// A user that left has faded out and is gone.
     UserRemoved {
         /// Who.

@@ -42,4 +42,8 @@ pub struct VeMetrics {
     pub max_closure_error: f64,
     /// Events dropped because nobody drained the queue.
     pub events_dropped: u64,
+    /// Offered room states the VE resumed from.
+    pub resumes_accepted: u64,
+    /// Offered room states refused (by the VE, or by the driver for their signature, scene or age).
+    pub resumes_refused: u64,
 }

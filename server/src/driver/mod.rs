@@ -14,6 +14,7 @@
 //! tasks take; the VE thread owns every consumer and producer it touches and never waits.
 
 mod record;
+pub mod room;
 mod session;
 pub mod stats;
 pub mod ve_thread;
@@ -32,6 +33,7 @@ use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     close_codes, server_endpoint, Endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity,
 };
+use kinloop_protocol::room_key::{scene_hash, RoomKey};
 use kinloop_protocol::SessionShape;
 use rtrb::RingBuffer;
 use tokio::sync::watch;
@@ -65,6 +67,13 @@ pub enum Identity {
     CertDir(PathBuf),
     /// A fresh self-signed certificate in memory (tests, demos).
     Ephemeral,
+    /// A certificate chain and key from PEM files (one issued by the room's CA, say).
+    Files {
+        /// The certificate chain, end entity first.
+        cert: PathBuf,
+        /// Its private key.
+        key: PathBuf,
+    },
 }
 
 /// Everything a server needs.
@@ -92,6 +101,9 @@ pub struct ServerConfig {
     pub realtime: bool,
     /// Serve the web view (`--view`).
     pub view: Option<ViewConfig>,
+    /// The room's key (`--room-key`): the server signs its state for its clients and resumes from a state
+    /// a client offers when it verifies (see `docs/resume.md`).
+    pub room_key: Option<RoomKey>,
 }
 
 impl ServerConfig {
@@ -109,6 +121,7 @@ impl ServerConfig {
             stats_every: None,
             realtime: true,
             view: None,
+            room_key: None,
         }
     }
 }
@@ -162,11 +175,16 @@ pub(crate) struct Shared {
     shutdown: watch::Sender<bool>,
     /// The view's counters, once it runs.
     view: std::sync::OnceLock<Arc<crate::view::Counters>>,
+    /// The room, with a room key.
+    room: Option<Arc<room::Room>>,
 }
 
 impl Shared {
     fn stats(&self) -> ServerStats {
-        let ve = self.ve_stats.lock().map(|s| *s).unwrap_or_default();
+        let mut ve = self.ve_stats.lock().map(|s| *s).unwrap_or_default();
+        if let Some(room) = &self.room {
+            ve.core.resumes_refused += room.refused_unseen.load(Ordering::Relaxed);
+        }
         let mut per_user = Vec::new();
         self.gateway.users.for_each(|e| {
             per_user.push({
@@ -313,7 +331,12 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
     let identity = match &config.identity {
         Identity::CertDir(dir) => ServerIdentity::load_or_create(dir)?,
         Identity::Ephemeral => ServerIdentity::generate(&kinloop_protocol::quic::DEFAULT_NAMES)?,
+        Identity::Files { cert, key } => ServerIdentity::load(cert, key)?,
     };
+    let room = config.room_key.clone().map(|key| {
+        let hash = scene_hash(&serde_json::to_vec(&config.scene).unwrap_or_default());
+        Arc::new(room::Room::new(key, hash, n, core.state().qd.len()))
+    });
     let options = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
     let endpoint = server_endpoint(config.listen, &identity, &options)?;
     let local_addr = endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
@@ -351,6 +374,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         stats: stats_tx,
         record: row_tx,
         view: view_tap,
+        room: room.clone(),
         stop: stop.clone(),
     };
     let realtime = config.realtime;
@@ -375,6 +399,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         scene_info,
         shutdown,
         view: std::sync::OnceLock::new(),
+        room,
     });
     let view = match (&config.view, view_reader) {
         (Some(view), Some(reader)) => {
@@ -485,6 +510,7 @@ fn log_event(shared: &Shared, event: &VeEvent) {
         VeEvent::FadingOut { user, reason } => tracing::info!(user, ?reason, "coupling fading out"),
         VeEvent::Resumed { user } => tracing::info!(user, "uplinks resumed; coupling fading in"),
         VeEvent::UserRemoved { user } => tracing::info!(user, "left the VE"),
+        VeEvent::RoomResumed { step } => tracing::info!(step, "the room resumed from a client's signed state"),
         VeEvent::UplinkRejected { user, rejection, previous_burst } => {
             tracing::warn!(user, %rejection, previous_burst, "rejecting uplinks (logged once per burst)")
         }

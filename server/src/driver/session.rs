@@ -7,10 +7,12 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
-    accept_with, close_codes, recv_control, send_control, AcceptError, AcceptedSession, DatagramReceiver,
+    accept_resuming, close_codes, recv_control, send_control, AcceptError, AcceptedSession, DatagramReceiver,
     DatagramSender, Incoming, Route,
 };
-use kinloop_protocol::{uplink_flags, Control, Datagram, RefusalReason, Refused};
+use kinloop_protocol::{
+    uplink_flags, Control, Datagram, RefusalReason, Refused, ResumeAnswer, ResumeRefusal, RoomState,
+};
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
@@ -47,7 +49,8 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
         shared_ref.access.admit(&hello.token, hello.role).map_err(refused)?;
         Ok(shared_ref.scene_info.clone())
     };
-    let handshake = accept_with(incoming, admit, move |hello, join| async move {
+    let resume = |offer: RoomState| resume(shared_ref, remote, offer);
+    let handshake = accept_resuming(incoming, admit, resume, move |hello, join| async move {
         let shared = shared_ref;
         let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
         let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.gateway.snapshot_ring_bytes);
@@ -78,11 +81,40 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
     run_session(session, shared, uplink_tx, snapshot_rx, notify).await;
 }
 
+/// Decides on a state a client offers: the room key's checks here, the fit to the linkage in the VE. A
+/// refusal is said in the log with what the room goes on from.
+async fn resume(shared: &Shared, remote: std::net::SocketAddr, offer: RoomState) -> ResumeAnswer {
+    let decided = async {
+        let room = shared.room.as_ref().ok_or(ResumeRefusal::NoRoomKey)?;
+        room.check(&offer)?;
+        let (reply, decision) = oneshot::channel();
+        let command = Command::Resume { q: offer.q.clone(), qd: offer.qd.clone(), reply };
+        let gone = ResumeRefusal::Shape { what: "the server is shutting down".into() };
+        shared.gateway.commands.send(command).await.map_err(|_| gone.clone())?;
+        decision.await.map_err(|_| gone)?
+    };
+    match decided.await {
+        Ok(()) => {
+            tracing::info!(%remote, ve_step = offer.ve_step, "resuming the room from the state the client offered");
+            ResumeAnswer::Resumed { ve_step: offer.ve_step }
+        }
+        Err(refusal) => {
+            let from = if matches!(refusal, ResumeRefusal::RoomLive { .. }) {
+                "its live state"
+            } else {
+                "where it is (q0 when new)"
+            };
+            tracing::warn!(%remote, %refusal, "refused the offered room state; the room goes on from {from}");
+            ResumeAnswer::Refused(refusal)
+        }
+    }
+}
+
 async fn run_session(
     session: AcceptedSession,
     shared: Arc<Shared>,
     mut uplinks: rtrb::Producer<UplinkSample>,
-    mut snapshots: rtrb::Consumer<u8>,
+    snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
 ) {
     let AcceptedSession { connection, mut send, mut recv, hello, join, welcome } = session;
@@ -136,38 +168,11 @@ async fn run_session(
             }
         })
     };
-    let transmit = {
-        let counters = counters.clone();
-        let connection = connection.clone();
-        tokio::spawn(async move {
-            let sender = DatagramSender::new(connection.clone());
-            let mut frame = Vec::new();
-            loop {
-                tokio::select! {
-                    _ = notify.notified() => {}
-                    _ = connection.closed() => break,
-                }
-                if take_latest_frame(&mut snapshots, &mut frame) == 0 {
-                    continue;
-                }
-                match sender.send_encoded(Bytes::copy_from_slice(&frame)) {
-                    Ok(route) => {
-                        counters.snapshots_sent.fetch_add(1, Ordering::Relaxed);
-                        counters.snapshot_bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
-                        if route == Route::Stream {
-                            counters.snapshots_oversize.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
-                    Err(error) => {
-                        tracing::debug!(user, %error, "snapshot not sent; ending the sender");
-                        break;
-                    }
-                }
-            }
-        })
-    };
+    let transmit = spawn_transmit(user, connection.clone(), counters.clone(), snapshots, notify);
 
     let mut shutdown = shared.shutdown.subscribe();
+    let mut room_tick = tokio::time::interval(super::room::ROOM_STATE_PERIOD);
+    room_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let reason = loop {
         if *shutdown.borrow() {
             let _ = send_control(&mut send, &Control::Leave { reason: "the server is shutting down".into() }).await;
@@ -186,6 +191,14 @@ async fn run_session(
                 Ok(other) => tracing::debug!(user, message = other.kind_name(), "ignored control message"),
                 Err(_) => break "connection lost",
             },
+            _ = room_tick.tick(), if shared.room.is_some() => {
+                let state = shared.room.as_ref().and_then(|room| room.signed_latest());
+                if let Some(state) = state {
+                    if send_control(&mut send, &Control::RoomState(state)).await.is_err() {
+                        break "control stream failed";
+                    }
+                }
+            }
             _ = shutdown.changed() => {}
         }
     };
@@ -196,4 +209,41 @@ async fn run_session(
     transmit.abort();
     counters.connected.store(false, Ordering::Relaxed);
     tracing::info!(user, reason, "session ended");
+}
+
+/// The user's snapshot sender: on each notification, the newest encoded snapshot the VE thread left in the
+/// user's ring goes out as a datagram (or a stream when too large), counted.
+fn spawn_transmit(
+    user: u32,
+    connection: kinloop_protocol::quic::Connection,
+    counters: Arc<UserCounters>,
+    mut snapshots: rtrb::Consumer<u8>,
+    notify: Arc<Notify>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let sender = DatagramSender::new(connection.clone());
+        let mut frame = Vec::new();
+        loop {
+            tokio::select! {
+                _ = notify.notified() => {}
+                _ = connection.closed() => break,
+            }
+            if take_latest_frame(&mut snapshots, &mut frame) == 0 {
+                continue;
+            }
+            match sender.send_encoded(Bytes::copy_from_slice(&frame)) {
+                Ok(route) => {
+                    counters.snapshots_sent.fetch_add(1, Ordering::Relaxed);
+                    counters.snapshot_bytes.fetch_add(frame.len() as u64, Ordering::Relaxed);
+                    if route == Route::Stream {
+                        counters.snapshots_oversize.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(error) => {
+                    tracing::debug!(user, %error, "snapshot not sent; ending the sender");
+                    break;
+                }
+            }
+        }
+    })
 }

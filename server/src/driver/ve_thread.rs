@@ -18,6 +18,8 @@ use crate::core::{UserId, VeCore, VeEvent};
 use crate::gateway::{push_frame, Command, LatencyHistogram, UserLink, VeLoopStats};
 use crate::view::ViewTap;
 
+use super::room::{Room, ROOM_STATE_PERIOD};
+
 struct ActiveLink {
     user: UserId,
     link: UserLink,
@@ -35,6 +37,8 @@ pub struct VeThreadIo {
     pub record: Option<Producer<f64>>,
     /// Frames for the view's hub (see `crate::view::tap`), when a view is served.
     pub view: Option<ViewTap>,
+    /// The room whose state the loop publishes (`--room-key`), if any.
+    pub room: Option<Arc<Room>>,
     /// Set to stop the loop.
     pub stop: Arc<AtomicBool>,
 }
@@ -50,6 +54,7 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
     let period = core.config().ve_period();
     let half_period = period / 2;
     let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;
+    let room_every = (core.config().ve_rate_hz * ROOM_STATE_PERIOD.as_secs_f64()).round().max(1.0) as u64;
     let mut histogram = LatencyHistogram::default();
     let mut links: Vec<ActiveLink> = Vec::with_capacity(2 * core.config().max_users);
     let mut encoded = Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES);
@@ -104,6 +109,9 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
             stats.view_frames = view.published;
             stats.view_frames_dropped = view.dropped;
         }
+        if let Some(room) = io.room.as_ref().filter(|_| iterations.is_multiple_of(room_every)) {
+            room.publish(&core);
+        }
         histogram.record(woke.elapsed().as_nanos() as u64);
         iterations += 1;
         if iterations.is_multiple_of(publish_every) {
@@ -136,6 +144,9 @@ fn serve_commands<S: Space>(
                     let _ = core.leave(now, joined.user_id);
                     links.retain(|l| l.user != joined.user_id);
                 }
+            }
+            Command::Resume { q, qd, reply } => {
+                let _ = reply.send(core.handle_resume_offer(now, &q, &qd));
             }
             Command::Leave { user } => {
                 let _ = core.leave(now, user);

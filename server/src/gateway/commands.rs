@@ -4,7 +4,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use kinloop_protocol::RefusalReason;
+use kinloop_protocol::{RefusalReason, ResumeRefusal};
 use rtrb::{Consumer, Producer};
 use tokio::sync::{oneshot, Notify};
 
@@ -22,6 +22,15 @@ pub enum Command {
         link: UserLink,
         /// Where the decision goes.
         reply: oneshot::Sender<Result<Joined, RefusalReason>>,
+    },
+    /// Resume the room from an authenticated state (see `VeCore::handle_resume_offer`).
+    Resume {
+        /// Generalized coordinates.
+        q: Vec<f64>,
+        /// Generalized velocities.
+        qd: Vec<f64>,
+        /// Where the decision goes.
+        reply: oneshot::Sender<Result<(), ResumeRefusal>>,
     },
     /// The user's session ended.
     Leave {
