@@ -25,10 +25,11 @@ pub fn survey() -> Value {
     match OpenedHd::describe(library, &request) {
         Ok((opened, calibrated)) => {
             let s = opened.spec();
+            let workspace_mm = [0, 1, 2].map(|i| 1e3 * (s.workspace_max[i] - s.workspace_min[i]));
             let device = json!({
                 "name": opened.name(),
                 "model": s.model,
-                "workspace_mm": [0, 1, 2].map(|i| 1e3 * (s.workspace_max[i] - s.workspace_min[i])),
+                "workspace_mm": workspace_mm,
                 "peak_force_n": s.max_force_n,
                 "continuous_force_n": s.continuous_force_n,
                 "stiffness_n_per_m": s.max_stiffness,

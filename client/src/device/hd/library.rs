@@ -95,7 +95,7 @@ type CheckCalibration = unsafe extern "system" fn() -> c_uint;
 type UpdateCalibration = unsafe extern "system" fn(c_uint);
 
 /// The required symbols, by name.
-pub const REQUIRED: [&str; 15] = [
+pub const REQUIRED: [&str; 16] = [
     "hdInitDevice",
     "hdDisableDevice",
     "hdMakeCurrentDevice",
@@ -111,6 +111,7 @@ pub const REQUIRED: [&str; 15] = [
     "hdScheduleAsynchronous",
     "hdUnschedule",
     "hdStartScheduler",
+    "hdStopScheduler",
 ];
 
 /// The calls kinloop makes, resolved once from a library that stays loaded for the process's life.
@@ -131,7 +132,7 @@ pub struct HdLibrary {
     schedule: Schedule,
     unschedule: Unschedule,
     start_scheduler: NoArgs,
-    stop_scheduler: Option<NoArgs>,
+    stop_scheduler: NoArgs,
     get_string: Option<GetString>,
     check_calibration: Option<CheckCalibration>,
     update_calibration: Option<UpdateCalibration>,
@@ -235,6 +236,7 @@ impl HdLibrary {
             required!("hdScheduleAsynchronous"),
             required!("hdUnschedule"),
             required!("hdStartScheduler"),
+            required!("hdStopScheduler"),
         );
         let (
             Some(init_device),
@@ -252,6 +254,7 @@ impl HdLibrary {
             Some(schedule),
             Some(unschedule),
             Some(start_scheduler),
+            Some(stop_scheduler),
         ) = parts
         else {
             return Err(HdError::MissingSymbols { library, symbols: missing.join(", ") });
@@ -273,7 +276,7 @@ impl HdLibrary {
             schedule,
             unschedule,
             start_scheduler,
-            stop_scheduler: optional!("hdStopScheduler"),
+            stop_scheduler,
             get_string: optional!("hdGetString"),
             check_calibration: optional!("hdCheckCalibration"),
             update_calibration: optional!("hdUpdateCalibration"),
@@ -442,12 +445,11 @@ impl HdLibrary {
         unsafe { (self.start_scheduler)() }
     }
 
-    /// `hdStopScheduler()`, when the library has it.
+    /// `hdStopScheduler()`: returns once no scheduled callback runs any more (required: kinloop frees a
+    /// callback's data only after it).
     pub fn stop_scheduler(&self) {
         // SAFETY: no arguments.
-        if let Some(call) = self.stop_scheduler {
-            unsafe { call() }
-        }
+        unsafe { (self.stop_scheduler)() }
     }
 }
 
