@@ -15,6 +15,7 @@ pub mod presets;
 pub mod request;
 pub mod rig;
 pub mod simulated;
+pub mod vendor_search;
 
 pub use haptic_device::{DeviceError, DeviceSpec, DeviceState, HapticDevice};
 pub use presets::DevicePreset;

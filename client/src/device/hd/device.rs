@@ -14,7 +14,7 @@ use std::ffi::c_uint;
 use std::marker::PhantomData;
 use std::time::Duration;
 
-use kinloop_linkage::math::space::{OpPose, SceneKind, Space, VecOps};
+use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::library::{constants, HdError, HdLibrary};
 use super::units;
@@ -279,20 +279,8 @@ impl<S: Space> HapticDevice<S> for HdDevice<S> {
                 self.lost(format!("non-finite reading from the HD library: position {p:?} mm, velocity {v:?} mm/s"))
             );
         }
-        let (p, v) = (units::mm_to_m(p), units::mm_to_m(v));
-        let mut point = <S::Point as VecOps>::zero();
-        let mut twist = S::OpVec::zero();
-        for (i, x) in point.as_mut_slice().iter_mut().enumerate() {
-            *x = p[i];
-            twist[i] = v[i];
-        }
         // Button 1 (bit 0) is the clutch: held, the hand counts as not grasping.
-        Ok(DeviceState {
-            pose: OpPose { position: point, rotation: S::rot_identity() },
-            twist,
-            hand_wrench: None,
-            grasped: Some(buttons & 1 == 0),
-        })
+        Ok(DeviceState::linear(units::mm_to_m(p), units::mm_to_m(v), Some(buttons & 1 == 0)))
     }
 
     fn command(&mut self, now: Duration, wrench: &S::OpVec) -> Result<(), DeviceError> {

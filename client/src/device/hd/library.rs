@@ -14,6 +14,8 @@ use std::ffi::{c_char, c_int, c_uint, c_ulong, c_ushort, c_void, CStr, CString};
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
+use crate::device::vendor_search;
+
 /// The variable naming the library file, before any search.
 pub const LIBRARY_VARIABLE: &str = "KINLOOP_HD_LIB";
 /// The OpenHaptics install folder, as 3D Systems' installers set it.
@@ -152,19 +154,7 @@ pub fn library_names() -> &'static [&'static str] {
 /// Where kinloop looks, in order: `KINLOOP_HD_LIB`; `$OH_SDK_BASE/lib`; `/usr/lib` and `/usr/local/lib`
 /// (where the Linux installer puts `libHD.so`); then the name through the system loader's search path.
 pub fn candidates() -> Vec<PathBuf> {
-    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
-        return vec![PathBuf::from(path)];
-    }
-    let mut folders = Vec::new();
-    if let Some(sdk) = std::env::var_os(SDK_VARIABLE).filter(|p| !p.is_empty()) {
-        folders.push(PathBuf::from(sdk).join("lib"));
-    }
-    if !cfg!(windows) {
-        folders.extend([PathBuf::from("/usr/lib"), PathBuf::from("/usr/local/lib")]);
-    }
-    let mut found: Vec<PathBuf> = folders.iter().flat_map(|f| library_names().iter().map(move |n| f.join(n))).collect();
-    found.extend(library_names().iter().map(PathBuf::from));
-    found
+    vendor_search::candidates(LIBRARY_VARIABLE, SDK_VARIABLE, &["/usr/lib", "/usr/local/lib"], library_names())
 }
 
 /// The one library this process loaded, by path (never unloaded, never loaded twice).
@@ -175,17 +165,9 @@ impl HdLibrary {
     /// exists but is refused is the error; when none exists, the error lists where kinloop looked.
     pub fn find() -> Result<&'static HdLibrary, HdError> {
         let candidates = candidates();
-        for path in &candidates {
-            let bare = path.components().count() == 1;
-            if !bare && !path.exists() {
-                continue;
-            }
-            match HdLibrary::load(path) {
-                Err(HdError::Load { .. }) if bare => continue,
-                result => return result,
-            }
-        }
-        Err(HdError::NotFound { looked: candidates })
+        let not_loadable = |e: &HdError| matches!(e, HdError::Load { .. });
+        vendor_search::first_loadable(&candidates, HdLibrary::load, not_loadable)
+            .unwrap_or(Err(HdError::NotFound { looked: candidates }))
     }
 
     /// Loads the library at `path` (once per process) and resolves its symbols.
