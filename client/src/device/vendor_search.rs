@@ -43,3 +43,29 @@ pub fn first_loadable<L, E>(
     }
     None
 }
+
+/// The symbol `name` of `library` as a `T`, or None with `name` added to `missing`.
+///
+/// # Safety
+/// `T` must be the type the library's header declares for `name` (a function pointer of its signature).
+pub unsafe fn required<T: Copy>(
+    library: &libloading::Library,
+    name: &'static str,
+    missing: &mut Vec<&'static str>,
+) -> Option<T> {
+    // SAFETY: as this function's contract.
+    let found = unsafe { optional(library, name) };
+    if found.is_none() {
+        missing.push(name);
+    }
+    found
+}
+
+/// The symbol `name` of `library` as a `T`, when it has it.
+///
+/// # Safety
+/// As [`required`].
+pub unsafe fn optional<T: Copy>(library: &libloading::Library, name: &'static str) -> Option<T> {
+    // SAFETY: as this function's contract.
+    unsafe { library.get::<T>(name) }.ok().map(|symbol| *symbol)
+}

@@ -162,18 +162,12 @@ impl DhdLibrary {
         // SAFETY: each type below is the signature `dhdc.h` declares for that name.
         macro_rules! required {
             ($name:literal) => {
-                match unsafe { loaded.get($name) } {
-                    Ok(symbol) => Some(*symbol),
-                    Err(_) => {
-                        missing.push($name);
-                        None
-                    }
-                }
+                unsafe { vendor_search::required(&loaded, $name, &mut missing) }
             };
         }
         macro_rules! optional {
             ($name:literal) => {
-                unsafe { loaded.get($name) }.ok().map(|symbol| *symbol)
+                unsafe { vendor_search::optional(&loaded, $name) }
             };
         }
         let get_version: Option<GetVersion> = required!("dhdGetSDKVersion");

@@ -188,18 +188,12 @@ impl HdLibrary {
         // SAFETY: each type is the signature the OpenHaptics headers declare for that name.
         macro_rules! required {
             ($name:literal) => {
-                match unsafe { handle.get($name) } {
-                    Ok(symbol) => Some(*symbol),
-                    Err(_) => {
-                        missing.push($name);
-                        None
-                    }
-                }
+                unsafe { vendor_search::required(handle, $name, &mut missing) }
             };
         }
         macro_rules! optional {
             ($name:literal) => {
-                unsafe { handle.get($name) }.ok().map(|symbol| *symbol)
+                unsafe { vendor_search::optional(handle, $name) }
             };
         }
         let parts = (
