@@ -14,7 +14,7 @@ use kinloop_protocol::quic::{ConnectError, Trust};
 use kinloop_protocol::{MappingRequest, RefusalReason};
 
 use crate::core::{ConstraintMode, ModelForm};
-use crate::device::{DeviceRequest, DhdRequest};
+use crate::device::{DeviceRequest, DhdRequest, HdRequest};
 use crate::driver::{Client, ClientConfig, ClientError};
 use crate::user::UserSpec;
 
@@ -43,14 +43,20 @@ struct Args {
     op: Option<String>,
     /// Device: simulated sim:paper (planar), sim:falcon or sim:touch (default: sim:paper for planar scenes,
     /// sim:touch for spatial ones); dhd[:INDEX] a Force Dimension device through the DHD SDK (found through
-    /// KINLOOP_DHD_LIB, FORCEDIM_SDK or the usual install places); dhd,sim:NAME falls back to a simulated
-    /// device when the DHD one cannot be used.
+    /// KINLOOP_DHD_LIB, FORCEDIM_SDK or the usual install places); hd[:NAME] a 3D Systems device through
+    /// OpenHaptics (libHD, found through KINLOOP_HD_LIB, OH_SDK_BASE or the usual install places; NAME as
+    /// Touch Setup lists it); dhd,sim:NAME or hd,sim:NAME falls back to a simulated device when the vendor's
+    /// cannot be used.
     #[arg(long)]
     device: Option<DeviceRequest>,
     /// With --device dhd: when the device is not calibrated (drdIsInitialized false), run drdAutoInit, which
     /// moves the device on its own (let go of the handle first). Without it an uncalibrated device is refused.
     #[arg(long)]
     dhd_auto_init: bool,
+    /// With --device hd: when the device needs calibrating (hdCheckCalibration), run hdUpdateCalibration.
+    /// Without it such a device is refused with what to do.
+    #[arg(long)]
+    hd_calibrate: bool,
     /// Simulated user: a hand soft|firm|release|poke (touring the OP's reach; KIND:PATH or KIND:hold for a
     /// scripted one), path:line:X0,Y0,X1,Y1,T | path:circle:R,T | path:waypoints:T:X,Y;... (a soft hand),
     /// constant:FX,FY,TZ (planar: forces x, y then torque z) or constant:FX,FY,FZ,TX,TY,TZ (spatial: forces
@@ -136,6 +142,7 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
         Some(DeviceRequest::Dhd(request)) => {
             config.dhd = Some(DhdRequest { auto_init: args.dhd_auto_init, ..request });
         }
+        Some(DeviceRequest::Hd(request)) => config.hd = Some(HdRequest { calibrate: args.hd_calibrate, ..request }),
         None => {}
     }
     config.user = args.user;

@@ -78,6 +78,9 @@ const HARNESS: Layers = Layers { dir: "harness/src", ranks: &[("record", 0)] };
 /// The fake DHD library: its plant below the exported C functions.
 const FAKE_DHD: Layers = Layers { dir: "fakes/fake-dhd/src", ranks: &[("hand", 0), ("plant", 1)] };
 
+/// The fake HD library: its plant below the exported C functions and the servo thread.
+const FAKE_HD: Layers = Layers { dir: "fakes/fake-hd/src", ranks: &[("plant", 0)] };
+
 /// The rank of a module path (its top-level segment) in `layers`.
 fn rank(layers: &Layers, module: &[String]) -> usize {
     let top = layers.ranks.iter().map(|&(_, r)| r + 1).max().unwrap_or(0);
@@ -673,15 +676,15 @@ fn no_import_circle_in_the_root_crate() {
 }
 
 #[test]
-fn no_file_of_the_process_record_harness_or_fake_dhd_crates_uses_a_layer_above_its_own() {
-    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD] {
+fn no_file_of_the_process_record_harness_or_fake_device_crates_uses_a_layer_above_its_own() {
+    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD, &FAKE_HD] {
         assert_layers_point_down(layers);
     }
 }
 
 #[test]
-fn no_import_circle_in_the_process_record_harness_or_fake_dhd_crates() {
-    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD] {
+fn no_import_circle_in_the_process_record_harness_or_fake_device_crates() {
+    for layers in [&PROCESS, &RECORD, &HARNESS, &FAKE_DHD, &FAKE_HD] {
         assert_no_import_circle(layers);
     }
 }

@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use kinloop_client::device::{DeviceRequest, DhdRequest};
 use kinloop_client::user::{HandKind, HandSpec};
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
@@ -98,6 +98,9 @@ fn parse_seconds(s: &str) -> Result<Duration, String> {
 /// Runs the demo and reports.
 pub fn run(args: &DemoArgs) -> Result<()> {
     let scene = load_scene(&args.scene)?;
+    if let Some(DeviceRequest::Hd(_)) = &args.device {
+        bail!("--device hd: kinloop demo drives DHD and simulated devices; run kinloop-client --device hd against a server");
+    }
     let options = DemoOptions {
         scene: scene.scene,
         scene_label: scene.label,
@@ -110,12 +113,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         realtime: !args.no_realtime,
         view: args.view.map(|listen| ViewConfig { grab_without_token: args.view_grab, ..ViewConfig::new(listen) }),
         paper_push: args.paper_push,
-        device: match args.device {
-            Some(DeviceRequest::Simulated(preset)) => Some(preset),
+        device: match &args.device {
+            Some(DeviceRequest::Simulated(preset)) => Some(*preset),
             _ => None,
         },
-        dhd: match args.device {
-            Some(DeviceRequest::Dhd(request)) => Some(DhdRequest { auto_init: args.dhd_auto_init, ..request }),
+        dhd: match &args.device {
+            Some(DeviceRequest::Dhd(request)) => Some(DhdRequest { auto_init: args.dhd_auto_init, ..*request }),
             _ => None,
         },
         first_op: args.op.clone(),

@@ -39,9 +39,11 @@ const USB_IDS: [(&str, Option<&str>, &str); 2] =
 /// Surveys the DHD library and its devices and prints what it found; fails when no library or no device
 /// could be used, so scripts can test the exit code.
 pub fn run(args: &DevicesArgs) -> Result<()> {
+    let hd = super::devices_hd::survey();
+    let hd_usable = hd["usable"].as_bool() == Some(true);
     let library = match DhdLibrary::find() {
         Ok(library) => Arc::new(library),
-        Err(e) => return not_usable(args, &e),
+        Err(e) => return not_usable(args, &e, hd),
     };
     let count = library.device_count();
     // Without dhdGetDeviceCount (older SDKs) the first device is tried.
@@ -57,13 +59,15 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
         "device_count": count,
         "devices": devices,
         "permission_problem": permission,
+        "hd": hd,
     });
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_text(&report);
+        super::devices_hd::print_text(&report["hd"]);
     }
-    if !usable {
+    if !usable && !hd_usable {
         bail!(
             "no usable DHD device through {}{}",
             library.path().display(),
@@ -73,8 +77,13 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     Ok(())
 }
 
-/// The library could not be used: where kinloop looked and what to set, as JSON or text, and a failure.
-fn not_usable(args: &DevicesArgs, error: &DhdError) -> Result<()> {
+/// The DHD library could not be used: where kinloop looked and what to set, as JSON or text, and a failure
+/// unless an OpenHaptics device was found (`hd`, the HD survey).
+fn not_usable(args: &DevicesArgs, error: &DhdError, hd: Value) -> Result<()> {
+    let hd_usable = hd["usable"].as_bool() == Some(true);
+    if !args.json {
+        super::devices_hd::print_text(&hd);
+    }
     if args.json {
         let looked: Vec<String> = candidates().iter().map(|p| p.display().to_string()).collect();
         let report = json!({
@@ -82,8 +91,15 @@ fn not_usable(args: &DevicesArgs, error: &DhdError) -> Result<()> {
             "error": error.to_string(),
             "looked": looked,
             "variables": [LIBRARY_VARIABLE, SDK_VARIABLE],
+            "hd": hd,
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    if hd_usable {
+        if !args.json {
+            println!("DHD library: not found: {error}");
+        }
+        return Ok(());
     }
     bail!("{error}")
 }

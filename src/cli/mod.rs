@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod demo;
 pub mod devices;
+pub mod devices_hd;
 pub mod experiment;
 pub mod generate;
 pub mod inspect;

@@ -93,11 +93,21 @@ pub fn temp_dir() -> tempfile::TempDir {
 /// The fake DHD library (`fakes/fake-dhd`) cargo built beside this test's binary: a dev-dependency of
 /// kinloop, so always there under `cargo test`; panics (never skips) when it is not.
 pub fn fake_dhd_library() -> std::path::PathBuf {
-    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    fake_library("kinloop_fake_dhd")
+}
+
+/// The fake OpenHaptics library (`fakes/fake-hd`), found as [`fake_dhd_library`] finds its own.
+pub fn fake_hd_library() -> std::path::PathBuf {
+    fake_library("kinloop_fake_hd")
+}
+
+/// The cdylib `crate_name` beside this test's binary or its parent folder; panics when it is not there.
+fn fake_library(crate_name: &str) -> std::path::PathBuf {
+    let name = format!("{}{crate_name}{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
     let exe = std::env::current_exe().expect("the test binary's path");
     let deps = exe.parent().expect("the test binary's folder");
     let candidates = [deps.join(&name), deps.parent().map(|p| p.join(&name)).unwrap_or_default()];
     candidates.iter().find(|p| p.is_file()).cloned().unwrap_or_else(|| {
-        panic!("the fake DHD library {name} is not in {candidates:?}: cargo builds it as a dev-dependency of kinloop")
+        panic!("the fake library {name} is not in {candidates:?}: cargo builds it as a dev-dependency of kinloop")
     })
 }

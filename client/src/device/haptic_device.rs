@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use kinloop_linkage::math::space::OpPose;
-use kinloop_linkage::math::space::{SceneKind, Space};
+use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 use kinloop_protocol::wrench_limits::WrenchLimits;
 use kinloop_protocol::DeviceCaps;
 
@@ -94,6 +94,20 @@ pub struct DeviceState<S: Space> {
     /// Whether a hand holds the handle, when the device has a presence sensor (a dead-man switch in the
     /// handle, as on Haption's Virtuose): `Some(false)` fades the output and lets go of the VE's OP.
     pub grasped: Option<bool>,
+}
+
+impl<S: Space> DeviceState<S> {
+    /// A 3-DOF device's reading in kinloop's axes (position m, velocity m/s): the scene's linear axes from
+    /// it, its angular axes at rest (locked), no force sensor; `grasped` from the device's clutch button.
+    pub fn linear(position: [f64; 3], velocity: [f64; 3], grasped: Option<bool>) -> Self {
+        let mut point = <S::Point as VecOps>::zero();
+        let mut twist = S::OpVec::zero();
+        for (i, x) in point.as_mut_slice().iter_mut().enumerate() {
+            *x = position[i];
+            twist[i] = velocity[i];
+        }
+        DeviceState { pose: OpPose { position: point, rotation: S::rot_identity() }, twist, hand_wrench: None, grasped }
+    }
 }
 
 /// Why a device call failed.

@@ -1,6 +1,8 @@
 //! What `--device` asks for: a simulated preset (`sim:paper`, `sim:falcon`, `sim:touch`), a Force Dimension
-//! device through the DHD SDK (`dhd` or `dhd:INDEX`), or a DHD device with a simulated one to fall back on
-//! when the DHD library or device cannot be used (`dhd,sim:falcon`): the fallback only when asked.
+//! device through the DHD SDK (`dhd` or `dhd:INDEX`), a 3D Systems device through OpenHaptics (`hd` or
+//! `hd:NAME`, the name Touch Setup gives it), or either with a simulated one to fall back on when the
+//! vendor's library or device cannot be used (`dhd,sim:falcon`, `hd,sim:touch`): the fallback only when
+//! asked.
 
 use super::presets::{DevicePreset, PresetError};
 
@@ -16,20 +18,37 @@ pub struct DhdRequest {
     pub auto_init: bool,
 }
 
+/// An OpenHaptics device asked for.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HdRequest {
+    /// `hdInitDevice`'s name (None: `HD_DEFAULT_DEVICE`).
+    pub name: Option<String>,
+    /// The simulated device used instead when the HD one cannot be opened.
+    pub fallback: Option<DevicePreset>,
+    /// Run `hdUpdateCalibration` on a device that needs it; never without the user's word
+    /// (`--hd-calibrate`).
+    pub calibrate: bool,
+}
+
 /// A `--device` value.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum DeviceRequest {
     /// A simulated device.
     Simulated(DevicePreset),
     /// A DHD device.
     Dhd(DhdRequest),
+    /// An OpenHaptics device.
+    Hd(HdRequest),
 }
 
 /// A `--device` value that names no device.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum DeviceRequestError {
-    /// Not a preset nor `dhd[:INDEX]`.
-    #[error("unknown device {0:?}; expected sim:paper, sim:falcon, sim:touch, dhd[:INDEX] or dhd[:INDEX],sim:NAME")]
+    /// Not a preset, `dhd[:INDEX]` nor `hd[:NAME]`.
+    #[error(
+        "unknown device {0:?}; expected sim:paper, sim:falcon, sim:touch, dhd[:INDEX], hd[:NAME], or dhd or hd \
+         followed by ,sim:NAME"
+    )]
     Unknown(String),
     /// The index is not 0-255.
     #[error("device {0:?}: the DHD index must be a number from 0 to 255")]
@@ -52,6 +71,16 @@ impl std::str::FromStr for DeviceRequest {
             Some((first, fallback)) => (first, Some(fallback)),
             None => (s, None),
         };
+        let fallback_preset = || {
+            fallback
+                .map(|f| f.parse::<DevicePreset>())
+                .transpose()
+                .map_err(|source| DeviceRequestError::Fallback { given: s.to_owned(), source })
+        };
+        if first == "hd" || first.starts_with("hd:") {
+            let name = first.strip_prefix("hd:").filter(|n| !n.is_empty()).map(String::from);
+            return Ok(DeviceRequest::Hd(HdRequest { name, fallback: fallback_preset()?, calibrate: false }));
+        }
         let index = match first {
             "dhd" => 0,
             _ => match first.strip_prefix("dhd:") {
@@ -65,11 +94,7 @@ impl std::str::FromStr for DeviceRequest {
                 None => return Err(DeviceRequestError::Unknown(s.to_owned())),
             },
         };
-        let fallback = fallback
-            .map(|f| f.parse::<DevicePreset>())
-            .transpose()
-            .map_err(|source| DeviceRequestError::Fallback { given: s.to_owned(), source })?;
-        Ok(DeviceRequest::Dhd(DhdRequest { index, fallback, auto_init: false }))
+        Ok(DeviceRequest::Dhd(DhdRequest { index, fallback: fallback_preset()?, auto_init: false }))
     }
 }
 
@@ -91,5 +116,13 @@ mod tests {
         assert!(matches!(parse("dhd,dhd"), Err(DeviceRequestError::Fallback { .. })));
         assert!(matches!(parse("omega"), Err(DeviceRequestError::Unknown(_))));
         assert!(matches!(parse("sim:paper,sim:falcon"), Err(DeviceRequestError::Unknown(_))));
+        let hd = |name: Option<&str>, fallback| {
+            Ok(DeviceRequest::Hd(HdRequest { name: name.map(String::from), fallback, calibrate: false }))
+        };
+        assert_eq!(parse("hd"), hd(None, None));
+        assert_eq!(parse("hd:Left Touch"), hd(Some("Left Touch"), None));
+        assert_eq!(parse("hd,sim:touch"), hd(None, Some(DevicePreset::Touch)));
+        assert!(matches!(parse("hd,hd"), Err(DeviceRequestError::Fallback { .. })));
+        assert!(matches!(parse("hdx"), Err(DeviceRequestError::Unknown(_))));
     }
 }

@@ -9,8 +9,9 @@ use kinloop_protocol::MappingRequest;
 
 use crate::core::{ConstraintMode, CoreError, GainChoice, ModelForm, UplinkDeadband};
 use crate::device::dhd::DhdError;
+use crate::device::hd::HdError;
 use crate::device::presets::SimulatedDeviceBuildError;
-use crate::device::{DevicePreset, DhdRequest};
+use crate::device::{DevicePreset, DhdRequest, HdRequest};
 use crate::user::{UserError, UserSpec};
 
 /// With fallback servers, a session whose server sent nothing for this long is lost and the next server is
@@ -37,6 +38,9 @@ pub struct ClientConfig {
     pub device: Option<DevicePreset>,
     /// A Force Dimension device through the DHD SDK instead of the simulated one (`--device dhd`).
     pub dhd: Option<DhdRequest>,
+    /// A 3D Systems device through OpenHaptics instead of the simulated one (`--device hd`): the vendor's
+    /// servo thread then runs the loop (`device_clock`).
+    pub hd: Option<HdRequest>,
     /// The simulated user.
     pub user: UserSpec,
     /// What to ask of the mapping between device and VE (scales, gravity compensation).
@@ -81,6 +85,7 @@ impl ClientConfig {
             op: None,
             device: None,
             dhd: None,
+            hd: None,
             user: UserSpec::soft_hand(),
             mapping: MappingRequest::default(),
             rate_hz: 1000.0,
@@ -130,6 +135,9 @@ pub enum ClientError {
     /// The DHD library or device cannot be used.
     #[error(transparent)]
     Dhd(#[from] DhdError),
+    /// The HD library or device cannot be used.
+    #[error(transparent)]
+    Hd(#[from] HdError),
     /// The user cannot be built.
     #[error(transparent)]
     User(#[from] UserError),

@@ -9,7 +9,9 @@
 //! a new session's core (re-indexed to the new first snapshot) is handed over when the client reconnects.
 
 mod config;
+pub mod device_clock;
 mod network;
+pub mod real;
 pub mod record;
 pub mod rt_loop;
 mod session;
@@ -26,9 +28,11 @@ use kinloop_protocol::Welcome;
 
 use crate::core::{ControllerGains, CoreStats};
 use crate::device::dhd::{DhdLibrary, OpenedDhd};
+use crate::device::hd::{HdLibrary, OpenedHd};
 pub use config::{ClientConfig, ClientError};
 pub use network::choose;
 use network::network_thread;
+use real::OpenedDevice;
 use rt_loop::{LoopReport, LoopShared};
 use session::NetShared;
 use timing::LatenessSummary;
@@ -121,7 +125,7 @@ impl Client {
             .chain(&config.fallback_servers)
             .map(|server| resolve(server))
             .collect::<Result<Vec<_>, _>>()?;
-        let dhd = open_dhd(&mut config)?;
+        let real = open_real(&mut config)?;
         let shared = Arc::new(LoopShared::default());
         let silence_limit = (addresses.len() > 1).then_some(config::SILENT_SERVER);
         let net = Arc::new(NetShared { silence_limit, ..NetShared::default() });
@@ -129,7 +133,7 @@ impl Client {
         let (thread_shared, thread_net) = (shared.clone(), net.clone());
         let net_thread = std::thread::Builder::new()
             .name("kinloop-net".into())
-            .spawn(move || network_thread(config, dhd, addresses, thread_shared, thread_net, started_tx))
+            .spawn(move || network_thread(config, real, addresses, thread_shared, thread_net, started_tx))
             .map_err(|e| ClientError::Runtime(e.to_string()))?;
         match started_rx.recv() {
             Ok(Ok(started)) => Ok(ClientHandle {
@@ -321,19 +325,27 @@ fn resolve(server: &str) -> Result<SocketAddr, ClientError> {
         .ok_or_else(|| error("resolves to no address".into()))
 }
 
-/// Opens the DHD device `config` asks for. When it cannot be used and a simulated fallback was asked for,
-/// says why and switches `config` to the fallback; otherwise the error.
-fn open_dhd(config: &mut ClientConfig) -> Result<Option<OpenedDhd>, ClientError> {
-    let Some(request) = config.dhd else { return Ok(None) };
-    let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open_for_rendering(Arc::new(library), &request));
-    match (opened, request.fallback) {
+/// Opens the vendor device `config` asks for (DHD or HD). When it cannot be used and a simulated fallback
+/// was asked for, says why and switches `config` to the fallback; otherwise the error.
+fn open_real(config: &mut ClientConfig) -> Result<Option<OpenedDevice>, ClientError> {
+    let (opened, fallback) = if let Some(request) = config.dhd {
+        let opened = DhdLibrary::find().and_then(|library| OpenedDhd::open_for_rendering(Arc::new(library), &request));
+        (opened.map(OpenedDevice::Dhd).map_err(ClientError::from), request.fallback)
+    } else if let Some(request) = config.hd.clone() {
+        let opened = HdLibrary::find().and_then(|library| OpenedHd::open(library, &request));
+        (opened.map(OpenedDevice::Hd).map_err(ClientError::from), request.fallback)
+    } else {
+        return Ok(None);
+    };
+    match (opened, fallback) {
         (Ok(device), _) => Ok(Some(device)),
         (Err(e), Some(fallback)) => {
             tracing::warn!("{e}; using {} as asked", fallback.name());
             config.dhd = None;
+            config.hd = None;
             config.device = Some(fallback);
             Ok(None)
         }
-        (Err(e), None) => Err(e.into()),
+        (Err(e), None) => Err(e),
     }
 }

@@ -17,12 +17,13 @@ use kinloop_protocol::{
 };
 
 use super::config::{ClientConfig, ClientError};
+use super::device_clock;
+use super::real::{OpenedDevice, RealSpec};
 use super::record::{self, TickRecord};
 use super::rt_loop::{self, LoopRings, LoopSettings, LoopShared};
 use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, NetShared, Session};
 use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
-use crate::device::dhd::specs::ModelSpec;
-use crate::device::dhd::OpenedDhd;
+use crate::device::hd::OpenedHd;
 use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::{DevicePreset, HapticDevice, SimulatedRig};
 use crate::user::UserContext;
@@ -52,7 +53,7 @@ const RECORD_RING: usize = 16_384;
 
 pub(super) fn network_thread(
     config: ClientConfig,
-    dhd: Option<OpenedDhd>,
+    real: Option<OpenedDevice>,
     addresses: Vec<SocketAddr>,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
@@ -75,10 +76,11 @@ pub(super) fn network_thread(
             }
         };
         let mut chosen = None;
-        let model = dhd.as_ref().map(OpenedDhd::model);
+        let spec = real.as_ref().map(OpenedDevice::spec);
         let mut first = Err(ConnectError::Declined("no server address".into()));
         for (i, address) in addresses.iter().enumerate() {
-            first = open_session(&endpoint, *address, &config, model, None, &mut chosen).await.map(|s| (i, s));
+            first =
+                open_session(&endpoint, *address, &config, spec.as_ref(), None, &mut chosen).await.map(|s| (i, s));
             match &first {
                 Ok(_) | Err(ConnectError::Refused(_) | ConnectError::Declined(_)) => break,
                 Err(e) => tracing::warn!(server = %address, error = %e, "cannot connect; trying the next server"),
@@ -100,11 +102,11 @@ pub(super) fn network_thread(
         match session.welcome.scene.kind {
             SceneKind::Planar => {
                 let dialer = Dialer { config, model: None, addresses, current, endpoint };
-                run::<Planar>(dialer, dhd, session, shared, net, started).await
+                run::<Planar>(dialer, real, session, shared, net, started).await
             }
             SceneKind::Spatial => {
                 let dialer = Dialer { config, model: None, addresses, current, endpoint };
-                run::<Spatial>(dialer, dhd, session, shared, net, started).await
+                run::<Spatial>(dialer, real, session, shared, net, started).await
             }
         }
     });
@@ -120,16 +122,16 @@ fn hello(config: &ClientConfig) -> Hello {
 }
 
 /// The join for the scene the server described: the operational point asked for (or the scene's first)
-/// and the device asked for (or the scene's default; `real`, an opened DHD device's model, before either),
+/// and the device asked for (or the scene's default; `real`, an opened vendor device's spec, before either),
 /// described in the scene's space. A device that cannot serve the scene's space is an error naming both.
 pub fn choose(
     config: &ClientConfig,
     scene: &SceneInfo,
-    real: Option<&ModelSpec>,
+    real: Option<&RealSpec>,
 ) -> Result<(Join, DevicePreset), String> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(scene.kind));
     let spec = match real {
-        Some(model) => model.device_spec(scene.kind),
+        Some(real) => real.device_spec(scene.kind),
         None => {
             device.spec(scene.kind).map_err(|e| format!("{e} (scene {} is {})", scene.name, kind_axes(scene.kind)))?
         }
@@ -157,7 +159,7 @@ async fn open_session(
     endpoint: &Endpoint,
     address: SocketAddr,
     config: &ClientConfig,
-    real: Option<&ModelSpec>,
+    real: Option<&RealSpec>,
     offer: Option<&RoomState>,
     chosen: &mut Option<DevicePreset>,
 ) -> Result<ConnectedSession, ConnectError> {
@@ -171,12 +173,12 @@ async fn open_session(
 
 fn core_for<S: Space>(
     config: &ClientConfig,
-    real: Option<&ModelSpec>,
+    real: Option<&RealSpec>,
     welcome: &Welcome,
 ) -> Result<Box<HapticCore<S>>, ClientError> {
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND));
     let spec = match real {
-        Some(model) => model.device_spec(S::KIND),
+        Some(real) => real.device_spec(S::KIND),
         None => device.spec(S::KIND).map_err(SimulatedDeviceBuildError::from)?,
     };
     let mut core_config = CoreConfig::new(spec);
@@ -212,16 +214,16 @@ fn empty_uplink<S: Space>() -> Uplink {
 /// loop are started, the caller told, and the session served (and re-opened when lost) until the client stops.
 async fn run<S: Space>(
     mut dialer: Dialer,
-    dhd: Option<OpenedDhd>,
+    real: Option<OpenedDevice>,
     session: ConnectedSession,
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
     started: mpsc::Sender<Result<Started, ClientError>>,
 ) {
-    let model = dhd.as_ref().map(OpenedDhd::model);
-    dialer.model = model;
+    dialer.model = real.as_ref().map(OpenedDevice::spec);
+    let model = dialer.model.clone();
     let (config, endpoint) = (&dialer.config, &dialer.endpoint);
-    let (rig, core) = match rig_and_core::<S>(config, dhd, &session.welcome) {
+    let (rig, core) = match rig_and_core::<S>(config, real, &session.welcome) {
         Ok(parts) => parts,
         Err(e) => {
             abandon(endpoint, &session.connection, b"client cannot render").await;
@@ -283,9 +285,10 @@ async fn run<S: Space>(
         report_every: (config.rate_hz * config.report_interval.as_secs_f64()).max(1.0) as u64,
     };
     let loop_shared = shared.clone();
-    let loop_thread = std::thread::Builder::new()
-        .name("kinloop-haptic".into())
-        .spawn(move || rt_loop::run(rig, core, loop_rings, loop_shared, settings));
+    let loop_thread = std::thread::Builder::new().name("kinloop-haptic".into()).spawn(move || match rig {
+        Haptic::Polled(device) => rt_loop::run(device, core, loop_rings, loop_shared, settings),
+        Haptic::Clocked(opened) => device_clock::run(opened, core, loop_rings, loop_shared, settings),
+    });
     let loop_thread = match loop_thread {
         Ok(t) => t,
         Err(e) => {
@@ -296,8 +299,8 @@ async fn run<S: Space>(
     };
     helpers.push(uplink_thread);
     let welcome = session.welcome.clone();
-    let device = match model {
-        Some(model) => format!("dhd ({})", model.name),
+    let device = match &model {
+        Some(model) => model.label(),
         None => config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).name().to_owned(),
     };
     let session = Session::adopt(session);
@@ -315,24 +318,32 @@ async fn run<S: Space>(
     let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
 }
 
+/// A session's device: polled by kinloop's loop, or clocked by the vendor's servo thread.
+enum Haptic<S: Space> {
+    Polled(Box<dyn HapticDevice<S>>),
+    Clocked(OpenedHd),
+}
+
 /// A session's device (whichever kind) and its haptic core.
-type DeviceAndCore<S> = (Box<dyn HapticDevice<S>>, Box<HapticCore<S>>);
+type DeviceAndCore<S> = (Haptic<S>, Box<HapticCore<S>>);
 
 /// The device (an opened DHD device, or the simulated rig whose hand grasps the handle where the linkage is)
 /// and the core for a session.
 fn rig_and_core<S: Space>(
     config: &ClientConfig,
-    dhd: Option<OpenedDhd>,
+    real: Option<OpenedDevice>,
     welcome: &Welcome,
 ) -> Result<DeviceAndCore<S>, ClientError> {
-    let core = core_for::<S>(config, dhd.as_ref().map(OpenedDhd::model), welcome)?;
-    if let Some(dhd) = dhd {
-        return Ok((Box::new(dhd.into_device::<S>()), core));
+    let core = core_for::<S>(config, real.as_ref().map(OpenedDevice::spec).as_ref(), welcome)?;
+    match real {
+        Some(OpenedDevice::Dhd(dhd)) => return Ok((Haptic::Polled(Box::new(dhd.into_device::<S>())), core)),
+        Some(OpenedDevice::Hd(hd)) => return Ok((Haptic::Clocked(hd), core)),
+        None => {}
     }
     let op = S::Point::from_slice(&welcome.op.position);
     let device = config.device.unwrap_or_else(|| DevicePreset::for_kind(S::KIND)).build_at::<S>(core.home(&op))?;
     let user = config.user.build::<S>(&UserContext::from_welcome(welcome))?;
-    Ok((Box::new(SimulatedRig::new(device, user)), core))
+    Ok((Haptic::Polled(Box::new(SimulatedRig::new(device, user))), core))
 }
 
 /// The `--record` writer thread and the ring the loop feeds it through; it stops when the loop stops, after
@@ -361,8 +372,8 @@ fn spawn_recorder<S: Space>(path: PathBuf, shared: Arc<LoopShared>) -> (JoinHand
 /// current session at `current`) and the endpoint.
 struct Dialer {
     config: ClientConfig,
-    /// An opened DHD device's model: the spec every re-join describes.
-    model: Option<&'static ModelSpec>,
+    /// An opened vendor device's spec: what every re-join describes.
+    model: Option<RealSpec>,
     addresses: Vec<SocketAddr>,
     current: usize,
     endpoint: Endpoint,
@@ -380,7 +391,8 @@ impl Dialer {
             let index = (self.current + step) % count;
             let address = self.addresses[index];
             let mut chosen = None;
-            let attempt = open_session(&self.endpoint, address, &self.config, self.model, offer.as_ref(), &mut chosen);
+            let attempt =
+                open_session(&self.endpoint, address, &self.config, self.model.as_ref(), offer.as_ref(), &mut chosen);
             // A dead server never answers: with others to try, each gets a short while.
             let attempt = if count > 1 {
                 tokio::time::timeout(DIAL_PATIENCE, attempt).await.unwrap_or(Err(ConnectError::Timeout))
@@ -451,7 +463,7 @@ async fn keep_connected<S: Space>(
             shared.stop.store(true, Ordering::Relaxed);
             break;
         }
-        match core_for::<S>(&dialer.config, dialer.model, &next.welcome) {
+        match core_for::<S>(&dialer.config, dialer.model.as_ref(), &next.welcome) {
             Ok(core) => {
                 while rings.spent_cores.pop().is_ok() {}
                 if rings.cores.push(core).is_err() {

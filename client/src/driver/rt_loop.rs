@@ -15,7 +15,7 @@ use kinloop_protocol::{Snapshot, Uplink};
 use super::record::TickRecord;
 use super::timing::{LatenessHistogram, LatenessSummary};
 use crate::core::{CoreStats, HapticCore};
-use crate::device::HapticDevice;
+use crate::device::{DeviceError, HapticDevice};
 
 /// State the loop shares with the rest of the client, all atomics.
 #[derive(Debug, Default)]
@@ -109,9 +109,9 @@ pub struct LoopSettings {
 
 /// Runs the loop until `shared.stop`, the duration, or a lost device; returns the last core's counters.
 pub fn run<S: Space, D: HapticDevice<S>>(
-    mut device: D,
-    mut core: Box<HapticCore<S>>,
-    mut rings: LoopRings<S>,
+    device: D,
+    core: Box<HapticCore<S>>,
+    rings: LoopRings<S>,
     shared: Arc<LoopShared>,
     settings: LoopSettings,
 ) -> CoreStats {
@@ -121,15 +121,68 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         }
     }
     let mut ticker = Ticker::new(settings.rate_hz, settings.busy_wait);
+    let mut body = LoopBody::new(device, core, rings, shared.clone(), settings);
     loop {
         let now = ticker.wait(&shared.lateness);
-        shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
-        if shared.stop.load(Ordering::Relaxed) || settings.duration.is_some_and(|d| now >= d) {
-            break;
+        match body.step(now) {
+            Flow::Continue => {}
+            Flow::Stop(None) => break,
+            Flow::Stop(Some(e)) => {
+                // Said once: the loop ends here.
+                tracing::error!("{e}; the loop stops");
+                break;
+            }
         }
+        ticker.advance();
+    }
+    body.finish(ticker.start.elapsed())
+}
+
+/// What a tick tells its clock.
+pub enum Flow {
+    /// Call again next tick.
+    Continue,
+    /// The loop ends: asked to, its duration is over, or the device failed (the error, for the clock's
+    /// thread to say: a device-clocked tick never logs).
+    Stop(Option<DeviceError>),
+}
+
+/// One tick's work, whichever clock calls it: kinloop's own loop ([`run`]) or the vendor's servo thread
+/// (`super::device_clock`). Read the device, take the snapshots waiting in the ring, tick the core, command
+/// the device, hand the uplink and the record row on; no lock, no allocation, no IO, no log line.
+pub struct LoopBody<S: Space, D: HapticDevice<S>> {
+    /// The device.
+    pub device: D,
+    core: Box<HapticCore<S>>,
+    rings: LoopRings<S>,
+    shared: Arc<LoopShared>,
+    settings: LoopSettings,
+    ticks: u64,
+}
+
+impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
+    /// A loop body for `device` and the session's `core`.
+    pub fn new(
+        device: D,
+        core: Box<HapticCore<S>>,
+        rings: LoopRings<S>,
+        shared: Arc<LoopShared>,
+        settings: LoopSettings,
+    ) -> Self {
+        LoopBody { device, core, rings, shared, settings, ticks: 0 }
+    }
+
+    /// One tick at `now` (time since the loop started).
+    pub fn step(&mut self, now: Duration) -> Flow {
+        let (rings, shared, core) = (&mut self.rings, &self.shared, &mut self.core);
+        shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
+        if shared.stop.load(Ordering::Relaxed) || self.settings.duration.is_some_and(|d| now >= d) {
+            return Flow::Stop(None);
+        }
+        self.ticks += 1;
         // A new session's core replaces the old one, which goes back to be dropped off this thread.
         while let Ok(next) = rings.cores.pop() {
-            let old = std::mem::replace(&mut core, next);
+            let old = std::mem::replace(core, next);
             if let Err(rtrb::PushError::Full(old)) = rings.spent_cores.push(old) {
                 // The network side is not collecting: keep the old core alive rather than free it here.
                 std::mem::forget(old);
@@ -143,26 +196,22 @@ pub fn run<S: Space, D: HapticDevice<S>>(
                 std::mem::forget(snapshot);
             }
         }
-        let state = match device.read(now) {
+        let state = match self.device.read(now) {
             Ok(state) => state,
             Err(e) if e.is_fatal() => {
-                // Said once: the loop ends here.
-                tracing::error!("{e}; the loop stops");
                 shared.device_lost.store(true, Ordering::Relaxed);
-                break;
+                return Flow::Stop(Some(e));
             }
             Err(_) => {
                 shared.device_force_errors.fetch_add(1, Ordering::Relaxed);
-                ticker.advance();
-                continue;
+                return Flow::Continue;
             }
         };
         let out = core.tick(now, &state);
-        if let Err(e) = device.command(now, &out.command) {
+        if let Err(e) = self.device.command(now, &out.command) {
             if e.is_fatal() {
-                tracing::error!("{e}; the loop stops");
                 shared.device_lost.store(true, Ordering::Relaxed);
-                break;
+                return Flow::Stop(Some(e));
             }
             shared.device_force_errors.fetch_add(1, Ordering::Relaxed);
         }
@@ -190,7 +239,7 @@ pub fn run<S: Space, D: HapticDevice<S>>(
         }
         let stats = core.stats();
         shared.max_force_ratio_bits.fetch_max(stats.max_force_ratio.to_bits(), Ordering::Relaxed);
-        if ticker.tick.is_multiple_of(settings.report_every.max(1)) {
+        if self.ticks.is_multiple_of(self.settings.report_every.max(1)) {
             let report = core.report();
             let _ = rings.reports.push(LoopReport {
                 elapsed: now,
@@ -200,11 +249,15 @@ pub fn run<S: Space, D: HapticDevice<S>>(
                 snapshot_age: report.snapshot_age,
             });
         }
-        ticker.advance();
+        Flow::Continue
     }
-    let _ = device.command(ticker.start.elapsed(), &zero::<S>());
-    shared.stop.store(true, Ordering::Relaxed);
-    core.stats()
+
+    /// The end: zero commanded, the loop marked stopped; the last core's counters.
+    pub fn finish(mut self, now: Duration) -> CoreStats {
+        let _ = self.device.command(now, &zero::<S>());
+        self.shared.stop.store(true, Ordering::Relaxed);
+        self.core.stats()
+    }
 }
 
 /// The loop's clock: absolute deadlines `start + k·period` (no drift), reached by spin_sleep (a native

@@ -8,8 +8,12 @@
 //! [`WORKSPACE_FILL`] of the device's workspace along the axis that binds, so the hand moves through the
 //! linkage's whole motion without reaching the device's walls. The force scale `c_f` (device newtons per VE
 //! newton) maps the static load at the OP (gravity through the closed loops, 90th percentile over the
-//! reach) to [`LOAD_FRACTION`] of the device's continuous force: the hand still feels the weight, with room
-//! to feel the inertia and the loops on top of it. A scene without gravity has no static load; then the
+//! reach) to [`LOAD_FRACTION`] of the device's continuous force, and to at most [`PEAK_SHARE`] of its peak
+//! force: the hand still feels the weight, with room to feel the inertia and the loops on top of it. The
+//! second bound matters for a device whose one published force is both its peak and its continuous one (the
+//! omega.3's 12 N): the continuous bound alone would leave it a third of the headroom above the load that
+//! a device rated for half its peak continuously has, and the dynamic forces of a tour then sit at its
+//! peak. A scene without gravity has no static load; then the
 //! load that sets the scale is the force that moves the OP's lightest direction across its reach in a
 //! second on a minimum-jerk path (peak acceleration `5.77 d / T²`, Flash & Hogan 1985). Angles map one to
 //! one and torques by `c_f c_p`, so every axis scales power alike (`protocol::Mapping`).
@@ -40,6 +44,10 @@ pub const WORKSPACE_FILL: f64 = 0.8;
 /// Fraction of the device's continuous force the static load at the OP maps to: a quarter to a half
 /// leaves the hand room to push against the load in either direction.
 pub const LOAD_FRACTION: f64 = 0.35;
+/// Largest fraction of the device's peak force the static load at the OP maps to: about five and a half
+/// times the load left up to the peak, as the simulated presets' continuous figures leave them (paper
+/// device 5.7, Falcon 6.4, Touch 10.7: the bound is met by each, so it changes none of their mappings).
+pub const PEAK_SHARE: f64 = 0.18;
 /// Natural frequency of the graphics controller on the OP's lightest effective mass (Hz).
 pub const COUPLING_HZ: f64 = 8.0;
 /// Damping ratio of the graphics controller.
@@ -173,7 +181,7 @@ pub fn choose_mapping<S: Space>(
     // Without gravity: the force to carry the lightest direction across the reach in CROSSING_S.
     let dynamic = if mass.is_finite() { mass * 5.77 * largest / (CROSSING_S * CROSSING_S) } else { 0.0 };
     let load = reach.static_force_n.max(dynamic);
-    let mut force_scale = if load > 0.0 { LOAD_FRACTION * device.continuous_force_n / load } else { 1.0 };
+    let mut force_scale = if load > 0.0 { load_target(device) / load } else { 1.0 };
     // Devices that render torque: the static torque must fit too (torques scale by c_f c_p).
     let torque_load = reach.static_torque_nm * position_scale;
     if device.max_torque_nm > 0.0 && torque_load > 0.0 {
@@ -205,6 +213,12 @@ pub fn choose_mapping<S: Space>(
         gravity_compensation: request.gravity_compensation,
         rigid_grasp: renders_rotation(reach, device, force_scale * position_scale),
     })
+}
+
+/// The force (device N) the static load at the OP maps to: [`LOAD_FRACTION`] of the continuous force, at
+/// most [`PEAK_SHARE`] of the peak.
+pub fn load_target(device: &DeviceCaps) -> f64 {
+    (LOAD_FRACTION * device.continuous_force_n).min(PEAK_SHARE * device.max_force_n)
 }
 
 /// Largest factor by which a device can be made to feel lighter than it is (the client's impedance
@@ -262,4 +276,26 @@ pub fn coupling_message<S: Space>(stiffness: &S::OpVec, damping: &S::OpVec) -> C
 /// `x > 0`, false for NaN: a limit that is not a positive number renders nothing.
 fn is_positive(x: f64) -> bool {
     x > 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_load_maps_below_both_the_continuous_and_the_peak_bound() {
+        let device = |peak: f64, continuous: f64| DeviceCaps {
+            max_force_n: peak,
+            continuous_force_n: continuous,
+            ..DeviceCaps::generous("d", 3)
+        };
+        // The simulated presets' figures (paper device 10/5 N, Falcon 8.9/4 N, Touch 3.3/0.88 N): the
+        // continuous bound binds, so their mappings are what they were before the peak bound.
+        for (peak, continuous) in [(10.0, 5.0), (8.9, 4.0), (3.3, 0.88)] {
+            assert_eq!(load_target(&device(peak, continuous)), LOAD_FRACTION * continuous);
+        }
+        // One figure for both (the omega.3's 12 N): the peak bound binds, leaving 1/PEAK_SHARE of headroom.
+        let omega = load_target(&device(12.0, 12.0));
+        assert!((omega - PEAK_SHARE * 12.0).abs() < 1e-12 && 12.0 / omega > 5.5, "{omega}");
+    }
 }

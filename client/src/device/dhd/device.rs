@@ -21,7 +21,6 @@ use std::marker::PhantomData;
 use std::sync::Arc;
 use std::time::Duration;
 
-use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
 use super::frames;
@@ -253,19 +252,7 @@ impl<S: Space> HapticDevice<S> for DhdDevice<S> {
             },
         };
         self.last_position = Some((position, now));
-        let (p, v) = (frames::to_kinloop(position), frames::to_kinloop(velocity));
-        let mut point = <S::Point as VecOps>::zero();
-        let mut twist = S::OpVec::zero();
-        for (i, x) in point.as_mut_slice().iter_mut().enumerate() {
-            *x = p[i];
-            twist[i] = v[i];
-        }
-        Ok(DeviceState {
-            pose: OpPose { position: point, rotation: S::rot_identity() },
-            twist,
-            hand_wrench: None,
-            grasped,
-        })
+        Ok(DeviceState::linear(frames::to_kinloop(position), frames::to_kinloop(velocity), grasped))
     }
 
     fn command(&mut self, now: Duration, wrench: &S::OpVec) -> Result<(), DeviceError> {

@@ -23,6 +23,8 @@
 use std::ffi::{c_char, c_int, c_uchar, CStr};
 use std::path::{Path, PathBuf};
 
+use crate::device::vendor_search;
+
 /// The variable naming the library file, before any search.
 pub const LIBRARY_VARIABLE: &str = "KINLOOP_DHD_LIB";
 /// The SDK's install folder, as Force Dimension's installers and Python's `forcedimension_core` use it.
@@ -64,22 +66,7 @@ pub fn library_names() -> &'static [&'static str] {
 /// Where kinloop looks, in order: `KINLOOP_DHD_LIB`; `$FORCEDIM_SDK/lib`; `/usr/local/lib` and `/usr/lib`
 /// (as `forcedimension_core`); then each name through the system loader's own search path.
 pub fn candidates() -> Vec<PathBuf> {
-    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
-        return vec![PathBuf::from(path)];
-    }
-    let mut folders = Vec::new();
-    if let Some(sdk) = std::env::var_os(SDK_VARIABLE).filter(|p| !p.is_empty()) {
-        folders.push(PathBuf::from(sdk).join("lib"));
-    }
-    if !cfg!(windows) {
-        folders.extend([PathBuf::from("/usr/local/lib"), PathBuf::from("/usr/lib")]);
-    }
-    let mut found = Vec::new();
-    for folder in &folders {
-        found.extend(library_names().iter().map(|name| folder.join(name)));
-    }
-    found.extend(library_names().iter().map(PathBuf::from));
-    found
+    vendor_search::candidates(LIBRARY_VARIABLE, SDK_VARIABLE, &["/usr/local/lib", "/usr/lib"], library_names())
 }
 
 type GetVersion = unsafe extern "system" fn(*mut c_int, *mut c_int, *mut c_int, *mut c_int);
@@ -159,18 +146,9 @@ impl DhdLibrary {
     /// exists, the error lists where kinloop looked.
     pub fn find() -> Result<DhdLibrary, DhdError> {
         let candidates = candidates();
-        for path in &candidates {
-            // A bare name goes to the system loader's search; a path must exist.
-            let bare = path.components().count() == 1;
-            if !bare && !path.exists() {
-                continue;
-            }
-            match DhdLibrary::load(path) {
-                Err(DhdError::Load { .. }) if bare => continue,
-                result => return result,
-            }
-        }
-        Err(DhdError::NotFound { looked: candidates })
+        let not_loadable = |e: &DhdError| matches!(e, DhdError::Load { .. });
+        vendor_search::first_loadable(&candidates, DhdLibrary::load, not_loadable)
+            .unwrap_or(Err(DhdError::NotFound { looked: candidates }))
     }
 
     /// Loads the library at `path` and checks it.
@@ -184,18 +162,12 @@ impl DhdLibrary {
         // SAFETY: each type below is the signature `dhdc.h` declares for that name.
         macro_rules! required {
             ($name:literal) => {
-                match unsafe { loaded.get($name) } {
-                    Ok(symbol) => Some(*symbol),
-                    Err(_) => {
-                        missing.push($name);
-                        None
-                    }
-                }
+                unsafe { vendor_search::required(&loaded, $name, &mut missing) }
             };
         }
         macro_rules! optional {
             ($name:literal) => {
-                unsafe { loaded.get($name) }.ok().map(|symbol| *symbol)
+                unsafe { vendor_search::optional(&loaded, $name) }
             };
         }
         let get_version: Option<GetVersion> = required!("dhdGetSDKVersion");

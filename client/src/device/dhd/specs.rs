@@ -2,10 +2,11 @@
 //!
 //! Workspace, force, DOF and gripper are the vendor's published figures (Force Dimension's product pages and
 //! datasheets; Novint's Falcon specification). The translational workspace is the box inscribed in the
-//! published cylinder (diameter d, height h: ±d/(2√2) across, ±h/2 up). What no datasheet gives (moving
-//! mass at the handle, mechanism damping, the stiffness and damping a 1 kHz loop over USB renders stably) is
-//! chosen, and the reason written beside it: the rendering limits are set well below the published
-//! closed-loop stiffness, which is a mechanical figure, not a rendering one.
+//! published cylinder (diameter d, height h: ±d/(2√2) across, ±h/2 up). The stiffness and damping a 1 kHz
+//! loop over USB renders stably are no datasheet's: they are CHAI3D's for the same models (its Force
+//! Dimension driver, `CDeltaDevices.cpp`), well below the published closed-loop stiffness, which is a
+//! mechanical figure, not a rendering one. What nobody publishes (moving mass at the handle, mechanism
+//! damping) is chosen, and the reason written beside it.
 
 use std::f64::consts::SQRT_2;
 
@@ -48,21 +49,25 @@ const fn cylinder(d: f64, h: f64) -> [f64; 3] {
     [d / (2.0 * SQRT_2), h / 2.0, d / (2.0 * SQRT_2)]
 }
 
-// Rendering limits chosen for all the omega/sigma family: 3000 N/m and 20 N s/m are a fifth of their
-// published 14.5 N/mm closed-loop stiffness, safe for a 1 kHz loop; the handle's apparent mass ≈ 0.2 kg.
+// Rendering limits of the omega family as CHAI3D's Force Dimension driver sets them for a 1 kHz loop
+// (chai3d/chai3d, src/devices/CDeltaDevices.cpp, omega.3/6/7: 12 N, 5000 N/m, 30 N s/m), about a third
+// of the published 14.5 N/mm closed-loop stiffness, a mechanical figure. Force Dimension publishes one
+// force for the omega.3, 12.0 N continuous, which is also the most its controller outputs: peak and
+// continuous are the same figure. The handle's apparent mass ≈ 0.2 kg is chosen (not published).
 const OMEGA: ModelSpec = ModelSpec {
     system: 33,
     name: "Force Dimension omega.3",
     half_extent: cylinder(0.160, 0.110),
     max_force_n: 12.0,
     continuous_force_n: 12.0,
-    max_stiffness: 3000.0,
-    max_damping: 20.0,
+    max_stiffness: 5000.0,
+    max_damping: 30.0,
     mass: 0.2,
     damping: 0.5,
     dof: 3,
     gripper: false,
-    source: "forcedimension.com omega.3 specifications: workspace ⌀160 x 110 mm, continuous force 12.0 N",
+    source: "forcedimension.com omega.3 specifications: workspace ⌀160 x 110 mm, continuous force 12.0 N; \
+             rendering limits: CHAI3D CDeltaDevices.cpp",
 };
 
 /// Every model kinloop knows.
@@ -96,6 +101,8 @@ pub const MODELS: [ModelSpec; 7] = [
         half_extent: cylinder(0.190, 0.130),
         max_force_n: 20.0,
         continuous_force_n: 20.0,
+        // CHAI3D's driver renders the sigma.7 at most 4000 N/m (CDeltaDevices.cpp).
+        max_stiffness: 4000.0,
         gripper: true,
         source: "forcedimension.com sigma.7 specifications: workspace ⌀190 x 130 mm, continuous force 20.0 N",
         ..OMEGA
