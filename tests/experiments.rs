@@ -8,7 +8,9 @@ use kinloop::experiments::delay_point::{Loss, PointSummary};
 use kinloop::experiments::model_update::ModelUpdateSummary;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
+use kinloop::experiments::renderability::RenderabilitySummary;
 use kinloop::experiments::scale::ScaleSummary;
+use kinloop::experiments::speed_accuracy::{SpeedAccuracyPoint, SpeedAccuracySummary};
 use kinloop::experiments::users::UsersSummary;
 use kinloop::experiments::{self, Name, Options, Report};
 use serde_json::Value;
@@ -82,24 +84,21 @@ fn paper_stiffness_rendering_keeps_the_device_on_the_op_and_impedance_drifts() {
 fn speed_accuracy_front_is_non_dominated() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::SpeedAccuracy, dir.path());
-    let r = &report.summary["results"];
-    let points = r["points"].as_array().unwrap();
-    let front = r["pareto_front_points"].as_array().unwrap();
-    assert!(!front.is_empty());
-    let key = |p: &Value| (f(&p["cost_us_per_simulated_s"]), f(&p["op_error_rms_m"]));
-    for member in front {
+    let r: SpeedAccuracySummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    assert!(!r.pareto_front_points.is_empty());
+    let key = |p: &SpeedAccuracyPoint| (p.cost_us_per_simulated_s, p.op_error_rms_m);
+    for member in &r.pareto_front_points {
         let (c, e) = key(member);
         assert!(c > 0.0 && e > 0.0);
-        for p in points.iter().filter(|p| p["stable"] == true) {
+        for p in r.points.iter().filter(|p| p.stable) {
             let (cp, ep) = key(p);
-            assert!(!(cp <= c && ep <= e && (cp < c || ep < e)), "{member} is dominated by {p}");
+            assert!(!(cp <= c && ep <= e && (cp < c || ep < e)), "{member:?} is dominated by {p:?}");
         }
     }
-    let alone = r["linkage_alone"]["points"].as_array().unwrap();
-    let fastest = alone.iter().map(|p| f(&p["rate_hz"])).fold(0.0, f64::max);
-    let error_of = |name: &str| {
-        alone.iter().find(|p| p["integrator"] == name && f(&p["rate_hz"]) == fastest).map(|p| f(&p["op_error_rms_m"]))
-    };
+    let alone = &r.linkage_alone.points;
+    let fastest = alone.iter().map(|p| p.rate_hz).fold(0.0, f64::max);
+    let error_of =
+        |name: &str| alone.iter().find(|p| p.integrator == name && p.rate_hz == fastest).map(|p| p.op_error_rms_m);
     assert!(error_of("rk4").unwrap() < error_of("euler").unwrap() / 10.0, "{alone:?}");
 }
 
@@ -477,10 +476,14 @@ fn the_seconds_flag_sets_each_sessions_length() {
     };
     let (short, long) = (run("0.5"), run("1"));
     assert_eq!(short["command"], "kinloop experiment renderability --quick --seconds 0.5");
-    assert_eq!(f(&short["results"]["seconds_per_pair"]), 0.5);
-    assert_eq!(f(&long["results"]["seconds_per_pair"]), 1.0);
-    let flows = |summary: &Value| -> Vec<f64> {
-        summary["results"]["points"].as_array().unwrap().iter().map(|p| f(&p["energy_flow_max_j"])).collect()
+    let typed = |summary: &Value| -> RenderabilitySummary {
+        serde_json::from_value(summary["results"].clone()).expect("typed summary")
+    };
+    let (short, long) = (typed(&short), typed(&long));
+    assert_eq!(short.seconds_per_pair, 0.5);
+    assert_eq!(long.seconds_per_pair, 1.0);
+    let flows = |r: &RenderabilitySummary| -> Vec<f64> {
+        r.points.iter().map(|p| p.energy_flow_max_j.expect("virtual time books the flow")).collect()
     };
     let (short, long) = (flows(&short), flows(&long));
     assert_eq!(short.len(), long.len());
