@@ -102,19 +102,3 @@ impl<S: Space> CoreHooks<S> for Probe<S> {
         self.samples.push(*sample);
     }
 }
-
-/// What a test needs to drive a core of its own on real terms: participant 0's welcome, the newest snapshot
-/// handed to its core and the core's configuration, `until` into `plan`.
-pub fn first_terms<S: Space>(
-    plan: &crate::SessionPlan,
-    until: Duration,
-) -> anyhow::Result<(Welcome, Snapshot, kinloop_client::core::CoreConfig)> {
-    let mut session = crate::Session::<S>::new(plan)?;
-    let mut probe = Probe::default();
-    session.run_until_with(until, &mut probe)?;
-    let config = session.core(0).map(|core| core.config().clone());
-    match (probe.welcome, probe.last_snapshot, config) {
-        (Some(welcome), Some(snapshot), Some(config)) => Ok((welcome, snapshot, config)),
-        _ => Err(anyhow::anyhow!("participant 0 had no snapshot {until:?} into the session")),
-    }
-}

@@ -28,7 +28,7 @@ use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
 use kinloop_protocol::{Datagram, LocalModelForm, MappingRequest, Role, SessionShape};
 use kinloop_server::core::{JoinRequest, PassivityObserver, UserId, VeConfig, VeCore};
 
-pub use hooks::{first_terms, CoreHooks, Plain, Probe, TickSample};
+pub use hooks::{CoreHooks, Plain, Probe, TickSample};
 pub use record::{ClientSample, Recording, VeSample};
 
 /// One simulated participant.
@@ -719,6 +719,22 @@ impl<S: Space> Session<S> {
             wall_s: wall.as_secs_f64(),
         };
         (summary, self.recording)
+    }
+}
+
+/// What a test needs to drive a core of its own on real terms: participant 0's welcome, the newest snapshot
+/// handed to its core and the core's configuration, `until` into `plan`.
+pub fn first_terms<S: Space>(
+    plan: &SessionPlan,
+    until: Duration,
+) -> Result<(kinloop_protocol::Welcome, kinloop_protocol::Snapshot, CoreConfig)> {
+    let mut session = Session::<S>::new(plan)?;
+    let mut probe = Probe::default();
+    session.run_until_with(until, &mut probe)?;
+    let config = session.core(0).map(|core| core.config().clone());
+    match (probe.welcome, probe.last_snapshot, config) {
+        (Some(welcome), Some(snapshot), Some(config)) => Ok((welcome, snapshot, config)),
+        _ => Err(anyhow!("participant 0 had no snapshot {until:?} into the session")),
     }
 }
 
