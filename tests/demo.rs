@@ -48,13 +48,13 @@ fn run_bounded(options: DemoOptions) -> DemoReport {
 
 /// Loop lateness (µs) beyond which a run does not count as on time for the tracking and the harness's path.
 /// A client whose loop is held up past the stale-snapshot age (100 ms) fades its force to zero by design, and
-/// any loop held up for tens of ms lets the coupling springs stretch and kick: runs whose loops were 45-58 ms
-/// late left the real-time path 0.8-2.2 mm RMS from the harness's; 14 runs up to 17 ms late, 0.02-0.18 mm.
+/// any loop held up for tens of ms lets the coupling springs stretch and kick, moving the real-time path off
+/// the harness's by millimetres, where runs late by less stay within a fraction of a millimetre.
 const STALL_US: f64 = 25_000.0;
 
 /// Largest share of the VE's ticks that may miss their deadline in a run that counts as on time. The VE
-/// thread stalls too: a run with loops at most 17 ms late but 264 VE misses in 1,642 ticks (16 %) left
-/// 0.74 mm; the 14 runs above had 3-100 misses (at most 7 %), four more failing ones 171-308.
+/// thread stalls too, and a run whose VE missed a sizeable share of its ticks strays from the harness's path
+/// even when its client loops were on time.
 const VE_MISS_SHARE: f64 = 0.05;
 
 /// Attempts [`run_on_time`] makes at most.
@@ -196,8 +196,8 @@ fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
     let s = &report.summary;
     let rtt = rtt_ms(s);
     assert!(rtt < 20.0, "loopback round trip {rtt} ms");
-    // Stiffness control keeps each device near the OP it holds (the paper's Fig 6b; the harness gives
-    // 0.4 mm RMS for the paper's single user with the default gains). A loop held up for tens of ms lets the
+    // Stiffness control keeps each device near the OP it holds (the paper's Fig 6b; the harness gives a
+    // fraction of a millimetre for the paper's single user with the default gains). A loop held up for tens of ms lets the
     // coupling stretch: a stalled run is held to a bound that still fails a device left behind.
     let device_bound = if run.on_time { 3.0 } else { 10.0 };
     for u in &s.per_user {
@@ -239,9 +239,9 @@ fn two_users_over_loopback_quic_move_the_testbed_as_the_harness_does() {
         })
         .collect();
     let rms = (compared.iter().map(|d| d * d).sum::<f64>() / compared.len() as f64).sqrt();
-    // Measured on time: about 0.02 mm; a few ms of scheduling noise shifts the path by a few hundredths of a
-    // mm. A stalled run (the VE catching up late ticks without the clients' uplinks shakes the linkage) left
-    // 0.7-2.2 mm: it is held to a quarter of the distance travelled, which a wrong sign, a lost coupling or a
+    // On time, a few ms of scheduling noise shifts the path by hundredths of a millimetre. A stalled run (the
+    // VE catching up late ticks without the clients' uplinks shakes the linkage) strays by millimetres: it is
+    // held to a quarter of the distance travelled, which a wrong sign, a lost coupling or a
     // missing user exceed by far.
     let bound = if run.on_time { 0.5e-3 } else { 0.25 * travelled };
     assert!(

@@ -92,8 +92,8 @@ fn run_point(delay_ms: u64) -> Point {
 fn latency_sweep_over_real_quic() {
     const CALM_WAIT: Duration = Duration::from_secs(60);
     let _bounded = common::bounded("latency_sweep_over_real_quic", Duration::from_secs(60) + CALM_WAIT);
-    // Each point starts in a calm second of the host: a stall inside the 50 ms point once made its device
-    // trail by 5.8 mm against 1.8 mm at 100 ms, which the ordering below then refused.
+    // Each point starts in a calm second of the host: a stall inside a point makes its device trail further
+    // than the delay does, which the ordering below would refuse.
     let mut calm_budget = CALM_WAIT;
     let points: Vec<Point> = DELAYS_MS
         .iter()
@@ -113,8 +113,8 @@ fn latency_sweep_over_real_quic() {
         let expected = 2.0 * p.delay_ms as f64;
         // The round trip is at least the injected delay both ways (less 3 ms of timer granularity): the
         // emulator must apply it. Above it the band is wider than the emulator's error, because a stall of
-        // either endpoint's task only ever adds time: this VM's host has stalled an idle 1 kHz loop for tens
-        // of ms (`kinloop timer-floor`), and the median ping then rose to 57 ms at 20 ms each way. A delay
+        // either endpoint's task only ever adds time: a host can stall an idle 1 kHz loop for tens of ms
+        // (`kinloop timer-floor`), which raises the median ping by as much. A delay
         // applied twice would still show (+2x the expected). quinn's smoothed RTT also carries ack delay.
         let (low, high) = (expected - 3.0, expected + 3.0 + 0.1 * expected + 25.0);
         for (what, rtt) in [("ping", p.ping_rtt_ms), ("QUIC", p.quic_rtt_ms)] {
@@ -126,9 +126,9 @@ fn latency_sweep_over_real_quic() {
         assert!(p.max_closure_error <= 1e-6, "{p:?}");
     }
     // Below 75 ms one way the VE follows what it hears, so the device trails its OP further with each delay
-    // (about in proportion: 0.55 mm at 20 ms, 1.28 mm at 50 ms). At 100 ms it leads its target by the delay
-    // (`VeConfig::coupling_lead_delays_s`), so the device is no longer twice as far as at 50 ms, as it would
-    // be following (1.23 mm against 1.28 when this was written), though still further than without delay.
+    // (about in proportion). At 100 ms it leads its target by the delay (`VeConfig::coupling_lead_delays_s`),
+    // so the device is no longer twice as far as at 50 ms, as it would be following, though still further
+    // than without delay.
     let leads_from_ms = kinloop_server::core::DEFAULT_COUPLING_LEAD_DELAYS_S[0] * 1e3;
     let (followed, led): (Vec<&Point>, Vec<&Point>) = points.iter().partition(|p| (p.delay_ms as f64) < leads_from_ms);
     let last_followed = followed.last().expect("delays below the lead's");

@@ -354,8 +354,8 @@ fn a_fixed_200_ms_pull_toward_the_ve_predicted_to_now_stays_stable_at_long_delay
 /// `device_unheard_rms_m`, the device-OP distance of a VE sitting exactly on the device as heard, recomputed
 /// from the recording: at 300 ms one way on a clean link the VE hears the device 300 ms (and a tick) late, so
 /// it is the RMS of the device's displacement over the last 300 ms. No VE that follows what it hears is
-/// nearer on average; the default VE leads by up to 100 ms at this delay, so it is below that floor (12.2
-/// against 14.4 mm), though by no more than the lead can buy.
+/// nearer on average; the default VE leads by up to 100 ms at this delay, so it is below that floor, though
+/// by no more than the lead can buy.
 #[test]
 fn the_unheard_distance_is_the_device_motion_over_the_uplink_delay() {
     let (summary, rec) = testbed_tour(HandKind::Soft, 300, 3, None);
@@ -390,7 +390,7 @@ fn reach_edit(reach: f64) -> kinloop_harness::CoreEdit {
 
 /// A firm hand touring the testbed at 500 ms one way: the local model runs a round trip of motion ahead of
 /// the VE its terms were linearized at, and a joint stiffness held against that stale tangent plane pushed
-/// back hard enough to saturate `sim:paper`'s 0.2 N m wrist (77 % of ticks in the worst second). With the
+/// back hard enough to saturate `sim:paper`'s 0.2 N m wrist through most of its worst second. With the
 /// constrained directions softened by `linearization_trust` (the default reach) the tour is stable and no
 /// second is saturated; with the softening off (infinite reach) the same session saturates, so the
 /// softening is what holds it.
@@ -419,8 +419,8 @@ fn tangent_only() -> kinloop_harness::CoreEdit {
 /// model runs a round trip of motion ahead of the VE it was linearized at, and the coupler curve bends away
 /// from the tangent line there: held to that line, the walls stood across the hand's way round the curve's
 /// corner, softened by `linearization_trust` but not enough at 1 s one way (the hand held at `sim:paper`'s
-/// limit through its worst second), and at 500 ms only because the trust's reach was tuned (0.3 L saturated
-/// there). Held to the path the welcome carries, the walls turn with the linkage's: both delays are stable
+/// limit through its worst second), and at 500 ms only for some settings of the trust's reach. Held to the
+/// path the welcome carries, the walls turn with the linkage's: both delays are stable
 /// with no second saturated past a tenth, and at 500 ms the reach no longer matters.
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_tangent() {
@@ -473,8 +473,7 @@ fn the_default_lead_brings_the_testbed_within_3_mm_of_the_device_at_100_ms() {
 }
 
 /// The default lead has no upper edge: at 500 ms and 1 s one way the testbed's soft tour is stable led, and
-/// its OP nearer the device than a VE that follows what it hears (by at least 3 %; 13 % and 6 % when this was
-/// written), while the OP that follows is no nearer than nine tenths of the device's own unheard motion.
+/// its OP nearer the device than a VE that follows what it hears (by at least 3 %), while the OP that follows is no nearer than nine tenths of the device's own unheard motion.
 #[test]
 fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
     use kinloop::experiments::delay_point::{measure_leading, measure_with, Lead};
@@ -522,8 +521,8 @@ fn the_testbed_meets_the_tracking_goals_on_the_issues_circle_and_the_tour_is_hel
 
 /// A poke through the Watt six-bar at 100 ms one way with 30 ms of jitter on a FIFO link (the latency
 /// sweep's draw): packets leave the queue in bursts, and a VE that followed the newest uplink saw the jab's
-/// poses arrive all at once, its PD target jumping centimetres in a tick: 1 J made beyond the hand's work,
-/// the OP 57 mm from the device, the device saturated. Played out at the stream's steady delay (the jitter
+/// poses arrive all at once, its PD target jumping centimetres in a tick: energy made beyond the hand's work,
+/// the OP centimetres from the device, the device saturated. Played out at the stream's steady delay (the jitter
 /// buffer, `VeConfig::jitter_buffer`) the same session is stable.
 #[test]
 fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
@@ -565,10 +564,9 @@ fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
 /// a round trip late, and each hand answers what its device does, so under delay the exchange is a loop whose
 /// gain grows with the users. Two users on the testbed's link2, a relaxed and a firm hand touring, 100 ms each
 /// way: with the others' hands taken whole (the paper's b̂, `exchange_delay_s` infinite) the exchange gains
-/// energy (when this was written the devices also saturated a quarter of their ticks and the OP strayed 26 mm);
-/// weighted by the measured round trip (`sharing`) the session is stable. Four users at 20 ms likewise, and two
+/// energy; weighted by the measured round trip (`sharing`) the session is stable. Four users at 20 ms likewise, and two
 /// on the four-bar's coupler and crank tip at 20 ms, whose pushes reach each other through the loop (taken
-/// whole, the OP left its device by 13 cm).
+/// whole, the OP leaves its device by centimetres).
 #[test]
 fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillation() {
     use kinloop::experiments::verdict::judge;
@@ -612,8 +610,8 @@ fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillat
 
 /// Four users on the testbed's link2 (relaxed, firm, one that lets go at 2 s, one that jabs): the released
 /// handle's presence sensor reports it, and its coupling lets go of the linkage rather than holding it where the
-/// hand left it against the other three (which, held, clamped 15 % of their ticks and left the released
-/// handle 17 cm from the OP). The session is stable and the three hands still on track the OP within mm.
+/// hand left it against the other three (which, held, clamp their devices and leave the released handle
+/// centimetres from the OP). The session is stable and the three hands still on track the OP within mm.
 #[test]
 fn a_user_letting_go_of_a_shared_linkage_does_not_hold_the_others_back() {
     use kinloop::experiments::verdict::judge;
@@ -644,8 +642,8 @@ fn a_user_letting_go_of_a_shared_linkage_does_not_hold_the_others_back() {
 /// A Falcon renders no torque, so the hand holds the four-bar's coupler as through a pin and the local
 /// model's angle is left to the linkage: the path is followed by position. Followed by the whole pose, the
 /// model's drifted angle put its point on the coupler curve off where it was, and the forces at rest taken
-/// there made 9 J beyond the hand's work (soft hand, 500 ms one way, 10 ms of jitter, the real-time latency
-/// run's session in virtual time; 6.4 % of its ticks clamped in real time).
+/// there made energy beyond the hand's work (soft hand, 500 ms one way, 10 ms of jitter: the real-time latency
+/// run's session in virtual time).
 #[test]
 fn a_pinned_grasp_follows_the_four_bars_path_by_position() {
     use kinloop::experiments::verdict::judge;

@@ -11,8 +11,8 @@ fn pair(scene: &str, op: &str, device: DevicePreset, hand: HandKind) -> Point {
 
 /// The Watt six-bar's output link and the slider-crank's crank tip are light and turn fast under the hand; at
 /// 50 ms one way, with the local model's free directions compared with the model's own state that the VE
-/// answered (a Smith predictor) instead of with the VE's state predicted to now, the six-bar saturated a Touch
-/// on 77 % of its ticks and grew energy on a Falcon, and the crank tip grew energy on a Falcon.
+/// answered (a Smith predictor) instead of with the VE's state predicted to now, the six-bar saturates a Touch
+/// and grows energy on a Falcon, and the crank tip grows energy on a Falcon.
 #[test]
 fn light_outputs_render_on_weak_devices_at_50_ms_over_a_whole_tour() {
     let pairs = [
@@ -41,7 +41,7 @@ fn light_outputs_render_on_weak_devices_at_50_ms_over_a_whole_tour() {
 /// directions only the position channels hold the device to the local model, and with a third of the damping
 /// budget (the joint-constraint controller took two thirds) they left the device's mass at a damping ratio of
 /// 0.3 with the hand on it; where the handle spins near the linkage's singular elbow the controllers then gave
-/// the hand 29 mJ more than it put in over the tour (energy growth). With two thirds of the damping in the
+/// the hand more than it put in over the tour (energy growth). With two thirds of the damping in the
 /// channels the pair renders, and the same session with the designed gains split the old way still grows
 /// energy, more than twice as much.
 #[test]

@@ -173,9 +173,9 @@ fn a_slider_crank_pushed_into_the_force_limit_clamps_alike_in_four_unit_systems(
 
 /// The Gauss-Newton assembly reads its residual and its steps in the scene's length scale: a spherical
 /// four-bar and a slider-crank with their first joint moved off q0 close in the same number of iterations,
-/// to the same configuration (angles alike, prismatic coordinates in proportion), in every unit system. In
-/// millimetres the residual used to mix millimetres with unit-free rows and the spherical four-bar did not
-/// converge.
+/// to the same configuration (angles alike, prismatic coordinates in proportion), in every unit system. A
+/// residual that mixed millimetres with unit-free rows would keep the spherical four-bar from converging in
+/// millimetres.
 #[test]
 fn assembly_closes_the_loops_alike_in_four_unit_systems() {
     use kinloop_linkage::algorithms::assemble::assemble;

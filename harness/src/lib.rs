@@ -5,6 +5,7 @@
 //! Nothing here reads a clock (except to measure the VE's compute cost, which is reported but never feeds
 //! back), so the same plan and seeds give the same results bit for bit, far faster than real time.
 
+pub mod hooks;
 pub mod record;
 
 use std::collections::VecDeque;
@@ -27,6 +28,7 @@ use kinloop_protocol::emulator::{LinkConfig, LinkEmulator};
 use kinloop_protocol::{Datagram, LocalModelForm, MappingRequest, Role, SessionShape};
 use kinloop_server::core::{JoinRequest, PassivityObserver, UserId, VeConfig, VeCore};
 
+pub use hooks::{CoreHooks, Plain, Probe, TickSample};
 pub use record::{ClientSample, Recording, VeSample};
 
 /// One simulated participant.
@@ -121,6 +123,22 @@ impl ClientPlan {
         }
     }
 
+    /// The core's configuration for this participant's device: mode, form and rate from the plan, then
+    /// `tweak` and `configure`.
+    pub fn core_config(&self, spec: kinloop_client::device::DeviceSpec) -> CoreConfig {
+        let mut config = CoreConfig::new(spec);
+        config.constraint_mode = self.constraint_mode;
+        config.form = self.form;
+        config.period = Duration::from_secs_f64(1.0 / self.rate_hz);
+        if let Some(tweak) = self.tweak {
+            tweak(&mut config);
+        }
+        if let Some(edit) = &self.configure {
+            edit.apply(&mut config);
+        }
+        config
+    }
+
     /// The same network conditions both ways (each direction gets its own seed).
     pub fn with_link(mut self, link: LinkConfig) -> Self {
         self.downlink = LinkConfig { seed: link.seed.wrapping_mul(2).wrapping_add(1), ..link.clone() };
@@ -154,6 +172,20 @@ impl SessionPlan {
             duration: Duration::from_secs(3),
             record_every: 1,
         })
+    }
+
+    /// [`SessionPlan::paper`] as section VI runs it: the paper's gains, `mode` and `form`, and a short ramp-in
+    /// (the paper's user pushes from t = 0; a long ramp would let the device run off first).
+    pub fn paper_manipulation(mode: ConstraintMode, form: ModelForm) -> Result<Self> {
+        let mut plan = Self::paper()?;
+        let client = &mut plan.clients[0];
+        client.constraint_mode = mode;
+        client.form = form;
+        client.tweak = Some(|config| {
+            config.gains = kinloop_client::core::GainChoice::Paper;
+            config.safety.ramp_in = Duration::from_millis(5);
+        });
+        Ok(plan)
     }
 }
 
@@ -292,6 +324,7 @@ pub struct Session<S: Space> {
     ve_compute: Duration,
     encode_buf: Vec<u8>,
     ve_ticks_seen: u64,
+    now: Duration,
 }
 
 impl<S: Space> Session<S> {
@@ -346,6 +379,7 @@ impl<S: Space> Session<S> {
             ve_compute: Duration::ZERO,
             encode_buf: Vec::with_capacity(2048),
             ve_ticks_seen: 0,
+            now: Duration::ZERO,
         })
     }
 
@@ -354,7 +388,7 @@ impl<S: Space> Session<S> {
         &self.ve
     }
 
-    fn join(&mut self, i: usize, now: Duration) -> Result<()> {
+    fn join<H: CoreHooks<S>>(&mut self, i: usize, now: Duration, hooks: &mut H) -> Result<()> {
         let p = &mut self.participants[i];
         let request = JoinRequest {
             name: p.plan.name.clone(),
@@ -375,16 +409,7 @@ impl<S: Space> Session<S> {
             return Err(anyhow!("{} refused: {}", p.plan.name, kinloop_protocol::RefusalReason::Unservable { what }));
         }
         let spec = p.device.take().context("a participant joins once")?.spec().clone();
-        let mut config = CoreConfig::new(spec);
-        config.constraint_mode = p.plan.constraint_mode;
-        config.form = p.plan.form;
-        config.period = p.period;
-        if let Some(tweak) = p.plan.tweak {
-            tweak(&mut config);
-        }
-        if let Some(edit) = &p.plan.configure {
-            edit.apply(&mut config);
-        }
+        let config = p.plan.core_config(spec);
         let mut core = HapticCore::new(config, &joined.welcome).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         // The hand grasps the handle where the linkage is: the device starts at the OP's place in its
         // workspace, and the user tours the reach the welcome describes.
@@ -394,6 +419,7 @@ impl<S: Space> Session<S> {
         let context = UserContext::from_welcome(&joined.welcome);
         let user = p.plan.user.build::<S>(&context).map_err(|e| anyhow!("{}: user: {e}", p.plan.name))?;
         p.rig = Some(SimulatedRig::new(device, user));
+        hooks.joined(i, &joined.welcome);
         let (w, g) = (&joined.welcome, &core.gains().device);
         let mut gains = vec![g.joint_stiffness, g.joint_damping];
         gains.extend(g.position_stiffness.iter().chain(&g.position_damping));
@@ -422,7 +448,13 @@ impl<S: Space> Session<S> {
     /// Handles everything due at `now`: datagrams first, then the VE's tick (its tick happens "before"
     /// clients read), then every client's tick. `now` never goes back; events not yet due wait.
     pub fn step(&mut self, now: Duration) -> Result<()> {
-        self.deliver_links(now)?;
+        self.step_with(now, &mut Plain)
+    }
+
+    /// [`Session::step`] with `hooks` around every call on a core.
+    pub fn step_with<H: CoreHooks<S>>(&mut self, now: Duration, hooks: &mut H) -> Result<()> {
+        self.now = now;
+        self.deliver_links(now, hooks)?;
         if self.ve.poll_timeout() <= now {
             let t = Instant::now();
             self.ve.handle_timeout(now);
@@ -434,14 +466,43 @@ impl<S: Space> Session<S> {
             if self.participants[i].left || self.participants[i].next_tick > now {
                 continue;
             }
-            self.client_tick(i, now)?;
+            self.client_tick(i, now, hooks)?;
         }
         Ok(())
+    }
+
+    /// Steps every event due up to `until` (inclusive) with `hooks`.
+    pub fn run_until_with<H: CoreHooks<S>>(&mut self, until: Duration, hooks: &mut H) -> Result<()> {
+        while self.next_event() <= until {
+            let now = self.next_event().max(self.now);
+            self.step_with(now, hooks)?;
+        }
+        Ok(())
+    }
+
+    /// The time of the last step.
+    pub fn now(&self) -> Duration {
+        self.now
     }
 
     /// Participant `i`'s haptic core, once it has joined.
     pub fn core(&self, i: usize) -> Option<&HapticCore<S>> {
         self.participants.get(i).and_then(|p| p.core.as_ref())
+    }
+
+    /// Participant `i`'s haptic core, for a test that calls it between steps.
+    pub fn core_mut(&mut self, i: usize) -> Option<&mut HapticCore<S>> {
+        self.participants.get_mut(i).and_then(|p| p.core.as_mut())
+    }
+
+    /// Participant `i`'s device and user, once it has joined.
+    pub fn rig(&self, i: usize) -> Option<&SimulatedRig<S>> {
+        self.participants.get(i).and_then(|p| p.rig.as_ref())
+    }
+
+    /// Participant `i`'s device and user, for a test that changes the user between steps.
+    pub fn rig_mut(&mut self, i: usize) -> Option<&mut SimulatedRig<S>> {
+        self.participants.get_mut(i).and_then(|p| p.rig.as_mut())
     }
 
     /// Runs to the end of the plan: [`Session::step`] at each [`Session::next_event`].
@@ -465,7 +526,7 @@ impl<S: Space> Session<S> {
         Ok(self.finish(wall.elapsed()))
     }
 
-    fn deliver_links(&mut self, now: Duration) -> Result<()> {
+    fn deliver_links<H: CoreHooks<S>>(&mut self, now: Duration, hooks: &mut H) -> Result<()> {
         for i in 0..self.participants.len() {
             // Datagrams that do not decode (a client reporting absurd values, say) are refused and counted,
             // as a real server and client would.
@@ -482,9 +543,7 @@ impl<S: Space> Session<S> {
             }
             while let Some(bytes) = self.participants[i].down.poll(now) {
                 match (decode_datagram(&bytes, &self.shape), self.participants[i].core.as_mut()) {
-                    (Ok(Datagram::Snapshot(s)), Some(core)) => {
-                        let _ = core.handle_snapshot(now, &s);
-                    }
+                    (Ok(Datagram::Snapshot(mut s)), Some(core)) => hooks.snapshot(i, core, now, &mut s),
                     (Ok(_), _) => {}
                     (Err(_), _) => self.participants[i].snapshots_refused += 1,
                 }
@@ -517,10 +576,10 @@ impl<S: Space> Session<S> {
         }
     }
 
-    fn client_tick(&mut self, i: usize, now: Duration) -> Result<()> {
+    fn client_tick<H: CoreHooks<S>>(&mut self, i: usize, now: Duration, hooks: &mut H) -> Result<()> {
         let p = &mut self.participants[i];
         if p.core.is_none() && now >= p.plan.join_at {
-            self.join(i, now)?;
+            self.join(i, now, hooks)?;
         }
         let p = &mut self.participants[i];
         if let Some(leave) = p.plan.leave_at {
@@ -538,11 +597,12 @@ impl<S: Space> Session<S> {
         };
         let state = rig.read(now).map_err(|e| anyhow!("{}: {e}", p.plan.name))?;
         let t = Instant::now();
-        let out = core.tick(now, &state);
+        let out = hooks.tick(i, core, now, &state);
         p.compute += t.elapsed();
         let command = out.command;
         let report = *out.report;
-        if let Some(uplink) = out.uplink {
+        let uplink_sent = out.uplink.is_some();
+        if let Some(uplink) = out.uplink.filter(|u| hooks.send_uplink(i, u)) {
             self.encode_buf.clear();
             if encode_datagram_into(&Datagram::Uplink(uplink.clone()), &mut self.encode_buf).is_ok() {
                 p.up.send(now, self.encode_buf.clone());
@@ -597,8 +657,9 @@ impl<S: Space> Session<S> {
                 }
             }
         }
+        let ve_op = ve_user.as_ref().map(|u| u.op_pose);
+        hooks.ticked(&TickSample { who: i, report, device: state, command, uplink_sent, ve_op });
         if self.record_every > 0 && p.ticks.is_multiple_of(self.record_every as u64) {
-            let ve_op = ve_user.as_ref().map(|u| u.op_pose);
             let mut sample = ClientSample::from_report(&report, report.device_pose, ve_op, &command);
             sample.ve_heard_s = ve_user.map(|u| u.answers_s).filter(|&t| t > 0.0);
             // The true hand (a sensorless device's report carries the observer's estimate) and the handle's
@@ -658,6 +719,22 @@ impl<S: Space> Session<S> {
             wall_s: wall.as_secs_f64(),
         };
         (summary, self.recording)
+    }
+}
+
+/// What a test needs to drive a core of its own on real terms: participant 0's welcome, the newest snapshot
+/// handed to its core and the core's configuration, `until` into `plan`.
+pub fn first_terms<S: Space>(
+    plan: &SessionPlan,
+    until: Duration,
+) -> Result<(kinloop_protocol::Welcome, kinloop_protocol::Snapshot, CoreConfig)> {
+    let mut session = Session::<S>::new(plan)?;
+    let mut probe = Probe::default();
+    session.run_until_with(until, &mut probe)?;
+    let config = session.core(0).map(|core| core.config().clone());
+    match (probe.welcome, probe.last_snapshot, config) {
+        (Some(welcome), Some(snapshot), Some(config)) => Ok((welcome, snapshot, config)),
+        _ => Err(anyhow!("participant 0 had no snapshot {until:?} into the session")),
     }
 }
 

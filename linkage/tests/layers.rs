@@ -72,8 +72,8 @@ const ROOT: Layers = Layers {
     ],
 };
 
-/// The virtual-time harness: its tick records below the session runner.
-const HARNESS: Layers = Layers { dir: "harness/src", ranks: &[("record", 0)] };
+/// The virtual-time harness: its tick records and its hooks on a core's calls below the session runner.
+const HARNESS: Layers = Layers { dir: "harness/src", ranks: &[("record", 0), ("hooks", 0)] };
 
 /// The fake DHD library: its plant below the exported C functions.
 const FAKE_DHD: Layers = Layers { dir: "fakes/fake-dhd/src", ranks: &[("hand", 0), ("plant", 1)] };

@@ -3,10 +3,10 @@
 //!
 //! The pull compares the VE's state, predicted to now, with the model's (step 2 of the client core's tick)
 //! and corrects what differs over a time constant τ; what it corrects comes back a round trip `T` later, and
-//! such a loop is stable only for `T < π τ / 2`. With τ fixed at 200 ms the testbed gained energy from a few
-//! hundred milliseconds one way while the free directions were compared with the model's own state that the
-//! VE answered (a Smith predictor, since removed); compared with the VE's state predicted to now, none of the
-//! rows' sessions is unstable, and the default keeps its margin. Each row here runs the grid's clean-network
+//! such a loop is stable only for `T < π τ / 2`: a fixed τ of 200 ms leaves no margin from a few hundred
+//! milliseconds one way when the free directions are compared with the model's own state that the VE answered
+//! (a Smith predictor); compared with the VE's state predicted to now, as the core does, the rows show whether
+//! any session is unstable (docs/benchmarks.md), and the default keeps its margin. Each row here runs the grid's clean-network
 //! sessions (soft and firm hands, every scene, [`DELAYS_MS`]) with one way of pulling:
 //! - `fixed pull, no tank`: τ = 200 ms at every delay, the update unbounded;
 //! - `fixed pull, tank`: the same with the energy tank that pays for each correction

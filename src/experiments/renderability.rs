@@ -15,8 +15,7 @@
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use serde::Serialize;
-use serde_json::json;
+use serde::{Deserialize, Serialize};
 
 use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
@@ -405,7 +404,12 @@ fn report(
     let failing: Vec<_> = results
         .iter()
         .filter(|r| !r.renders)
-        .map(|r| json!({"pair": row_label(&r.point), "network": r.point.network.name(), "hand": r.point.hand.name(), "failures": r.failures}))
+        .map(|r| FailingPair {
+            pair: row_label(&r.point),
+            network: r.point.network.name().into(),
+            hand: r.point.hand.name().into(),
+            failures: r.failures.clone(),
+        })
         .collect();
     let worst_rms = results.iter().map(|r| r.device_op_rms_m).fold(0.0, f64::max);
     let worst_clamped = results.iter().map(|r| r.clamped_fraction).fold(0.0, f64::max);
@@ -419,24 +423,130 @@ fn report(
     out.finish(
         title,
         runtime_note,
-        json!({
-            "answer": answer,
-            "seconds_per_pair": seconds,
-            "pairs": results.len(),
-            "rendering": rendering,
-            "failing": failing,
-            "bounds": {"closure_m": CLOSURE_BOUND_M, "clamped_fraction": CLAMPED_BOUND, "rms_perfect_m": RMS_PERFECT_M, "rms_50ms_m": RMS_DELAYED_M},
-            "points": results.iter().map(|r| json!({
-                "scene": r.point.scene, "op": r.point.op, "device": r.point.device.name(),
-                "network": r.point.network.name(), "hand": r.point.hand.name(),
-                "renders": r.renders, "failures": r.failures, "stable": r.stable, "ve_restores": r.ve_restores,
-                "clamped_fraction": round(r.clamped_fraction, 4), "device_op_rms_mm": round(r.device_op_rms_m * 1e3, 3),
-                "max_closure_error_m": r.max_closure_error_m,
-                "energy_excess_j": r.energy_excess_j, "energy_flow_max_j": r.energy_flow_max_j, "position_scale": r.position_scale,
-                "force_scale": r.force_scale, "coupling_kg_bg": r.coupling, "gains_kj_bj_kpc_bpc": r.gains,
-            })).collect::<Vec<_>>(),
-        }),
+        serde_json::to_value(RenderabilitySummary {
+            answer,
+            seconds_per_pair: seconds,
+            pairs: results.len(),
+            rendering,
+            failing,
+            bounds: RenderBounds {
+                closure_m: CLOSURE_BOUND_M,
+                clamped_fraction: CLAMPED_BOUND,
+                rms_perfect_m: RMS_PERFECT_M,
+                rms_50ms_m: RMS_DELAYED_M,
+            },
+            points: results.iter().map(point_summary).collect(),
+        })?,
     )
+}
+
+/// `summary.json`'s `results` of the renderability matrix.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderabilitySummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// Simulated seconds of each pair's session.
+    pub seconds_per_pair: f64,
+    /// Pairs run.
+    pub pairs: usize,
+    /// Pairs that render by every bound.
+    pub rendering: usize,
+    /// The pairs that do not, and why.
+    pub failing: Vec<FailingPair>,
+    /// The bounds a pair is judged by.
+    pub bounds: RenderBounds,
+    /// Every pair.
+    pub points: Vec<RenderPoint>,
+}
+
+/// A pair that does not render.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FailingPair {
+    /// `scene:op device`.
+    pub pair: String,
+    /// The network's name.
+    pub network: String,
+    /// The hand's name.
+    pub hand: String,
+    /// Which bounds failed.
+    pub failures: Vec<String>,
+}
+
+/// The bounds of the matrix.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderBounds {
+    /// Largest closure error (m).
+    pub closure_m: f64,
+    /// Largest fraction of ticks clamped at the device limit.
+    pub clamped_fraction: f64,
+    /// Largest device-OP RMS on a perfect network (device m).
+    pub rms_perfect_m: f64,
+    /// Largest device-OP RMS at 50 ms one way (device m).
+    pub rms_50ms_m: f64,
+}
+
+/// One pair's figures, as [`PointResult`] with names for the JSON.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderPoint {
+    /// Scene.
+    pub scene: String,
+    /// Operational point.
+    pub op: String,
+    /// Device preset's name.
+    pub device: String,
+    /// Network's name.
+    pub network: String,
+    /// Hand's name.
+    pub hand: String,
+    /// See [`PointResult::renders`].
+    pub renders: bool,
+    /// See [`PointResult::failures`].
+    pub failures: Vec<String>,
+    /// See [`PointResult::stable`].
+    pub stable: bool,
+    /// See [`PointResult::ve_restores`].
+    pub ve_restores: u64,
+    /// See [`PointResult::clamped_fraction`] (4 decimals).
+    pub clamped_fraction: f64,
+    /// Device-OP RMS, device space (mm, 3 decimals).
+    pub device_op_rms_mm: f64,
+    /// See [`PointResult::max_closure_error_m`].
+    pub max_closure_error_m: f64,
+    /// See [`PointResult::energy_excess_j`].
+    pub energy_excess_j: Option<f64>,
+    /// See [`PointResult::energy_flow_max_j`].
+    pub energy_flow_max_j: Option<f64>,
+    /// See [`PointResult::position_scale`].
+    pub position_scale: f64,
+    /// See [`PointResult::force_scale`].
+    pub force_scale: f64,
+    /// K_g then B_g per axis.
+    pub coupling_kg_bg: Vec<f64>,
+    /// k_j, b_j, K_pc per axis, B_pc per axis (device units).
+    pub gains_kj_bj_kpc_bpc: Vec<f64>,
+}
+
+fn point_summary(r: &PointResult) -> RenderPoint {
+    RenderPoint {
+        scene: r.point.scene.clone(),
+        op: r.point.op.clone(),
+        device: r.point.device.name().into(),
+        network: r.point.network.name().into(),
+        hand: r.point.hand.name().into(),
+        renders: r.renders,
+        failures: r.failures.clone(),
+        stable: r.stable,
+        ve_restores: r.ve_restores,
+        clamped_fraction: round(r.clamped_fraction, 4),
+        device_op_rms_mm: round(r.device_op_rms_m * 1e3, 3),
+        max_closure_error_m: r.max_closure_error_m,
+        energy_excess_j: r.energy_excess_j,
+        energy_flow_max_j: r.energy_flow_max_j,
+        position_scale: r.position_scale,
+        force_scale: r.force_scale,
+        coupling_kg_bg: r.coupling.clone(),
+        gains_kj_bj_kpc_bpc: r.gains.clone(),
+    }
 }
 
 fn row_label(p: &Point) -> String {

@@ -30,7 +30,7 @@ use kinloop_linkage::{
 };
 use kinloop_server::core::AxisGains;
 use nalgebra::Vector3;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
 
 use super::common::{
     op_position, paper_plan, pareto_front, rms_error, session, sweep, timed_cost, ve_op_trajectory, Options, Output,
@@ -190,22 +190,111 @@ fn configs(options: &Options) -> Vec<Config> {
     out
 }
 
-fn point_json(m: &Measured) -> Value {
-    json!({
-        "integrator": m.config.integrator.name(),
-        "ve_rate_hz": m.config.ve_rate_hz,
-        "snapshot_rate_hz": m.config.snapshot_rate_hz,
-        "form": form_name(m.config.form),
-        "op_error_rms_m": significant(m.op_error_rms_m, 4),
-        "numerical_error_rms_m": significant(m.numerical_error_rms_m, 4),
-        "device_error_rms_m": significant(m.device_error_rms_m, 4),
-        "max_closure_error_m": significant(m.max_closure_error_m, 3),
-        "cost_us_per_simulated_s": round(m.cost_us_per_s, 1),
-        "ve_cost_us_per_simulated_s": round(m.ve_cost_us_per_s, 1),
-        "client_cost_us_per_simulated_s": round(m.client_cost_us_per_s, 1),
-        "stable": m.stable,
-        "reasons": m.reasons,
-    })
+/// `summary.json`'s `results` of the speed-accuracy experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpeedAccuracySummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// The configurations on the Pareto front of OP error against cost.
+    pub pareto_front: Vec<String>,
+    /// Their figures.
+    pub pareto_front_points: Vec<SpeedAccuracyPoint>,
+    /// The configurations on the Pareto front of numerical error against cost.
+    pub numerical_pareto_front: Vec<String>,
+    /// How the sessions ran and were measured.
+    pub setup: SpeedAccuracySetup,
+    /// Every configuration.
+    pub points: Vec<SpeedAccuracyPoint>,
+    /// The integrators on the linkage alone.
+    pub linkage_alone: LinkageAlone,
+}
+
+/// How the sessions ran and were measured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpeedAccuracySetup {
+    /// The session.
+    pub session: String,
+    /// The graphics controller's coupling.
+    pub coupling: String,
+    /// The reference trajectory.
+    pub reference: String,
+    /// The accuracy figures.
+    pub accuracy: String,
+    /// The cost figure.
+    pub cost: String,
+    /// The stability criterion.
+    pub criterion: String,
+}
+
+/// One configuration's figures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpeedAccuracyPoint {
+    /// Integrator's name.
+    pub integrator: String,
+    /// VE rate (Hz).
+    pub ve_rate_hz: f64,
+    /// Snapshot rate (Hz).
+    pub snapshot_rate_hz: f64,
+    /// Local-model form.
+    pub form: String,
+    /// RMS distance of the VE's OP from the linkage alone (m).
+    pub op_error_rms_m: f64,
+    /// RMS distance of the VE's OP from the numerical reference (m).
+    pub numerical_error_rms_m: f64,
+    /// RMS distance of the device from the linkage alone (m).
+    pub device_error_rms_m: f64,
+    /// Largest closure error (m).
+    pub max_closure_error_m: f64,
+    /// VE + haptic-core compute per simulated second (µs/s).
+    pub cost_us_per_simulated_s: f64,
+    /// The VE's part of it.
+    pub ve_cost_us_per_simulated_s: f64,
+    /// The haptic cores' part of it.
+    pub client_cost_us_per_simulated_s: f64,
+    /// Stable by the criterion.
+    pub stable: bool,
+    /// Why not, if not.
+    pub reasons: Vec<String>,
+}
+
+/// The integrators on the linkage alone.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinkageAlone {
+    /// `integrator rate Hz` on the Pareto front of error against cost.
+    pub pareto_front: Vec<String>,
+    /// Every integrator and rate.
+    pub points: Vec<LinkageAlonePoint>,
+}
+
+/// One integrator at one rate on the linkage alone.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinkageAlonePoint {
+    /// Integrator's name.
+    pub integrator: String,
+    /// Step rate (Hz).
+    pub rate_hz: f64,
+    /// RMS OP distance from the RK4 10 kHz reference (m).
+    pub op_error_rms_m: f64,
+    /// Step compute per simulated second (µs/s).
+    pub cost_us_per_simulated_s: f64,
+}
+
+fn point_summary(m: &Measured) -> SpeedAccuracyPoint {
+    SpeedAccuracyPoint {
+        integrator: m.config.integrator.name().into(),
+        ve_rate_hz: m.config.ve_rate_hz,
+        snapshot_rate_hz: m.config.snapshot_rate_hz,
+        form: form_name(m.config.form).into(),
+        op_error_rms_m: significant(m.op_error_rms_m, 4),
+        numerical_error_rms_m: significant(m.numerical_error_rms_m, 4),
+        device_error_rms_m: significant(m.device_error_rms_m, 4),
+        max_closure_error_m: significant(m.max_closure_error_m, 3),
+        cost_us_per_simulated_s: round(m.cost_us_per_s, 1),
+        ve_cost_us_per_simulated_s: round(m.ve_cost_us_per_s, 1),
+        client_cost_us_per_simulated_s: round(m.client_cost_us_per_s, 1),
+        stable: m.stable,
+        reasons: m.reasons.iter().map(|r| r.to_string()).collect(),
+    }
 }
 
 fn scatter(title: &str, y_label: &str, points: &[Measured], y: impl Fn(&Measured) -> f64, front: &[usize]) -> Chart {
@@ -308,32 +397,38 @@ pub fn run(options: &Options) -> Result<Report> {
     let alone_front = pareto_front(&alone_pairs);
 
     let answer = answer(&measured, &front, &numerical_front);
-    let results = json!({
-        "answer": answer,
-        "pareto_front": front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
-        "pareto_front_points": front.iter().map(|&i| point_json(&measured[i])).collect::<Vec<_>>(),
-        "numerical_pareto_front": numerical_front.iter().map(|&i| measured[i].config.label()).collect::<Vec<_>>(),
-        "setup": {
-            "session": format!("paper testbed and user, sim:paper device, 1 kHz haptic loop, perfect network, {seconds} s"),
-            "coupling": format!("K_g = 1000 N/m, B_g = 100 N s/m linear; angular K_g L^2, B_g L^2 with L = {:.4} m; implicit for semi-implicit Euler, explicit otherwise", length),
-            "reference": "the linkage alone under the paper's wrench (faded in over 0.2 s like the VE's coupling), RK4 at 10 kHz with projection",
-            "accuracy": "RMS distance between the VE's OP and the reference OP at every VE tick (op_error_rms_m); the same against the numerical reference, the whole session with RK4 at 10 kHz, op form, 1 kHz snapshots (numerical_error_rms_m); device error against the linkage reference at every haptic tick",
-            "cost": format!("VE + haptic-core wall-clock compute per simulated second, one thread, best of {reps} runs of {timing_s} s"),
-            "criterion": verdict::CRITERION,
+    let results = SpeedAccuracySummary {
+        answer,
+        pareto_front: front.iter().map(|&i| measured[i].config.label()).collect(),
+        pareto_front_points: front.iter().map(|&i| point_summary(&measured[i])).collect(),
+        numerical_pareto_front: numerical_front.iter().map(|&i| measured[i].config.label()).collect(),
+        setup: SpeedAccuracySetup {
+            session: format!("paper testbed and user, sim:paper device, 1 kHz haptic loop, perfect network, {seconds} s"),
+            coupling: format!("K_g = 1000 N/m, B_g = 100 N s/m linear; angular K_g L^2, B_g L^2 with L = {:.4} m; implicit for semi-implicit Euler, explicit otherwise", length),
+            reference: "the linkage alone under the paper's wrench (faded in over 0.2 s like the VE's coupling), RK4 at 10 kHz with projection".into(),
+            accuracy: "RMS distance between the VE's OP and the reference OP at every VE tick (op_error_rms_m); the same against the numerical reference, the whole session with RK4 at 10 kHz, op form, 1 kHz snapshots (numerical_error_rms_m); device error against the linkage reference at every haptic tick".into(),
+            cost: format!("VE + haptic-core wall-clock compute per simulated second, one thread, best of {reps} runs of {timing_s} s"),
+            criterion: verdict::CRITERION.into(),
         },
-        "points": measured.iter().map(point_json).collect::<Vec<_>>(),
-        "linkage_alone": {
-            "pareto_front": alone_front.iter().map(|&i| format!("{} {} Hz", alone_points[i].0.name(), alone_points[i].1)).collect::<Vec<_>>(),
-            "points": alone_points.iter().zip(&alone).map(|(p, &(err, cost))| json!({
-                "integrator": p.0.name(), "rate_hz": p.1,
-                "op_error_rms_m": significant(err, 4), "cost_us_per_simulated_s": round(cost, 1),
-            })).collect::<Vec<_>>(),
+        points: measured.iter().map(point_summary).collect(),
+        linkage_alone: LinkageAlone {
+            pareto_front: alone_front.iter().map(|&i| format!("{} {} Hz", alone_points[i].0.name(), alone_points[i].1)).collect(),
+            points: alone_points
+                .iter()
+                .zip(&alone)
+                .map(|(p, &(err, cost))| LinkageAlonePoint {
+                    integrator: p.0.name().into(),
+                    rate_hz: p.1,
+                    op_error_rms_m: significant(err, 4),
+                    cost_us_per_simulated_s: round(cost, 1),
+                })
+                .collect(),
         },
-    });
+    };
     out.finish(
         "Speed against accuracy: integrators x VE rates x snapshot rates x local-model forms, with the Pareto front",
         "84 sessions of 3 s, their timing pass, 18 linkage-alone runs; --quick fewer",
-        results,
+        serde_json::to_value(&results)?,
     )
 }
 

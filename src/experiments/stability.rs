@@ -21,7 +21,8 @@ use kinloop_client::core::{ControllerGains, GainChoice};
 use kinloop_client::device::presets::DevicePreset;
 use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::Model};
 use kinloop_server::core::AxisGains;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 use super::common::{log_grid, paper_plan, session, sweep, Options, Output, Report};
 use super::verdict::{self, Verdict};
@@ -126,13 +127,54 @@ fn run_map(label: &str, part: Part, xs: &[f64], ys: &[f64], options: &Options) -
     sweep(label, &points, options.threads, options.progress, |&(x, y)| judge_point(part, x, y))
 }
 
-fn cells_json(cells: &[Cell], x: &str, y: &str) -> Value {
-    Value::Array(
-        cells
-            .iter()
-            .map(|c| json!({ x: c.x, y: c.y, "stable": c.verdict.stable, "reasons": c.verdict.reasons }))
-            .collect(),
-    )
+/// A map's cell under the JSON names of its axes.
+macro_rules! map_cell {
+    ($(#[$doc:meta])* $name:ident, $x:ident, $y:ident) => {
+        $(#[$doc])*
+        #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+        pub struct $name {
+            /// The x axis's value.
+            pub $x: f64,
+            /// The y axis's value.
+            pub $y: f64,
+            /// Stable by the criterion.
+            pub stable: bool,
+            /// Why not, if not.
+            pub reasons: Vec<String>,
+        }
+
+        impl From<&Cell> for $name {
+            fn from(c: &Cell) -> Self {
+                $name {
+                    $x: c.x,
+                    $y: c.y,
+                    stable: c.verdict.stable,
+                    reasons: c.verdict.reasons.iter().map(|r| r.to_string()).collect(),
+                }
+            }
+        }
+    };
+}
+
+map_cell!(
+    /// A cell of map (a).
+    GainsCell, k_j, b_j
+);
+map_cell!(
+    /// A cell of map (b).
+    RateCell, rate_hz, k_j
+);
+map_cell!(
+    /// A cell of map (c).
+    BaumgarteCell, step_ms, alpha
+);
+map_cell!(
+    /// A cell of map (d).
+    CouplingCell, k_g, b_g
+);
+
+fn typed_cells<T: for<'a> From<&'a Cell>>(cells: &[Cell]) -> Vec<T> {
+    cells.iter().map(T::from).collect()
 }
 
 fn map(title: &str, x_label: &str, y_label: &str, cells: &[Cell], overlays: Vec<Series>) -> StabilityMap {
@@ -179,7 +221,7 @@ fn dense(lo: f64, hi: f64) -> impl Iterator<Item = f64> {
 }
 
 /// (a): k_j × b_j at 1 kHz.
-fn gains_map(out: &mut Output, options: &Options) -> Result<Value> {
+fn gains_map(out: &mut Output, options: &Options) -> Result<GainsMap> {
     let ks = log_grid(1.0, 1e6, options.pick(4, 1));
     let bs = log_grid(0.01, 1e4, options.pick(4, 1));
     let cells = run_map("(a) k_j x b_j at 1 kHz", Part::Gains, &ks, &bs, options)?;
@@ -220,30 +262,30 @@ fn gains_map(out: &mut Output, options: &Options) -> Result<Value> {
     };
     let best_at_paper_b = at_paper_b.iter().filter(|c| c.verdict.stable).map(|c| c.x).fold(f64::NAN, f64::max);
     let paper_point = nearest(&cells, PAPER_KJ, PAPER_BJ);
-    Ok(json!({
-        "k_j_values_n_per_m": ks,
-        "b_j_values_ns_per_m": bs,
-        "haptic_rate_hz": 1000.0,
-        "units": "per kg of device mass in the paper; the simulated paper device has 1 kg per linear axis, so N/m/kg = N/m",
-        "largest_stable_k_j_n_per_m": best_k,
-        "stable_b_j_at_largest_k_j": stable_bs_at_best,
-        "largest_stable_k_j_at_b_j_near_50_n_per_m": if best_at_paper_b.is_finite() { Some(best_at_paper_b) } else { None },
-        "passivity_bound": {
-            "rule": "Colgate and Schenkel: passive iff b > K T/2 + |B|, with b the device's physical viscous damping, K, B the rendered stiffness and damping, T the sample period",
-            "physical_damping_b_ns_per_m": device_damping,
-            "largest_passive_k_j_with_b_j_0_n_per_m": passive_k_max,
-            "note": "with the position channel's B_pc = 70 N s/m also rendered, |B| > b and no k_j is passive; the bound drawn ignores B_pc",
+    Ok(GainsMap {
+        k_j_values_n_per_m: ks,
+        b_j_values_ns_per_m: bs,
+        haptic_rate_hz: 1000.0,
+        units: "per kg of device mass in the paper; the simulated paper device has 1 kg per linear axis, so N/m/kg = N/m".into(),
+        largest_stable_k_j_n_per_m: best_k,
+        stable_b_j_at_largest_k_j: stable_bs_at_best,
+        largest_stable_k_j_at_b_j_near_50_n_per_m: best_at_paper_b.is_finite().then_some(best_at_paper_b),
+        passivity_bound: PassivityBound {
+            rule: "Colgate and Schenkel: passive iff b > K T/2 + |B|, with b the device's physical viscous damping, K, B the rendered stiffness and damping, T the sample period".into(),
+            physical_damping_b_ns_per_m: device_damping,
+            largest_passive_k_j_with_b_j_0_n_per_m: passive_k_max,
+            note: "with the position channel's B_pc = 70 N s/m also rendered, |B| > b and no k_j is passive; the bound drawn ignores B_pc".into(),
         },
-        "largest_stable_k_j_over_passivity_bound": best_k.map(|k| round(k / passive_k_max, 1)),
-        "paper_gains_stable": paper_point.map(|c| c.verdict.stable),
-        "stable_points": cells.iter().filter(|c| c.verdict.stable).count(),
-        "points": cells.len(),
-        "cells": cells_json(&cells, "k_j", "b_j"),
-    }))
+        largest_stable_k_j_over_passivity_bound: best_k.map(|k| round(k / passive_k_max, 1)),
+        paper_gains_stable: paper_point.map(|c| c.verdict.stable),
+        stable_points: cells.iter().filter(|c| c.verdict.stable).count(),
+        points: cells.len(),
+        cells: typed_cells(&cells),
+    })
 }
 
 /// (b): haptic rate × k_j at b_j = 50.
-fn rate_map(out: &mut Output, options: &Options) -> Result<Value> {
+fn rate_map(out: &mut Output, options: &Options) -> Result<RateMap> {
     let rates: Vec<f64> =
         options.pick(vec![250.0, 500.0, 1000.0, 2000.0, 5000.0, 10000.0], vec![250.0, 1000.0, 10000.0]);
     let ks = log_grid(10.0, 1e7, options.pick(3, 1));
@@ -265,12 +307,12 @@ fn rate_map(out: &mut Output, options: &Options) -> Result<Value> {
             overlays,
         ),
     )?;
-    let per_rate: Vec<Value> = rates
+    let per_rate: Vec<RateLimit> = rates
         .iter()
         .map(|&r| {
             let best =
                 largest_stable(&cells.iter().filter(|c| c.x == r).cloned().collect::<Vec<_>>(), |c| c.y).map(|c| c.y);
-            json!({ "rate_hz": r, "largest_stable_k_j_n_per_m": best })
+            RateLimit { rate_hz: r, largest_stable_k_j_n_per_m: best }
         })
         .collect();
     let mut rate_chart = Chart::new(
@@ -280,27 +322,24 @@ fn rate_map(out: &mut Output, options: &Options) -> Result<Value> {
     )
     .with(Series::line(
         "largest stable k_j (grid value)",
-        per_rate
-            .iter()
-            .filter_map(|v| Some((v["rate_hz"].as_f64()?, v["largest_stable_k_j_n_per_m"].as_f64()?)))
-            .collect(),
+        per_rate.iter().filter_map(|v| Some((v.rate_hz, v.largest_stable_k_j_n_per_m?))).collect(),
     ))
     .with(curve("Colgate passivity bound 2 b f, b = 0.02 N s/m", dense(250.0, 10000.0), |f| 2.0 * device_damping * f))
     .legend(Legend::LowerRight);
     rate_chart.log_x = true;
     rate_chart.log_y = true;
     out.chart("b_largest_stable_kj_vs_rate", &rate_chart)?;
-    Ok(json!({
-        "b_j_ns_per_m": PAPER_BJ,
-        "rates_hz": rates,
-        "k_j_values_n_per_m": ks,
-        "largest_stable_k_j_per_rate": per_rate,
-        "cells": cells_json(&cells, "rate_hz", "k_j"),
-    }))
+    Ok(RateMap {
+        b_j_ns_per_m: PAPER_BJ,
+        rates_hz: rates,
+        k_j_values_n_per_m: ks,
+        largest_stable_k_j_per_rate: per_rate,
+        cells: typed_cells(&cells),
+    })
 }
 
 /// (c): Baumgarte α × VE time step, projection off.
-fn baumgarte_map(out: &mut Output, options: &Options) -> Result<Value> {
+fn baumgarte_map(out: &mut Output, options: &Options) -> Result<BaumgarteMap> {
     let rates: Vec<f64> =
         options.pick(vec![250.0, 500.0, 1000.0, 2000.0, 5000.0, 10000.0], vec![250.0, 1000.0, 10000.0]);
     let steps_ms: Vec<f64> = rates.iter().map(|r| 1000.0 / r).collect();
@@ -334,38 +373,43 @@ fn baumgarte_map(out: &mut Output, options: &Options) -> Result<Value> {
         ));
     }
     out.chart("c_closure_error_vs_alpha", &closure)?;
-    let per_step: Vec<Value> = steps_ms
+    let per_step: Vec<StepLimits> = steps_ms
         .iter()
         .map(|&h| {
             let stable: Vec<&Cell> = cells.iter().filter(|c| c.x == h && c.verdict.stable).collect();
-            let best = stable.iter().min_by(|a, b| a.verdict.max_closure_error_m.total_cmp(&b.verdict.max_closure_error_m));
-            json!({
-                "step_ms": h,
-                "stable_alpha_min": stable.iter().map(|c| c.y).reduce(f64::min),
-                "stable_alpha_max": stable.iter().map(|c| c.y).reduce(f64::max),
-                "largest_stable_alpha_times_h": stable.iter().map(|c| c.y * h / 1000.0).reduce(f64::max).map(|v| significant(v, 3)),
-                "alpha_with_smallest_closure_error": best.map(|c| c.y),
-                "smallest_closure_error_m": best.map(|c| significant(c.verdict.max_closure_error_m, 3)),
-            })
+            let best =
+                stable.iter().min_by(|a, b| a.verdict.max_closure_error_m.total_cmp(&b.verdict.max_closure_error_m));
+            StepLimits {
+                step_ms: h,
+                stable_alpha_min: stable.iter().map(|c| c.y).reduce(f64::min),
+                stable_alpha_max: stable.iter().map(|c| c.y).reduce(f64::max),
+                largest_stable_alpha_times_h: stable
+                    .iter()
+                    .map(|c| c.y * h / 1000.0)
+                    .reduce(f64::max)
+                    .map(|v| significant(v, 3)),
+                alpha_with_smallest_closure_error: best.map(|c| c.y),
+                smallest_closure_error_m: best.map(|c| significant(c.verdict.max_closure_error_m, 3)),
+            }
         })
         .collect();
-    Ok(json!({
-        "projection": false,
-        "beta": 1.0,
-        "alpha_values": alphas,
-        "steps_ms": steps_ms,
-        "per_step": per_step,
-        "cells": cells_json(&cells, "step_ms", "alpha"),
-    }))
+    Ok(BaumgarteMap {
+        projection: false,
+        beta: 1.0,
+        alpha_values: alphas,
+        steps_ms,
+        per_step,
+        cells: typed_cells(&cells),
+    })
 }
 
 /// (d): K_g × B_g with implicit and explicit coupling, angular gains scaled by L²; plus the paper's exact
 /// gains (angular 10⁴ N m/rad and 10⁴ N m s/rad) both ways.
-fn coupling_maps(out: &mut Output, options: &Options) -> Result<Value> {
+fn coupling_maps(out: &mut Output, options: &Options) -> Result<CouplingMaps> {
     let kgs = log_grid(10.0, 1e7, options.pick(3, 1));
     let bgs = log_grid(0.1, 1e5, options.pick(3, 1));
     let length = length_scale(&paper_plan(DURATION_S)?)?;
-    let mut results = serde_json::Map::new();
+    let mut maps = Vec::with_capacity(2);
     for (implicit, name) in [(true, "implicit"), (false, "explicit")] {
         let label = format!("(d) K_g x B_g, {name}");
         let part = Part::Coupling { implicit, paper_angular: false };
@@ -383,29 +427,33 @@ fn coupling_maps(out: &mut Output, options: &Options) -> Result<Value> {
         )?;
         let best = largest_stable(&cells, |c| c.x);
         let paper = nearest(&cells, PAPER_KG, PAPER_BG);
-        results.insert(
-            name.into(),
-            json!({
-                "largest_stable_k_g_n_per_m": best.map(|c| c.x),
-                "stable_b_g_at_largest_k_g": cells.iter().filter(|c| Some(c.x) == best.map(|b| b.x) && c.verdict.stable).map(|c| c.y).collect::<Vec<_>>(),
-                "paper_linear_gains_with_l2_angular_stable": paper.map(|c| c.verdict.stable),
-                "paper_exact_gains_stable": exact.verdict.stable,
-                "paper_exact_gains_reasons": exact.verdict.reasons,
-                "stable_points": cells.iter().filter(|c| c.verdict.stable).count(),
-                "points": cells.len(),
-                "cells": cells_json(&cells, "k_g", "b_g"),
-            }),
-        );
+        maps.push(CouplingMap {
+            largest_stable_k_g_n_per_m: best.map(|c| c.x),
+            stable_b_g_at_largest_k_g: cells
+                .iter()
+                .filter(|c| Some(c.x) == best.map(|b| b.x) && c.verdict.stable)
+                .map(|c| c.y)
+                .collect(),
+            paper_linear_gains_with_l2_angular_stable: paper.map(|c| c.verdict.stable),
+            paper_exact_gains_stable: exact.verdict.stable,
+            paper_exact_gains_reasons: exact.verdict.reasons.iter().map(|r| r.to_string()).collect(),
+            stable_points: cells.iter().filter(|c| c.verdict.stable).count(),
+            points: cells.len(),
+            cells: typed_cells(&cells),
+        });
     }
-    Ok(json!({
-        "k_g_values_n_per_m": kgs,
-        "b_g_values_ns_per_m": bgs,
-        "length_scale_m": significant(length, 4),
-        "angular_gains": "K_g L^2 and B_g L^2 on the angular axis (unit-consistent); the paper's own angular gains (10000 N m/rad, 10000 N m s/rad) are judged separately as paper_exact_gains",
-        "integrator": "semi-implicit Euler at 1 kHz (the only scheme that can treat the coupling implicitly)",
-        "implicit": results.remove("implicit"),
-        "explicit": results.remove("explicit"),
-    }))
+    let (Some(explicit), Some(implicit)) = (maps.pop(), maps.pop()) else {
+        anyhow::bail!("both couplings ran");
+    };
+    Ok(CouplingMaps {
+        k_g_values_n_per_m: kgs,
+        b_g_values_ns_per_m: bgs,
+        length_scale_m: significant(length, 4),
+        angular_gains: "K_g L^2 and B_g L^2 on the angular axis (unit-consistent); the paper's own angular gains (10000 N m/rad, 10000 N m s/rad) are judged separately as paper_exact_gains".into(),
+        integrator: "semi-implicit Euler at 1 kHz (the only scheme that can treat the coupling implicitly)".into(),
+        implicit,
+        explicit,
+    })
 }
 
 /// Runs the experiment.
@@ -415,28 +463,16 @@ pub fn run(options: &Options) -> Result<Report> {
     let rate = rate_map(&mut out, options)?;
     let baumgarte = baumgarte_map(&mut out, options)?;
     let coupling = coupling_maps(&mut out, options)?;
-    let f = |v: &Value| num(v.as_f64().unwrap_or(f64::NAN));
-    let per_rate: Vec<(f64, f64)> = rate["largest_stable_k_j_per_rate"]
-        .as_array()
-        .map(|v| {
-            v.iter()
-                .map(|p| {
-                    (
-                        p["rate_hz"].as_f64().unwrap_or(f64::NAN),
-                        p["largest_stable_k_j_n_per_m"].as_f64().unwrap_or(f64::NAN),
-                    )
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+    let f = |v: Option<f64>| num(v.unwrap_or(f64::NAN));
+    let per_rate: Vec<(f64, f64)> = rate
+        .largest_stable_k_j_per_rate
+        .iter()
+        .map(|p| (p.rate_hz, p.largest_stable_k_j_n_per_m.unwrap_or(f64::NAN)))
+        .collect();
     let k_top = per_rate.iter().map(|p| p.1).fold(f64::NAN, f64::max);
     let first_top = per_rate.iter().find(|p| p.1 == k_top).map_or(f64::NAN, |p| p.0);
-    let alpha_h: Vec<f64> = baumgarte["per_step"]
-        .as_array()
-        .map(|v| v.iter().filter_map(|p| p["largest_stable_alpha_times_h"].as_f64()).collect())
-        .unwrap_or_default();
-    let stable_bs: Vec<String> =
-        gains["stable_b_j_at_largest_k_j"].as_array().map(|v| v.iter().map(&f).collect()).unwrap_or_default();
+    let alpha_h: Vec<f64> = baumgarte.per_step.iter().filter_map(|p| p.largest_stable_alpha_times_h).collect();
+    let stable_bs: Vec<String> = gains.stable_b_j_at_largest_k_j.iter().map(|&b| num(b)).collect();
     let answer = format!(
         "At 1 kHz the largest stable joint-constraint stiffness on the grid is k_j = {} N/m (N/m/kg on the 1 kg device; \
          stable there for b_j = {} N s/m), {}x Colgate's passivity bound of {} N/m (2 b / T with the device's own \
@@ -444,11 +480,11 @@ pub fn run(options: &Options) -> Result<Report> {
          to {} N/m at {} Hz and stays there up to {} Hz. Without projection, Baumgarte holds the loop up to alpha h = \
          {:.2}-{:.2}. Explicit coupling is stable up to K_g = {} N/m with unit-consistent angular gains but not at the \
          paper's own gains (angular 10^4); implicit coupling is stable at {} of {} points.",
-        f(&gains["largest_stable_k_j_n_per_m"]),
+        f(gains.largest_stable_k_j_n_per_m),
         stable_bs.join(", "),
-        f(&gains["largest_stable_k_j_over_passivity_bound"]),
-        f(&gains["passivity_bound"]["largest_passive_k_j_with_b_j_0_n_per_m"]),
-        if gains["paper_gains_stable"].as_bool() == Some(true) { "stable" } else { "unstable" },
+        f(gains.largest_stable_k_j_over_passivity_bound),
+        num(gains.passivity_bound.largest_passive_k_j_with_b_j_0_n_per_m),
+        if gains.paper_gains_stable == Some(true) { "stable" } else { "unstable" },
         num(per_rate.first().map_or(f64::NAN, |p| p.1)),
         num(per_rate.first().map_or(f64::NAN, |p| p.0)),
         num(k_top),
@@ -456,25 +492,195 @@ pub fn run(options: &Options) -> Result<Report> {
         num(per_rate.last().map_or(f64::NAN, |p| p.0)),
         alpha_h.iter().copied().fold(f64::INFINITY, f64::min),
         alpha_h.iter().copied().fold(0.0, f64::max),
-        f(&coupling["explicit"]["largest_stable_k_g_n_per_m"]),
-        coupling["implicit"]["stable_points"],
-        coupling["implicit"]["points"],
+        f(coupling.explicit.largest_stable_k_g_n_per_m),
+        coupling.implicit.stable_points,
+        coupling.implicit.points,
     );
-    let results = json!({
-        "answer": answer,
-        "criterion": verdict::criterion_json(),
-        "setup": {
-            "session": "paper testbed, constant wrench (-0.5 N, 0, -0.0025 N m) at link 2, sim:paper device (1 kg), 3 s, perfect network",
-            "defaults": "1 kHz VE (semi-implicit Euler, projection, implicit coupling, paper K_g and B_g), 1 kHz haptic loop, paper controller gains",
+    let results = StabilitySummary {
+        answer,
+        criterion: verdict::criterion_json(),
+        setup: StabilitySetup {
+            session: "paper testbed, constant wrench (-0.5 N, 0, -0.0025 N m) at link 2, sim:paper device (1 kg), 3 s, perfect network".into(),
+            defaults: "1 kHz VE (semi-implicit Euler, projection, implicit coupling, paper K_g and B_g), 1 kHz haptic loop, paper controller gains".into(),
         },
-        "a_joint_constraint_gains": gains,
-        "b_haptic_rate": rate,
-        "c_baumgarte": baumgarte,
-        "d_coupling": coupling,
-    });
+        a_joint_constraint_gains: gains,
+        b_haptic_rate: rate,
+        c_baumgarte: baumgarte,
+        d_coupling: coupling,
+    };
     out.finish(
         "Where methods fail: stability maps of joint-constraint gains, haptic rate, Baumgarte stabilization and coupling gains",
         "about 1600 sessions of 3 s; --quick fewer",
-        results,
+        serde_json::to_value(&results)?,
     )
+}
+
+/// `summary.json`'s `results` of the stability maps.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StabilitySummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// The stability criterion's rules and thresholds.
+    pub criterion: Value,
+    /// What every point runs.
+    pub setup: StabilitySetup,
+    /// Map (a).
+    pub a_joint_constraint_gains: GainsMap,
+    /// Map (b).
+    pub b_haptic_rate: RateMap,
+    /// Map (c).
+    pub c_baumgarte: BaumgarteMap,
+    /// Map (d), both couplings.
+    pub d_coupling: CouplingMaps,
+}
+
+/// What every point runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StabilitySetup {
+    /// The session.
+    pub session: String,
+    /// The settings not swept.
+    pub defaults: String,
+}
+
+/// (a): k_j × b_j at 1 kHz.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GainsMap {
+    /// The k_j grid (N/m).
+    pub k_j_values_n_per_m: Vec<f64>,
+    /// The b_j grid (N s/m).
+    pub b_j_values_ns_per_m: Vec<f64>,
+    /// The haptic rate (Hz).
+    pub haptic_rate_hz: f64,
+    /// How the paper's per-kg gains map onto the device.
+    pub units: String,
+    /// The largest stable k_j of the grid (N/m).
+    pub largest_stable_k_j_n_per_m: Option<f64>,
+    /// The b_j stable at that k_j (N s/m).
+    pub stable_b_j_at_largest_k_j: Vec<f64>,
+    /// The largest stable k_j at the grid's b_j nearest the paper's (N/m).
+    pub largest_stable_k_j_at_b_j_near_50_n_per_m: Option<f64>,
+    /// Colgate's passivity bound.
+    pub passivity_bound: PassivityBound,
+    /// The largest stable k_j over the bound (1 decimal).
+    pub largest_stable_k_j_over_passivity_bound: Option<f64>,
+    /// The cell nearest the paper's gains is stable.
+    pub paper_gains_stable: Option<bool>,
+    /// Stable cells.
+    pub stable_points: usize,
+    /// All cells.
+    pub points: usize,
+    /// Every cell.
+    pub cells: Vec<GainsCell>,
+}
+
+/// Colgate's passivity bound on the device.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PassivityBound {
+    /// The rule.
+    pub rule: String,
+    /// The device's own viscous damping (N s/m).
+    pub physical_damping_b_ns_per_m: f64,
+    /// The largest passive k_j with no rendered damping (N/m).
+    pub largest_passive_k_j_with_b_j_0_n_per_m: f64,
+    /// What the bound leaves out.
+    pub note: String,
+}
+
+/// (b): haptic rate × k_j.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RateMap {
+    /// b_j of every cell (N s/m).
+    pub b_j_ns_per_m: f64,
+    /// The rate grid (Hz).
+    pub rates_hz: Vec<f64>,
+    /// The k_j grid (N/m).
+    pub k_j_values_n_per_m: Vec<f64>,
+    /// The largest stable k_j at each rate.
+    pub largest_stable_k_j_per_rate: Vec<RateLimit>,
+    /// Every cell.
+    pub cells: Vec<RateCell>,
+}
+
+/// The largest stable k_j at one rate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RateLimit {
+    /// Haptic rate (Hz).
+    pub rate_hz: f64,
+    /// Largest stable k_j (N/m), none if no cell is stable.
+    pub largest_stable_k_j_n_per_m: Option<f64>,
+}
+
+/// (c): Baumgarte α × VE time step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaumgarteMap {
+    /// Projection on.
+    pub projection: bool,
+    /// Baumgarte β.
+    pub beta: f64,
+    /// The α grid (1/s).
+    pub alpha_values: Vec<f64>,
+    /// The step grid (ms).
+    pub steps_ms: Vec<f64>,
+    /// The stable α at each step.
+    pub per_step: Vec<StepLimits>,
+    /// Every cell.
+    pub cells: Vec<BaumgarteCell>,
+}
+
+/// The stable α at one VE step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepLimits {
+    /// VE time step (ms).
+    pub step_ms: f64,
+    /// Smallest stable α (1/s).
+    pub stable_alpha_min: Option<f64>,
+    /// Largest stable α (1/s).
+    pub stable_alpha_max: Option<f64>,
+    /// Largest stable α h (3 significant digits).
+    pub largest_stable_alpha_times_h: Option<f64>,
+    /// The stable α with the smallest closure error (1/s).
+    pub alpha_with_smallest_closure_error: Option<f64>,
+    /// That error (m, 3 significant digits).
+    pub smallest_closure_error_m: Option<f64>,
+}
+
+/// (d): K_g × B_g, both couplings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CouplingMaps {
+    /// The K_g grid (N/m).
+    pub k_g_values_n_per_m: Vec<f64>,
+    /// The B_g grid (N s/m).
+    pub b_g_values_ns_per_m: Vec<f64>,
+    /// The testbed's length scale L (m, 4 significant digits).
+    pub length_scale_m: f64,
+    /// How the angular gains follow the linear ones.
+    pub angular_gains: String,
+    /// The integrator.
+    pub integrator: String,
+    /// Implicit coupling.
+    pub implicit: CouplingMap,
+    /// Explicit coupling.
+    pub explicit: CouplingMap,
+}
+
+/// One coupling's map.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CouplingMap {
+    /// The largest stable K_g of the grid (N/m).
+    pub largest_stable_k_g_n_per_m: Option<f64>,
+    /// The B_g stable at that K_g (N s/m).
+    pub stable_b_g_at_largest_k_g: Vec<f64>,
+    /// The cell nearest the paper's linear gains is stable.
+    pub paper_linear_gains_with_l2_angular_stable: Option<bool>,
+    /// The paper's exact gains are stable.
+    pub paper_exact_gains_stable: bool,
+    /// Why not, if not.
+    pub paper_exact_gains_reasons: Vec<String>,
+    /// Stable cells.
+    pub stable_points: usize,
+    /// All cells.
+    pub points: usize,
+    /// Every cell.
+    pub cells: Vec<CouplingCell>,
 }

@@ -43,6 +43,7 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 use kinloop_harness::{Recording, SessionSummary};
+use kinloop_protocol::Mapping;
 
 /// Device–OP distance beyond which a session has diverged (device m).
 pub const DIVERGENCE_DISTANCE_M: f64 = 0.05;
@@ -160,15 +161,14 @@ struct DeviceFigures {
 
 impl DeviceFigures {
     fn of(summary: &SessionSummary) -> Self {
-        let usable = |x: f64| x > 0.0 && x.is_finite();
+        let usable = Mapping::usable_scale;
         let mapped = summary.clients.iter().filter(|c| usable(c.position_scale) && usable(c.force_scale));
         let (mut length, mut energy) = (0.0f64, 0.0f64);
         for c in mapped {
             length = length.max(c.position_scale);
             energy = energy.max(c.position_scale * c.force_scale);
         }
-        let or_one = |x: f64| if x > 0.0 { x } else { 1.0 };
-        DeviceFigures { length: or_one(length), energy: or_one(energy) }
+        DeviceFigures { length: Mapping::scale_or_one(length), energy: Mapping::scale_or_one(energy) }
     }
 }
 

@@ -90,7 +90,7 @@ impl UpdateTank {
     /// A full tank of [`TANK_CAPACITY_J`] for a device whose energy is `device_per_ve` times the VE's (the
     /// mapping's torque scale `c_f c_p`): a session's first corrections find the model where the VE put it.
     pub fn new(device_per_ve: f64) -> Self {
-        let per = if device_per_ve > 0.0 && device_per_ve.is_finite() { device_per_ve } else { 1.0 };
+        let per = kinloop_protocol::Mapping::scale_or_one(device_per_ve);
         let capacity = TANK_CAPACITY_J / per;
         UpdateTank { level_j: capacity, capacity }
     }

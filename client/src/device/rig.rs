@@ -24,6 +24,11 @@ impl<S: Space> SimulatedRig<S> {
         SimulatedRig { device, user, last_read: None, hand: S::OpVec::zero() }
     }
 
+    /// Hands the device to `user` from the next read on.
+    pub fn set_user(&mut self, user: Box<dyn SimulatedUser<S>>) {
+        self.user = user;
+    }
+
     /// The simulated device (exact state, applied command).
     pub fn device(&self) -> &SimulatedDevice<S> {
         &self.device

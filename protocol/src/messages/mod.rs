@@ -229,6 +229,21 @@ impl Mapping {
     pub fn torque_scale(&self) -> f64 {
         self.force_scale * self.position_scale
     }
+
+    /// A scale a side can divide by: positive and finite.
+    pub fn usable_scale(scale: f64) -> bool {
+        scale > 0.0 && scale.is_finite()
+    }
+
+    /// `scale` when it is usable, else one to one: what every side falls back to rather than divide by a
+    /// broken mapping.
+    pub fn scale_or_one(scale: f64) -> f64 {
+        if Self::usable_scale(scale) {
+            scale
+        } else {
+            1.0
+        }
+    }
 }
 
 /// The graphics controller's gains the server chose for this user (paper section IV, Fig 3), per

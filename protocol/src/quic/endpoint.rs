@@ -80,10 +80,10 @@ pub enum EndpointError {
 /// The congestion window a connection starts with (bytes): a second's worth of the largest 1 kHz datagram
 /// stream over a 2 s round trip (1 kHz x 2 KB x 2 s). BBR paces its start-up at the initial window per round
 /// trip and grows it only as acknowledgements return, so with quinn's 240 KB a 1 kHz snapshot stream (~0.4 MB/s)
-/// over a 1 s round trip lost a third of its datagrams for the first several seconds: the client's force faded
-/// and its model restarted on stale poses (real time, testbed with sim:falcon at 500 ms one way: 50.6 % of ticks
-/// clamped; with this window 0.0 %, as in virtual time). The streams are rate-limited by the application
-/// (latest-wins, one datagram a tick), so the larger window admits the designed rate at once, not a burst.
+/// over a 1 s round trip loses a large share of its datagrams for its first seconds: the client's force fades
+/// and its model restarts on stale poses (`tests/e2e_latency.rs` runs such a session in real time). The streams
+/// are rate-limited by the application (latest-wins, one datagram a tick), so the larger window admits the
+/// designed rate at once, not a burst.
 pub const INITIAL_WINDOW_BYTES: u64 = 4 * 1024 * 1024;
 
 /// The transport tuning both sides use.
@@ -96,10 +96,10 @@ pub fn transport_config(opts: &EndpointOptions) -> Result<TransportConfig, Endpo
         .datagram_receive_buffer_size(Some(opts.datagram_receive_buffer))
         .datagram_send_buffer_size(opts.datagram_send_buffer)
         // The default (Cubic) takes random loss for congestion and throttles the 1 kHz datagram streams far
-        // below what the loss alone leaves: at 30 % bursty loss 86-227 snapshots/s reached a client and its
-        // force was faded most of the time; with BBR 625-750/s and no stale ticks (tests/e2e_faults.rs). At
-        // 100 ms one way Cubic's slow start also starved the first ~0.8 s. BBR is model-based, not
-        // loss-based; quinn marks it experimental, so this is one line to revert.
+        // below what the loss alone leaves, so that under bursty loss the client's force fades for want of
+        // snapshots (tests/e2e_faults.rs holds a session at 30 % bursty loss without stale ticks), and its slow
+        // start starves a delayed session's first moments. BBR is model-based, not loss-based; quinn marks it
+        // experimental, so this is one line to revert.
         .congestion_controller_factory(std::sync::Arc::new({
             let mut bbr = quinn::congestion::BbrConfig::default();
             bbr.initial_window(INITIAL_WINDOW_BYTES);

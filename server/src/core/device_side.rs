@@ -46,7 +46,7 @@ struct DeviceToVe {
 
 impl DeviceToVe {
     fn of(mapping: &Mapping) -> Self {
-        let inverse = |scale: f64| if scale > 0.0 && scale.is_finite() { 1.0 / scale } else { 1.0 };
+        let inverse = |scale: f64| 1.0 / Mapping::scale_or_one(scale);
         DeviceToVe {
             length: inverse(mapping.position_scale),
             force: inverse(mapping.force_scale),

@@ -3,9 +3,8 @@
 //! The graphics controller pulls the user's OP toward the newest uplinked model pose. Over a link whose delay
 //! jitters, packets leave a queue in bursts (a late one holds back those behind it), so the newest pose held
 //! still through a gap and then jumped by the gap's worth of motion: on a jab, a step of several centimetres
-//! in one tick, energy the PD put into the linkage that the hand never did (`kinloop experiment latency`, 30
-//! ms of jitter: the testbed's and the six-bar's pokes, the testbed's soft hand at 200 ms). Extrapolating
-//! the newest pose over the gap overshot instead.
+//! in one tick, energy the PD put into the linkage that the hand never did (`kinloop experiment latency`'s
+//! jittered points). Extrapolating the newest pose over the gap overshoots instead.
 //!
 //! So each uplink is held until the client time it was sent at, plus the stream's steady delay, has come:
 //! the VE plays the stream out as it was sent, later by a buffer that covers the jitter, and never ahead of

@@ -1,18 +1,16 @@
 //! The safety envelope: limits under hostile input, the staleness fade and the resume, non-finite values.
 
-mod support;
-
 use std::time::Duration;
 
 use kinloop_client::core::safety::{force_ratio, limit_wrench, limit_wrench_parts, WrenchLimits};
-use kinloop_client::core::{ConstraintMode, HapticCore, ModelForm, UplinkDeadband};
+use kinloop_client::core::{ConstraintMode, CoreConfig, HapticCore, ModelForm, UplinkDeadband};
 use kinloop_client::device::{DevicePreset, DeviceState};
 use kinloop_client::user::ConstantWrench;
+use kinloop_harness::{first_terms, CoreEdit, Probe, Session, SessionPlan, TickSample};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Planar, math::space::SceneKind, model::builtin};
-use kinloop_protocol::{uplink_flags, ContactTerm, Snapshot};
+use kinloop_protocol::{uplink_flags, ContactTerm, Snapshot, Welcome};
 use nalgebra::{Vector2, Vector3};
-use support::{paper_config, ClosedLoop, TestbedVe};
 
 fn paper_limits() -> WrenchLimits {
     DevicePreset::Paper.spec(SceneKind::Planar).expect("planar").wrench_limits()
@@ -43,20 +41,33 @@ fn clamping_keeps_each_parts_direction_and_zeroes_unactuated_axes() {
 /// A way to corrupt a snapshot.
 type Corruption = Box<dyn Fn(&mut Snapshot)>;
 
-/// A valid testbed snapshot to corrupt.
-fn base_snapshot(seq: u64) -> Snapshot {
-    let mut ve = TestbedVe::new(false);
-    let mut s = ve.snapshot();
-    s.seq = seq;
-    s
+/// The paper's session, with `edit` applied to the core's configuration.
+fn paper_session(edit: impl Fn(&mut CoreConfig) + Send + Sync + 'static) -> Session<Planar> {
+    let mut plan = SessionPlan::paper_manipulation(ConstraintMode::Stiffness, ModelForm::Op).expect("the plan");
+    plan.clients[0].configure = Some(CoreEdit::new(edit));
+    Session::new(&plan).expect("the session")
+}
+
+/// Runs `session` for `ms` more ticks.
+fn run(session: &mut Session<Planar>, probe: &mut Probe<Planar>, ms: u64) -> Vec<TickSample<Planar>> {
+    let from = probe.samples.len();
+    let until = if from == 0 { Duration::from_millis(ms - 1) } else { session.now() + Duration::from_millis(ms) };
+    session.run_until_with(until, probe).expect("steps");
+    probe.samples[from..].to_vec()
+}
+
+/// The testbed's welcome and a valid snapshot of it at rest (a few milliseconds into the paper's session),
+/// with the configuration the session's core has.
+fn testbed() -> (Welcome, Snapshot, CoreConfig) {
+    let plan = SessionPlan::paper_manipulation(ConstraintMode::Stiffness, ModelForm::Op).expect("the plan");
+    first_terms::<Planar>(&plan, Duration::from_millis(4)).expect("terms")
 }
 
 #[test]
 fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
-    let ve = TestbedVe::new(false);
-    let mut config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
-    config.gains = kinloop_client::core::GainChoice::Paper;
-    let mut core = HapticCore::<Planar>::new(config, &ve.welcome()).expect("core");
+    let (welcome, base, config) = testbed();
+    let base_snapshot = |seq: u64| Snapshot { seq, ..base.clone() };
+    let mut core = HapticCore::<Planar>::new(config, &welcome).expect("core");
     let limits = paper_limits();
     let hostile: Vec<Corruption> = vec![
         Box::new(|_| {}),
@@ -126,38 +137,37 @@ fn force_never_exceeds_the_device_limits_even_with_hostile_snapshots() {
 
 #[test]
 fn a_non_finite_device_reading_commands_zero_and_is_counted() {
-    let mut l = ClosedLoop::paper(ConstraintMode::Stiffness, ModelForm::Op);
-    for _ in 0..100 {
-        l.tick();
-    }
-    let snapshot = l.ve.snapshot();
-    let mut snapshot = snapshot;
+    let mut session = paper_session(|_| {});
+    let mut probe = Probe::default();
+    run(&mut session, &mut probe, 100);
+    let mut snapshot = probe.last_snapshot.expect("snapshots arrived");
     snapshot.seq = 1_000_000;
-    l.core.handle_snapshot(l.now, &snapshot).expect("valid");
+    let now = session.now() + Duration::from_millis(1);
+    let core = session.core_mut(0).expect("joined");
+    core.handle_snapshot(now, &snapshot).expect("valid");
     let bad = DeviceState::<Planar> {
         pose: OpPose { position: Vector2::new(f64::NAN, 0.0), rotation: nalgebra::UnitComplex::identity() },
         twist: Vector3::zeros(),
         hand_wrench: None,
         grasped: None,
     };
-    let out = l.core.tick(l.now, &bad);
+    let out = core.tick(now, &bad);
     assert_eq!(out.command, Vector3::zeros());
     assert_ne!(out.report.flags & uplink_flags::SAFETY_STOP, 0);
-    assert_eq!(l.core.stats().non_finite_events, 1);
+    assert_eq!(core.stats().non_finite_events, 1);
 }
 
 #[test]
 fn stale_snapshots_fade_the_force_to_zero_within_the_fade_time_and_resume_smoothly() {
-    let mut config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
-    config.safety.ramp_in = Duration::from_millis(200);
-    let (max_age, fade) = (config.safety.max_snapshot_age, config.safety.fade_out);
-    let user = Box::new(ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values"));
-    let mut l = ClosedLoop::with(config, user, false);
-    let before: Vec<_> = (0..600).map(|_| l.tick()).collect();
+    let mut session = paper_session(|c| c.safety.ramp_in = Duration::from_millis(200));
+    let mut probe = Probe::default();
+    let before = run(&mut session, &mut probe, 600);
+    let safety = &session.core(0).expect("joined").config().safety;
+    let (max_age, fade) = (safety.max_snapshot_age, safety.fade_out);
     assert!(before.last().expect("ran").report.gain == 1.0);
-    l.link_up = false;
-    let cut_at = l.now;
-    let outage: Vec<_> = (0..400).map(|_| l.tick()).collect();
+    probe.link_up = false;
+    let cut_at = session.now() + Duration::from_millis(1);
+    let outage = run(&mut session, &mut probe, 400);
     let zero_from = cut_at + max_age + fade + Duration::from_millis(2);
     for s in &outage {
         if s.report.time >= zero_from {
@@ -167,28 +177,25 @@ fn stale_snapshots_fade_the_force_to_zero_within_the_fade_time_and_resume_smooth
     }
     let fade_steps = outage.windows(2).map(|w| (w[1].command - w[0].command).norm()).fold(0.0f64, f64::max);
     assert!(fade_steps < 0.06, "the fade steps by {fade_steps} N");
-    l.link_up = true;
-    let after: Vec<_> = (0..400).map(|_| l.tick()).collect();
+    probe.link_up = true;
+    let after = run(&mut session, &mut probe, 400);
     // The handle drifted while nothing held it; the force comes back from zero over the ramp.
     assert!(after[0].command.norm() < 0.01, "the first resumed tick pushes {} N", after[0].command.norm());
     let resume_steps = after.windows(2).map(|w| (w[1].command - w[0].command).norm()).fold(0.0f64, f64::max);
     println!("largest step: fading {fade_steps:.4} N, resuming {resume_steps:.4} N");
     assert!(resume_steps < 0.2, "the resume steps by {resume_steps} N");
     assert_eq!(after.last().expect("ran").report.gain, 1.0, "fully back");
-    assert!(l.core.stats().stale_ticks > 0);
+    assert!(session.core(0).expect("joined").stats().stale_ticks > 0);
 }
 
 #[test]
 fn the_perceptual_deadband_saves_uplinks_and_respects_the_longest_gap() {
-    let mut config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
     let deadband = UplinkDeadband::default();
-    config.deadband = Some(deadband);
-    let user = Box::new(ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values"));
-    let mut l = ClosedLoop::with(config, user, false);
-    let samples: Vec<_> = (0..2000).map(|_| l.tick()).collect();
+    let mut session = paper_session(move |c| c.deadband = Some(deadband));
+    let samples = run(&mut session, &mut Probe::default(), 2000);
     let sent: Vec<Duration> = samples.iter().filter(|s| s.uplink_sent).map(|s| s.report.time).collect();
     let longest = sent.windows(2).map(|w| w[1] - w[0]).max().expect("several uplinks");
-    let stats = l.core.stats();
+    let stats = session.core(0).expect("joined").stats();
     println!(
         "deadband: {} of {} uplinks sent ({:.0}% saved), longest gap {longest:?}",
         stats.uplinks_sent,
@@ -230,13 +237,16 @@ impl kinloop_client::user::SimulatedUser<Planar> for LetsGo {
 /// left it, and the uplinks say HAND_OFF; when the hand returns, the force ramps in again without a step.
 #[test]
 fn a_released_handle_is_braked_and_the_linkage_waits_where_the_hand_left_it() {
-    let mut config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
-    config.safety.ramp_in = Duration::from_millis(200);
-    let fade = config.safety.fade_out;
+    let mut session = paper_session(|c| c.safety.ramp_in = Duration::from_millis(200));
+    let mut probe = Probe::default();
+    // The session's first tick joins the user with the paper's push, which `LetsGo` continues.
+    run(&mut session, &mut probe, 1);
+    let fade = session.core(0).expect("joined").config().safety.fade_out;
     let push = ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values");
     let user = Box::new(LetsGo { push, release_s: 1.0, regrasp_s: 2.5 });
-    let mut l = ClosedLoop::with(config, user, false);
-    let samples: Vec<_> = (0..3500).map(|_| l.tick()).collect();
+    session.rig_mut(0).expect("joined").set_user(user);
+    run(&mut session, &mut probe, 3499);
+    let samples = probe.samples;
     let at = |s: f64| &samples[(s * 1000.0) as usize];
     assert_eq!(at(0.9).report.flags & uplink_flags::HAND_OFF, 0);
     assert!(at(0.9).report.gain == 1.0 && at(0.9).command.norm() > 0.1, "pushing before the release");
@@ -264,9 +274,10 @@ fn a_released_handle_is_braked_and_the_linkage_waits_where_the_hand_left_it() {
     assert!(released.iter().all(|s| (s.report.model_pose.position - parked).norm() < 1e-12));
     let last = released.last().expect("released");
     assert!(last.device.twist.xy().norm() < 1e-3, "the brake stopped the handle: {:?}", last.device.twist);
-    let op_moved = (last.ve_op.position - at(1.0).ve_op.position).norm();
+    let ve_op = |s: &TickSample<Planar>| s.ve_op.expect("the VE has the user").position;
+    let op_moved = (ve_op(last) - ve_op(at(1.0))).norm();
     assert!(op_moved < 5e-3, "the VE's OP moved {op_moved} m while no hand held it");
-    assert!(l.core.stats().hand_off_ticks as usize >= released.len());
+    assert!(session.core(0).expect("joined").stats().hand_off_ticks as usize >= released.len());
     // The hand returns: the force ramps back in without a step, and the push goes on.
     let back: Vec<_> = samples.iter().filter(|s| s.report.time.as_secs_f64() >= 2.5).collect();
     assert_eq!(back[0].report.flags & uplink_flags::HAND_OFF, 0);
@@ -279,14 +290,13 @@ fn a_released_handle_is_braked_and_the_linkage_waits_where_the_hand_left_it() {
 /// energy books are broken is still used, its books refused and counted.
 #[test]
 fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
-    let mut l = ClosedLoop::paper(ConstraintMode::Stiffness, ModelForm::Op);
-    for _ in 0..1000 {
-        l.tick();
-    }
-    let (own, server) = l.core.energy_books();
+    let mut session = paper_session(|_| {});
+    let mut probe = Probe::default();
+    run(&mut session, &mut probe, 1000);
+    let (own, server) = session.core(0).expect("joined").energy_books();
     let received: f64 = own.received_j.iter().sum();
     assert!(received > 1e-4, "the paper's push did work on the local model: {own:?}");
-    assert_eq!(server.refused, 0, "the test VE's snapshots carry zero books, which are fine");
+    assert_eq!(server.refused, 0, "the VE's books are sound");
     for (n, corrupt) in [
         |s: &mut Snapshot| s.energy.received_j[0] = f64::NAN,
         |s: &mut Snapshot| s.energy.emitted_j[2] = -1.0,
@@ -295,16 +305,18 @@ fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
     .iter()
     .enumerate()
     {
-        let mut s = l.ve.snapshot();
+        let mut s = probe.last_snapshot.clone().expect("snapshots arrived");
         s.seq = 1_000_000 + n as u64;
         s.server_time_s = 10.0 + n as f64;
         corrupt(&mut s);
-        assert_eq!(l.core.handle_snapshot(l.now, &s), Ok(true), "the state is used");
-        l.tick();
+        let now = session.now() + Duration::from_millis(1);
+        assert_eq!(session.core_mut(0).expect("joined").handle_snapshot(now, &s), Ok(true), "the state is used");
+        run(&mut session, &mut probe, 1);
     }
-    assert_eq!(l.core.energy_books().1.refused, 3);
-    assert_eq!(l.core.stats().energy_reports_refused, 3);
-    assert_eq!(l.core.stats().snapshots_rejected, 0);
+    let core = session.core(0).expect("joined");
+    assert_eq!(core.energy_books().1.refused, 3);
+    assert_eq!(core.stats().energy_reports_refused, 3);
+    assert_eq!(core.stats().snapshots_rejected, 0);
 }
 
 /// A welcome whose OP path cannot be followed (poses that repeat, accelerations that do not match the poses)
@@ -314,9 +326,7 @@ fn the_two_port_books_grow_with_the_push_and_bad_server_books_are_refused() {
 fn a_welcome_whose_path_cannot_be_followed_is_refused_by_name() {
     use kinloop_client::core::CoreError;
     use kinloop_linkage::algorithms::op_path::PathError;
-    let ve = TestbedVe::new(false);
-    let config = paper_config(ConstraintMode::Stiffness, ModelForm::Op);
-    let mut welcome = ve.welcome();
+    let (mut welcome, _, config) = testbed();
     assert!(welcome.op.path.is_empty(), "the testbed has two degrees of freedom: no path");
     welcome.op.path = vec![0.1, 0.2, 0.0, 0.1, 0.2, 0.0];
     welcome.op.path_rest_acceleration = vec![0.0, 0.0];

@@ -1,23 +1,29 @@
 //! The paper's experiment (section VI, Figs 6 and 7) in virtual time: the testbed, the constant wrench
 //! (−0.5 N, 0 N, −0.0025 N m) at link 2, the `paper` device, the paper's gains.
 
-mod support;
+use std::time::Duration;
 
 use kinloop_client::core::{ConstraintMode, ModelForm};
-use kinloop_client::user::ConstantWrench;
-use kinloop_linkage::{math::space::Planar, model::builtin};
-use support::{paper_config, ClosedLoop, LoopSample};
+use kinloop_harness::{CoreEdit, Probe, Session, SessionPlan, TickSample};
+use kinloop_linkage::math::space::Planar;
 
-/// Runs `ms` ticks and keeps every sample.
-fn run(mode: ConstraintMode, form: ModelForm, ms: usize) -> Vec<LoopSample> {
-    let mut l = ClosedLoop::paper(mode, form);
-    (0..ms).map(|_| l.tick()).collect()
+/// Runs `ms` ticks (one a millisecond from t = 0) and keeps every sample.
+fn run(mode: ConstraintMode, form: ModelForm, ms: u64) -> Vec<TickSample<Planar>> {
+    let plan = SessionPlan::paper_manipulation(mode, form).expect("the paper's plan");
+    let mut session = Session::<Planar>::new(&plan).expect("the session");
+    let mut probe = Probe::default();
+    session.run_until_with(Duration::from_millis(ms - 1), &mut probe).expect("steps");
+    assert_eq!(probe.samples.len() as u64, ms);
+    probe.samples
 }
 
-/// RMS of the linear distance between the device (mapped into the VE) and the VE's OP.
-fn rms_device_to_op(samples: &[LoopSample]) -> f64 {
-    let sum: f64 = samples.iter().map(|s| (s.report.device_pose.position - s.ve_op.position).norm_squared()).sum();
-    (sum / samples.len() as f64).sqrt()
+/// RMS of the linear distance between the device (mapped into the VE) and the VE's OP, over the ticks after
+/// the VE has the user.
+fn rms_device_to_op(samples: &[TickSample<Planar>]) -> f64 {
+    let distances: Vec<f64> =
+        samples.iter().filter_map(|s| s.ve_op.map(|op| (s.report.device_pose.position - op.position).norm())).collect();
+    assert!(distances.len() + 5 > samples.len(), "the VE has the user from its first ticks");
+    (distances.iter().map(|d| d * d).sum::<f64>() / distances.len() as f64).sqrt()
 }
 
 #[test]
@@ -34,8 +40,12 @@ fn stiffness_mode_keeps_device_on_op_while_impedance_mode_drifts() {
 fn constraint_count_is_at_least_one_and_reaches_two_when_the_loop_closure_binds() {
     let samples = run(ConstraintMode::Stiffness, ModelForm::Op, 3400);
     let count_at = |ms: usize| samples[ms].report.constraint_count;
+    // The core has no model until the first snapshot reaches it, a tick or two into the session.
+    let start = samples.iter().position(|s| s.report.active).expect("the core gets a model");
+    assert!(start <= 3, "the first snapshot arrives at {start} ms");
+    let samples = &samples[start..];
     assert!(samples.iter().all(|s| s.report.active && s.report.constraint_count >= 1), "link 2 always lacks a DOF");
-    let twos: Vec<usize> = (0..samples.len()).filter(|&ms| count_at(ms) == 2).collect();
+    let twos: Vec<usize> = (start..start + samples.len()).filter(|&ms| count_at(ms) == 2).collect();
     let first = *twos.first().expect("the loop closure binds");
     let last = *twos.last().expect("the loop closure binds");
     println!("count 2 from {first} ms; last at {last} ms");
@@ -69,18 +79,18 @@ fn force_has_no_chatter_through_the_near_singular_passage() {
 fn both_local_model_forms_give_the_same_device_motion() {
     // Same terms for both: the reduced form must not filter Λ̂⁻¹ (the configuration form implies its own).
     let run_form = |form: ModelForm| {
-        let mut config = paper_config(ConstraintMode::Stiffness, form);
-        config.terms_time_constant = std::time::Duration::ZERO;
-        let user = Box::new(ConstantWrench::<Planar>::from_values(&builtin::PAPER_WRENCH).expect("3 values"));
-        let mut l = ClosedLoop::with(config, user, form == ModelForm::Config);
+        let mut plan = SessionPlan::paper_manipulation(ConstraintMode::Stiffness, form).expect("the paper's plan");
+        plan.clients[0].configure = Some(CoreEdit::new(|c| c.terms_time_constant = Duration::ZERO));
+        let mut session = Session::<Planar>::new(&plan).expect("the session");
+        let mut probe = Probe::default();
         // The exact handle position (the encoders would hide differences below 1 µm).
         let positions: Vec<_> = (0..1500)
-            .map(|_| {
-                l.tick();
-                l.rig.true_pose().position
+            .map(|ms| {
+                session.run_until_with(Duration::from_millis(ms), &mut probe).expect("steps");
+                session.rig(0).expect("joined").true_pose().position
             })
             .collect();
-        assert_eq!(l.core.using_config_form(), form == ModelForm::Config);
+        assert_eq!(session.core(0).expect("joined").using_config_form(), form == ModelForm::Config);
         positions
     };
     let reduced = run_form(ModelForm::Op);
