@@ -79,8 +79,7 @@ pub(super) fn network_thread(
         let spec = real.as_ref().map(OpenedDevice::spec);
         let mut first = Err(ConnectError::Declined("no server address".into()));
         for (i, address) in addresses.iter().enumerate() {
-            first =
-                open_session(&endpoint, *address, &config, spec.as_ref(), None, &mut chosen).await.map(|s| (i, s));
+            first = open_session(&endpoint, *address, &config, spec.as_ref(), None, &mut chosen).await.map(|s| (i, s));
             match &first {
                 Ok(_) | Err(ConnectError::Refused(_) | ConnectError::Declined(_)) => break,
                 Err(e) => tracing::warn!(server = %address, error = %e, "cannot connect; trying the next server"),
