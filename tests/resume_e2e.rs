@@ -63,12 +63,7 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
     let server_b = live::start_server(&rt, config);
     let b_addr = server_b.local_addr();
 
-    let mut config = live::client_config(a_addr, "", "holder", OPS[0], &[0.0; 3]);
-    config.trust = Trust::CaFile(path("ca.pem"));
-    config.fallback_servers = vec![b_addr.to_string()];
-    config.user = resume::HAND.parse().expect("a hand that moves and holds");
-    config.record = Some(path("client.csv"));
-    let client = live::start_client(config);
+    let client = resume::start_holder(dir.path(), a_addr, b_addr);
     let client_started = Instant::now();
     let a_user = client.welcome().user_id;
     std::thread::sleep(Duration::from_millis(2500));

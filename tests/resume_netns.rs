@@ -11,10 +11,8 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use common::child::{ChildProcess, Role};
-use common::live::{self, OPS};
 use common::records;
 use common::resume::{self, Moved};
-use kinloop_protocol::quic::Trust;
 
 /// Runs `ip ARGS`; panics naming the command and what it said when it fails.
 fn ip(args: &[&str]) {
@@ -90,12 +88,7 @@ fn a_server_killed_on_one_host_is_replaced_on_another_and_the_linkage_resumes() 
     }
     let (a_addr, b_addr) = (servers[0].1, servers[1].1);
 
-    let mut config = live::client_config(a_addr, "", "holder", OPS[0], &[0.0; 3]);
-    config.trust = Trust::CaFile(path("ca.pem"));
-    config.fallback_servers = vec![b_addr.to_string()];
-    config.user = resume::HAND.parse().expect("a hand that moves and holds");
-    config.record = Some(path("client.csv"));
-    let client = live::start_client(config);
+    let client = resume::start_holder(dir.path(), a_addr, b_addr);
     let client_started = Instant::now();
     let a_user = client.welcome().user_id;
     std::thread::sleep(Duration::from_millis(2500));

@@ -132,34 +132,18 @@ fn run(role: Role, ready: &Path) -> Result<i32, String> {
         .try_init();
     match role {
         Role::Server { listen, cert_dir } => {
-            let rt = live::runtime();
             let mut config = live::server_config();
             config.listen = listen;
             config.identity = Identity::CertDir(cert_dir);
-            let server = {
-                let _inside = rt.enter();
-                kinloop_server::Server::start(config).map_err(|e| e.to_string())?
-            };
-            let fingerprint = server.fingerprint().to_owned();
-            announce(ready, &Ready { addr: server.local_addr(), fingerprint, user_id: 0 })?;
-            until_parent_lets_go();
-            live::stop_server(&rt, server);
+            serve_until_released(config, ready)?;
         }
         Role::RoomServer { listen, cert, key, room_key, record } => {
-            let rt = live::runtime();
             let mut config = live::server_config();
             config.listen = listen;
             config.identity = Identity::Files { cert, key };
             config.room_key = Some(RoomKey::load(&room_key).map_err(|e| e.to_string())?);
             config.record = Some(record);
-            let server = {
-                let _inside = rt.enter();
-                kinloop_server::Server::start(config).map_err(|e| e.to_string())?
-            };
-            let fingerprint = server.fingerprint().to_owned();
-            announce(ready, &Ready { addr: server.local_addr(), fingerprint, user_id: 0 })?;
-            until_parent_lets_go();
-            live::stop_server(&rt, server);
+            serve_until_released(config, ready)?;
         }
         Role::Client { server, fingerprint, name, op, wrench } => {
             let client = Client::start(live::client_config(server, &fingerprint, &name, &op, &wrench))
@@ -171,6 +155,20 @@ fn run(role: Role, ready: &Path) -> Result<i32, String> {
         Role::Program { .. } => {}
     }
     Ok(0)
+}
+
+/// Starts a server with `config`, says where it listens, and serves until the parent lets go.
+fn serve_until_released(config: kinloop_server::ServerConfig, ready: &Path) -> Result<(), String> {
+    let rt = live::runtime();
+    let server = {
+        let _inside = rt.enter();
+        kinloop_server::Server::start(config).map_err(|e| e.to_string())?
+    };
+    let fingerprint = server.fingerprint().to_owned();
+    announce(ready, &Ready { addr: server.local_addr(), fingerprint, user_id: 0 })?;
+    until_parent_lets_go();
+    live::stop_server(&rt, server);
+    Ok(())
 }
 
 /// Writes the ready file whole (temporary name, then rename), so the parent never reads half of it.

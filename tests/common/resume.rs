@@ -1,10 +1,13 @@
 //! What the resume tests share (docs/resume.md): a room's files (CA, two servers' certificates, the room key)
 //! and what a session that moved from a killed server A to server B measured in their records.
 
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use kinloop_protocol::quic::RoomCa;
+use kinloop_client::driver::ClientHandle;
+use kinloop_protocol::quic::{RoomCa, Trust};
 
+use super::live::{self, OPS};
 use super::records::{self, Step, Tick};
 
 /// The goals of issue 46: the linkage resumed within 1 mm and 1° of where it was, the client back within
@@ -16,6 +19,17 @@ pub const MAX_FORCE_STEP_N: f64 = 0.2;
 
 /// The hand: it carries the OP 18 mm from where the linkage starts (over 1 s) and holds it there.
 pub const HAND: &str = "firm:line:0,0,-0.01,0.015,1";
+
+/// The client that holds the OP with [`HAND`]: on server A first with B as its fallback, trusting the
+/// room's CA (`ca.pem` in `dir`), recording to `client.csv` there.
+pub fn start_holder(dir: &Path, a: SocketAddr, b: SocketAddr) -> ClientHandle {
+    let mut config = live::client_config(a, "", "holder", OPS[0], &[0.0; 3]);
+    config.trust = Trust::CaFile(dir.join("ca.pem"));
+    config.fallback_servers = vec![b.to_string()];
+    config.user = HAND.parse().expect("a hand that moves and holds");
+    config.record = Some(dir.join("client.csv"));
+    live::start_client(config)
+}
 
 /// A room's files in `dir`: `ca.pem`, `a.pem`/`a.key` and `b.pem`/`b.key` (issued by the CA for
 /// localhost) and `room.key`; the key's bytes.
