@@ -11,7 +11,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::child::{listening, ChildProcess, Program, Role};
+use common::child::{spawn_scene_server, with_overrides, ChildProcess, Program, Role};
 
 /// The omega.3's published peak force, the limit kinloop's spec table gives it (N).
 const OMEGA3_LIMIT_N: f64 = 12.0;
@@ -82,20 +82,15 @@ fn run_client_signalled(
     signal: Option<StopSignal>,
 ) -> Run {
     let dir = common::temp_dir();
-    let server_args = ["--scene", scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"].map(String::from).to_vec();
-    let mut server =
-        ChildProcess::spawn(test, &Role::Program { program: Program::Server, args: server_args }, dir.path(), "server");
-    let (addr, fingerprint) =
-        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let (mut server, addr, fingerprint) = spawn_scene_server(test, scene, dir.path());
     let record = dir.path().join("forces.txt");
-    let mut vars = vec![
-        ("KINLOOP_DHD_LIB", common::fake_dhd_library().display().to_string()),
-        ("FAKE_DHD_RECORD", record.display().to_string()),
-    ];
-    for (k, v) in env {
-        vars.retain(|(name, _)| name != k);
-        vars.push((k, v.clone()));
-    }
+    let vars = with_overrides(
+        vec![
+            ("KINLOOP_DHD_LIB", common::fake_dhd_library().display().to_string()),
+            ("FAKE_DHD_RECORD", record.display().to_string()),
+        ],
+        env,
+    );
     let args = [
         "--server",
         &addr.to_string(),

@@ -12,7 +12,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::child::{listening, ChildProcess, Program, Role};
+use common::child::{spawn_scene_server, with_overrides, ChildProcess, Program, Role};
 
 /// The Touch's nominal peak force, as the fake reports it (N).
 const TOUCH_PEAK_N: f64 = 3.3;
@@ -45,21 +45,15 @@ impl HdRun {
 /// library and the fake configured by `env` (`KINLOOP_HD_LIB` defaults to the fake).
 fn run_hd(test: &'static str, device: &str, seconds: &str, env: &[(&str, String)]) -> HdRun {
     let dir = common::temp_dir();
-    let server_args =
-        ["--scene", "paper-testbed", "--listen", "127.0.0.1:0", "--cert-dir", "cert"].map(String::from).to_vec();
-    let mut server =
-        ChildProcess::spawn(test, &Role::Program { program: Program::Server, args: server_args }, dir.path(), "server");
-    let (addr, fingerprint) =
-        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let (mut server, addr, fingerprint) = spawn_scene_server(test, "paper-testbed", dir.path());
     let record = dir.path().join("forces.txt");
-    let mut vars = vec![
-        ("KINLOOP_HD_LIB", common::fake_hd_library().display().to_string()),
-        ("FAKE_HD_RECORD", record.display().to_string()),
-    ];
-    for (k, v) in env {
-        vars.retain(|(name, _)| name != k);
-        vars.push((k, v.clone()));
-    }
+    let vars = with_overrides(
+        vec![
+            ("KINLOOP_HD_LIB", common::fake_hd_library().display().to_string()),
+            ("FAKE_HD_RECORD", record.display().to_string()),
+        ],
+        env,
+    );
     let args = ["--server", &addr.to_string(), "--fingerprint", &fingerprint, "--device", device]
         .into_iter()
         .chain(["--duration", seconds, "--no-realtime", "--json"])

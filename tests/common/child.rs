@@ -358,6 +358,28 @@ impl Drop for ChildProcess {
     }
 }
 
+/// `kinloop-server --scene SCENE` on a free loopback port, a child in `dir`: the child, its address and its
+/// certificate's fingerprint once it has printed them.
+pub fn spawn_scene_server(test: &str, scene: &str, dir: &Path) -> (ChildProcess, SocketAddr, String) {
+    let args = ["--scene", scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"].map(String::from).to_vec();
+    let mut server = ChildProcess::spawn(test, &Role::Program { program: Program::Server, args }, dir, "server");
+    let (addr, fingerprint) =
+        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    (server, addr, fingerprint)
+}
+
+/// `defaults` with each of `overrides` in place of the variable of its name (or added after them).
+pub fn with_overrides<'a>(
+    mut defaults: Vec<(&'a str, String)>,
+    overrides: &[(&'a str, String)],
+) -> Vec<(&'a str, String)> {
+    for (name, value) in overrides {
+        defaults.retain(|(n, _)| n != name);
+        defaults.push((name, value.clone()));
+    }
+    defaults
+}
+
 /// The address and fingerprint a `kinloop-server` prints, once it has printed both (the test harness's
 /// `test NAME ... ` may precede the first on its line).
 pub fn listening(stdout: &str) -> Option<(SocketAddr, String)> {
