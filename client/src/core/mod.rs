@@ -196,7 +196,7 @@ impl<S: Space> HapticCore<S> {
             path,
             trust: 1.0,
             index: DeviceIndex::identity(scales.position),
-            gate: OutputGate::new(&config.safety),
+            gate: OutputGate::new(&config.safety, config.period),
             observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
             reaction: S::OpVec::zero(),
             last_command: S::OpVec::zero(),
