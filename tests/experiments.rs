@@ -5,6 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
+use kinloop::experiments::lead::{ByDelay, LeadSummary};
 use kinloop::experiments::model_update::ModelUpdateSummary;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
@@ -233,49 +234,60 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     // one-way delay is nearer the device than any VE that follows what it heard can be; the lead is cut to
     // what the heard motion supports, so none of these sessions is unstable; each row counts its own unstable
     // sessions.
-    let lead = &r["lead"];
-    let lead_points = lead["points"].as_array().unwrap();
-    let soft_100 = lead_points
+    let lead: LeadSummary = serde_json::from_value(r["lead"].clone()).expect("typed lead summary");
+    let soft_100 = lead
+        .points
         .iter()
-        .find(|p| p["scene"] == "paper-testbed" && p["hand"] == "soft" && f(&p["delay_ms"]) == 100.0)
+        .map(|p| &p.point)
+        .find(|p| p.scene == "paper-testbed" && p.hand == "soft" && p.delay_ms == 100.0)
         .expect("the testbed's soft hand at 100 ms");
-    assert!(f(&soft_100["device_op_rms_mm"]) < 0.8 * f(&soft_100["device_unheard_rms_mm"]), "{soft_100}");
-    for p in lead_points {
-        assert_eq!(p["stable"], true, "{p}");
+    assert!(soft_100.device_op_rms_mm < 0.8 * soft_100.device_unheard_rms_mm, "{soft_100:?}");
+    for p in &lead.points {
+        assert!(p.point.stable, "{p:?}");
     }
     // Every session the grid ran with the default method, run again with the lead set the other way (unled,
     // as the default leads): the same sessions, each judged (the unstable ones listed,
     // led and unled), and nearer the device on average under delay led than unled. The default side of each figure is recomputed from
     // the grid's points.
-    let everywhere = &lead["everywhere"];
-    let default_side = if everywhere["default_leads"] == true { "led" } else { "unled" };
+    let everywhere = &lead.everywhere;
+    // The default side of a led-and-unled figure.
+    let default_side = |led: Option<f64>, unled: Option<f64>| if everywhere.default_leads { led } else { unled };
     let default_points = points.iter().filter(|p| p.method == "passivity").count();
-    assert_eq!(everywhere["sessions"].as_u64().unwrap() as usize, default_points, "{everywhere}");
-    for side in ["led", "unled"] {
-        let listed = everywhere["unstable_points"][side].as_array().unwrap();
-        assert_eq!(everywhere[format!("unstable_{side}")].as_u64().unwrap() as usize, listed.len());
-        assert!(listed.iter().all(|p| p["stable"] == false && p["method"] == "passivity"), "{everywhere}");
+    assert_eq!(everywhere.sessions, default_points, "{everywhere:?}");
+    let listed = &everywhere.unstable_points;
+    for (count, listed) in [(everywhere.unstable_led, &listed.led), (everywhere.unstable_unled, &listed.unled)] {
+        assert_eq!(count, listed.len());
+        assert!(listed.iter().all(|p| !p.stable && p.method == "passivity"), "{everywhere:?}");
     }
     let grid_unstable = points.iter().filter(|p| p.method == "passivity" && !p.stable).count();
-    assert_eq!(everywhere[format!("unstable_{default_side}")].as_u64().unwrap() as usize, grid_unstable);
-    let by_delay = everywhere["device_op_rms_mm_mean_by_delay"].as_array().unwrap();
-    let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
-    assert!(f(&at_100["led"]) < f(&at_100["unled"]), "{at_100}");
+    let default_unstable = default_side(Some(everywhere.unstable_led as f64), Some(everywhere.unstable_unled as f64));
+    assert_eq!(default_unstable, Some(grid_unstable as f64));
+    let at_100 =
+        everywhere.device_op_rms_mm_mean_by_delay.iter().find(|d| d.delay_ms == 100.0).expect("100 ms in the grid");
+    assert!(at_100.led < at_100.unled, "{at_100:?}");
     let default_100: Vec<f64> =
         points.iter().filter(|p| p.method == "passivity" && p.delay_ms == 100.0).map(|p| p.device_op_rms_mm).collect();
     let default_mean = default_100.iter().sum::<f64>() / default_100.len() as f64;
-    assert!((f(&at_100[default_side]) - default_mean).abs() < 2e-3, "{at_100} vs {default_mean}");
+    let default_rms = default_side(Some(at_100.led), Some(at_100.unled)).unwrap();
+    assert!((default_rms - default_mean).abs() < 2e-3, "{at_100:?} vs {default_mean}");
     // Beside it, what the hand feels, each recomputed from the grid's points: the touring hands' median
     // felt-vs-rendered impedance error, and their median change of the felt impedance from the same hand
     // without delay.
     let felt_error = |p: &PointSummary| p.felt_vs_rendered_impedance_error;
     let felt_change = |p: &PointSummary| p.felt_change_from_undelayed;
-    for (summary, point) in [
-        ("felt_vs_rendered_impedance_error_median_by_delay", &felt_error as &dyn Fn(&PointSummary) -> Option<f64>),
-        ("felt_change_from_undelayed_median_by_delay", &felt_change),
+    for (summary, by_delay, point) in [
+        (
+            "felt_vs_rendered_impedance_error_median_by_delay",
+            &everywhere.felt_vs_rendered_impedance_error_median_by_delay,
+            &felt_error as &dyn Fn(&PointSummary) -> Option<f64>,
+        ),
+        (
+            "felt_change_from_undelayed_median_by_delay",
+            &everywhere.felt_change_from_undelayed_median_by_delay,
+            &felt_change,
+        ),
     ] {
-        let by_delay = everywhere[summary].as_array().unwrap();
-        let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
+        let at_100: &ByDelay<Option<f64>> = by_delay.iter().find(|d| d.delay_ms == 100.0).expect("100 ms in the grid");
         let mut touring: Vec<f64> = points
             .iter()
             .filter(|p| p.method == "passivity" && p.delay_ms == 100.0)
@@ -284,13 +296,14 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
             .collect();
         touring.sort_by(f64::total_cmp);
         let median = touring[touring.len() / 2];
-        assert!((f(&at_100[default_side]) - median).abs() < 2e-3, "{summary}: {at_100} vs {touring:?}");
-        assert!(f(&at_100["led"]) > 0.0 && f(&at_100["unled"]) > 0.0, "{summary}: {at_100}");
+        let default_median = default_side(at_100.led, at_100.unled).unwrap_or_else(|| panic!("{summary}"));
+        assert!((default_median - median).abs() < 2e-3, "{summary}: {at_100:?} vs {touring:?}");
+        assert!(at_100.led > Some(0.0) && at_100.unled > Some(0.0), "{summary}: {at_100:?}");
     }
-    for row in lead["rows"].as_array().unwrap() {
-        let of: Vec<&Value> = lead_points.iter().filter(|p| p["lead"] == row["lead"]).collect();
-        assert_eq!(row["sessions"].as_u64().unwrap() as usize, of.len(), "{row}");
-        assert_eq!(row["unstable"].as_u64().unwrap() as usize, of.iter().filter(|p| p["stable"] == false).count());
+    for row in &lead.rows {
+        let of: Vec<_> = lead.points.iter().filter(|p| p.lead == row.lead).collect();
+        assert_eq!(row.sessions, of.len(), "{row:?}");
+        assert_eq!(row.unstable, of.iter().filter(|p| !p.point.stable).count());
     }
 }
 

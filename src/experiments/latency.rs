@@ -357,7 +357,7 @@ pub fn run(options: &Options) -> Result<Report> {
         "answer": format!("{answer} {} {}", model_update.answer, lead.answer),
         "goals": goals,
         "model_update": serde_json::to_value(&model_update)?,
-        "lead": lead.summary,
+        "lead": serde_json::to_value(&lead)?,
         "first_failures": first_failures,
         "criterion": verdict::criterion_json(),
         "grid": {
