@@ -5,8 +5,8 @@ use std::path::Path;
 use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
-use kinloop::experiments::lead::{ByDelay, LeadSummary};
-use kinloop::experiments::model_update::ModelUpdateSummary;
+use kinloop::experiments::latency::LatencySummary;
+use kinloop::experiments::lead::ByDelay;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
 use kinloop::experiments::renderability::RenderabilitySummary;
@@ -135,9 +135,9 @@ fn stability_maps_have_both_labels_and_the_passivity_bound_is_conservative() {
 fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Latency, dir.path());
-    let r = &report.summary["results"];
-    let points: Vec<PointSummary> = serde_json::from_value(r["points"].clone()).expect("typed points");
-    assert_eq!(points.len(), r["grid"]["points"].as_u64().unwrap() as usize);
+    let r: LatencySummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    let points = &r.points;
+    assert_eq!(points.len(), r.grid.points);
     let find = |hand: &str, delay: f64, method: &str| {
         points
             .iter()
@@ -176,18 +176,13 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     for method in ["plain", "passivity"] {
         assert_eq!(points.iter().filter(|p| p.method == method).count(), points.len() / 2, "both methods swept");
     }
-    let failures = r["first_failures"].as_array().unwrap();
-    assert!(!failures.is_empty());
-    for row in failures {
-        let of: Vec<&PointSummary> = points
-            .iter()
-            .filter(|p| {
-                row["hand"] == p.hand.as_str() && row["method"] == p.method.as_str() && row["scene"] == p.scene.as_str()
-            })
-            .collect();
-        assert_eq!(of.len() as u64, row["points"].as_u64().unwrap());
+    assert!(!r.first_failures.is_empty());
+    for row in &r.first_failures {
+        let of: Vec<&PointSummary> =
+            points.iter().filter(|p| row.hand == p.hand && row.method == p.method && row.scene == p.scene).collect();
+        assert_eq!(of.len(), row.points);
         let first = of.iter().filter(|p| !p.stable).map(|p| p.delay_ms).reduce(f64::min);
-        assert_eq!(row["first_failure_ms"].as_f64(), first, "{row}");
+        assert_eq!(row.first_failure_ms, first, "{row:?}");
         // An unstable point names the parts of the criterion that failed.
         for p in of.iter().filter(|p| !p.stable) {
             assert!(!p.reasons.is_empty(), "{p:?}");
@@ -195,20 +190,17 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     }
     // The passivity controller is the default: the goals judge its points, and it costs
     // little without delay (the mean device-OP distance over the 0 ms points, recomputed here).
-    assert_eq!(r["goals"]["default_method"], "passivity");
-    assert_eq!(
-        r["goals"]["no_unstable_point_with_defaults"],
-        points.iter().all(|p| p.method != "passivity" || p.stable)
-    );
+    assert_eq!(r.goals.default_method, "passivity");
+    assert_eq!(r.goals.no_unstable_point_with_defaults, points.iter().all(|p| p.method != "passivity" || p.stable));
     let mean_at_0 = |method: &str| {
         let at_0: Vec<f64> =
             points.iter().filter(|p| p.method == method && p.delay_ms == 0.0).map(|p| p.device_op_rms_mm).collect();
         at_0.iter().sum::<f64>() / at_0.len() as f64
     };
-    let cost = &r["goals"]["passivity_cost_at_0ms"];
+    let cost = &r.goals.passivity_cost_at_0ms;
     let ratio = mean_at_0("passivity") / mean_at_0("plain");
-    assert!((f(&cost["ratio"]) - ratio).abs() < 2e-3 * ratio, "{cost} vs {ratio}");
-    assert_eq!(cost["goal_met"], true, "{cost}");
+    assert!((cost.ratio.expect("both methods at 0 ms") - ratio).abs() < 2e-3 * ratio, "{cost:?} vs {ratio}");
+    assert_eq!(cost.goal_met, Some(true), "{cost:?}");
     // Without delay the VE hears the device a tick late: it has hardly moved; at 1 s it has toured on, and the
     // VE, which follows what it heard, is no nearer than that on average (within the tour's turns).
     let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
@@ -217,8 +209,7 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     assert!(last.device_op_rms_mm > 0.8 * last.device_unheard_rms_mm, "{last:?}");
     // The model-update rows: every way of pulling runs the same sessions, and the default pull (at least two
     // round trips, paid from the tank) leaves none unstable.
-    let model_update: ModelUpdateSummary =
-        serde_json::from_value(r["model_update"].clone()).expect("typed model-update summary");
+    let model_update = &r.model_update;
     let rows = &model_update.rows;
     let row = |name: &str| rows.iter().find(|row| row.update == name).unwrap_or_else(|| panic!("{name}"));
     assert_eq!(row("default").unstable, 0, "{rows:?}");
@@ -234,7 +225,7 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     // one-way delay is nearer the device than any VE that follows what it heard can be; the lead is cut to
     // what the heard motion supports, so none of these sessions is unstable; each row counts its own unstable
     // sessions.
-    let lead: LeadSummary = serde_json::from_value(r["lead"].clone()).expect("typed lead summary");
+    let lead = &r.lead;
     let soft_100 = lead
         .points
         .iter()
