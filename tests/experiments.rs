@@ -5,7 +5,8 @@ use std::path::Path;
 use std::process::Command;
 
 use kinloop::experiments::delay_point::{Loss, PointSummary};
-use kinloop::experiments::model_update::ModelUpdateSummary;
+use kinloop::experiments::latency::LatencySummary;
+use kinloop::experiments::lead::ByDelay;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
 use kinloop::experiments::renderability::RenderabilitySummary;
@@ -134,9 +135,9 @@ fn stability_maps_have_both_labels_and_the_passivity_bound_is_conservative() {
 fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let dir = tempfile::tempdir().unwrap();
     let report = run(Name::Latency, dir.path());
-    let r = &report.summary["results"];
-    let points: Vec<PointSummary> = serde_json::from_value(r["points"].clone()).expect("typed points");
-    assert_eq!(points.len(), r["grid"]["points"].as_u64().unwrap() as usize);
+    let r: LatencySummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    let points = &r.points;
+    assert_eq!(points.len(), r.grid.points);
     let find = |hand: &str, delay: f64, method: &str| {
         points
             .iter()
@@ -175,18 +176,13 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     for method in ["plain", "passivity"] {
         assert_eq!(points.iter().filter(|p| p.method == method).count(), points.len() / 2, "both methods swept");
     }
-    let failures = r["first_failures"].as_array().unwrap();
-    assert!(!failures.is_empty());
-    for row in failures {
-        let of: Vec<&PointSummary> = points
-            .iter()
-            .filter(|p| {
-                row["hand"] == p.hand.as_str() && row["method"] == p.method.as_str() && row["scene"] == p.scene.as_str()
-            })
-            .collect();
-        assert_eq!(of.len() as u64, row["points"].as_u64().unwrap());
+    assert!(!r.first_failures.is_empty());
+    for row in &r.first_failures {
+        let of: Vec<&PointSummary> =
+            points.iter().filter(|p| row.hand == p.hand && row.method == p.method && row.scene == p.scene).collect();
+        assert_eq!(of.len(), row.points);
         let first = of.iter().filter(|p| !p.stable).map(|p| p.delay_ms).reduce(f64::min);
-        assert_eq!(row["first_failure_ms"].as_f64(), first, "{row}");
+        assert_eq!(row.first_failure_ms, first, "{row:?}");
         // An unstable point names the parts of the criterion that failed.
         for p in of.iter().filter(|p| !p.stable) {
             assert!(!p.reasons.is_empty(), "{p:?}");
@@ -194,20 +190,17 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     }
     // The passivity controller is the default: the goals judge its points, and it costs
     // little without delay (the mean device-OP distance over the 0 ms points, recomputed here).
-    assert_eq!(r["goals"]["default_method"], "passivity");
-    assert_eq!(
-        r["goals"]["no_unstable_point_with_defaults"],
-        points.iter().all(|p| p.method != "passivity" || p.stable)
-    );
+    assert_eq!(r.goals.default_method, "passivity");
+    assert_eq!(r.goals.no_unstable_point_with_defaults, points.iter().all(|p| p.method != "passivity" || p.stable));
     let mean_at_0 = |method: &str| {
         let at_0: Vec<f64> =
             points.iter().filter(|p| p.method == method && p.delay_ms == 0.0).map(|p| p.device_op_rms_mm).collect();
         at_0.iter().sum::<f64>() / at_0.len() as f64
     };
-    let cost = &r["goals"]["passivity_cost_at_0ms"];
+    let cost = &r.goals.passivity_cost_at_0ms;
     let ratio = mean_at_0("passivity") / mean_at_0("plain");
-    assert!((f(&cost["ratio"]) - ratio).abs() < 2e-3 * ratio, "{cost} vs {ratio}");
-    assert_eq!(cost["goal_met"], true, "{cost}");
+    assert!((cost.ratio.expect("both methods at 0 ms") - ratio).abs() < 2e-3 * ratio, "{cost:?} vs {ratio}");
+    assert_eq!(cost.goal_met, Some(true), "{cost:?}");
     // Without delay the VE hears the device a tick late: it has hardly moved; at 1 s it has toured on, and the
     // VE, which follows what it heard, is no nearer than that on average (within the tour's turns).
     let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
@@ -216,8 +209,7 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     assert!(last.device_op_rms_mm > 0.8 * last.device_unheard_rms_mm, "{last:?}");
     // The model-update rows: every way of pulling runs the same sessions, and the default pull (at least two
     // round trips, paid from the tank) leaves none unstable.
-    let model_update: ModelUpdateSummary =
-        serde_json::from_value(r["model_update"].clone()).expect("typed model-update summary");
+    let model_update = &r.model_update;
     let rows = &model_update.rows;
     let row = |name: &str| rows.iter().find(|row| row.update == name).unwrap_or_else(|| panic!("{name}"));
     assert_eq!(row("default").unstable, 0, "{rows:?}");
@@ -233,49 +225,60 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     // one-way delay is nearer the device than any VE that follows what it heard can be; the lead is cut to
     // what the heard motion supports, so none of these sessions is unstable; each row counts its own unstable
     // sessions.
-    let lead = &r["lead"];
-    let lead_points = lead["points"].as_array().unwrap();
-    let soft_100 = lead_points
+    let lead = &r.lead;
+    let soft_100 = lead
+        .points
         .iter()
-        .find(|p| p["scene"] == "paper-testbed" && p["hand"] == "soft" && f(&p["delay_ms"]) == 100.0)
+        .map(|p| &p.point)
+        .find(|p| p.scene == "paper-testbed" && p.hand == "soft" && p.delay_ms == 100.0)
         .expect("the testbed's soft hand at 100 ms");
-    assert!(f(&soft_100["device_op_rms_mm"]) < 0.8 * f(&soft_100["device_unheard_rms_mm"]), "{soft_100}");
-    for p in lead_points {
-        assert_eq!(p["stable"], true, "{p}");
+    assert!(soft_100.device_op_rms_mm < 0.8 * soft_100.device_unheard_rms_mm, "{soft_100:?}");
+    for p in &lead.points {
+        assert!(p.point.stable, "{p:?}");
     }
     // Every session the grid ran with the default method, run again with the lead set the other way (unled,
     // as the default leads): the same sessions, each judged (the unstable ones listed,
     // led and unled), and nearer the device on average under delay led than unled. The default side of each figure is recomputed from
     // the grid's points.
-    let everywhere = &lead["everywhere"];
-    let default_side = if everywhere["default_leads"] == true { "led" } else { "unled" };
+    let everywhere = &lead.everywhere;
+    // The default side of a led-and-unled figure.
+    let default_side = |led: Option<f64>, unled: Option<f64>| if everywhere.default_leads { led } else { unled };
     let default_points = points.iter().filter(|p| p.method == "passivity").count();
-    assert_eq!(everywhere["sessions"].as_u64().unwrap() as usize, default_points, "{everywhere}");
-    for side in ["led", "unled"] {
-        let listed = everywhere["unstable_points"][side].as_array().unwrap();
-        assert_eq!(everywhere[format!("unstable_{side}")].as_u64().unwrap() as usize, listed.len());
-        assert!(listed.iter().all(|p| p["stable"] == false && p["method"] == "passivity"), "{everywhere}");
+    assert_eq!(everywhere.sessions, default_points, "{everywhere:?}");
+    let listed = &everywhere.unstable_points;
+    for (count, listed) in [(everywhere.unstable_led, &listed.led), (everywhere.unstable_unled, &listed.unled)] {
+        assert_eq!(count, listed.len());
+        assert!(listed.iter().all(|p| !p.stable && p.method == "passivity"), "{everywhere:?}");
     }
     let grid_unstable = points.iter().filter(|p| p.method == "passivity" && !p.stable).count();
-    assert_eq!(everywhere[format!("unstable_{default_side}")].as_u64().unwrap() as usize, grid_unstable);
-    let by_delay = everywhere["device_op_rms_mm_mean_by_delay"].as_array().unwrap();
-    let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
-    assert!(f(&at_100["led"]) < f(&at_100["unled"]), "{at_100}");
+    let default_unstable = default_side(Some(everywhere.unstable_led as f64), Some(everywhere.unstable_unled as f64));
+    assert_eq!(default_unstable, Some(grid_unstable as f64));
+    let at_100 =
+        everywhere.device_op_rms_mm_mean_by_delay.iter().find(|d| d.delay_ms == 100.0).expect("100 ms in the grid");
+    assert!(at_100.led < at_100.unled, "{at_100:?}");
     let default_100: Vec<f64> =
         points.iter().filter(|p| p.method == "passivity" && p.delay_ms == 100.0).map(|p| p.device_op_rms_mm).collect();
     let default_mean = default_100.iter().sum::<f64>() / default_100.len() as f64;
-    assert!((f(&at_100[default_side]) - default_mean).abs() < 2e-3, "{at_100} vs {default_mean}");
+    let default_rms = default_side(Some(at_100.led), Some(at_100.unled)).unwrap();
+    assert!((default_rms - default_mean).abs() < 2e-3, "{at_100:?} vs {default_mean}");
     // Beside it, what the hand feels, each recomputed from the grid's points: the touring hands' median
     // felt-vs-rendered impedance error, and their median change of the felt impedance from the same hand
     // without delay.
     let felt_error = |p: &PointSummary| p.felt_vs_rendered_impedance_error;
     let felt_change = |p: &PointSummary| p.felt_change_from_undelayed;
-    for (summary, point) in [
-        ("felt_vs_rendered_impedance_error_median_by_delay", &felt_error as &dyn Fn(&PointSummary) -> Option<f64>),
-        ("felt_change_from_undelayed_median_by_delay", &felt_change),
+    for (summary, by_delay, point) in [
+        (
+            "felt_vs_rendered_impedance_error_median_by_delay",
+            &everywhere.felt_vs_rendered_impedance_error_median_by_delay,
+            &felt_error as &dyn Fn(&PointSummary) -> Option<f64>,
+        ),
+        (
+            "felt_change_from_undelayed_median_by_delay",
+            &everywhere.felt_change_from_undelayed_median_by_delay,
+            &felt_change,
+        ),
     ] {
-        let by_delay = everywhere[summary].as_array().unwrap();
-        let at_100 = by_delay.iter().find(|d| f(&d["delay_ms"]) == 100.0).expect("100 ms in the grid");
+        let at_100: &ByDelay<Option<f64>> = by_delay.iter().find(|d| d.delay_ms == 100.0).expect("100 ms in the grid");
         let mut touring: Vec<f64> = points
             .iter()
             .filter(|p| p.method == "passivity" && p.delay_ms == 100.0)
@@ -284,13 +287,14 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
             .collect();
         touring.sort_by(f64::total_cmp);
         let median = touring[touring.len() / 2];
-        assert!((f(&at_100[default_side]) - median).abs() < 2e-3, "{summary}: {at_100} vs {touring:?}");
-        assert!(f(&at_100["led"]) > 0.0 && f(&at_100["unled"]) > 0.0, "{summary}: {at_100}");
+        let default_median = default_side(at_100.led, at_100.unled).unwrap_or_else(|| panic!("{summary}"));
+        assert!((default_median - median).abs() < 2e-3, "{summary}: {at_100:?} vs {touring:?}");
+        assert!(at_100.led > Some(0.0) && at_100.unled > Some(0.0), "{summary}: {at_100:?}");
     }
-    for row in lead["rows"].as_array().unwrap() {
-        let of: Vec<&Value> = lead_points.iter().filter(|p| p["lead"] == row["lead"]).collect();
-        assert_eq!(row["sessions"].as_u64().unwrap() as usize, of.len(), "{row}");
-        assert_eq!(row["unstable"].as_u64().unwrap() as usize, of.iter().filter(|p| p["stable"] == false).count());
+    for row in &lead.rows {
+        let of: Vec<_> = lead.points.iter().filter(|p| p.lead == row.lead).collect();
+        assert_eq!(row.sessions, of.len(), "{row:?}");
+        assert_eq!(row.unstable, of.iter().filter(|p| !p.point.stable).count());
     }
 }
 

@@ -423,6 +423,17 @@ impl PointSummary {
     }
 }
 
+/// A figure at the tracking goals' one-way delays, 100 ms and 1 s (written `100ms` and `1000ms`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AtGoalDelays {
+    /// At 100 ms.
+    #[serde(rename = "100ms")]
+    pub at_100ms: Option<f64>,
+    /// At 1 s.
+    #[serde(rename = "1000ms")]
+    pub at_1000ms: Option<f64>,
+}
+
 /// One measured point as the summaries list it ([`PointSummary`]).
 pub fn point_json(m: &Measured) -> Value {
     json!(PointSummary::of(m))

@@ -28,18 +28,19 @@
 //! unstable.
 
 use anyhow::Result;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 use kinloop_client::user::{HandKind, Intent};
 
 use super::common::{sweep, Options, Output, Report};
 use super::delay_point::{
     default_passivity, fill_felt_changes, goal_circle, is_undelayed_reference, measure, measure_intending, method,
-    point_json, seconds_per_point, Lead, Loss, Measured, Network, Point, BURST_LENGTH, DELAYS_MS,
+    seconds_per_point, AtGoalDelays, Lead, Loss, Measured, Network, Point, PointSummary, BURST_LENGTH, DELAYS_MS,
     GOAL_PASSIVITY_COST_AT_0MS, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, JITTERS_MS, TARGETS,
 };
-use super::lead;
-use super::model_update;
+use super::lead::{self, LeadSummary};
+use super::model_update::{self, ModelUpdateSummary};
 use super::verdict;
 use crate::charts::{Chart, HeatMap, Legend, Series};
 use crate::rounding::round;
@@ -98,6 +99,150 @@ impl Grid {
         }
         out
     }
+}
+
+/// The `latency` experiment's results (the summary's `results`), typed so that tests read its fields.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LatencySummary {
+    /// The run's answer, then the model-update rows' and the lead rows'.
+    pub answer: String,
+    /// The goals' figures.
+    pub goals: Goals,
+    /// The model-update rows.
+    pub model_update: ModelUpdateSummary,
+    /// The lead rows.
+    pub lead: LeadSummary,
+    /// The first failing delay of each (scene, hand, method).
+    pub first_failures: Vec<FirstFailure>,
+    /// The stability criterion's rules and thresholds.
+    pub criterion: Value,
+    /// The grid the run swept.
+    pub grid: GridSummary,
+    /// How the sessions ran.
+    pub setup: Setup,
+    /// Every point of the grid.
+    pub points: Vec<PointSummary>,
+}
+
+/// The axes of the run's grid, as names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridSummary {
+    /// The scenes, as `scene:op`.
+    pub scenes: Vec<String>,
+    /// The hands.
+    pub hands: Vec<String>,
+    /// The one-way delays (ms).
+    pub delays_ms: Vec<f64>,
+    /// The network conditions.
+    pub networks: Vec<String>,
+    /// The two methods, plain and passivity.
+    pub methods: Vec<String>,
+    /// The grid's points.
+    pub points: usize,
+    /// Each session's length (s).
+    pub seconds_per_point: f64,
+    /// What `--quick` reduced the grid to; `None` for the full grid.
+    pub reduced: Option<String>,
+}
+
+/// The summary's notes on how the sessions ran.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// One session.
+    pub session: String,
+    /// The network conditions.
+    pub network: String,
+    /// What a first failure is.
+    pub first_failure: String,
+    /// The passivity controller.
+    pub passivity: String,
+}
+
+/// The first failing delay of one (scene, hand, method).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FirstFailure {
+    /// Scene name.
+    pub scene: String,
+    /// Operational point.
+    pub op: String,
+    /// Hand name.
+    pub hand: String,
+    /// `plain` or `passivity`.
+    pub method: String,
+    /// The smallest delay where some network condition is unstable (ms); `None` up to the largest delay.
+    pub first_failure_ms: Option<f64>,
+    /// The same on the clean network only.
+    pub first_failure_clean_network_ms: Option<f64>,
+    /// Its unstable points.
+    pub unstable_points: usize,
+    /// Its points.
+    pub points: usize,
+    /// The unstable points at the first failing delay: `network: reasons`.
+    pub unstable_at_first_failure: Vec<String>,
+}
+
+/// The goals' figures: the defaults' stability, what the passivity controller costs without delay, and the
+/// testbed's soft hand at 100 ms and 1 s on its tour and on the 5 mm goal circle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Goals {
+    /// The default method (`passivity` or `plain`).
+    pub default_method: String,
+    /// No point of the default method is unstable.
+    pub no_unstable_point_with_defaults: bool,
+    /// The default method's unstable points.
+    pub unstable_points_with_defaults: usize,
+    /// The passivity controller's cost without delay.
+    pub passivity_cost_at_0ms: PassivityCost,
+    /// Testbed, soft hand, clean network, defaults: device-OP RMS at 100 ms (mm).
+    pub testbed_soft_device_op_rms_mm_at_100ms: Option<f64>,
+    /// Whether it meets the 100 ms goal.
+    pub testbed_soft_device_op_rms_mm_at_100ms_goal_met: Option<bool>,
+    /// The same at 1 s (mm).
+    pub testbed_soft_device_op_rms_mm_at_1000ms: Option<f64>,
+    /// Whether it meets the 1 s goal.
+    pub testbed_soft_device_op_rms_mm_at_1000ms_goal_met: Option<bool>,
+    /// The same with the passivity controller off (mm).
+    pub testbed_soft_device_op_rms_mm_with_passivity_off: AtGoalDelays,
+    /// How far the device had moved from the pose the VE had heard of, RMS (mm).
+    pub testbed_soft_device_unheard_rms_mm: AtGoalDelays,
+    /// The soft hand on the 5 mm goal circle.
+    pub testbed_soft_issue_circle: IssueCircle,
+    /// What `device_unheard_rms` means.
+    pub device_unheard_rms_means: String,
+}
+
+/// What the passivity controller costs without delay: the mean device-OP RMS over the 0 ms points.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PassivityCost {
+    /// With it on (mm).
+    pub device_op_rms_mm_mean_on: Option<f64>,
+    /// With it off (mm).
+    pub device_op_rms_mm_mean_off: Option<f64>,
+    /// On over off.
+    pub ratio: Option<f64>,
+    /// The largest ratio the goal allows ([`GOAL_PASSIVITY_COST_AT_0MS`]).
+    pub goal: f64,
+    /// Whether the ratio meets it.
+    pub goal_met: Option<bool>,
+}
+
+/// The testbed's soft hand on the 5 mm goal circle, the motion the tracking goals were set on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IssueCircle {
+    /// The motion.
+    pub motion: String,
+    /// Device-OP RMS (mm).
+    pub device_op_rms_mm: AtGoalDelays,
+    /// How far the device had moved from the pose the VE had heard of, RMS (mm).
+    pub device_unheard_rms_mm: AtGoalDelays,
+    /// Stable and within the 100 ms goal.
+    pub goal_met_at_100ms: Option<bool>,
+    /// Stable and within the 1 s goal.
+    pub goal_met_at_1000ms: Option<bool>,
+    /// Its unstable sessions.
+    pub unstable_points: usize,
+    /// Its sessions.
+    pub points: Vec<PointSummary>,
 }
 
 /// The points of one (scene, hand, method), in grid order.
@@ -353,41 +498,44 @@ pub fn run(options: &Options) -> Result<Report> {
 
     let (table, first_failures) = first_failures(&grid, &all);
     let (goals, answer) = goals_and_answer(&grid, &all, &circle, &table);
-    let results = json!({
-        "answer": format!("{answer} {} {}", model_update.answer, lead.answer),
-        "goals": goals,
-        "model_update": serde_json::to_value(&model_update)?,
-        "lead": lead.summary,
-        "first_failures": first_failures,
-        "criterion": verdict::criterion_json(),
-        "grid": {
-            "scenes": grid.targets.iter().map(|&t| format!("{}:{}", TARGETS[t].0, TARGETS[t].1)).collect::<Vec<_>>(),
-            "hands": grid.hands.iter().map(|h| h.name()).collect::<Vec<_>>(),
-            "delays_ms": grid.delays_ms,
-            "networks": grid.networks.iter().map(|n| n.name()).collect::<Vec<_>>(),
-            "methods": ["plain (VeConfig::passivity off, --passivity off)", "passivity (VeConfig::passivity, the default)"],
-            "points": all.len(),
-            "seconds_per_point": seconds,
-            "reduced": options.quick.then_some("--quick: the four-bar coupler, hands soft and poke, delays 0/100/500/1000 ms, a clean network and 30 ms jitter with 20 % bursty loss"),
+    let results = LatencySummary {
+        answer: format!("{answer} {} {}", model_update.answer, lead.answer),
+        goals,
+        model_update,
+        lead,
+        first_failures,
+        criterion: verdict::criterion_json(),
+        grid: GridSummary {
+            scenes: grid.targets.iter().map(|&t| format!("{}:{}", TARGETS[t].0, TARGETS[t].1)).collect(),
+            hands: grid.hands.iter().map(|h| h.name().to_owned()).collect(),
+            delays_ms: grid.delays_ms.clone(),
+            networks: grid.networks.iter().map(|n| n.name()).collect(),
+            methods: vec![
+                "plain (VeConfig::passivity off, --passivity off)".into(),
+                "passivity (VeConfig::passivity, the default)".into(),
+            ],
+            points: all.len(),
+            seconds_per_point: seconds,
+            reduced: options.quick.then(|| "--quick: the four-bar coupler, hands soft and poke, delays 0/100/500/1000 ms, a clean network and 30 ms jitter with 20 % bursty loss".into()),
         },
-        "setup": {
-            "session": "one client with default settings (server-designed coupling and mapping, designed client gains, sim:paper, stiffness mode, 1 kHz VE and haptic loop), a simulated hand touring the OP's reach; the client knows the nominal one-way delay",
-            "network": format!("the same conditions both ways; jitter is the standard deviation of the one-way delay; 5 % loss is independent; 20 % bursty loss is Gilbert (lost in the bad state only) with mean burst {BURST_LENGTH} packets"),
-            "first_failure": "the smallest delay at which some jitter and loss of the grid is unstable; null: none up to the largest delay",
-            "passivity": "VeConfig::passivity: time-domain passivity observer on each coupling port (graphics-controller PD and force channel, per axis and in total) and controller: when the VE has received through the coupling more than the hand put in at the client (its books trusted as far as the uplinks show), the PD is scaled down, to zero once the excess reaches passivity_allowance_j, and what is taken off it brakes the OP",
+        setup: Setup {
+            session: "one client with default settings (server-designed coupling and mapping, designed client gains, sim:paper, stiffness mode, 1 kHz VE and haptic loop), a simulated hand touring the OP's reach; the client knows the nominal one-way delay".into(),
+            network: format!("the same conditions both ways; jitter is the standard deviation of the one-way delay; 5 % loss is independent; 20 % bursty loss is Gilbert (lost in the bad state only) with mean burst {BURST_LENGTH} packets"),
+            first_failure: "the smallest delay at which some jitter and loss of the grid is unstable; null: none up to the largest delay".into(),
+            passivity: "VeConfig::passivity: time-domain passivity observer on each coupling port (graphics-controller PD and force channel, per axis and in total) and controller: when the VE has received through the coupling more than the hand put in at the client (its books trusted as far as the uplinks show), the PD is scaled down, to zero once the excess reaches passivity_allowance_j, and what is taken off it brakes the OP".into(),
         },
-        "points": all.iter().map(point_json).collect::<Vec<_>>(),
-    });
+        points: all.iter().map(PointSummary::of).collect(),
+    };
     out.finish(
         "Network delay, jitter and loss with default settings, with and without the passivity controller",
         "1728 sessions of 10 s, 144 model-update sessions and 8 on the 5 mm goal circle; --quick 40 sessions",
-        results,
+        serde_json::to_value(&results)?,
     )
 }
 
 /// The first failing delay of each (scene, hand, method) of the grid: a phrase for the answer and a row for
 /// the summary.
-fn first_failures(grid: &Grid, all: &[Measured]) -> (Vec<String>, Vec<Value>) {
+fn first_failures(grid: &Grid, all: &[Measured]) -> (Vec<String>, Vec<FirstFailure>) {
     let mut first_failures = Vec::new();
     let mut table = Vec::new();
     for &target in &grid.targets {
@@ -411,17 +559,17 @@ fn first_failures(grid: &Grid, all: &[Measured]) -> (Vec<String>, Vec<Value>) {
                     method(passivity),
                     first.map_or("none".into(), |d| format!("{d} ms"))
                 ));
-                first_failures.push(json!({
-                    "scene": TARGETS[target].0,
-                    "op": TARGETS[target].1,
-                    "hand": hand.name(),
-                    "method": method(passivity),
-                    "first_failure_ms": first,
-                    "first_failure_clean_network_ms": first_clean,
-                    "unstable_points": unstable.len(),
-                    "points": pair(all, target, hand, passivity).count(),
-                    "unstable_at_first_failure": at_first,
-                }));
+                first_failures.push(FirstFailure {
+                    scene: TARGETS[target].0.to_owned(),
+                    op: TARGETS[target].1.to_owned(),
+                    hand: hand.name().to_owned(),
+                    method: method(passivity).to_owned(),
+                    first_failure_ms: first,
+                    first_failure_clean_network_ms: first_clean,
+                    unstable_points: unstable.len(),
+                    points: pair(all, target, hand, passivity).count(),
+                    unstable_at_first_failure: at_first,
+                });
             }
         }
     }
@@ -431,7 +579,7 @@ fn first_failures(grid: &Grid, all: &[Measured]) -> (Vec<String>, Vec<Value>) {
 /// The goals' figures (the testbed's soft hand at 100 ms and 1 s, on its tour and on the 5 mm goal circle;
 /// what the passivity controller costs without delay) and the run's answer, given the first failures'
 /// phrases.
-fn goals_and_answer(grid: &Grid, all: &[Measured], circle: &[Measured], table: &[String]) -> (Value, String) {
+fn goals_and_answer(grid: &Grid, all: &[Measured], circle: &[Measured], table: &[String]) -> (Goals, String) {
     let unstable = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity && !m.verdict.stable).count();
     let per_method = |passivity: bool| all.iter().filter(|m| m.point.passivity == passivity).count();
     let max_delay = grid.delays_ms.iter().copied().fold(0.0, f64::max);
@@ -466,34 +614,40 @@ fn goals_and_answer(grid: &Grid, all: &[Measured], circle: &[Measured], table: &
     };
     let (cost_on, cost_off) = (mean_rms_at_0ms(true), mean_rms_at_0ms(false));
     let cost_ratio = cost_on.zip(cost_off).map(|(on, off)| round(on / off, 3));
-    let goals = json!({
-        "default_method": method(default),
-        "no_unstable_point_with_defaults": unstable(default) == 0,
-        "unstable_points_with_defaults": unstable(default),
-        "passivity_cost_at_0ms": {
-            "device_op_rms_mm_mean_on": cost_on.map(|r| round(r, 3)),
-            "device_op_rms_mm_mean_off": cost_off.map(|r| round(r, 3)),
-            "ratio": cost_ratio,
-            "goal": GOAL_PASSIVITY_COST_AT_0MS,
-            "goal_met": cost_ratio.map(|r| r <= GOAL_PASSIVITY_COST_AT_0MS),
+    let goals = Goals {
+        default_method: method(default).to_owned(),
+        no_unstable_point_with_defaults: unstable(default) == 0,
+        unstable_points_with_defaults: unstable(default),
+        passivity_cost_at_0ms: PassivityCost {
+            device_op_rms_mm_mean_on: cost_on.map(|r| round(r, 3)),
+            device_op_rms_mm_mean_off: cost_off.map(|r| round(r, 3)),
+            ratio: cost_ratio,
+            goal: GOAL_PASSIVITY_COST_AT_0MS,
+            goal_met: cost_ratio.map(|r| r <= GOAL_PASSIVITY_COST_AT_0MS),
         },
-        "testbed_soft_device_op_rms_mm_at_100ms": rms_100,
-        "testbed_soft_device_op_rms_mm_at_100ms_goal_met": rms_100.map(|r| r <= GOAL_RMS_100MS_M * 1e3),
-        "testbed_soft_device_op_rms_mm_at_1000ms": rms_1000,
-        "testbed_soft_device_op_rms_mm_at_1000ms_goal_met": rms_1000.map(|r| r <= GOAL_RMS_1S_M * 1e3),
-        "testbed_soft_device_op_rms_mm_with_passivity_off": {"100ms": goal_rms(100.0, false), "1000ms": goal_rms(1000.0, false)},
-        "testbed_soft_device_unheard_rms_mm": {"100ms": floor_100, "1000ms": floor_1000},
-        "testbed_soft_issue_circle": {
-            "motion": "the soft hand on the motion the tracking goals were set on, --user path:circle:0.005,2 (a 5 mm circle, a turn every 2 s)",
-            "device_op_rms_mm": {"100ms": circle_100, "1000ms": circle_1000},
-            "device_unheard_rms_mm": {"100ms": circle_mm(100.0, |m| m.device_unheard_rms_m), "1000ms": circle_mm(1000.0, |m| m.device_unheard_rms_m)},
-            "goal_met_at_100ms": circle_goal_met(circle_100, GOAL_RMS_100MS_M, 100.0),
-            "goal_met_at_1000ms": circle_goal_met(circle_1000, GOAL_RMS_1S_M, 1000.0),
-            "unstable_points": circle.iter().filter(|m| !m.verdict.stable).count(),
-            "points": circle.iter().map(point_json).collect::<Vec<_>>(),
+        testbed_soft_device_op_rms_mm_at_100ms: rms_100,
+        testbed_soft_device_op_rms_mm_at_100ms_goal_met: rms_100.map(|r| r <= GOAL_RMS_100MS_M * 1e3),
+        testbed_soft_device_op_rms_mm_at_1000ms: rms_1000,
+        testbed_soft_device_op_rms_mm_at_1000ms_goal_met: rms_1000.map(|r| r <= GOAL_RMS_1S_M * 1e3),
+        testbed_soft_device_op_rms_mm_with_passivity_off: AtGoalDelays {
+            at_100ms: goal_rms(100.0, false),
+            at_1000ms: goal_rms(1000.0, false),
         },
-        "device_unheard_rms_means": "how far the device had moved since the pose the VE had heard of: the device-OP distance of a VE sitting exactly on the device as heard, which a VE that does not run ahead of the hand cannot beat on average",
-    });
+        testbed_soft_device_unheard_rms_mm: AtGoalDelays { at_100ms: floor_100, at_1000ms: floor_1000 },
+        testbed_soft_issue_circle: IssueCircle {
+            motion: "the soft hand on the motion the tracking goals were set on, --user path:circle:0.005,2 (a 5 mm circle, a turn every 2 s)".into(),
+            device_op_rms_mm: AtGoalDelays { at_100ms: circle_100, at_1000ms: circle_1000 },
+            device_unheard_rms_mm: AtGoalDelays {
+                at_100ms: circle_mm(100.0, |m| m.device_unheard_rms_m),
+                at_1000ms: circle_mm(1000.0, |m| m.device_unheard_rms_m),
+            },
+            goal_met_at_100ms: circle_goal_met(circle_100, GOAL_RMS_100MS_M, 100.0),
+            goal_met_at_1000ms: circle_goal_met(circle_1000, GOAL_RMS_1S_M, 1000.0),
+            unstable_points: circle.iter().filter(|m| !m.verdict.stable).count(),
+            points: circle.iter().map(PointSummary::of).collect(),
+        },
+        device_unheard_rms_means: "how far the device had moved since the pose the VE had heard of: the device-OP distance of a VE sitting exactly on the device as heard, which a VE that does not run ahead of the hand cannot beat on average".into(),
+    };
     let answer = format!(
         "Up to {max_delay} ms one-way, {} of {} points are unstable with the defaults (passivity controller on), {} of {} \
          with it off (plain coupling). Without delay the controller costs {} (device-OP RMS, mean over the 0 ms points, \

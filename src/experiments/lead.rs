@@ -20,15 +20,15 @@
 //! would do to tracking, stability and feel.
 
 use anyhow::Result;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
 
 use kinloop_client::user::HandKind;
 use kinloop_server::core::VeConfig;
 
 use super::common::{sweep, Options, Output};
 use super::delay_point::{
-    fill_felt_changes, measure_leading, point_json, seconds_per_point, Lead, Loss, Measured, Network, Point,
-    GOAL_RMS_100MS_M, GOAL_RMS_1S_M, TARGETS,
+    fill_felt_changes, measure_leading, seconds_per_point, AtGoalDelays, Lead, Loss, Measured, Network, Point,
+    PointSummary, GOAL_RMS_100MS_M, GOAL_RMS_1S_M, TARGETS,
 };
 use crate::charts::{Chart, HeatMap, Legend, Series};
 use crate::rounding::round;
@@ -62,12 +62,97 @@ struct LeadTally {
     soft_rms_1000_mm: Option<f64>,
 }
 
-/// The rows' results: what [`run`] measured, for the latency summary.
-pub struct LeadRows {
-    /// The summary (JSON).
-    pub summary: Value,
-    /// Its answer, one sentence per cap.
+/// The lead rows' part of the latency summary (its `lead`), typed so that tests read its fields.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LeadSummary {
+    /// The rows' answer: one sentence per lead, then the [`everywhere`] row's.
     pub answer: String,
+    /// Per lead: its sessions and how they came out.
+    pub rows: Vec<LeadRow>,
+    /// Every session of the rows.
+    pub points: Vec<LeadPoint>,
+    /// The grid's default sessions run again with the lead set the other way.
+    pub everywhere: EverywhereSummary,
+    /// How the sessions ran.
+    pub setup: String,
+}
+
+/// One lead over its sessions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LeadRow {
+    /// The lead's name ("(default)" appended for the default).
+    pub lead: String,
+    /// The longest lead (s; 0: none).
+    pub cap_s: f64,
+    /// The one-way delays it acts over (ms, from and until; `None`, written null, for no bound).
+    pub delays_ms: [Option<f64>; 2],
+    /// Its unstable sessions.
+    pub unstable: usize,
+    /// Its sessions.
+    pub sessions: usize,
+    /// The smallest one-way delay with an unstable session (ms), none if all were stable.
+    pub first_unstable_delay_ms: Option<f64>,
+    /// The same on the clean network only.
+    pub first_unstable_delay_clean_network_ms: Option<f64>,
+    /// The testbed's soft tour on a clean network: device-OP RMS (mm) at the goals' delays.
+    pub testbed_soft_clean_device_op_rms_mm: AtGoalDelays,
+}
+
+/// One session of the rows: the delay experiments' point and the lead it ran with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LeadPoint {
+    /// The point.
+    #[serde(flatten)]
+    pub point: PointSummary,
+    /// The lead's name, as its row's.
+    pub lead: String,
+    /// The longest lead (s).
+    pub cap_s: f64,
+}
+
+/// The [`everywhere`] row: the grid's default sessions with the lead set the other way.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EverywhereSummary {
+    /// The led sessions' lead.
+    pub led: String,
+    /// Its cap (s).
+    pub cap_s: f64,
+    /// Whether the default leads (then the grid's sessions are the led side, else the unled).
+    pub default_leads: bool,
+    /// Sessions on each side.
+    pub sessions: usize,
+    /// Unstable sessions led.
+    pub unstable_led: usize,
+    /// Unstable sessions unled.
+    pub unstable_unled: usize,
+    /// The unstable sessions of each side.
+    pub unstable_points: LedAndUnled<Vec<PointSummary>>,
+    /// Mean device-OP RMS (mm) over the sessions at each delay.
+    pub device_op_rms_mm_mean_by_delay: Vec<ByDelay<f64>>,
+    /// Median over the touring hands of the felt-vs-rendered impedance error at each delay.
+    pub felt_vs_rendered_impedance_error_median_by_delay: Vec<ByDelay<Option<f64>>>,
+    /// Median over the touring hands of the felt impedance's change from the same hand without delay.
+    pub felt_change_from_undelayed_median_by_delay: Vec<ByDelay<Option<f64>>>,
+}
+
+/// Something of the led sessions and the same of the unled.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LedAndUnled<T> {
+    /// Of the led sessions.
+    pub led: T,
+    /// Of the unled sessions.
+    pub unled: T,
+}
+
+/// A figure of the led and the unled sessions at one one-way delay.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ByDelay<T> {
+    /// The one-way delay (ms).
+    pub delay_ms: f64,
+    /// The led sessions' figure.
+    pub led: T,
+    /// The unled sessions' figure.
+    pub unled: T,
 }
 
 /// Runs the rows, draws their stability map and the testbed's soft tour at each cap, and returns their
@@ -75,7 +160,7 @@ pub struct LeadRows {
 ///
 /// `defaults` are the grid's sessions with the default method: each is run again with the lead set the other
 /// way (see [`everywhere`]); `undelayed` holds the grid's sessions without delay on a clean network.
-pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelayed: &[Measured]) -> Result<LeadRows> {
+pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelayed: &[Measured]) -> Result<LeadSummary> {
     let chosen: Vec<Lead> = options.pick(leads().to_vec(), vec![Lead::everywhere(1.0)]);
     let targets: Vec<usize> = options.pick((0..TARGETS.len()).collect(), vec![0]);
     let hands = options.pick(HandKind::ALL.to_vec(), vec![HandKind::Soft, HandKind::Poke]);
@@ -134,19 +219,21 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
             soft_rms_1000_mm: soft_rms_at(lead, 1000.0),
         })
         .collect();
-    let rows_json: Vec<Value> = tallies
+    let rows: Vec<LeadRow> = tallies
         .iter()
-        .map(|t| {
-            json!({
-                "lead": lead_name(t.lead),
-                "cap_s": t.lead.max_s,
-                "delays_ms": t.lead.delays_s.map(|s| s * 1e3),
-                "unstable": t.unstable,
-                "sessions": t.sessions,
-                "first_unstable_delay_ms": t.first_unstable_ms,
-                "first_unstable_delay_clean_network_ms": t.first_unstable_clean_ms,
-                "testbed_soft_clean_device_op_rms_mm": {"100ms": t.soft_rms_100_mm, "1000ms": t.soft_rms_1000_mm},
-            })
+        .map(|t| LeadRow {
+            lead: lead_name(t.lead),
+            cap_s: t.lead.max_s,
+            // An unbounded end is written null, as JSON has no infinity.
+            delays_ms: t.lead.delays_s.map(|s| Some(s * 1e3).filter(|ms| ms.is_finite())),
+            unstable: t.unstable,
+            sessions: t.sessions,
+            first_unstable_delay_ms: t.first_unstable_ms,
+            first_unstable_delay_clean_network_ms: t.first_unstable_clean_ms,
+            testbed_soft_clean_device_op_rms_mm: AtGoalDelays {
+                at_100ms: t.soft_rms_100_mm,
+                at_1000ms: t.soft_rms_1000_mm,
+            },
         })
         .collect();
     let mm = |r: Option<f64>| r.map_or("n/a".into(), |r| r.to_string());
@@ -166,26 +253,18 @@ pub fn run(out: &mut Output, options: &Options, defaults: &[&Measured], undelaye
         })
         .collect::<Vec<_>>()
         .join(" ");
-    let (everywhere_json, everywhere_answer) = everywhere(out, options, defaults, undelayed)?;
+    let (everywhere, everywhere_answer) = everywhere(out, options, defaults, undelayed)?;
     let answer = format!("{answer} {everywhere_answer}");
-    let points_json: Vec<Value> = all
+    let points: Vec<LeadPoint> = all
         .iter()
-        .map(|(lead, m)| {
-            let mut point = point_json(m);
-            point["lead"] = json!(lead_name(*lead));
-            point["cap_s"] = json!(lead.max_s);
-            point
-        })
+        .map(|(lead, m)| LeadPoint { point: PointSummary::of(m), lead: lead_name(*lead), cap_s: lead.max_s })
         .collect();
-    Ok(LeadRows {
-        summary: json!({
-            "answer": answer,
-            "rows": rows_json,
-            "points": points_json,
-            "everywhere": everywhere_json,
-            "setup": "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each lead, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_miss_m (the PD spring's energy at a 1 mm miss at the device), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss",
-        }),
+    Ok(LeadSummary {
         answer,
+        rows,
+        points,
+        everywhere,
+        setup: "VeConfig::coupling_lead_max_s (kinloop-server --lead-max-ms) at each lead, at every one-way delay or (the default) over VeConfig::coupling_lead_delays_s (--lead-delays-ms), bounded by VeConfig::coupling_lead_guess_miss_m (the PD spring's energy at a 1 mm miss at the device), the passivity controller on as by default; the grid's sessions on a clean network and on 30 ms of jitter with 20 % bursty loss".into(),
     })
 }
 
@@ -267,7 +346,7 @@ fn everywhere(
     options: &Options,
     defaults: &[&Measured],
     undelayed: &[Measured],
-) -> Result<(Value, String)> {
+) -> Result<(EverywhereSummary, String)> {
     let points: Vec<Point> = defaults.iter().map(|m| m.point).collect();
     let default_leads = Lead::default().max_s > 0.0;
     let led_lead = if default_leads { Lead::default() } else { Lead::everywhere(EVERYWHERE_CAP_S) };
@@ -306,12 +385,12 @@ fn everywhere(
     };
     let median_impedance_error = median_of(|m| m.impedance_error);
     let median_felt_change = median_of(|m| m.felt_change);
-    let by_delay: Vec<Value> = delays
+    let by_delay: Vec<ByDelay<f64>> = delays
         .iter()
-        .map(|&d| json!({"delay_ms": d, "led": mean_rms_mm(led, d), "unled": mean_rms_mm(unled, d)}))
+        .map(|&d| ByDelay { delay_ms: d, led: mean_rms_mm(led, d), unled: mean_rms_mm(unled, d) })
         .collect();
-    let led_and_unled = |median: &MedianByDelay| -> Vec<Value> {
-        delays.iter().map(|&d| json!({"delay_ms": d, "led": median(led, d), "unled": median(unled, d)})).collect()
+    let led_and_unled = |median: &MedianByDelay| -> Vec<ByDelay<Option<f64>>> {
+        delays.iter().map(|&d| ByDelay { delay_ms: d, led: median(led, d), unled: median(unled, d) }).collect()
     };
     let impedance_by_delay = led_and_unled(&median_impedance_error);
     let felt_change_by_delay = led_and_unled(&median_felt_change);
@@ -333,21 +412,21 @@ fn everywhere(
     }
     out.chart("impedance_lead", &chart)?;
     let (unstable_led, unstable_unled) = (unstable(led), unstable(unled));
-    let summary = json!({
-        "led": lead_name(led_lead),
-        "cap_s": led_lead.max_s,
-        "default_leads": default_leads,
-        "sessions": led.len(),
-        "unstable_led": unstable_led.len(),
-        "unstable_unled": unstable_unled.len(),
-        "unstable_points": {
-            "led": unstable_led.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
-            "unled": unstable_unled.iter().map(|m| point_json(m)).collect::<Vec<_>>(),
+    let summary = EverywhereSummary {
+        led: lead_name(led_lead),
+        cap_s: led_lead.max_s,
+        default_leads,
+        sessions: led.len(),
+        unstable_led: unstable_led.len(),
+        unstable_unled: unstable_unled.len(),
+        unstable_points: LedAndUnled {
+            led: unstable_led.iter().map(|m| PointSummary::of(m)).collect(),
+            unled: unstable_unled.iter().map(|m| PointSummary::of(m)).collect(),
         },
-        "device_op_rms_mm_mean_by_delay": by_delay,
-        "felt_vs_rendered_impedance_error_median_by_delay": impedance_by_delay,
-        "felt_change_from_undelayed_median_by_delay": felt_change_by_delay,
-    });
+        device_op_rms_mm_mean_by_delay: by_delay,
+        felt_vs_rendered_impedance_error_median_by_delay: impedance_by_delay,
+        felt_change_from_undelayed_median_by_delay: felt_change_by_delay,
+    };
     let at_100 = |f: &MedianByDelay, set: &[&Measured]| f(set, 100.0).map_or("n/a".to_string(), |v| v.to_string());
     let rms_at = |set: &[&Measured], d: f64| Some(mean_rms_mm(set, d));
     let listed = |set: &[&Measured]| {
