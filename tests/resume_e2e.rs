@@ -104,3 +104,45 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
     assert!(end.gain >= 1.0 && end.snapshot_age < 0.05, "full force again on B: {end:?}");
     assert!(!server_a.log().contains("panicked"), "{}", server_a.log_tail());
 }
+
+/// When every server of the room is gone, the client fades to zero force and stays there while it keeps
+/// looking (it never reconnects, since nothing answers), and its haptic loop runs on.
+#[test]
+fn a_client_whose_servers_are_all_gone_holds_zero_force_while_it_keeps_looking() {
+    const NAME: &str = "a_client_whose_servers_are_all_gone_holds_zero_force_while_it_keeps_looking";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(60));
+    let dir = common::temp_dir();
+    let path = |name: &str| dir.path().join(name);
+    resume::room_files(dir.path());
+    let role = Role::RoomServer {
+        listen: live::LOOPBACK,
+        cert: path("a.pem"),
+        key: path("a.key"),
+        room_key: path("room.key"),
+        record: path("a.csv"),
+    };
+    let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
+    let a_addr = server_a.ready(Duration::from_secs(15)).addr;
+    // B's address, with nothing listening on it: a port bound and let go.
+    let b_addr = std::net::UdpSocket::bind(live::LOOPBACK).and_then(|s| s.local_addr()).expect("a free port");
+
+    let client = resume::start_holder(dir.path(), a_addr, b_addr);
+    let client_started = Instant::now();
+    std::thread::sleep(Duration::from_millis(1500));
+    server_a.kill();
+    let t_kill = client_started.elapsed().as_secs_f64();
+    std::thread::sleep(Duration::from_millis(3000));
+    let stats = client.shutdown();
+
+    assert_eq!(stats.reconnects, 0, "no server answered, so no session was reopened");
+    let ticks = records::client_ticks(&path("client.csv"));
+    assert!(ticks.iter().any(|t| t.t < t_kill && t.gain >= 1.0), "full force before the kill");
+    // Stale after the snapshot age limit, then faded within the fade time; a generous margin for a busy host.
+    let settled = t_kill + 1.0;
+    let after: Vec<_> = ticks.iter().filter(|t| t.t > settled).collect();
+    assert!(after.len() > 1000, "the haptic loop ran on while the client looked: {} ticks", after.len());
+    let worst = after.iter().map(|t| t.command.iter().fold(0.0f64, |m, c| m.max(c.abs()))).fold(0.0, f64::max);
+    assert!(after.iter().all(|t| t.gain == 0.0), "the gate stayed closed");
+    assert_eq!(worst, 0.0, "zero force while no server answers");
+}
