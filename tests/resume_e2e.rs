@@ -10,7 +10,7 @@ use std::net::SocketAddr;
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime};
 
-use common::child::{ChildProcess, Role};
+use common::child::ChildProcess;
 use common::live::{self, OPS};
 use common::records;
 use common::resume::{self, Moved};
@@ -46,13 +46,7 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
     let secret = resume::room_files(dir.path());
     let key = RoomKey::from_bytes(&secret).expect("room key");
 
-    let role = Role::RoomServer {
-        listen: live::LOOPBACK,
-        cert: path("a.pem"),
-        key: path("a.key"),
-        room_key: path("room.key"),
-        record: path("a.csv"),
-    };
+    let role = resume::server_role(dir.path(), "a", live::LOOPBACK);
     let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
     let a_addr = server_a.ready(Duration::from_secs(15)).addr;
     let rt = live::runtime();
@@ -115,13 +109,7 @@ fn a_client_whose_servers_are_all_gone_holds_zero_force_while_it_keeps_looking()
     let dir = common::temp_dir();
     let path = |name: &str| dir.path().join(name);
     resume::room_files(dir.path());
-    let role = Role::RoomServer {
-        listen: live::LOOPBACK,
-        cert: path("a.pem"),
-        key: path("a.key"),
-        room_key: path("room.key"),
-        record: path("a.csv"),
-    };
+    let role = resume::server_role(dir.path(), "a", live::LOOPBACK);
     let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
     let a_addr = server_a.ready(Duration::from_secs(15)).addr;
     // B's address, with nothing listening on it: a port bound and let go.

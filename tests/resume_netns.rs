@@ -10,7 +10,7 @@ use std::net::SocketAddr;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::child::{ChildProcess, Role};
+use common::child::ChildProcess;
 use common::records;
 use common::resume::{self, Moved};
 
@@ -75,13 +75,8 @@ fn a_server_killed_on_one_host_is_replaced_on_another_and_the_linkage_resumes() 
     let (hosts, addresses) = Hosts::make(&format!("kl{}", pid % 10_000), 100 + (pid % 100) as u8);
     let mut servers = Vec::new();
     for (side, (ns, address)) in ["a", "b"].into_iter().zip(hosts.names.iter().zip(&addresses)) {
-        let role = Role::RoomServer {
-            listen: format!("{address}:4433").parse().expect("address"),
-            cert: path(&format!("{side}.pem")),
-            key: path(&format!("{side}.key")),
-            room_key: path("room.key"),
-            record: path(&format!("{side}.csv")),
-        };
+        let listen = format!("{address}:4433").parse().expect("address");
+        let role = resume::server_role(dir.path(), side, listen);
         let mut server = ChildProcess::spawn_in_netns(NAME, &role, dir.path(), &format!("server-{side}"), ns);
         let addr: SocketAddr = server.ready(Duration::from_secs(15)).addr;
         servers.push((server, addr));

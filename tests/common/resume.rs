@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use kinloop_client::driver::ClientHandle;
 use kinloop_protocol::quic::{RoomCa, Trust};
 
+use super::child::Role;
 use super::live::{self, OPS};
 use super::records::{self, Step, Tick};
 
@@ -29,6 +30,18 @@ pub fn start_holder(dir: &Path, a: SocketAddr, b: SocketAddr) -> ClientHandle {
     config.user = HAND.parse().expect("a hand that moves and holds");
     config.record = Some(dir.join("client.csv"));
     live::start_client(config)
+}
+
+/// Server SIDE (`a` or `b`) of the room whose files are in `dir`, listening on `listen`: its certificate
+/// `SIDE.pem`/`SIDE.key`, the room's key, and its record `SIDE.csv`.
+pub fn server_role(dir: &Path, side: &str, listen: SocketAddr) -> Role {
+    Role::RoomServer {
+        listen,
+        cert: dir.join(format!("{side}.pem")),
+        key: dir.join(format!("{side}.key")),
+        room_key: dir.join("room.key"),
+        record: dir.join(format!("{side}.csv")),
+    }
 }
 
 /// A room's files in `dir`: `ca.pem`, `a.pem`/`a.key` and `b.pem`/`b.key` (issued by the CA for
