@@ -88,9 +88,12 @@ scene = \"paper-testbed\"
 token_file = \"beta.tokens\"
 ";
 
+/// What is wrong, the files, and the room and key the refusal must name.
+type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a str, &'a str);
+
 #[test]
 fn a_rooms_file_with_a_mistake_is_refused_naming_file_room_and_key() {
-    let cases: [(&str, &[(&str, &str)], &str, &str); 3] = [
+    let cases: [Case; 3] = [
         ("bad scene", &[("rooms.toml", "[[room]]\nname = \"a\"\nscene = \"no-such-scene\"\n")], "\"a\"", "`scene`"),
         (
             "duplicate name",

@@ -114,7 +114,7 @@ impl Host {
             .map(|r| RoomSummary {
                 name: r.name,
                 scene: r.scene,
-                users: r.stats.users as u32,
+                users: r.stats.users,
                 thread: r.thread as u32,
                 cost_us: r.cost_us,
             })
