@@ -16,6 +16,7 @@ use kinloop_protocol::{
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
+use super::rooms::{serve_admin, Host};
 use super::Shared;
 use crate::core::{JoinRequest, UplinkSample};
 use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLink};
@@ -40,18 +41,31 @@ fn log_handshake_end(remote: std::net::SocketAddr, error: &AcceptError) {
     }
 }
 
-/// Serves one incoming connection to its end.
-pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
+/// Serves one incoming connection to its end: a session in the room its hello names, or an admin command.
+pub async fn serve(incoming: Incoming, host: Arc<Host>) {
     let remote = incoming.remote_address();
     let mut ends = None;
-    let (slot, shared_ref) = (&mut ends, &shared);
+    let routed: std::sync::OnceLock<Arc<Shared>> = std::sync::OnceLock::new();
+    let (slot, routed_ref) = (&mut ends, &routed);
     let admit = |hello: &kinloop_protocol::Hello| {
-        shared_ref.access.admit(&hello.token, hello.role).map_err(refused)?;
-        Ok(shared_ref.scene_info.clone())
+        let shared = host.route(hello).map_err(refused)?;
+        shared.access.admit(&hello.token, hello.role).map_err(refused)?;
+        let info = shared.scene_info.clone();
+        let _ = routed_ref.set(shared);
+        Ok(info)
     };
-    let resume = |offer: RoomState| resume(shared_ref, remote, offer);
+    let resume = |offer: RoomState| async move {
+        match routed_ref.get() {
+            Some(shared) => resume(shared, remote, offer).await,
+            None => ResumeAnswer::Refused(ResumeRefusal::NoRoomKey),
+        }
+    };
     let handshake = accept_resuming(incoming, admit, resume, move |hello, join| async move {
-        let shared = shared_ref;
+        let shared = routed_ref.get().ok_or_else(|| refused(RefusalReason::Malformed { what: "no room".into() }))?;
+        shared
+            .executor
+            .admit_user(&shared.cell)
+            .map_err(|over| refused(RefusalReason::OverBudget { what: over.what }))?;
         let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
         let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.gateway.snapshot_ring_bytes);
         let notify = Arc::new(Notify::new());
@@ -66,10 +80,11 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
     });
     let session = match handshake.await {
         Ok(session) => session,
+        Err(AcceptError::Admin(admin)) => return serve_admin(admin, &host).await,
         Err(error) => {
             // The VE may have admitted the user before the handshake failed (the welcome could not be sent:
             // the client had gone); it leaves now, not at the next restart.
-            if let Some((user, ..)) = ends {
+            if let (Some((user, ..)), Some(shared)) = (ends, routed.get()) {
                 let _ = shared.gateway.commands.send(Command::Leave { user }).await;
             }
             // Never the hello itself: it carries the token.
@@ -77,8 +92,8 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
             return;
         }
     };
-    let Some((_, uplink_tx, snapshot_rx, notify)) = ends else { return };
-    run_session(session, shared, uplink_tx, snapshot_rx, notify).await;
+    let (Some((_, uplink_tx, snapshot_rx, notify)), Some(shared)) = (ends, routed.get()) else { return };
+    run_session(session, shared.clone(), uplink_tx, snapshot_rx, notify).await;
 }
 
 /// Decides on a state a client offers: the room key's checks here, the fit to the linkage in the VE. A
@@ -175,10 +190,12 @@ async fn run_session(
     room_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let reason = loop {
         if *shutdown.borrow() {
-            let _ = send_control(&mut send, &Control::Leave { reason: "the server is shutting down".into() }).await;
+            let reason = shared.cell.closed_reason().or_else(|| shared.leave_reason.lock().ok().map(|r| r.clone()));
+            let reason = reason.unwrap_or_default();
+            let _ = send_control(&mut send, &Control::Leave { reason }).await;
             let _ = send.finish();
             let _ = tokio::time::timeout(LEAVE_LINGER, connection.closed()).await;
-            break "server shutdown";
+            break "room closed";
         }
         tokio::select! {
             message = recv_control(&mut recv) => match message {
