@@ -53,7 +53,8 @@ fn without_balls_the_configuration_update_adds() {
         assert!((d - &v * 0.5).norm() < 1e-15, "{name}");
     }
     planar_models().iter().for_each(|(name, model)| check(name, model));
-    spatial_models().iter().for_each(|(name, model)| check(name, model));
+    // The ball-jointed built-in scenes are what the other tests here check.
+    spatial_models().iter().filter(|(_, model)| !model.has_balls()).for_each(|(name, model)| check(name, model));
 }
 
 /// The sizes: a ball joint is 4 coordinates and 3 rates; the Delta has fewer scene bodies and joints than
