@@ -294,17 +294,7 @@ fn button_zero_is_a_clutch_the_output_fades_while_it_is_held() {
     let run = run_client_signalled(NAME, "paper-testbed", "dhd", "4", &env, &["--record", "client.csv"], None);
     assert!(run.success, "the client fails:\n{}", run.stderr);
     assert_safe("clutch", &run, OMEGA3_LIMIT_N);
-    let pressed = run.record.iter().position(|l| l == "B 1").expect("the button is pressed");
-    let released = run.record.iter().position(|l| l == "B 0").expect("the button is released");
-    assert!(pressed < released);
-    // The output gain of the client's ticks: full before the press, zero while held, full again after.
-    let ticks = common::records::client_ticks(&run.dir.path().join("client.csv"));
-    let held_s = common::checks::clutched_seconds(&ticks).expect("the clutch fades the output and it comes back");
-    assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
-    // While faded, the fake received only small braking forces.
-    let forces = run.forces();
-    let during: Vec<f64> = forces.iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
-    assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
+    common::checks::assert_clutched(&run.record, &run.forces(), &run.dir.path().join("client.csv"));
 }
 
 #[test]

@@ -223,14 +223,7 @@ fn button_one_is_a_clutch_the_output_fades_while_it_is_held() {
     let run = run_hd_with(NAME, "hd", "4", &env, &["--record", "client.csv"]);
     assert!(run.success, "the client fails:\n{}", run.stderr);
     assert_released("clutch", &run);
-    let pressed = run.record.iter().position(|l| l == "B 1").expect("the button is pressed");
-    let released = run.record.iter().position(|l| l == "B 0").expect("the button is released");
-    assert!(pressed < released);
-    let ticks = common::records::client_ticks(&run.dir.path().join("client.csv"));
-    let held_s = common::checks::clutched_seconds(&ticks).expect("the clutch fades the output and it comes back");
-    assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
-    let during: Vec<f64> = run.forces().iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
-    assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
+    common::checks::assert_clutched(&run.record, &run.forces(), &run.dir.path().join("client.csv"));
 }
 
 /// An HDAPI older than 3.0, or one that will not say its version, is refused before any force: one line

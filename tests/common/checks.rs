@@ -47,11 +47,20 @@ pub fn ticks_below_full_gain(ticks: &[Tick]) -> usize {
     ticks[first..].iter().filter(|t| t.gain < 1.0).count()
 }
 
-/// How long a clutch held the output faded (s): from the first tick at zero gain after the output first
-/// reached full gain to the next tick back at full gain; None when the output never fades and recovers.
-pub fn clutched_seconds(ticks: &[Tick]) -> Option<f64> {
-    let first_full = ticks.iter().position(|t| t.gain >= 1.0)?;
-    let faded = ticks[first_full..].iter().position(|t| t.gain == 0.0)? + first_full;
-    let back = ticks[faded..].iter().position(|t| t.gain >= 1.0)? + faded;
-    Some(ticks[back].t - ticks[faded].t)
+/// A clutch held over a 1 s press, judged on a vendor fake's record (`B 1` pressed, `B 0` released; `forces`
+/// its frames as (line, |F| in N)) and the client's recording at `client_csv`: the output gain, full before
+/// the press, fades to zero for about the press and comes back to full; while faded (from 0.4 s into the
+/// press) the device gets only small braking forces.
+pub fn assert_clutched(record: &[String], forces: &[(usize, f64)], client_csv: &std::path::Path) {
+    let pressed = record.iter().position(|l| l == "B 1").expect("the button is pressed");
+    let released = record.iter().position(|l| l == "B 0").expect("the button is released");
+    assert!(pressed < released);
+    let ticks = super::records::client_ticks(client_csv);
+    let first_full = ticks.iter().position(|t| t.gain >= 1.0).expect("the output reaches full gain");
+    let faded = ticks[first_full..].iter().position(|t| t.gain == 0.0).expect("the clutch fades") + first_full;
+    let back = ticks[faded..].iter().position(|t| t.gain >= 1.0).expect("full gain again") + faded;
+    let held_s = ticks[back].t - ticks[faded].t;
+    assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
+    let during: Vec<f64> = forces.iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
+    assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
 }
