@@ -5,7 +5,8 @@
 use nalgebra::{DMatrix, DVector};
 
 pub use kinloop_linkage::testing::{
-    builtin_scene, compile, paper_testbed as testbed, planar_models, random_state, spatial_models, TestRng as Rng,
+    builtin_scene, compile, displaced, paper_testbed as testbed, planar_models, random_state, spatial_models,
+    TestRng as Rng,
 };
 
 /// An orthonormal basis of the null space of W (n×(n-r)), from nalgebra's SVD.
