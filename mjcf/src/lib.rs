@@ -22,6 +22,7 @@
 //! | [`equality`] | `connect` and `weld` as cuts |
 //! | [`actuator`] | `position` actuators as joint PD actuators |
 //! | [`import`] | the whole model → a scene that compiles |
+//! | [`export`] | a scene → MJCF, with the encodings MJCF needs (universal, revolute and slider cuts, planar) |
 //! | [`warnings`] | what kinloop cannot use, listed by name in one warning |
 //! | [`load`] | a command line's scene argument: `.xml` through the importer, anything else as before |
 
@@ -29,6 +30,7 @@ pub mod actuator;
 pub mod defaults;
 pub mod equality;
 pub mod error;
+pub mod export;
 pub mod frames;
 pub mod import;
 pub mod inertia;
@@ -38,4 +40,5 @@ pub mod warnings;
 pub mod xml;
 
 pub use error::MjcfError;
+pub use export::{export, Export};
 pub use import::{import_file, import_str, Import};

@@ -25,14 +25,22 @@ pub fn is_mjcf(arg: &str) -> bool {
     arg.to_ascii_lowercase().ends_with(".xml")
 }
 
-/// Loads `arg`: returns the scene and the label its messages carry (the path, or `builtin:NAME`).
+/// Loads `arg`: returns the scene and the label its messages carry (the path, or `builtin:NAME`); an MJCF
+/// model's warning (what it holds that kinloop cannot use) goes to the log.
 pub fn load(arg: &str) -> Result<(Scene, String), LoadError> {
+    let (scene, label, warning) = load_with_warning(arg)?;
+    if let Some(message) = warning {
+        tracing::warn!("{message}");
+    }
+    Ok((scene, label))
+}
+
+/// As [`load`], handing the MJCF model's one warning to the caller (a command line prints it).
+pub fn load_with_warning(arg: &str) -> Result<(Scene, String, Option<String>), LoadError> {
     if is_mjcf(arg) {
         let import = import_file(std::path::Path::new(arg))?;
-        if let Some(message) = import.warnings.message(arg) {
-            tracing::warn!("{message}");
-        }
-        return Ok((import.scene, arg.to_string()));
+        return Ok((import.scene, arg.to_string(), import.warnings.message(arg)));
     }
-    Ok(builtin::load(arg)?)
+    let (scene, label) = builtin::load(arg)?;
+    Ok((scene, label, None))
 }

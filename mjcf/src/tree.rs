@@ -222,8 +222,21 @@ impl Walk<'_> {
                 self.warnings.unusable(format!("range of ball joint '{}' (a cone limit)", spec.name));
             }
         } else {
-            spec.axis = Some(self.axis(e)?.as_slice().to_vec());
-            self.unused(e, &["armature", "frictionloss", "ref"], "joint")?;
+            let axis = self.axis(e)?;
+            spec.axis = Some(axis.as_slice().to_vec());
+            self.unused(e, &["armature", "frictionloss"], "joint")?;
+            // `ref`: the body as written is at qpos = ref, which is qpos0. kinloop's frame is the one at q = 0,
+            // so it is turned (slid) back by ref, and q0 = ref.
+            let reference = e.number("ref", 0.0)? * unit;
+            spec.q0 = reference;
+            if kind == "hinge" {
+                let back = in_parent.rot * Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), -reference);
+                let rpy = back.euler_angles();
+                spec.rotation = Some(Numbers::Many(vec![rpy.0, rpy.1, rpy.2]));
+            } else {
+                let origin = in_parent.point(&(pos - axis * reference));
+                spec.origin = origin.as_slice().to_vec();
+            }
             let stiffness = non_negative(e, "stiffness")?;
             if stiffness > 0.0 {
                 spec.spring = Some(SpringSpec { stiffness, rest: e.number("springref", 0.0)? * unit });

@@ -49,7 +49,12 @@ fn imported_linkages_match_mujoco_terms() {
         let kin_model = Model::<Spatial>::compile(&import.scene, name).unwrap_or_else(|e| panic!("{e}"));
         for seed in 0..3 {
             let (q, qd) = closed_state(&kin_model, seed);
-            checks.push(Check { model: model(name), qpos: q.as_slice().to_vec(), qvel: qd.as_slice().to_vec() });
+            checks.push(Check {
+                model: model(name),
+                qpos: q.as_slice().to_vec(),
+                qvel: qd.as_slice().to_vec(),
+                steps: 0,
+            });
             cases.push((name, seed, kin_model.clone(), q, qd));
         }
     }

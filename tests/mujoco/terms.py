@@ -1,10 +1,11 @@
 """Prints MuJoCo's own terms for a batch of (model, qpos, qvel) checks, as JSON, for kinloop's tests.
 
-Reads a JSON list of {"model": path, "qpos": [...], "qvel": [...]} on stdin (qpos/qvel may be empty: the
+Reads a JSON list of {"model": path, "qpos": [...], "qvel": [...], "steps": n} on stdin (qpos/qvel may be empty: the
 model's qpos0 and zero velocity) and writes a JSON list with, per check: the joint layout, the site
 positions, the dense mass matrix (mj_fullM), qfrc_bias, qfrc_spring, qfrc_damper, qfrc_actuator (ctrl 0),
 the equality rows of the constraint Jacobian (efc_J) and, for connect equalities, Jdot*qvel of the same rows
-(mj_jacDot at both anchors). Contacts are disabled: kinloop's scene has no contacts between links.
+(mj_jacDot at both anchors), the equality residual at the state, and whether n steps of MuJoCo's own
+simulation from qpos0 stay finite. Contacts are disabled: kinloop's scene has no contacts between links.
 One process serves a whole batch, so the tests start Python once.
 """
 
@@ -24,6 +25,7 @@ def terms(check):
     if check.get("qvel"):
         d.qvel[:] = check["qvel"]
     mujoco.mj_forward(m, d)
+    closure = float(np.linalg.norm(d.efc_pos[[i for i in range(d.nefc) if d.efc_type[i] == 0]])) if d.nefc else 0.0
     full = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, full, d.qM)
     rows = [i for i in range(d.nefc) if d.efc_type[i] == mujoco.mjtConstraint.mjCNSTR_EQUALITY]
@@ -61,7 +63,17 @@ def terms(check):
         "constraint_jacobian": jac.tolist(),
         "jdot_qdot": jdot_qdot,
         "body_mass": m.body_mass.tolist(),
+        "closure": closure,
+        "stepped_finite": stepped_finite(m, check.get("steps", 0)),
     }
+
+
+def stepped_finite(m, steps):
+    """Steps a fresh copy from qpos0 `steps` times; True when the state stays finite."""
+    d = mujoco.MjData(m)
+    for _ in range(steps):
+        mujoco.mj_step(m, d)
+    return bool(np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all())
 
 
 def main():

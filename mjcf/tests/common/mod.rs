@@ -74,13 +74,17 @@ pub struct Check {
     pub qpos: Vec<f64>,
     /// qvel.
     pub qvel: Vec<f64>,
+    /// MuJoCo steps to take from qpos0 (0: none).
+    pub steps: usize,
 }
 
 /// MuJoCo's terms for each check, from one Python process.
 pub fn mujoco_terms(checks: &[Check]) -> Vec<Value> {
     let python = python();
-    let input: Vec<Value> =
-        checks.iter().map(|c| serde_json::json!({ "model": c.model, "qpos": c.qpos, "qvel": c.qvel })).collect();
+    let input: Vec<Value> = checks
+        .iter()
+        .map(|c| serde_json::json!({ "model": c.model, "qpos": c.qpos, "qvel": c.qvel, "steps": c.steps }))
+        .collect();
     let mut child = Command::new(python)
         .arg(root().join("tests/mujoco/terms.py"))
         .stdin(Stdio::piped())
