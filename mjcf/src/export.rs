@@ -109,7 +109,8 @@ impl Writer<'_> {
         let s = self.scene;
         let g = v3(&s.gravity);
         let _ = writeln!(self.out, "<mujoco model=\"{}\">", escape(&s.name));
-        let _ = writeln!(self.out, "  <!-- Exported by `kinloop export --mjcf`; encodings: docs/mjcf.md. -->");
+        let _ =
+            writeln!(self.out, "  <!-- Exported by kinloop (export to MJCF); the encodings are in docs/mjcf.md. -->");
         let _ = writeln!(self.out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
         let _ = writeln!(
             self.out,
