@@ -42,6 +42,10 @@ enum Command {
     TimerFloor(cli::timer_floor::TimerFloorArgs),
     /// Write the seeded, reproducible linkage of a seed as a scene file (any class, any unit system).
     Generate(cli::generate::GenerateArgs),
+    /// An MJCF model (MuJoCo XML) as a kinloop scene file; what kinloop cannot use is listed in one warning.
+    Import(cli::import::ImportArgs),
+    /// A scene as an MJCF model (MuJoCo XML) MuJoCo loads and simulates; what it cannot carry is one warning.
+    Export(cli::export::ExportArgs),
     /// The haptic devices kinloop can drive here: vendor libraries found (or where it looked), each device's
     /// model and spec; --check reads positions for a second with forces off.
     Devices(cli::devices::DevicesArgs),
@@ -65,6 +69,8 @@ fn run(cli: &Cli) -> Result<()> {
         Command::TimerFloor(a) => cli::timer_floor::run(a),
         Command::View(a) => cli::view::run(a),
         Command::Generate(a) => cli::generate::run(a),
+        Command::Import(a) => cli::import::run(a),
+        Command::Export(a) => cli::export::run(a),
         Command::Devices(a) => cli::devices::run(a),
     }
 }

@@ -1,8 +1,9 @@
-//! Reading the SCENE argument of the CLI: a file path, or the name of a built-in scene
-//! (`paper-testbed`, `chain50_loops5`, ...).
+//! Reading the SCENE argument of the CLI: an MJCF model (`.xml`), a scene file, or the name of a built-in
+//! scene (`paper-testbed`, `chain50_loops5`, ...), through [`kinloop_mjcf::load::load`], the reader the
+//! server uses too.
 
 use anyhow::{Context, Result};
-use kinloop_linkage::{model::builtin, model::scene::Scene};
+use kinloop_linkage::model::scene::Scene;
 
 /// A scene and the label its errors should carry.
 pub struct LoadedScene {
@@ -12,9 +13,12 @@ pub struct LoadedScene {
     pub label: String,
 }
 
-/// Loads `arg` as a file or a built-in scene name (see [`builtin::load`]).
+/// Loads `arg` as an MJCF model, a scene file or a built-in scene name (see [`kinloop_mjcf::load::load`]).
 pub fn load_scene(arg: &str) -> Result<LoadedScene> {
-    let (scene, label) = builtin::load(arg)?;
+    let (scene, label, warning) = kinloop_mjcf::load::load_with_warning(arg)?;
+    if let Some(message) = warning {
+        eprintln!("warning: {message}");
+    }
     Ok(LoadedScene { scene, label })
 }
 

@@ -1,5 +1,6 @@
-//! `kinloop simulate` applies a scene's obstacles as the VE does, and a kinloop program whose stdout is closed
-//! early (`kinloop inspect … | head`) ends quietly with success, through real processes.
+//! `kinloop simulate` applies a scene's obstacles as the VE does, a kinloop program whose stdout is closed
+//! early (`kinloop inspect … | head`) ends quietly with success, and an MJCF model is a scene argument like a
+//! scene file (`kinloop import` writes the same scene), through real processes.
 
 use std::process::{Command, Stdio};
 
@@ -53,4 +54,23 @@ fn a_closed_stdout_ends_the_program_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "exit {:?}: {stderr}", out.status);
     assert!(stderr.is_empty(), "nothing on stderr, got: {stderr}");
+}
+
+/// `kinloop simulate MODEL.xml` and `kinloop simulate` of the scene `kinloop import MODEL.xml -o` wrote move
+/// the same, bit for bit; `kinloop export --mjcf` of that scene writes a model the same reader takes.
+#[test]
+fn an_mjcf_model_is_a_scene_argument() {
+    let model = concat!(env!("CARGO_MANIFEST_DIR"), "/mjcf/tests/models/spatial-rssr.xml");
+    let dir = tempfile::tempdir().unwrap();
+    let toml = dir.path().join("rssr.toml");
+    let out = kinloop(&["import", model, "-o", toml.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let from_model = simulated_q(std::path::Path::new(model));
+    assert_eq!(from_model, simulated_q(&toml));
+    let xml = dir.path().join("again.xml");
+    let out = kinloop(&["export", toml.to_str().unwrap(), "--mjcf", "-o", xml.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let again = simulated_q(&xml);
+    let gap = from_model.iter().zip(&again).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(gap < 1e-9, "exported and re-read, q departs by {gap:e}");
 }

@@ -633,5 +633,6 @@ fn log_event(shared: &Shared, event: &VeEvent) {
     }
 }
 
-/// Loads a scene argument: a file, or a built-in name (see [`kinloop_linkage::model::builtin::load`]).
-pub use kinloop_linkage::model::builtin::load as load_scene;
+/// Loads a scene argument: an MJCF model (`.xml`), a scene file, or a built-in name (see
+/// [`kinloop_mjcf::load::load`], the one reader every command uses).
+pub use kinloop_mjcf::load::load as load_scene;
