@@ -39,20 +39,7 @@ impl SyntheticUser {
         let k = snapshot.op_twist.len().min(MAX_AXES);
         let share = self.share;
         let sample = self.sample.get_or_insert_with(|| {
-            let mut sample = UplinkSample {
-                seq: 0,
-                client_time_s: 0.0,
-                flags: 0,
-                last_snapshot_seq: 0,
-                last_snapshot_age_s: 0.0,
-                hand_wrench: [0.0; 6],
-                model_pose: [0.0; 7],
-                model_twist: [0.0; 6],
-                energy_received_j: [0.0; 6],
-                energy_emitted_j: [0.0; 6],
-                op_dim: k as u8,
-                pose_len: snapshot.op_pose.len() as u8,
-            };
+            let mut sample = UplinkSample::zeroed(k as u8, snapshot.op_pose.len() as u8);
             for (a, w) in PAPER_WRENCH.iter().enumerate().take(k) {
                 sample.hand_wrench[a] = w * share;
             }
