@@ -4,6 +4,7 @@
 use std::path::Path;
 use std::process::Command;
 
+use kinloop::experiments::capacity::CapacitySummary;
 use kinloop::experiments::delay_point::{Loss, PointSummary};
 use kinloop::experiments::latency::LatencySummary;
 use kinloop::experiments::lead::ByDelay;
@@ -421,6 +422,25 @@ fn pauses_time_each_tick_after_each_kind_of_pause() {
         };
         let (base, slept) = (find(0, "sleep").tick_us_p50, find(900, "sleep").tick_us_p50);
         assert!((ratio.sleep_over_back_to_back - slept / base).abs() <= 0.01 + 1e-3 * slept / base, "{ratio:?}");
+    }
+}
+
+/// Every point of the capacity experiment is a real-time run that happened: one room, each user count's loop
+/// timed and its stages reported, the idle loop's floor measured beside it, the synthetic users' books
+/// accepted, the linkage whole. (How fast the loop runs is the machine's doing, not asserted here.)
+#[test]
+fn capacity_runs_each_user_count_beside_the_timer_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(Name::Capacity, dir.path());
+    let r: CapacitySummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
+    assert_eq!(r.rooms, 1);
+    assert_eq!(r.points.iter().map(|p| p.users).collect::<Vec<_>>(), [1, 4], "quick grid");
+    for p in &r.points {
+        assert!(p.step_us_p50 > 0.0 && p.step_us_p50 <= p.step_us_p99 && p.bench_us > 0.0, "{p:?}");
+        assert!(p.stages_us_p50.step > 0.0 && p.stages_us_p50.snapshot_terms > 0.0, "{p:?}");
+        assert!((0.0..=1.0).contains(&p.miss_rate) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
+        assert_eq!((p.energy_reports_refused, p.state_restores), (0, 0), "{p:?}");
+        assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
     }
 }
 

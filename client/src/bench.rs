@@ -18,7 +18,7 @@ use kinloop_linkage::{
     algorithms::local_model::{op_space_terms, op_twist, LocalModelTerms},
     math::space::OpPose,
 };
-use kinloop_protocol::{CouplingGains, Mapping, OpSummary, OtherUsers, SceneSummary, Snapshot, Welcome};
+use kinloop_protocol::{CouplingGains, Mapping, OpSummary, SceneSummary, Snapshot, Welcome};
 use nalgebra::{UnitComplex, Vector2, Vector3};
 
 use crate::core::{CoreConfig, GainChoice, HapticCore};
@@ -90,7 +90,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
         singular_values: directions.singular_values.as_slice().to_vec(),
         constraint_count: directions.count as u8,
         contacts: Vec::new(),
-        others: OtherUsers::default(),
+        other_manipulators: 0,
         config: None,
         energy: kinloop_protocol::PortEnergy::zero(3),
     };

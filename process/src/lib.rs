@@ -2,7 +2,9 @@
 //! client (both use it; it uses no other kinloop crate).
 //!
 //! - [`report`]: how the programs set up their logs and print an error (one line, each cause once);
-//! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system.
+//! - [`realtime`]: what the server's and the client's real-time loops ask of the operating system;
+//! - [`cpu`]: the CPU time a thread has used, for loops that report what their waiting costs.
 
+pub mod cpu;
 pub mod realtime;
 pub mod report;

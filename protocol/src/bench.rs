@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use bytes::Bytes;
 
 use crate::codec::{self, DecodeError, EncodeError};
-use crate::messages::{Datagram, OtherUsers, PortEnergy, Snapshot};
+use crate::messages::{Datagram, PortEnergy, Snapshot};
 use crate::quic::{
     client_endpoint, server_endpoint, EndpointError, EndpointOptions, IdentityError, ServerIdentity, Trust,
 };
@@ -35,7 +35,7 @@ pub fn testbed_snapshot() -> Snapshot {
         singular_values: vec![12.83, 2.41, 0.0017],
         constraint_count: 1,
         contacts: Vec::new(),
-        others: OtherUsers::default(),
+        other_manipulators: 0,
         config: None,
         energy: PortEnergy::zero(3),
     }

@@ -51,17 +51,14 @@ fn infinity_is_refused_with_its_index() {
 fn absurd_wrench_is_out_of_range() {
     use kinloop_protocol::codec::limits::MAX_SCENE_WRENCH;
     let absurd = 2.0 * MAX_SCENE_WRENCH;
-    let mut s = testbed_snapshot();
-    s.others.push(2, &[0.0, 0.0], &[0.0, 0.0, 0.0]);
-    s.others.push(3, &[0.0, 0.0], &[0.0, 2e4, 0.0]);
-    assert!(decode_snapshot(s.clone()).is_ok(), "2e4 in some scene's units");
-    let mut s = testbed_snapshot();
-    s.others.push(2, &[0.0, 0.0], &[0.0, 0.0, 0.0]);
-    s.others.push(3, &[0.0, 0.0], &[0.0, absurd, 0.0]);
-    let error = decode_snapshot(s).unwrap_err();
+    let decode = |wrench: f64| {
+        let uplink = Uplink { hand_wrench: vec![0.0, wrench, 0.0], ..Uplink::at_rest(1, 3, 3) };
+        decode_datagram(&encode_datagram(&Datagram::Uplink(uplink)).unwrap(), &testbed_shape())
+    };
+    assert!(decode(2e4).is_ok(), "2e4 in some scene's units");
+    let error = decode(absurd).unwrap_err();
     assert!(matches!(error, DecodeError::OutOfRange { value, index: Some(1), .. } if value == absurd), "{error:?}");
-    assert_eq!(field_of(&error), "snapshot.others[1].wrench");
-    assert_eq!(error.to_string().split(' ').next(), Some("snapshot.others[1].wrench[1]"));
+    assert_eq!(field_of(&error), "uplink.hand_wrench");
 }
 
 #[test]
@@ -238,46 +235,25 @@ fn refusals_read_well() {
     );
 }
 
-/// A sender that checks the other users' table once (`other_users`) and each snapshot without its values
-/// (`snapshot_but_others`, itself the OP's terms and the user's) refuses exactly what the full check
-/// refuses: a bad value is caught by the first, a bad own field by the second, and the row count and the
-/// table's lengths by both.
+/// A sender that checks the OP's terms once per operational point (`snapshot_op_terms`) and each snapshot's
+/// own (`snapshot_user_terms`) refuses exactly what the whole check refuses: each half catches its own fields
+/// and only those.
 #[test]
 fn split_snapshot_check_covers_what_the_whole_check_does() {
     use kinloop_protocol::codec::validate;
     let shape = testbed_shape();
     let mut s = testbed_snapshot();
-    s.others.push(2, &[0.1, 0.2], &[0.5, f64::INFINITY, 0.0]);
-    assert!(validate::snapshot(&s, &shape).is_err());
-    assert!(validate::snapshot_but_others(&s, &shape).is_ok());
-    let error = validate::other_users(&s.others, &shape).unwrap_err();
-    assert!(matches!(error, DecodeError::NonFinite { index: Some(1), .. }), "{error:?}");
-    assert_eq!(field_of(&error), "snapshot.others[0].wrench");
-    s.others.wrenches[1] = 0.0;
+    s.other_manipulators = 3;
     assert!(validate::snapshot(&s, &shape).is_ok());
-    // The OP's terms and the user's: each half catches its own fields and only those.
     s.op_twist[0] = f64::NAN;
-    assert!(validate::snapshot_but_others(&s, &shape).is_err());
+    assert!(validate::snapshot(&s, &shape).is_err());
     assert!(validate::snapshot_op_terms(&s, &shape).is_err());
     assert!(validate::snapshot_user_terms(&s, &shape).is_ok());
     s.op_twist[0] = 0.0;
     s.bias_accel[2] = f64::INFINITY;
-    assert!(validate::snapshot_but_others(&s, &shape).is_err());
+    assert!(validate::snapshot(&s, &shape).is_err());
     assert!(validate::snapshot_op_terms(&s, &shape).is_ok());
     assert!(validate::snapshot_user_terms(&s, &shape).is_err());
-    s.bias_accel[2] = 0.0;
-    // A table whose columns disagree: a wrench short.
-    s.others.wrenches.pop();
-    for check in [validate::snapshot_but_others(&s, &shape), validate::other_users(&s.others, &shape)] {
-        let error = check.unwrap_err();
-        assert!(matches!(error, DecodeError::WrongLength { got: 2, expected: 3, .. }), "{error:?}");
-        assert_eq!(field_of(&error), "snapshot.others.wrenches");
-    }
-    s.others.clear();
-    for id in 0..=MAX_LIST_ENTRIES as u32 {
-        s.others.push(id, &[0.1, 0.2], &[0.5, 0.0, 0.0]);
-    }
-    assert!(matches!(validate::snapshot_but_others(&s, &shape), Err(DecodeError::TooMany { .. })));
 }
 
 /// An offered room state that is truncated (velocities shorter than coordinates), not finite or carries an

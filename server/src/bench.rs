@@ -12,18 +12,19 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
+use kinloop_linkage::model::builtin;
 use kinloop_linkage::{
     error::SceneError, math::space::Planar, math::space::SceneKind, math::space::Space, math::space::Spatial,
     model::scene::Scene, model::Model,
 };
-use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape, Snapshot};
+use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape};
 use rtrb::RingBuffer;
 use serde::Serialize;
 
-use crate::core::{JoinRequest, UplinkSample, VeConfig, VeConfigError, VeCore};
+use crate::core::{JoinRequest, VeConfig, VeConfigError, VeCore};
 use crate::driver::ve_thread::{self, VeThreadIo};
 use crate::gateway::{take_latest_frame, Command, UserLink, VeLoopStats, FRAME_HEADER};
+use crate::synthetic::SyntheticUser;
 use crate::view::ViewTap;
 
 /// Why a measurement could not run.
@@ -86,39 +87,12 @@ fn join_request(model: &Model<impl Space>, index: usize, k: usize) -> JoinReques
     }
 }
 
-/// An uplink sample "following" a snapshot: the local model where the VE put the OP, and an equal share of
-/// the paper's hand wrench, so that together the users push as the paper's one user does and the linkage
-/// moves. (Shares of alternating sign cancelled exactly on one OP: the real-time runs' linkage stood still.)
-fn follow(snapshot: &Snapshot, seq: u64, users: usize) -> UplinkSample {
-    let k = snapshot.op_twist.len();
-    let mut sample = UplinkSample {
-        seq,
-        client_time_s: 0.0,
-        flags: 0,
-        last_snapshot_seq: snapshot.seq,
-        last_snapshot_age_s: 0.0,
-        hand_wrench: [0.0; 6],
-        model_pose: [0.0; 7],
-        model_twist: [0.0; 6],
-        energy_received_j: [0.0; 6],
-        energy_emitted_j: [0.0; 6],
-        op_dim: k as u8,
-        pose_len: snapshot.op_pose.len() as u8,
-    };
-    for (a, w) in PAPER_WRENCH.iter().enumerate().take(k) {
-        sample.hand_wrench[a] = w / users as f64;
-    }
-    sample.model_pose[..snapshot.op_pose.len()].copy_from_slice(&snapshot.op_pose);
-    sample.model_twist[..k].copy_from_slice(&snapshot.op_twist);
-    sample
-}
-
 /// A VE on the testbed with `users` users (all on `link2`, see [`testbed`]) whose uplinks follow their
 /// newest snapshots: what [`ve_tick_users`] and [`ve_tick_after_pauses`] tick.
 pub struct TickBench {
     core: VeCore<Planar>,
     ids: Vec<u32>,
-    samples: Vec<Option<UplinkSample>>,
+    users: Vec<SyntheticUser>,
     seq: u64,
 }
 
@@ -136,7 +110,7 @@ impl TickBench {
                     .map_err(|reason| BenchError::Refused { index: i, reason })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let mut bench = TickBench { core, ids, samples: vec![None; users], seq: 0 };
+        let mut bench = TickBench { core, ids, users: vec![SyntheticUser::new(users); users], seq: 0 };
         for _ in 0..warm_up {
             bench.tick();
         }
@@ -151,32 +125,44 @@ impl TickBench {
     /// One tick: every user's uplink, the VE step and every user's snapshot (read back into the next
     /// uplink).
     pub fn tick(&mut self) {
+        self.tick_with(|_| {});
+    }
+
+    /// One [`Self::tick`] that also encodes the round's snapshots as the VE thread does; returns their bytes.
+    pub fn tick_encoded(&mut self) -> usize {
+        let mut buffer = Vec::new();
+        let mut bytes = 0;
+        self.tick_with(|datagram| {
+            if codec::encode_datagram_into(datagram, &mut buffer).is_ok() {
+                bytes += buffer.len();
+            }
+        });
+        bytes
+    }
+
+    /// The synthetic users (in join order).
+    pub fn users(&self) -> &[SyntheticUser] {
+        &self.users
+    }
+
+    /// One tick, handing each snapshot built to `on_snapshot` before a synthetic user reads it.
+    fn tick_with(&mut self, mut on_snapshot: impl FnMut(&Datagram)) {
         let core = black_box(&mut self.core);
         let now = core.poll_timeout();
         self.seq += 1;
-        for (sample, id) in self.samples.iter_mut().zip(&self.ids) {
-            if let Some(sample) = sample.as_mut() {
-                sample.seq = self.seq;
+        for (user, id) in self.users.iter_mut().zip(&self.ids) {
+            if let Some(sample) = user.uplink(self.seq, now.as_secs_f64()) {
                 let _ = core.handle_uplink_sample(now, *id, sample);
             }
         }
         core.handle_timeout(now);
-        let users = self.ids.len();
         while let Some(pending) = core.poll_snapshot() {
             // Ids are handed out in increasing order (see `VeCore::join`): a search, not a scan per snapshot,
-            // so the harness adds no quadratic work to the ticks it times.
+            // so the harness adds no quadratic work to the ticks it times. Each uplink answers the newest
+            // snapshot, as a client's does (the VE's round trips).
             let index = self.ids.binary_search(&pending.user_id()).unwrap_or(0);
-            match self.samples[index].as_mut() {
-                // Reuse the sample: only the pose and twist change (no allocation in the loop).
-                Some(sample) => {
-                    let s = pending.snapshot();
-                    // Each uplink answers the newest snapshot, as a client's does (the VE's round trips).
-                    sample.last_snapshot_seq = s.seq;
-                    sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
-                    sample.model_twist[..s.op_twist.len()].copy_from_slice(&s.op_twist);
-                }
-                None => self.samples[index] = Some(follow(pending.snapshot(), 0, users)),
-            }
+            on_snapshot(pending.datagram());
+            self.users[index].on_snapshot(pending.snapshot());
         }
     }
 }
@@ -332,15 +318,21 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
             let mut frame = Vec::new();
             let mut received = 0u64;
             let mut seq = 0u64;
+            let mut synthetic = vec![SyntheticUser::new(users); users];
+            let started = Instant::now();
             while !client_stop.load(Ordering::Relaxed) {
                 seq += 1;
+                let time_s = started.elapsed().as_secs_f64();
                 for (i, (uplinks, snapshots)) in clients.iter_mut().enumerate() {
                     if ids[i].is_none() || take_latest_frame(snapshots, &mut frame) == 0 {
                         continue;
                     }
                     received += 1;
                     if let Ok(Datagram::Snapshot(s)) = codec::decode_datagram(&frame, &shape) {
-                        let _ = uplinks.push(follow(&s, seq, users));
+                        synthetic[i].on_snapshot(&s);
+                    }
+                    if let Some(sample) = synthetic[i].uplink(seq, time_s) {
+                        let _ = uplinks.push(*sample);
                     }
                 }
                 std::thread::sleep(Duration::from_millis(1));

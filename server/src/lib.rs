@@ -12,11 +12,13 @@
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
 //! - [`view`]: the web page that draws the linkage live (and lets a visitor grab it) or replays a recording;
 //! - [`bench`](mod@bench): the numbers `kinloop bench` reports;
+//! - [`synthetic`]: the in-process users those numbers and `--synthetic-users` drive;
 //! - [`cli`]: the `kinloop-server` program itself (its arguments and what it prints).
 
 pub mod bench;
 pub mod cli;
 pub mod core;
+pub mod synthetic;
 
 pub use crate::core::{
     JoinRequest, Joined, UplinkRejection, UplinkSample, UserId, VeConfig, VeCore, VeEvent, VeMetrics,

@@ -95,20 +95,7 @@ fn calls_per_run<S: Space>(model: Model<S>, forms: &[LocalModelForm], passivity:
             codec::encode_datagram_into(pending.datagram(), &mut encoded).unwrap();
             let s = pending.snapshot();
             let i = users.iter().position(|u| *u == s.user_id).unwrap();
-            let sample = samples[i].get_or_insert(UplinkSample {
-                seq: 0,
-                client_time_s: 0.0,
-                flags: 0,
-                last_snapshot_seq: 0,
-                last_snapshot_age_s: 0.0,
-                hand_wrench: [0.0; 6],
-                model_pose: [0.0; 7],
-                model_twist: [0.0; 6],
-                energy_received_j: [0.0; 6],
-                energy_emitted_j: [0.0; 6],
-                op_dim: s.op_twist.len() as u8,
-                pose_len: s.op_pose.len() as u8,
-            });
+            let sample = samples[i].get_or_insert(UplinkSample::zeroed(s.op_twist.len() as u8, s.op_pose.len() as u8));
             sample.model_pose[..s.op_pose.len()].copy_from_slice(&s.op_pose);
             // Each uplink answers the newest snapshot, so the round-trip estimate is kept up too.
             sample.last_snapshot_seq = s.seq;

@@ -25,6 +25,7 @@ const WHICH: [Which; 14] = [
     Which::One(Name::Users),
     Which::One(Name::Scale),
     Which::One(Name::Pauses),
+    Which::One(Name::Capacity),
     Which::One(Name::Renderability),
     Which::One(Name::RenderabilityLive),
     Which::One(Name::RenderabilityDhd),

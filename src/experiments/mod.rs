@@ -10,6 +10,7 @@
 //! | [`users`] | do 1 to 16 users on one linkage stay stable, and what does each cost the VE? |
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
+//! | [`capacity`] | how many users does one room carry in real time, beside the machine's timer floor? |
 //! | [`renderability`] | does every shipped linkage render with default settings, on every device? (`renderability-live`: the same in real time) |
 //! | [`renderability_device`] | the same through a vendor's device: the fake DHD library as omega.3 and Falcon (`renderability-dhd`), the fake OpenHaptics library as a Touch (`renderability-hd`), in real processes (not in `all`: they need the fakes) |
 //! | [`robustness`] | do generated linkages of every class, in any units, render with default settings under delay? |
@@ -18,6 +19,7 @@
 //! on two threads and keep point order ([`common::sweep`]), so results are deterministic; timings are
 //! wall-clock and are the only numbers that vary between runs.
 
+pub mod capacity;
 pub mod common;
 pub mod delay_point;
 pub mod impedance;
@@ -58,6 +60,8 @@ pub enum Name {
     Scale,
     /// A tick's cost after a real-time loop's pause.
     Pauses,
+    /// Users per room in real time.
+    Capacity,
     /// Every shipped linkage with default settings.
     Renderability,
     /// The same in real time over loopback QUIC.
@@ -74,7 +78,7 @@ pub enum Name {
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 11] = [
+    pub const ALL: [Name; 12] = [
         Name::Paper,
         Name::SpeedAccuracy,
         Name::Stability,
@@ -82,6 +86,7 @@ impl Name {
         Name::Users,
         Name::Scale,
         Name::Pauses,
+        Name::Capacity,
         Name::Renderability,
         Name::RenderabilityLive,
         Name::LatencyLive,
@@ -98,6 +103,7 @@ impl Name {
             Name::Users => "1 to 16 users on one linkage",
             Name::Scale => "cost and snapshot size against links and loops",
             Name::Pauses => "a VE tick after the pause a real-time loop takes, against back-to-back ticks",
+            Name::Capacity => "users per room against the real-time VE step, misses beside the timer floor",
             Name::Renderability => "every scene x OP x device x network x hand with default settings",
             Name::RenderabilityLive => "the renderability matrix in real time over loopback QUIC (about 20 min)",
             Name::RenderabilityDhd => {
@@ -138,6 +144,7 @@ impl Name {
             Name::Users => "users",
             Name::Scale => "scale",
             Name::Pauses => "pauses",
+            Name::Capacity => "capacity",
             Name::Renderability => "renderability",
             Name::RenderabilityLive => "renderability-live",
             Name::RenderabilityDhd => "renderability-dhd",
@@ -158,6 +165,7 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Users => users::run(options),
         Name::Scale => scale::run(options),
         Name::Pauses => pauses::run(options),
+        Name::Capacity => capacity::run(options),
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
         Name::RenderabilityDhd => renderability_device::run(Vendor::Dhd, options),

@@ -1,7 +1,6 @@
 //! Snapshot intake: a wire [`Snapshot`] (vectors) is checked and copied into fixed-size, preallocated terms
-//! the tick can use without allocating. The checks are the wire's own (`validate::snapshot_but_others`:
-//! lengths, finiteness and the protocol's ranges; the others' table, which the core does not read, is left
-//! to the decoder), then the core's stricter ones (its own bound on Λ̂⁻¹, non-negative diagonal, a pose it
+//! the tick can use without allocating. The checks are the wire's own (`validate::snapshot`: lengths,
+//! finiteness and the protocol's ranges), then the core's stricter ones (its own bound on Λ̂⁻¹, non-negative diagonal, a pose it
 //! can read). The codec already ran the wire's checks on network input; the core runs them again because
 //! in-process callers hand it snapshots directly, and a corrupt term must never reach the device or the
 //! uplink (a pose of 1e300 m accepted here once sent the local model, and the uplinks, off to 1e298 m).
@@ -37,7 +36,7 @@ pub(crate) struct SnapshotTerms<S: Space> {
     pub received_at: Duration,
     /// Client clock of the uplink the VE had used (0: none).
     pub uplink_time_s: f64,
-    /// Other users hold the linkage (the snapshot's table of them is not empty).
+    /// Other manipulators hold the linkage (the snapshot counts them).
     pub shared: bool,
     pub op_pose: OpPose<S>,
     pub op_twist: S::OpVec,
@@ -89,7 +88,7 @@ impl<S: Space> SnapshotTerms<S> {
         max_inverse_inertia: f64,
         pose_memo: &mut S::RotParamsMemo,
     ) -> Result<(), SnapshotRejection> {
-        validate::snapshot_but_others(snap, shape).map_err(SnapshotRejection::Wire)?;
+        validate::snapshot(snap, shape).map_err(SnapshotRejection::Wire)?;
         let k = S::DIM;
         self.op_pose = OpPose::from_slice_memo(&snap.op_pose, pose_memo)
             .ok_or(SnapshotRejection::Implausible { field: "op_pose" })?;
@@ -119,7 +118,7 @@ impl<S: Space> SnapshotTerms<S> {
         self.seq = snap.seq;
         self.received_at = received_at;
         self.uplink_time_s = snap.uplink_time_s;
-        self.shared = !snap.others.is_empty();
+        self.shared = snap.other_manipulators > 0;
         Ok(())
     }
 

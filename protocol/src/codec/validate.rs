@@ -5,8 +5,8 @@ use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
     uplink_flags, AdminAnswer, AdminCommand, AdminRequest, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram,
-    DeviceCaps, Hello, Join, Mapping, MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused,
-    ResumeAnswer, ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
+    DeviceCaps, Hello, Join, Mapping, MappingRequest, OpSummary, PortEnergy, RefusalReason, Refused, ResumeAnswer,
+    ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -239,21 +239,13 @@ fn refused(r: &Refused) -> Result<(), DecodeError> {
     }
 }
 
-/// Checks a snapshot against the session shape.
+/// Checks a snapshot against the session shape: [`snapshot_user_terms`] and [`snapshot_op_terms`].
 pub fn snapshot(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
-    snapshot_but_others(s, shape)?;
-    other_users(&s.others, shape)
-}
-
-/// [`snapshot`] without the values of `others` (its row count and lengths are checked): for a sender that
-/// builds every user's table from the rows of one and checks that one with [`other_users`] instead of each
-/// (64 users make 4032 rows a tick).
-pub fn snapshot_but_others(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     snapshot_user_terms(s, shape)?;
     snapshot_op_terms(s, shape)
 }
 
-/// The fields of [`snapshot_but_others`] that describe the operational point rather than the user: twist,
+/// The fields of [`snapshot`] that describe the operational point rather than the user: twist,
 /// Λ̂⁻¹, directions, singular values and constraint count. A sender that writes the same values into the
 /// snapshots of every user holding one OP checks them once, and each snapshot with
 /// [`snapshot_user_terms`].
@@ -278,8 +270,8 @@ pub fn snapshot_op_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Decod
     Ok(())
 }
 
-/// The rest of [`snapshot_but_others`]: time, pose (each user's wire angle has its own anchor), b̂, contacts,
-/// the shape of the others' table and the configuration-space terms.
+/// The rest of [`snapshot`]: time, pose (each user's wire angle has its own anchor), b̂, contacts, the
+/// energy books' shape and the configuration-space terms.
 pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), DecodeError> {
     scalar(Field::at("snapshot.server_time_s"), s.server_time_s, 0.0, MAX_TIME_S)?;
     scalar(Field::at("snapshot.uplink_time_s"), s.uplink_time_s, 0.0, MAX_TIME_S)?;
@@ -289,7 +281,6 @@ pub fn snapshot_user_terms(s: &Snapshot, shape: &SessionShape) -> Result<(), Dec
     for (i, c) in s.contacts.iter().enumerate() {
         contact(i, c, shape)?;
     }
-    other_users_shape(&s.others, shape)?;
     port_energy_shape(("snapshot.energy.received_j", "snapshot.energy.emitted_j"), &s.energy, shape.op_dim())?;
     match &s.config {
         Some(config) => config_terms(config, shape),
@@ -318,35 +309,6 @@ fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), Decode
     scalar(Field::in_item(LIST, i, "bias_accel"), c.bias_accel, -MAX_SCENE_ACCEL, MAX_SCENE_ACCEL)?;
     scalar(Field::in_item(LIST, i, "stiffness"), c.stiffness, 0.0, MAX_SCENE_GAIN)?;
     scalar(Field::in_item(LIST, i, "damping"), c.damping, 0.0, MAX_SCENE_GAIN)
-}
-
-const OTHERS: &str = "snapshot.others";
-
-/// Checks a table of other users: its shape (as [`snapshot_but_others`] does) and every row's OP position
-/// and wrench; a bad value is named by row, e.g. `snapshot.others[3].wrench[1]`.
-pub fn other_users(o: &OtherUsers, shape: &SessionShape) -> Result<(), DecodeError> {
-    other_users_shape(o, shape)?;
-    rows(OTHERS, "op_position", &o.op_positions, shape.point_dim(), MAX_SCENE_POSITION)?;
-    rows(OTHERS, "wrench", &o.wrenches, shape.op_dim(), MAX_SCENE_WRENCH)
-}
-
-/// At most [`MAX_LIST_ENTRIES`] rows, and d positions and k wrench numbers for each.
-fn other_users_shape(o: &OtherUsers, shape: &SessionShape) -> Result<(), DecodeError> {
-    let rows = o.len();
-    count(Field::at(OTHERS), rows, MAX_LIST_ENTRIES)?;
-    length(Field::at("snapshot.others.op_positions"), o.op_positions.len(), rows * shape.point_dim())?;
-    length(Field::at("snapshot.others.wrenches"), o.wrenches.len(), rows * shape.op_dim())
-}
-
-/// Every number of a flat table of rows of `width` within `±bound`, an error naming the row and element.
-fn rows(list: &'static str, member: &'static str, v: &[f64], width: usize, bound: f64) -> Result<(), DecodeError> {
-    if v.iter().all(|&value| value >= -bound && value <= bound) {
-        return Ok(());
-    }
-    for (i, &value) in v.iter().enumerate() {
-        in_range(Field::in_item(list, i / width, member), Some(i % width), value, -bound, bound)?;
-    }
-    Ok(())
 }
 
 fn config_terms(c: &ConfigTerms, shape: &SessionShape) -> Result<(), DecodeError> {

@@ -301,7 +301,7 @@ fn snapshot() -> Datagram {
         singular_values: vec![16.0, 4.0, 0.0],
         constraint_count: 1,
         contacts: vec![],
-        others: OtherUsers { user_ids: vec![7], op_positions: vec![0.25, -0.5], wrenches: vec![1.0, 0.0, -0.25] },
+        other_manipulators: 2,
         config: None,
         energy: PortEnergy { received_j: vec![0.5, 0.25, 0.0], emitted_j: vec![2.0, 0.0, 0.0] },
     })
@@ -343,14 +343,7 @@ const SNAPSHOT_BYTES: &[&str] = &[
     "0000000000000000",                                   // 0.0
     "01",                                                 // constraint_count 1
     "00",                                                 // contacts: none
-    "01 07",                                              // others.user_ids: 1 id, 7
-    "02",                                                 // others.op_positions: 2 values (one planar row)
-    "000000000000d03f",                                   // 0.25
-    "000000000000e0bf",                                   // -0.5
-    "03",                                                 // others.wrenches: 3 values (one planar row)
-    "000000000000f03f",                                   // 1.0
-    "0000000000000000",                                   // 0.0
-    "000000000000d0bf",                                   // -0.25
+    "02",                                                 // other_manipulators 2
     "00",                                                 // config: None
     "03",                                                 // energy.received_j: 3 values
     "000000000000e03f 000000000000d03f 0000000000000000", // 0.5 0.25 0.0
@@ -452,9 +445,9 @@ fn planar_testbed_snapshot_matches_golden_bytes() {
     let golden = unhex(SNAPSHOT_BYTES);
     assert_eq!(
         golden.len(),
-        343,
-        "a planar snapshot without contacts is 34 doubles (6 of them the energy books), one other user's row 5, plus \
-         small headers"
+        300,
+        "a planar snapshot without contacts is 34 doubles (6 of them the energy books) plus small headers and the \
+         count of other manipulators"
     );
     assert_eq!(encode_datagram(&snapshot()).unwrap(), golden);
     assert_eq!(decode_datagram(&golden, &PLANAR_TESTBED).unwrap(), snapshot());

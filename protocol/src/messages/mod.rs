@@ -469,80 +469,6 @@ pub struct ContactTerm {
     pub damping: f64,
 }
 
-/// The other manipulators' operational points and wrenches, so a client can feel who else pushes: row `i`
-/// is user `user_ids[i]`, at `op_positions[i d..(i + 1) d]` (world, m; d the point dimension) applying
-/// `wrenches[i k..(i + 1) k]` (length `k`, linear first).
-///
-/// One flat table, not an entry per user with its own heap vectors: a server with N users sends N snapshots a round holding N − 1 rows each, and its rows are copied
-/// and encoded as contiguous blocks.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct OtherUsers {
-    /// Each row's user id.
-    pub user_ids: Vec<u32>,
-    /// Each row's OP position, d numbers a row.
-    pub op_positions: Vec<f64>,
-    /// Each row's wrench, k numbers a row.
-    pub wrenches: Vec<f64>,
-}
-
-impl OtherUsers {
-    /// Rows.
-    #[inline]
-    pub fn len(&self) -> usize {
-        self.user_ids.len()
-    }
-
-    /// True without rows.
-    #[inline]
-    pub fn is_empty(&self) -> bool {
-        self.user_ids.is_empty()
-    }
-
-    /// Removes every row, keeping the capacity.
-    #[inline]
-    pub fn clear(&mut self) {
-        self.user_ids.clear();
-        self.op_positions.clear();
-        self.wrenches.clear();
-    }
-
-    /// Room for `rows` rows of point dimension `d` and operational dimension `k` without reallocating.
-    pub fn reserve(&mut self, rows: usize, d: usize, k: usize) {
-        self.user_ids.reserve(rows.saturating_sub(self.user_ids.len()));
-        self.op_positions.reserve((rows * d).saturating_sub(self.op_positions.len()));
-        self.wrenches.reserve((rows * k).saturating_sub(self.wrenches.len()));
-    }
-
-    /// Appends a row.
-    #[inline]
-    pub fn push(&mut self, user_id: u32, op_position: &[f64], wrench: &[f64]) {
-        self.user_ids.push(user_id);
-        self.op_positions.extend_from_slice(op_position);
-        self.wrenches.extend_from_slice(wrench);
-    }
-
-    /// Appends rows `rows` of `table`, whose rows have dimensions `d` and `k`, as blocks.
-    #[inline]
-    pub fn extend_from_rows(&mut self, table: &OtherUsers, rows: std::ops::Range<usize>, d: usize, k: usize) {
-        if rows.is_empty() {
-            return;
-        }
-        self.user_ids.extend_from_slice(&table.user_ids[rows.clone()]);
-        self.op_positions.extend_from_slice(&table.op_positions[rows.start * d..rows.end * d]);
-        self.wrenches.extend_from_slice(&table.wrenches[rows.start * k..rows.end * k]);
-    }
-
-    /// Row `i`: user id, OP position and wrench, for a table of point dimension `d` and operational dimension
-    /// `k` (a checked snapshot's are its session's); `None` past the end or when the table is shorter.
-    pub fn row(&self, i: usize, d: usize, k: usize) -> Option<(u32, &[f64], &[f64])> {
-        Some((
-            *self.user_ids.get(i)?,
-            self.op_positions.get(i * d..(i + 1) * d)?,
-            self.wrenches.get(i * k..(i + 1) * k)?,
-        ))
-    }
-}
-
 /// Configuration-space local-model terms (paper eq 11), sent only when the client asked for
 /// [`LocalModelForm::ConfigSpace`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -597,8 +523,11 @@ pub struct Snapshot {
     pub constraint_count: u8,
     /// Contacts near the operational point.
     pub contacts: Vec<ContactTerm>,
-    /// The other manipulators.
-    pub others: OtherUsers,
+    /// How many other manipulators are on the linkage. Their hands reach this user's local model through b̂
+    /// (weighted, see the server's `sharing`) and the VE it is blended toward; the model itself needs only
+    /// whether it is alone, so a snapshot carries a count rather than their rows, and the bytes a round
+    /// sends grow with the users rather than with their square.
+    pub other_manipulators: u16,
     /// Configuration-space terms, present only for [`LocalModelForm::ConfigSpace`].
     pub config: Option<ConfigTerms>,
     /// The energy books of this user's coupling port in the VE.

@@ -55,19 +55,6 @@ fn contact(shape: SessionShape) -> impl Strategy<Value = ContactTerm> {
         })
 }
 
-fn other_user(shape: SessionShape) -> impl Strategy<Value = (u32, Vec<f64>, Vec<f64>)> {
-    (any::<u32>(), values(shape.point_dim(), 100.0), values(shape.op_dim(), 1e3))
-}
-
-/// A table of other users built row by row from `rows`.
-fn other_users(rows: Vec<(u32, Vec<f64>, Vec<f64>)>) -> OtherUsers {
-    let mut table = OtherUsers::default();
-    for (user_id, op_position, wrench) in &rows {
-        table.push(*user_id, op_position, wrench);
-    }
-    table
-}
-
 fn config_terms(shape: SessionShape) -> impl Strategy<Value = ConfigTerms> {
     let (n, m, k) = (shape.n, shape.m, shape.op_dim());
     (
@@ -116,16 +103,12 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
         decreasing(k),
         0..=k as u8,
     );
-    let surroundings = (
-        vec(contact(shape), 0..4),
-        vec(other_user(shape), 0..4).prop_map(other_users),
-        proptest::option::of(config_terms(shape)),
-    );
+    let surroundings = (vec(contact(shape), 0..4), any::<u16>(), proptest::option::of(config_terms(shape)));
     (header, local_model, surroundings).prop_map(
         move |(
             (seq, server_time_s, ve_step, user_id),
             (op_pose, op_twist, inverse_inertia, bias_accel, directions, singular_values, constraint_count),
-            (contacts, others, config),
+            (contacts, other_manipulators, config),
         )| Snapshot {
             seq,
             server_time_s,
@@ -140,7 +123,7 @@ pub fn snapshot(shape: SessionShape) -> impl Strategy<Value = Snapshot> {
             singular_values,
             constraint_count,
             contacts,
-            others,
+            other_manipulators,
             config,
             energy: PortEnergy { received_j: vec![0.5; k], emitted_j: vec![0.25; k] },
         },
@@ -383,11 +366,7 @@ pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
             stiffness: 1e4,
             damping: 10.0,
         }],
-        others: OtherUsers {
-            user_ids: vec![3],
-            op_positions: vec![0.5, 0.0, 0.2],
-            wrenches: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.1],
-        },
+        other_manipulators: 1,
         config: Some(ConfigTerms {
             q: vec![0.1, 0.2, 0.3],
             qd: vec![0.0; 3],

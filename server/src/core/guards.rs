@@ -53,6 +53,25 @@ pub struct UplinkSample {
 }
 
 impl UplinkSample {
+    /// A sample of `op_dim` axes and a pose of `pose_len` numbers with every number zero (sequence, clock,
+    /// hand, model, books): what an in-process user fills in.
+    pub fn zeroed(op_dim: u8, pose_len: u8) -> Self {
+        UplinkSample {
+            seq: 0,
+            client_time_s: 0.0,
+            flags: 0,
+            last_snapshot_seq: 0,
+            last_snapshot_age_s: 0.0,
+            hand_wrench: [0.0; MAX_OP_DIM],
+            model_pose: [0.0; MAX_POSE_LEN],
+            model_twist: [0.0; MAX_OP_DIM],
+            energy_received_j: [0.0; MAX_OP_DIM],
+            energy_emitted_j: [0.0; MAX_OP_DIM],
+            op_dim,
+            pose_len,
+        }
+    }
+
     /// Copies the numbers the VE needs; fails only when a vector is longer than any scene uses.
     pub fn from_uplink(uplink: &Uplink) -> Result<Self, UplinkRejection> {
         let k = uplink.hand_wrench.len();

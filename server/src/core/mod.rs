@@ -51,8 +51,8 @@ use kinloop_linkage::{
     model::data::Data, model::Model,
 };
 use kinloop_protocol::{
-    Datagram, LocalModelForm, Mapping, OpSummary, OtherUsers, RefusalReason, Role, SceneInfo, SceneSummary,
-    SessionShape, Snapshot, Uplink, Welcome,
+    Datagram, LocalModelForm, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
+    Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -188,10 +188,6 @@ struct SnapshotScratch<S: Space> {
     contact_y: DVector<f64>,
     /// Contacts within the margin, nearest first.
     near: Vec<Contact<S>>,
-    /// Every manipulator's row for the others' tables, in user order (so by ascending id), gathered and checked
-    /// once per snapshot round: each snapshot copies it as blocks but for its own row (64 users make 4,032 rows
-    /// a round).
-    others: OtherUsers,
     /// The op-space terms of the OP whose users are being built (see `snapshots`).
     at_op: snapshots::AtOp<S>,
     /// `P Σ Jᵀ F_h` over every pushing user's hand (n): the hands' share of the probe's accelerations
@@ -296,11 +292,6 @@ impl<S: Space> VeCore<S> {
             op_y: DMatrix::zeros(n, k),
             contact_y: DVector::zeros(n),
             near: Vec::with_capacity(kinloop_linkage::algorithms::contact::contact_capacity(&model)),
-            others: {
-                let mut table = OtherUsers::default();
-                table.reserve(user_room, <S::Point as VecOps>::LEN, S::DIM);
-                table
-            },
             at_op: snapshots::AtOp::none(),
             hands_qdd: DVector::zeros(n),
             response: vec![0.0; 2 * m],

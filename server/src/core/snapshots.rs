@@ -25,8 +25,8 @@
 //!   which its own local model is blended toward;
 //! - the SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12): directions in `(v, L ω)` coordinates, singular values,
 //!   the constraint count;
-//! - OP pose and twist, the other users' OP positions and wrenches, and the configuration-space terms of
-//!   eq 11 when the user asked for them.
+//! - OP pose and twist, how many other manipulators there are (the local model needs only that), and the
+//!   configuration-space terms of eq 11 when the user asked for them.
 //!
 //! **Contacts** within `contact_margin` length scales (the nearest `MAX_LOCAL_CONTACTS`, wherever on the linkage: the
 //! loops carry a contact's force to any OP) enter the local model along their normal n. With
@@ -59,7 +59,6 @@ use kinloop_linkage::{
     algorithms::local_model::{op_acceleration, op_twist, LocalModelTerms, MAX_LOCAL_CONTACTS},
     math::space::OpPose,
 };
-use kinloop_protocol::codec::limits::{MAX_LIST_ENTRIES, MAX_SCENE_WRENCH};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
 use nalgebra::{DMatrix, DVector};
@@ -104,15 +103,8 @@ impl<S: Space> VeCore<S> {
             scratch.near.truncate(MAX_LOCAL_CONTACTS);
         }
         let time_s = self.last_tick_at.as_secs_f64();
-        // Every snapshot carries rows of the same table of the other users: gather and check it once here. If
-        // it fails, each snapshot is checked whole, and those that carry a bad row are withheld.
-        scratch.others.clear();
-        let manipulators = self.users.iter().zip(&self.couplings);
-        for (user, coupling) in manipulators.filter(|(user, _)| user.role == Role::Manipulator) {
-            let wrench = within_wire_range::<S>(&coupling.wrench);
-            scratch.others.push(user.id, coupling.op_pose.position.as_slice(), wrench.as_slice());
-        }
-        let others_valid = validate::other_users(&scratch.others, &self.shape).is_ok();
+        // Each snapshot counts the other manipulators (its own user aside): all its local model needs of them.
+        let manipulators = self.users.iter().filter(|user| user.role == Role::Manipulator).count();
         for position in 0..self.scratch.order.len() {
             let index = self.scratch.order[position];
             if self.users[index].presence != Presence::Present {
@@ -129,7 +121,7 @@ impl<S: Space> VeCore<S> {
                 index,
                 &mut self.scratch,
                 self.contacts.as_ref().map(|c| (c.stiffness, c.damping)),
-                self.roster_version,
+                manipulators,
                 &mut pose_memo,
                 &exchange,
                 self.config.exchange_delay_s,
@@ -148,9 +140,7 @@ impl<S: Space> VeCore<S> {
                 snapshot.energy.emitted_j.copy_from_slice(&books.emitted_j[..k]);
                 snapshot.ve_step = self.step;
                 // The OP's terms are the same numbers in every snapshot built from `at_op`: checked once.
-                let checked = if !others_valid {
-                    validate::snapshot(snapshot, &self.shape)
-                } else if at_op.checked {
+                let checked = if at_op.checked {
                     validate::snapshot_user_terms(snapshot, &self.shape)
                 } else {
                     let op_terms = validate::snapshot_op_terms(snapshot, &self.shape);
@@ -349,7 +339,7 @@ fn build_one<S: Space>(
     index: usize,
     scratch: &mut SnapshotScratch<S>,
     contact_gains: Option<(f64, f64)>,
-    roster_version: u64,
+    manipulators: usize,
     pose_memo: &mut S::RotParamsMemo,
     exchange: &Exchange,
     exchange_delay_s: f64,
@@ -374,12 +364,8 @@ fn build_one<S: Space>(
     };
     let bias = shared_bias(&shared.acceleration, &shared.hands, &own, others, weight);
 
-    let (d, k) = (<S::Point as VecOps>::LEN, S::DIM);
-    let user_id = users[index].id;
+    let other_manipulators = manipulators - usize::from(users[index].role == Role::Manipulator);
     let slot = &mut users[index].slot;
-    if slot.roster_version != roster_version {
-        slot.size_others(scratch.others.len().min(MAX_LIST_ENTRIES), d, k, roster_version);
-    }
     if let Some(scratch_terms) = slot.config_scratch.as_mut() {
         scratch_terms.fill_from(model, data, q, qd, &own_wrench, LocalModelTerms::full());
     }
@@ -398,16 +384,7 @@ fn build_one<S: Space>(
     if let (Some(wire), Some(terms)) = (snapshot.config.as_mut(), config_scratch) {
         write_config_terms(wire, terms);
     }
-    // Every manipulator's row but this user's own, as two blocks, and no more than the codec's limit.
-    let table = &scratch.others;
-    let rows = table.len();
-    // The roster, and so the table, is sorted by user id.
-    let own = table.user_ids.binary_search(&user_id).map_or(rows..rows, |row| row..row + 1);
-    let before = 0..own.start.min(MAX_LIST_ENTRIES);
-    let after = own.end..rows.min(own.end + MAX_LIST_ENTRIES - before.end);
-    snapshot.others.clear();
-    snapshot.others.extend_from_rows(table, before, d, k);
-    snapshot.others.extend_from_rows(table, after, d, k);
+    snapshot.other_manipulators = u16::try_from(other_manipulators).unwrap_or(u16::MAX);
 
     // Contacts last: frame_point_inertia overwrites data.op.
     spare.append(&mut snapshot.contacts);
@@ -530,42 +507,4 @@ fn fill_contact_term<S: Space>(
     term.stiffness = stiffness;
     term.damping = damping;
     Ok(penalty)
-}
-
-/// A user's wrench as the others' table carries it: scaled down, its direction kept, until no component
-/// exceeds the wire's `MAX_SCENE_WRENCH`. The coupling's PD may legitimately go past it for a moment (a user
-/// yanking the local model far from the VE), and one row out of range would fail the table, and with it
-/// every other user's snapshot. A non-finite component stays non-finite, for the checks to withhold.
-fn within_wire_range<S: Space>(wrench: &S::OpVec) -> S::OpVec {
-    let largest = wrench.as_slice().iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let mut fitted = *wrench;
-    if largest > MAX_SCENE_WRENCH && largest.is_finite() {
-        let scale = MAX_SCENE_WRENCH / largest;
-        for x in fitted.as_mut_slice() {
-            // The clamp only catches the rounding of the largest component's product.
-            *x = (*x * scale).clamp(-MAX_SCENE_WRENCH, MAX_SCENE_WRENCH);
-        }
-    }
-    fitted
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use kinloop_linkage::math::space::Planar;
-    use nalgebra::Vector3;
-
-    /// A wrench past the wire's range is scaled into it with its direction kept and its largest component on
-    /// the limit; one within range is left as it is, and a non-finite component stays non-finite.
-    #[test]
-    fn the_others_wrenches_are_fitted_to_the_wire_range() {
-        let yank = Vector3::new(-3.0 * MAX_SCENE_WRENCH, 0.5 * MAX_SCENE_WRENCH, 7.0);
-        let fitted = within_wire_range::<Planar>(&yank);
-        assert_eq!(fitted.amax(), MAX_SCENE_WRENCH);
-        assert!((fitted.normalize() - yank.normalize()).amax() <= 1e-15, "{fitted}");
-        let calm = Vector3::new(MAX_SCENE_WRENCH, -0.3, 0.002);
-        assert_eq!(within_wire_range::<Planar>(&calm), calm);
-        let bad = Vector3::new(f64::NAN, 2.0 * MAX_SCENE_WRENCH, 0.0);
-        assert!(within_wire_range::<Planar>(&bad)[0].is_nan());
-    }
 }

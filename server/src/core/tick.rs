@@ -10,6 +10,15 @@ impl<S: Space> VeCore<S> {
     /// Runs every tick due at or before `now` at the fixed VE period (at most `max_catch_up_ticks`; beyond
     /// that the schedule skips ahead and the skip is counted), then builds snapshots if one is due.
     pub fn handle_timeout(&mut self, now: Duration) {
+        if self.run_due_ticks(now) {
+            self.build_due_snapshots();
+        }
+    }
+
+    /// The first half of [`Self::handle_timeout`]: runs every tick due at or before `now`; true when a
+    /// snapshot round is due after them ([`Self::build_due_snapshots`]). A driver that times the two halves
+    /// apart calls them in turn.
+    pub fn run_due_ticks(&mut self, now: Duration) -> bool {
         let mut ran = 0;
         while self.next_tick_at <= now {
             if ran == self.config.max_catch_up_ticks {
@@ -25,12 +34,20 @@ impl<S: Space> VeCore<S> {
             self.next_tick_at += self.period;
             ran += 1;
         }
-        if ran > 0 && self.last_tick_at >= self.next_snapshot_at {
-            self.build_snapshots();
-            self.update_held_loads();
-            while self.next_snapshot_at <= self.last_tick_at {
-                self.next_snapshot_at += self.snapshot_period;
-            }
+        self.metrics.events_dropped = self.events.dropped;
+        ran > 0 && self.last_tick_at >= self.next_snapshot_at
+    }
+
+    /// The second half of [`Self::handle_timeout`]: every present user's snapshot terms at the current state,
+    /// when [`Self::run_due_ticks`] said a round is due (a call when none is due does nothing).
+    pub fn build_due_snapshots(&mut self) {
+        if self.last_tick_at < self.next_snapshot_at {
+            return;
+        }
+        self.build_snapshots();
+        self.update_held_loads();
+        while self.next_snapshot_at <= self.last_tick_at {
+            self.next_snapshot_at += self.snapshot_period;
         }
         self.metrics.events_dropped = self.events.dropped;
     }

@@ -6,8 +6,8 @@ use std::time::Duration;
 use kinloop_linkage::algorithms::local_model::{ConfigSpaceTerms, MAX_LOCAL_CONTACTS};
 use kinloop_linkage::{math::space::Space, model::Model};
 use kinloop_protocol::{
-    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Mapping, MappingRequest, OtherUsers,
-    Role, Snapshot,
+    ConfigTerms, ContactTerm, Datagram, DeviceCaps, Hello, Join, LocalModelForm, Mapping, MappingRequest, Role,
+    Snapshot,
 };
 
 use super::fade::Fade;
@@ -76,8 +76,6 @@ pub struct SnapshotSlot {
     pub message: Datagram,
     /// Contact terms with allocated vectors, not in the current snapshot.
     pub spare_contacts: Vec<ContactTerm>,
-    /// Roster version the `others` list was sized for.
-    pub roster_version: u64,
     /// Built and not yet polled.
     pub pending: bool,
     /// Configuration-space terms scratch, for `LocalModelForm::ConfigSpace`.
@@ -114,7 +112,7 @@ impl SnapshotSlot {
             singular_values: Vec::with_capacity(k),
             constraint_count: 0,
             contacts: Vec::with_capacity(if model.obstacles.is_empty() { 0 } else { MAX_LOCAL_CONTACTS }),
-            others: OtherUsers::default(),
+            other_manipulators: 0,
             config,
             energy: kinloop_protocol::PortEnergy::zero(k),
         };
@@ -138,7 +136,6 @@ impl SnapshotSlot {
         SnapshotSlot {
             message: Datagram::Snapshot(snapshot),
             spare_contacts,
-            roster_version: u64::MAX,
             pending: false,
             config_scratch: (form == LocalModelForm::ConfigSpace).then(|| ConfigSpaceTerms::zeros(n, m, k)),
         }
@@ -159,12 +156,6 @@ impl SnapshotSlot {
             Datagram::Snapshot(s) => s,
             Datagram::Uplink(_) => unreachable!("a snapshot slot holds a snapshot"),
         }
-    }
-
-    /// Makes room for `rows` other users (allocates; only after the roster changed).
-    pub fn size_others(&mut self, rows: usize, point_dim: usize, op_dim: usize, version: u64) {
-        self.snapshot_mut().others.reserve(rows, point_dim, op_dim);
-        self.roster_version = version;
     }
 }
 

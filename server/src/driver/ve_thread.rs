@@ -10,12 +10,13 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
+use kinloop_process::cpu::thread_cpu_time;
 use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::codec;
 use rtrb::{Consumer, Producer};
 
 use crate::core::{UserId, VeCore, VeEvent};
-use crate::gateway::{push_frame, Command, LatencyHistogram, UserLink, VeLoopStats};
+use crate::gateway::{push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats};
 use crate::view::ViewTap;
 
 use super::room::{Room, ROOM_STATE_PERIOD};
@@ -62,6 +63,11 @@ pub fn run<S: Space>(core: VeCore<S>, io: VeThreadIo, realtime: bool) -> VeLoopS
 
 /// One VE's loop state, stepped by whoever owns it: [`run`] on a thread of its own, or a thread of the
 /// rooms' executor among other rooms (`super::rooms::executor`). [`VeLoop::tick`] is one iteration.
+///
+/// Each iteration runs its stages in turn and times each (`StageHistograms`): intake, step, snapshot terms,
+/// then the round's snapshots encoded together, pushed together and their tasks woken together (a stage at a
+/// time over all users keeps each stage's code and data hot across users), events and the recorder, the
+/// view's tap, and the loop's own statistics.
 pub struct VeLoop<S: Space> {
     core: VeCore<S>,
     io: VeThreadIo,
@@ -71,9 +77,12 @@ pub struct VeLoop<S: Space> {
     publish_every: u64,
     room_every: u64,
     histogram: LatencyHistogram,
+    stages: StageHistograms,
     links: Vec<ActiveLink>,
-    encoded: Vec<u8>,
+    round: Round,
     epoch: Instant,
+    /// CPU time of the thread that made the loop (a room's executor thread is shared with other rooms).
+    cpu_at_start: Option<Duration>,
     iterations: u64,
 }
 
@@ -84,6 +93,7 @@ impl<S: Space> VeLoop<S> {
         let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;
         let room_every = (core.config().ve_rate_hz * ROOM_STATE_PERIOD.as_secs_f64()).round().max(1.0) as u64;
         let links = Vec::with_capacity(2 * core.config().max_users);
+        let round = Round::with_capacity(2 * core.config().max_users);
         VeLoop {
             core,
             io,
@@ -92,9 +102,11 @@ impl<S: Space> VeLoop<S> {
             publish_every,
             room_every,
             histogram: LatencyHistogram::default(),
+            stages: StageHistograms::default(),
             links,
-            encoded: Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES),
+            round,
             epoch,
+            cpu_at_start: thread_cpu_time(),
             iterations: 0,
         }
     }
@@ -113,14 +125,15 @@ impl<S: Space> VeLoop<S> {
     pub fn tick(&mut self) {
         let deadline = self.next_deadline();
         let woke = Instant::now();
-        let (core, io, stats, links, encoded) =
-            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.encoded);
+        let (core, io, stats, links, round, stages) =
+            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.round, &mut self.stages);
         let lateness = woke.saturating_duration_since(deadline);
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
         if lateness > self.half_period {
             stats.deadline_misses += 1;
         }
         let now = woke - self.epoch;
+        let mut clock = StageClock { last: woke };
         serve_commands(core, &mut io.commands, links, now);
         for l in links.iter_mut() {
             while let Ok(sample) = l.link.uplinks.pop() {
@@ -128,21 +141,34 @@ impl<S: Space> VeLoop<S> {
                 let _ = core.handle_uplink_sample(now, l.user, &sample);
             }
         }
-        core.handle_timeout(now);
+        clock.lap(&mut stages.intake);
+        let round_due = core.run_due_ticks(now);
+        clock.lap(&mut stages.step);
+        if round_due {
+            core.build_due_snapshots();
+        }
+        clock.lap(&mut stages.snapshot_terms);
+        round.clear();
+        let mut view_ns = 0;
         while let Some(pending) = core.poll_snapshot() {
-            let user = pending.user_id();
             if let Some(view) = io.view.as_mut() {
+                let before = Instant::now();
                 view.note_snapshot(pending.snapshot());
+                view_ns += before.elapsed().as_nanos() as u64;
             }
-            let Some(l) = links.iter_mut().find(|l| l.user == user) else { continue };
-            let sent = codec::encode_datagram_into(pending.datagram(), encoded).is_ok()
-                && push_frame(&mut l.link.snapshots, encoded);
-            if sent {
-                l.link.notify.notify_one();
-            } else {
+            // Links are kept in join order, and ids are handed out increasing (`VeCore::join`): a search.
+            let Ok(at) = links.binary_search_by_key(&pending.user_id(), |l| l.user) else { continue };
+            if !round.encode(at, pending.datagram()) {
                 stats.snapshots_dropped += 1;
             }
         }
+        clock.lap_less(&mut stages.encode, view_ns);
+        stats.snapshots_dropped += round.push(links);
+        clock.lap(&mut stages.ring_push);
+        for (at, _) in round.frames().filter(|(at, _)| round.pushed[*at]) {
+            links[at].link.notify.notify_one();
+        }
+        clock.lap(&mut stages.wake);
         while let Some(event) = core.poll_event() {
             // A full event ring drops the event; the core's counters still count what happened.
             let _ = io.events.push(event);
@@ -154,15 +180,18 @@ impl<S: Space> VeLoop<S> {
                 stats.record_rows_dropped += 1;
             }
         }
+        clock.lap(&mut stages.events_record);
         if let Some(view) = io.view.as_mut() {
             view.after_tick(core, stats);
             stats.view_frames = view.published;
             stats.view_frames_dropped = view.dropped;
         }
+        clock.lap_plus(&mut stages.view, view_ns);
         if let Some(room) = io.room.as_ref().filter(|_| self.iterations.is_multiple_of(self.room_every)) {
             room.publish(core);
         }
         self.histogram.record(woke.elapsed().as_nanos() as u64);
+        clock.lap(&mut stages.stats);
         self.iterations += 1;
         if self.iterations.is_multiple_of(self.publish_every) {
             self.publish();
@@ -174,16 +203,109 @@ impl<S: Space> VeLoop<S> {
         self.links.len()
     }
 
+    /// Copies the histograms' summaries, the core's counters and the thread's CPU use into the statistics,
+    /// and pushes them out.
     fn publish(&mut self) {
-        self.stats.step_time = self.histogram.summary();
-        self.stats.core = self.core.metrics();
-        let _ = self.io.stats.push(self.stats);
+        let stats = &mut self.stats;
+        stats.step_time = self.histogram.summary();
+        stats.stages = self.stages.summary();
+        stats.core = self.core.metrics();
+        stats.wall_s = self.epoch.elapsed().as_secs_f64();
+        stats.cpu_s = self.cpu_at_start.zip(thread_cpu_time()).map(|(a, b)| b.saturating_sub(a).as_secs_f64());
+        let _ = self.io.stats.push(*stats);
     }
 
     /// Publishes the final statistics and returns them.
     pub fn finish(mut self) -> VeLoopStats {
         self.publish();
         self.stats
+    }
+}
+
+/// Times consecutive stages: each lap records the time since the last.
+struct StageClock {
+    last: Instant,
+}
+
+impl StageClock {
+    fn lap(&mut self, into: &mut LatencyHistogram) {
+        self.lap_plus(into, 0);
+    }
+
+    /// A lap with `extra_ns` added (time another stage spent inside it, see `lap_less`).
+    fn lap_plus(&mut self, into: &mut LatencyHistogram, extra_ns: u64) {
+        let now = Instant::now();
+        into.record(now.saturating_duration_since(self.last).as_nanos() as u64 + extra_ns);
+        self.last = now;
+    }
+
+    /// A lap less `inner_ns` spent inside it on another stage's work.
+    fn lap_less(&mut self, into: &mut LatencyHistogram, inner_ns: u64) {
+        let now = Instant::now();
+        into.record((now.saturating_duration_since(self.last).as_nanos() as u64).saturating_sub(inner_ns));
+        self.last = now;
+    }
+}
+
+/// One round's encoded snapshots, back to back in one buffer, with the link each is for: encoded in one pass,
+/// pushed in the next, woken in a third. Its buffers grow to a round's size once and are reused.
+struct Round {
+    bytes: Vec<u8>,
+    /// `(link index, end of its frame in bytes)`, in encoding order.
+    ends: Vec<(usize, usize)>,
+    /// Per link index: its frame went into its ring this round.
+    pushed: Vec<bool>,
+    scratch: Vec<u8>,
+}
+
+impl Round {
+    fn with_capacity(links: usize) -> Self {
+        Round {
+            bytes: Vec::new(),
+            ends: Vec::with_capacity(links),
+            pushed: Vec::with_capacity(links),
+            scratch: Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.bytes.clear();
+        self.ends.clear();
+    }
+
+    /// Encodes a snapshot for link `at`; false when the codec refused it.
+    fn encode(&mut self, at: usize, datagram: &kinloop_protocol::Datagram) -> bool {
+        if codec::encode_datagram_into(datagram, &mut self.scratch).is_err() {
+            return false;
+        }
+        self.bytes.extend_from_slice(&self.scratch);
+        self.ends.push((at, self.bytes.len()));
+        if self.pushed.len() <= at {
+            self.pushed.resize(at + 1, false);
+        }
+        self.pushed[at] = true;
+        true
+    }
+
+    /// Pushes each encoded frame into its link's ring; returns how many found their ring full (those links
+    /// are not woken).
+    fn push(&mut self, links: &mut [ActiveLink]) -> u64 {
+        let mut dropped = 0;
+        let mut start = 0;
+        for &(at, end) in &self.ends {
+            if !push_frame(&mut links[at].link.snapshots, &self.bytes[start..end]) {
+                self.pushed[at] = false;
+                dropped += 1;
+            }
+            start = end;
+        }
+        dropped
+    }
+
+    /// Each encoded frame with its link index.
+    fn frames(&self) -> impl Iterator<Item = (usize, &[u8])> + '_ {
+        let starts = std::iter::once(0).chain(self.ends.iter().map(|(_, end)| *end));
+        self.ends.iter().zip(starts).map(|((at, end), start)| (*at, &self.bytes[start..*end]))
     }
 }
 

@@ -6,12 +6,31 @@ use rtrb::{Consumer, Producer};
 /// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
 pub const FRAME_HEADER: usize = 4;
 
-/// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room.
+/// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room. The frame is
+/// copied as slices (at most two, where the ring wraps), not byte by byte through an iterator.
 pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
     let total = FRAME_HEADER + bytes.len();
-    let Ok(chunk) = ring.write_chunk_uninit(total) else { return false };
+    let Ok(mut chunk) = ring.write_chunk(total) else { return false };
     let header = (bytes.len() as u32).to_le_bytes();
-    chunk.fill_from_iter(header.iter().chain(bytes).copied()) == total
+    let (a, b) = chunk.as_mut_slices();
+    write_at(a, b, 0, &header);
+    write_at(a, b, FRAME_HEADER, bytes);
+    chunk.commit_all();
+    true
+}
+
+/// Writes `src` at byte `at` of the concatenation of `a` and `b` (a ring chunk's two halves), which must
+/// have room for it.
+fn write_at(a: &mut [u8], b: &mut [u8], at: usize, src: &[u8]) {
+    let in_a = a.len().saturating_sub(at).min(src.len());
+    if in_a > 0 {
+        a[at..at + in_a].copy_from_slice(&src[..in_a]);
+    }
+    let rest = &src[in_a..];
+    if !rest.is_empty() {
+        let b_at = at + in_a - a.len();
+        b[b_at..b_at + rest.len()].copy_from_slice(rest);
+    }
 }
 
 /// Reads every complete frame from a snapshot ring and keeps the newest in `out` (latest wins); returns
@@ -32,7 +51,10 @@ pub fn take_latest_frame(ring: &mut Consumer<u8>, out: &mut Vec<u8>) -> usize {
         let Ok(chunk) = ring.read_chunk(FRAME_HEADER + len) else { break };
         let (a, b) = chunk.as_slices();
         out.clear();
-        out.extend(a.iter().chain(b).skip(FRAME_HEADER));
+        // Skip the header, which may itself straddle the wrap.
+        let skip_a = FRAME_HEADER.min(a.len());
+        out.extend_from_slice(&a[skip_a..]);
+        out.extend_from_slice(&b[FRAME_HEADER - skip_a..]);
         chunk.commit_all();
         frames += 1;
     }

@@ -92,11 +92,83 @@ pub struct Percentiles {
     pub samples: u64,
 }
 
+/// Where an iteration of the VE loop goes, stage by stage in the order the loop runs them: each a
+/// distribution over iterations of that stage's time (ns), so a stage's p50 can be set beside the back-to-back
+/// benchmark of the same work.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    /// Joins and leaves served, every user's uplinks popped and handed to the core.
+    pub intake: Percentiles,
+    /// The integrator step(s) due (`VeCore::run_due_ticks`).
+    pub step: Percentiles,
+    /// Every user's local-model terms (`VeCore::build_due_snapshots`); zero on iterations without a round.
+    pub snapshot_terms: Percentiles,
+    /// Every user's snapshot encoded (bincode) into the loop's buffer.
+    pub encode: Percentiles,
+    /// The encoded frames pushed into the users' rings.
+    pub ring_push: Percentiles,
+    /// The users' network tasks woken (one notification per user that got a frame).
+    pub wake: Percentiles,
+    /// Events moved to the log's ring and the recorder's row.
+    pub events_record: Percentiles,
+    /// The web view's tap (its per-snapshot note and per-tick frame), when a view is served.
+    pub view: Percentiles,
+    /// The loop's own bookkeeping: room-state publication and the step-time histogram.
+    pub stats: Percentiles,
+}
+
+/// One fixed-size histogram per stage of [`StageTimes`], allocation-free after construction.
+#[derive(Clone, Debug, Default)]
+pub struct StageHistograms {
+    /// See [`StageTimes::intake`].
+    pub intake: LatencyHistogram,
+    /// See [`StageTimes::step`].
+    pub step: LatencyHistogram,
+    /// See [`StageTimes::snapshot_terms`].
+    pub snapshot_terms: LatencyHistogram,
+    /// See [`StageTimes::encode`].
+    pub encode: LatencyHistogram,
+    /// See [`StageTimes::ring_push`].
+    pub ring_push: LatencyHistogram,
+    /// See [`StageTimes::wake`].
+    pub wake: LatencyHistogram,
+    /// See [`StageTimes::events_record`].
+    pub events_record: LatencyHistogram,
+    /// See [`StageTimes::view`].
+    pub view: LatencyHistogram,
+    /// See [`StageTimes::stats`].
+    pub stats: LatencyHistogram,
+}
+
+impl StageHistograms {
+    /// Each stage's percentiles.
+    pub fn summary(&self) -> StageTimes {
+        StageTimes {
+            intake: self.intake.summary(),
+            step: self.step.summary(),
+            snapshot_terms: self.snapshot_terms.summary(),
+            encode: self.encode.summary(),
+            ring_push: self.ring_push.summary(),
+            wake: self.wake.summary(),
+            events_record: self.events_record.summary(),
+            view: self.view.summary(),
+            stats: self.stats.summary(),
+        }
+    }
+}
+
 /// What the VE thread reports (copied out a few times per second).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct VeLoopStats {
     /// Time per VE loop iteration: uplinks in, tick(s), snapshots encoded and handed over.
     pub step_time: Percentiles,
+    /// The same iterations stage by stage.
+    pub stages: StageTimes,
+    /// CPU time the VE thread used (s), sleeping excluded; beside `wall_s` it shows what the loop's hybrid
+    /// sleep spends spinning (`None` where the platform has no per-thread CPU clock).
+    pub cpu_s: Option<f64>,
+    /// Seconds since the loop started.
+    pub wall_s: f64,
     /// Wake-ups later than half a period after their deadline.
     pub deadline_misses: u64,
     /// Latest wake-up after its deadline (ns).

@@ -10,7 +10,7 @@ mod users;
 
 pub use commands::{Command, CommandSender, UserLink};
 pub use frames::{push_frame, take_latest_frame, FRAME_HEADER};
-pub use loop_stats::{LatencyHistogram, Percentiles, VeLoopStats};
+pub use loop_stats::{LatencyHistogram, Percentiles, StageHistograms, StageTimes, VeLoopStats};
 pub use users::{PoseTap, UserCounters, UserEntry, UserRegistry};
 
 use std::sync::Arc;

@@ -243,7 +243,7 @@ mod tests {
             singular_values: vec![0.0; 3],
             constraint_count: 0,
             contacts: Vec::new(),
-            others: Default::default(),
+            other_manipulators: 0,
             config: None,
             energy: kinloop_protocol::PortEnergy::zero(3),
         }

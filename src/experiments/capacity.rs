@@ -1,0 +1,179 @@
+//! `capacity`: how many users one room carries in real time. Each point runs the real VE thread (absolute
+//! deadlines, spin_sleep, SCHED_FIFO when granted) with N synthetic users (`kinloop_server::bench::realtime_run`:
+//! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time
+//! (p50, p99), its deadline misses beside the idle timer floor measured in the same run just before it
+//! (`kinloop_client::driver::rt_loop::timer_floor`, the same clock and sleep with no work), the thread's CPU
+//! use beside the figure (its hybrid sleep spins), the back-to-back benchmark of the same tick
+//! (`server/ve_tick_users_N`) for the real-time/benchmark ratio, and whether the linkage stayed whole.
+//!
+//! Synthetic users follow the VE, so their tracking is the VE's own and not a client's: what this reports of
+//! the session is its stability (restores, closure). A `rooms` parameter (1: one room per server) names the
+//! second axis the rooms-per-server work adds. Wall-clock, on whatever the machine is doing: the run says how
+//! loaded it was (`load_average`), and the timer floor beside each point is the measure of the machine.
+
+use std::time::Duration;
+
+use anyhow::{anyhow, Result};
+use kinloop_client::driver::rt_loop::timer_floor;
+use kinloop_server::bench::{realtime_run, ve_tick_users, RealtimeRun};
+use kinloop_server::core::VeConfig;
+use serde::{Deserialize, Serialize};
+
+use super::common::{Options, Output, Report};
+use crate::charts::{Chart, Legend, Series};
+use crate::rounding::round;
+
+/// `summary.json`'s `results` of the capacity experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CapacitySummary {
+    /// The one-line answer.
+    pub answer: String,
+    /// Rooms per server (1 until a server hosts several).
+    pub rooms: usize,
+    /// The host's 1-minute load average when the run began (`None` where `/proc/loadavg` is unreadable).
+    pub load_average: Option<f64>,
+    /// Seconds each point ran the VE thread (and the idle loop before it).
+    pub seconds_per_point: f64,
+    /// One point per user count.
+    pub points: Vec<CapacityPoint>,
+}
+
+/// One user count in one room.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CapacityPoint {
+    /// Users in the room.
+    pub users: usize,
+    /// Median VE loop iteration (µs).
+    pub step_us_p50: f64,
+    /// 99th percentile (µs).
+    pub step_us_p99: f64,
+    /// The same tick back to back (`server/ve_tick_users_N`, µs).
+    pub bench_us: f64,
+    /// `step_us_p50 / bench_us`.
+    pub realtime_over_bench: f64,
+    /// The step's stages (p50, µs): intake, step, snapshot terms, encode, ring push, wake-up.
+    pub stages_us_p50: StageMedians,
+    /// Fraction of the VE loop's ticks woken more than half a period late.
+    pub miss_rate: f64,
+    /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
+    pub floor_miss_rate: f64,
+    /// CPU time over wall time of the VE thread (its hybrid sleep's spinning included).
+    pub cpu_fraction: Option<f64>,
+    /// SCHED_FIFO granted to the VE thread.
+    pub realtime_priority: bool,
+    /// Snapshots the rings had no room for.
+    pub snapshots_dropped: u64,
+    /// Energy reports of the synthetic users the server refused (a client's books are accepted).
+    pub energy_reports_refused: u64,
+    /// States restored after a failed step.
+    pub state_restores: u64,
+    /// Largest closure residual (m).
+    pub max_closure_error_m: f64,
+}
+
+/// Medians of the loop's main stages (µs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageMedians {
+    /// Uplinks into the core.
+    pub intake: f64,
+    /// The integrator step.
+    pub step: f64,
+    /// Every user's local-model terms.
+    pub snapshot_terms: f64,
+    /// Encoding.
+    pub encode: f64,
+    /// Ring pushes.
+    pub ring_push: f64,
+    /// Wake-ups.
+    pub wake: f64,
+}
+
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
+}
+
+fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint> {
+    let duration = Duration::from_secs_f64(seconds);
+    let (floor, _) = timer_floor(1000.0, duration, true);
+    let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
+        .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
+    let run = RealtimeRun { scene, scene_label: "paper-testbed".into(), users, duration, ve: VeConfig::paper() };
+    let report = realtime_run(run).map_err(|e| anyhow!("{users} users: {e}"))?;
+    let bench_ns = ve_tick_users(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
+    let ve = report.ve;
+    let us = |ns: u64| round(ns as f64 / 1e3, 2);
+    let ticks = ve.step_time.samples.max(1) as f64;
+    Ok(CapacityPoint {
+        users,
+        step_us_p50: us(ve.step_time.p50_ns),
+        step_us_p99: us(ve.step_time.p99_ns),
+        bench_us: round(bench_ns / 1e3, 2),
+        realtime_over_bench: round(ve.step_time.p50_ns as f64 / bench_ns.max(1.0), 2),
+        stages_us_p50: StageMedians {
+            intake: us(ve.stages.intake.p50_ns),
+            step: us(ve.stages.step.p50_ns),
+            snapshot_terms: us(ve.stages.snapshot_terms.p50_ns),
+            encode: us(ve.stages.encode.p50_ns),
+            ring_push: us(ve.stages.ring_push.p50_ns),
+            wake: us(ve.stages.wake.p50_ns),
+        },
+        miss_rate: ve.deadline_misses as f64 / ticks,
+        floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
+        cpu_fraction: ve.cpu_s.map(|cpu| round(cpu / ve.wall_s.max(1e-9), 3)),
+        realtime_priority: ve.realtime_priority,
+        snapshots_dropped: ve.snapshots_dropped,
+        energy_reports_refused: ve.core.energy_reports_refused,
+        state_restores: ve.core.state_restores,
+        max_closure_error_m: ve.core.max_closure_error,
+    })
+}
+
+/// Runs the experiment.
+pub fn run(options: &Options) -> Result<Report> {
+    let mut out = Output::new("capacity", options)?;
+    let users: Vec<usize> = options.pick(vec![1, 2, 4, 16, 64], vec![1, 4]);
+    let seconds = options.pick(10.0, 0.5);
+    let bench_iters = options.pick(5_000, 200);
+    let load = load_average();
+    let mut points = Vec::with_capacity(users.len());
+    // One point at a time: the points share the machine they measure.
+    for &n in &users {
+        if options.progress {
+            eprintln!("capacity: {n} users, {seconds} s");
+        }
+        points.push(measure(n, seconds, bench_iters)?);
+    }
+
+    let xs = |f: fn(&CapacityPoint) -> f64| points.iter().map(|p| (p.users as f64, f(p))).collect::<Vec<_>>();
+    let chart = Chart::new("VE loop iteration against users in one room", "users", "step (us)")
+        .legend(Legend::UpperLeft)
+        .with(Series::line("real time, p50", xs(|p| p.step_us_p50)))
+        .with(Series::line("real time, p99", xs(|p| p.step_us_p99)))
+        .with(Series::line("back to back (bench)", xs(|p| p.bench_us)));
+    out.chart("step_vs_users", &chart)?;
+    let chart = Chart::new("Deadline misses against users, beside the idle loop's", "users", "missed ticks (%)")
+        .legend(Legend::UpperLeft)
+        .with(Series::line("VE loop", xs(|p| 100.0 * p.miss_rate)))
+        .with(Series::line("idle loop (timer floor)", xs(|p| 100.0 * p.floor_miss_rate)));
+    out.chart("misses_vs_users", &chart)?;
+
+    let last = points.last().ok_or_else(|| anyhow!("no points"))?;
+    let answer = format!(
+        "{} users in one room: step p50 {} us, p99 {} us ({}x the back-to-back {} us); misses {:.3} % beside the \
+         idle loop's {:.3} %; load average {}.",
+        last.users,
+        last.step_us_p50,
+        last.step_us_p99,
+        last.realtime_over_bench,
+        last.bench_us,
+        100.0 * last.miss_rate,
+        100.0 * last.floor_miss_rate,
+        load.map_or("unknown".to_string(), |l| format!("{l:.2}")),
+    );
+    let results = CapacitySummary { answer, rooms: 1, load_average: load, seconds_per_point: seconds, points };
+    out.finish(
+        "Users per room against the real-time VE loop's step, misses beside the timer floor, and stability",
+        "5 points of 2 x 10 s; --quick 2 points of 2 x 0.5 s",
+        serde_json::to_value(&results)?,
+    )
+}
