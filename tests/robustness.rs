@@ -29,7 +29,8 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
         assert!(!reasons.is_empty(), "{f}");
         for r in reasons {
             let kind = r.as_str().unwrap_or("").split(':').next().unwrap_or("");
-            assert!(["refused", "unstable", "closure", "saturation", "tracking"].contains(&kind), "{r}");
+            let kinds = ["refused", "refused (predicted)", "unstable", "closure", "saturation", "tracking"];
+            assert!(kinds.contains(&kind), "{r}");
         }
     }
     assert!(dir.path().join("robustness/summary.json").exists());

@@ -5,7 +5,9 @@
 //! virtual-time session of [`SECONDS`] (the whole tour), with what `kinloop-client` does by default.
 //!
 //! A session **fails** for each of these that holds (the robustness goals):
-//! - **refused**: the harness could not start it (its join was refused, or the scene did not compile);
+//! - **refused**: the harness could not start it (its join was refused, or the scene did not compile); a
+//!   join refused by the load rule stated in advance (`design::check_holdable`, docs/robustness.md) is
+//!   counted apart, as **refused (predicted)**;
 //! - **unstable**: the one criterion of [`verdict`] (energy growth, sustained saturation, divergence,
 //!   which includes VE restores and non-finite values);
 //! - **closure**: the loops opened by more than [`CLOSURE_RELATIVE`] of the scene's length scale;
@@ -32,6 +34,7 @@ use kinloop_client::device::presets::DevicePreset;
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::Spatial, model::Model};
 use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::core::design::PREDICTED_REFUSAL;
 use kinloop_server::core::VeConfig;
 
 use super::common::{session, sweep, Options, Output};
@@ -50,6 +53,8 @@ pub const UNHEARD_FACTOR: f64 = 1.2;
 pub const DELAYS_MS: [u64; 4] = [0, 50, 300, 1000];
 /// Length of a session (s): the touring hand's whole tour there and back (see `renderability::SECONDS`).
 pub const SECONDS: f64 = 40.0;
+/// The failure class of a join refused by the load rule stated in advance (`design::check_holdable`).
+pub const PREDICTED_CLASS: &str = "refused (predicted)";
 /// The seeds `experiment robustness` runs without `--seeds`: the fixed sample CI runs with `--quick`.
 pub const DEFAULT_SEEDS: Range<u64> = 1..4;
 
@@ -136,7 +141,12 @@ fn length_scale(g: &Generated) -> Result<f64, String> {
 pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
     let refused = |why: String| Outcome {
         point: point.clone(),
-        failures: vec![format!("refused: {why}")],
+        // A refusal by the rule stated in advance (`design::check_holdable`) is counted apart from the others.
+        failures: vec![if why.contains(PREDICTED_REFUSAL) {
+            format!("{PREDICTED_CLASS}: {why}")
+        } else {
+            format!("refused: {why}")
+        }],
         stable: false,
         ve_restores: 0,
         clamped_fraction: f64::NAN,
@@ -277,8 +287,10 @@ fn report(
         }
     }
     let rendering = outcomes.iter().filter(|o| o.failures.is_empty()).count();
-    let refused = outcomes.iter().filter(|o| o.failures.iter().any(|f| f.starts_with("refused"))).count();
-    let unstable = outcomes.iter().filter(|o| !o.stable).count() - refused;
+    let refused_by =
+        |class: &str| outcomes.iter().filter(|o| o.failures.iter().any(|f| failure_class(f) == class)).count();
+    let (refused, predicted) = (refused_by("refused"), refused_by(PREDICTED_CLASS));
+    let unstable = outcomes.iter().filter(|o| !o.stable).count() - refused - predicted;
     let failing: Vec<_> = outcomes
         .iter()
         .filter(|o| !o.failures.is_empty())
@@ -294,7 +306,8 @@ fn report(
         })
         .collect();
     let answer = format!(
-        "{rendering} of {} sessions render on seeds {}..{} ({} unstable, {refused} refused); failures by kind: {}",
+        "{rendering} of {} sessions render on seeds {}..{} ({} unstable, {refused} refused, {predicted} refused by \
+         the stated load rule); failures by kind: {}",
         outcomes.len(),
         seeds.start,
         seeds.end,
@@ -317,6 +330,7 @@ fn report(
             "rendering": rendering,
             "unstable": unstable,
             "refused": refused,
+            "refused_predicted": predicted,
             "failures_by_kind": classes_failed,
             "worst_rms_mm": num(worst_rms * 1e3),
             "coverage": coverage(linkages),

@@ -5,6 +5,7 @@ use nalgebra::DVector;
 
 use crate::algorithms::configuration;
 use crate::algorithms::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
+use crate::algorithms::implicit_joint_forces::add_implicit_joint_terms;
 use crate::algorithms::kinematics::forward_poses;
 use crate::algorithms::kkt;
 use crate::algorithms::loop_closure::closure_residual_and_jacobian;
@@ -110,9 +111,13 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             report = StepReport { closure_error: data.closure_residual.norm() };
             // The matrix is zero unless the last step used it: clear it only then (n² writes otherwise wasted).
             drop_implicit_mass(data);
-            data.use_implicit_mass = cfg.implicit_forces
-                && cfg.integrator == Integrator::SemiImplicitEuler
-                && forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied);
+            if cfg.implicit_forces && cfg.integrator == Integrator::SemiImplicitEuler {
+                // The couplings' terms and then the joints' own stiff terms (`implicit_joint_forces`).
+                let couplings =
+                    forces.add_implicit(model, &data.kin, dt, qd, &mut data.implicit_mass, &mut data.applied);
+                let joints = add_implicit_joint_terms(model, dt, q, qd, &mut data.implicit_mass, &mut data.applied);
+                data.use_implicit_mass = couplings || joints;
+            }
             kkt::factorize(model, data)?;
             kkt::solve(model, data)?;
             if cfg.integrator == Integrator::SemiImplicitEuler {

@@ -14,6 +14,7 @@ pub mod cut_forces;
 pub mod dynamics;
 pub mod gravity;
 pub mod idle_freedoms;
+pub mod implicit_joint_forces;
 pub mod integrator;
 pub mod jacobian;
 pub mod joint_forces;

@@ -90,6 +90,61 @@ pub enum DesignError {
         /// What is wrong, with the largest scale allowed.
         what: String,
     },
+    /// The refusal rule [`check_holdable`] states in advance: over most of its reach the OP's static load,
+    /// mapped by the smallest force scale the wire carries, exceeds what the device holds continuously.
+    #[error(
+        "{PREDICTED_REFUSAL}: holding the OP still over most of its reach takes {needed_n:.2} N of device \
+         {device} (static load {load:.4e} scene force units, force scale {force_scale:.4e}), beyond its \
+         continuous {continuous_n} N; a lighter linkage, a weaker gravity or spring, an OP nearer the pivots or a \
+         stronger device would change this"
+    )]
+    Unholdable {
+        /// The device's name.
+        device: String,
+        /// The static load that sets the force scale (scene force units).
+        load: f64,
+        /// The force scale (device N per scene force unit).
+        force_scale: f64,
+        /// The device force it maps to.
+        needed_n: f64,
+        /// The device's continuous force.
+        continuous_n: f64,
+    },
+    /// The other refusal [`check_holdable`] states: an OP that cannot move renders nothing.
+    #[error("{PREDICTED_REFUSAL}: the OP cannot move (its linkage has no degree of freedom); an OP on a linkage that moves would change this")]
+    Motionless,
+}
+
+/// The words every refusal of [`check_holdable`] begins with, so that a tally can tell a refusal predicted by
+/// the stated rule from any other.
+pub const PREDICTED_REFUSAL: &str = "refused by the load rule";
+
+/// The refusal rule, stated in advance (docs/robustness.md): a manipulator is refused at join when its OP
+/// cannot move, or when the static load that sets the force scale (the 90th percentile over the OP's surveyed
+/// reach of gravity, springs and actuators at rest, `OpReach::static_force_n`), times the force scale the
+/// mapping chose, exceeds the device's continuous force. [`choose_mapping`] maps that load to
+/// [`LOAD_FRACTION`] of the continuous force, so this holds only where the wire's range of scales
+/// (`MIN_MAPPING_SCALE`) kept the scale from going low enough: over most of the reach the device could not
+/// hold the linkage. The largest load is not the test: near a dead centre it tends to infinity on linkages
+/// that render (a hand does not stay there). Everything compared is in device newtons, so the rule does not
+/// depend on the scene's units. A user whose VE compensates gravity (`Mapping::gravity_compensation`) is not
+/// held to the load part.
+pub fn check_holdable<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, mapping: &Mapping) -> Result<(), DesignError> {
+    if reach.dof == 0 {
+        return Err(DesignError::Motionless);
+    }
+    let needed_n = reach.static_force_n * mapping.force_scale;
+    // With gravity compensation the VE holds the static load, not the device.
+    if !mapping.gravity_compensation && needed_n > device.continuous_force_n {
+        return Err(DesignError::Unholdable {
+            device: device.name.clone(),
+            load: reach.static_force_n,
+            force_scale: mapping.force_scale,
+            needed_n,
+            continuous_n: device.continuous_force_n,
+        });
+    }
+    Ok(())
 }
 
 /// The scene's axes, for messages.
@@ -297,5 +352,28 @@ mod tests {
         // One figure for both (the omega.3's 12 N): the peak bound binds, leaving 1/PEAK_SHARE of headroom.
         let omega = load_target(&device(12.0, 12.0));
         assert!((omega - PEAK_SHARE * 12.0).abs() < 1e-12 && 12.0 / omega > 5.5, "{omega}");
+    }
+
+    /// The stated load rule: the mapping the server chooses passes it (the load maps to `LOAD_FRACTION` of the
+    /// continuous force); the same load with the force scale held at the wire's smallest, far above what the
+    /// device holds, is refused with a message naming the rule and what would change it.
+    #[test]
+    fn the_load_rule_refuses_only_a_load_the_scale_could_not_bring_down() {
+        use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+        use kinloop_linkage::math::space::Planar;
+        use kinloop_linkage::model::{builtin, Model};
+        let scene = builtin::scene("paper-testbed").expect("built in").expect("parses");
+        let model = Model::<Planar>::compile(&scene, "paper-testbed").expect("compiles");
+        let mut reach = survey_op(&model, 0, &SurveyConfig::default()).expect("surveys");
+        reach.static_force_n = reach.static_force_n.max(1.0);
+        let device = DeviceCaps { continuous_force_n: 5.0, max_force_n: 10.0, ..DeviceCaps::generous("d", 3) };
+        let mapping = choose_mapping(&reach, &device, &MappingRequest::default(), true).expect("a mapping");
+        assert_eq!(check_holdable(&reach, &device, &mapping), Ok(()));
+        let heavy = Mapping { force_scale: 10.0 * device.continuous_force_n / reach.static_force_n, ..mapping };
+        let refused = check_holdable(&reach, &device, &heavy).expect_err("refused");
+        let text = refused.to_string();
+        assert!(text.starts_with(PREDICTED_REFUSAL) && text.contains("would change this"), "{text}");
+        let compensated = Mapping { gravity_compensation: true, ..heavy };
+        assert_eq!(check_holdable(&reach, &device, &compensated), Ok(()));
     }
 }

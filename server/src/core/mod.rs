@@ -403,6 +403,15 @@ impl<S: Space> VeCore<S> {
         let designed = match &request.device {
             Some(device) => design::check_request::<S>(device, &request.mapping)
                 .and_then(|()| design::choose_mapping(reach, device, &request.mapping, manipulator))
+                .and_then(|mapping| {
+                    // Only a manipulator with the mapping the server chose for it: a scale the client asked
+                    // for is checked by `choose_mapping` against the peak.
+                    let automatic = request.mapping.force_scale.is_none();
+                    if manipulator && automatic {
+                        design::check_holdable(reach, device, &mapping)?;
+                    }
+                    Ok(mapping)
+                })
                 .map(|mapping| {
                     let rigid = mapping.rigid_grasp;
                     (mapping, device.native_rate_hz, rigid)
