@@ -17,7 +17,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 14] = [
+const WHICH: [Which; 15] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),

@@ -5,25 +5,15 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use quinn::{Connection, Endpoint, SendStream};
+use quinn::Endpoint;
 
+use super::admin_session::AdminSession;
 use super::framing::{recv_control, send_control};
 use super::handshake::{close_codes, ConnectError, HANDSHAKE_TIMEOUT};
 use crate::messages::{AdminAnswer, AdminRequest, Control};
 
 /// How long the server waits for the admin to read the answer and close.
 const ANSWER_LINGER: Duration = Duration::from_secs(2);
-
-/// An admin connection the server has not answered yet.
-#[derive(Debug)]
-pub struct AdminSession {
-    /// The connection.
-    pub connection: Connection,
-    /// Sending half of the control stream.
-    pub send: SendStream,
-    /// What the admin asked.
-    pub request: AdminRequest,
-}
 
 /// Sends the answer, gives the admin a moment to read it, then closes.
 pub async fn answer_admin(session: AdminSession, answer: AdminAnswer) {

@@ -268,9 +268,9 @@ pub enum AcceptError {
     /// The validator produced a welcome the client would reject (a server bug).
     #[error("the server's own welcome is invalid: {0}")]
     InvalidWelcome(DecodeError),
-    /// Not a session: an admin command, for the server to answer with [`super::admin::answer_admin`].
+    /// Not a session: an admin command, for the server to answer with `answer_admin`.
     #[error("an admin command")]
-    Admin(super::admin::AdminSession),
+    Admin(super::admin_session::AdminSession),
 }
 
 /// Accepts an incoming connection and runs the handshake. The protocol version is checked here; the rest is
@@ -320,7 +320,7 @@ where
             Ok(hello) => hello,
             Err(HelloProblem::Refuse(refused)) => return Err(refuse(&connection, send, refused).await),
             Err(HelloProblem::Admin(request)) => {
-                return Err(AcceptError::Admin(super::admin::AdminSession { connection, send, request }))
+                return Err(AcceptError::Admin(super::admin_session::AdminSession { connection, send, request }))
             }
             Err(HelloProblem::Fail(error)) => {
                 connection.close(close_codes::PROTOCOL, b"expected Hello");

@@ -4,6 +4,7 @@
 //! client (Hello → Welcome/Refused, then Leave/Error/Ping/Pong), snapshots and uplinks as datagrams.
 
 mod admin;
+mod admin_session;
 mod datagrams;
 mod emulated_socket;
 mod endpoint;
@@ -13,7 +14,8 @@ mod identity;
 mod room_ca;
 mod trust;
 
-pub use admin::{admin, answer_admin, AdminSession};
+pub use admin::{admin, answer_admin};
+pub use admin_session::AdminSession;
 pub use datagrams::{DatagramReceiver, DatagramSender, DeliveryStats, RecvError, Route, SendError};
 pub use emulated_socket::{EmulatedSocketStats, EmulatedSocketStatsHandle};
 pub use endpoint::{

@@ -16,7 +16,8 @@ use kinloop_protocol::{
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
-use super::rooms::{serve_admin, Host};
+use super::rooms::admin::serve_admin;
+use super::rooms::Host;
 use super::Shared;
 use crate::core::{JoinRequest, UplinkSample};
 use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLink};

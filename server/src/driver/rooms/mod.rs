@@ -3,7 +3,7 @@
 //! by the admin command), and hands each room's VE to the real-time [`Executor`]. (`super::room` is another
 //! thing: the signed state a client carries so a room survives its server.)
 
-mod admin;
+pub(crate) mod admin;
 mod executor;
 mod file;
 
@@ -15,7 +15,6 @@ use kinloop_protocol::{RefusalReason, RoomSummary};
 use serde::Serialize;
 use tokio::sync::watch;
 
-pub(crate) use admin::serve_admin;
 pub use executor::{default_rt_threads, Executor, OverBudget, RoomCell, Steppable, BUDGET_SHARE};
 pub use file::{load_entry, load_rooms_file, EntryShape, RoomSpec, RoomsFileError, TestKnobs};
 
