@@ -21,7 +21,7 @@ pub mod ve_thread;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -45,6 +45,7 @@ pub use stats::{ServerStats, UserStats};
 
 use crate::access::Access;
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use crate::fleet::{FleetEvent, FleetFeed, ONE_ROOM};
 use crate::gateway::{CommandSender, Gateway, UserRegistry, FRAME_HEADER};
 use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use ve_thread::VeThreadIo;
@@ -57,8 +58,10 @@ const EVENT_RING: usize = 1024;
 const RECORD_RING: usize = 1 << 17;
 /// How often the collector drains the VE thread's statistics and events.
 const COLLECT_EVERY: Duration = Duration::from_millis(50);
-/// Longest wait for sessions to tell their clients and close at shutdown.
-const SHUTDOWN_GRACE: Duration = Duration::from_secs(3);
+/// Longest wait, by default, for the clients to move elsewhere when the server drains (`--drain-s`).
+pub const DEFAULT_DRAIN: Duration = Duration::from_secs(5);
+/// Past the drain, the longest wait for the network tasks to wind down.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(1);
 
 /// Where the certificate comes from.
 #[derive(Clone, Debug)]
@@ -104,6 +107,10 @@ pub struct ServerConfig {
     /// The room's key (`--room-key`): the server signs its state for its clients and resumes from a state
     /// a client offers when it verifies (see `docs/resume.md`).
     pub room_key: Option<RoomKey>,
+    /// At shutdown, how long the server waits for its clients to move after it told them to (`--drain-s`).
+    pub drain: Duration,
+    /// Where the server tells a fleet manager's adapter what happens (`--agones`), if anywhere.
+    pub fleet: Option<FleetFeed>,
 }
 
 impl ServerConfig {
@@ -122,6 +129,8 @@ impl ServerConfig {
             realtime: true,
             view: None,
             room_key: None,
+            drain: DEFAULT_DRAIN,
+            fleet: None,
         }
     }
 }
@@ -177,6 +186,19 @@ pub(crate) struct Shared {
     view: std::sync::OnceLock<Arc<crate::view::Counters>>,
     /// The room, with a room key.
     room: Option<Arc<room::Room>>,
+    /// How long a draining server waits for its clients to move.
+    drain: Duration,
+    /// The fleet adapter's feed.
+    fleet: Option<FleetFeed>,
+}
+
+impl Shared {
+    /// Tells the fleet adapter, if there is one.
+    fn tell_fleet(&self, event: FleetEvent) {
+        if let Some(fleet) = &self.fleet {
+            fleet.send(event);
+        }
+    }
 }
 
 impl Shared {
@@ -244,6 +266,8 @@ pub struct ServerHandle {
     accept: JoinHandle<()>,
     collector: JoinHandle<()>,
     stop: Arc<AtomicBool>,
+    /// See [`ServerHandle::stall_ve`].
+    stall_ms: Arc<AtomicU64>,
     ve_thread: Option<std::thread::JoinHandle<VeLoopStats>>,
     recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
     view: Option<ViewHandle>,
@@ -270,17 +294,30 @@ impl ServerHandle {
         self.shared.stats()
     }
 
-    /// Tells every client (`Leave`), waits for them to close, closes the endpoint, stops the VE thread and
-    /// the recorder, and returns the final statistics.
+    /// A test knob: the VE thread stops ticking for `duration` at its next tick (it sleeps), as a stalled VE
+    /// would; what a fleet manager sees of it is the test.
+    pub fn stall_ve(&self, duration: Duration) {
+        self.stall_ms.store(duration.as_millis().max(1) as u64, Ordering::Relaxed);
+    }
+
+    /// Drains: stops admitting (new connections are refused), hands each client the room's newest signed
+    /// state and tells it to move (`Leave`), waits up to the configured drain time for them to go, then
+    /// closes the endpoint, stops the VE thread and the recorder, and returns the final statistics.
     pub async fn shutdown(mut self) -> Result<ServerStats, ServerError> {
         if let Some(view) = self.view.take() {
             // Pages first: their grabs leave while the VE still runs.
             view.shutdown().await;
         }
+        let clients = self.shared.gateway.users.connected();
+        tracing::info!(clients, drain_s = self.shared.drain.as_secs_f64(), "draining: telling the clients to move");
+        self.shared.tell_fleet(FleetEvent::Draining);
+        let started = Instant::now();
         self.shared.shutdown.send_replace(true);
-        if tokio::time::timeout(SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
+        if tokio::time::timeout(self.shared.drain + SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
             self.accept.abort();
         }
+        let left = self.shared.gateway.users.connected();
+        tracing::info!(left, waited_s = started.elapsed().as_secs_f64(), "drained");
         self.endpoint.close(close_codes::NORMAL, b"server shutdown");
         let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.endpoint.wait_idle()).await;
         self.stop.store(true, Ordering::Relaxed);
@@ -305,6 +342,8 @@ impl ServerHandle {
                 tracing::error!(%error, "the recording is incomplete");
             }
         }
+        self.shared.tell_fleet(FleetEvent::RoomClosed { room: ONE_ROOM.into() });
+        self.shared.tell_fleet(FleetEvent::Drained);
         Ok(self.shared.stats())
     }
 }
@@ -348,6 +387,7 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
     let (event_tx, event_rx) = RingBuffer::new(EVENT_RING);
     let (stats_tx, stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
+    let stall_ms = Arc::new(AtomicU64::new(0));
     let recorder = match &config.record {
         Some(path) => {
             let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
@@ -376,6 +416,8 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         view: view_tap,
         room: room.clone(),
         stop: stop.clone(),
+        heartbeat: config.fleet.as_ref().map(|f| f.heartbeat().clone()),
+        stall_ms: stall_ms.clone(),
     };
     let realtime = config.realtime;
     let ve_thread = std::thread::Builder::new()
@@ -400,6 +442,8 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         shutdown,
         view: std::sync::OnceLock::new(),
         room,
+        drain: config.drain,
+        fleet: config.fleet.clone(),
     });
     let view = match (&config.view, view_reader) {
         (Some(view), Some(reader)) => {
@@ -424,6 +468,8 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
     };
     let accept = tokio::spawn(accept_loop(endpoint.clone(), shared.clone()));
     let collector = tokio::spawn(collect(shared.clone(), stats_rx, event_rx, config.stats_every));
+    shared.tell_fleet(FleetEvent::Listening { addr: local_addr });
+    shared.tell_fleet(FleetEvent::RoomOpened { room: ONE_ROOM.into() });
     Ok(ServerHandle {
         local_addr,
         fingerprint: identity.fingerprint.clone(),
@@ -432,13 +478,15 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         accept,
         collector,
         stop,
+        stall_ms,
         ve_thread: Some(ve_thread),
         recorder,
         view,
     })
 }
 
-/// Accepts connections until shutdown, then waits (bounded) for every session to finish.
+/// Accepts connections until shutdown; then, while the sessions end (each bounded by the drain), refuses
+/// new ones at once rather than leaving them to time out.
 async fn accept_loop(endpoint: Endpoint, shared: Arc<Shared>) {
     let mut sessions = tokio::task::JoinSet::new();
     let mut shutdown = shared.shutdown.subscribe();
@@ -452,7 +500,15 @@ async fn accept_loop(endpoint: Endpoint, shared: Arc<Shared>) {
             Some(_) = sessions.join_next(), if !sessions.is_empty() => {}
         }
     }
-    while sessions.join_next().await.is_some() {}
+    while !sessions.is_empty() {
+        tokio::select! {
+            Some(incoming) = endpoint.accept() => {
+                tracing::info!(remote = %incoming.remote_address(), "refused a connection: the server is draining");
+                incoming.refuse();
+            }
+            _ = sessions.join_next() => {}
+        }
+    }
 }
 
 /// Drains the VE thread's statistics and events; logs statistics every `stats_every`.

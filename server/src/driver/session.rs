@@ -3,7 +3,6 @@
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
@@ -22,8 +21,8 @@ use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLi
 
 /// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
 const UPLINK_RING: usize = 64;
-/// How long a leaving server waits for a client to close after telling it.
-const LEAVE_LINGER: Duration = Duration::from_secs(1);
+/// What a draining server tells its clients.
+const DRAINING: &str = "the server is draining: move to another server of the room";
 
 fn refused(reason: RefusalReason) -> Refused {
     Refused { reason, message: String::new() }
@@ -130,6 +129,8 @@ async fn run_session(
         connection: connection.clone(),
         counters: counters.clone(),
     });
+    let fleet_user = crate::fleet::user_label(&hello.client_name, user);
+    shared.tell_fleet(crate::fleet::FleetEvent::UserJoined { user: fleet_user.clone() });
     tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %welcome.scene.op_name, position_scale = welcome.mapping.position_scale, force_scale = welcome.mapping.force_scale, coupling_stiffness = ?welcome.coupling.stiffness, coupling_damping = ?welcome.coupling.damping, remote = %connection.remote_address(), "session started");
 
     let receive = {
@@ -175,10 +176,14 @@ async fn run_session(
     room_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let reason = loop {
         if *shutdown.borrow() {
-            let _ = send_control(&mut send, &Control::Leave { reason: "the server is shutting down".into() }).await;
+            // The newest state first, so that the server the client moves to resumes the room where it is.
+            if let Some(state) = shared.room.as_ref().and_then(|room| room.signed_latest()) {
+                let _ = send_control(&mut send, &Control::RoomState(state)).await;
+            }
+            let _ = send_control(&mut send, &Control::Leave { reason: DRAINING.into() }).await;
             let _ = send.finish();
-            let _ = tokio::time::timeout(LEAVE_LINGER, connection.closed()).await;
-            break "server shutdown";
+            let _ = tokio::time::timeout(shared.drain, connection.closed()).await;
+            break "server drained";
         }
         tokio::select! {
             message = recv_control(&mut recv) => match message {
@@ -208,6 +213,7 @@ async fn run_session(
     receive.abort();
     transmit.abort();
     counters.connected.store(false, Ordering::Relaxed);
+    shared.tell_fleet(crate::fleet::FleetEvent::UserLeft { user: fleet_user });
     tracing::info!(user, reason, "session ended");
 }
 

@@ -5,7 +5,7 @@
 //! that a tokio task turns into log lines, statistics are copied out every 100 ms. Joins and leaves arrive
 //! as commands (they allocate and free per-user buffers, once per user).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -15,6 +15,7 @@ use kinloop_protocol::codec;
 use rtrb::{Consumer, Producer};
 
 use crate::core::{UserId, VeCore, VeEvent};
+use crate::fleet::Heartbeat;
 use crate::gateway::{push_frame, Command, LatencyHistogram, UserLink, VeLoopStats};
 use crate::view::ViewTap;
 
@@ -41,6 +42,10 @@ pub struct VeThreadIo {
     pub room: Option<Arc<Room>>,
     /// Set to stop the loop.
     pub stop: Arc<AtomicBool>,
+    /// Advanced every tick, for a fleet manager's health pings (`crate::fleet`), if one listens.
+    pub heartbeat: Option<Heartbeat>,
+    /// A test knob: milliseconds to stall the loop for at its next tick (then reset to 0).
+    pub stall_ms: Arc<AtomicU64>,
 }
 
 /// Runs the VE loop until `io.stop` is set; returns the final statistics.
@@ -69,6 +74,13 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
         if lateness > half_period {
             stats.deadline_misses += 1;
+        }
+        if let Some(heartbeat) = &io.heartbeat {
+            heartbeat.beat();
+        }
+        let stall_ms = io.stall_ms.swap(0, Ordering::Relaxed);
+        if stall_ms > 0 {
+            std::thread::sleep(Duration::from_millis(stall_ms));
         }
         let now = woke - epoch;
         serve_commands(&mut core, &mut io.commands, &mut links, now);
