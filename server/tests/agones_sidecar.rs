@@ -14,7 +14,7 @@ use kinloop_linkage::model::builtin;
 use kinloop_protocol::quic::{client_endpoint, connect, recv_control, ConnectedSession, EndpointOptions, Trust};
 use kinloop_protocol::{Control, DeviceCaps, Hello, Join, LocalModelForm, Role, PROTOCOL_VERSION};
 use kinloop_server::fleet::agones::{self, AgonesAdapter, AgonesConfig, ROOMS_COUNTER, USERS_LIST};
-use kinloop_server::fleet::{self, user_label};
+use kinloop_server::fleet::{self, user_label, FleetEvent};
 use kinloop_server::{Server, ServerConfig, ServerHandle};
 
 const HEALTH_PERIOD: Duration = Duration::from_millis(100);
@@ -182,6 +182,36 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
     adapter.finished(Duration::from_secs(15)).await;
     assert_eq!(journal.calls().last().map(|c| c.call.clone()), Some(Call::Shutdown));
     let _ = back.stop().await;
+}
+
+/// The fleet interface as the rooms executor will drive it: rooms opening and closing are counted, a server
+/// whose last room closes while it serves on is Ready again, and one that drains is not (it shuts down).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_server_whose_last_room_closes_is_ready_again_and_one_that_drains_shuts_down() {
+    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
+    let journal = sidecar.journal().clone();
+    let (adapter, feed) = adapter_for(&sidecar).await;
+    let room = |name: &str| name.to_string();
+    feed.send(FleetEvent::Listening { addr: loopback() });
+    feed.send(FleetEvent::RoomOpened { room: room("a") });
+    feed.send(FleetEvent::RoomOpened { room: room("b") });
+    feed.send(FleetEvent::RoomClosed { room: room("a") });
+    until("two rooms opened, one closed", || {
+        count(&journal, &Call::Counter { name: ROOMS_COUNTER.into(), diff: -1 }) == 1
+    })
+    .await;
+    assert_eq!((journal.counter(ROOMS_COUNTER), count(&journal, &Call::Ready)), (1, 1), "a room left: not Ready");
+    feed.send(FleetEvent::RoomClosed { room: room("b") });
+    until("Ready again", || count(&journal, &Call::Ready) == 2).await;
+    assert_eq!(journal.counter(ROOMS_COUNTER), 0);
+    feed.send(FleetEvent::RoomOpened { room: room("c") });
+    feed.send(FleetEvent::Draining);
+    feed.send(FleetEvent::RoomClosed { room: room("c") });
+    feed.send(FleetEvent::Drained);
+    adapter.finished(Duration::from_secs(10)).await;
+    assert_eq!(count(&journal, &Call::Ready), 2, "a draining server is not Ready again");
+    assert_eq!(journal.calls().last().map(|c| c.call.clone()), Some(Call::Shutdown));
+    let _ = sidecar.stop().await;
 }
 
 /// An allocation for a scene the server does not hold is refused with the reason and the `rooms` count the

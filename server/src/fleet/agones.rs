@@ -4,7 +4,8 @@
 //! - health pings every health period, each only if the executor's heartbeat advanced since the last one, so
 //!   a stalled VE stops them within one period (and Agones marks the server Unhealthy after the Fleet's
 //!   `health.periodSeconds × failureThreshold`; see `deploy/agones/fleet.yaml` and docs/fleet.md);
-//! - rooms as the Counter [`ROOMS_COUNTER`] and users as the List [`USERS_LIST`] (the SDK's beta API);
+//! - rooms as the Counter [`ROOMS_COUNTER`] and users as the List [`USERS_LIST`] (the SDK's beta API), and
+//!   `Ready` again when the last room closes while the server serves on (back to the fleet's pool);
 //! - `Shutdown` once drained.
 //!
 //! A sidecar that errors or goes away is retried with backoff and reported in the log, never a crash: each
@@ -124,6 +125,9 @@ async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
     let FleetEvents { mut events, heartbeat } = events;
     let (stop_health, health_stopped) = watch::channel(false);
     let health = tokio::spawn(ping_while_beating(sdk.clone(), heartbeat, health_period, health_stopped));
+    // Rooms open, and whether the server drains: a server whose last room closed while it serves on goes back
+    // to the pool of Ready servers (an allocation had made it Allocated).
+    let (mut rooms, mut draining) = (0usize, false);
     while let Some(event) = events.recv().await {
         match event {
             FleetEvent::Listening { addr } => {
@@ -131,6 +135,7 @@ async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
                 retried("Ready", &sdk, |mut s| async move { s.ready().await }).await;
             }
             FleetEvent::RoomOpened { room } => {
+                rooms += 1;
                 tracing::info!(room, "Agones: rooms + 1");
                 let increment = |s: Sdk| async move { s.beta().clone().increment_counter(ROOMS_COUNTER, 1).await };
                 retried("UpdateCounter rooms +1", &sdk, increment).await;
@@ -139,6 +144,11 @@ async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
                 tracing::info!(room, "Agones: rooms - 1");
                 let decrement = |s: Sdk| async move { s.beta().clone().decrement_counter(ROOMS_COUNTER, 1).await };
                 retried("UpdateCounter rooms -1", &sdk, decrement).await;
+                rooms = rooms.saturating_sub(1);
+                if rooms == 0 && !draining {
+                    tracing::info!("Agones: no room left; Ready again");
+                    retried("Ready", &sdk, |mut s| async move { s.ready().await }).await;
+                }
             }
             FleetEvent::UserJoined { user } => {
                 let add = |s: Sdk| {
@@ -154,7 +164,10 @@ async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
                 };
                 retried("RemoveListValue users", &sdk, remove).await;
             }
-            FleetEvent::Draining => tracing::info!("Agones: draining"),
+            FleetEvent::Draining => {
+                draining = true;
+                tracing::info!("Agones: draining");
+            }
             FleetEvent::Drained => {
                 stop_health.send_replace(true);
                 let _ = health.await;
