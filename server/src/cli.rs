@@ -333,18 +333,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     runtime.block_on(async move {
-        let agones = match cli.agones {
-            true => {
-                let settings = AgonesConfig {
-                    health_period: Duration::from_millis(cli.agones_health_ms),
-                    ..AgonesConfig::default()
-                };
-                let sdk = crate::fleet::agones::connect(&settings).await?;
-                let (feed, events) = crate::fleet::channel();
-                config.fleet = Some(feed);
-                Some(AgonesAdapter::spawn(sdk, &settings, events))
-            }
-            false => None,
+        let agones = if cli.agones {
+            let settings =
+                AgonesConfig { health_period: Duration::from_millis(cli.agones_health_ms), ..AgonesConfig::default() };
+            let sdk = crate::fleet::agones::connect(&settings).await?;
+            let (feed, events) = crate::fleet::channel();
+            config.fleet = Some(feed);
+            Some(AgonesAdapter::spawn(sdk, &settings, events))
+        } else {
+            None
         };
         let server = Server::start(config)?;
         println!("kinloop-server listening on {}", server.local_addr());
