@@ -420,7 +420,7 @@ mod tests {
         assert_eq!(error(""), "x.csv: no rows");
         assert!(error("a,b\n1,2\n").contains("not a kinloop recording"));
         assert!(
-            error(&format!("{client}\n\n0.1,2\n")).starts_with("x.csv:3: 2 fields, expected 28"),
+            error(&format!("{client}\n\n0.1,2\n")).starts_with("x.csv:3: 2 fields, expected 29"),
             "{}",
             error(&format!("{client}\n0.1,2\n"))
         );
