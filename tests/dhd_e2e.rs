@@ -298,28 +298,13 @@ fn button_zero_is_a_clutch_the_output_fades_while_it_is_held() {
     let released = run.record.iter().position(|l| l == "B 0").expect("the button is released");
     assert!(pressed < released);
     // The output gain of the client's ticks: full before the press, zero while held, full again after.
-    let csv = std::fs::read_to_string(run.dir.path().join("client.csv")).expect("the client's record");
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
-    let (t, gain) = (column(&header, "time_s"), column(&header, "gain"));
-    let rows: Vec<(f64, f64)> = lines
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .map(|f| (f[t].parse().unwrap_or(f64::NAN), f[gain].parse().unwrap_or(f64::NAN)))
-        .collect();
-    let first_full = rows.iter().position(|r| r.1 >= 1.0).expect("the output reaches full gain");
-    let faded = rows[first_full..].iter().position(|r| r.1 == 0.0).map(|i| i + first_full).expect("the clutch fades");
-    let back = rows[faded..].iter().position(|r| r.1 >= 1.0).map(|i| i + faded).expect("full gain again");
-    let held_s = rows[back].0 - rows[faded].0;
+    let ticks = common::records::client_ticks(&run.dir.path().join("client.csv"));
+    let held_s = common::checks::clutched_seconds(&ticks).expect("the clutch fades the output and it comes back");
     assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
     // While faded, the fake received only small braking forces.
     let forces = run.forces();
     let during: Vec<f64> = forces.iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
     assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
-}
-
-/// The index of `name` in a CSV header.
-fn column(header: &[&str], name: &str) -> usize {
-    header.iter().position(|c| *c == name).unwrap_or_else(|| panic!("no column {name} in {header:?}"))
 }
 
 #[test]

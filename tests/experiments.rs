@@ -325,13 +325,13 @@ fn latency_live_sessions_report_the_goal_and_meet_it() {
     assert_eq!(r["goal_met"], meeting == 12);
     let circle: Vec<&Value> = points.iter().filter(|p| p["hand"].as_str().unwrap().contains("circle")).collect();
     assert_eq!(circle.len(), 4);
-    let tracked = &r["testbed_issue_circle_device_op_rms_mm"];
+    let tracked = &r["testbed_goal_circle_device_op_rms_mm"];
     for (delay, key, goal_mm) in [(100.0, "100ms", 3.0), (1000.0, "1000ms", 25.0)] {
         let own = circle.iter().find(|p| f(&p["delay_ms"]) == delay).unwrap();
         assert_eq!(tracked[key], own["device_op_rms_mm"], "{tracked}");
         assert!(f(&tracked[key]) > 0.0 && f(&tracked[key]) <= goal_mm, "{tracked}");
     }
-    assert_eq!(r["testbed_issue_circle_tracking_goal_met"], true);
+    assert_eq!(r["testbed_goal_circle_tracking_goal_met"], true);
 }
 
 /// 16 users stay stable on one OP and spread over the links, and every user costs the VE something.

@@ -499,7 +499,7 @@ fn the_default_lead_brings_the_op_nearer_the_device_at_long_delays_too() {
 /// same floor: the device moves more than 25 mm (RMS) in the second the VE has not heard of, and the OP is
 /// no nearer than nine tenths of that.
 #[test]
-fn the_testbed_meets_the_tracking_goals_on_the_issues_circle_and_the_tour_is_held_by_its_unheard_floor() {
+fn the_testbed_meets_the_tracking_goals_on_the_goal_circle_and_the_tour_is_held_by_its_unheard_floor() {
     use kinloop::experiments::delay_point::{
         goal_circle, measure_intending, measure_with, Lead, GOAL_RMS_100MS_M, GOAL_RMS_1S_M,
     };

@@ -2,8 +2,10 @@
 //! their own `main`), against the fake OpenHaptics library (`fakes/fake-hd`) found through `KINLOOP_HD_LIB`:
 //! the same loading and calls as with 3D Systems' `libHD`, and the fake's servo thread running kinloop's
 //! tick (the device-clocked loop). Judged on the forces the fake output (its record): none above the
-//! Touch's nominal peak, zero from a fault on, the device disabled last. Bad libraries and a failing
-//! `hdInitDevice` get one line naming the library and the HD error code, and a non-zero exit.
+//! Touch's nominal peak, zero from the tick of a fault on (a panic inside the callback included: the
+//! client's tests build it with the `fault-injection` feature, which panics on demand), the device disabled
+//! last. Bad, missing and old libraries and a failing `hdInitDevice` get one line naming the library and what
+//! to check, and a non-zero exit. `kinloop demo --device hd` runs its first user through the same code.
 //!
 //! The fake is a dev-dependency of this package, so cargo builds its cdylib beside this test's binary; the
 //! test fails (never skips) when it is not there.
@@ -17,12 +19,13 @@ use common::child::{spawn_scene_server, with_overrides, ChildProcess, Program, R
 /// The Touch's nominal peak force, as the fake reports it (N).
 const TOUCH_PEAK_N: f64 = 3.3;
 
-/// A client run: whether it succeeded, its log and stdout, and the fake's record.
+/// A client run: whether it succeeded, its log and stdout, the fake's record, and its folder.
 struct HdRun {
     success: bool,
     stderr: String,
     stdout: String,
     record: Vec<String>,
+    dir: tempfile::TempDir,
 }
 
 impl HdRun {
@@ -39,11 +42,21 @@ impl HdRun {
     fn fault_line(&self) -> usize {
         self.record.iter().position(|l| l.starts_with("X ")).unwrap_or_else(|| panic!("no fault: {:?}", self.record))
     }
+
+    /// The client's last error line.
+    fn error_line(&self) -> String {
+        self.stderr.lines().rfind(|l| l.contains("error:")).unwrap_or_default().to_string()
+    }
 }
 
 /// A server for the testbed and `kinloop-client --device DEVICE --duration SECONDS --json` against it, the
 /// library and the fake configured by `env` (`KINLOOP_HD_LIB` defaults to the fake).
 fn run_hd(test: &'static str, device: &str, seconds: &str, env: &[(&str, String)]) -> HdRun {
+    run_hd_with(test, device, seconds, env, &[])
+}
+
+/// [`run_hd`] with `extra` client arguments.
+fn run_hd_with(test: &'static str, device: &str, seconds: &str, env: &[(&str, String)], extra: &[&str]) -> HdRun {
     let dir = common::temp_dir();
     let (mut server, addr, fingerprint) = spawn_scene_server(test, "paper-testbed", dir.path());
     let record = dir.path().join("forces.txt");
@@ -57,6 +70,7 @@ fn run_hd(test: &'static str, device: &str, seconds: &str, env: &[(&str, String)
     let args = ["--server", &addr.to_string(), "--fingerprint", &fingerprint, "--device", device]
         .into_iter()
         .chain(["--duration", seconds, "--no-realtime", "--json"])
+        .chain(extra.iter().copied())
         .map(String::from)
         .collect();
     let role = Role::Program { program: Program::Client, args };
@@ -64,18 +78,37 @@ fn run_hd(test: &'static str, device: &str, seconds: &str, env: &[(&str, String)
     let status = client.exit_status(Duration::from_secs(40));
     server.stop(Duration::from_secs(5));
     let stderr = client.log();
-    assert!(!stderr.contains("panicked"), "{test}: the client panicked:\n{stderr}");
+    // No panic but the one injected on demand (see the module documentation).
+    let (panics, injected) = (stderr.matches("panicked at").count(), stderr.matches(INJECTED).count());
+    assert_eq!(panics, injected, "{test}: the client panicked:\n{stderr}");
     let record = std::fs::read_to_string(&record).unwrap_or_default().lines().map(String::from).collect();
-    HdRun { success: status.success(), stderr, stdout: client.stdout(), record }
+    HdRun { success: status.success(), stderr, stdout: client.stdout(), record, dir }
 }
 
-/// No force above the Touch's peak, and the device disabled last with a zero force before it.
-fn assert_released(what: &str, run: &HdRun) {
-    let forces = run.forces();
-    let max = forces.iter().map(|f| f.1).fold(0.0, f64::max);
+/// What the injected panic says.
+const INJECTED: &str = "a panic injected at frame";
+
+/// No force above the Touch's peak, and the device disabled last.
+fn assert_within_peak_and_disabled(what: &str, run: &HdRun) {
+    let max = run.forces().iter().map(|f| f.1).fold(0.0, f64::max);
     assert!(max <= TOUCH_PEAK_N + 1e-9, "{what}: a force of {max} N, above the Touch's {TOUCH_PEAK_N} N");
     assert_eq!(run.record.last().map(String::as_str), Some("D"), "{what}: the device is disabled last");
-    assert_eq!(forces.last().map(|f| f.1), Some(0.0), "{what}: the last force is zero");
+}
+
+/// As [`assert_within_peak_and_disabled`], with a zero force last.
+fn assert_released(what: &str, run: &HdRun) {
+    assert_within_peak_and_disabled(what, run);
+    assert_eq!(run.forces().last().map(|f| f.1), Some(0.0), "{what}: the last force is zero");
+}
+
+/// A fault that struck at record line `at`: the first frame output after it (the fault's own tick, or the
+/// next) is zero, forces were rendered before it, none above the peak, the device disabled last.
+fn assert_zero_within_one_tick(what: &str, run: &HdRun, at: usize) {
+    assert_within_peak_and_disabled(what, run);
+    let forces = run.forces();
+    assert!(forces.iter().any(|f| f.0 < at && f.1 > 0.0), "{what}: forces were rendered before the fault");
+    let next = forces.iter().find(|f| f.0 > at).map(|f| f.1);
+    assert!(next.is_none_or(|f| f == 0.0), "{what}: the first frame after the fault output {next:?} N");
 }
 
 #[test]
@@ -113,6 +146,7 @@ fn hd_faults_leave_zero_force_and_bad_libraries_one_line() {
     assert!(!run.success, "nan: the client must fail:\n{}", run.stderr);
     assert_released("nan", &run);
     let at = run.fault_line();
+    assert_zero_within_one_tick("nan", &run, at);
     let after: Vec<f64> = run.forces().iter().filter(|f| f.0 > at).map(|f| f.1).collect();
     assert!(!after.is_empty() && after.iter().all(|&f| f == 0.0), "nan: forces after the fault {after:?}");
     assert!(run.forces().iter().any(|f| f.0 < at && f.1 > 0.0), "nan: forces were rendered before it");
@@ -121,21 +155,22 @@ fn hd_faults_leave_zero_force_and_bad_libraries_one_line() {
     let run = run_hd(NAME, "hd", "3", &[("FAKE_HD_FAULT", "lost:1200".into())]);
     assert!(!run.success, "lost: the client must fail:\n{}", run.stderr);
     let at = run.fault_line();
+    assert_zero_within_one_tick("lost", &run, at);
     assert!(run.forces().iter().all(|f| f.0 < at || f.1 == 0.0), "lost: no force after the fault");
     assert!(run.stderr.contains("0x0302"), "lost: the HD error code is said:\n{}", run.stderr);
-    assert_eq!(run.record.last().map(String::as_str), Some("D"), "lost: the device is disabled");
     // The scheduler stalls for 100 ms: the fake's amplifiers drop the held force, and kinloop's next frame,
     // seeing the gap, commands zero and ramps in again; the session goes on.
     let run = run_hd(NAME, "hd", "3", &[("FAKE_HD_FAULT", "stall:1200:100".into())]);
     assert!(run.success, "stall: the session goes on:\n{}", run.stderr);
     assert_released("stall", &run);
     let at = run.fault_line();
+    assert_zero_within_one_tick("stall", &run, at);
     let next = run.forces().iter().find(|f| f.0 > at).map(|f| f.1);
     assert_eq!(next, Some(0.0), "stall: the first frame after it outputs zero");
     // hdInitDevice failing with HD_COMM_ERROR: one line with the library, the code and what to check.
     let run = run_hd(NAME, "hd", "3", &[("FAKE_HD_FAULT", "init".into())]);
     assert!(!run.success && run.forces().is_empty(), "init: the client must fail, no force sent");
-    let line = run.stderr.lines().rfind(|l| l.contains("error:")).unwrap_or_default().to_string();
+    let line = run.error_line();
     assert!(line.contains(&fake) && line.contains("0x0302") && line.contains("plugged in"), "init: {line}");
     // ... unless a simulated fallback was asked for.
     let run = run_hd(NAME, "hd,sim:touch", "1", &[("FAKE_HD_FAULT", "init".into())]);
@@ -143,9 +178,108 @@ fn hd_faults_leave_zero_force_and_bad_libraries_one_line() {
     // Not an HD library: the fake DHD library lacks every HD symbol; a missing file is named.
     let dhd = common::fake_dhd_library().display().to_string();
     let run = run_hd(NAME, "hd", "1", &[("KINLOOP_HD_LIB", dhd.clone())]);
-    let line = run.stderr.lines().rfind(|l| l.contains("error:")).unwrap_or_default().to_string();
+    let line = run.error_line();
     assert!(!run.success && line.contains(&dhd) && line.contains("lacks required symbols hdInitDevice"), "{line}");
     let run = run_hd(NAME, "hd", "1", &[("KINLOOP_HD_LIB", "/nonexistent/libHD.so".into())]);
-    let line = run.stderr.lines().rfind(|l| l.contains("error:")).unwrap_or_default().to_string();
+    let line = run.error_line();
     assert!(!run.success && line.contains("/nonexistent/libHD.so") && line.contains("KINLOOP_HD_LIB"), "{line}");
+}
+
+/// A panic inside kinloop's tick in the vendor's servo thread (injected mid-frame, after `hdBeginFrame`):
+/// caught, that very frame ends with zero force, the callback is unscheduled, the client ends with one line
+/// saying so, and `hdDisableDevice` runs.
+#[test]
+fn a_panic_in_the_servo_callback_ends_in_zero_force_and_a_disabled_device() {
+    const NAME: &str = "a_panic_in_the_servo_callback_ends_in_zero_force_and_a_disabled_device";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(60));
+    const FRAME: usize = 1200;
+    let tour = "0,0,0;30,20,0;-30,10,0".to_string();
+    let env = [("KINLOOP_FAULT_HD_PANIC_AT_FRAME", FRAME.to_string()), ("FAKE_HD_TOUR", tour)];
+    let run = run_hd(NAME, "hd", "3", &env);
+    assert!(!run.success, "the client must fail:\n{}", run.stderr);
+    assert_eq!(run.stderr.matches(INJECTED).count(), 1, "one panic, injected:\n{}", run.stderr);
+    assert!(run.stderr.contains("panicked inside the HD servo callback; force zeroed"), "{}", run.stderr);
+    assert_released("panic", &run);
+    // Every frame ends with one force line: the panicking frame is the FRAME-th, and from it on only zero.
+    let forces = run.forces();
+    assert!(forces.len() >= FRAME, "{} frames before the end", forces.len());
+    assert!(forces[FRAME - 2].1 > 0.0, "forces were rendered before the panic: {:?}", forces[FRAME - 2]);
+    let after: Vec<f64> = forces[FRAME - 1..].iter().map(|f| f.1).collect();
+    assert!(after.iter().all(|&f| f == 0.0), "forces from the panicking frame on: {after:?}");
+    // The callback was unscheduled: no frame came from the servo thread after it (the end's own zero
+    // frame and the disable are all that follow).
+    assert!(after.len() <= 2, "{} frames from the panicking one on", after.len());
+}
+
+/// Button 1 is the clutch, as a DHD device's button 0: held from 1.5 s to 2.5 s, the output fades to zero
+/// for about that second and comes back; the device gets only small braking forces meanwhile.
+#[test]
+fn button_one_is_a_clutch_the_output_fades_while_it_is_held() {
+    const NAME: &str = "button_one_is_a_clutch_the_output_fades_while_it_is_held";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(60));
+    let env = [("FAKE_HD_BUTTON", "1.5:2.5".to_owned()), ("FAKE_HD_TOUR", "0,0,0;30,20,0;-30,10,0".into())];
+    let run = run_hd_with(NAME, "hd", "4", &env, &["--record", "client.csv"]);
+    assert!(run.success, "the client fails:\n{}", run.stderr);
+    assert_released("clutch", &run);
+    let pressed = run.record.iter().position(|l| l == "B 1").expect("the button is pressed");
+    let released = run.record.iter().position(|l| l == "B 0").expect("the button is released");
+    assert!(pressed < released);
+    let ticks = common::records::client_ticks(&run.dir.path().join("client.csv"));
+    let held_s = common::checks::clutched_seconds(&ticks).expect("the clutch fades the output and it comes back");
+    assert!((0.8..1.6).contains(&held_s), "faded for {held_s} s of a 1 s press");
+    let during: Vec<f64> = run.forces().iter().filter(|f| f.0 > pressed + 400 && f.0 < released).map(|f| f.1).collect();
+    assert!(!during.is_empty() && during.iter().all(|&f| f < 1.0), "forces while held: {during:?}");
+}
+
+/// An HDAPI older than 3.0, or one that will not say its version, is refused before any force: one line
+/// with the library, what it said and what to check; the device is disabled.
+#[test]
+fn an_old_or_silent_hd_library_is_refused_with_what_to_check() {
+    const NAME: &str = "an_old_or_silent_hd_library_is_refused_with_what_to_check";
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(60));
+    let fake = common::fake_hd_library().display().to_string();
+    for (version, said) in [("2.0.3", "\"2.0.3\""), ("none", "unknown")] {
+        let run = run_hd(NAME, "hd", "1", &[("FAKE_HD_VERSION", version.into())]);
+        let line = run.error_line();
+        assert!(!run.success && run.forces().is_empty(), "{version}: refused, no force:\n{}", run.stderr);
+        assert!(line.contains(&fake) && line.contains(said) && line.contains("OpenHaptics 3.0 or newer"), "{line}");
+        assert!(line.contains("KINLOOP_HD_LIB"), "{version}: says what to check: {line}");
+        assert!(!run.record.iter().any(|l| l == "E 1"), "{version}: force output never enabled");
+        assert_eq!(run.record.last().map(String::as_str), Some("D"), "{version}: the device is disabled");
+    }
+    // 3.0 itself is new enough.
+    let run = run_hd(NAME, "hd", "1", &[("FAKE_HD_VERSION", "3.00.66".into())]);
+    assert!(run.success, "3.00.66 is accepted:\n{}", run.stderr);
+}
+
+/// `kinloop demo --device hd`: the demo's first user holds the Touch through the client's code (the
+/// vendor's servo thread runs its loop), within the Touch's peak, released and disabled at the end.
+#[test]
+fn the_demo_drives_an_hd_device_through_the_clients_code_path() {
+    const NAME: &str = "the_demo_drives_an_hd_device_through_the_clients_code_path";
+    let _bounded = common::bounded(NAME, Duration::from_secs(60));
+    let dir = common::temp_dir();
+    let record = dir.path().join("forces.txt");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_kinloop"))
+        .args(["demo", "--device", "hd", "--duration", "2", "--json", "--no-realtime", "--out"])
+        .arg(dir.path().join("out"))
+        .env("KINLOOP_HD_LIB", common::fake_hd_library())
+        .env("FAKE_HD_RECORD", &record)
+        .env("FAKE_HD_TOUR", "0,0,0;30,20,0")
+        .output()
+        .expect("kinloop runs");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "the demo fails:\n{stderr}");
+    let summary: serde_json::Value = common::child::json_object(&String::from_utf8_lossy(&out.stdout));
+    assert_eq!(summary["users"], 1, "{summary}");
+    let record: Vec<String> =
+        std::fs::read_to_string(&record).expect("the fake's record").lines().map(String::from).collect();
+    let run = HdRun { success: true, stderr, stdout: String::new(), record, dir };
+    assert_released("demo", &run);
+    let max = run.forces().iter().map(|f| f.1).fold(0.0, f64::max);
+    assert!(max > 0.05, "forces were rendered: up to {max} N");
+    assert!(run.record.iter().any(|l| l == "E 1"), "force output enabled");
 }

@@ -29,6 +29,9 @@ struct Args {
     /// Access token the server was started with.
     #[arg(long, default_value = "")]
     token: String,
+    /// Room to join on a server hosting several (default: the server's default room).
+    #[arg(long, value_name = "NAME", default_value = "")]
+    room: String,
     /// Trust the server certificates this CA (or self-signed certificate) PEM file vouches for.
     #[arg(long, value_name = "FILE", conflicts_with = "fingerprint")]
     ca: Option<PathBuf>,
@@ -136,6 +139,7 @@ fn config(args: Args) -> anyhow::Result<(ClientConfig, bool)> {
     config.fallback_servers = servers.collect();
     config.server_name = args.server_name;
     config.token = args.token;
+    config.room = args.room;
     config.op = args.op;
     match args.device {
         Some(DeviceRequest::Simulated(preset)) => config.device = Some(preset),
@@ -190,6 +194,11 @@ fn remedy(reason: &RefusalReason) -> Option<String> {
              SI bounds often mean a scene in millimetres or grams)"
                 .into()
         }
+        RefusalReason::UnknownRoom { available, .. } if available.is_empty() => {
+            "no room on this server opens to your token; ask the server's operator".into()
+        }
+        RefusalReason::UnknownRoom { .. } => "choose one of the rooms listed with --room NAME".into(),
+        RefusalReason::OverBudget { .. } => "try again later or another room: the server is at capacity".into(),
         RefusalReason::Malformed { .. } => return None,
     })
 }

@@ -153,7 +153,7 @@ pub fn paper_wrench() -> Vector3<f64> {
 }
 
 /// The Delta robot written with ball joints (the linkage tests' scene).
-const DELTA_BALL: &str = include_str!("../tests/scenes/delta-ball.toml");
+const DELTA_BALL: &str = include_str!("../../scenes/delta.toml");
 
 /// Mass of each gimbal in the Delta's revolute-built version: what a user had to write before ball joints.
 pub const DELTA_GIMBAL_MASS: f64 = 0.005;
@@ -172,7 +172,7 @@ pub struct DeltaCase {
 impl DeltaCase {
     /// The ball-jointed Delta, or its revolute-built version.
     pub fn new(balls: bool) -> Option<DeltaCase> {
-        let scene = Scene::from_toml_str(DELTA_BALL, "delta-ball.toml").ok()?;
+        let scene = Scene::from_toml_str(DELTA_BALL, "scenes/delta.toml").ok()?;
         let scene = if balls { scene } else { revolute_built(&scene, DELTA_GIMBAL_MASS) };
         let model: Model<Spatial> = Model::compile(&scene, &scene.name).ok()?;
         let data = Data::new(&model);

@@ -34,6 +34,14 @@ pub fn random_state<S: Space>(model: &Model<S>, seed: u64) -> (DVector<f64>, DVe
     (q, qd)
 }
 
+/// `q ⊕ h v` (see [`crate::algorithms::configuration::integrate`]): the configuration a finite difference
+/// steps to, on the manifold when the model has ball joints.
+pub fn displaced<S: Space>(model: &Model<S>, q: &DVector<f64>, v: &DVector<f64>, h: f64) -> DVector<f64> {
+    let mut out = q.clone();
+    crate::algorithms::configuration::integrate(model, &mut out, v, h);
+    out
+}
+
 /// Every planar test scene: the built-in files plus generated chains (with and without loops).
 pub fn planar_models() -> Vec<(String, Model<Planar>)> {
     let mut out: Vec<(String, Model<Planar>)> =

@@ -113,7 +113,7 @@ fn hot_paths_allocate_nothing() {
 /// The same with ball joints (nq ≠ nv: the configuration update on the manifold, RKMK, the projection's
 /// correction through a displacement): the Delta robot of `tests/scenes`.
 fn ball_joints_allocate_nothing() {
-    let scene = Scene::from_toml_str(include_str!("scenes/delta-ball.toml"), "delta-ball.toml").unwrap();
+    let scene = Scene::from_toml_str(include_str!("../../scenes/delta.toml"), "scenes/delta.toml").unwrap();
     let model: Model<Spatial> = Model::compile(&scene, "delta-ball").unwrap();
     let mut data = Data::new(&model);
     let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());

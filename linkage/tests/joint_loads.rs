@@ -1,4 +1,4 @@
-//! Springs, dampers and ranges on cuts, and ranges on tree joints (issue 43), checked against independent
+//! Springs, dampers and ranges on cuts, and ranges on tree joints, checked against independent
 //! computations: each cut freedom's coordinate computed here by hand from the bodies' poses, its energy
 //! `½ k (s − rest)²` against the potential energy, G against finite differences of that energy, the damper's
 //! power against `−c ṡ²` with ṡ a finite difference, a joint held against its range by a known load

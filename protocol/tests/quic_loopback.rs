@@ -29,7 +29,13 @@ fn options() -> EndpointOptions {
 }
 
 fn hello(version: u16, token: &str) -> Hello {
-    Hello { version, token: token.into(), client_name: "test-client".into(), role: Role::Manipulator }
+    Hello {
+        version,
+        token: token.into(),
+        client_name: "test-client".into(),
+        role: Role::Manipulator,
+        room: String::new(),
+    }
 }
 
 /// The join the tests make: the first operational point the scene offers, with a small desktop device.

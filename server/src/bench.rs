@@ -317,8 +317,6 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
         view,
         room: None,
         stop: stop.clone(),
-        heartbeat: None,
-        stall_ms: Default::default(),
     };
     let ve_thread = std::thread::Builder::new()
         .name("kinloop-ve".into())

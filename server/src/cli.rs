@@ -43,8 +43,18 @@ enum PassivityMode {
 #[command(name = "kinloop-server", version)]
 struct Cli {
     /// Scene file (TOML) or built-in name (paper-testbed, fourbar-crank-rocker, chain50_loops5, ...).
-    #[arg(long, value_name = "FILE_OR_BUILTIN_NAME")]
-    scene: String,
+    #[arg(long, value_name = "FILE_OR_BUILTIN_NAME", required_unless_present = "rooms", conflicts_with = "rooms")]
+    scene: Option<String>,
+    /// Host several linkages: a rooms file (TOML, one `[[room]]` per room: name, scene, token_file,
+    /// max_users, record; docs/rooms.md). Clients pick a room with `--room NAME`.
+    #[arg(long, value_name = "FILE")]
+    rooms: Option<PathBuf>,
+    /// Real-time threads stepping the rooms (default: one fewer than the cores, at least one).
+    #[arg(long, value_name = "N", default_value_t = crate::driver::rooms::default_rt_threads())]
+    rt_threads: usize,
+    /// Accept admin commands (create, remove, list rooms) carrying a token from this file.
+    #[arg(long, value_name = "FILE")]
+    admin_token: Option<PathBuf>,
     /// UDP address to listen on, e.g. 0.0.0.0:4433 or 127.0.0.1:0.
     #[arg(long, value_name = "ADDR")]
     listen: SocketAddr,
@@ -274,7 +284,12 @@ fn ve_config(cli: &Cli) -> VeConfig {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    let (scene, label) = load_scene(&cli.scene).with_context(|| format!("cannot load scene {}", cli.scene))?;
+    let rooms = cli.rooms.as_deref().map(crate::driver::rooms::load_rooms_file).transpose()?.unwrap_or_default();
+    let (scene, label) = match (&cli.scene, rooms.first()) {
+        (Some(scene), _) => load_scene(scene).with_context(|| format!("cannot load scene {scene}"))?,
+        (None, Some(first)) => (first.scene.clone(), first.scene_label.clone()),
+        (None, None) => anyhow::bail!("give --scene or --rooms"),
+    };
     let ve = ve_config(&cli);
     let duration = cli.duration.map(|s| seconds("--duration", s)).transpose()?;
 
@@ -330,7 +345,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         view,
         drain: seconds("--drain-s", cli.drain_s)?,
         fleet: None,
+        rt_threads: cli.rt_threads.max(1),
+        admin: cli.admin_token.as_deref().map(Access::from_file).transpose().context("--admin-token")?,
+        rooms,
     };
+    let many = !config.rooms.is_empty();
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     runtime.block_on(async move {
         let agones = if cli.agones {
@@ -360,15 +379,28 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             _ = terminated() => tracing::info!("SIGTERM: draining"),
             _ = stop => tracing::info!("--duration elapsed: draining"),
         }
-        let stats = server.shutdown().await?;
-        if let Some(agones) = agones {
-            agones.finished(AGONES_FINISH).await;
-        }
-        if cli.json {
-            println!("{}", serde_json::to_string_pretty(&stats)?);
+        if many {
+            let reports = server.shutdown_rooms().await?;
+            finish_agones(agones).await;
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "rooms": reports }))?);
+            }
+        } else {
+            let stats = server.shutdown().await?;
+            finish_agones(agones).await;
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&stats)?);
+            }
         }
         anyhow::Ok(())
     })
+}
+
+/// After the drain, lets the Agones adapter (if any) report the last counts and call Shutdown.
+async fn finish_agones(agones: Option<AgonesAdapter>) {
+    if let Some(agones) = agones {
+        agones.finished(AGONES_FINISH).await;
+    }
 }
 
 /// Resolves when the process is asked to terminate (SIGTERM: Kubernetes, Agones, systemd, `kill`); never

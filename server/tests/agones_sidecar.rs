@@ -1,7 +1,7 @@
 //! The Agones adapter against a fake SDK sidecar (`kinloop-fake-agones`: the SDK's gRPC service on a loopback
 //! port, recording each call): what a real sidecar would see of `kinloop-server --agones`: Ready only once
 //! the server listens, health pings at the configured period and none while the VE is stalled, the `rooms`
-//! Counter and `users` List following the room and the joins and leaves, Shutdown after the drain; a sidecar
+//! Counter and `users` List following the rooms (the admin command's too) and the joins and leaves, Shutdown after the drain; a sidecar
 //! that fails calls or goes away is retried and the server carries on; without one the program stops with one
 //! line. Every SDK call the server makes is covered here.
 
@@ -12,10 +12,12 @@ use std::time::{Duration, Instant};
 use kinloop_fake_agones::{Call, FakeSidecar, Journal};
 use kinloop_linkage::model::builtin;
 use kinloop_protocol::quic::{client_endpoint, connect, recv_control, ConnectedSession, EndpointOptions, Trust};
-use kinloop_protocol::{Control, DeviceCaps, Hello, Join, LocalModelForm, Role, PROTOCOL_VERSION};
+use kinloop_protocol::{
+    AdminAnswer, AdminCommand, AdminRequest, Control, DeviceCaps, Hello, Join, LocalModelForm, Role, PROTOCOL_VERSION,
+};
 use kinloop_server::fleet::agones::{self, AgonesAdapter, AgonesConfig, ROOMS_COUNTER, USERS_LIST};
-use kinloop_server::fleet::{self, user_label, FleetEvent};
-use kinloop_server::{Server, ServerConfig, ServerHandle};
+use kinloop_server::fleet::{self, user_label};
+use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 
 const HEALTH_PERIOD: Duration = Duration::from_millis(100);
 /// Scheduling slack on a busy host when asking whether a ping came "within one period".
@@ -50,8 +52,13 @@ fn start_server(feed: fleet::FleetFeed) -> ServerHandle {
 async fn join(server: &ServerHandle, name: &str) -> ConnectedSession {
     let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
     let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
-    let hello =
-        Hello { version: PROTOCOL_VERSION, token: String::new(), client_name: name.into(), role: Role::Manipulator };
+    let hello = Hello {
+        version: PROTOCOL_VERSION,
+        token: String::new(),
+        client_name: name.into(),
+        role: Role::Manipulator,
+        room: String::new(),
+    };
     let join = Join {
         op: "link2".into(),
         device: DeviceCaps { max_force_n: 20.0, continuous_force_n: 10.0, ..DeviceCaps::generous("sim", 3) },
@@ -184,31 +191,54 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
     let _ = back.stop().await;
 }
 
-/// The fleet interface as the rooms executor will drive it: rooms opening and closing are counted, a server
+/// Rooms opened and closed by the admin command are counted like the rooms the server starts with; a server
 /// whose last room closes while it serves on is Ready again, and one that drains is not (it shuts down).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_server_whose_last_room_closes_is_ready_again_and_one_that_drains_shuts_down() {
+async fn admin_rooms_are_counted_a_server_with_none_left_is_ready_again_and_one_that_drains_shuts_down() {
     let sidecar = FakeSidecar::start().await.expect("fake sidecar");
     let journal = sidecar.journal().clone();
     let (adapter, feed) = adapter_for(&sidecar).await;
-    let room = |name: &str| name.to_string();
-    feed.send(FleetEvent::Listening { addr: loopback() });
-    feed.send(FleetEvent::RoomOpened { room: room("a") });
-    feed.send(FleetEvent::RoomOpened { room: room("b") });
-    feed.send(FleetEvent::RoomClosed { room: room("a") });
-    until("two rooms opened, one closed", || {
-        count(&journal, &Call::Counter { name: ROOMS_COUNTER.into(), diff: -1 }) == 1
-    })
-    .await;
-    assert_eq!((journal.counter(ROOMS_COUNTER), count(&journal, &Call::Ready)), (1, 1), "a room left: not Ready");
-    feed.send(FleetEvent::RoomClosed { room: room("b") });
+    let scene = builtin::scene("paper-testbed").unwrap().unwrap();
+    let mut config = ServerConfig::new(scene, "paper-testbed", loopback());
+    config.realtime = false;
+    config.rt_threads = 1;
+    config.drain = Duration::from_secs(2);
+    config.fleet = Some(feed);
+    config.admin = Some(Access::parse("admin-secret\n", "admin tokens").unwrap());
+    let server = Server::start(config).expect("the server starts");
+    let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
+    let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
+    let admin = |command: AdminCommand| {
+        let request = AdminRequest { version: PROTOCOL_VERSION, token: "admin-secret".into(), command };
+        let (client, addr) = (client.clone(), server.local_addr());
+        async move {
+            let answer = kinloop_protocol::quic::admin(&client, addr, "localhost", &request).await.expect("answered");
+            assert!(matches!(answer, AdminAnswer::Done { .. }), "{answer:?}");
+        }
+    };
+    let create = |name: &str| AdminCommand::CreateRoom {
+        name: name.into(),
+        scene: "fourbar-crank-rocker".into(),
+        token_file: String::new(),
+        max_users: 4,
+    };
+    let remove = |name: &str| AdminCommand::RemoveRoom { name: name.into() };
+    until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+
+    admin(create("second")).await;
+    until("the admin's room counted", || journal.counter(ROOMS_COUNTER) == 2).await;
+    admin(remove("default")).await;
+    until("the default room uncounted", || journal.counter(ROOMS_COUNTER) == 1).await;
+    assert_eq!(count(&journal, &Call::Ready), 1, "a room left: not Ready again");
+    admin(remove("second")).await;
     until("Ready again", || count(&journal, &Call::Ready) == 2).await;
     assert_eq!(journal.counter(ROOMS_COUNTER), 0);
-    feed.send(FleetEvent::RoomOpened { room: room("c") });
-    feed.send(FleetEvent::Draining);
-    feed.send(FleetEvent::RoomClosed { room: room("c") });
-    feed.send(FleetEvent::Drained);
+
+    admin(create("third")).await;
+    until("the third room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+    server.shutdown().await.expect("drained");
     adapter.finished(Duration::from_secs(10)).await;
+    assert_eq!(journal.counter(ROOMS_COUNTER), 0, "the drain closed the third room");
     assert_eq!(count(&journal, &Call::Ready), 2, "a draining server is not Ready again");
     assert_eq!(journal.calls().last().map(|c| c.call.clone()), Some(Call::Shutdown));
     let _ = sidecar.stop().await;

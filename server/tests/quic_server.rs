@@ -33,7 +33,13 @@ fn start(tokens: &str) -> ServerHandle {
 }
 
 fn hello(token: &str, role: Role) -> Hello {
-    Hello { version: PROTOCOL_VERSION, token: token.into(), client_name: "test client".into(), role }
+    Hello {
+        version: PROTOCOL_VERSION,
+        token: token.into(),
+        client_name: "test client".into(),
+        role,
+        room: String::new(),
+    }
 }
 
 fn join_link2() -> Join {

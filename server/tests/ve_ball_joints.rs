@@ -18,8 +18,8 @@ fn a_ball_jointed_delta_runs_in_the_ve() {
     use kinloop_linkage::math::space::Spatial;
     use kinloop_linkage::model::scene::Scene;
     use kinloop_protocol::{LocalModelForm, RefusalReason};
-    let text = include_str!("../../linkage/tests/scenes/delta-ball.toml");
-    let scene = Scene::from_toml_str(text, "delta-ball.toml").unwrap();
+    let text = include_str!("../../scenes/delta.toml");
+    let scene = Scene::from_toml_str(text, "scenes/delta.toml").unwrap();
     let model: kinloop_linkage::model::Model<Spatial> =
         kinloop_linkage::model::Model::compile(&scene, "delta").unwrap();
     let mut ve = core(model, VeConfig::default());

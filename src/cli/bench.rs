@@ -12,6 +12,8 @@ use kinloop_linkage::algorithms::integrator::Integrator;
 use kinloop_linkage::bench::{measure, measure_batches, paper_wrench, Case, DeltaCase, Timing};
 use serde_json::{json, Value};
 
+use crate::experiments::renderability_device::Vendor;
+
 /// Arguments of `kinloop bench`.
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
@@ -271,7 +273,7 @@ fn device_exchanges(r: &mut Reporter, budget: Duration) -> Result<()> {
         r.timing("device/tick_sim_falcon", t);
     }
     if r.wanted("device/tick_dhd_fake") {
-        let library = match crate::experiments::renderability_dhd::fake_library_beside_this_program() {
+        let library = match crate::experiments::renderability_device::fake_library_beside_this_program(Vendor::Dhd) {
             Ok(library) => library,
             Err(e) => {
                 eprintln!("device/tick_dhd_fake left out: {e:#}");

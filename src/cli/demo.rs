@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{bail, Context, Result};
-use kinloop_client::device::{DeviceRequest, DhdRequest};
+use anyhow::{Context, Result};
+use kinloop_client::device::{DeviceRequest, DhdRequest, HdRequest};
 use kinloop_client::user::{HandKind, HandSpec};
 use kinloop_protocol::emulator::{parse_duration, LinkArgs};
 
@@ -53,13 +53,17 @@ pub struct DemoArgs {
     #[arg(long)]
     pub paper_push: bool,
     /// The device every user holds: sim:paper, sim:falcon or sim:touch (default: the scene's, as
-    /// `kinloop-client` picks it); or dhd[:INDEX] (dhd,sim:NAME to fall back): the first user holds that
-    /// Force Dimension device, as `kinloop-client --device dhd` does, the others the scene's simulated one.
+    /// `kinloop-client` picks it); or dhd[:INDEX] or hd[:NAME] (dhd,sim:NAME to fall back): the first user
+    /// holds that Force Dimension or 3D Systems device, as `kinloop-client --device dhd|hd` does, the others
+    /// the scene's simulated one.
     #[arg(long, value_name = "NAME")]
     pub device: Option<DeviceRequest>,
     /// With --device dhd: run drdAutoInit on an uncalibrated device (it moves on its own).
     #[arg(long)]
     pub dhd_auto_init: bool,
+    /// With --device hd: run hdUpdateCalibration on a device that needs it.
+    #[arg(long)]
+    pub hd_calibrate: bool,
     /// The first user's operational point (default: the scene's first); further users take the next ones.
     #[arg(long, value_name = "NAME")]
     pub op: Option<String>,
@@ -98,9 +102,6 @@ fn parse_seconds(s: &str) -> Result<Duration, String> {
 /// Runs the demo and reports.
 pub fn run(args: &DemoArgs) -> Result<()> {
     let scene = load_scene(&args.scene)?;
-    if let Some(DeviceRequest::Hd(_)) = &args.device {
-        bail!("--device hd: kinloop demo drives DHD and simulated devices; run kinloop-client --device hd against a server");
-    }
     let options = DemoOptions {
         scene: scene.scene,
         scene_label: scene.label,
@@ -119,6 +120,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         },
         dhd: match &args.device {
             Some(DeviceRequest::Dhd(request)) => Some(DhdRequest { auto_init: args.dhd_auto_init, ..*request }),
+            _ => None,
+        },
+        hd: match &args.device {
+            Some(DeviceRequest::Hd(request)) => Some(HdRequest { calibrate: args.hd_calibrate, ..request.clone() }),
             _ => None,
         },
         first_op: args.op.clone(),

@@ -17,7 +17,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 13] = [
+const WHICH: [Which; 14] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -28,6 +28,7 @@ const WHICH: [Which; 13] = [
     Which::One(Name::Renderability),
     Which::One(Name::RenderabilityLive),
     Which::One(Name::RenderabilityDhd),
+    Which::One(Name::RenderabilityHd),
     Which::One(Name::LatencyLive),
     Which::One(Name::Robustness),
     Which::All,

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use kinloop_client::device::{DevicePreset, DhdRequest};
+use kinloop_client::device::{DevicePreset, DhdRequest, HdRequest};
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
@@ -81,6 +81,9 @@ pub struct DemoOptions {
     /// A Force Dimension device the first user holds instead, through the same code as `kinloop-client
     /// --device dhd`.
     pub dhd: Option<DhdRequest>,
+    /// A 3D Systems device the first user holds instead, through the same code as `kinloop-client --device
+    /// hd` (its servo thread runs that user's loop).
+    pub hd: Option<HdRequest>,
     /// The first user's OP (`None`: the scene's first; the others follow in turn from it).
     pub first_op: Option<String>,
     /// Every user's hand and what it intends (`None`: relaxed and firm in turn, touring the reach).
@@ -105,6 +108,7 @@ impl DemoOptions {
             paper_push: false,
             device: None,
             dhd: None,
+            hd: None,
             first_op: None,
             hand: None,
         })
@@ -360,6 +364,7 @@ fn start_clients(
         config.device = options.device;
         if i == 0 {
             config.dhd = options.dhd;
+            config.hd = options.hd.clone();
         }
         config.duration = Some(options.duration);
         config.link = side_link(&options.link, i as u64 + 1);

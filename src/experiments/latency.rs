@@ -206,7 +206,7 @@ pub struct Goals {
     /// How far the device had moved from the pose the VE had heard of, RMS (mm).
     pub testbed_soft_device_unheard_rms_mm: AtGoalDelays,
     /// The soft hand on the 5 mm goal circle.
-    pub testbed_soft_issue_circle: IssueCircle,
+    pub testbed_soft_goal_circle: GoalCircle,
     /// What `device_unheard_rms` means.
     pub device_unheard_rms_means: String,
 }
@@ -228,7 +228,7 @@ pub struct PassivityCost {
 
 /// The testbed's soft hand on the 5 mm goal circle, the motion the tracking goals were set on.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct IssueCircle {
+pub struct GoalCircle {
     /// The motion.
     pub motion: String,
     /// Device-OP RMS (mm).
@@ -634,7 +634,7 @@ fn goals_and_answer(grid: &Grid, all: &[Measured], circle: &[Measured], table: &
             at_1000ms: goal_rms(1000.0, false),
         },
         testbed_soft_device_unheard_rms_mm: AtGoalDelays { at_100ms: floor_100, at_1000ms: floor_1000 },
-        testbed_soft_issue_circle: IssueCircle {
+        testbed_soft_goal_circle: GoalCircle {
             motion: "the soft hand on the motion the tracking goals were set on, --user path:circle:0.005,2 (a 5 mm circle, a turn every 2 s)".into(),
             device_op_rms_mm: AtGoalDelays { at_100ms: circle_100, at_1000ms: circle_1000 },
             device_unheard_rms_mm: AtGoalDelays {

@@ -174,8 +174,8 @@ pub fn run(options: &Options) -> Result<Report> {
     let results = json!({
         "answer": answer,
         "goal_met": meeting == all.len(),
-        "testbed_issue_circle_device_op_rms_mm": {"100ms": circle_100, "1000ms": circle_1000},
-        "testbed_issue_circle_tracking_goal_met": circle_100.zip(circle_1000)
+        "testbed_goal_circle_device_op_rms_mm": {"100ms": circle_100, "1000ms": circle_1000},
+        "testbed_goal_circle_tracking_goal_met": circle_100.zip(circle_1000)
             .map(|(a, b)| a <= GOAL_RMS_100MS_M * 1e3 && b <= GOAL_RMS_1S_M * 1e3),
         "setup": {
             "session": "kinloop demo: a server and one client on real threads over loopback QUIC through the emulated link, default flags (the scene's OP, the device preset, the client's default hand)",

@@ -11,7 +11,7 @@
 //! | [`scale`] | how do VE step, local-model step and snapshot size grow with links and loops? |
 //! | [`pauses`] | what does a VE tick cost after the pause a real-time loop takes between ticks? |
 //! | [`renderability`] | does every shipped linkage render with default settings, on every device? (`renderability-live`: the same in real time) |
-//! | [`renderability_dhd`] | the same through a DHD device: the fake library as omega.3 and Falcon, in real processes (not in `all`: it needs the fake) |
+//! | [`renderability_device`] | the same through a vendor's device: the fake DHD library as omega.3 and Falcon (`renderability-dhd`), the fake OpenHaptics library as a Touch (`renderability-hd`), in real processes (not in `all`: they need the fakes) |
 //! | [`robustness`] | do generated linkages of every class, in any units, render with default settings under delay? |
 //!
 //! Every point of a stability question is labelled by the one criterion of [`verdict`]. Sweeps run points
@@ -28,7 +28,7 @@ pub mod model_update;
 pub mod paper;
 pub mod pauses;
 pub mod renderability;
-pub mod renderability_dhd;
+pub mod renderability_device;
 pub mod robustness;
 pub mod scale;
 pub mod speed_accuracy;
@@ -39,6 +39,7 @@ pub mod verdict;
 use anyhow::Result;
 
 pub use common::{Options, Report};
+use renderability_device::Vendor;
 
 /// An experiment's name, as given on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,6 +64,8 @@ pub enum Name {
     RenderabilityLive,
     /// The matrix through a DHD device (the fake library), in real server and client processes.
     RenderabilityDhd,
+    /// The matrix through an OpenHaptics device (the fake library as a Touch), in real processes.
+    RenderabilityHd,
     /// Delay in real time: three scenes x two devices x four delays.
     LatencyLive,
     /// Generated linkages with default settings.
@@ -100,6 +103,9 @@ impl Name {
             Name::RenderabilityDhd => {
                 "the renderability matrix through the fake DHD library as omega.3 and Falcon, real processes"
             }
+            Name::RenderabilityHd => {
+                "the renderability matrix through the fake OpenHaptics library as a Touch, real processes"
+            }
             Name::LatencyLive => {
                 "3 scenes x 2 devices x 100-1000 ms one way in real time over loopback QUIC (about 5 min)"
             }
@@ -117,6 +123,7 @@ impl Name {
                 | Name::Renderability
                 | Name::RenderabilityLive
                 | Name::RenderabilityDhd
+                | Name::RenderabilityHd
                 | Name::Robustness
         )
     }
@@ -134,6 +141,7 @@ impl Name {
             Name::Renderability => "renderability",
             Name::RenderabilityLive => "renderability-live",
             Name::RenderabilityDhd => "renderability-dhd",
+            Name::RenderabilityHd => "renderability-hd",
             Name::LatencyLive => "latency-live",
             Name::Robustness => "robustness",
         }
@@ -152,7 +160,8 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::Pauses => pauses::run(options),
         Name::Renderability => renderability::run(options),
         Name::RenderabilityLive => renderability::run_live(options),
-        Name::RenderabilityDhd => renderability_dhd::run(options),
+        Name::RenderabilityDhd => renderability_device::run(Vendor::Dhd, options),
+        Name::RenderabilityHd => renderability_device::run(Vendor::Hd, options),
         Name::LatencyLive => latency_live::run(options),
         Name::Robustness => robustness::run(options),
     }

@@ -4,7 +4,7 @@
 //! touring the OP's reach × one-way delay {0, 50, 300, 1000 ms} with a tenth of it as jitter, each a
 //! virtual-time session of [`SECONDS`] (the whole tour), with what `kinloop-client` does by default.
 //!
-//! A session **fails** for each of these that holds (issue 39's goals):
+//! A session **fails** for each of these that holds (the robustness goals):
 //! - **refused**: the harness could not start it (its join was refused, or the scene did not compile);
 //! - **unstable**: the one criterion of [`verdict`] (energy growth, sustained saturation, divergence,
 //!   which includes VE restores and non-finite values);

@@ -46,3 +46,12 @@ pub fn ticks_below_full_gain(ticks: &[Tick]) -> usize {
     let Some(first) = ticks.iter().position(|t| t.gain >= 1.0) else { return ticks.len() };
     ticks[first..].iter().filter(|t| t.gain < 1.0).count()
 }
+
+/// How long a clutch held the output faded (s): from the first tick at zero gain after the output first
+/// reached full gain to the next tick back at full gain; None when the output never fades and recovers.
+pub fn clutched_seconds(ticks: &[Tick]) -> Option<f64> {
+    let first_full = ticks.iter().position(|t| t.gain >= 1.0)?;
+    let faded = ticks[first_full..].iter().position(|t| t.gain == 0.0)? + first_full;
+    let back = ticks[faded..].iter().position(|t| t.gain >= 1.0)? + faded;
+    Some(ticks[back].t - ticks[faded].t)
+}

@@ -97,8 +97,13 @@ pub fn start_client(config: ClientConfig) -> ClientHandle {
 /// The hello and join `kinloop-client` sends for the simulated paper device at `op` (a raw session built by
 /// hand can then misbehave in ways the real client never would).
 pub fn paper_handshake(name: &str, op: &str, token: &str) -> (Hello, Join) {
-    let hello =
-        Hello { version: PROTOCOL_VERSION, token: token.into(), client_name: name.into(), role: Role::Manipulator };
+    let hello = Hello {
+        version: PROTOCOL_VERSION,
+        token: token.into(),
+        client_name: name.into(),
+        role: Role::Manipulator,
+        room: String::new(),
+    };
     let join = Join {
         op: op.into(),
         device: DevicePreset::Paper.spec(SceneKind::Planar).expect("paper device").caps(),

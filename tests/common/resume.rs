@@ -13,7 +13,7 @@ use super::child::Role;
 use super::live::{self, OPS};
 use super::records::{self, Step, Tick};
 
-/// The goals of issue 46: the linkage resumed within 1 mm and 1° of where it was, the client back within
+/// The resume goals: the linkage resumed within 1 mm and 1° of where it was, the client back within
 /// 2 s of the kill, and no force step above 0.2 N at the reconnection.
 pub const MAX_RESUME_OFFSET_M: f64 = 1e-3;
 pub const MAX_RESUME_OFFSET_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;

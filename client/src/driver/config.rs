@@ -30,6 +30,8 @@ pub struct ClientConfig {
     pub server_name: String,
     /// Shared secret.
     pub token: String,
+    /// The room to join on a server of many rooms (`--room`); empty: the server's default room.
+    pub room: String,
     /// How the server is trusted.
     pub trust: Trust,
     /// Operational point to hold; `None`: the scene's first.
@@ -81,6 +83,7 @@ impl ClientConfig {
             fallback_servers: Vec::new(),
             server_name: "localhost".into(),
             token: String::new(),
+            room: String::new(),
             trust,
             op: None,
             device: None,

@@ -117,6 +117,7 @@ fn hello(config: &ClientConfig) -> Hello {
         token: config.token.clone(),
         client_name: config.client_name.clone(),
         role: Role::Manipulator,
+        room: config.room.clone(),
     }
 }
 

@@ -17,6 +17,7 @@
 //! - `FAKE_HD_TOUR`: waypoints `X,Y,Z;X,Y,Z;...` in millimetres, the device's frame (x right, y up, z
 //!   towards the user); the stylus starts at the first, and the hand sets off at the first frame;
 //! - `FAKE_HD_BUTTON`: `FROM:UNTIL`, seconds after the first frame: button 1 is held over that span;
+//! - `FAKE_HD_VERSION`: what `hdGetString(HD_VERSION)` answers (default `3.4.0`; `none`: a null string);
 //! - `FAKE_HD_CALIBRATION`: `update` makes `hdCheckCalibration` answer `HD_CALIBRATION_NEEDS_UPDATE` until
 //!   `hdUpdateCalibration` runs;
 //! - `FAKE_HD_FAULT`: `init` (`hdInitDevice` fails with `HD_COMM_ERROR`), `lost:N` (from the N-th frame on,
@@ -31,7 +32,7 @@
 
 pub mod plant;
 
-use std::ffi::{c_char, c_int, c_uint, c_ulong, c_ushort, c_void, CStr};
+use std::ffi::{c_char, c_int, c_uint, c_ulong, c_ushort, c_void, CStr, CString};
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -71,6 +72,7 @@ const HD_CURRENT_BUTTONS: c_uint = 0x2000;
 const HD_CURRENT_INKWELL_SWITCH: c_uint = 0x2002;
 const HD_CURRENT_POSITION: c_uint = 0x2050;
 const HD_CURRENT_VELOCITY: c_uint = 0x2051;
+const HD_VERSION: c_uint = 0x2500;
 const HD_DEVICE_MODEL_TYPE: c_uint = 0x2501;
 const HD_USABLE_WORKSPACE_DIMENSIONS: c_uint = 0x2551;
 const HD_OUTPUT_DOF: c_uint = 0x2554;
@@ -147,6 +149,8 @@ struct Device {
     button_span: Option<(f64, f64)>,
     button: bool,
     calibrated: bool,
+    /// `hdGetString(HD_VERSION)`'s answer (None: null).
+    version: Option<CString>,
     record: Option<std::io::BufWriter<std::fs::File>>,
 }
 
@@ -203,6 +207,11 @@ impl Device {
             }
             None => None,
         };
+        let version = match env("FAKE_HD_VERSION").as_deref() {
+            Some("none") => None,
+            Some(text) => Some(CString::new(text).map_err(|_| HD_COMM_CONFIG_ERROR)?),
+            None => Some(CString::from(c"3.4.0")),
+        };
         let record = env("FAKE_HD_RECORD")
             .and_then(|path| std::fs::File::create(path).ok())
             .map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
@@ -223,6 +232,7 @@ impl Device {
             button_span,
             button: false,
             calibrated: env("FAKE_HD_CALIBRATION").as_deref() != Some("update"),
+            version,
             record,
         })
     }
@@ -491,11 +501,14 @@ pub unsafe extern "system" fn hdGetIntegerv(pname: c_uint, params: *mut c_int) {
     }
 }
 
-/// `HDstring hdGetString(HDenum pname)`.
+/// `HDstring hdGetString(HDenum pname)`: the model, and the HDAPI's version (the device's, which lives
+/// until `hdDisableDevice`).
 #[no_mangle]
 pub extern "system" fn hdGetString(pname: c_uint) -> *const c_char {
     if pname == HD_DEVICE_MODEL_TYPE {
         MODEL.as_ptr().cast()
+    } else if pname == HD_VERSION {
+        with_device(std::ptr::null(), |d| d.version.as_ref().map_or(std::ptr::null(), |v| v.as_ptr()))
     } else {
         push_error(HD_INVALID_ENUM);
         std::ptr::null()

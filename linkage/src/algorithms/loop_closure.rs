@@ -275,7 +275,7 @@ fn same_angle<S: Space>(
 mod tests {
     use super::*;
     use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
-    use crate::testing::{for_each_model, random_state};
+    use crate::testing::{displaced, for_each_model, random_state};
 
     /// W is the derivative of h (central differences along random directions) and w = Ẇ q̇ the derivative
     /// of W q̇ along q̇, for every closure primitive of every test scene, away from q0 (h ≠ 0).
@@ -299,8 +299,8 @@ mod tests {
             };
             let (_, wmat, wbias) = eval(&mut data, &q);
             let hstep = 1e-6;
-            let (hp, wp, _) = eval(&mut data, &(&q + &qd * hstep));
-            let (hm, wm, _) = eval(&mut data, &(&q - &qd * hstep));
+            let (hp, wp, _) = eval(&mut data, &displaced(model, &q, &qd, hstep));
+            let (hm, wm, _) = eval(&mut data, &displaced(model, &q, &qd, -hstep));
             let hdot_fd = (&hp - &hm) / (2.0 * hstep);
             let hdot = &wmat * &qd;
             let wdot_fd = (&wp * &qd - &wm * &qd) / (2.0 * hstep);
@@ -317,8 +317,8 @@ mod tests {
             for j in 0..model.nv() {
                 let mut e = DVector::zeros(model.nv());
                 e[j] = hstep;
-                let (hp, _, _) = eval(&mut data, &(&q + &e));
-                let (hm, _, _) = eval(&mut data, &(&q - &e));
+                let (hp, _, _) = eval(&mut data, &displaced(model, &q, &e, 1.0));
+                let (hm, _, _) = eval(&mut data, &displaced(model, &q, &e, -1.0));
                 for r in 0..model.nc() {
                     let fd = (hp[r] - hm[r]) / (2.0 * hstep);
                     assert!((fd - wmat[(r, j)]).abs() < 1e-6, "{name}: W[{r},{j}] fd {fd} vs {}", wmat[(r, j)]);

@@ -21,6 +21,7 @@ pub const SCENE_FILES: &[(&str, &str)] = &[
     ("bennett-linkage", include_str!("../../../scenes/bennett-linkage.toml")),
     ("rssr-four-bar", include_str!("../../../scenes/rssr-four-bar.toml")),
     ("guided-slider-crank", include_str!("../../../scenes/guided-slider-crank.toml")),
+    ("delta", include_str!("../../../scenes/delta.toml")),
 ];
 
 /// The paper's user wrench on the testbed: (−0.5 N, 0 N, −0.0025 N m) at the COM of link 2.

@@ -4,9 +4,9 @@
 use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
-    uplink_flags, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram, DeviceCaps, Hello, Join, Mapping,
-    MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused, ResumeAnswer, ResumeRefusal, RoomState,
-    SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
+    uplink_flags, AdminAnswer, AdminCommand, AdminRequest, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram,
+    DeviceCaps, Hello, Join, Mapping, MappingRequest, OpSummary, OtherUsers, PortEnergy, RefusalReason, Refused,
+    ResumeAnswer, ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 
@@ -24,6 +24,8 @@ pub fn control(msg: &Control) -> Result<(), DecodeError> {
         Control::Join(join) => self::join(join),
         Control::RoomState(state) | Control::Resume(state) => self::room_state(state),
         Control::ResumeAnswer(answer) => self::resume_answer(answer),
+        Control::Admin(request) => self::admin_request(request),
+        Control::AdminAnswer(answer) => self::admin_answer(answer),
     }
 }
 
@@ -38,7 +40,38 @@ pub fn datagram(msg: &Datagram, shape: &SessionShape) -> Result<(), DecodeError>
 /// Checks a hello. Any version passes, so that the server can answer an old client with a polite refusal.
 pub fn hello(h: &Hello) -> Result<(), DecodeError> {
     text(Field::at("hello.token"), &h.token)?;
-    text(Field::at("hello.client_name"), &h.client_name)
+    text(Field::at("hello.client_name"), &h.client_name)?;
+    text(Field::at("hello.room"), &h.room)
+}
+
+/// Checks an admin request's texts.
+fn admin_request(r: &AdminRequest) -> Result<(), DecodeError> {
+    text(Field::at("admin.token"), &r.token)?;
+    match &r.command {
+        AdminCommand::CreateRoom { name, scene, token_file, .. } => {
+            text(Field::at("admin.command.name"), name)?;
+            text(Field::at("admin.command.scene"), scene)?;
+            text(Field::at("admin.command.token_file"), token_file)
+        }
+        AdminCommand::RemoveRoom { name } => text(Field::at("admin.command.name"), name),
+        AdminCommand::ListRooms => Ok(()),
+    }
+}
+
+/// Checks an admin answer: texts, a bounded list, finite costs.
+fn admin_answer(a: &AdminAnswer) -> Result<(), DecodeError> {
+    match a {
+        AdminAnswer::Refused { what } => text(Field::at("admin_answer.what"), what),
+        AdminAnswer::Done { rooms } => {
+            count(Field::at("admin_answer.rooms"), rooms.len(), MAX_LIST_ENTRIES)?;
+            for (i, room) in rooms.iter().enumerate() {
+                text(Field::in_item("admin_answer.rooms", i, "name"), &room.name)?;
+                text(Field::in_item("admin_answer.rooms", i, "scene"), &room.scene)?;
+                scalar(Field::in_item("admin_answer.rooms", i, "cost_us"), room.cost_us, 0.0, MAX_TIME_S * 1e6)?;
+            }
+            Ok(())
+        }
+    }
 }
 
 /// Checks a scene info.
@@ -186,7 +219,7 @@ fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
 fn refused(r: &Refused) -> Result<(), DecodeError> {
     text(Field::at("refused.message"), &r.message)?;
     match &r.reason {
-        RefusalReason::UnknownOp { requested, available } => {
+        RefusalReason::UnknownOp { requested, available } | RefusalReason::UnknownRoom { requested, available } => {
             text(Field::at("refused.reason.requested"), requested)?;
             count(Field::at("refused.reason.available"), available.len(), MAX_LIST_ENTRIES)?;
             for (i, name) in available.iter().enumerate() {
@@ -196,7 +229,9 @@ fn refused(r: &Refused) -> Result<(), DecodeError> {
         }
         RefusalReason::Malformed { what } => text(Field::at("refused.reason.what"), what),
         RefusalReason::Device { what } => text(Field::at("refused.reason.what"), what),
-        RefusalReason::Unservable { what } => text(Field::at("refused.reason.what"), what),
+        RefusalReason::Unservable { what } | RefusalReason::OverBudget { what } => {
+            text(Field::at("refused.reason.what"), what)
+        }
         RefusalReason::UnsupportedVersion { .. }
         | RefusalReason::BadToken
         | RefusalReason::ServerFull { .. }

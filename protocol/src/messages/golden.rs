@@ -18,7 +18,13 @@ fn unhex(parts: &[&str]) -> Vec<u8> {
 const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
 
 fn hello() -> Control {
-    Control::Hello(Hello { version: 5, token: "tok".into(), client_name: "c1".into(), role: Role::Manipulator })
+    Control::Hello(Hello {
+        version: 5,
+        token: "tok".into(),
+        client_name: "c1".into(),
+        role: Role::Manipulator,
+        room: "lab".into(),
+    })
 }
 
 const HELLO_BYTES: &[&str] = &[
@@ -27,6 +33,63 @@ const HELLO_BYTES: &[&str] = &[
     "03 746f6b", // token "tok"
     "02 6331",   // client_name "c1"
     "00",        // role Manipulator
+    "03 6c6162", // room "lab"
+];
+
+fn unknown_room() -> Control {
+    Control::Refused(Refused {
+        reason: RefusalReason::UnknownRoom { requested: "x".into(), available: vec!["a".into()] },
+        message: String::new(),
+    })
+}
+
+const UNKNOWN_ROOM_BYTES: &[&str] = &[
+    "02",    // Control::Refused
+    "08",    // RefusalReason::UnknownRoom
+    "01 78", // requested "x"
+    "01",    // available: 1 name
+    "01 61", // "a"
+    "00",    // message ""
+];
+
+fn admin() -> Control {
+    Control::Admin(AdminRequest {
+        version: 8,
+        token: "k".into(),
+        command: AdminCommand::CreateRoom {
+            name: "r".into(),
+            scene: "s".into(),
+            token_file: String::new(),
+            max_users: 2,
+        },
+    })
+}
+
+const ADMIN_BYTES: &[&str] = &[
+    "0c",    // Control::Admin
+    "08",    // version 8
+    "01 6b", // token "k"
+    "00",    // AdminCommand::CreateRoom
+    "01 72", // name "r"
+    "01 73", // scene "s"
+    "00",    // token_file ""
+    "02",    // max_users 2
+];
+
+fn admin_answer() -> Control {
+    let room = RoomSummary { name: "r".into(), scene: "s".into(), users: 1, thread: 0, cost_us: 1.0 };
+    Control::AdminAnswer(AdminAnswer::Done { rooms: vec![room] })
+}
+
+const ADMIN_ANSWER_BYTES: &[&str] = &[
+    "0d",               // Control::AdminAnswer
+    "00",               // AdminAnswer::Done
+    "01",               // rooms: 1
+    "01 72",            // name "r"
+    "01 73",            // scene "s"
+    "01",               // users 1
+    "00",               // thread 0
+    "000000000000f03f", // cost_us 1.0
 ];
 
 fn scene_info() -> Control {
@@ -341,6 +404,17 @@ fn resume_and_its_answer_match_golden_bytes() {
     for (message, bytes) in [(resume(), RESUME_BYTES), (resume_answer(), RESUME_ANSWER_BYTES)] {
         let golden = unhex(bytes);
         assert_eq!(encode_control(&message).unwrap(), golden);
+        assert_eq!(decode_control(&golden).unwrap(), message);
+    }
+}
+
+#[test]
+fn room_messages_match_golden_bytes() {
+    for (message, bytes) in
+        [(unknown_room(), UNKNOWN_ROOM_BYTES), (admin(), ADMIN_BYTES), (admin_answer(), ADMIN_ANSWER_BYTES)]
+    {
+        let golden = unhex(bytes);
+        assert_eq!(encode_control(&message).unwrap(), golden, "{}", message.kind_name());
         assert_eq!(decode_control(&golden).unwrap(), message);
     }
 }

@@ -30,12 +30,16 @@ use serde::{Deserialize, Serialize};
 
 use crate::shape::{SceneKind, SessionShape};
 
+mod admin;
+mod refusal;
 mod room;
+pub use admin::{AdminAnswer, AdminCommand, AdminRequest, RoomSummary};
+pub use refusal::{RefusalReason, Refused};
 pub use room::{ResumeAnswer, ResumeRefusal, RoomState};
 
 /// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
 /// landing that changes the wire (see the module documentation).
-pub const PROTOCOL_VERSION: u16 = 7;
+pub const PROTOCOL_VERSION: u16 = 8;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
 /// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.
@@ -136,6 +140,8 @@ pub struct Hello {
     pub client_name: String,
     /// Manipulator or observer.
     pub role: Role,
+    /// The room to join on a server of many rooms; empty: the server's only (or default) room.
+    pub room: String,
 }
 
 /// The scene, server → client after an accepted [`Hello`]: what the client needs to choose a device in the
@@ -339,96 +345,6 @@ pub struct Welcome {
     pub op: OpSummary,
 }
 
-/// Why a server refused a client.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum RefusalReason {
-    /// The client speaks another protocol version.
-    UnsupportedVersion {
-        /// Version the server speaks.
-        server: u16,
-        /// Version the client sent.
-        client: u16,
-    },
-    /// The token did not match.
-    BadToken,
-    /// No room for another user.
-    ServerFull {
-        /// How many users the server admits.
-        max_users: u32,
-    },
-    /// The requested operational point does not exist or is taken.
-    UnknownOp {
-        /// What the client asked for.
-        requested: String,
-        /// What it could have asked for.
-        available: Vec<String>,
-    },
-    /// The requested role is not allowed on this server.
-    RoleNotAllowed,
-    /// The device or the mapping asked for cannot serve this scene.
-    Device {
-        /// What is wrong, naming the device's value and the scene's need.
-        what: String,
-    },
-    /// The hello or the join made no sense.
-    Malformed {
-        /// What was wrong with it.
-        what: String,
-    },
-    /// The server cannot serve this scene to this client: what it would send breaks the wire's checks (a
-    /// scene whose numbers the protocol's SI bounds do not carry, a non-finite term). Appended last, so the
-    /// other reasons keep their encoding.
-    Unservable {
-        /// What the server could not send, naming the field and its bound.
-        what: String,
-    },
-}
-
-impl fmt::Display for RefusalReason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            RefusalReason::UnsupportedVersion { server, client } => {
-                write!(f, "protocol version {client} is not supported (the server speaks version {server})")
-            }
-            RefusalReason::BadToken => f.write_str("the access token was not accepted"),
-            RefusalReason::ServerFull { max_users } => write!(f, "the server is full ({max_users} users)"),
-            RefusalReason::UnknownOp { requested, available } => {
-                write!(f, "the scene has no free operational point {requested:?}")?;
-                if available.is_empty() {
-                    f.write_str(" (none is free)")
-                } else {
-                    write!(f, " (free: {})", available.join(", "))
-                }
-            }
-            RefusalReason::RoleNotAllowed => f.write_str("that role is not allowed on this server"),
-            RefusalReason::Device { what } => write!(f, "the device cannot join: {what}"),
-            RefusalReason::Malformed { what } => write!(f, "the request was malformed: {what}"),
-            RefusalReason::Unservable { what } => write!(f, "the server cannot serve this scene: {what}"),
-        }
-    }
-}
-
-/// Refusal reply, server → client; the server closes the connection after sending it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Refused {
-    /// Machine-readable reason.
-    pub reason: RefusalReason,
-    /// Optional extra words from the server operator (may be empty).
-    pub message: String,
-}
-
-impl fmt::Display for Refused {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "refused: {}", self.reason)?;
-        if !self.message.is_empty() {
-            write!(f, " — {}", self.message)?;
-        }
-        Ok(())
-    }
-}
-
-impl std::error::Error for Refused {}
-
 /// Category of a [`Control::Error`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum ErrorCode {
@@ -502,6 +418,10 @@ pub enum Control {
     Resume(RoomState),
     /// Server → client, the answer to [`Control::Resume`].
     ResumeAnswer(ResumeAnswer),
+    /// Admin → server, first frame instead of a hello: create, remove or list rooms.
+    Admin(AdminRequest),
+    /// Server → admin, the answer to [`Control::Admin`]; the server closes after it.
+    AdminAnswer(AdminAnswer),
 }
 
 impl Control {
@@ -520,6 +440,8 @@ impl Control {
             Control::RoomState(_) => "RoomState",
             Control::Resume(_) => "Resume",
             Control::ResumeAnswer(_) => "ResumeAnswer",
+            Control::Admin(_) => "Admin",
+            Control::AdminAnswer(_) => "AdminAnswer",
         }
     }
 }

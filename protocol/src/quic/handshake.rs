@@ -268,6 +268,9 @@ pub enum AcceptError {
     /// The validator produced a welcome the client would reject (a server bug).
     #[error("the server's own welcome is invalid: {0}")]
     InvalidWelcome(DecodeError),
+    /// Not a session: an admin command, for the server to answer with [`super::admin::answer_admin`].
+    #[error("an admin command")]
+    Admin(super::admin::AdminSession),
 }
 
 /// Accepts an incoming connection and runs the handshake. The protocol version is checked here; the rest is
@@ -316,6 +319,9 @@ where
         let hello = match read_hello(&mut recv).await {
             Ok(hello) => hello,
             Err(HelloProblem::Refuse(refused)) => return Err(refuse(&connection, send, refused).await),
+            Err(HelloProblem::Admin(request)) => {
+                return Err(AcceptError::Admin(super::admin::AdminSession { connection, send, request }))
+            }
             Err(HelloProblem::Fail(error)) => {
                 connection.close(close_codes::PROTOCOL, b"expected Hello");
                 return Err(error);
@@ -369,6 +375,8 @@ enum HelloProblem {
     Refuse(Refused),
     /// Not worth an answer.
     Fail(AcceptError),
+    /// An admin command instead of a hello.
+    Admin(crate::messages::AdminRequest),
 }
 
 /// Reads the first frame: a hello of this version, or a reason to refuse.
@@ -381,6 +389,7 @@ async fn read_hello(recv: &mut RecvStream) -> Result<Hello, HelloProblem> {
     }
     match codec::decode_control(&body) {
         Ok(Control::Hello(hello)) => Ok(hello),
+        Ok(Control::Admin(request)) => Err(HelloProblem::Admin(request)),
         Ok(other) => {
             Err(HelloProblem::Fail(AcceptError::UnexpectedMessage { expected: "Hello", got: other.kind_name() }))
         }

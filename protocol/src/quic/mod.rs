@@ -3,6 +3,7 @@
 //! One session = one QUIC connection with ALPN [`crate::ALPN`]: a bidirectional control stream opened by the
 //! client (Hello → Welcome/Refused, then Leave/Error/Ping/Pong), snapshots and uplinks as datagrams.
 
+mod admin;
 mod datagrams;
 mod emulated_socket;
 mod endpoint;
@@ -12,6 +13,7 @@ mod identity;
 mod room_ca;
 mod trust;
 
+pub use admin::{admin, answer_admin, AdminSession};
 pub use datagrams::{DatagramReceiver, DatagramSender, DeliveryStats, RecvError, Route, SendError};
 pub use emulated_socket::{EmulatedSocketStats, EmulatedSocketStatsHandle};
 pub use endpoint::{

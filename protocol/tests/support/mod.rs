@@ -222,8 +222,9 @@ fn device() -> impl Strategy<Value = DeviceCaps> {
 }
 
 fn hello() -> impl Strategy<Value = Hello> {
-    (any::<u16>(), name(), name(), prop_oneof![Just(Role::Manipulator), Just(Role::Observer)])
-        .prop_map(|(version, token, client_name, role)| Hello { version, token, client_name, role })
+    (any::<u16>(), name(), name(), prop_oneof![Just(Role::Manipulator), Just(Role::Observer)]).prop_map(
+        |(version, token, client_name, role)| Hello { version, token, client_name, role, room: String::new() },
+    )
 }
 
 fn scale() -> impl Strategy<Value = Option<f64>> {

@@ -15,13 +15,14 @@
 
 mod record;
 pub mod room;
+pub mod rooms;
 mod session;
 pub mod stats;
 pub mod ve_thread;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -45,7 +46,7 @@ pub use stats::{ServerStats, UserStats};
 
 use crate::access::Access;
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
-use crate::fleet::{FleetEvent, FleetFeed, ONE_ROOM};
+use crate::fleet::{FleetEvent, FleetFeed, FleetRoom};
 use crate::gateway::{CommandSender, Gateway, UserRegistry, FRAME_HEADER};
 use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use ve_thread::VeThreadIo;
@@ -62,6 +63,8 @@ const COLLECT_EVERY: Duration = Duration::from_millis(50);
 pub const DEFAULT_DRAIN: Duration = Duration::from_secs(5);
 /// Past the drain, the longest wait for the network tasks to wind down.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(1);
+/// What a draining server tells its clients.
+const DRAINING: &str = "the server is draining: move to another server of the room";
 
 /// Where the certificate comes from.
 #[derive(Clone, Debug)]
@@ -111,6 +114,12 @@ pub struct ServerConfig {
     pub drain: Duration,
     /// Where the server tells a fleet manager's adapter what happens (`--agones`), if anywhere.
     pub fleet: Option<FleetFeed>,
+    /// The rooms (`--rooms`); empty: one room, "default", of the fields above.
+    pub rooms: Vec<rooms::RoomSpec>,
+    /// Real-time threads stepping the rooms (`--rt-threads`).
+    pub rt_threads: usize,
+    /// Tokens of the admin command (`--admin-token`); `None`: no admin command is accepted.
+    pub admin: Option<Access>,
 }
 
 impl ServerConfig {
@@ -131,7 +140,26 @@ impl ServerConfig {
             room_key: None,
             drain: DEFAULT_DRAIN,
             fleet: None,
+            rooms: Vec::new(),
+            rt_threads: rooms::default_rt_threads(),
+            admin: None,
         }
+    }
+
+    /// The rooms to open at start: the rooms file's, or one "default" room of the single-scene fields.
+    fn room_specs(&self) -> Vec<rooms::RoomSpec> {
+        if !self.rooms.is_empty() {
+            return self.rooms.clone();
+        }
+        vec![rooms::RoomSpec {
+            name: rooms::DEFAULT_ROOM.into(),
+            scene: self.scene.clone(),
+            scene_label: self.scene_label.clone(),
+            access: self.access.clone(),
+            max_users: self.ve.max_users,
+            record: self.record.clone(),
+            knobs: rooms::TestKnobs::default(),
+        }]
     }
 }
 
@@ -167,10 +195,29 @@ pub enum ServerError {
     /// The server was started outside a tokio runtime.
     #[error("the server must be started inside a tokio runtime")]
     NoRuntime,
+    /// A room could not open.
+    #[error("room {room:?}: {source}")]
+    Room {
+        /// The room.
+        room: String,
+        /// Why.
+        source: Box<ServerError>,
+    },
+    /// The executor has no budget for another room.
+    #[error("{0}")]
+    OverBudget(#[from] rooms::OverBudget),
 }
 
-/// State the network tasks share (the VE thread sees none of it).
+/// One room's state the network tasks share (the VE thread sees none of it).
 pub(crate) struct Shared {
+    /// The room's name.
+    name: String,
+    /// What the executor measures of the room.
+    cell: Arc<rooms::RoomCell>,
+    /// The executor, which admits users.
+    executor: Arc<rooms::Executor>,
+    /// What sessions tell their clients when the room closes.
+    leave_reason: Mutex<String>,
     /// Commands, the user registry and the rings' sizes, which the view shares.
     gateway: Arc<Gateway>,
     /// The server's endpoint, for the count of open connections.
@@ -186,18 +233,16 @@ pub(crate) struct Shared {
     view: std::sync::OnceLock<Arc<crate::view::Counters>>,
     /// The room, with a room key.
     room: Option<Arc<room::Room>>,
-    /// How long a draining server waits for its clients to move.
+    /// How long a closing room waits for its clients to move.
     drain: Duration,
-    /// The fleet adapter's feed.
-    fleet: Option<FleetFeed>,
+    /// The room's side of the fleet adapter's feed.
+    fleet: Arc<FleetRoom>,
 }
 
 impl Shared {
     /// Tells the fleet adapter, if there is one.
     fn tell_fleet(&self, event: FleetEvent) {
-        if let Some(fleet) = &self.fleet {
-            fleet.send(event);
-        }
+        self.fleet.send(event);
     }
 }
 
@@ -246,14 +291,43 @@ impl Shared {
 pub struct Server;
 
 impl Server {
-    /// Compiles the scene, binds the endpoint, starts the VE thread and the network tasks on the current
-    /// tokio runtime, and returns at once. Must be called inside a tokio runtime.
+    /// Binds the endpoint, starts the rooms' executor and opens every room (the rooms file's, or one
+    /// "default" room of `config.scene`), starts the network tasks on the current tokio runtime, and
+    /// returns at once. Must be called inside a tokio runtime.
     pub fn start(config: ServerConfig) -> Result<ServerHandle, ServerError> {
         tokio::runtime::Handle::try_current().map_err(|_| ServerError::NoRuntime)?;
-        match config.scene.kind {
-            SceneKind::Planar => start_with::<Planar>(config),
-            SceneKind::Spatial => start_with::<Spatial>(config),
+        let identity = match &config.identity {
+            Identity::CertDir(dir) => ServerIdentity::load_or_create(dir)?,
+            Identity::Ephemeral => ServerIdentity::generate(&kinloop_protocol::quic::DEFAULT_NAMES)?,
+            Identity::Files { cert, key } => ServerIdentity::load(cert, key)?,
+        };
+        let options = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
+        let endpoint = server_endpoint(config.listen, &identity, &options)?;
+        let local_addr =
+            endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
+        let heartbeat = config.fleet.as_ref().map(|f| f.heartbeat().clone());
+        let executor = rooms::Executor::start(config.rt_threads, config.realtime, heartbeat)
+            .map_err(|e| ServerError::Thread { which: "rooms", what: e.to_string() })?;
+        let host = Arc::new(rooms::Host {
+            endpoint: endpoint.clone(),
+            executor: executor.clone(),
+            table: Mutex::new(std::collections::BTreeMap::new()),
+            admin: config.admin.clone(),
+            template: config.clone(),
+            shutdown: watch::channel(false).0,
+            announced: AtomicBool::new(false),
+        });
+        for spec in config.room_specs() {
+            let name = spec.name.clone();
+            if let Err(error) = host.open(spec) {
+                executor.shutdown();
+                return Err(ServerError::Room { room: name, source: Box::new(error) });
+            }
         }
+        // The fleet hears of the server first, then of its rooms (later rooms as they open).
+        host.announce(local_addr);
+        let accept = tokio::spawn(accept_loop(endpoint.clone(), host.clone()));
+        Ok(ServerHandle { local_addr, fingerprint: identity.fingerprint.clone(), host, endpoint, accept })
     }
 }
 
@@ -261,16 +335,9 @@ impl Server {
 pub struct ServerHandle {
     local_addr: SocketAddr,
     fingerprint: String,
-    shared: Arc<Shared>,
+    host: Arc<rooms::Host>,
     endpoint: Endpoint,
     accept: JoinHandle<()>,
-    collector: JoinHandle<()>,
-    stop: Arc<AtomicBool>,
-    /// See [`ServerHandle::stall_ve`].
-    stall_ms: Arc<AtomicU64>,
-    ve_thread: Option<std::thread::JoinHandle<VeLoopStats>>,
-    recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
-    view: Option<ViewHandle>,
 }
 
 impl ServerHandle {
@@ -284,53 +351,107 @@ impl ServerHandle {
         &self.fingerprint
     }
 
-    /// Where the web view is served (`--view`), if it is.
+    /// Where the first room's web view is served (`--view`), if it is.
     pub fn view_addr(&self) -> Option<SocketAddr> {
-        self.view.as_ref().map(ViewHandle::local_addr)
+        self.host.first(|room| room.view.as_ref().map(ViewHandle::local_addr)).flatten()
     }
 
-    /// Statistics so far.
+    /// Statistics so far of the first room (the only one of a `--scene` server).
     pub fn stats(&self) -> ServerStats {
-        self.shared.stats()
+        self.host.first(|room| room.shared.stats()).unwrap_or_default()
     }
 
-    /// A test knob: the VE thread stops ticking for `duration` at its next tick (it sleeps), as a stalled VE
-    /// would; what a fleet manager sees of it is the test.
+    /// A test knob: the rooms' executor stops stepping for `duration` from its next pass (it sleeps), as a
+    /// stalled executor would; what a fleet manager sees of it is the test.
     pub fn stall_ve(&self, duration: Duration) {
-        self.stall_ms.store(duration.as_millis().max(1) as u64, Ordering::Relaxed);
+        self.host.executor.stall(duration);
     }
 
-    /// Drains: stops admitting (new connections are refused), hands each client the room's newest signed
-    /// state and tells it to move (`Leave`), waits up to the configured drain time for them to go, then
-    /// closes the endpoint, stops the VE thread and the recorder, and returns the final statistics.
-    pub async fn shutdown(mut self) -> Result<ServerStats, ServerError> {
-        if let Some(view) = self.view.take() {
-            // Pages first: their grabs leave while the VE still runs.
-            view.shutdown().await;
-        }
-        let clients = self.shared.gateway.users.connected();
-        tracing::info!(clients, drain_s = self.shared.drain.as_secs_f64(), "draining: telling the clients to move");
-        self.shared.tell_fleet(FleetEvent::Draining);
+    /// Statistics so far of every room, by name.
+    pub fn room_stats(&self) -> Vec<rooms::RoomReport> {
+        self.host.reports()
+    }
+
+    /// Drains (see [`ServerHandle::shutdown_rooms`]) and returns the final statistics of the first room.
+    pub async fn shutdown(self) -> Result<ServerStats, ServerError> {
+        Ok(self.shutdown_rooms().await?.into_iter().next().map(|r| r.stats).unwrap_or_default())
+    }
+
+    /// Drains: stops admitting on every room (new connections are refused), hands each client its room's
+    /// newest signed state and tells it to move (`Leave`), waits up to the configured drain time for them to
+    /// go, then closes the endpoint, stops the rooms and their recorders, and returns every room's final
+    /// statistics.
+    pub async fn shutdown_rooms(mut self) -> Result<Vec<rooms::RoomReport>, ServerError> {
+        let opened = self.host.take_all();
+        let clients: usize = opened.iter().map(|room| room.shared.gateway.users.connected()).sum();
+        let drain = self.host.template.drain;
+        tracing::info!(clients, drain_s = drain.as_secs_f64(), "draining: telling the clients to move");
+        self.host.tell_fleet(FleetEvent::Draining);
         let started = Instant::now();
-        self.shared.shutdown.send_replace(true);
-        if tokio::time::timeout(self.shared.drain + SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
+        for room in &opened {
+            room.begin_close(DRAINING);
+        }
+        self.host.shutdown.send_replace(true);
+        if tokio::time::timeout(drain + SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
             self.accept.abort();
         }
-        let left = self.shared.gateway.users.connected();
+        let left: usize = opened.iter().map(|room| room.shared.gateway.users.connected()).sum();
         tracing::info!(left, waited_s = started.elapsed().as_secs_f64(), "drained");
         self.endpoint.close(close_codes::NORMAL, b"server shutdown");
         let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.endpoint.wait_idle()).await;
-        self.stop.store(true, Ordering::Relaxed);
-        let final_ve = match self.ve_thread.take() {
-            Some(thread) => tokio::task::spawn_blocking(move || thread.join())
-                .await
-                .map_err(|e| ServerError::Thread { which: "VE", what: e.to_string() })?
-                .map_err(|_| ServerError::Thread { which: "VE", what: "panicked".into() })?,
-            None => VeLoopStats::default(),
-        };
-        if let Ok(mut ve) = self.shared.ve_stats.lock() {
-            *ve = final_ve;
+        let mut reports = Vec::new();
+        for room in opened {
+            reports.push(room.finish().await?);
         }
+        let executor = self.host.executor.clone();
+        let _ = tokio::task::spawn_blocking(move || executor.shutdown()).await;
+        self.host.tell_fleet(FleetEvent::Drained);
+        Ok(reports)
+    }
+}
+
+impl Drop for ServerHandle {
+    fn drop(&mut self) {
+        // A handle dropped without shutdown must not leave the rooms' threads spinning.
+        for room in self.host.take_all() {
+            room.begin_close("the server is shutting down");
+            room.stop.store(true, Ordering::Relaxed);
+        }
+        self.host.executor.shutdown_soon();
+        self.accept.abort();
+    }
+}
+
+/// A room, open: its shared state and the tasks and threads it owns.
+pub(crate) struct OpenRoom {
+    shared: Arc<Shared>,
+    collector: JoinHandle<()>,
+    stop: Arc<AtomicBool>,
+    recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
+    view: Option<ViewHandle>,
+}
+
+impl OpenRoom {
+    /// Tells its sessions to leave (with `reason`); [`OpenRoom::finish`] then stops its VE.
+    fn begin_close(&self, reason: &str) {
+        if let Ok(mut leave) = self.shared.leave_reason.lock() {
+            *leave = reason.to_owned();
+        }
+        self.shared.shutdown.send_replace(true);
+    }
+
+    /// Waits for its VE to finish, stops its recorder and view, and returns its final statistics.
+    async fn finish(mut self) -> Result<rooms::RoomReport, ServerError> {
+        if let Some(view) = self.view.take() {
+            view.shutdown().await;
+        }
+        self.stop.store(true, Ordering::Relaxed);
+        let deadline = Instant::now() + SHUTDOWN_GRACE;
+        while !self.shared.cell.done() && Instant::now() < deadline {
+            tokio::time::sleep(COLLECT_EVERY / 5).await;
+        }
+        // The collector takes the final statistics the VE published as it finished.
+        tokio::time::sleep(2 * COLLECT_EVERY).await;
         self.collector.abort();
         if let Some((stop, thread)) = self.recorder.take() {
             stop.store(true, Ordering::Release);
@@ -342,53 +463,48 @@ impl ServerHandle {
                 tracing::error!(%error, "the recording is incomplete");
             }
         }
-        self.shared.tell_fleet(FleetEvent::RoomClosed { room: ONE_ROOM.into() });
-        self.shared.tell_fleet(FleetEvent::Drained);
-        Ok(self.shared.stats())
+        self.shared.fleet.closed();
+        Ok(rooms::RoomReport::of(&self.shared))
     }
 }
 
-impl Drop for ServerHandle {
-    fn drop(&mut self) {
-        // A handle dropped without shutdown must not leave the VE thread spinning.
-        self.stop.store(true, Ordering::Relaxed);
-        self.accept.abort();
-        self.collector.abort();
+/// Opens a room: compiles its scene, builds its VE and rings, starts its recorder, view and collector, and
+/// places it on the executor (refused when the budget has no room).
+pub(crate) fn open_room(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError> {
+    match spec.scene.kind {
+        SceneKind::Planar => open_room_with::<Planar>(host, spec),
+        SceneKind::Spatial => open_room_with::<Spatial>(host, spec),
     }
 }
 
-fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerError> {
-    let model = Model::<S>::compile(&config.scene, &config.scene_label)?;
+fn open_room_with<S: Space>(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError>
+where
+    VeCore<S>: Send,
+{
+    let config = &host.template;
+    let model = Model::<S>::compile(&spec.scene, &spec.scene_label)?;
     let (nq, n, m) = (model.nq(), model.nv(), model.nc());
-    let core = VeCore::new(model, config.ve.clone())?;
+    let ve_config = VeConfig { max_users: spec.max_users, ..config.ve.clone() };
+    let core = VeCore::new(model, ve_config.clone())?;
     let scene_info = core.scene_info();
     for op in 0..core.model().ops.len() {
         if let Some(reach) = core.reach(op) {
-            tracing::info!(op = %core.model().ops[op].name, reach_m = ?reach.extent().as_slice(), static_force_n = reach.static_force_n, lightest_mass_kg = 1.0 / reach.inverse_mass_max, "operational point surveyed");
+            tracing::info!(room = %spec.name, op = %core.model().ops[op].name, reach_m = ?reach.extent().as_slice(), static_force_n = reach.static_force_n, lightest_mass_kg = 1.0 / reach.inverse_mass_max, "operational point surveyed");
         }
     }
-    let identity = match &config.identity {
-        Identity::CertDir(dir) => ServerIdentity::load_or_create(dir)?,
-        Identity::Ephemeral => ServerIdentity::generate(&kinloop_protocol::quic::DEFAULT_NAMES)?,
-        Identity::Files { cert, key } => ServerIdentity::load(cert, key)?,
-    };
     let room = config.room_key.clone().map(|key| {
-        let hash = scene_hash(&serde_json::to_vec(&config.scene).unwrap_or_default());
+        let hash = scene_hash(&serde_json::to_vec(&spec.scene).unwrap_or_default());
         Arc::new(room::Room::new(key, hash, n, core.state().qd.len()))
     });
-    let options = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
-    let endpoint = server_endpoint(config.listen, &identity, &options)?;
-    let local_addr = endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
-    if config.access.is_open() {
-        tracing::warn!("no --token-file: any token is accepted");
+    if spec.access.is_open() {
+        tracing::warn!(room = %spec.name, "no token file: any token is accepted");
     }
 
     let (command_tx, command_rx) = RingBuffer::new(COMMAND_RING);
     let (event_tx, event_rx) = RingBuffer::new(EVENT_RING);
     let (stats_tx, stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
-    let stall_ms = Arc::new(AtomicU64::new(0));
-    let recorder = match &config.record {
+    let recorder = match &spec.record {
         Some(path) => {
             let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
             let done = Arc::new(AtomicBool::new(false));
@@ -401,9 +517,11 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         Some((tx, handle)) => (Some(tx), Some(handle)),
         None => (None, None),
     };
-    let (view_tap, view_reader) = match &config.view {
+    // The view serves the first room (the only one of a `--scene` server).
+    let view_config = config.view.as_ref().filter(|_| host.is_empty());
+    let (view_tap, view_reader) = match view_config {
         Some(v) => {
-            let (tap, reader) = crate::view::tap::<S>(n, config.ve.max_users, config.ve.ve_rate_hz, v.frame_rate_hz);
+            let (tap, reader) = crate::view::tap::<S>(n, ve_config.max_users, ve_config.ve_rate_hz, v.frame_rate_hz);
             (Some(tap), Some(reader))
         }
         None => (None, None),
@@ -416,42 +534,52 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
         view: view_tap,
         room: room.clone(),
         stop: stop.clone(),
-        heartbeat: config.fleet.as_ref().map(|f| f.heartbeat().clone()),
-        stall_ms: stall_ms.clone(),
     };
-    let realtime = config.realtime;
-    let ve_thread = std::thread::Builder::new()
-        .name("kinloop-ve".into())
-        .spawn(move || ve_thread::run(core, io, realtime))
-        .map_err(|e| ServerError::Thread { which: "VE", what: e.to_string() })?;
-
     let (shutdown, _) = watch::channel(false);
+    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone()));
+    let on_close = {
+        let (shutdown, fleet) = (shutdown.clone(), fleet.clone());
+        Box::new(move |_reason: &str| {
+            shutdown.send_replace(true);
+            fleet.closed();
+        }) as Box<dyn Fn(&str) + Send + Sync>
+    };
+    let cell = Arc::new(rooms::RoomCell::new(spec.name.clone(), ve_config.ve_rate_hz, on_close));
     let shared = Arc::new(Shared {
+        name: spec.name.clone(),
+        cell: cell.clone(),
+        executor: host.executor.clone(),
+        leave_reason: Mutex::new("the server is shutting down".into()),
         gateway: Arc::new(Gateway {
             commands: Arc::new(CommandSender::new(command_tx)),
             users: UserRegistry::default(),
             shape: SessionShape { kind: S::KIND, n, m },
             snapshot_ring_bytes: 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
         }),
-        endpoint: endpoint.clone(),
+        endpoint: host.endpoint.clone(),
         ve_stats: Mutex::new(VeLoopStats::default()),
         started: Instant::now(),
-        ve_rate_hz: config.ve.ve_rate_hz,
-        access: config.access.clone(),
+        ve_rate_hz: ve_config.ve_rate_hz,
+        access: spec.access.clone(),
         scene_info,
         shutdown,
         view: std::sync::OnceLock::new(),
         room,
         drain: config.drain,
-        fleet: config.fleet.clone(),
+        fleet,
     });
-    let view = match (&config.view, view_reader) {
+    let hosted = rooms::Hosted::new(ve_thread::VeLoop::new(core, io, Instant::now()), spec.knobs);
+    if let Err(error) = host.executor.place(Box::new(hosted), cell) {
+        shared.fleet.closed();
+        return Err(error.into());
+    }
+    let view = match (view_config, view_reader) {
         (Some(view), Some(reader)) => {
             let source = LiveSource {
-                scene: config.scene.clone(),
-                scene_label: config.scene_label.clone(),
+                scene: spec.scene.clone(),
+                scene_label: spec.scene_label.clone(),
                 reader,
-                access: config.access.clone(),
+                access: spec.access.clone(),
             };
             match crate::view::start_live_with(view, source, Some(shared.gateway.clone())) {
                 Ok(handle) => {
@@ -460,40 +588,26 @@ fn start_with<S: Space>(config: ServerConfig) -> Result<ServerHandle, ServerErro
                 }
                 Err(error) => {
                     stop.store(true, Ordering::Relaxed);
+                    shared.fleet.closed();
                     return Err(error.into());
                 }
             }
         }
         _ => None,
     };
-    let accept = tokio::spawn(accept_loop(endpoint.clone(), shared.clone()));
     let collector = tokio::spawn(collect(shared.clone(), stats_rx, event_rx, config.stats_every));
-    shared.tell_fleet(FleetEvent::Listening { addr: local_addr });
-    shared.tell_fleet(FleetEvent::RoomOpened { room: ONE_ROOM.into() });
-    Ok(ServerHandle {
-        local_addr,
-        fingerprint: identity.fingerprint.clone(),
-        shared,
-        endpoint,
-        accept,
-        collector,
-        stop,
-        stall_ms,
-        ve_thread: Some(ve_thread),
-        recorder,
-        view,
-    })
+    Ok(OpenRoom { shared, collector, stop, recorder, view })
 }
 
 /// Accepts connections until shutdown; then, while the sessions end (each bounded by the drain), refuses
 /// new ones at once rather than leaving them to time out.
-async fn accept_loop(endpoint: Endpoint, shared: Arc<Shared>) {
+async fn accept_loop(endpoint: Endpoint, host: Arc<rooms::Host>) {
     let mut sessions = tokio::task::JoinSet::new();
-    let mut shutdown = shared.shutdown.subscribe();
+    let mut shutdown = host.shutdown.subscribe();
     loop {
         tokio::select! {
             incoming = endpoint.accept() => match incoming {
-                Some(incoming) => drop(sessions.spawn(session::serve(incoming, shared.clone()))),
+                Some(incoming) => drop(sessions.spawn(session::serve(incoming, host.clone()))),
                 None => break,
             },
             _ = shutdown.changed() => break,

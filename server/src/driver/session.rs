@@ -15,14 +15,13 @@ use kinloop_protocol::{
 use rtrb::RingBuffer;
 use tokio::sync::{oneshot, Notify};
 
+use super::rooms::{serve_admin, Host};
 use super::Shared;
 use crate::core::{JoinRequest, UplinkSample};
 use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLink};
 
 /// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
 const UPLINK_RING: usize = 64;
-/// What a draining server tells its clients.
-const DRAINING: &str = "the server is draining: move to another server of the room";
 
 fn refused(reason: RefusalReason) -> Refused {
     Refused { reason, message: String::new() }
@@ -39,18 +38,31 @@ fn log_handshake_end(remote: std::net::SocketAddr, error: &AcceptError) {
     }
 }
 
-/// Serves one incoming connection to its end.
-pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
+/// Serves one incoming connection to its end: a session in the room its hello names, or an admin command.
+pub async fn serve(incoming: Incoming, host: Arc<Host>) {
     let remote = incoming.remote_address();
     let mut ends = None;
-    let (slot, shared_ref) = (&mut ends, &shared);
+    let routed: std::sync::OnceLock<Arc<Shared>> = std::sync::OnceLock::new();
+    let (slot, routed_ref) = (&mut ends, &routed);
     let admit = |hello: &kinloop_protocol::Hello| {
-        shared_ref.access.admit(&hello.token, hello.role).map_err(refused)?;
-        Ok(shared_ref.scene_info.clone())
+        let shared = host.route(hello).map_err(refused)?;
+        shared.access.admit(&hello.token, hello.role).map_err(refused)?;
+        let info = shared.scene_info.clone();
+        let _ = routed_ref.set(shared);
+        Ok(info)
     };
-    let resume = |offer: RoomState| resume(shared_ref, remote, offer);
+    let resume = |offer: RoomState| async move {
+        match routed_ref.get() {
+            Some(shared) => resume(shared, remote, offer).await,
+            None => ResumeAnswer::Refused(ResumeRefusal::NoRoomKey),
+        }
+    };
     let handshake = accept_resuming(incoming, admit, resume, move |hello, join| async move {
-        let shared = shared_ref;
+        let shared = routed_ref.get().ok_or_else(|| refused(RefusalReason::Malformed { what: "no room".into() }))?;
+        shared
+            .executor
+            .admit_user(&shared.cell)
+            .map_err(|over| refused(RefusalReason::OverBudget { what: over.what }))?;
         let (uplink_tx, uplink_rx) = RingBuffer::new(UPLINK_RING);
         let (snapshot_tx, snapshot_rx) = RingBuffer::new(shared.gateway.snapshot_ring_bytes);
         let notify = Arc::new(Notify::new());
@@ -65,10 +77,11 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
     });
     let session = match handshake.await {
         Ok(session) => session,
+        Err(AcceptError::Admin(admin)) => return serve_admin(admin, &host).await,
         Err(error) => {
             // The VE may have admitted the user before the handshake failed (the welcome could not be sent:
             // the client had gone); it leaves now, not at the next restart.
-            if let Some((user, ..)) = ends {
+            if let (Some((user, ..)), Some(shared)) = (ends, routed.get()) {
                 let _ = shared.gateway.commands.send(Command::Leave { user }).await;
             }
             // Never the hello itself: it carries the token.
@@ -76,8 +89,8 @@ pub async fn serve(incoming: Incoming, shared: Arc<Shared>) {
             return;
         }
     };
-    let Some((_, uplink_tx, snapshot_rx, notify)) = ends else { return };
-    run_session(session, shared, uplink_tx, snapshot_rx, notify).await;
+    let (Some((_, uplink_tx, snapshot_rx, notify)), Some(shared)) = (ends, routed.get()) else { return };
+    run_session(session, shared.clone(), uplink_tx, snapshot_rx, notify).await;
 }
 
 /// Decides on a state a client offers: the room key's checks here, the fit to the linkage in the VE. A
@@ -176,14 +189,17 @@ async fn run_session(
     room_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let reason = loop {
         if *shutdown.borrow() {
-            // The newest state first, so that the server the client moves to resumes the room where it is.
-            if let Some(state) = shared.room.as_ref().and_then(|room| room.signed_latest()) {
+            let closed = shared.cell.closed_reason();
+            // The newest state first, so that the server the client moves to resumes the room where it is
+            // (not when the room's simulation failed: that state is not to be trusted).
+            if let Some(state) = shared.room.as_ref().filter(|_| closed.is_none()).and_then(|r| r.signed_latest()) {
                 let _ = send_control(&mut send, &Control::RoomState(state)).await;
             }
-            let _ = send_control(&mut send, &Control::Leave { reason: DRAINING.into() }).await;
+            let reason = closed.or_else(|| shared.leave_reason.lock().ok().map(|r| r.clone())).unwrap_or_default();
+            let _ = send_control(&mut send, &Control::Leave { reason }).await;
             let _ = send.finish();
             let _ = tokio::time::timeout(shared.drain, connection.closed()).await;
-            break "server drained";
+            break "room closed";
         }
         tokio::select! {
             message = recv_control(&mut recv) => match message {

@@ -5,7 +5,7 @@
 //! that a tokio task turns into log lines, statistics are copied out every 100 ms. Joins and leaves arrive
 //! as commands (they allocate and free per-user buffers, once per user).
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -15,7 +15,6 @@ use kinloop_protocol::codec;
 use rtrb::{Consumer, Producer};
 
 use crate::core::{UserId, VeCore, VeEvent};
-use crate::fleet::Heartbeat;
 use crate::gateway::{push_frame, Command, LatencyHistogram, UserLink, VeLoopStats};
 use crate::view::ViewTap;
 
@@ -42,49 +41,88 @@ pub struct VeThreadIo {
     pub room: Option<Arc<Room>>,
     /// Set to stop the loop.
     pub stop: Arc<AtomicBool>,
-    /// Advanced every tick, for a fleet manager's health pings (`crate::fleet`), if one listens.
-    pub heartbeat: Option<Heartbeat>,
-    /// A test knob: milliseconds to stall the loop for at its next tick (then reset to 0).
-    pub stall_ms: Arc<AtomicU64>,
 }
 
-/// Runs the VE loop until `io.stop` is set; returns the final statistics.
-pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) -> VeLoopStats {
+/// Runs the VE loop on the calling thread until `io.stop` is set; returns the final statistics.
+pub fn run<S: Space>(core: VeCore<S>, io: VeThreadIo, realtime: bool) -> VeLoopStats {
     let granted = if realtime {
         try_realtime_priority().inspect_err(|why| tracing::warn!(%why, "the VE thread runs at normal priority")).is_ok()
     } else {
         false
     };
-    let mut stats = VeLoopStats { realtime_priority: granted, ..Default::default() };
-    let period = core.config().ve_period();
-    let half_period = period / 2;
-    let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;
-    let room_every = (core.config().ve_rate_hz * ROOM_STATE_PERIOD.as_secs_f64()).round().max(1.0) as u64;
-    let mut histogram = LatencyHistogram::default();
-    let mut links: Vec<ActiveLink> = Vec::with_capacity(2 * core.config().max_users);
-    let mut encoded = Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES);
+    let mut ve = VeLoop::new(core, io, Instant::now());
+    ve.stats.realtime_priority = granted;
     let sleeper = spin_sleep::SpinSleeper::default();
-    let epoch = Instant::now();
-    let mut iterations = 0u64;
-    while !io.stop.load(Ordering::Relaxed) {
-        let deadline = epoch + core.poll_timeout();
-        sleeper.sleep_until(deadline);
+    while !ve.stopped() {
+        sleeper.sleep_until(ve.next_deadline());
+        ve.tick();
+    }
+    ve.finish()
+}
+
+/// One VE's loop state, stepped by whoever owns it: [`run`] on a thread of its own, or a thread of the
+/// rooms' executor among other rooms (`super::rooms::executor`). [`VeLoop::tick`] is one iteration.
+pub struct VeLoop<S: Space> {
+    core: VeCore<S>,
+    io: VeThreadIo,
+    /// Statistics so far (also published every 100 ms).
+    pub stats: VeLoopStats,
+    half_period: Duration,
+    publish_every: u64,
+    room_every: u64,
+    histogram: LatencyHistogram,
+    links: Vec<ActiveLink>,
+    encoded: Vec<u8>,
+    epoch: Instant,
+    iterations: u64,
+}
+
+impl<S: Space> VeLoop<S> {
+    /// A loop for `core` whose time starts at `epoch`.
+    pub fn new(core: VeCore<S>, io: VeThreadIo, epoch: Instant) -> Self {
+        let period = core.config().ve_period();
+        let publish_every = (core.config().ve_rate_hz / 10.0).ceil().max(1.0) as u64;
+        let room_every = (core.config().ve_rate_hz * ROOM_STATE_PERIOD.as_secs_f64()).round().max(1.0) as u64;
+        let links = Vec::with_capacity(2 * core.config().max_users);
+        VeLoop {
+            core,
+            io,
+            stats: VeLoopStats::default(),
+            half_period: period / 2,
+            publish_every,
+            room_every,
+            histogram: LatencyHistogram::default(),
+            links,
+            encoded: Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES),
+            epoch,
+            iterations: 0,
+        }
+    }
+
+    /// When the next tick is due.
+    pub fn next_deadline(&self) -> Instant {
+        self.epoch + self.core.poll_timeout()
+    }
+
+    /// Whether the loop was told to stop.
+    pub fn stopped(&self) -> bool {
+        self.io.stop.load(Ordering::Relaxed)
+    }
+
+    /// One iteration, at the deadline it was due (now or a little later).
+    pub fn tick(&mut self) {
+        let deadline = self.next_deadline();
         let woke = Instant::now();
+        let (core, io, stats, links, encoded) =
+            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.encoded);
         let lateness = woke.saturating_duration_since(deadline);
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
-        if lateness > half_period {
+        if lateness > self.half_period {
             stats.deadline_misses += 1;
         }
-        if let Some(heartbeat) = &io.heartbeat {
-            heartbeat.beat();
-        }
-        let stall_ms = io.stall_ms.swap(0, Ordering::Relaxed);
-        if stall_ms > 0 {
-            std::thread::sleep(Duration::from_millis(stall_ms));
-        }
-        let now = woke - epoch;
-        serve_commands(&mut core, &mut io.commands, &mut links, now);
-        for l in &mut links {
+        let now = woke - self.epoch;
+        serve_commands(core, &mut io.commands, links, now);
+        for l in links.iter_mut() {
             while let Ok(sample) = l.link.uplinks.pop() {
                 // Rejections are counted (and reported once per burst) by the core.
                 let _ = core.handle_uplink_sample(now, l.user, &sample);
@@ -97,8 +135,8 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
                 view.note_snapshot(pending.snapshot());
             }
             let Some(l) = links.iter_mut().find(|l| l.user == user) else { continue };
-            let sent = codec::encode_datagram_into(pending.datagram(), &mut encoded).is_ok()
-                && push_frame(&mut l.link.snapshots, &encoded);
+            let sent = codec::encode_datagram_into(pending.datagram(), encoded).is_ok()
+                && push_frame(&mut l.link.snapshots, encoded);
             if sent {
                 l.link.notify.notify_one();
             } else {
@@ -110,32 +148,43 @@ pub fn run<S: Space>(mut core: VeCore<S>, mut io: VeThreadIo, realtime: bool) ->
             let _ = io.events.push(event);
         }
         if let Some(record) = io.record.as_mut() {
-            if super::record::write_row(&core, record) {
+            if super::record::write_row(core, record) {
                 stats.record_rows += 1;
             } else {
                 stats.record_rows_dropped += 1;
             }
         }
         if let Some(view) = io.view.as_mut() {
-            view.after_tick(&core, &stats);
+            view.after_tick(core, stats);
             stats.view_frames = view.published;
             stats.view_frames_dropped = view.dropped;
         }
-        if let Some(room) = io.room.as_ref().filter(|_| iterations.is_multiple_of(room_every)) {
-            room.publish(&core);
+        if let Some(room) = io.room.as_ref().filter(|_| self.iterations.is_multiple_of(self.room_every)) {
+            room.publish(core);
         }
-        histogram.record(woke.elapsed().as_nanos() as u64);
-        iterations += 1;
-        if iterations.is_multiple_of(publish_every) {
-            stats.step_time = histogram.summary();
-            stats.core = core.metrics();
-            let _ = io.stats.push(stats);
+        self.histogram.record(woke.elapsed().as_nanos() as u64);
+        self.iterations += 1;
+        if self.iterations.is_multiple_of(self.publish_every) {
+            self.publish();
         }
     }
-    stats.step_time = histogram.summary();
-    stats.core = core.metrics();
-    let _ = io.stats.push(stats);
-    stats
+
+    /// Users in the VE now.
+    pub fn users(&self) -> usize {
+        self.links.len()
+    }
+
+    fn publish(&mut self) {
+        self.stats.step_time = self.histogram.summary();
+        self.stats.core = self.core.metrics();
+        let _ = self.io.stats.push(self.stats);
+    }
+
+    /// Publishes the final statistics and returns them.
+    pub fn finish(mut self) -> VeLoopStats {
+        self.publish();
+        self.stats
+    }
 }
 
 fn serve_commands<S: Space>(

@@ -2,9 +2,9 @@
 //! interface that knows nothing of the manager, and the executor's heartbeat.
 //!
 //! The driver feeds a [`FleetFeed`]: listening, rooms opened and closed, users joined and left, draining and
-//! drained; the VE thread (the room executor, once there are many rooms) advances the [`Heartbeat`] every
-//! tick. An adapter reads the other end, [`FleetEvents`]: it marks the server ready, counts rooms and users,
-//! sends health pings only while the heartbeat advances (a stalled VE stops them), and asks to be shut down
+//! drained; the rooms' executor advances the [`Heartbeat`] every time round each real-time thread's loop. An
+//! adapter reads the other end, [`FleetEvents`]: it marks the server ready, counts rooms and users, sends
+//! health pings only while the heartbeat advances (a stalled executor stops them), and asks to be shut down
 //! once drained. Nothing inside a core knows about any of it.
 
 pub mod agones;
@@ -12,12 +12,9 @@ pub mod allocation;
 
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use tokio::sync::mpsc;
-
-/// The name of the one room a one-room server holds (its rooms counter is 1 while it runs).
-pub const ONE_ROOM: &str = "room";
 
 /// What happened at the server, for the fleet manager.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -53,7 +50,7 @@ pub enum FleetEvent {
     Drained,
 }
 
-/// The executor's heartbeat: a count its thread advances every tick. Reading it never blocks the thread.
+/// The executor's heartbeat: a count its real-time threads advance every pass. Reading it never blocks the thread.
 #[derive(Clone, Debug, Default)]
 pub struct Heartbeat(Arc<AtomicU64>);
 
@@ -85,6 +82,54 @@ impl FleetFeed {
     /// The heartbeat the executor advances.
     pub fn heartbeat(&self) -> &Heartbeat {
         &self.heartbeat
+    }
+}
+
+/// One room's side of the feed: it is told opened once and closed once, closed never before opened, whichever
+/// way it closes first (removed by the admin command, closed by a panic of its simulation, or at shutdown), so
+/// the adapter's count stays true.
+#[derive(Debug)]
+pub struct FleetRoom {
+    feed: Option<FleetFeed>,
+    name: String,
+    /// Whether it was told opened, and whether it closed.
+    told: Mutex<(bool, bool)>,
+}
+
+impl FleetRoom {
+    /// Room `name`'s side of `feed` (none: nothing is told).
+    pub fn new(feed: Option<FleetFeed>, name: String) -> Self {
+        FleetRoom { feed, name, told: Mutex::new((false, false)) }
+    }
+
+    /// Tells the adapter, if there is one.
+    pub fn send(&self, event: FleetEvent) {
+        if let Some(feed) = &self.feed {
+            feed.send(event);
+        }
+    }
+
+    /// Tells that the room is open (the first time only; and that it closed, if it already did).
+    pub fn opened(&self) {
+        let Ok(mut told) = self.told.lock() else { return };
+        if !told.0 {
+            told.0 = true;
+            self.send(FleetEvent::RoomOpened { room: self.name.clone() });
+            if told.1 {
+                self.send(FleetEvent::RoomClosed { room: self.name.clone() });
+            }
+        }
+    }
+
+    /// The room closed: told the first time only, and once it was told open.
+    pub fn closed(&self) {
+        let Ok(mut told) = self.told.lock() else { return };
+        if !told.1 {
+            told.1 = true;
+            if told.0 {
+                self.send(FleetEvent::RoomClosed { room: self.name.clone() });
+            }
+        }
     }
 }
 

@@ -183,6 +183,7 @@ impl Pusher {
             token: token.into(),
             client_name: "test pusher".into(),
             role: Role::Manipulator,
+            room: String::new(),
         };
         let join = Join { op: "link2".into(), device, form: LocalModelForm::OpSpace, mapping: Default::default() };
         let mut session =

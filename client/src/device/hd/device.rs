@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::{SceneKind, Space, VecOps};
 
-use super::library::{constants, HdError, HdLibrary};
+use super::library::{constants, parse_version, HdError, HdLibrary, OLDEST_VERSION};
 use super::units;
 use crate::device::presets::DevicePreset;
 use crate::device::{DeviceError, DeviceSpec, DeviceState, HapticDevice, HdRequest};
@@ -95,6 +95,21 @@ impl HdSpec {
     }
 }
 
+/// The library's HDAPI version against [`OLDEST_VERSION`] (`hdGetString(HD_VERSION)` answers once a device
+/// is initialised).
+fn check_version(library: &HdLibrary) -> Result<(), HdError> {
+    let text = library.version();
+    let _ = library.error();
+    match text.as_deref().map(|t| (t, parse_version(t))) {
+        Some((_, Some(version))) if version >= OLDEST_VERSION => Ok(()),
+        found => Err(HdError::Old {
+            library: library.path().display().to_string(),
+            found: found
+                .map_or_else(|| "unknown (hdGetString(HD_VERSION) answers nothing)".into(), |f| format!("{:?}", f.0)),
+        }),
+    }
+}
+
 /// An initialised device: forces off and the device disabled when dropped.
 struct Lease {
     library: &'static HdLibrary,
@@ -130,6 +145,7 @@ impl OpenedHd {
         })?;
         let lease = Lease { library, handle };
         library.make_current(handle);
+        check_version(library)?;
         let one = |pname| {
             let mut v = [f64::NAN];
             library.get_doubles(pname, &mut v);
@@ -204,6 +220,10 @@ impl OpenedHd {
             started: false,
             ramp_from: None,
             last_read: None,
+            #[cfg(feature = "fault-injection")]
+            panic_at: fault_injection::panic_at(),
+            #[cfg(feature = "fault-injection")]
+            frames: 0,
             _space: PhantomData,
         }
     }
@@ -219,6 +239,12 @@ pub struct HdDevice<S: Space> {
     started: bool,
     ramp_from: Option<Duration>,
     last_read: Option<Duration>,
+    /// The frame whose read panics (see [`fault_injection`]).
+    #[cfg(feature = "fault-injection")]
+    panic_at: Option<u64>,
+    /// Frames begun.
+    #[cfg(feature = "fault-injection")]
+    frames: u64,
     _space: PhantomData<S>,
 }
 
@@ -269,6 +295,11 @@ impl<S: Space> HapticDevice<S> for HdDevice<S> {
         library.begin_frame(self.lease.handle);
         self.in_frame = true;
         self.check("hdBeginFrame")?;
+        #[cfg(feature = "fault-injection")]
+        {
+            self.frames += 1;
+            fault_injection::maybe_panic(self.panic_at, self.frames);
+        }
         let (mut p, mut v) = ([f64::NAN; 3], [f64::NAN; 3]);
         library.get_doubles(constants::CURRENT_POSITION, &mut p);
         library.get_doubles(constants::CURRENT_VELOCITY, &mut v);
@@ -311,5 +342,26 @@ impl<S: Space> HapticDevice<S> for HdDevice<S> {
         library.end_frame(self.lease.handle);
         self.in_frame = false;
         self.check("hdEndFrame")
+    }
+}
+
+/// A panic inside the servo callback on demand, for the tests that check it is caught (kinloop's own code
+/// has no panic a test could reach through the library): built only with the `fault-injection` feature,
+/// which the workspace's tests turn on and no shipped build does.
+#[cfg(feature = "fault-injection")]
+pub mod fault_injection {
+    /// The variable naming the frame (counted from 1) whose read panics, mid-frame.
+    pub const PANIC_AT_FRAME: &str = "KINLOOP_FAULT_HD_PANIC_AT_FRAME";
+
+    /// The frame `PANIC_AT_FRAME` names, if any.
+    pub fn panic_at() -> Option<u64> {
+        std::env::var(PANIC_AT_FRAME).ok()?.parse().ok()
+    }
+
+    /// Panics when `frame` is the one asked for.
+    pub fn maybe_panic(at: Option<u64>, frame: u64) {
+        if at == Some(frame) {
+            panic!("{PANIC_AT_FRAME}: a panic injected at frame {frame}");
+        }
     }
 }

@@ -34,6 +34,8 @@ pub mod constants {
     pub const CURRENT_POSITION: c_uint = 0x2050;
     /// `HD_CURRENT_VELOCITY` (3 doubles, mm/s).
     pub const CURRENT_VELOCITY: c_uint = 0x2051;
+    /// `HD_VERSION` (`hdGetString`: the HDAPI's version, e.g. `3.4.0`).
+    pub const VERSION: c_uint = 0x2500;
     /// `HD_DEVICE_MODEL_TYPE` (`hdGetString`).
     pub const DEVICE_MODEL_TYPE: c_uint = 0x2501;
     /// `HD_USABLE_WORKSPACE_DIMENSIONS` (6 doubles, mm).
@@ -380,9 +382,19 @@ impl HdLibrary {
 
     /// `hdGetString(HD_DEVICE_MODEL_TYPE)`, when the library has it.
     pub fn model_name(&self) -> Option<String> {
+        self.string(constants::DEVICE_MODEL_TYPE)
+    }
+
+    /// `hdGetString(HD_VERSION)`, when the library has it and answers.
+    pub fn version(&self) -> Option<String> {
+        self.string(constants::VERSION)
+    }
+
+    /// `hdGetString(pname)`, when the library has it and answers.
+    fn string(&self, pname: c_uint) -> Option<String> {
         let call = self.get_string?;
         // SAFETY: returns null or a NUL-terminated string owned by the library.
-        let text = unsafe { call(constants::DEVICE_MODEL_TYPE) };
+        let text = unsafe { call(pname) };
         // SAFETY: non-null and NUL-terminated, as above.
         (!text.is_null()).then(|| unsafe { CStr::from_ptr(text) }.to_string_lossy().into_owned())
     }
@@ -429,6 +441,18 @@ impl HdLibrary {
     }
 }
 
+/// The oldest HDAPI kinloop drives: the 3.x headers its signatures come from (`HDErrorInfo` by value,
+/// `hdScheduleAsynchronous` with a priority).
+pub const OLDEST_VERSION: (u32, u32) = (3, 0);
+
+/// The (major, minor) of an `HD_VERSION` string (`3.4.0`, `3.00.66`), if it starts with one.
+pub fn parse_version(text: &str) -> Option<(u32, u32)> {
+    let mut parts = text.trim().split('.');
+    let major = parts.next()?.parse().ok()?;
+    let minor = parts.next().map_or(Some(0), |m| m.parse().ok())?;
+    Some((major, minor))
+}
+
 /// Why the HD library or a device behind it cannot be used. Each message names the library.
 #[derive(Debug, thiserror::Error)]
 pub enum HdError {
@@ -458,6 +482,20 @@ pub enum HdError {
         library: String,
         /// The missing names, comma-separated.
         symbols: String,
+    },
+    /// The library is older than [`OLDEST_VERSION`], or will not say its version.
+    #[error(
+        "HD library {library}: HDAPI version {found}, kinloop needs OpenHaptics {}.{} or newer (check which \
+         OpenHaptics is installed, and that {} or OH_SDK_BASE points at it rather than an older copy)",
+        OLDEST_VERSION.0,
+        OLDEST_VERSION.1,
+        LIBRARY_VARIABLE
+    )]
+    Old {
+        /// The library.
+        library: String,
+        /// What `hdGetString(HD_VERSION)` said, quoted, or that it said nothing.
+        found: String,
     },
     /// `hdInitDevice` failed.
     #[error(

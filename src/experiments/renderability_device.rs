@@ -1,16 +1,19 @@
-//! `renderability-dhd`: the renderability matrix ([`super::renderability`]) through a Force Dimension
-//! device, in real processes: for every shipped scene × operational point × device {omega.3, Falcon} ×
-//! network {perfect, 50 ms one way with 5 ms jitter} × hand {soft, firm}, a `kinloop-server --scene S`
-//! and a `kinloop-client --op OP --device dhd` with default flags, the client loading the fake DHD library
-//! (`fakes/fake-dhd`) as a vendor's, told which model to be (`FAKE_DHD_SYSTEM`).
+//! `renderability-dhd` and `renderability-hd`: the renderability matrix ([`super::renderability`])
+//! through a vendor's device, in real processes: for every shipped scene × operational point × device ×
+//! network {perfect, 50 ms one way with 5 ms jitter} × hand {soft, firm}, a `kinloop-server --scene S` and a
+//! `kinloop-client --op OP --device dhd|hd` with default flags, the client loading the vendor's fake library
+//! as a vendor's: the fake DHD library (`fakes/fake-dhd`) as an omega.3 and a Falcon (`FAKE_DHD_SYSTEM`),
+//! or the fake OpenHaptics library (`fakes/fake-hd`) as a Touch, whose servo thread then runs the client's
+//! loop. One runner serves both ([`Vendor`]); what differs is the fake's variables, its frame and units, and
+//! where the device's figures come from.
 //!
 //! The fake's hand stands in for the simulated presets' hands: the same grasp impedances (soft and firm,
 //! `shared/haptics-facts.md`) and the same intention, a tour of the OP's reach. That tour is what the
 //! server's welcome gives a client (`Welcome::op::tour`), placed where the client's core puts the OP in the
-//! device's workspace (`HapticCore::home`) and written in the device's frame (`dhd::frames`): this module
+//! device's workspace (`HapticCore::home`) and written in the device's frame and units: this module
 //! computes it ahead of the session with the server's and the client's own cores (same scene, same device
-//! spec, same defaults, so the same welcome), and hands it to the fake through `FAKE_DHD_TOUR`. The handle
-//! starts at the OP's place, as a simulated rig's does, and the hand sets off when forces come on.
+//! spec, same defaults, so the same welcome), and hands it to the fake (`FAKE_DHD_TOUR`, `FAKE_HD_TOUR`).
+//! The handle starts at the OP's place, as a simulated rig's does.
 //!
 //! A pair renders by the matrix's bounds: the client ends well, no VE restore, no withheld snapshot, no
 //! non-finite value; loops closed; at most 5 % of ticks clamped; device-OP RMS (the device against the VE's
@@ -29,8 +32,11 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 use kinloop_client::core::{CoreConfig, HapticCore};
-use kinloop_client::device::dhd::specs::{self, ModelSpec};
-use kinloop_client::device::dhd::{frames, library::LIBRARY_VARIABLE};
+use kinloop_client::device::dhd::specs;
+use kinloop_client::device::dhd::{frames, library::LIBRARY_VARIABLE as DHD_VARIABLE};
+use kinloop_client::device::hd::library::LIBRARY_VARIABLE as HD_VARIABLE;
+use kinloop_client::device::hd::{HdLibrary, OpenedHd};
+use kinloop_client::device::{DeviceSpec, HdRequest};
 use kinloop_client::user::hand::tour_order;
 use kinloop_client::user::{HandKind, UserContext};
 use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
@@ -44,6 +50,122 @@ use crate::rounding::{num, round};
 
 /// The DHD models of the matrix: `dhdGetSystemType`'s omega.3 and Falcon.
 pub const SYSTEMS: [i32; 2] = [33, 60];
+
+/// Whose library a matrix goes through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Vendor {
+    /// Force Dimension's DHD SDK (`--device dhd`).
+    Dhd,
+    /// 3D Systems' OpenHaptics HD API (`--device hd`).
+    Hd,
+}
+
+impl Vendor {
+    /// The experiment's name.
+    pub fn experiment(self) -> &'static str {
+        match self {
+            Vendor::Dhd => "renderability-dhd",
+            Vendor::Hd => "renderability-hd",
+        }
+    }
+
+    /// The devices of its matrix.
+    pub fn devices(self) -> Vec<FakeDevice> {
+        match self {
+            Vendor::Dhd => SYSTEMS.iter().map(|&s| FakeDevice::Dhd(s)).collect(),
+            Vendor::Hd => vec![FakeDevice::Touch],
+        }
+    }
+
+    /// The variable naming the library file.
+    pub fn library_variable(self) -> &'static str {
+        match self {
+            Vendor::Dhd => DHD_VARIABLE,
+            Vendor::Hd => HD_VARIABLE,
+        }
+    }
+
+    /// The fake library's crate name (its file is `{DLL_PREFIX}NAME{DLL_SUFFIX}`).
+    fn fake_crate(self) -> &'static str {
+        match self {
+            Vendor::Dhd => "kinloop_fake_dhd",
+            Vendor::Hd => "kinloop_fake_hd",
+        }
+    }
+}
+
+/// The device a pair's fake library is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum FakeDevice {
+    /// A DHD device of this `dhdGetSystemType`.
+    Dhd(i32),
+    /// A Touch behind OpenHaptics.
+    Touch,
+}
+
+impl FakeDevice {
+    /// Its vendor.
+    pub fn vendor(self) -> Vendor {
+        match self {
+            FakeDevice::Dhd(_) => Vendor::Dhd,
+            FakeDevice::Touch => Vendor::Hd,
+        }
+    }
+
+    /// The model's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FakeDevice::Dhd(system) => specs::model(system).map_or("unknown", |m| m.name),
+            FakeDevice::Touch => "Touch",
+        }
+    }
+
+    /// The device spec a client designs for in a scene of `kind`: the DHD model's, or what the fake
+    /// OpenHaptics library at `fake` reports (read through kinloop's own HD code, as the client does).
+    fn device_spec(self, kind: SceneKind, fake: &Path) -> Result<DeviceSpec> {
+        match self {
+            FakeDevice::Dhd(system) => {
+                Ok(specs::model(system).with_context(|| format!("no DHD model {system}"))?.device_spec(kind))
+            }
+            FakeDevice::Touch => {
+                let library = HdLibrary::load(fake)?;
+                let request = HdRequest { name: None, fallback: None, calibrate: false };
+                let (opened, _) = OpenedHd::describe(library, &request)?;
+                Ok(opened.spec().device_spec(kind))
+            }
+        }
+    }
+
+    /// A point in kinloop's axes (m; `linear` of them used) as the fake's tour takes it: the DHD device's
+    /// frame in metres, or HD's (kinloop's axes) in millimetres.
+    fn tour_point(self, kinloop: &[f64], linear: usize) -> [f64; 3] {
+        match self {
+            FakeDevice::Dhd(_) => frames::to_device(kinloop, linear),
+            FakeDevice::Touch => {
+                let mut out = [0.0; 3];
+                for (o, x) in out.iter_mut().zip(kinloop).take(linear.min(3)) {
+                    *o = x * 1e3;
+                }
+                out
+            }
+        }
+    }
+
+    /// The fake's variables for a pair with `hand` touring `tour` (the fake's frame and units).
+    fn fake_env(self, hand: HandKind, tour: &[[f64; 3]]) -> Vec<(&'static str, String)> {
+        let tour: Vec<String> = tour.iter().map(|p| format!("{:e},{:e},{:e}", p[0], p[1], p[2])).collect();
+        match self {
+            FakeDevice::Dhd(system) => vec![
+                ("FAKE_DHD_SYSTEM", system.to_string()),
+                ("FAKE_DHD_HAND", hand.name().to_owned()),
+                ("FAKE_DHD_TOUR", tour.join(";")),
+            ],
+            FakeDevice::Touch => {
+                vec![("FAKE_HD_HAND", hand.name().to_owned()), ("FAKE_HD_TOUR", tour.join(";"))]
+            }
+        }
+    }
+}
 /// The hands of the matrix.
 pub const HANDS: [HandKind; 2] = [HandKind::Soft, HandKind::Firm];
 /// A pair's session (s), as `renderability-live`'s; `--quick` halves it.
@@ -53,32 +175,31 @@ const SERVER_MARGIN_S: f64 = 2.5;
 
 /// One pair of the matrix.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct DhdPoint {
+pub struct DevicePoint {
     /// Built-in scene name.
     pub scene: String,
     /// Operational point.
     pub op: String,
-    /// `dhdGetSystemType` the fake answers.
-    pub system: i32,
+    /// The device the fake library is.
+    pub device: FakeDevice,
     /// Network.
     pub network: Network,
     /// Hand.
     pub hand: HandKind,
 }
 
-impl DhdPoint {
+impl DevicePoint {
     /// `scene:op model network hand`.
     pub fn label(&self) -> String {
-        let model = specs::model(self.system).map_or("unknown", |m| m.name);
-        format!("{}:{} {} {} {}", self.scene, self.op, model, self.network.name(), self.hand.name())
+        format!("{}:{} {} {} {}", self.scene, self.op, self.device.name(), self.network.name(), self.hand.name())
     }
 }
 
 /// What one pair measured.
 #[derive(Clone, Debug, Serialize)]
-pub struct DhdResult {
+pub struct DeviceResult {
     /// The pair.
-    pub point: DhdPoint,
+    pub point: DevicePoint,
     /// Renders by every bound.
     pub renders: bool,
     /// Which bounds failed.
@@ -95,14 +216,14 @@ pub struct DhdResult {
     pub ve_restores: u64,
 }
 
-/// Every pair for `scenes` (all built-in scenes when empty).
-pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DhdPoint>> {
+/// Every pair of `vendor`'s matrix for `scenes` (all built-in scenes when empty).
+pub fn points(vendor: Vendor, scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DevicePoint>> {
     let mut out = Vec::new();
     for (scene, op, _) in scene_ops(scenes)? {
-        for system in SYSTEMS {
+        for device in vendor.devices() {
             for network in Network::ALL {
                 for &hand in hands {
-                    out.push(DhdPoint { scene: scene.clone(), op: op.clone(), system, network, hand });
+                    out.push(DevicePoint { scene: scene.clone(), op: op.clone(), device, network, hand });
                 }
             }
         }
@@ -113,10 +234,10 @@ pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<DhdPoint>> {
 /// How a program is started: its name (`kinloop-server`, `kinloop-client`) and arguments to a command.
 pub type Launch = dyn Fn(&str, &[String]) -> Command + Sync;
 
-/// The programs a pair runs: `kinloop-server`, `kinloop-client` and the fake library.
+/// The programs a pair runs: `kinloop-server`, `kinloop-client` and the vendor's fake library.
 pub struct Programs {
     launch: Box<Launch>,
-    /// The fake DHD library.
+    /// The fake library.
     pub fake: PathBuf,
 }
 
@@ -127,8 +248,9 @@ impl Programs {
     }
 
     /// The programs beside this executable (cargo puts `kinloop`, `kinloop-server` and `kinloop-client` in
-    /// one folder, and the fake library in it or in its `deps`), the library from `KINLOOP_DHD_LIB` when set.
-    pub fn beside_this_program() -> Result<Programs> {
+    /// one folder, and the fake library in it or in its `deps`), the library from the vendor's variable
+    /// (`KINLOOP_DHD_LIB`, `KINLOOP_HD_LIB`) when set.
+    pub fn beside_this_program(vendor: Vendor) -> Result<Programs> {
         let exe = std::env::current_exe().context("this program's path")?;
         let dir = exe.parent().context("this program's folder")?.to_owned();
         for name in ["kinloop-server", "kinloop-client"] {
@@ -137,7 +259,7 @@ impl Programs {
                 bail!("{} is missing: build the workspace (cargo build --release --workspace)", path.display());
             }
         }
-        let fake = fake_library_beside_this_program()?;
+        let fake = fake_library_beside_this_program(vendor)?;
         let launch = move |program: &str, args: &[String]| {
             let mut command = Command::new(dir.join(format!("{program}{}", std::env::consts::EXE_SUFFIX)));
             command.args(args);
@@ -151,39 +273,39 @@ impl Programs {
     }
 }
 
-/// The fake DHD library: `KINLOOP_DHD_LIB` when set, else beside this executable or in its `deps` (where
-/// cargo builds it).
-pub fn fake_library_beside_this_program() -> Result<PathBuf> {
-    if let Some(path) = std::env::var_os(LIBRARY_VARIABLE).filter(|p| !p.is_empty()) {
+/// `vendor`'s fake library: its variable's (`KINLOOP_DHD_LIB`, `KINLOOP_HD_LIB`) when set, else beside this
+/// executable or in its `deps` (where cargo builds it).
+pub fn fake_library_beside_this_program(vendor: Vendor) -> Result<PathBuf> {
+    let variable = vendor.library_variable();
+    if let Some(path) = std::env::var_os(variable).filter(|p| !p.is_empty()) {
         return Ok(PathBuf::from(path));
     }
     let exe = std::env::current_exe().context("this program's path")?;
     let dir = exe.parent().context("this program's folder")?;
-    let name = format!("{}kinloop_fake_dhd{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    let name = format!("{}{}{}", std::env::consts::DLL_PREFIX, vendor.fake_crate(), std::env::consts::DLL_SUFFIX);
     [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(|| {
         format!(
-            "the fake DHD library {name} is not in {} nor its deps (cargo build --release --workspace builds it), \
-             and {LIBRARY_VARIABLE} is not set",
+            "the fake library {name} is not in {} nor its deps (cargo build --release --workspace builds it), \
+             and {variable} is not set",
             dir.display()
         )
     })
 }
 
-/// The tour the pair's hand intends, in the device's frame (m): the OP's place in the workspace, then the
-/// welcome's waypoints (see the module documentation).
-pub fn device_tour(point: &DhdPoint) -> Result<Vec<[f64; 3]>> {
+/// The tour the pair's hand intends, in the device's frame and units: the OP's place in the workspace,
+/// then the welcome's waypoints (see the module documentation); `fake` is the pair's fake library.
+pub fn device_tour(point: &DevicePoint, fake: &Path) -> Result<Vec<[f64; 3]>> {
     let scene = builtin::scene(&point.scene).context("built in")??;
-    let model = specs::model(point.system).with_context(|| format!("no DHD model {}", point.system))?;
+    let spec = point.device.device_spec(scene.kind, fake)?;
     match scene.kind {
-        SceneKind::Planar => tour_in::<Planar>(&scene, &point.op, model),
-        SceneKind::Spatial => tour_in::<Spatial>(&scene, &point.op, model),
+        SceneKind::Planar => tour_in::<Planar>(&scene, &point.op, spec, point.device),
+        SceneKind::Spatial => tour_in::<Spatial>(&scene, &point.op, spec, point.device),
     }
 }
 
-fn tour_in<S: Space>(scene: &Scene, op: &str, model: &ModelSpec) -> Result<Vec<[f64; 3]>> {
+fn tour_in<S: Space>(scene: &Scene, op: &str, spec: DeviceSpec, device: FakeDevice) -> Result<Vec<[f64; 3]>> {
     let compiled: Model<S> = Model::compile(scene, &scene.name)?;
     let mut ve = VeCore::new(compiled, VeConfig::default()).map_err(|e| anyhow!("VE configuration: {e}"))?;
-    let spec = model.device_spec(S::KIND);
     let request = JoinRequest {
         name: "tour".into(),
         role: Role::Manipulator,
@@ -196,12 +318,12 @@ fn tour_in<S: Space>(scene: &Scene, op: &str, model: &ModelSpec) -> Result<Vec<[
     let core = HapticCore::<S>::new(CoreConfig::new(spec), &joined.welcome).map_err(|e| anyhow!("{e}"))?;
     let home = core.home(&S::Point::from_slice(&joined.welcome.op.position));
     let linear = S::KIND.point_dim();
-    let mut tour = vec![frames::to_device(home.as_slice(), linear)];
+    let mut tour = vec![device.tour_point(home.as_slice(), linear)];
     // In the order the simulated hands tour it, there and back (the fake goes back along the list again).
     let context = UserContext::<S>::from_welcome(&joined.welcome);
     for displacement in tour_order::<S>(&context.tour) {
         let at = home + S::op_lin(&displacement);
-        tour.push(frames::to_device(at.as_slice(), linear));
+        tour.push(device.tour_point(at.as_slice(), linear));
     }
     Ok(tour)
 }
@@ -259,9 +381,8 @@ struct Ran {
 }
 
 /// Runs the server and the client of `point` for `seconds` in `dir`.
-fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path) -> Result<Ran> {
-    let tour = device_tour(point)?;
-    let tour_text: Vec<String> = tour.iter().map(|p| format!("{:e},{:e},{:e}", p[0], p[1], p[2])).collect();
+fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Path) -> Result<Ran> {
+    let tour = device_tour(point, &programs.fake)?;
     let mut args: Vec<String> = ["--scene", &point.scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"]
         .into_iter()
         .chain(["--record", "ve.csv", "--json", "--stats-every", "0", "--duration"])
@@ -287,7 +408,11 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
     let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
     let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
     let (address, fingerprint) = (last_word(&address), last_word(&fingerprint));
-    let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", "dhd"]
+    let device_flag = match point.device.vendor() {
+        Vendor::Dhd => "dhd",
+        Vendor::Hd => "hd",
+    };
+    let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", device_flag]
         .into_iter()
         .chain(["--op", &point.op, "--no-realtime", "--json", "--record", "client.csv", "--duration"])
         .map(String::from)
@@ -296,10 +421,8 @@ fn run_programs(point: &DhdPoint, seconds: f64, programs: &Programs, dir: &Path)
     args.extend(link_flags(point.network, 2));
     let mut client = programs
         .command("kinloop-client", args)
-        .env(LIBRARY_VARIABLE, &programs.fake)
-        .env("FAKE_DHD_SYSTEM", point.system.to_string())
-        .env("FAKE_DHD_HAND", point.hand.name())
-        .env("FAKE_DHD_TOUR", tour_text.join(";"))
+        .env(point.device.vendor().library_variable(), &programs.fake)
+        .envs(point.device.fake_env(point.hand, &tour))
         .current_dir(dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -374,7 +497,7 @@ fn device_op_rms(dir: &Path, kind: SceneKind, offset_s: f64, position_scale: f64
 }
 
 /// Runs one pair for `seconds` in a folder under `scratch` and judges it.
-pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &Path) -> Result<DhdResult> {
+pub fn evaluate(point: &DevicePoint, seconds: f64, programs: &Programs, scratch: &Path) -> Result<DeviceResult> {
     let dir = scratch.join(point.label().replace([' ', ':', '+'], "_"));
     std::fs::create_dir_all(&dir)?;
     let ran = run_programs(point, seconds, programs, &dir)?;
@@ -398,7 +521,7 @@ pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &P
     }
     let rms = if ran.client_ok { device_op_rms(&dir, kind, ran.offset_s, scale)? } else { f64::NAN };
     failures.extend(bound_failures(closure, clamped, rms, point.network));
-    let result = DhdResult {
+    let result = DeviceResult {
         point: point.clone(),
         renders: failures.is_empty(),
         failures,
@@ -413,44 +536,50 @@ pub fn evaluate(point: &DhdPoint, seconds: f64, programs: &Programs, scratch: &P
     Ok(result)
 }
 
-/// Runs the experiment (see the module documentation), one pair at a time.
-pub fn run(options: &Options) -> Result<super::Report> {
-    let out = Output::new("renderability-dhd", options)?;
-    let programs = Programs::beside_this_program()?;
-    let all = points(&[], &HANDS)?;
+/// Runs `vendor`'s experiment (see the module documentation), one pair at a time.
+pub fn run(vendor: Vendor, options: &Options) -> Result<super::Report> {
+    let name = vendor.experiment();
+    let out = Output::new(name, options)?;
+    let programs = Programs::beside_this_program(vendor)?;
+    let all = points(vendor, &[], &HANDS)?;
     let seconds = options.session_seconds(SECONDS, SECONDS / 2.0);
-    let scratch = std::env::temp_dir().join("kinloop-renderability-dhd");
-    let results = sweep("renderability-dhd", &all, 1, options.progress, |p| evaluate(p, seconds, &programs, &scratch))?;
+    let scratch = std::env::temp_dir().join(format!("kinloop-{name}"));
+    let results = sweep(name, &all, 1, options.progress, |p| evaluate(p, seconds, &programs, &scratch))?;
     let rendering = results.iter().filter(|r| r.renders).count();
-    let worst = |f: fn(&DhdResult) -> f64| results.iter().map(f).fold(0.0, f64::max);
+    let worst = |f: fn(&DeviceResult) -> f64| results.iter().map(f).fold(0.0, f64::max);
     let (worst_rms, worst_clamped) = (worst(|r| r.device_op_rms_m), worst(|r| r.clamped_fraction));
-    let by_system: Vec<Value> = SYSTEMS
+    let devices = vendor.devices();
+    let by_device: Vec<Value> = devices
         .iter()
-        .map(|&s| {
-            let of: Vec<&DhdResult> = results.iter().filter(|r| r.point.system == s).collect();
-            let name = specs::model(s).map_or("unknown", |m| m.name);
-            json!({"system": s, "model": name, "pairs": of.len(), "rendering": of.iter().filter(|r| r.renders).count()})
+        .map(|&d| {
+            let of: Vec<&DeviceResult> = results.iter().filter(|r| r.point.device == d).collect();
+            json!({"device": d.name(), "pairs": of.len(), "rendering": of.iter().filter(|r| r.renders).count()})
         })
         .collect();
+    let names: Vec<&str> = devices.iter().map(|d| d.name()).collect();
+    let library = match vendor {
+        Vendor::Dhd => "the fake DHD library",
+        Vendor::Hd => "the fake OpenHaptics library",
+    };
     let answer = format!(
-        "{rendering} of {} pairs render through the fake DHD library in real processes (stable, closure <= 1e-6 m, \
+        "{rendering} of {} pairs render through {library} in real processes (stable, closure <= 1e-6 m, \
          clamped <= 5 %, device-OP RMS <= 5 mm perfect / 10 mm at 50 ms); worst clamped {} %, worst RMS {} mm",
         results.len(),
         num(worst_clamped * 100.0),
         num(worst_rms * 1e3)
     );
     out.finish(
-        "Every shipped linkage through a DHD device (the fake library as omega.3 and Falcon), real processes",
+        &format!("Every shipped linkage through {library} as {}, real processes", names.join(" and ")),
         "one pair at a time, about 7 s each",
         json!({
             "answer": answer,
             "seconds_per_pair": seconds,
             "pairs": results.len(),
             "rendering": rendering,
-            "by_system": by_system,
+            "by_device": by_device,
             "failing": results.iter().filter(|r| !r.renders).map(|r| json!({"pair": r.point.label(), "failures": r.failures})).collect::<Vec<_>>(),
             "points": results.iter().map(|r| json!({
-                "scene": r.point.scene, "op": r.point.op, "system": r.point.system, "network": r.point.network.name(),
+                "scene": r.point.scene, "op": r.point.op, "device": r.point.device.name(), "network": r.point.network.name(),
                 "hand": r.point.hand.name(), "renders": r.renders, "failures": r.failures,
                 "clamped_fraction": round(r.clamped_fraction, 4), "device_op_rms_mm": round(r.device_op_rms_m * 1e3, 3),
                 "device_model_rms_mm": round(r.device_model_rms_m * 1e3, 3), "max_closure_error_m": r.max_closure_error_m,

@@ -1,0 +1,412 @@
+//! The rooms' real-time executor: a few threads (`--rt-threads`, default one fewer than the cores), each
+//! stepping the rooms placed on it at their deadlines, and a quarantine thread for rooms that overrun.
+//!
+//! - **Cost.** Each room's step time is measured around its tick and kept as an exponentially weighted
+//!   moving average ([`EWMA_WEIGHT`]); a thread's load is the sum of its rooms' costs times their rates
+//!   (the share of a second the thread spends stepping them).
+//! - **Placement and admission.** A new room goes to the least-loaded thread, and only if that thread's load
+//!   plus the room's estimate ([`ROOM_ESTIMATE`] per tick) stays within [`BUDGET_SHARE`]; a new user joins
+//!   only if its room's thread load plus the user's estimate (its room's measured cost per user, at least
+//!   [`USER_ESTIMATE`]) stays within it. Refusals say the load and the share.
+//! - **Isolation.** A room whose own load passes the share is moved off its real-time thread to the
+//!   quarantine thread (normal priority), so it never delays a room within budget; it refuses new users. A
+//!   tick that panics is caught (`catch_unwind`): that room is closed with the reason, its users told; the
+//!   thread's other rooms go on.
+//! - **Liveness.** Every pass of a real-time thread's loop advances the fleet's [`Heartbeat`], rooms or
+//!   none, so a fleet manager's health pings stop when the stepping stalls (`crate::fleet`).
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use rtrb::{Consumer, Producer, RingBuffer};
+
+use crate::fleet::Heartbeat;
+
+/// Weight of the newest step time in a room's cost average (about the last 64 ticks).
+pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
+/// The share of each real-time thread's time that rooms may fill; the rest absorbs jitter.
+pub const BUDGET_SHARE: f64 = 0.7;
+/// A new room's cost per tick before it is measured.
+pub const ROOM_ESTIMATE: Duration = Duration::from_micros(50);
+/// The least a new user is expected to add to its room's tick.
+pub const USER_ESTIMATE: Duration = Duration::from_micros(10);
+/// Rooms waiting to be taken by one thread.
+const INBOX: usize = 64;
+/// How long an idle thread sleeps between looks at its inbox.
+const IDLE: Duration = Duration::from_millis(1);
+
+/// A room as a thread steps it (its VE loop behind the room's test knobs).
+pub trait Steppable: Send {
+    /// When its next tick is due.
+    fn next_deadline(&self) -> Instant;
+    /// One tick.
+    fn tick(&mut self);
+    /// Whether it was told to stop.
+    fn stopped(&self) -> bool;
+    /// Users in it now.
+    fn users(&self) -> usize;
+    /// Publishes its final statistics.
+    fn finish(self: Box<Self>);
+}
+
+/// What the network side and the executor share about one room.
+pub struct RoomCell {
+    /// The room's name.
+    pub name: String,
+    /// Ticks per second.
+    pub rate_hz: f64,
+    cost_ns: AtomicU64,
+    users: AtomicUsize,
+    thread: AtomicUsize,
+    quarantined: AtomicBool,
+    done: AtomicBool,
+    closed: Mutex<Option<String>>,
+    on_close: Box<dyn Fn(&str) + Send + Sync>,
+}
+
+impl RoomCell {
+    /// A cell for a room ticking at `rate_hz`; `on_close` tells its users why it closed.
+    pub fn new(name: String, rate_hz: f64, on_close: Box<dyn Fn(&str) + Send + Sync>) -> Self {
+        RoomCell {
+            name,
+            rate_hz,
+            cost_ns: AtomicU64::new(f64::to_bits(ROOM_ESTIMATE.as_nanos() as f64)),
+            users: AtomicUsize::new(0),
+            thread: AtomicUsize::new(0),
+            quarantined: AtomicBool::new(false),
+            done: AtomicBool::new(false),
+            closed: Mutex::new(None),
+            on_close,
+        }
+    }
+
+    /// The measured cost of a tick (EWMA).
+    pub fn cost(&self) -> Duration {
+        Duration::from_nanos(f64::from_bits(self.cost_ns.load(Ordering::Relaxed)) as u64)
+    }
+
+    /// The share of a second the room takes.
+    pub fn load(&self) -> f64 {
+        self.cost().as_secs_f64() * self.rate_hz
+    }
+
+    /// The thread that steps it.
+    pub fn thread(&self) -> usize {
+        self.thread.load(Ordering::Relaxed)
+    }
+
+    /// Whether it was moved to the quarantine thread for overrunning.
+    pub fn quarantined(&self) -> bool {
+        self.quarantined.load(Ordering::Relaxed)
+    }
+
+    /// Users in it (as of its last tick).
+    pub fn users(&self) -> usize {
+        self.users.load(Ordering::Relaxed)
+    }
+
+    /// Whether the executor has let it go (stopped, or closed after a panic).
+    pub fn done(&self) -> bool {
+        self.done.load(Ordering::Acquire)
+    }
+
+    /// Why it closed on its own (a panic), if it did.
+    pub fn closed_reason(&self) -> Option<String> {
+        self.closed.lock().ok().and_then(|c| c.clone())
+    }
+
+    fn record(&self, step: Duration, users: usize) {
+        let old = f64::from_bits(self.cost_ns.load(Ordering::Relaxed));
+        let new = old + EWMA_WEIGHT * (step.as_nanos() as f64 - old);
+        self.cost_ns.store(new.to_bits(), Ordering::Relaxed);
+        self.users.store(users, Ordering::Relaxed);
+    }
+
+    /// Keeps the reason, then tells the room's sessions (which read it).
+    fn close(&self, reason: String) {
+        if let Ok(mut closed) = self.closed.lock() {
+            *closed = Some(reason.clone());
+        }
+        (self.on_close)(&reason);
+    }
+}
+
+/// Why a room or a user was not admitted.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{what}")]
+pub struct OverBudget {
+    /// The load, the estimate and the share, in words.
+    pub what: String,
+}
+
+struct Slot {
+    room: Box<dyn Steppable>,
+    cell: Arc<RoomCell>,
+}
+
+struct ThreadEnd {
+    inbox: Mutex<Producer<Slot>>,
+}
+
+/// What the real-time threads tell a fleet manager: the heartbeat they advance, and a test knob that
+/// stalls them.
+struct Pulse {
+    heartbeat: Option<Heartbeat>,
+    epoch: Instant,
+    /// Until when (ns after `epoch`) the real-time threads stall; 0: they do not.
+    stall_until_ns: AtomicU64,
+}
+
+impl Pulse {
+    /// One pass of a real-time thread: first sits out a stall, if one is asked for, then beats.
+    fn pass(&self) {
+        let until = self.stall_until_ns.load(Ordering::Relaxed);
+        if until > 0 {
+            let until = self.epoch + Duration::from_nanos(until);
+            std::thread::sleep(until.saturating_duration_since(Instant::now()));
+        }
+        if let Some(heartbeat) = &self.heartbeat {
+            heartbeat.beat();
+        }
+    }
+}
+
+/// The executor: its threads and every room placed on them.
+pub struct Executor {
+    threads: Vec<Arc<ThreadEnd>>,
+    cells: Mutex<Vec<Arc<RoomCell>>>,
+    stop: Arc<AtomicBool>,
+    handles: Mutex<Vec<std::thread::JoinHandle<()>>>,
+    pulse: Arc<Pulse>,
+}
+
+/// The default number of real-time threads: one fewer than the cores, at least one.
+pub fn default_rt_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get().saturating_sub(1)).max(1)
+}
+
+impl Executor {
+    /// Starts `threads` real-time threads (SCHED_FIFO when `realtime` and granted) and the quarantine thread;
+    /// the real-time threads advance `heartbeat`, if given, on every pass.
+    pub fn start(threads: usize, realtime: bool, heartbeat: Option<Heartbeat>) -> std::io::Result<Arc<Executor>> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
+        let (quarantine, quarantine_handle) = spawn_thread(None, false, stop.clone(), None, pulse.clone())?;
+        let mut ends = Vec::new();
+        let mut handles = vec![quarantine_handle];
+        for index in 0..threads.max(1) {
+            let (end, handle) =
+                spawn_thread(Some(index), realtime, stop.clone(), Some(quarantine.clone()), pulse.clone())?;
+            ends.push(end);
+            handles.push(handle);
+        }
+        Ok(Arc::new(Executor {
+            threads: ends,
+            cells: Mutex::new(Vec::new()),
+            stop,
+            handles: Mutex::new(handles),
+            pulse,
+        }))
+    }
+
+    /// A test knob: every real-time thread stops stepping (and beating) for `duration` from its next pass,
+    /// as a stalled executor would; what a fleet manager sees of it is the test.
+    pub fn stall(&self, duration: Duration) {
+        let until = self.pulse.epoch.elapsed() + duration;
+        self.pulse.stall_until_ns.store(until.as_nanos().max(1) as u64, Ordering::Relaxed);
+    }
+
+    /// Real-time threads (the quarantine thread not counted).
+    pub fn rt_threads(&self) -> usize {
+        self.threads.len()
+    }
+
+    /// The load of real-time thread `index`: its rooms' shares of a second.
+    pub fn thread_load(&self, index: usize) -> f64 {
+        self.live_cells().iter().filter(|c| !c.quarantined() && c.thread() == index).map(|c| c.load()).sum()
+    }
+
+    fn live_cells(&self) -> Vec<Arc<RoomCell>> {
+        let mut cells = self.cells.lock().map(|c| c.clone()).unwrap_or_default();
+        cells.retain(|c| !c.done());
+        cells
+    }
+
+    /// Places a room on the least-loaded real-time thread when its estimate fits the budget there.
+    pub fn place(&self, room: Box<dyn Steppable>, cell: Arc<RoomCell>) -> Result<(), OverBudget> {
+        let estimate = ROOM_ESTIMATE.as_secs_f64() * cell.rate_hz;
+        let (index, load) = (0..self.threads.len())
+            .map(|i| (i, self.thread_load(i)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0, 0.0));
+        if load + estimate > BUDGET_SHARE {
+            return Err(OverBudget {
+                what: format!(
+                    "the least-loaded real-time thread is {:.0} % busy; a new room ({:.0} % estimated) would pass the {:.0} % share",
+                    load * 100.0,
+                    estimate * 100.0,
+                    BUDGET_SHARE * 100.0
+                ),
+            });
+        }
+        cell.thread.store(index, Ordering::Relaxed);
+        if let Ok(mut cells) = self.cells.lock() {
+            cells.retain(|c| !c.done());
+            cells.push(cell.clone());
+        }
+        push(&self.threads[index], Slot { room, cell });
+        Ok(())
+    }
+
+    /// Whether one more user fits `cell`'s room: its thread's load plus the user's estimate within the share.
+    pub fn admit_user(&self, cell: &RoomCell) -> Result<(), OverBudget> {
+        if cell.quarantined() {
+            return Err(OverBudget {
+                what: format!(
+                    "room {:?} takes {:.0} µs a tick, over a real-time thread's {:.0} % share; it admits no one",
+                    cell.name,
+                    cell.cost().as_secs_f64() * 1e6,
+                    BUDGET_SHARE * 100.0
+                ),
+            });
+        }
+        let per_user = cell.cost() / (cell.users() as u32 + 1);
+        let estimate = per_user.max(USER_ESTIMATE).as_secs_f64() * cell.rate_hz;
+        let load = self.thread_load(cell.thread());
+        if load + estimate > BUDGET_SHARE {
+            return Err(OverBudget {
+                what: format!(
+                    "room {:?}'s real-time thread is {:.0} % busy; a user ({:.1} % estimated) would pass the {:.0} % share",
+                    cell.name,
+                    load * 100.0,
+                    estimate * 100.0,
+                    BUDGET_SHARE * 100.0
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// Tells every thread to stop without waiting.
+    pub fn shutdown_soon(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+
+    /// Stops every thread (after the rooms were told to stop) and waits for them.
+    pub fn shutdown(&self) {
+        self.stop.store(true, Ordering::Release);
+        let handles = self.handles.lock().map(|mut h| std::mem::take(&mut *h)).unwrap_or_default();
+        for handle in handles {
+            let _ = handle.join();
+        }
+    }
+}
+
+impl Drop for Executor {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+    }
+}
+
+fn push(end: &ThreadEnd, slot: Slot) {
+    if let Ok(mut inbox) = end.inbox.lock() {
+        if let Err(rtrb::PushError::Full(slot)) = inbox.push(slot) {
+            slot.cell.close("the executor's inbox was full".into());
+            slot.cell.done.store(true, Ordering::Release);
+        }
+    }
+}
+
+/// Starts a thread: real-time thread `index`, or the quarantine thread (`index` `None`, where `quarantine`
+/// is also `None`: it has nowhere further to send a room).
+fn spawn_thread(
+    index: Option<usize>,
+    realtime: bool,
+    stop: Arc<AtomicBool>,
+    quarantine: Option<Arc<ThreadEnd>>,
+    pulse: Arc<Pulse>,
+) -> std::io::Result<(Arc<ThreadEnd>, std::thread::JoinHandle<()>)> {
+    let (producer, consumer) = RingBuffer::new(INBOX);
+    let name = index.map_or("kinloop-rooms-q".to_string(), |i| format!("kinloop-rooms-{i}"));
+    let handle = std::thread::Builder::new().name(name).spawn(move || {
+        if realtime {
+            if let Err(why) = kinloop_process::realtime::try_realtime_priority() {
+                tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority");
+            }
+        }
+        run_thread(consumer, &stop, quarantine.as_deref(), &pulse)
+    })?;
+    Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
+}
+
+/// One thread's loop: take new rooms, sleep until the earliest deadline, step every room that is due
+/// (each inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away. A
+/// real-time thread (one with a quarantine to send rooms to) also passes the `pulse` every time round.
+fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&ThreadEnd>, pulse: &Pulse) {
+    let sleeper = spin_sleep::SpinSleeper::default();
+    let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
+    loop {
+        while let Ok(slot) = inbox.pop() {
+            slots.push(slot);
+        }
+        if stop.load(Ordering::Acquire) {
+            break;
+        }
+        if quarantine.is_some() {
+            pulse.pass();
+        }
+        let mut i = 0;
+        while i < slots.len() {
+            if slots[i].room.stopped() {
+                let slot = slots.swap_remove(i);
+                slot.room.finish();
+                slot.cell.done.store(true, Ordering::Release);
+            } else {
+                i += 1;
+            }
+        }
+        let next = slots.iter().map(|s| s.room.next_deadline()).min();
+        sleeper.sleep_until(next.unwrap_or_else(|| Instant::now() + IDLE));
+        let mut i = 0;
+        while i < slots.len() {
+            if slots[i].room.next_deadline() > Instant::now() {
+                i += 1;
+                continue;
+            }
+            let started = Instant::now();
+            let room = &mut slots[i].room;
+            let ticked = catch_unwind(AssertUnwindSafe(|| room.tick()));
+            let users = room.users();
+            let cell = slots[i].cell.clone();
+            cell.record(started.elapsed(), users);
+            match ticked {
+                Ok(()) if quarantine.is_some() && cell.load() > BUDGET_SHARE => {
+                    let slot = slots.swap_remove(i);
+                    slot.cell.quarantined.store(true, Ordering::Relaxed);
+                    tracing::warn!(room = %cell.name, cost_us = cell.cost().as_secs_f64() * 1e6, "the room overruns its share; moved to the quarantine thread");
+                    if let Some(end) = quarantine {
+                        push(end, slot);
+                    }
+                }
+                Ok(()) => i += 1,
+                Err(panic) => {
+                    let what = panic
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| panic.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "a panic".into());
+                    // The room's state is not to be trusted: it is dropped, not finished.
+                    drop(slots.swap_remove(i));
+                    cell.close(format!("the room's simulation failed ({what}); it is closed"));
+                    cell.done.store(true, Ordering::Release);
+                }
+            }
+        }
+    }
+    for slot in slots {
+        slot.room.finish();
+        slot.cell.done.store(true, Ordering::Release);
+    }
+}

@@ -1,0 +1,81 @@
+//! Rooms in the programs themselves: `kinloop-server --rooms` with one real-time thread and two rooms, one
+//! made to take 2 ms a tick (`debug_cost_ms`, a test knob), and two `kinloop-client`s in the other. The slow
+//! room overruns the thread's share, so the executor moves it off the real-time thread: the calm room's
+//! users do not miss (its per-room `--json` deadline misses stay under 1 % of ticks, where sharing the
+//! thread with a 2 ms tick at 1 kHz would miss nearly every one), the calm room never restores, a client
+//! asking the slow room is refused with a reason it prints, and one asking for a room that does not exist
+//! learns which rooms do.
+
+mod common;
+
+use std::time::Duration;
+
+use common::child::{json_object, listening, ChildProcess, Program, Role};
+
+const NAME: &str = "a_two_millisecond_room_does_not_make_the_other_rooms_users_miss";
+
+const ROOMS: &str = "
+[[room]]
+name = \"calm\"
+scene = \"fourbar-crank-rocker\"
+
+[[room]]
+name = \"slow\"
+scene = \"paper-testbed\"
+debug_cost_ms = 2.0
+";
+
+fn strings(args: &[&str]) -> Vec<String> {
+    args.iter().map(|a| (*a).to_owned()).collect()
+}
+
+#[test]
+fn a_two_millisecond_room_does_not_make_the_other_rooms_users_miss() {
+    common::child::serve_if_child();
+    let _bounded = common::bounded(NAME, Duration::from_secs(120));
+    let dir = common::temp_dir();
+    std::fs::write(dir.path().join("rooms.toml"), ROOMS).unwrap();
+    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
+    let mut server = ChildProcess::spawn(NAME, &Role::Program { program: Program::Server, args }, dir.path(), "server");
+    let (addr, fingerprint) =
+        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let client = |room: &str, op: &str, seconds: &str, tag: &str| {
+        let mut args = vec!["--server".to_owned(), addr.to_string(), "--fingerprint".to_owned(), fingerprint.clone()];
+        args.extend(strings(&["--room", room, "--op", op, "--duration", seconds, "--user", "firm", "--json"]));
+        ChildProcess::spawn(NAME, &Role::Program { program: Program::Client, args }, dir.path(), tag)
+    };
+    let mut calm = [client("calm", "coupler", "8", "calm-1"), client("calm", "crank-tip", "8", "calm-2")];
+    // The slow room has been measured by now (its cost passes the share within a few dozen ticks).
+    std::thread::sleep(Duration::from_secs(2));
+    for (room, tag, expected) in
+        [("slow", "slow", "over its real-time budget"), ("nowhere", "nowhere", "rooms: calm, slow")]
+    {
+        let mut refused = client(room, "link2", "3", tag);
+        let status = refused.exit_status(Duration::from_secs(30));
+        assert!(!status.success(), "{room}: the client was admitted");
+        let said = refused.log();
+        assert!(said.contains(expected), "{room}: the client did not print why ({expected}):\n{said}");
+    }
+    for c in &mut calm {
+        let status = c.exit_status(Duration::from_secs(45));
+        assert!(status.success(), "a calm client exited with {status}:\n{}", c.log_tail());
+    }
+    server.interrupt();
+    let status = server.exit_status(Duration::from_secs(20));
+    assert!(status.success(), "the server exited with {status}:\n{}", server.log_tail());
+    let json = json_object(&server.stdout());
+    let rooms = json["rooms"].as_array().expect("rooms");
+    let room = |name: &str| rooms.iter().find(|r| r["name"] == name).unwrap_or_else(|| panic!("{name}: {json}"));
+    let (calm, slow) = (room("calm"), room("slow"));
+    println!("calm: {}\nslow: cost {} µs, quarantined {}", calm["stats"]["ve"], slow["cost_us"], slow["quarantined"]);
+    assert_eq!(slow["quarantined"], true, "the overrunning room stayed on the real-time thread: {slow}");
+    assert!(slow["cost_us"].as_f64().unwrap() >= 1500.0, "the knob's 2 ms was not measured: {slow}");
+    let ve = &calm["stats"]["ve"];
+    let ticks = ve["step_time"]["samples"].as_f64().expect("samples");
+    let misses = ve["deadline_misses"].as_f64().expect("deadline_misses");
+    assert!(ticks > 5000.0, "{ve}");
+    assert!(misses <= 0.01 * ticks, "the calm room missed {misses} of {ticks} ticks: {ve}");
+    assert_eq!(ve["core"]["state_restores"].as_u64(), Some(0), "{ve}");
+    assert_eq!(ve["core"]["users_joined"].as_u64(), Some(2), "{ve}");
+    assert!(ve["core"]["max_closure_error"].as_f64().unwrap() <= 1e-6, "{ve}");
+}
