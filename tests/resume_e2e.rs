@@ -17,7 +17,6 @@ use common::resume::{self, Moved};
 use kinloop_protocol::quic::{client_endpoint, connect_resuming, EndpointOptions, Trust};
 use kinloop_protocol::room_key::{unix_ms, RoomKey, MAX_RESUME_AGE};
 use kinloop_protocol::{ResumeAnswer, ResumeRefusal, RoomState};
-use kinloop_server::Identity;
 
 /// Offers `offer` to the room server at `addr` as an observer that leaves right after the handshake; the
 /// server's answer.
@@ -50,11 +49,7 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
     let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
     let a_addr = server_a.ready(Duration::from_secs(15)).addr;
     let rt = live::runtime();
-    let mut config = live::server_config();
-    config.identity = Identity::Files { cert: path("b.pem"), key: path("b.key") };
-    config.room_key = Some(RoomKey::load(&path("room.key")).expect("room key"));
-    config.record = Some(path("b.csv"));
-    let server_b = live::start_server(&rt, config);
+    let server_b = live::start_server(&rt, resume::room_server(live::server_config(), dir.path(), "b"));
     let b_addr = server_b.local_addr();
 
     let client = resume::start_holder(dir.path(), a_addr, b_addr);

@@ -182,8 +182,12 @@ pub fn parse(text: &str, file: &str) -> Result<Recording, ReadError> {
         Ok(Recording::Ve { schema, rows })
     } else if columns.first() == Some(&"time_s") && columns.get(1).is_some_and(|c| c.starts_with("device_")) {
         let schema = ClientSchema { kind };
-        check_header(file, "client", &columns, &schema.header())?;
-        let names = schema.columns();
+        let mut names = schema.columns();
+        if columns.last() != Some(&ClientSchema::SESSION_COLUMN) {
+            // Written before the session column: one session throughout.
+            names.pop();
+        }
+        check_header(file, "client", &columns, &names.join(","))?;
         let rows = lines
             .map(|(line, text)| tick_row(&Fields { file, line, text }, &schema, &names))
             .collect::<Result<_, _>>()?;
@@ -275,6 +279,10 @@ fn tick_row(fields: &Fields, schema: &ClientSchema, names: &[String]) -> Result<
     let [count, age, gain] = [take(1)[0], take(1)[0], take(1)[0]];
     r.constraint_count = fields.count(count, 6.0, "constraint_count")? as u8;
     (r.snapshot_age_s, r.gain) = (age, gain);
+    r.session = match v.get(at) {
+        Some(&session) => fields.count(session, f64::from(u32::MAX), ClientSchema::SESSION_COLUMN)? as u32,
+        None => 1,
+    };
     Ok(r)
 }
 
@@ -324,6 +332,7 @@ mod tests {
             constraint_count: 2,
             snapshot_age_s: f64::NAN,
             gain: 0.75,
+            session: 2,
             ..TickRecord::default()
         };
         r.device_pose[..3].copy_from_slice(&[1.0, 2.0, 3.0]);
@@ -349,6 +358,26 @@ mod tests {
         assert_eq!(TickRecord { snapshot_age_s: 0.0, ..back }, TickRecord { snapshot_age_s: 0.0, ..sent });
         let e = read_ve(&path, SceneKind::Planar).unwrap_err().to_string();
         assert!(e.contains("a client's record of a Planar scene, not a server's"), "{e}");
+    }
+
+    /// A record written before the session column reads as one session; a session that is not a whole
+    /// number is refused naming the column.
+    #[test]
+    fn a_client_record_without_the_session_column_is_one_session() {
+        let schema = ClientSchema { kind: SceneKind::Planar };
+        let header = schema.header();
+        let old_header = header.strip_suffix(",session").expect("session is the last column");
+        let numbers = |n: usize| vec!["0.5"; n].join(",");
+        let width = schema.columns().len();
+        let old = format!("{old_header}\n{}\n", numbers(width - 1).replacen("0.5", "1", 26));
+        let rows = match parse(&old, "old.csv").unwrap() {
+            Recording::Client { rows, .. } => rows,
+            other => panic!("{}", other.describe()),
+        };
+        assert_eq!(rows[0].session, 1);
+        let bad = format!("{header}\n{}\n", numbers(width).replacen("0.5", "1", 26));
+        let e = parse(&bad, "new.csv").unwrap_err().to_string();
+        assert!(e.contains("session"), "{e}");
     }
 
     #[test]
@@ -391,7 +420,7 @@ mod tests {
         assert_eq!(error(""), "x.csv: no rows");
         assert!(error("a,b\n1,2\n").contains("not a kinloop recording"));
         assert!(
-            error(&format!("{client}\n\n0.1,2\n")).starts_with("x.csv:3: 2 fields, expected 28"),
+            error(&format!("{client}\n\n0.1,2\n")).starts_with("x.csv:3: 2 fields, expected 29"),
             "{}",
             error(&format!("{client}\n0.1,2\n"))
         );

@@ -27,6 +27,10 @@ pub struct TickRecord {
     pub snapshot_age_s: f64,
     /// Output gain.
     pub gain: f64,
+    /// The server session the tick renders: 1 for the first server, 2 after the first move to another, ...;
+    /// 0 between servers (from losing one until the next session's core takes over), so a recording shows
+    /// where the client was between servers as a marked gap, not a silent jump.
+    pub session: u32,
 }
 
 /// One user's part of a VE step (planar rows use the first 3 pose / wrench entries, spatial 7 / 6).

@@ -38,6 +38,10 @@ impl ClientSchema {
     pub const AGE: Format = Format::Fixed(6);
     /// Output gain.
     pub const GAIN: Format = Format::Fixed(4);
+    /// The server session (0 between servers).
+    pub const SESSION: Format = Format::Shortest;
+    /// The last column, which records written before it was added lack (read as session 1).
+    pub const SESSION_COLUMN: &'static str = "session";
 
     /// Every column's name, in file order.
     pub fn columns(&self) -> Vec<String> {
@@ -48,7 +52,7 @@ impl ClientSchema {
         for prefix in CLIENT_WRENCHES {
             columns.extend(wrench_names(self.kind).iter().map(|n| format!("{prefix}_{n}")));
         }
-        columns.extend(["constraint_count", "snapshot_age_s", "gain"].map(String::from));
+        columns.extend(["constraint_count", "snapshot_age_s", "gain", Self::SESSION_COLUMN].map(String::from));
         columns
     }
 
@@ -148,9 +152,9 @@ mod tests {
             header,
             "time_s,device_x,device_y,device_theta,model_x,model_y,model_theta,hand_fx,hand_fy,hand_tz,pc_fx,\
              pc_fy,pc_tz,jc_fx,jc_fy,jc_tz,imp_fx,imp_fy,imp_tz,contact_fx,contact_fy,contact_tz,cmd_fx,cmd_fy,\
-             cmd_tz,constraint_count,snapshot_age_s,gain"
+             cmd_tz,constraint_count,snapshot_age_s,gain,session"
         );
-        assert_eq!(ClientSchema { kind: SceneKind::Spatial }.columns().len(), 1 + 2 * 7 + 6 * 6 + 3);
+        assert_eq!(ClientSchema { kind: SceneKind::Spatial }.columns().len(), 1 + 2 * 7 + 6 * 6 + 4);
     }
 
     #[test]

@@ -70,6 +70,7 @@ impl RecordFile {
             (f64::from(r.constraint_count), ClientSchema::COUNT),
             (r.snapshot_age_s, ClientSchema::AGE),
             (r.gain, ClientSchema::GAIN),
+            (f64::from(r.session), ClientSchema::SESSION),
         ];
         self.write_row(time.into_iter().chain(poses).chain(wrenches).chain(tail))
     }

@@ -17,8 +17,12 @@ use kinloop_protocol::room_key::RoomKey;
 use crate::bench::RealtimeRun;
 use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_DELAYS_S, DEFAULT_COUPLING_LEAD_MAX_S};
 use crate::driver::load_scene;
+use crate::fleet::agones::{AgonesAdapter, AgonesConfig};
 use crate::view::{LiveSource, ViewConfig};
 use crate::{Access, Identity, Server, ServerConfig, VeConfig};
+
+/// After the drain, how long the Agones adapter may take to report the last counts and call Shutdown.
+const AGONES_FINISH: Duration = Duration::from_secs(15);
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum Switch {
@@ -124,9 +128,21 @@ struct Cli {
     /// Log statistics every S seconds (0: never).
     #[arg(long, value_name = "S", default_value_t = 10.0)]
     stats_every: f64,
-    /// Stop after S seconds (default: run until Ctrl-C).
+    /// Stop after S seconds (default: run until Ctrl-C or SIGTERM).
     #[arg(long, value_name = "S")]
     duration: Option<f64>,
+    /// On Ctrl-C, SIGTERM or the end of --duration, drain: refuse new clients, hand each client the room's
+    /// newest signed state and tell it to move, wait up to S seconds for them to go, then exit (code 0).
+    #[arg(long, value_name = "S", default_value_t = crate::driver::DEFAULT_DRAIN.as_secs_f64())]
+    drain_s: f64,
+    /// Run as an Agones GameServer: talk to the SDK sidecar in the pod (port from AGONES_SDK_GRPC_PORT, else
+    /// 9357): Ready once listening, health pings while the VE ticks, the `rooms` Counter and `users` List,
+    /// Shutdown after the drain (docs/fleet.md). Without a sidecar the server stops within a few seconds.
+    #[arg(long)]
+    agones: bool,
+    /// With --agones, the period of the health pings (ms); the Fleet's health check must allow for it.
+    #[arg(long, value_name = "MS", default_value_t = crate::fleet::agones::DEFAULT_HEALTH_PERIOD.as_millis() as u64, requires = "agones", value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    agones_health_ms: u64,
     /// Print the final statistics as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -311,7 +327,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         return Ok(());
     }
 
-    let config = ServerConfig {
+    let mut config = ServerConfig {
         scene,
         scene_label: label,
         listen: cli.listen,
@@ -327,6 +343,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         stats_every: Some(seconds("--stats-every", cli.stats_every)?),
         realtime: true,
         view,
+        drain: seconds("--drain-s", cli.drain_s)?,
+        fleet: None,
         rt_threads: cli.rt_threads.max(1),
         admin: cli.admin_token.as_deref().map(Access::from_file).transpose().context("--admin-token")?,
         rooms,
@@ -334,6 +352,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let many = !config.rooms.is_empty();
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     runtime.block_on(async move {
+        let agones = if cli.agones {
+            let settings =
+                AgonesConfig { health_period: Duration::from_millis(cli.agones_health_ms), ..AgonesConfig::default() };
+            let sdk = crate::fleet::agones::connect(&settings).await?;
+            let (feed, events) = crate::fleet::channel();
+            config.fleet = Some(feed);
+            Some(AgonesAdapter::spawn(sdk, &settings, events))
+        } else {
+            None
+        };
         let server = Server::start(config)?;
         println!("kinloop-server listening on {}", server.local_addr());
         println!("certificate fingerprint (sha-256): {}", server.fingerprint());
@@ -347,22 +375,49 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         };
         tokio::select! {
-            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: telling clients and shutting down"),
-            _ = stop => tracing::info!("--duration elapsed: shutting down"),
+            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: draining"),
+            _ = terminated() => tracing::info!("SIGTERM: draining"),
+            _ = stop => tracing::info!("--duration elapsed: draining"),
         }
         if many {
             let reports = server.shutdown_rooms().await?;
+            finish_agones(agones).await;
             if cli.json {
                 println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "rooms": reports }))?);
             }
         } else {
             let stats = server.shutdown().await?;
+            finish_agones(agones).await;
             if cli.json {
                 println!("{}", serde_json::to_string_pretty(&stats)?);
             }
         }
         anyhow::Ok(())
     })
+}
+
+/// After the drain, lets the Agones adapter (if any) report the last counts and call Shutdown.
+async fn finish_agones(agones: Option<AgonesAdapter>) {
+    if let Some(agones) = agones {
+        agones.finished(AGONES_FINISH).await;
+    }
+}
+
+/// Resolves when the process is asked to terminate (SIGTERM: Kubernetes, Agones, systemd, `kill`); never
+/// where there is no such signal or it cannot be watched (then Ctrl-C and --duration still stop the server).
+async fn terminated() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                term.recv().await;
+                return;
+            }
+            Err(error) => tracing::warn!(%error, "SIGTERM is not watched: stop with Ctrl-C"),
+        }
+    }
+    std::future::pending::<()>().await
 }
 
 #[cfg(test)]

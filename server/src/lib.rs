@@ -10,6 +10,7 @@
 //!   registry of admitted users, snapshot frames, the VE thread's timing statistics;
 //! - [`driver`]: the thin real-time shell: the VE thread with absolute deadlines, tokio + quinn for the
 //!   network, lock-free rings between them; [`Server::start`] runs it in-process;
+//! - [`fleet`]: the edge toward a fleet manager (Agones): readiness, health from the VE's heartbeat, counts;
 //! - [`view`]: the web page that draws the linkage live (and lets a visitor grab it) or replays a recording;
 //! - [`bench`](mod@bench): the numbers `kinloop bench` reports;
 //! - [`synthetic`]: the in-process users those numbers and `--synthetic-users` drive;
@@ -25,6 +26,7 @@ pub use crate::core::{
 };
 pub mod access;
 pub mod driver;
+pub mod fleet;
 pub mod gateway;
 pub mod view;
 

@@ -19,6 +19,8 @@ pub struct Tick {
     pub snapshot_age: f64,
     /// Output gain in [0, 1].
     pub gain: f64,
+    /// The server session rendered: 1, 2, ... (one more per move), 0 between servers.
+    pub session: u32,
 }
 
 /// One user's part of a VE step.
@@ -53,6 +55,7 @@ pub fn client_ticks(path: &Path) -> Vec<Tick> {
             command: first_three(&r.command),
             snapshot_age: r.snapshot_age_s,
             gain: r.gain,
+            session: r.session,
         })
         .collect()
 }

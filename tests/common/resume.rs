@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use kinloop_client::driver::ClientHandle;
 use kinloop_protocol::quic::{RoomCa, Trust};
+use kinloop_protocol::room_key::RoomKey;
+use kinloop_server::{Identity, ServerConfig};
 
 use super::child::Role;
 use super::live::{self, OPS};
@@ -42,6 +44,15 @@ pub fn server_role(dir: &Path, side: &str, listen: SocketAddr) -> Role {
         room_key: dir.join("room.key"),
         record: dir.join(format!("{side}.csv")),
     }
+}
+
+/// `config` as server SIDE (`a` or `b`) of the room whose files are in `dir`: its certificate
+/// `SIDE.pem`/`SIDE.key`, the room's key, and its record `SIDE.csv`.
+pub fn room_server(mut config: ServerConfig, dir: &Path, side: &str) -> ServerConfig {
+    config.identity = Identity::Files { cert: dir.join(format!("{side}.pem")), key: dir.join(format!("{side}.key")) };
+    config.room_key = Some(RoomKey::load(&dir.join("room.key")).expect("room key"));
+    config.record = Some(dir.join(format!("{side}.csv")));
+    config
 }
 
 /// A room's files in `dir`: `ca.pem`, `a.pem`/`a.key` and `b.pem`/`b.key` (issued by the CA for

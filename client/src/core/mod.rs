@@ -237,6 +237,11 @@ impl<S: Space> HapticCore<S> {
         }
     }
 
+    /// The output gate's gain now, in [0, 1] (0: the core commands no force).
+    pub fn output_gain(&self) -> f64 {
+        self.gate.gain()
+    }
+
     /// The gains in use.
     pub fn gains(&self) -> &ResolvedGains<S> {
         &self.gains

@@ -456,6 +456,9 @@ async fn keep_connected<S: Space>(
             leave(&mut session).await;
             break;
         }
+        shared.between_servers.store(true, Ordering::Relaxed);
+        // Closed at once, so that a server draining its clients sees this one gone.
+        session.connection.close(kinloop_protocol::quic::close_codes::NORMAL, b"moving on");
         tracing::warn!(why = %ended, "session lost; the force fades out while reconnecting");
         let Some(next) = reconnect(dialer, rings, shared, net, &mut backoff).await else { break };
         if next.welcome.scene.kind != S::KIND {

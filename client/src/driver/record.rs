@@ -43,6 +43,8 @@ pub fn tick_record<S: Space>(report: &TickReport<S>) -> TickRecord {
         constraint_count: report.constraint_count as u8,
         snapshot_age_s: report.snapshot_age.map_or(f64::NAN, |a| a.as_secs_f64()),
         gain: report.gain,
+        // The loop knows which session it renders.
+        session: 0,
     }
 }
 

@@ -38,6 +38,9 @@ pub struct LoopShared {
     pub device_lost: AtomicBool,
     /// Nanoseconds since the loop started, at its last tick.
     pub elapsed_ns: AtomicU64,
+    /// Set by the network side when it loses its server; cleared by the loop when the next session's core
+    /// takes over (the record marks the ticks in between as session 0).
+    pub between_servers: AtomicBool,
 }
 
 impl LoopShared {
@@ -158,6 +161,8 @@ pub struct LoopBody<S: Space, D: HapticDevice<S>> {
     shared: Arc<LoopShared>,
     settings: LoopSettings,
     ticks: u64,
+    /// The session whose core renders: 1 for the first, one more for each that took over.
+    session: u32,
 }
 
 impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
@@ -169,19 +174,24 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
         shared: Arc<LoopShared>,
         settings: LoopSettings,
     ) -> Self {
-        LoopBody { device, core, rings, shared, settings, ticks: 0 }
+        LoopBody { device, core, rings, shared, settings, ticks: 0, session: 1 }
     }
 
     /// One tick at `now` (time since the loop started).
     pub fn step(&mut self, now: Duration) -> Flow {
-        let (rings, shared, core) = (&mut self.rings, &self.shared, &mut self.core);
+        let (rings, shared, core, session) = (&mut self.rings, &self.shared, &mut self.core, &mut self.session);
         shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
         if shared.stop.load(Ordering::Relaxed) || self.settings.duration.is_some_and(|d| now >= d) {
             return Flow::Stop(None);
         }
         self.ticks += 1;
-        // A new session's core replaces the old one, which goes back to be dropped off this thread.
-        while let Ok(next) = rings.cores.pop() {
+        // A new session's core replaces the old one, which goes back to be dropped off this thread; not before
+        // the old one has faded out (a server that drains says so at once, and the old core may still push),
+        // so the force never steps from the old session's to the new one's zero.
+        while core.output_gain() == 0.0 {
+            let Ok(next) = rings.cores.pop() else { break };
+            *session += 1;
+            shared.between_servers.store(false, Ordering::Relaxed);
             let old = std::mem::replace(core, next);
             if let Err(rtrb::PushError::Full(old)) = rings.spent_cores.push(old) {
                 // The network side is not collecting: keep the old core alive rather than free it here.
@@ -189,7 +199,9 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
             }
         }
         core.set_one_way_delay(Duration::from_nanos(shared.one_way_delay_ns.load(Ordering::Relaxed)));
-        while let Ok(snapshot) = rings.snapshots.pop() {
+        // While the next session's core waits for the old one to fade, the new server's snapshots wait for it.
+        while rings.cores.is_empty() {
+            let Ok(snapshot) = rings.snapshots.pop() else { break };
             // Refused snapshots are counted by the core.
             let _ = core.handle_snapshot(now, &snapshot);
             if let Err(rtrb::PushError::Full(snapshot)) = rings.spent_snapshots.push(snapshot) {
@@ -233,7 +245,9 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
             }
         }
         if let Some(records) = rings.records.as_mut() {
-            if records.push(super::record::tick_record(out.report)).is_err() {
+            let mut row = super::record::tick_record(out.report);
+            row.session = if shared.between_servers.load(Ordering::Relaxed) { 0 } else { *session };
+            if records.push(row).is_err() {
                 shared.records_dropped.fetch_add(1, Ordering::Relaxed);
             }
         }

@@ -46,6 +46,7 @@ pub use stats::{ServerStats, UserStats};
 
 use crate::access::Access;
 use crate::core::{VeConfig, VeConfigError, VeCore, VeEvent};
+use crate::fleet::{FleetEvent, FleetFeed, FleetRoom};
 use crate::gateway::{CommandSender, Gateway, UserRegistry, FRAME_HEADER};
 use crate::view::{LiveSource, ViewConfig, ViewError, ViewHandle};
 use ve_thread::VeThreadIo;
@@ -58,8 +59,12 @@ const EVENT_RING: usize = 1024;
 const RECORD_RING: usize = 1 << 17;
 /// How often the collector drains the VE thread's statistics and events.
 const COLLECT_EVERY: Duration = Duration::from_millis(50);
-/// Longest wait for sessions to tell their clients and close at shutdown.
-const SHUTDOWN_GRACE: Duration = Duration::from_secs(3);
+/// Longest wait, by default, for the clients to move elsewhere when the server drains (`--drain-s`).
+pub const DEFAULT_DRAIN: Duration = Duration::from_secs(5);
+/// Past the drain, the longest wait for the network tasks to wind down.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(1);
+/// What a draining server tells its clients.
+const DRAINING: &str = "the server is draining: move to another server of the room";
 
 /// Where the certificate comes from.
 #[derive(Clone, Debug)]
@@ -105,6 +110,10 @@ pub struct ServerConfig {
     /// The room's key (`--room-key`): the server signs its state for its clients and resumes from a state
     /// a client offers when it verifies (see `docs/resume.md`).
     pub room_key: Option<RoomKey>,
+    /// At shutdown, how long the server waits for its clients to move after it told them to (`--drain-s`).
+    pub drain: Duration,
+    /// Where the server tells a fleet manager's adapter what happens (`--agones`), if anywhere.
+    pub fleet: Option<FleetFeed>,
     /// The rooms (`--rooms`); empty: one room, "default", of the fields above.
     pub rooms: Vec<rooms::RoomSpec>,
     /// Real-time threads stepping the rooms (`--rt-threads`).
@@ -129,6 +138,8 @@ impl ServerConfig {
             realtime: true,
             view: None,
             room_key: None,
+            drain: DEFAULT_DRAIN,
+            fleet: None,
             rooms: Vec::new(),
             rt_threads: rooms::default_rt_threads(),
             admin: None,
@@ -222,6 +233,17 @@ pub(crate) struct Shared {
     view: std::sync::OnceLock<Arc<crate::view::Counters>>,
     /// The room, with a room key.
     room: Option<Arc<room::Room>>,
+    /// How long a closing room waits for its clients to move.
+    drain: Duration,
+    /// The room's side of the fleet adapter's feed.
+    fleet: Arc<FleetRoom>,
+}
+
+impl Shared {
+    /// Tells the fleet adapter, if there is one.
+    fn tell_fleet(&self, event: FleetEvent) {
+        self.fleet.send(event);
+    }
 }
 
 impl Shared {
@@ -283,7 +305,8 @@ impl Server {
         let endpoint = server_endpoint(config.listen, &identity, &options)?;
         let local_addr =
             endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
-        let executor = rooms::Executor::start(config.rt_threads, config.realtime)
+        let heartbeat = config.fleet.as_ref().map(|f| f.heartbeat().clone());
+        let executor = rooms::Executor::start(config.rt_threads, config.realtime, heartbeat)
             .map_err(|e| ServerError::Thread { which: "rooms", what: e.to_string() })?;
         let host = Arc::new(rooms::Host {
             endpoint: endpoint.clone(),
@@ -292,6 +315,7 @@ impl Server {
             admin: config.admin.clone(),
             template: config.clone(),
             shutdown: watch::channel(false).0,
+            announced: AtomicBool::new(false),
         });
         for spec in config.room_specs() {
             let name = spec.name.clone();
@@ -300,6 +324,8 @@ impl Server {
                 return Err(ServerError::Room { room: name, source: Box::new(error) });
             }
         }
+        // The fleet hears of the server first, then of its rooms (later rooms as they open).
+        host.announce(local_addr);
         let accept = tokio::spawn(accept_loop(endpoint.clone(), host.clone()));
         Ok(ServerHandle { local_addr, fingerprint: identity.fingerprint.clone(), host, endpoint, accept })
     }
@@ -335,27 +361,42 @@ impl ServerHandle {
         self.host.first(|room| room.shared.stats()).unwrap_or_default()
     }
 
+    /// A test knob: the rooms' executor stops stepping for `duration` from its next pass (it sleeps), as a
+    /// stalled executor would; what a fleet manager sees of it is the test.
+    pub fn stall_ve(&self, duration: Duration) {
+        self.host.executor.stall(duration);
+    }
+
     /// Statistics so far of every room, by name.
     pub fn room_stats(&self) -> Vec<rooms::RoomReport> {
         self.host.reports()
     }
 
-    /// Tells every client (`Leave`), waits for them to close, closes the endpoint, stops the rooms and the
-    /// recorders, and returns the final statistics of the first room.
+    /// Drains (see [`ServerHandle::shutdown_rooms`]) and returns the final statistics of the first room.
     pub async fn shutdown(self) -> Result<ServerStats, ServerError> {
         Ok(self.shutdown_rooms().await?.into_iter().next().map(|r| r.stats).unwrap_or_default())
     }
 
-    /// [`ServerHandle::shutdown`], returning every room's final statistics.
+    /// Drains: stops admitting on every room (new connections are refused), hands each client its room's
+    /// newest signed state and tells it to move (`Leave`), waits up to the configured drain time for them to
+    /// go, then closes the endpoint, stops the rooms and their recorders, and returns every room's final
+    /// statistics.
     pub async fn shutdown_rooms(mut self) -> Result<Vec<rooms::RoomReport>, ServerError> {
         let opened = self.host.take_all();
+        let clients: usize = opened.iter().map(|room| room.shared.gateway.users.connected()).sum();
+        let drain = self.host.template.drain;
+        tracing::info!(clients, drain_s = drain.as_secs_f64(), "draining: telling the clients to move");
+        self.host.tell_fleet(FleetEvent::Draining);
+        let started = Instant::now();
         for room in &opened {
-            room.begin_close("the server is shutting down");
+            room.begin_close(DRAINING);
         }
         self.host.shutdown.send_replace(true);
-        if tokio::time::timeout(SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
+        if tokio::time::timeout(drain + SHUTDOWN_GRACE, &mut self.accept).await.is_err() {
             self.accept.abort();
         }
+        let left: usize = opened.iter().map(|room| room.shared.gateway.users.connected()).sum();
+        tracing::info!(left, waited_s = started.elapsed().as_secs_f64(), "drained");
         self.endpoint.close(close_codes::NORMAL, b"server shutdown");
         let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.endpoint.wait_idle()).await;
         let mut reports = Vec::new();
@@ -364,6 +405,7 @@ impl ServerHandle {
         }
         let executor = self.host.executor.clone();
         let _ = tokio::task::spawn_blocking(move || executor.shutdown()).await;
+        self.host.tell_fleet(FleetEvent::Drained);
         Ok(reports)
     }
 }
@@ -421,6 +463,7 @@ impl OpenRoom {
                 tracing::error!(%error, "the recording is incomplete");
             }
         }
+        self.shared.fleet.closed();
         Ok(rooms::RoomReport::of(&self.shared))
     }
 }
@@ -493,10 +536,12 @@ where
         stop: stop.clone(),
     };
     let (shutdown, _) = watch::channel(false);
+    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone()));
     let on_close = {
-        let shutdown = shutdown.clone();
+        let (shutdown, fleet) = (shutdown.clone(), fleet.clone());
         Box::new(move |_reason: &str| {
             shutdown.send_replace(true);
+            fleet.closed();
         }) as Box<dyn Fn(&str) + Send + Sync>
     };
     let cell = Arc::new(rooms::RoomCell::new(spec.name.clone(), ve_config.ve_rate_hz, on_close));
@@ -520,9 +565,14 @@ where
         shutdown,
         view: std::sync::OnceLock::new(),
         room,
+        drain: config.drain,
+        fleet,
     });
     let hosted = rooms::Hosted::new(ve_thread::VeLoop::new(core, io, Instant::now()), spec.knobs);
-    host.executor.place(Box::new(hosted), cell)?;
+    if let Err(error) = host.executor.place(Box::new(hosted), cell) {
+        shared.fleet.closed();
+        return Err(error.into());
+    }
     let view = match (view_config, view_reader) {
         (Some(view), Some(reader)) => {
             let source = LiveSource {
@@ -538,6 +588,7 @@ where
                 }
                 Err(error) => {
                     stop.store(true, Ordering::Relaxed);
+                    shared.fleet.closed();
                     return Err(error.into());
                 }
             }
@@ -548,7 +599,8 @@ where
     Ok(OpenRoom { shared, collector, stop, recorder, view })
 }
 
-/// Accepts connections until shutdown, then waits (bounded) for every session to finish.
+/// Accepts connections until shutdown; then, while the sessions end (each bounded by the drain), refuses
+/// new ones at once rather than leaving them to time out.
 async fn accept_loop(endpoint: Endpoint, host: Arc<rooms::Host>) {
     let mut sessions = tokio::task::JoinSet::new();
     let mut shutdown = host.shutdown.subscribe();
@@ -562,7 +614,15 @@ async fn accept_loop(endpoint: Endpoint, host: Arc<rooms::Host>) {
             Some(_) = sessions.join_next(), if !sessions.is_empty() => {}
         }
     }
-    while sessions.join_next().await.is_some() {}
+    while !sessions.is_empty() {
+        tokio::select! {
+            Some(incoming) = endpoint.accept() => {
+                tracing::info!(remote = %incoming.remote_address(), "refused a connection: the server is draining");
+                incoming.refuse();
+            }
+            _ = sessions.join_next() => {}
+        }
+    }
 }
 
 /// Drains the VE thread's statistics and events; logs statistics every `stats_every`.

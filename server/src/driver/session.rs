@@ -3,7 +3,6 @@
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::Duration;
 
 use bytes::Bytes;
 use kinloop_protocol::quic::{
@@ -24,8 +23,6 @@ use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLi
 
 /// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
 const UPLINK_RING: usize = 64;
-/// How long a leaving server waits for a client to close after telling it.
-const LEAVE_LINGER: Duration = Duration::from_secs(1);
 
 fn refused(reason: RefusalReason) -> Refused {
     Refused { reason, message: String::new() }
@@ -146,6 +143,8 @@ async fn run_session(
         connection: connection.clone(),
         counters: counters.clone(),
     });
+    let fleet_user = crate::fleet::user_label(&hello.client_name, user);
+    shared.tell_fleet(crate::fleet::FleetEvent::UserJoined { user: fleet_user.clone() });
     tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %welcome.scene.op_name, position_scale = welcome.mapping.position_scale, force_scale = welcome.mapping.force_scale, coupling_stiffness = ?welcome.coupling.stiffness, coupling_damping = ?welcome.coupling.damping, remote = %connection.remote_address(), "session started");
 
     let receive = {
@@ -191,11 +190,16 @@ async fn run_session(
     room_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let reason = loop {
         if *shutdown.borrow() {
-            let reason = shared.cell.closed_reason().or_else(|| shared.leave_reason.lock().ok().map(|r| r.clone()));
-            let reason = reason.unwrap_or_default();
+            let closed = shared.cell.closed_reason();
+            // The newest state first, so that the server the client moves to resumes the room where it is
+            // (not when the room's simulation failed: that state is not to be trusted).
+            if let Some(state) = shared.room.as_ref().filter(|_| closed.is_none()).and_then(|r| r.signed_latest()) {
+                let _ = send_control(&mut send, &Control::RoomState(state)).await;
+            }
+            let reason = closed.or_else(|| shared.leave_reason.lock().ok().map(|r| r.clone())).unwrap_or_default();
             let _ = send_control(&mut send, &Control::Leave { reason }).await;
             let _ = send.finish();
-            let _ = tokio::time::timeout(LEAVE_LINGER, connection.closed()).await;
+            let _ = tokio::time::timeout(shared.drain, connection.closed()).await;
             break "room closed";
         }
         tokio::select! {
@@ -226,6 +230,7 @@ async fn run_session(
     receive.abort();
     transmit.abort();
     counters.connected.store(false, Ordering::Relaxed);
+    shared.tell_fleet(crate::fleet::FleetEvent::UserLeft { user: fleet_user });
     tracing::info!(user, reason, "session ended");
 }
 

@@ -91,4 +91,11 @@ impl UserRegistry {
             users.iter().for_each(&mut visit);
         }
     }
+
+    /// How many users' sessions are still open.
+    pub fn connected(&self) -> usize {
+        let mut count = 0;
+        self.for_each(|e| count += usize::from(e.counters.connected.load(Ordering::Relaxed)));
+        count
+    }
 }

@@ -12,6 +12,8 @@
 //!   quarantine thread (normal priority), so it never delays a room within budget; it refuses new users. A
 //!   tick that panics is caught (`catch_unwind`): that room is closed with the reason, its users told; the
 //!   thread's other rooms go on.
+//! - **Liveness.** Every pass of a real-time thread's loop advances the fleet's [`Heartbeat`], rooms or
+//!   none, so a fleet manager's health pings stop when the stepping stalls (`crate::fleet`).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -19,6 +21,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use rtrb::{Consumer, Producer, RingBuffer};
+
+use crate::fleet::Heartbeat;
 
 /// Weight of the newest step time in a room's cost average (about the last 64 ticks).
 pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
@@ -146,12 +150,36 @@ struct ThreadEnd {
     inbox: Mutex<Producer<Slot>>,
 }
 
+/// What the real-time threads tell a fleet manager: the heartbeat they advance, and a test knob that
+/// stalls them.
+struct Pulse {
+    heartbeat: Option<Heartbeat>,
+    epoch: Instant,
+    /// Until when (ns after `epoch`) the real-time threads stall; 0: they do not.
+    stall_until_ns: AtomicU64,
+}
+
+impl Pulse {
+    /// One pass of a real-time thread: first sits out a stall, if one is asked for, then beats.
+    fn pass(&self) {
+        let until = self.stall_until_ns.load(Ordering::Relaxed);
+        if until > 0 {
+            let until = self.epoch + Duration::from_nanos(until);
+            std::thread::sleep(until.saturating_duration_since(Instant::now()));
+        }
+        if let Some(heartbeat) = &self.heartbeat {
+            heartbeat.beat();
+        }
+    }
+}
+
 /// The executor: its threads and every room placed on them.
 pub struct Executor {
     threads: Vec<Arc<ThreadEnd>>,
     cells: Mutex<Vec<Arc<RoomCell>>>,
     stop: Arc<AtomicBool>,
     handles: Mutex<Vec<std::thread::JoinHandle<()>>>,
+    pulse: Arc<Pulse>,
 }
 
 /// The default number of real-time threads: one fewer than the cores, at least one.
@@ -160,18 +188,34 @@ pub fn default_rt_threads() -> usize {
 }
 
 impl Executor {
-    /// Starts `threads` real-time threads (SCHED_FIFO when `realtime` and granted) and the quarantine thread.
-    pub fn start(threads: usize, realtime: bool) -> std::io::Result<Arc<Executor>> {
+    /// Starts `threads` real-time threads (SCHED_FIFO when `realtime` and granted) and the quarantine thread;
+    /// the real-time threads advance `heartbeat`, if given, on every pass.
+    pub fn start(threads: usize, realtime: bool, heartbeat: Option<Heartbeat>) -> std::io::Result<Arc<Executor>> {
         let stop = Arc::new(AtomicBool::new(false));
-        let (quarantine, quarantine_handle) = spawn_thread(None, false, stop.clone(), None)?;
+        let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
+        let (quarantine, quarantine_handle) = spawn_thread(None, false, stop.clone(), None, pulse.clone())?;
         let mut ends = Vec::new();
         let mut handles = vec![quarantine_handle];
         for index in 0..threads.max(1) {
-            let (end, handle) = spawn_thread(Some(index), realtime, stop.clone(), Some(quarantine.clone()))?;
+            let (end, handle) =
+                spawn_thread(Some(index), realtime, stop.clone(), Some(quarantine.clone()), pulse.clone())?;
             ends.push(end);
             handles.push(handle);
         }
-        Ok(Arc::new(Executor { threads: ends, cells: Mutex::new(Vec::new()), stop, handles: Mutex::new(handles) }))
+        Ok(Arc::new(Executor {
+            threads: ends,
+            cells: Mutex::new(Vec::new()),
+            stop,
+            handles: Mutex::new(handles),
+            pulse,
+        }))
+    }
+
+    /// A test knob: every real-time thread stops stepping (and beating) for `duration` from its next pass,
+    /// as a stalled executor would; what a fleet manager sees of it is the test.
+    pub fn stall(&self, duration: Duration) {
+        let until = self.pulse.epoch.elapsed() + duration;
+        self.pulse.stall_until_ns.store(until.as_nanos().max(1) as u64, Ordering::Relaxed);
     }
 
     /// Real-time threads (the quarantine thread not counted).
@@ -282,6 +326,7 @@ fn spawn_thread(
     realtime: bool,
     stop: Arc<AtomicBool>,
     quarantine: Option<Arc<ThreadEnd>>,
+    pulse: Arc<Pulse>,
 ) -> std::io::Result<(Arc<ThreadEnd>, std::thread::JoinHandle<()>)> {
     let (producer, consumer) = RingBuffer::new(INBOX);
     let name = index.map_or("kinloop-rooms-q".to_string(), |i| format!("kinloop-rooms-{i}"));
@@ -291,14 +336,15 @@ fn spawn_thread(
                 tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority");
             }
         }
-        run_thread(consumer, &stop, quarantine.as_deref())
+        run_thread(consumer, &stop, quarantine.as_deref(), &pulse)
     })?;
     Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
 }
 
 /// One thread's loop: take new rooms, sleep until the earliest deadline, step every room that is due
-/// (each inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away.
-fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&ThreadEnd>) {
+/// (each inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away. A
+/// real-time thread (one with a quarantine to send rooms to) also passes the `pulse` every time round.
+fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&ThreadEnd>, pulse: &Pulse) {
     let sleeper = spin_sleep::SpinSleeper::default();
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
@@ -307,6 +353,9 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&
         }
         if stop.load(Ordering::Acquire) {
             break;
+        }
+        if quarantine.is_some() {
+            pulse.pass();
         }
         let mut i = 0;
         while i < slots.len() {

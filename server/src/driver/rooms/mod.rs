@@ -8,6 +8,7 @@ mod executor;
 mod file;
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use kinloop_linkage::math::space::Space;
@@ -39,6 +40,8 @@ pub(crate) struct Host {
     pub template: ServerConfig,
     /// Set at shutdown.
     pub shutdown: watch::Sender<bool>,
+    /// Whether the fleet adapter was told the server listens (rooms opened since are told as they open).
+    pub announced: AtomicBool,
 }
 
 impl Host {
@@ -52,10 +55,29 @@ impl Host {
         }
         let name = spec.name.clone();
         let opened = open_room(self, spec)?;
+        if self.announced.load(Ordering::Acquire) {
+            opened.shared.fleet.opened();
+        }
         if let Ok(mut table) = self.table.lock() {
             table.insert(name, opened);
         }
         Ok(())
+    }
+
+    /// Tells the fleet adapter that the server listens at `addr`, then which rooms are open.
+    pub fn announce(&self, addr: std::net::SocketAddr) {
+        self.tell_fleet(crate::fleet::FleetEvent::Listening { addr });
+        self.announced.store(true, Ordering::Release);
+        if let Ok(table) = self.table.lock() {
+            table.values().for_each(|room| room.shared.fleet.opened());
+        }
+    }
+
+    /// Tells the fleet adapter, if there is one.
+    pub fn tell_fleet(&self, event: crate::fleet::FleetEvent) {
+        if let Some(fleet) = &self.template.fleet {
+            fleet.send(event);
+        }
     }
 
     /// Whether no room is open.
