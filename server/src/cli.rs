@@ -17,11 +17,13 @@ use kinloop_protocol::room_key::RoomKey;
 use crate::bench::RealtimeRun;
 use crate::core::{AxisGains, DEFAULT_COUPLING_LEAD_DELAYS_S, DEFAULT_COUPLING_LEAD_MAX_S};
 use crate::driver::load_scene;
+#[cfg(feature = "agones")]
 use crate::fleet::agones::{AgonesAdapter, AgonesConfig};
 use crate::view::{LiveSource, ViewConfig};
 use crate::{Access, Identity, Server, ServerConfig, VeConfig};
 
 /// After the drain, how long the Agones adapter may take to report the last counts and call Shutdown.
+#[cfg(feature = "agones")]
 const AGONES_FINISH: Duration = Duration::from_secs(15);
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -141,7 +143,7 @@ struct Cli {
     #[arg(long)]
     agones: bool,
     /// With --agones, the period of the health pings (ms); the Fleet's health check must allow for it.
-    #[arg(long, value_name = "MS", default_value_t = crate::fleet::agones::DEFAULT_HEALTH_PERIOD.as_millis() as u64, requires = "agones", value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    #[arg(long, value_name = "MS", default_value_t = crate::fleet::DEFAULT_HEALTH_PERIOD.as_millis() as u64, requires = "agones", value_parser = clap::value_parser!(u64).range(10..=60_000))]
     agones_health_ms: u64,
     /// Print the final statistics as JSON on stdout.
     #[arg(long)]
@@ -352,16 +354,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let many = !config.rooms.is_empty();
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     runtime.block_on(async move {
-        let agones = if cli.agones {
-            let settings =
-                AgonesConfig { health_period: Duration::from_millis(cli.agones_health_ms), ..AgonesConfig::default() };
-            let sdk = crate::fleet::agones::connect(&settings).await?;
-            let (feed, events) = crate::fleet::channel();
-            config.fleet = Some(feed);
-            Some(AgonesAdapter::spawn(sdk, &settings, events))
-        } else {
-            None
-        };
+        let agones = if cli.agones { Some(start_agones(cli.agones_health_ms, &mut config).await?) } else { None };
         let server = Server::start(config)?;
         println!("kinloop-server listening on {}", server.local_addr());
         println!("certificate fingerprint (sha-256): {}", server.fingerprint());
@@ -396,12 +389,32 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     })
 }
 
+/// Connects to the Agones SDK sidecar and starts the adapter the server's fleet feed drives.
+#[cfg(feature = "agones")]
+async fn start_agones(health_ms: u64, config: &mut ServerConfig) -> anyhow::Result<AgonesAdapter> {
+    let settings = AgonesConfig { health_period: Duration::from_millis(health_ms), ..AgonesConfig::default() };
+    let sdk = crate::fleet::agones::connect(&settings).await?;
+    let (feed, events) = crate::fleet::channel();
+    config.fleet = Some(feed);
+    Ok(AgonesAdapter::spawn(sdk, &settings, events))
+}
+
+/// Without the `agones` feature the SDK (and the protoc its build needs) is not compiled in: say so.
+#[cfg(not(feature = "agones"))]
+async fn start_agones(_health_ms: u64, _config: &mut ServerConfig) -> anyhow::Result<std::convert::Infallible> {
+    anyhow::bail!("--agones: this kinloop-server was built without Agones support; build it with `--features agones`")
+}
+
 /// After the drain, lets the Agones adapter (if any) report the last counts and call Shutdown.
+#[cfg(feature = "agones")]
 async fn finish_agones(agones: Option<AgonesAdapter>) {
     if let Some(agones) = agones {
         agones.finished(AGONES_FINISH).await;
     }
 }
+
+#[cfg(not(feature = "agones"))]
+async fn finish_agones(_agones: Option<std::convert::Infallible>) {}
 
 /// Resolves when the process is asked to terminate (SIGTERM: Kubernetes, Agones, systemd, `kill`); never
 /// where there is no such signal or it cannot be watched (then Ctrl-C and --duration still stop the server).

@@ -28,8 +28,6 @@ use super::{FleetEvent, FleetEvents, Heartbeat};
 pub const ROOMS_COUNTER: &str = "rooms";
 /// The List of users on the server.
 pub const USERS_LIST: &str = "users";
-/// How often the server pings by default (the Fleet checks every 1 s, `deploy/agones/fleet.yaml`).
-pub const DEFAULT_HEALTH_PERIOD: Duration = Duration::from_millis(500);
 /// How long the server waits for the sidecar at start by default.
 pub const DEFAULT_CONNECT_WITHIN: Duration = Duration::from_secs(3);
 /// How long one call is retried before it is given up (and reported).
@@ -53,7 +51,7 @@ pub struct AgonesConfig {
 
 impl Default for AgonesConfig {
     fn default() -> Self {
-        AgonesConfig { port: None, health_period: DEFAULT_HEALTH_PERIOD, connect_within: DEFAULT_CONNECT_WITHIN }
+        AgonesConfig { port: None, health_period: super::DEFAULT_HEALTH_PERIOD, connect_within: DEFAULT_CONNECT_WITHIN }
     }
 }
 

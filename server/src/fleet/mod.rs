@@ -7,14 +7,19 @@
 //! health pings only while the heartbeat advances (a stalled executor stops them), and asks to be shut down
 //! once drained. Nothing inside a core knows about any of it.
 
+#[cfg(feature = "agones")]
 pub mod agones;
 pub mod allocation;
 
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use tokio::sync::mpsc;
+
+/// How often the server pings by default (the Fleet checks every 1 s, `deploy/agones/fleet.yaml`).
+pub const DEFAULT_HEALTH_PERIOD: Duration = Duration::from_millis(500);
 
 /// What happened at the server, for the fleet manager.
 #[derive(Clone, Debug, PartialEq, Eq)]
