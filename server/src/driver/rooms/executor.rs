@@ -26,6 +26,8 @@ use crate::fleet::Heartbeat;
 
 /// Weight of the newest step time in a room's cost average (about the last 64 ticks).
 pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
+/// The most one tick is charged to its room's cost, in periods (see `RoomCell::record`).
+pub const MAX_CHARGED_PERIODS: f64 = 4.0;
 /// The share of each real-time thread's time that rooms may fill; the rest absorbs jitter.
 pub const BUDGET_SHARE: f64 = 0.7;
 /// A new room's cost per tick before it is measured.
@@ -118,8 +120,12 @@ impl RoomCell {
     }
 
     fn record(&self, step: Duration, users: usize) {
+        // One tick is charged at most MAX_CHARGED_PERIODS periods: a thread preempted mid-tick on a busy host
+        // (or a page fault storm) must not make a room look over budget for the next hundred ticks, while a
+        // room that really takes a few periods a tick still reads as what it takes.
+        let charged = (step.as_nanos() as f64).min(MAX_CHARGED_PERIODS * 1e9 / self.rate_hz);
         let old = f64::from_bits(self.cost_ns.load(Ordering::Relaxed));
-        let new = old + EWMA_WEIGHT * (step.as_nanos() as f64 - old);
+        let new = old + EWMA_WEIGHT * (charged - old);
         self.cost_ns.store(new.to_bits(), Ordering::Relaxed);
         self.users.store(users, Ordering::Relaxed);
     }
@@ -408,5 +414,26 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&
     for slot in slots {
         slot.room.finish();
         slot.cell.done.store(true, Ordering::Release);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_still_reads_slow() {
+        let quiet = RoomCell::new("quiet".into(), 1000.0, Box::new(|_| {}));
+        for _ in 0..200 {
+            quiet.record(Duration::from_micros(20), 1);
+        }
+        quiet.record(Duration::from_millis(200), 1);
+        assert!(quiet.load() < 0.1, "one 200 ms tick made the room {:.0} % busy", quiet.load() * 100.0);
+        let slow = RoomCell::new("slow".into(), 1000.0, Box::new(|_| {}));
+        for _ in 0..400 {
+            slow.record(Duration::from_millis(2), 1);
+        }
+        assert!(slow.cost() > Duration::from_micros(1900), "a 2 ms room reads {:?}", slow.cost());
+        assert!(slow.load() > BUDGET_SHARE);
     }
 }
