@@ -6,8 +6,9 @@
 
 use std::path::PathBuf;
 
-use kinloop_server::fleet::agones::{DEFAULT_HEALTH_PERIOD, ROOMS_COUNTER, USERS_LIST};
+use kinloop_server::fleet::agones::{ROOMS_COUNTER, USERS_LIST};
 use kinloop_server::fleet::allocation::room_request;
+use kinloop_server::fleet::DEFAULT_HEALTH_PERIOD;
 use serde_norway::Value;
 
 /// The longest time Agones may take to notice a stalled VE with the shipped settings (s).
