@@ -47,7 +47,7 @@ fn a_terminated_server_drains_its_client_to_another_and_exits_zero() {
     .to_vec();
     let mut server_a =
         ChildProcess::spawn(NAME, &Role::Program { program: Program::Server, args }, dir.path(), "server-a");
-    let a_addr = server_a.wait_for_stdout("server A listening", Duration::from_secs(15), |out| listening(out)).0;
+    let a_addr = server_a.wait_for_stdout("server A listening", Duration::from_secs(15), listening).0;
 
     // B runs the same scene as A (the room's state names its scene), in this process.
     let rt = live::runtime();
