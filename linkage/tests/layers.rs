@@ -50,8 +50,10 @@ const RECORD: Layers =
     Layers { dir: "record/src", ranks: &[("axes", 0), ("rows", 0), ("schema", 1), ("write", 2), ("read", 2)] };
 
 /// The sans-IO VE and access control < the gateway the driver and the view share < the view < the driver.
-const SERVER: Layers =
-    Layers { dir: "server/src", ranks: &[("access", 0), ("core", 0), ("gateway", 1), ("view", 2), ("driver", 3)] };
+const SERVER: Layers = Layers {
+    dir: "server/src",
+    ranks: &[("access", 0), ("core", 0), ("gateway", 1), ("fleet", 1), ("view", 2), ("driver", 3)],
+};
 
 /// Axes < devices < the haptic core < the simulated user < the driver.
 const CLIENT: Layers =
