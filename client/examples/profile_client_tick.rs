@@ -1,4 +1,5 @@
 //! Runs `client/tick_testbed` for profilers: `profile_client_tick [ITERS]` (default 2,000,000).
+//! Build it with line tables (`cargo build --profile profiling -p kinloop-client --example profile_client_tick`);
 //! `perf record` shows where the time goes; `valgrind --tool=callgrind` counts instructions, which do not
 //! suffer from a noisy machine.
 

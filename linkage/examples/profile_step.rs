@@ -1,5 +1,6 @@
 //! Runs one benchmark case in a loop for profilers:
 //! `profile_step [SCENE] [CALLS] [step|rk4|op_space]` (defaults: paper-testbed, 200000, step).
+//! Build it with line tables (`cargo build --profile profiling -p kinloop-linkage --example profile_step`);
 //! `perf record -g` shows where the time goes; for instruction counts, which do not suffer from a noisy
 //! machine, run under `valgrind --tool=callgrind --collect-atstart=no --toggle-collect='*run_calls*'`.
 
