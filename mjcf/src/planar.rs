@@ -139,8 +139,13 @@ struct Poses<'a> {
 }
 
 impl Poses<'_> {
-    fn index(&self, body: &str) -> Option<usize> {
-        self.model.body_index(body)
+    /// The model's index of scene body `name` (`None`: ground); a name the model lacks keeps the import
+    /// spatial (it cannot happen for a scene the model was compiled from).
+    fn index(&self, name: &str) -> Result<Option<usize>, Reduction> {
+        if name == GROUND {
+            return Ok(None);
+        }
+        self.model.body_index(name).map(Some).ok_or_else(|| spatial(format!("no compiled body '{name}'"), false))
     }
 
     fn pose(&self, body: Option<usize>) -> (Rotation3<f64>, Vector3<f64>) {
@@ -158,109 +163,15 @@ fn planar_scene(scene: &Scene, model: &Model<Spatial>) -> Result<(Scene, PlanarR
     let mut data = Data::new(model);
     forward_kinematics(model, &mut data, &model.q0);
     let poses = Poses { model, data };
-    // Each hinge's and slide's world axis at q0 (a hinge's axis is the same in its joint frame and its
-    // child's frame; the model's joint i carries its body i).
-    let axes: Vec<Option<Vector3<f64>>> = scene
-        .joints
-        .iter()
-        .map(|j| match (j.kind, poses.index(&j.child)) {
-            (JointKindSpec::Revolute | JointKindSpec::Prismatic, Some(b)) => {
-                Some(poses.data.kin.body_rot[b] * model.joints[b].axis)
-            }
-            _ => None,
-        })
-        .collect();
-    let hinge = |j: &JointSpec| j.kind == JointKindSpec::Revolute;
-    let Some(h) = scene.joints.iter().position(hinge) else {
-        return Err(spatial("no hinge fixes a plane".into(), false));
-    };
-    let normal = axes[h].expect("a hinge has an axis");
-    for (j, axis) in scene.joints.iter().zip(&axes) {
-        if hinge(j) && axis.is_some_and(|a| a.cross(&normal).norm() > PARALLEL) {
-            let why = format!("hinge '{}' is not parallel to hinge '{}'", j.name, scene.joints[h].name);
-            return Err(spatial(why, false));
-        }
-    }
-    for (j, axis) in scene.joints.iter().zip(&axes) {
-        match (j.kind, axis) {
-            (JointKindSpec::Ball, _) => return Err(spatial(format!("joint '{}' is a ball joint", j.name), true)),
-            (JointKindSpec::Universal, _) => {
-                return Err(spatial(format!("joint '{}' is a universal joint (two hinges)", j.name), true))
-            }
-            (JointKindSpec::Prismatic, Some(a)) if a.dot(&normal).abs() > PARALLEL => {
-                let why = format!("slide '{}' moves along the hinges' axis, out of their plane", j.name);
-                return Err(spatial(why, true));
-            }
-            _ => {}
-        }
-    }
-    let axes: Vec<Vector3<f64>> = axes.into_iter().map(|a| a.expect("hinges and slides only")).collect();
+    let (normal, axes) = plane_normal(scene, &poses)?;
     let plane = Plane::normal_to(normal);
-    let mut dropped = Vec::new();
-    let mut cuts = Vec::with_capacity(scene.cuts.len());
-    for cut in &scene.cuts {
-        let compiled = model.cuts.iter().find(|c| c.name == cut.name).expect("the compiled model has every cut");
-        let kind = match cut.kind {
-            CutKindSpec::Spherical => {
-                dropped.push(format!("connect '{}': 1 of 3 (along the normal)", cut.name));
-                CutKindSpec::Pin
-            }
-            CutKindSpec::Weld => {
-                dropped.push(format!("weld '{}': 3 of 6 (along the normal, turns about the plane's axes)", cut.name));
-                CutKindSpec::Weld
-            }
-            other => return Err(spatial(format!("cut '{}' is a {other:?} cut", cut.name), true)),
-        };
-        let Some(ClosurePrimitive::Coincident { a, b }) = compiled.primitives.first() else {
-            return Err(spatial(format!("cut '{}' has no point to pin", cut.name), true));
-        };
-        let point = |at: &Attachment<Spatial>| {
-            let (r, _) = poses.pose(at.body);
-            plane.project(&(r * at.point)).to_vec()
-        };
-        // A body's planar point is its spatial point turned to world axes at q0 (planar frames start at
-        // angle zero) and projected; point b is written out, as the spatial compile completed it.
-        cuts.push(CutSpec {
-            kind,
-            point_a: point(a),
-            point_b: Some(point(b)),
-            axis: None,
-            axis_b: None,
-            ..cut.clone()
-        });
-    }
-    let mut bodies = Vec::with_capacity(scene.bodies.len());
-    for spec in &scene.bodies {
-        let b = poses.index(&spec.name).expect("the compiled model has every scene body");
-        let (r, _) = poses.pose(Some(b));
-        let body = &model.bodies[b];
-        let inertia_world = r.matrix() * body.inertia * r.matrix().transpose();
-        let xy = |p: &Vector3<f64>| plane.project(&(r * p)).to_vec();
-        let geometry = body
-            .geometry
-            .iter()
-            .map(|g| match g {
-                Shape::Capsule { from, to, radius } => {
-                    GeometrySpec::Capsule { from: xy(from), to: xy(to), radius: *radius }
-                }
-                Shape::Ball { center, radius } => GeometrySpec::Ball { center: xy(center), radius: *radius },
-            })
-            .collect();
-        bodies.push(BodySpec {
-            name: spec.name.clone(),
-            mass: spec.mass,
-            com: xy(&body.com),
-            inertia: Numbers::One(normal.dot(&(inertia_world * normal))),
-            geometry,
-        });
-    }
+    let (cuts, dropped) = planar_cuts(scene, &poses, &plane)?;
+    let bodies = scene.bodies.iter().map(|spec| planar_body(spec, &poses, &plane)).collect::<Result<_, _>>()?;
     let mut joints = Vec::with_capacity(scene.joints.len());
     let mut signs = Vec::with_capacity(scene.joints.len());
     for (j, axis) in scene.joints.iter().zip(&axes) {
-        let child = poses.index(&j.child);
-        let parent = if j.parent == GROUND { None } else { poses.index(&j.parent) };
-        let (_, at_child) = poses.pose(child);
-        let (_, at_parent) = poses.pose(parent);
+        let (_, at_child) = poses.pose(poses.index(&j.child)?);
+        let (_, at_parent) = poses.pose(poses.index(&j.parent)?);
         let offset = |v: Vector3<f64>| plane.project(&v).to_vec();
         joints.push(if j.kind == JointKindSpec::Revolute {
             let sign = axis.dot(&normal).signum();
@@ -276,11 +187,10 @@ fn planar_scene(scene: &Scene, model: &Model<Spatial>) -> Result<(Scene, PlanarR
     let mut ops = Vec::with_capacity(scene.ops.len());
     let mut op_depths = Vec::with_capacity(scene.ops.len());
     for spec in &scene.ops {
-        let op = &model.ops[model.op_index(&spec.name).expect("the compiled model has every operational point")];
-        let (r, p) = poses.pose(Some(op.body));
-        let world = p + r * op.point;
-        op_depths.push(normal.dot(&world));
-        ops.push(OpSpec { point: plane.project(&(r * op.point)).to_vec(), ..spec.clone() });
+        let (r, p) = poses.pose(poses.index(&spec.body)?);
+        let point = Vector3::from_iterator(spec.point.iter().copied().chain(std::iter::repeat(0.0)).take(3));
+        op_depths.push(normal.dot(&(p + r * point)));
+        ops.push(OpSpec { point: plane.project(&(r * point)).to_vec(), ..spec.clone() });
     }
     let gravity = Vector3::from_iterator(scene.gravity.iter().copied().chain(std::iter::repeat(0.0)).take(3));
     let planar = Scene {
@@ -292,8 +202,116 @@ fn planar_scene(scene: &Scene, model: &Model<Spatial>) -> Result<(Scene, PlanarR
         ops,
         ..scene.clone()
     };
-    let reduction = PlanarReduction { plane, signs, op_depths, dropped, spatial: scene.clone() };
-    Ok((planar, reduction))
+    Ok((planar, PlanarReduction { plane, signs, op_depths, dropped, spatial: scene.clone() }))
+}
+
+/// The common hinge normal (the first hinge's world axis at q0) and every joint's world axis, or why the
+/// model is not planar.
+fn plane_normal(scene: &Scene, poses: &Poses<'_>) -> Result<(Vector3<f64>, Vec<Vector3<f64>>), Reduction> {
+    let mut axes = Vec::with_capacity(scene.joints.len());
+    for j in &scene.joints {
+        // A hinge's axis is the same in its joint frame and its child's frame; the model's joint i carries
+        // its body i.
+        axes.push(match (j.kind, poses.index(&j.child)?) {
+            (JointKindSpec::Revolute | JointKindSpec::Prismatic, Some(b)) => {
+                Some(poses.data.kin.body_rot[b] * poses.model.joints[b].axis)
+            }
+            _ => None,
+        });
+    }
+    let hinges: Vec<(usize, Vector3<f64>)> = scene
+        .joints
+        .iter()
+        .zip(&axes)
+        .enumerate()
+        .filter(|(_, (j, _))| j.kind == JointKindSpec::Revolute)
+        .filter_map(|(i, (_, a))| a.map(|a| (i, a)))
+        .collect();
+    let Some(&(h, normal)) = hinges.first() else {
+        return Err(spatial("no hinge fixes a plane".into(), false));
+    };
+    if let Some(&(i, _)) = hinges.iter().find(|(_, a)| a.cross(&normal).norm() > PARALLEL) {
+        let why = format!("hinge '{}' is not parallel to hinge '{}'", scene.joints[i].name, scene.joints[h].name);
+        return Err(spatial(why, false));
+    }
+    let mut out = Vec::with_capacity(axes.len());
+    for (j, axis) in scene.joints.iter().zip(axes) {
+        let why = match (j.kind, axis) {
+            (JointKindSpec::Ball, _) => format!("joint '{}' is a ball joint", j.name),
+            (JointKindSpec::Universal, _) => format!("joint '{}' is a universal joint (two hinges)", j.name),
+            (JointKindSpec::Prismatic, Some(a)) if a.dot(&normal).abs() > PARALLEL => {
+                format!("slide '{}' moves along the hinges' axis, out of their plane", j.name)
+            }
+            (_, Some(a)) => {
+                out.push(a);
+                continue;
+            }
+            (_, None) => format!("joint '{}' has no axis", j.name),
+        };
+        return Err(spatial(why, true));
+    }
+    Ok((normal, out))
+}
+
+/// Each cut as a planar one (a connect a pin, a weld a planar weld) and the equations dropped.
+fn planar_cuts(scene: &Scene, poses: &Poses<'_>, plane: &Plane) -> Result<(Vec<CutSpec>, Vec<String>), Reduction> {
+    let mut dropped = Vec::new();
+    let mut cuts = Vec::with_capacity(scene.cuts.len());
+    for cut in &scene.cuts {
+        let kind = match cut.kind {
+            CutKindSpec::Spherical => {
+                dropped.push(format!("connect '{}': 1 of 3 (along the normal)", cut.name));
+                CutKindSpec::Pin
+            }
+            CutKindSpec::Weld => {
+                dropped.push(format!("weld '{}': 3 of 6 (along the normal, turns about the plane's axes)", cut.name));
+                CutKindSpec::Weld
+            }
+            other => return Err(spatial(format!("cut '{}' is a {other:?} cut", cut.name), true)),
+        };
+        let compiled = poses.model.cuts.iter().find(|c| c.name == cut.name);
+        let Some(ClosurePrimitive::Coincident { a, b }) = compiled.and_then(|c| c.primitives.first()) else {
+            return Err(spatial(format!("cut '{}' has no point to pin", cut.name), true));
+        };
+        // A body's planar point is its spatial point turned to world axes at q0 (planar frames start at
+        // angle zero) and projected; point b is written out, as the spatial compile completed it.
+        let point = |at: &Attachment<Spatial>| plane.project(&(poses.pose(at.body).0 * at.point)).to_vec();
+        cuts.push(CutSpec {
+            kind,
+            point_a: point(a),
+            point_b: Some(point(b)),
+            axis: None,
+            axis_b: None,
+            ..cut.clone()
+        });
+    }
+    Ok((cuts, dropped))
+}
+
+/// A body with its centre of mass and geometry projected and its inertia about the normal, nᵀ I n.
+fn planar_body(spec: &BodySpec, poses: &Poses<'_>, plane: &Plane) -> Result<BodySpec, Reduction> {
+    let b = poses.index(&spec.name)?.ok_or_else(|| spatial("a body named 'ground'".into(), false))?;
+    let (r, _) = poses.pose(Some(b));
+    let body = &poses.model.bodies[b];
+    let inertia_world = r.matrix() * body.inertia * r.matrix().transpose();
+    let xy = |p: &Vector3<f64>| plane.project(&(r * p)).to_vec();
+    let geometry = body
+        .geometry
+        .iter()
+        .map(|g| match g {
+            Shape::Capsule { from, to, radius } => {
+                GeometrySpec::Capsule { from: xy(from), to: xy(to), radius: *radius }
+            }
+            Shape::Ball { center, radius } => GeometrySpec::Ball { center: xy(center), radius: *radius },
+        })
+        .collect();
+    Ok(BodySpec {
+        name: spec.name.clone(),
+        mass: spec.mass,
+        com: xy(&body.com),
+        inertia: Numbers::One(plane.normal.dot(&(inertia_world * plane.normal))),
+        geometry,
+    })
 }
 
 /// A spatial hinge or slide as a planar joint: q scaled by `sign` (springs, ranges and targets with it), the
