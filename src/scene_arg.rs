@@ -11,15 +11,17 @@ pub struct LoadedScene {
     pub scene: Scene,
     /// The file it came from, or `builtin:NAME`.
     pub label: String,
+    /// An MJCF model's reduction (planar, or why it stayed spatial), for `inspect` to say.
+    pub reduction: Option<String>,
 }
 
 /// Loads `arg` as an MJCF model, a scene file or a built-in scene name (see [`kinloop_mjcf::load::load`]).
 pub fn load_scene(arg: &str) -> Result<LoadedScene> {
-    let (scene, label, warning) = kinloop_mjcf::load::load_with_warning(arg)?;
-    if let Some(message) = warning {
+    let loaded = kinloop_mjcf::load::load_with_warning(arg)?;
+    if let Some(message) = loaded.warning {
         eprintln!("warning: {message}");
     }
-    Ok(LoadedScene { scene, label })
+    Ok(LoadedScene { scene: loaded.scene, label: loaded.label, reduction: loaded.reduction })
 }
 
 /// Parses a comma-separated list of numbers (`--q 0.1,0.2`), naming the flag in errors.

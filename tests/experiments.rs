@@ -538,3 +538,57 @@ fn bad_bench_and_timer_floor_arguments_are_refused_cleanly() {
         assert!(stderr.contains(flag) && !stderr.contains("panicked"), "{args:?}: {stderr}");
     }
 }
+
+/// Imported linkages feel right by default: the planar four-bar and slider-crank and the Delta robot written
+/// as MJCF for the importer's tests (`mjcf/tests/models/`, hand-written, not exported from kinloop's scenes)
+/// render on every pair of the renderability matrix for their kind, judged by the experiment's own
+/// [`evaluate`](kinloop::experiments::renderability::evaluate) over the touring hand's whole tour: the planar
+/// imports (reduced from their spatial writing) on `sim:paper`, `sim:falcon` and `sim:touch`, the Delta on
+/// the two spatial devices, on both networks, under both hands. The four-bar runs without its position
+/// actuator (kp 2 N m/rad on the crank, no force range, there for the MuJoCo agreement of actuator forces):
+/// with it, its handle on `sim:paper` at 50 ms does not render under either hand (the force scale chosen for
+/// the actuated linkage is a twelfth of the passive one's), a limit docs/benchmarks.md names.
+#[test]
+fn imported_linkages_render_by_default_on_devices_of_their_kind() {
+    use kinloop::experiments::common::sweep;
+    use kinloop::experiments::renderability::{evaluate, points, SECONDS};
+    use kinloop_client::user::HandKind;
+    let models = format!("{}/mjcf/tests/models", env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let four_bar = dir.path().join("planar-four-bar.xml");
+    let written = std::fs::read_to_string(format!("{models}/planar-four-bar.xml")).unwrap();
+    let actuator = written.find("<actuator>").and_then(|a| Some(a..written.find("</actuator>")? + 11)).unwrap();
+    std::fs::write(&four_bar, written.replacen(&written[actuator], "", 1)).unwrap();
+    let names = [
+        four_bar.to_str().unwrap().to_string(),
+        format!("{models}/planar-slider-crank.xml"),
+        format!("{models}/delta.xml"),
+    ];
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    let pairs = points(&names, &[HandKind::Soft, HandKind::Firm]).unwrap();
+    // Four-bar: one site, three devices; slider-crank: two sites, three devices; Delta: one site, two devices;
+    // each on two networks under two hands.
+    assert_eq!(pairs.len(), (3 + 2 * 3 + 2) * 2 * 2);
+    let results = sweep("imports", &pairs, 2, false, |p| evaluate(p, SECONDS)).unwrap();
+    let mut failing = Vec::new();
+    for r in &results {
+        let p = &r.point;
+        let said = format!(
+            "{}:{} on {:?}, {:?}, {:?} hand: clamped {:.2} %, RMS {:.2} mm, closure {:.1e} m, failures {:?}",
+            p.scene.rsplit('/').next().unwrap_or(""),
+            p.op,
+            p.device,
+            p.network,
+            p.hand,
+            r.clamped_fraction * 100.0,
+            r.device_op_rms_m * 1e3,
+            r.max_closure_error_m,
+            r.failures
+        );
+        eprintln!("{said}");
+        if !r.renders {
+            failing.push(said);
+        }
+    }
+    assert!(failing.is_empty(), "pairs that do not render:\n{}", failing.join("\n"));
+}

@@ -1,6 +1,7 @@
 //! `kinloop simulate` applies a scene's obstacles as the VE does, a kinloop program whose stdout is closed
 //! early (`kinloop inspect … | head`) ends quietly with success, and an MJCF model is a scene argument like a
-//! scene file (`kinloop import` writes the same scene), through real processes.
+//! scene file (`kinloop import` writes the same scene, and `inspect` says what its import reduced), through real
+//! processes.
 
 use std::process::{Command, Stdio};
 
@@ -60,7 +61,12 @@ fn a_closed_stdout_ends_the_program_quietly() {
 /// the same, bit for bit; `kinloop export --mjcf` of that scene writes a model the same reader takes.
 #[test]
 fn an_mjcf_model_is_a_scene_argument() {
-    let model = concat!(env!("CARGO_MANIFEST_DIR"), "/mjcf/tests/models/spatial-rssr.xml");
+    for model in ["spatial-rssr.xml", "planar-four-bar.xml"] {
+        a_model_moves_as_its_import(&format!("{}/mjcf/tests/models/{model}", env!("CARGO_MANIFEST_DIR")));
+    }
+}
+
+fn a_model_moves_as_its_import(model: &str) {
     let dir = tempfile::tempdir().unwrap();
     let toml = dir.path().join("rssr.toml");
     let out = kinloop(&["import", model, "-o", toml.to_str().unwrap()]);
@@ -73,4 +79,26 @@ fn an_mjcf_model_is_a_scene_argument() {
     let again = simulated_q(&xml);
     let gap = from_model.iter().zip(&again).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     assert!(gap < 1e-9, "exported and re-read, q departs by {gap:e}");
+}
+
+/// `kinloop inspect MODEL.xml` says what the import reduced: a planar four-bar written with hinges along y is a
+/// planar scene with a pin's two equations, the connect's third dropped and named; a spatial loop says why it
+/// stayed spatial.
+#[test]
+fn inspect_says_what_an_mjcf_import_reduced() {
+    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/mjcf/tests/models/");
+    let out = kinloop(&["inspect", &format!("{models}planar-four-bar.xml"), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["kind"], "planar");
+    assert_eq!((report["m"].as_u64(), report["dof"].as_u64()), (Some(2), Some(1)), "a pin's two equations");
+    let reduction = report["import"].as_str().unwrap();
+    assert!(reduction.starts_with("reduced to a planar scene: hinges along [0.0000, 1.0000, 0.0000]"), "{reduction}");
+    assert!(reduction.contains("dropped as redundant: connect 'coupler-rocker': 1 of 3"), "{reduction}");
+    let out = kinloop(&["inspect", &format!("{models}spatial-rssr.xml")]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.lines().any(|l| l.starts_with("MJCF import: kept spatial: ")), "{text}");
+    let out = kinloop(&["inspect", "paper-testbed", "--json"]);
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(report["import"].is_null(), "a scene file has no import to speak of");
 }

@@ -1,6 +1,6 @@
 //! An MJCF model → a kinloop [`Scene`]: `<compiler>`, `<default>`, `<option gravity>`, `<worldbody>`,
 //! `<equality>` and `<actuator>`, checked by compiling the scene before it is handed out, so a
-//! half-imported scene is never used.
+//! half-imported scene is never used; a model that moves in one plane becomes a planar scene ([`crate::planar`]).
 
 use std::path::Path;
 
@@ -13,6 +13,7 @@ use crate::defaults::{Defaults, MAIN};
 use crate::equality::read_equality;
 use crate::error::MjcfError;
 use crate::frames::Compiler;
+use crate::planar::{reduce, Reduction};
 use crate::tree::{finish_bodies, read_tree};
 use crate::warnings::Warnings;
 use crate::xml::{self, Element};
@@ -31,6 +32,8 @@ pub struct Import {
     pub scene: Scene,
     /// The unusable items and unknown elements.
     pub warnings: Warnings,
+    /// Whether the model was reduced to a planar scene, and what was dropped (or why it was not).
+    pub reduction: Reduction,
 }
 
 /// Reads the model file at `path` (and its includes).
@@ -91,9 +94,13 @@ fn import_tree(root: &Element) -> Result<Import, MjcfError> {
         ops: tree.ops,
         obstacles: Vec::new(),
     };
-    Model::<Spatial>::compile(&scene, &file)
+    let model = Model::<Spatial>::compile(&scene, &file)
         .map_err(|e| MjcfError::Scene { file: file.clone(), message: e.to_string() })?;
-    Ok(Import { scene, warnings })
+    let (scene, reduction) = reduce(scene, &model, &file);
+    if let Reduction::Spatial { why, near_planar: true } = &reduction {
+        warnings.kept_spatial = Some(why.clone());
+    }
+    Ok(Import { scene, warnings, reduction })
 }
 
 fn label(e: &Element) -> String {

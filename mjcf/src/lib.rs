@@ -22,6 +22,7 @@
 //! | [`equality`] | `connect` and `weld` as cuts |
 //! | [`actuator`] | `position` actuators as joint PD actuators |
 //! | [`import`] | the whole model → a scene that compiles |
+//! | [`planar`] | a model that moves in one plane → a planar scene (redundant equations dropped) |
 //! | [`export`] | a scene → MJCF, with the encodings MJCF needs (universal, revolute and slider cuts, planar) |
 //! | [`warnings`] | what kinloop cannot use, listed by name in one warning |
 //! | [`load`] | a command line's scene argument: `.xml` through the importer, anything else as before |
@@ -35,6 +36,7 @@ pub mod frames;
 pub mod import;
 pub mod inertia;
 pub mod load;
+pub mod planar;
 pub mod tree;
 pub mod warnings;
 pub mod xml;

@@ -28,19 +28,37 @@ pub fn is_mjcf(arg: &str) -> bool {
 /// Loads `arg`: returns the scene and the label its messages carry (the path, or `builtin:NAME`); an MJCF
 /// model's warning (what it holds that kinloop cannot use) goes to the log.
 pub fn load(arg: &str) -> Result<(Scene, String), LoadError> {
-    let (scene, label, warning) = load_with_warning(arg)?;
-    if let Some(message) = warning {
+    let loaded = load_with_warning(arg)?;
+    if let Some(message) = loaded.warning {
         tracing::warn!("{message}");
     }
-    Ok((scene, label))
+    Ok((loaded.scene, loaded.label))
 }
 
-/// As [`load`], handing the MJCF model's one warning to the caller (a command line prints it).
-pub fn load_with_warning(arg: &str) -> Result<(Scene, String, Option<String>), LoadError> {
+/// A scene argument as loaded, with what an MJCF model's import has to say.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Loaded {
+    /// The scene.
+    pub scene: Scene,
+    /// The label its messages carry (the path, or `builtin:NAME`).
+    pub label: String,
+    /// An MJCF model's one warning (what it holds that kinloop cannot use).
+    pub warning: Option<String>,
+    /// An MJCF model's reduction: what was reduced to a planar scene, or why the scene stayed spatial.
+    pub reduction: Option<String>,
+}
+
+/// As [`load`], handing the MJCF model's warning and reduction to the caller (a command line prints them).
+pub fn load_with_warning(arg: &str) -> Result<Loaded, LoadError> {
     if is_mjcf(arg) {
         let import = import_file(std::path::Path::new(arg))?;
-        return Ok((import.scene, arg.to_string(), import.warnings.message(arg)));
+        return Ok(Loaded {
+            warning: import.warnings.message(arg),
+            reduction: Some(import.reduction.describe()),
+            scene: import.scene,
+            label: arg.to_string(),
+        });
     }
     let (scene, label) = builtin::load(arg)?;
-    Ok((scene, label, None))
+    Ok(Loaded { scene, label, warning: None, reduction: None })
 }

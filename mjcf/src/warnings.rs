@@ -7,6 +7,8 @@ pub struct Warnings {
     pub unusable: Vec<String>,
     /// Elements the reader does not know, with their lines.
     pub unknown: Vec<String>,
+    /// Why a model whose hinges are all parallel was kept spatial (a ball joint, a slide along the hinges).
+    pub kept_spatial: Option<String>,
 }
 
 impl Warnings {
@@ -22,7 +24,7 @@ impl Warnings {
 
     /// True when there is nothing to report.
     pub fn is_empty(&self) -> bool {
-        self.unusable.is_empty() && self.unknown.is_empty()
+        self.unusable.is_empty() && self.unknown.is_empty() && self.kept_spatial.is_none()
     }
 
     /// The one warning for `file`, or `None` when there is nothing to say.
@@ -36,6 +38,9 @@ impl Warnings {
         }
         if !self.unknown.is_empty() {
             parts.push(format!("unknown elements, skipped: {}", self.unknown.join(", ")));
+        }
+        if let Some(why) = &self.kept_spatial {
+            parts.push(format!("its hinges are parallel, but it is kept spatial: {why}"));
         }
         Some(format!("{file}: {}", parts.join(". ")))
     }

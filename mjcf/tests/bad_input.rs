@@ -78,3 +78,22 @@ fn a_failed_model_is_never_half_used() {
         other => panic!("expected an error at line 3, got {other:?}"),
     }
 }
+
+/// A model that looks planar but is not stays spatial, and says why: in its one warning when its hinges are
+/// all parallel (a slide along them), only in the reduction's description when they are not.
+#[test]
+fn a_model_that_is_not_planar_stays_spatial_and_says_why() {
+    let lift =
+        r#"<body name="lift" pos="0.3 0 0"><joint name="up" type="slide" axis="0 0 1"/><geom size="0.02"/></body>"#;
+    let import = import_str(&model(&format!("{GOOD_BODY}\n{lift}"), ""), "lift.xml", Path::new(".")).unwrap();
+    assert_eq!(import.scene.kind, kinloop_linkage::math::space::SceneKind::Spatial);
+    let message = import.warnings.message("lift.xml").expect("a warning");
+    assert!(message.contains("kept spatial: slide 'up' moves along the hinges' axis"), "{message}");
+    let tilted = GOOD_BODY.replace("name=\"crank\"", "name=\"other\"").replace("pivot", "tilt").replace("tip", "t2");
+    let tilted = tilted.replace("axis=\"0 0 1\"", "axis=\"1 0 0\"");
+    let import = import_str(&model(&format!("{GOOD_BODY}\n{tilted}"), ""), "t.xml", Path::new(".")).unwrap();
+    assert_eq!(import.warnings.message("t.xml"), None);
+    assert_eq!(import.reduction.describe(), "kept spatial: hinge 'tilt' is not parallel to hinge 'pivot'");
+    let import = import_str(&model(GOOD_BODY, ""), "one.xml", Path::new(".")).unwrap();
+    assert_eq!(import.scene.kind, kinloop_linkage::math::space::SceneKind::Planar);
+}

@@ -15,6 +15,7 @@ use kinloop_linkage::model::data::Data;
 use kinloop_linkage::model::scene::Scene;
 use kinloop_linkage::model::JointKind;
 use kinloop_linkage::Model;
+use kinloop_mjcf::planar::Reduction;
 use kinloop_mjcf::{export, import_file};
 use nalgebra::DVector;
 
@@ -86,7 +87,22 @@ fn shipped_scenes_export_load_in_mujoco_and_reimport_to_the_same_motion() {
         assert_eq!(mj["stepped_finite"].as_bool(), Some(true), "{name}: MuJoCo's simulation went non-finite");
         let import = import_file(path).unwrap_or_else(|e| panic!("{name}: {e}"));
         let steps = 300;
-        let theirs = motion::<Spatial>(&import.scene, name, steps);
+        // A planar scene exported re-imports as planar (its hinges along +z keep their sign); a spatial one
+        // stays spatial.
+        let mut theirs = match import.scene.kind {
+            SceneKind::Planar => motion::<Planar>(&import.scene, name, steps),
+            SceneKind::Spatial => motion::<Spatial>(&import.scene, name, steps),
+        };
+        assert_eq!(import.scene.kind, original.kind, "{name}: {}", import.reduction.describe());
+        if let Reduction::Planar(r) = &import.reduction {
+            for (joint, sign) in import.scene.joints.iter().zip(&r.signs) {
+                for (n, q) in theirs.iter_mut().flatten() {
+                    if *n == joint.name {
+                        q.iter_mut().for_each(|x| *x *= sign);
+                    }
+                }
+            }
+        }
         let carried = carried(original);
         let ours = match original.kind {
             SceneKind::Planar => motion::<Planar>(&carried, name, steps),

@@ -21,7 +21,9 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     if let Some(message) = import.warnings.message(&label) {
         eprintln!("warning: {message}");
     }
-    let text = format!("# Imported by `kinloop import` from {label}.\n{}", import.scene.to_toml_string());
+    let reduction = import.reduction.describe();
+    eprintln!("{label}: {reduction}");
+    let text = format!("# Imported by `kinloop import` from {label}: {reduction}.\n{}", import.scene.to_toml_string());
     match &args.out {
         Some(path) => std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display())),
         None => {

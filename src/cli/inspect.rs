@@ -44,10 +44,12 @@ pub struct InspectArgs {
 /// Runs `kinloop inspect`.
 pub fn run(args: &InspectArgs) -> Result<()> {
     let loaded = load_scene(&args.scene)?;
-    let report = match loaded.scene.kind {
+    let mut report = match loaded.scene.kind {
         SceneKind::Planar => inspect::<Planar>(args, &loaded.scene, &loaded.label)?,
         SceneKind::Spatial => inspect::<Spatial>(args, &loaded.scene, &loaded.label)?,
     };
+    // An MJCF model says what its import reduced (or why it stayed spatial).
+    report["import"] = json!(loaded.reduction);
     if args.json {
         println!("{report}");
     } else {
@@ -174,6 +176,9 @@ fn print_human(r: &serde_json::Value) {
         r["dof"],
         text(&r["op"])
     );
+    if let Some(reduction) = r["import"].as_str() {
+        println!("MJCF import: {reduction}");
+    }
     for f in &idle {
         println!(
             "idle freedom: body '{}' spins about [{}] through [{}], moving nothing else (kept in the model, with the body's own inertia about it)",

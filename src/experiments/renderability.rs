@@ -86,7 +86,7 @@ impl Network {
 /// One pair of the matrix.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Point {
-    /// Built-in scene name.
+    /// The scene argument: a built-in scene's name, a scene file or an MJCF model.
     pub scene: String,
     /// Operational point.
     pub op: String,
@@ -132,14 +132,15 @@ pub struct PointResult {
     pub gains: Vec<f64>,
 }
 
-/// Every (scene, operational point, the scene's kind) of `scenes` (all built-in scenes when empty): the rows
+/// Every (scene, operational point, the scene's kind) of `scenes` (all built-in scenes when empty; each a
+/// scene argument: a built-in name, a scene file or an MJCF model, whose import decides its kind): the rows
 /// of the matrices.
 pub fn scene_ops(scenes: &[&str]) -> Result<Vec<(String, String, SceneKind)>> {
     let names: Vec<&str> =
         if scenes.is_empty() { builtin::SCENE_FILES.iter().map(|(n, _)| *n).collect() } else { scenes.to_vec() };
     let mut out = Vec::new();
     for name in names {
-        let scene = builtin::scene(name).context("built in")??;
+        let (scene, _) = kinloop_mjcf::load::load(name)?;
         out.extend(scene.ops.iter().map(|op| (name.to_owned(), op.name.clone(), scene.kind)));
     }
     Ok(out)
@@ -165,7 +166,7 @@ pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<Point>> {
 
 /// Runs one pair for `seconds` and judges it.
 pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
-    let scene = builtin::scene(&point.scene).context("built in")??;
+    let (scene, _) = kinloop_mjcf::load::load(&point.scene)?;
     let mut client = ClientPlan::new("user", &point.op, point.device);
     client.user = UserSpec::Hand(HandSpec::touring(point.hand));
     let client = client.with_link(point.network.link(0x5eed));
