@@ -5,7 +5,7 @@
 //! finite with its loops closed, every snapshot sent passes the receiver's wire checks and goes to a present
 //! user, and the metrics add up.
 
-mod support;
+use crate::support;
 
 use std::time::Duration;
 

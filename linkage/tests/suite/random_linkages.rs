@@ -1,7 +1,7 @@
 //! Property tests on random linkages: random trees of revolute and prismatic joints, closed by random pins
 //! (some of them degenerate or redundant), in the plane and in space.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::op_space::op_space_inertia;

@@ -1,6 +1,6 @@
 //! The time-domain passivity controller keeps a delayed coupling from pumping energy into the VE.
 
-mod support;
+use crate::support;
 
 use std::collections::VecDeque;
 use std::time::Duration;

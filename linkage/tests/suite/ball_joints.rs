@@ -5,7 +5,7 @@
 //! found and counted, and the operational-space terms stay finite. Bad input is a typed error naming the
 //! file, the key and the value.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::configuration::{difference, integrate};
@@ -24,8 +24,8 @@ use kinloop_linkage::model::scene::Scene;
 use kinloop_linkage::model::Model;
 use nalgebra::{DMatrix, DVector};
 
-const RSSR: &str = include_str!("scenes/rssr-ball.toml");
-const DELTA: &str = include_str!("../../scenes/delta.toml");
+const RSSR: &str = include_str!("../scenes/rssr-ball.toml");
+const DELTA: &str = include_str!("../../../scenes/delta.toml");
 
 fn scene(text: &str, file: &str) -> Scene {
     Scene::from_toml_str(text, file).unwrap_or_else(|e| panic!("{e}"))

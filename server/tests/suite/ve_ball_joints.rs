@@ -1,6 +1,6 @@
 //! The VE with ball joints (nq ≠ nv): the Delta robot of the linkage tests, pushed by a user.
 
-mod support;
+use crate::support;
 
 use std::time::Duration;
 
@@ -18,7 +18,7 @@ fn a_ball_jointed_delta_runs_in_the_ve() {
     use kinloop_linkage::math::space::Spatial;
     use kinloop_linkage::model::scene::Scene;
     use kinloop_protocol::{LocalModelForm, RefusalReason};
-    let text = include_str!("../../scenes/delta.toml");
+    let text = include_str!("../../../scenes/delta.toml");
     let scene = Scene::from_toml_str(text, "scenes/delta.toml").unwrap();
     let model: kinloop_linkage::model::Model<Spatial> =
         kinloop_linkage::model::Model::compile(&scene, "delta").unwrap();

@@ -1,7 +1,7 @@
 //! Physics checked against independent computations: energy identities, finite differences of the
 //! Lagrangian, null-space (independent-coordinates) dynamics, conservation laws and closed forms.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::bias::bias_forces;
@@ -76,7 +76,7 @@ fn coriolis_terms_match_lagrange_equations() {
 fn check_bias<S: Space>(name: &str, model: &Model<S>) {
     // Written for additive configurations (q ± h q̇, one body per tree joint); ball-jointed models
     // (nq ≠ nv, internal bodies per ball) have these checks along the configuration update in
-    // tests/ball_joints.rs.
+    // tests/suite/ball_joints.rs.
     if model.has_balls() {
         return;
     }

@@ -1,7 +1,7 @@
 //! Loop closure over time, redundant closures, the plain path for loop-free scenes, and the unit
 //! consistency of constraint counting.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};

@@ -5,7 +5,7 @@
 //! moves it along its axis), the closures' null space comes from nalgebra's SVD, and the mobility is the
 //! rank of the OP's Jacobian on that null space: the count must be 3 minus it.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::constraint_directions::{constraint_directions, DEFAULT_THRESHOLD};

@@ -4,7 +4,7 @@
 //! dynamics, steps, operational-space inertia and assembly return typed errors or finite numbers, and a step
 //! that fails leaves the state as it was.
 
-mod common;
+use crate::common;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 

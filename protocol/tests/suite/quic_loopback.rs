@@ -1,7 +1,7 @@
 //! Real QUIC over 127.0.0.1: the handshake, its distinct failures, datagrams, oversize snapshots and the
 //! emulated link's delay. Every test is bounded by a timeout and uses ephemeral ports.
 
-mod support;
+use crate::support;
 
 use std::future::Future;
 use std::net::SocketAddr;

@@ -5,7 +5,7 @@
 //! penetrating `load / k`, free motion conserving energy with RK4, and walls that never give energy back.
 //! Bad values are errors naming the file, the key and the value.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::assemble::assemble;
@@ -367,7 +367,7 @@ fn a_range_wall_creates_no_energy() {
 /// Errors for bad new keys: each names the file, the key and the value.
 #[test]
 fn bad_ranges_springs_and_dampers_are_errors_naming_file_key_and_value() {
-    let base = include_str!("../../scenes/guided-slider-crank.toml");
+    let base = include_str!("../../../scenes/guided-slider-crank.toml");
     let cases: &[(&str, &str, &[&str])] = &[
         ("range = [0.0, 1.9]", "range = [1.0, 0.5]", &["joint[0] (crank-pivot).range", "lo < hi", "[1, 0.5]"]),
         ("range = [0.0, 1.9]", "range = [0.0, nan]", &["joint[0] (crank-pivot).range[1]", "finite", "NaN"]),

@@ -1,6 +1,6 @@
 //! Scene validation names the file and the key; assembly finds the nearest closed configuration.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::assemble::assemble;

@@ -1,6 +1,6 @@
 //! The codec refuses what a broken or hostile peer may send, and says what and where.
 
-mod support;
+use crate::support;
 
 use kinloop_protocol::bench::{testbed_shape, testbed_snapshot};
 use kinloop_protocol::codec::limits::{MAX_DATAGRAM_MESSAGE_BYTES, MAX_LIST_ENTRIES, MAX_STRING_BYTES};

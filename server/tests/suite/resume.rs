@@ -3,7 +3,7 @@
 //! that breaks the loops, does not fit the scene or arrives while users are present is refused and counted,
 //! leaving the VE as it was. Closure is checked with a workspace of the test's own.
 
-mod support;
+use crate::support;
 
 use std::time::Duration;
 

@@ -1,7 +1,7 @@
 //! VeCore in virtual time: the paper's manipulation, users pulling against each other, joins and leaves,
 //! hostile uplinks, passivity.
 
-mod support;
+use crate::support;
 
 use std::time::Duration;
 
@@ -633,7 +633,7 @@ fn snapshots_failing_the_wire_checks_are_withheld_for_every_user_of_their_op() {
     use kinloop_server::core::VeEvent;
     use nalgebra::Vector2;
 
-    let text = include_str!("../../scenes/serial-arm.toml");
+    let text = include_str!("../../../scenes/serial-arm.toml");
     let hand = "mass = 0.5\ncom = [0.1, 0.0]\ninertia = 1.6666666666666667e-3";
     assert!(text.contains(hand), "the serial arm's hand as this test knows it");
     let wrist_damping = "q0 = -0.9\ndamping = 0.02";

@@ -5,7 +5,7 @@
 //! configurations reached by re-closing the loops, and free motion under gravity: closed loops and
 //! conserved energy.
 
-mod common;
+use crate::common;
 
 use std::f64::consts::PI;
 

@@ -1,7 +1,7 @@
 //! The local model of interaction (eq 11, 13): its two forms agree, and it predicts the full dynamics over
 //! the short horizons between VE updates.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::op_space::op_space_inertia;

@@ -1,6 +1,6 @@
 //! Every message survives encode → decode unchanged, and encodes to the same bytes again.
 
-mod support;
+use crate::support;
 
 use kinloop_protocol::codec::{decode_control, decode_datagram, encode_control, encode_datagram};
 use proptest::prelude::*;

@@ -1,0 +1,8 @@
+//! The client crate's integration tests in one binary: the generic algorithms they exercise are
+//! compiled and optimised once rather than once per test file (release builds do not share generic
+//! instantiations across crates). Tests that install a counting global allocator keep binaries of their own.
+
+mod bench_hooks;
+mod cli;
+mod device;
+mod hand;

@@ -1,0 +1,12 @@
+//! The protocol crate's integration tests in one binary: the generic algorithms they exercise are
+//! compiled and optimised once rather than once per test file (release builds do not share generic
+//! instantiations across crates). Tests that install a counting global allocator keep binaries of their own.
+
+#[path = "../support/mod.rs"]
+mod support;
+
+mod bench_hooks;
+mod emulator;
+mod quic_loopback;
+mod roundtrip;
+mod validation;
