@@ -3,7 +3,7 @@
 //! `--check` reads positions with forces never enabled and closes the device; and without a library the
 //! command fails naming every place it looked and the variables to set.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

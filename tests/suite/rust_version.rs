@@ -1,7 +1,7 @@
 //! The Rust version the workspace promises (`rust-version` in Cargo.toml, and the README's "Set up") is one
 //! that every locked dependency accepts: a newcomer with that Rust can build the checkout.
 
-mod common;
+use crate::common;
 
 use common::workspace::{self, rust_version};
 

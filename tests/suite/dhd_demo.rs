@@ -2,7 +2,7 @@
 //! as `kinloop-client --device dhd` (library search, checks, safety), here the fake DHD library
 //! (`fakes/fake-dhd`) found through `KINLOOP_DHD_LIB`; judged on the forces the fake received.
 
-mod common;
+use crate::common;
 
 use std::process::{Command, Output};
 use std::time::Duration;

@@ -1,7 +1,7 @@
 //! End to end over real QUIC on 127.0.0.1: a multi-user session through the server and client drivers,
 //! the refusals a user meets through them, and the scene errors `kinloop-server --scene` reports.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

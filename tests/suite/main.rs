@@ -1,0 +1,21 @@
+//! The root package's fast tests that run no child processes, in one binary: each test binary of a release
+//! build compiles and optimises its own copy of the generic code it reaches, so one binary builds far faster
+//! than one per file. Tests that re-run their binary as a child process (`common::child`) and the slow tier
+//! keep binaries of their own.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod bench_markdown;
+mod devices_cli;
+mod dhd_demo;
+mod e2e_session;
+mod generate;
+mod harness;
+mod renderability;
+mod robustness;
+mod rust_version;
+mod scene_cli;
+mod unit_invariance;
+mod units_regressions;
+mod view_cli;
