@@ -319,12 +319,16 @@ impl Server {
         });
         for spec in config.room_specs() {
             let name = spec.name.clone();
-            if let Err(error) = host.open(spec) {
+            if let Err(error) = host.open(spec, false) {
                 executor.shutdown();
                 return Err(ServerError::Room { room: name, source: Box::new(error) });
             }
         }
-        // The fleet hears of the server first, then of its rooms (later rooms as they open).
+        // The fleet hears of the server first, then of its rooms (later rooms as they open); the rooms its
+        // allocations ask for are created through the host.
+        if let Some(fleet) = &config.fleet {
+            fleet.offer_rooms(Arc::downgrade(&host) as std::sync::Weak<dyn crate::fleet::allocation::RoomCreator>);
+        }
         host.announce(local_addr);
         let accept = tokio::spawn(accept_loop(endpoint.clone(), host.clone()));
         Ok(ServerHandle { local_addr, fingerprint: identity.fingerprint.clone(), host, endpoint, accept })
@@ -470,14 +474,15 @@ impl OpenRoom {
 
 /// Opens a room: compiles its scene, builds its VE and rings, starts its recorder, view and collector, and
 /// places it on the executor (refused when the budget has no room).
-pub(crate) fn open_room(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError> {
+/// `allocated`: opened for a fleet's allocation, which counted it.
+pub(crate) fn open_room(host: &rooms::Host, spec: rooms::RoomSpec, allocated: bool) -> Result<OpenRoom, ServerError> {
     match spec.scene.kind {
-        SceneKind::Planar => open_room_with::<Planar>(host, spec),
-        SceneKind::Spatial => open_room_with::<Spatial>(host, spec),
+        SceneKind::Planar => open_room_with::<Planar>(host, spec, allocated),
+        SceneKind::Spatial => open_room_with::<Spatial>(host, spec, allocated),
     }
 }
 
-fn open_room_with<S: Space>(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError>
+fn open_room_with<S: Space>(host: &rooms::Host, spec: rooms::RoomSpec, allocated: bool) -> Result<OpenRoom, ServerError>
 where
     VeCore<S>: Send,
 {
@@ -536,7 +541,7 @@ where
         stop: stop.clone(),
     };
     let (shutdown, _) = watch::channel(false);
-    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone()));
+    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone(), allocated));
     let on_close = {
         let (shutdown, fleet) = (shutdown.clone(), fleet.clone());
         Box::new(move |_reason: &str| {

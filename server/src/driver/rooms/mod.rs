@@ -45,8 +45,9 @@ pub(crate) struct Host {
 }
 
 impl Host {
-    /// Opens a room and adds it to the table; a name already open is refused.
-    pub fn open(&self, spec: RoomSpec) -> Result<(), ServerError> {
+    /// Opens a room and adds it to the table; a name already open is refused. `allocated`: opened for a
+    /// fleet's allocation, which counted it.
+    pub fn open(&self, spec: RoomSpec, allocated: bool) -> Result<(), ServerError> {
         if self.table.lock().map(|t| t.contains_key(&spec.name)).unwrap_or(true) {
             return Err(ServerError::Thread {
                 which: "rooms",
@@ -54,7 +55,7 @@ impl Host {
             });
         }
         let name = spec.name.clone();
-        let opened = open_room(self, spec)?;
+        let opened = open_room(self, spec, allocated)?;
         if self.announced.load(Ordering::Acquire) {
             opened.shared.fleet.opened();
         }
