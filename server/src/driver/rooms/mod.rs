@@ -28,6 +28,8 @@ pub const DEFAULT_ROOM: &str = "default";
 
 /// The server's rooms and what opening another needs.
 pub(crate) struct Host {
+    /// The web view's site (`--view`), every room on it.
+    pub view: Option<crate::view::ViewSite>,
     /// The server's endpoint.
     pub endpoint: kinloop_protocol::quic::Endpoint,
     /// The rooms' executor.
@@ -79,11 +81,6 @@ impl Host {
         if let Some(fleet) = &self.template.fleet {
             fleet.send(event);
         }
-    }
-
-    /// Whether no room is open.
-    pub fn is_empty(&self) -> bool {
-        self.table.lock().map(|t| t.is_empty()).unwrap_or(true)
     }
 
     /// Applies `f` to the first room by name.
