@@ -56,6 +56,32 @@ fn start_server(feed: fleet::FleetFeed) -> ServerHandle {
     Server::start(config).expect("the server starts")
 }
 
+/// A fake sidecar, the adapter and a server (its default room counted).
+struct Fleet {
+    sidecar: FakeSidecar,
+    journal: Journal,
+    adapter: AgonesAdapter,
+    server: ServerHandle,
+}
+
+impl Fleet {
+    async fn start() -> Fleet {
+        let sidecar = FakeSidecar::start().await.expect("fake sidecar");
+        let journal = sidecar.journal().clone();
+        let (adapter, feed) = adapter_for(&sidecar).await;
+        let server = start_server(feed);
+        until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+        Fleet { sidecar, journal, adapter, server }
+    }
+
+    /// Drains the server, lets the adapter call Shutdown, stops the sidecar.
+    async fn finish(self) {
+        self.server.shutdown().await.expect("drained");
+        self.adapter.finished(Duration::from_secs(10)).await;
+        let _ = self.sidecar.stop().await;
+    }
+}
+
 /// Sends `server` an admin command and asserts it was done.
 async fn admin(server: &ServerHandle, command: AdminCommand) {
     let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
@@ -222,17 +248,13 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
 /// whose last room closes while it serves on is Ready again, and one that drains is not (it shuts down).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn admin_rooms_are_counted_a_server_with_none_left_is_ready_again_and_one_that_drains_shuts_down() {
-    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
-    let journal = sidecar.journal().clone();
-    let (adapter, feed) = adapter_for(&sidecar).await;
-    let server = start_server(feed);
+    let Fleet { sidecar, journal, adapter, server } = Fleet::start().await;
     let create = |name: &str| AdminCommand::CreateRoom {
         name: name.into(),
         scene: "fourbar-crank-rocker".into(),
         token_file: String::new(),
         max_users: 4,
     };
-    until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
 
     admin(&server, create("second")).await;
     until("the admin's room counted", || journal.counter(ROOMS_COUNTER) == 2).await;
@@ -259,17 +281,14 @@ async fn admin_rooms_are_counted_a_server_with_none_left_is_ready_again_and_one_
 /// sidecar streams every counter change) create nothing more.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_allocation_creates_its_room_a_client_joins_it_and_closing_it_lowers_the_count() {
-    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
-    let journal = sidecar.journal().clone();
-    let (adapter, feed) = adapter_for(&sidecar).await;
-    let server = start_server(feed);
-    until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+    let fleet = Fleet::start().await;
+    let (journal, server) = (fleet.journal.clone(), &fleet.server);
     assert!(count(&journal, &Call::WatchGameServer) >= 1, "the GameServer is watched once the server is Ready");
 
     journal.allocate(ROOMS_COUNTER, &[(ROOM_ANNOTATION, "lab-3"), (SCENE_ANNOTATION, "paper-testbed")]);
     let rooms = || server.room_stats().into_iter().map(|r| r.name).collect::<Vec<_>>();
     until("the allocated room open", || rooms().contains(&"lab-3".to_string())).await;
-    let alice = join_room(&server, "alice", "lab-3").await;
+    let alice = join_room(server, "alice", "lab-3").await;
     let label = user_label("lab-3", "alice", alice.welcome.user_id);
     until("alice listed in her room", || journal.list(USERS_LIST) == vec![label.clone()]).await;
     assert_eq!(journal.counter(ROOMS_COUNTER), 2, "the allocation counted the room; the server did not again");
@@ -277,14 +296,12 @@ async fn an_allocation_creates_its_room_a_client_joins_it_and_closing_it_lowers_
     assert_eq!(ups, 1, "the server raised the count for its default room only");
     assert_eq!(rooms(), vec!["default".to_string(), "lab-3".to_string()], "one room for one allocation");
 
-    admin(&server, remove("lab-3")).await;
+    admin(server, remove("lab-3")).await;
     until("the closed room uncounted", || journal.counter(ROOMS_COUNTER) == 1).await;
     until("alice unlisted", || journal.list(USERS_LIST).is_empty()).await;
     drop(alice);
-    server.shutdown().await.expect("drained");
-    adapter.finished(Duration::from_secs(10)).await;
+    fleet.finish().await;
     assert_eq!(journal.counter(ROOMS_COUNTER), 0);
-    let _ = sidecar.stop().await;
 }
 
 /// An allocation for a scene the server cannot load is refused with the reason (on the GameServer, for the
@@ -292,12 +309,9 @@ async fn an_allocation_creates_its_room_a_client_joins_it_and_closing_it_lowers_
 /// again.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_allocation_for_a_scene_the_server_cannot_load_is_refused_and_the_count_restored() {
-    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
-    let journal = sidecar.journal().clone();
-    let (adapter, feed) = adapter_for(&sidecar).await;
-    let server = start_server(feed);
-    until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
-    admin(&server, remove("default")).await;
+    let fleet = Fleet::start().await;
+    let (journal, server) = (fleet.journal.clone(), &fleet.server);
+    admin(server, remove("default")).await;
     until("Ready with no room", || count(&journal, &Call::Ready) == 2).await;
 
     journal.allocate(ROOMS_COUNTER, &[(ROOM_ANNOTATION, "lab-4"), (SCENE_ANNOTATION, "no-such-scene")]);
@@ -311,9 +325,7 @@ async fn an_allocation_for_a_scene_the_server_cannot_load_is_refused_and_the_cou
     // The reason, for the lobby, on the GameServer.
     let reason = journal.annotations().get(REFUSED_ANNOTATION).cloned().unwrap_or_default();
     assert!(reason.contains("lab-4") && reason.contains("no-such-scene"), "{reason:?}");
-    server.shutdown().await.expect("drained");
-    adapter.finished(Duration::from_secs(10)).await;
-    let _ = sidecar.stop().await;
+    fleet.finish().await;
 }
 
 /// `kinloop-server --agones` with no sidecar stops within a few seconds, exit code 1, saying why in one line.
