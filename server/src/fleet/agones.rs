@@ -29,6 +29,7 @@ use tokio::task::JoinHandle;
 use super::allocation::{
     room_request, AllocationRefused, AllocationTracker, RoomCreator, RoomRequest, MAX_REASON, REFUSED_ANNOTATION,
 };
+use super::sidecar::{describe, FIRST_BACKOFF, MAX_BACKOFF};
 use super::watch::GameServerWatch;
 use super::{FleetEvent, FleetEvents, Heartbeat, RoomsSlot};
 
@@ -40,9 +41,6 @@ pub const USERS_LIST: &str = "users";
 pub const DEFAULT_CONNECT_WITHIN: Duration = Duration::from_secs(3);
 /// How long one call is retried before it is given up (and reported).
 pub const RETRY_FOR: Duration = Duration::from_secs(10);
-/// The first wait between retries; it doubles up to [`MAX_BACKOFF`].
-pub(super) const FIRST_BACKOFF: Duration = Duration::from_millis(100);
-pub(super) const MAX_BACKOFF: Duration = Duration::from_secs(2);
 /// The SDK's port when neither the configuration nor `AGONES_SDK_GRPC_PORT` names one.
 const DEFAULT_SDK_PORT: u16 = 9357;
 
@@ -261,18 +259,6 @@ where
         }
     }
     false
-}
-
-/// The SDK's error with its causes (its own text for a failed call is only "rpc failure").
-pub(super) fn describe(error: &agones::errors::Error) -> String {
-    let mut text = error.to_string();
-    let mut source = std::error::Error::source(error);
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text
 }
 
 /// Pings every `period` while `heartbeat` advances; reopens the health stream (with backoff) when it ends.

@@ -12,6 +12,8 @@
 pub mod agones;
 pub mod allocation;
 #[cfg(feature = "agones")]
+mod sidecar;
+#[cfg(feature = "agones")]
 mod watch;
 
 use std::net::SocketAddr;

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use agones::{GameServer, Sdk};
 use futures_util::stream::{BoxStream, StreamExt};
 
-use super::agones::{describe, FIRST_BACKOFF, MAX_BACKOFF};
+use super::sidecar::{describe, FIRST_BACKOFF, MAX_BACKOFF};
 
 /// The open watch, if any, and how often in a row it failed.
 pub(super) struct GameServerWatch {

@@ -38,6 +38,7 @@ pub mod tap;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use kinloop_linkage::{error::SceneError, model::scene::Scene};
 use kinloop_protocol::SessionShape;
@@ -49,7 +50,6 @@ use crate::access::Access;
 use crate::gateway::Gateway;
 use compose::UserInfo;
 use draw::SceneInfo;
-pub use site::{RoomLink, ViewSite};
 pub use tap::ViewTap;
 
 /// Frames per second a live view aims for by default.
@@ -286,6 +286,47 @@ impl Drop for ViewHandle {
         self.site.remove(&self.name);
         if let Some(hub) = &self.hub {
             hub.abort();
+        }
+    }
+}
+
+/// A running site: the HTTP server on the view's address.
+pub struct ViewSite {
+    addr: SocketAddr,
+    pub(crate) site: Arc<site::Site>,
+    serve: Option<JoinHandle<()>>,
+}
+
+impl ViewSite {
+    /// Binds `listen` and serves the rooms added to it. Must be called inside a tokio runtime.
+    pub fn start(listen: SocketAddr) -> Result<ViewSite, ViewError> {
+        tokio::runtime::Handle::try_current().map_err(|_| ViewError::NoRuntime)?;
+        let site = Arc::new(site::Site::default());
+        let (addr, serve) = http::serve(listen, site.clone())?;
+        Ok(ViewSite { addr, site, serve: Some(serve) })
+    }
+
+    /// Where the pages are served.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Stops serving (after the rooms' pages have closed, at most a few seconds).
+    pub async fn shutdown(mut self) {
+        self.site.shutdown.send_replace(true);
+        if let Some(mut serve) = self.serve.take() {
+            if tokio::time::timeout(Duration::from_secs(3), &mut serve).await.is_err() {
+                serve.abort();
+            }
+        }
+    }
+}
+
+impl Drop for ViewSite {
+    fn drop(&mut self) {
+        self.site.shutdown.send_replace(true);
+        if let Some(serve) = &self.serve {
+            serve.abort();
         }
     }
 }

@@ -1,18 +1,15 @@
 //! One view address for all of a server's rooms: `/` shows the default room (or the first), `/room/NAME`
 //! shows room NAME, and each page's socket is `/ws` or `/room/NAME/ws`; `/rooms` lists the rooms a page's
 //! token may watch (so a token learns nothing of rooms it cannot enter, as on the QUIC side). Rooms join
-//! and leave the site as they open and close.
+//! and leave the site as they open and close. [`super::ViewSite`] serves it.
 
-use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use kinloop_protocol::Role;
 use serde::Serialize;
 use tokio::sync::watch;
-use tokio::task::JoinHandle;
 
-use super::{http, ViewError, ViewShared};
+use super::ViewShared;
 
 /// The room `/` and `/ws` show when the site has it (a `--scene` server's only room).
 const FRONT_ROOM: &str = "default";
@@ -67,46 +64,5 @@ impl Site {
             .filter(|(_, room)| room.access.admit(token, Role::Observer).is_ok())
             .map(|(name, room)| RoomLink { name: name.clone(), scene: room.info.name.clone() })
             .collect()
-    }
-}
-
-/// A running site: the HTTP server on the view's address.
-pub struct ViewSite {
-    addr: SocketAddr,
-    pub(crate) site: Arc<Site>,
-    serve: Option<JoinHandle<()>>,
-}
-
-impl ViewSite {
-    /// Binds `listen` and serves the rooms added to it. Must be called inside a tokio runtime.
-    pub fn start(listen: SocketAddr) -> Result<ViewSite, ViewError> {
-        tokio::runtime::Handle::try_current().map_err(|_| ViewError::NoRuntime)?;
-        let site = Arc::new(Site::default());
-        let (addr, serve) = http::serve(listen, site.clone())?;
-        Ok(ViewSite { addr, site, serve: Some(serve) })
-    }
-
-    /// Where the pages are served.
-    pub fn local_addr(&self) -> SocketAddr {
-        self.addr
-    }
-
-    /// Stops serving (after the rooms' pages have closed, at most a few seconds).
-    pub async fn shutdown(mut self) {
-        self.site.shutdown.send_replace(true);
-        if let Some(mut serve) = self.serve.take() {
-            if tokio::time::timeout(Duration::from_secs(3), &mut serve).await.is_err() {
-                serve.abort();
-            }
-        }
-    }
-}
-
-impl Drop for ViewSite {
-    fn drop(&mut self) {
-        self.site.shutdown.send_replace(true);
-        if let Some(serve) = &self.serve {
-            serve.abort();
-        }
     }
 }
