@@ -1,8 +1,9 @@
 //! From an Agones allocation to a room: a lobby's GameServerAllocation raises the server's `rooms` Counter
 //! and names the room it wants in the GameServer's annotations ([`ROOM_ANNOTATION`], [`SCENE_ANNOTATION`];
 //! `deploy/agones/allocation.yaml`). The server reads them (`Sdk::watch_gameserver`), creates the room
-//! (the run-time admin command of the rooms executor), and, when it cannot, refuses with the reason and
-//! lowers the counter again so that the fleet's count stays true.
+//! (the run-time admin command of the rooms executor), and, when it cannot, refuses with the reason (in the
+//! log and in the [`REFUSED_ANNOTATION`], where the lobby reads it) and lowers the counter again so that the
+//! fleet's count stays true.
 //!
 //! [`AllocationTracker`] tells a new allocation from an update that repeats it; [`room_request`] is the
 //! parsing and the checks; [`RoomCreator`] is what the server's rooms implement (through the admin
