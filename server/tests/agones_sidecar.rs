@@ -1,7 +1,8 @@
 //! The Agones adapter against a fake SDK sidecar (`kinloop-fake-agones`: the SDK's gRPC service on a loopback
 //! port, recording each call): what a real sidecar would see of `kinloop-server --agones`: Ready only once
 //! the server listens, health pings at the configured period and none while the VE is stalled, the `rooms`
-//! Counter and `users` List following the rooms (the admin command's too) and the joins and leaves, Shutdown after the drain; a sidecar
+//! Counter and `users` List following the rooms (the admin command's and the allocations' too) and the joins
+//! and leaves, an allocation becoming a room a client joins, Shutdown after the drain; a sidecar
 //! that fails calls or goes away is retried and the server carries on; without one the program stops with one
 //! line. Every SDK call the server makes is covered here.
 
@@ -16,6 +17,7 @@ use kinloop_protocol::{
     AdminAnswer, AdminCommand, AdminRequest, Control, DeviceCaps, Hello, Join, LocalModelForm, Role, PROTOCOL_VERSION,
 };
 use kinloop_server::fleet::agones::{self, AgonesAdapter, AgonesConfig, ROOMS_COUNTER, USERS_LIST};
+use kinloop_server::fleet::allocation::{REFUSED_ANNOTATION, ROOM_ANNOTATION, SCENE_ANNOTATION};
 use kinloop_server::fleet::{self, user_label};
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 
@@ -39,17 +41,66 @@ async fn adapter_for(sidecar: &FakeSidecar) -> (AgonesAdapter, fleet::FleetFeed)
     (AgonesAdapter::spawn(sdk, &settings, events), feed)
 }
 
-/// A one-room server for the paper's testbed that tells `feed`.
+/// The admin command's token of the servers here.
+const ADMIN_TOKEN: &str = "admin-secret";
+
+/// A server for the paper's testbed (its one room "default") that tells `feed` and takes admin commands.
 fn start_server(feed: fleet::FleetFeed) -> ServerHandle {
     let scene = builtin::scene("paper-testbed").unwrap().unwrap();
     let mut config = ServerConfig::new(scene, "paper-testbed", loopback());
     config.realtime = false;
+    config.rt_threads = 1;
     config.drain = Duration::from_secs(2);
     config.fleet = Some(feed);
+    config.admin = Some(Access::parse(&format!("{ADMIN_TOKEN}\n"), "admin tokens").unwrap());
     Server::start(config).expect("the server starts")
 }
 
+/// A fake sidecar, the adapter and a server (its default room counted).
+struct Fleet {
+    sidecar: FakeSidecar,
+    journal: Journal,
+    adapter: AgonesAdapter,
+    server: ServerHandle,
+}
+
+impl Fleet {
+    async fn start() -> Fleet {
+        let sidecar = FakeSidecar::start().await.expect("fake sidecar");
+        let journal = sidecar.journal().clone();
+        let (adapter, feed) = adapter_for(&sidecar).await;
+        let server = start_server(feed);
+        until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+        Fleet { sidecar, journal, adapter, server }
+    }
+
+    /// Drains the server, lets the adapter call Shutdown, stops the sidecar.
+    async fn finish(self) {
+        self.server.shutdown().await.expect("drained");
+        self.adapter.finished(Duration::from_secs(10)).await;
+        let _ = self.sidecar.stop().await;
+    }
+}
+
+/// Sends `server` an admin command and asserts it was done.
+async fn admin(server: &ServerHandle, command: AdminCommand) {
+    let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
+    let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
+    let request = AdminRequest { version: PROTOCOL_VERSION, token: ADMIN_TOKEN.into(), command };
+    let answer = kinloop_protocol::quic::admin(&client, server.local_addr(), "localhost", &request).await;
+    assert!(matches!(answer, Ok(AdminAnswer::Done { .. })), "{answer:?}");
+}
+
+fn remove(name: &str) -> AdminCommand {
+    AdminCommand::RemoveRoom { name: name.into() }
+}
+
+/// Joins the default room.
 async fn join(server: &ServerHandle, name: &str) -> ConnectedSession {
+    join_room(server, name, "").await
+}
+
+async fn join_room(server: &ServerHandle, name: &str, room: &str) -> ConnectedSession {
     let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
     let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
     let hello = Hello {
@@ -57,7 +108,7 @@ async fn join(server: &ServerHandle, name: &str) -> ConnectedSession {
         token: String::new(),
         client_name: name.into(),
         role: Role::Manipulator,
-        room: String::new(),
+        room: room.into(),
     };
     let join = Join {
         op: "link2".into(),
@@ -129,7 +180,8 @@ async fn the_sidecar_sees_ready_health_counts_and_shutdown_after_the_drain() {
     // Users as a List: joins and leaves.
     let a = join(&server, "alice").await;
     let b = join(&server, "bob").await;
-    let (a_label, b_label) = (user_label("alice", a.welcome.user_id), user_label("bob", b.welcome.user_id));
+    let (a_label, b_label) =
+        (user_label("default", "alice", a.welcome.user_id), user_label("default", "bob", b.welcome.user_id));
     until("both users listed", || journal.list(USERS_LIST).len() == 2).await;
     assert_eq!(journal.list(USERS_LIST), vec![a_label.clone(), b_label.clone()]);
     a.connection.close(0u32.into(), b"bye");
@@ -164,11 +216,12 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
     let sidecar = FakeSidecar::start().await.expect("fake sidecar");
     let journal = sidecar.journal().clone();
     let (adapter, feed) = adapter_for(&sidecar).await;
-    journal.fail_next(2);
+    journal.fail_next(3);
     let server = start_server(feed);
-    // Two failed Readys, then one that lands.
+    // The GameServer watch fails to open (and is reopened), two Readys fail, then one lands.
     until("Ready retried", || count(&journal, &Call::Ready) == 3).await;
     until("the room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
+    until("the watch reopened", || count(&journal, &Call::WatchGameServer) == 2).await;
 
     // The sidecar goes away; the server serves on; it comes back on the same port and hears from the server
     // again: health pings and the List.
@@ -181,7 +234,7 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
     let back_at = Instant::now();
     let back = FakeSidecar::start_on(SocketAddr::from(([127, 0, 0, 1], port)), journal.clone()).await.expect("restart");
     until("health pings after the sidecar came back", || pings(&journal).iter().any(|t| *t > back_at)).await;
-    let label = user_label("carol", session.welcome.user_id);
+    let label = user_label("default", "carol", session.welcome.user_id);
     until("the join listed once the sidecar came back", || journal.list(USERS_LIST).contains(&label)).await;
     assert!(pings(&journal).iter().all(|t| *t < gone_at || *t > back_at), "no pings reached a stopped sidecar");
     session.connection.close(0u32.into(), b"bye");
@@ -195,46 +248,24 @@ async fn a_sidecar_that_fails_or_goes_away_is_retried_and_the_server_carries_on(
 /// whose last room closes while it serves on is Ready again, and one that drains is not (it shuts down).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn admin_rooms_are_counted_a_server_with_none_left_is_ready_again_and_one_that_drains_shuts_down() {
-    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
-    let journal = sidecar.journal().clone();
-    let (adapter, feed) = adapter_for(&sidecar).await;
-    let scene = builtin::scene("paper-testbed").unwrap().unwrap();
-    let mut config = ServerConfig::new(scene, "paper-testbed", loopback());
-    config.realtime = false;
-    config.rt_threads = 1;
-    config.drain = Duration::from_secs(2);
-    config.fleet = Some(feed);
-    config.admin = Some(Access::parse("admin-secret\n", "admin tokens").unwrap());
-    let server = Server::start(config).expect("the server starts");
-    let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
-    let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
-    let admin = |command: AdminCommand| {
-        let request = AdminRequest { version: PROTOCOL_VERSION, token: "admin-secret".into(), command };
-        let (client, addr) = (client.clone(), server.local_addr());
-        async move {
-            let answer = kinloop_protocol::quic::admin(&client, addr, "localhost", &request).await.expect("answered");
-            assert!(matches!(answer, AdminAnswer::Done { .. }), "{answer:?}");
-        }
-    };
+    let Fleet { sidecar, journal, adapter, server } = Fleet::start().await;
     let create = |name: &str| AdminCommand::CreateRoom {
         name: name.into(),
         scene: "fourbar-crank-rocker".into(),
         token_file: String::new(),
         max_users: 4,
     };
-    let remove = |name: &str| AdminCommand::RemoveRoom { name: name.into() };
-    until("the default room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
 
-    admin(create("second")).await;
+    admin(&server, create("second")).await;
     until("the admin's room counted", || journal.counter(ROOMS_COUNTER) == 2).await;
-    admin(remove("default")).await;
+    admin(&server, remove("default")).await;
     until("the default room uncounted", || journal.counter(ROOMS_COUNTER) == 1).await;
     assert_eq!(count(&journal, &Call::Ready), 1, "a room left: not Ready again");
-    admin(remove("second")).await;
+    admin(&server, remove("second")).await;
     until("Ready again", || count(&journal, &Call::Ready) == 2).await;
     assert_eq!(journal.counter(ROOMS_COUNTER), 0);
 
-    admin(create("third")).await;
+    admin(&server, create("third")).await;
     until("the third room counted", || journal.counter(ROOMS_COUNTER) == 1).await;
     server.shutdown().await.expect("drained");
     adapter.finished(Duration::from_secs(10)).await;
@@ -244,29 +275,57 @@ async fn admin_rooms_are_counted_a_server_with_none_left_is_ready_again_and_one_
     let _ = sidecar.stop().await;
 }
 
-/// An allocation for a scene the server does not hold is refused with the reason and the `rooms` count the
-/// allocation raised is lowered again; one for its scene is taken.
+/// A lobby's allocation (the `rooms` count raised, the room and scene in the GameServer's annotations, the
+/// GameServer streamed to the server's watch) becomes a room a client joins by name, counted once; its
+/// users are listed as `ROOM/NAME#ID`; closing it lowers the count. Updates that repeat the allocation (the
+/// sidecar streams every counter change) create nothing more.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn an_allocation_for_another_scene_is_refused_and_the_room_count_restored() {
-    use kinloop_server::fleet::allocation::{OneRoom, ROOM_ANNOTATION, SCENE_ANNOTATION};
-    let sidecar = FakeSidecar::start().await.expect("fake sidecar");
-    let journal = sidecar.journal().clone();
-    let sdk = agones::connect(&settings(&sidecar)).await.expect("the fake sidecar answers");
-    journal.set_counter(ROOMS_COUNTER, 2);
-    let server = OneRoom { scene: "paper-testbed".into() };
-    let ask = |scene: &str| -> std::collections::HashMap<String, String> {
-        [(ROOM_ANNOTATION, "lab"), (SCENE_ANNOTATION, scene)]
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
-            .collect()
-    };
-    let refused = agones::create_allocated_room(&sdk, &server, &ask("no-such-scene")).await.unwrap_err();
-    assert!(refused.to_string().contains("no-such-scene"), "{refused}");
-    assert_eq!(journal.counter(ROOMS_COUNTER), 1, "the refused allocation's room uncounted");
-    let taken = agones::create_allocated_room(&sdk, &server, &ask("paper-testbed")).await.expect("its own scene");
-    assert_eq!(taken.room, "lab");
-    assert_eq!(journal.counter(ROOMS_COUNTER), 1);
-    let _ = sidecar.stop().await;
+async fn an_allocation_creates_its_room_a_client_joins_it_and_closing_it_lowers_the_count() {
+    let fleet = Fleet::start().await;
+    let (journal, server) = (fleet.journal.clone(), &fleet.server);
+    assert!(count(&journal, &Call::WatchGameServer) >= 1, "the GameServer is watched once the server is Ready");
+
+    journal.allocate(ROOMS_COUNTER, &[(ROOM_ANNOTATION, "lab-3"), (SCENE_ANNOTATION, "paper-testbed")]);
+    let rooms = || server.room_stats().into_iter().map(|r| r.name).collect::<Vec<_>>();
+    until("the allocated room open", || rooms().contains(&"lab-3".to_string())).await;
+    let alice = join_room(server, "alice", "lab-3").await;
+    let label = user_label("lab-3", "alice", alice.welcome.user_id);
+    until("alice listed in her room", || journal.list(USERS_LIST) == vec![label.clone()]).await;
+    assert_eq!(journal.counter(ROOMS_COUNTER), 2, "the allocation counted the room; the server did not again");
+    let ups = journal.calls().iter().filter(|c| matches!(&c.call, Call::Counter { diff: 1, .. })).count();
+    assert_eq!(ups, 1, "the server raised the count for its default room only");
+    assert_eq!(rooms(), vec!["default".to_string(), "lab-3".to_string()], "one room for one allocation");
+
+    admin(server, remove("lab-3")).await;
+    until("the closed room uncounted", || journal.counter(ROOMS_COUNTER) == 1).await;
+    until("alice unlisted", || journal.list(USERS_LIST).is_empty()).await;
+    drop(alice);
+    fleet.finish().await;
+    assert_eq!(journal.counter(ROOMS_COUNTER), 0);
+}
+
+/// An allocation for a scene the server cannot load is refused with the reason (on the GameServer, for the
+/// lobby) and the `rooms` count the allocation raised is lowered again; a server left with no room is Ready
+/// again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_allocation_for_a_scene_the_server_cannot_load_is_refused_and_the_count_restored() {
+    let fleet = Fleet::start().await;
+    let (journal, server) = (fleet.journal.clone(), &fleet.server);
+    admin(server, remove("default")).await;
+    until("Ready with no room", || count(&journal, &Call::Ready) == 2).await;
+
+    journal.allocate(ROOMS_COUNTER, &[(ROOM_ANNOTATION, "lab-4"), (SCENE_ANNOTATION, "no-such-scene")]);
+    assert_eq!(journal.state(), "Allocated");
+    until("Ready again after the refusal", || count(&journal, &Call::Ready) == 3).await;
+    assert_eq!(journal.counter(ROOMS_COUNTER), 0, "the refused allocation's room uncounted");
+    assert!(server.room_stats().is_empty(), "no room opened");
+    let downs = journal.calls().iter().filter(|c| matches!(&c.call, Call::Counter { diff: -1, .. })).count();
+    assert_eq!(downs, 2, "the default room's close and the refusal");
+
+    // The reason, for the lobby, on the GameServer.
+    let reason = journal.annotations().get(REFUSED_ANNOTATION).cloned().unwrap_or_default();
+    assert!(reason.contains("lab-4") && reason.contains("no-such-scene"), "{reason:?}");
+    fleet.finish().await;
 }
 
 /// `kinloop-server --agones` with no sidecar stops within a few seconds, exit code 1, saying why in one line.

@@ -1,7 +1,8 @@
 //! The view in a real browser (headless Chromium through chromedriver): the live page draws the VE's
 //! state as a QUIC client sees it in its snapshots, a mouse drag moves the linkage, a wrong token sees
 //! nothing but a refusal, an observer watches, a recorded session replays at the slider's time, and the
-//! panel shows the status bar's frame rate and its whole user table.
+//! panel shows the status bar's frame rate and its whole user table; a server of two rooms lists both and
+//! shows each.
 //! Screenshots go to `target/tmp/view/`.
 
 mod support;
@@ -352,4 +353,71 @@ async fn a_spatial_scene_is_drawn_in_perspective_and_the_camera_orbits() {
         server.shutdown().await.unwrap();
     })
     .await;
+}
+
+/// A server of two rooms serves both on one view address: the page lists the rooms its token may watch
+/// (none for no token), and the second room's link opens its page, which draws that room's linkage live.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_two_room_server_lists_both_rooms_and_shows_the_second_rooms_frames() {
+    use kinloop_server::driver::rooms::{RoomSpec, TestKnobs};
+    let _one = exclusive().await;
+    bounded(async {
+        let room = |name: &str, scene: &str| RoomSpec {
+            name: name.into(),
+            scene: builtin::scene(scene).unwrap().unwrap(),
+            scene_label: scene.into(),
+            access: Access::parse(TOKENS, "test tokens").unwrap(),
+            max_users: 4,
+            record: None,
+            knobs: TestKnobs::default(),
+        };
+        let scene = builtin::scene("paper-testbed").unwrap().unwrap();
+        let mut config = ServerConfig::new(scene, "paper-testbed", loopback());
+        config.realtime = false;
+        config.rt_threads = 1;
+        config.rooms = vec![room("bench-a", "paper-testbed"), room("bench-b", "fourbar-crank-rocker")];
+        config.view = Some(ViewConfig::new(loopback()));
+        let server = Server::start(config).unwrap();
+        let addr = server.view_addr().unwrap();
+        let browser = Browser::start().await;
+        browser.client.goto(&format!("http://{addr}/#token=watch-token")).await.unwrap();
+        let front = browser
+            .wait_for("the room list", Duration::from_secs(10), |s| s["rooms"].as_array().map(Vec::len) == Some(2))
+            .await;
+        assert_eq!(front["rooms"], serde_json::json!(["bench-a", "bench-b"]));
+        assert_eq!(front["scene"], "paper-testbed", "`/` shows the first room");
+
+        browser.client.find(Locator::Css("#rooms a:nth-child(2)")).await.unwrap().click().await.unwrap();
+        let second = browser
+            .wait_for("the second room's frames", Duration::from_secs(10), |s| {
+                s["room"] == "bench-b" && s["frames"].as_u64() >= Some(5)
+            })
+            .await;
+        assert_eq!(second["scene"], "fourbar-crank-rocker");
+        assert!(second["ops"]["coupler"].is_array() && second["ops"]["link2"].is_null(), "its linkage: {second}");
+        let pages = |name: &str| {
+            let report = server.room_stats().into_iter().find(|r| r.name == name).unwrap();
+            report.stats.view.unwrap().pages_total
+        };
+        assert_eq!((pages("bench-a"), pages("bench-b")), (1, 1), "one page each");
+        browser.screenshot(&output_dir(), "second-room.png").await;
+
+        // A page without a token is told of no room that needs one.
+        let listed = http_get(addr, "/rooms").await;
+        assert!(listed.ends_with(r#"{"rooms":[]}"#), "{listed}");
+        browser.close().await;
+        server.shutdown_rooms().await.unwrap();
+    })
+    .await;
+}
+
+/// A plain HTTP/1.1 GET: the whole answer, headers and body.
+async fn http_get(addr: SocketAddr, path: &str) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let request = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
+    stream.write_all(request.as_bytes()).await.unwrap();
+    let mut answer = String::new();
+    stream.read_to_string(&mut answer).await.unwrap();
+    answer
 }

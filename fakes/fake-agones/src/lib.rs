@@ -3,6 +3,10 @@
 //! it arrived, each health ping one record. Counters and Lists keep their values as the sidecar's would. It
 //! can be told to fail calls (as a sidecar in trouble does) and stopped and restarted on the same port (as
 //! one that disappears and comes back).
+//!
+//! Like a sidecar, it streams the GameServer to every `WatchGameServer` caller: the current one when the
+//! watch opens, then again at each change (its state, its counters, and the annotations and counter raise
+//! of an allocation the test makes with [`Journal::allocate`], as a lobby's GameServerAllocation does).
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -10,8 +14,8 @@ use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use tokio::sync::oneshot;
-use tokio_stream::wrappers::TcpListenerStream;
+use tokio::sync::{oneshot, watch};
+use tokio_stream::wrappers::{ReceiverStream, TcpListenerStream};
 use tonic::{Request, Response, Status, Streaming};
 
 /// The SDK's messages and server stubs (package `agones.dev.sdk`).
@@ -39,6 +43,10 @@ pub enum Call {
     Health,
     /// `GetGameServer` (the SDK's connection check).
     GetGameServer,
+    /// `WatchGameServer` (the stream opened).
+    WatchGameServer,
+    /// `SetAnnotation`.
+    SetAnnotation { key: String, value: String },
     /// `UpdateCounter` by a difference.
     Counter { name: String, diff: i64 },
     /// `AddListValue`.
@@ -64,6 +72,10 @@ pub struct Journal {
     lists: Arc<Mutex<HashMap<String, Vec<String>>>>,
     /// Calls still to fail (with `UNAVAILABLE`) before answering again; health pings are recorded anyway.
     failing: Arc<Mutex<u32>>,
+    /// The GameServer's state (`Ready`, `Allocated`...) and annotations.
+    meta: Arc<Mutex<(String, HashMap<String, String>)>>,
+    /// The GameServer as the watchers see it, published at each change.
+    published: Arc<watch::Sender<sdk::GameServer>>,
 }
 
 impl Journal {
@@ -102,6 +114,54 @@ impl Journal {
     /// Sets a counter, as an allocation does.
     pub fn set_counter(&self, name: &str, count: i64) {
         self.counters.lock().expect("journal").insert(name.into(), count);
+        self.publish();
+    }
+
+    /// What a lobby's GameServerAllocation does to the GameServer: it becomes `Allocated`, `counter` rises
+    /// by one and the allocation's annotations are written (replacing values of the same keys); every
+    /// watcher is sent the new GameServer.
+    pub fn allocate(&self, counter: &str, annotations: &[(&str, &str)]) {
+        {
+            let mut meta = self.meta.lock().expect("journal");
+            meta.0 = "Allocated".into();
+            meta.1.extend(annotations.iter().map(|(k, v)| (k.to_string(), v.to_string())));
+        }
+        *self.counters.lock().expect("journal").entry(counter.into()).or_default() += 1;
+        self.publish();
+    }
+
+    /// The GameServer's annotations.
+    pub fn annotations(&self) -> HashMap<String, String> {
+        self.meta.lock().expect("journal").1.clone()
+    }
+
+    /// The GameServer's state as the sidecar last set it (`""` before `Ready`).
+    pub fn state(&self) -> String {
+        self.meta.lock().expect("journal").0.clone()
+    }
+
+    fn set_state(&self, state: &str) {
+        self.meta.lock().expect("journal").0 = state.into();
+        self.publish();
+    }
+
+    /// The GameServer as it is now.
+    fn gameserver(&self) -> sdk::GameServer {
+        use sdk::game_server::{status::CounterStatus, ObjectMeta, Status};
+        let (state, annotations) = self.meta.lock().expect("journal").clone();
+        let counters = self.counters.lock().expect("journal").clone();
+        sdk::GameServer {
+            object_meta: Some(ObjectMeta { name: "kinloop-fake".into(), annotations, labels: HashMap::new() }),
+            status: Some(Status {
+                state,
+                counters: counters.into_iter().map(|(k, count)| (k, CounterStatus { count, capacity: 1000 })).collect(),
+            }),
+        }
+    }
+
+    /// Sends the GameServer to every watcher.
+    fn publish(&self) {
+        self.published.send_replace(self.gameserver());
     }
 
     /// Fails the next `calls` calls (health pings excepted).
@@ -110,12 +170,17 @@ impl Journal {
     }
 }
 
-struct Sdk(Journal, tokio::sync::watch::Receiver<bool>);
+struct Sdk(Journal, watch::Receiver<bool>);
+
+/// How many GameServer updates may wait for a slow watcher (the newest always arrives).
+const WATCH_QUEUE: usize = 16;
 
 #[tonic::async_trait]
 impl sdk::sdk_server::Sdk for Sdk {
     async fn ready(&self, _: Request<sdk::Empty>) -> Result<Response<sdk::Empty>, Status> {
-        self.0.record(Call::Ready).map(|()| Response::new(sdk::Empty {}))
+        self.0.record(Call::Ready)?;
+        self.0.set_state("Ready");
+        Ok(Response::new(sdk::Empty {}))
     }
 
     async fn allocate(&self, _: Request<sdk::Empty>) -> Result<Response<sdk::Empty>, Status> {
@@ -123,7 +188,9 @@ impl sdk::sdk_server::Sdk for Sdk {
     }
 
     async fn shutdown(&self, _: Request<sdk::Empty>) -> Result<Response<sdk::Empty>, Status> {
-        self.0.record(Call::Shutdown).map(|()| Response::new(sdk::Empty {}))
+        self.0.record(Call::Shutdown)?;
+        self.0.set_state("Shutdown");
+        Ok(Response::new(sdk::Empty {}))
     }
 
     async fn health(&self, pings: Request<Streaming<sdk::Empty>>) -> Result<Response<sdk::Empty>, Status> {
@@ -142,7 +209,41 @@ impl sdk::sdk_server::Sdk for Sdk {
     }
 
     async fn get_game_server(&self, _: Request<sdk::Empty>) -> Result<Response<sdk::GameServer>, Status> {
-        self.0.record(Call::GetGameServer).map(|()| Response::new(sdk::GameServer::default()))
+        self.0.record(Call::GetGameServer).map(|()| Response::new(self.0.gameserver()))
+    }
+
+    async fn set_annotation(&self, request: Request<sdk::KeyValue>) -> Result<Response<sdk::Empty>, Status> {
+        let sdk::KeyValue { key, value } = request.into_inner();
+        self.0.record(Call::SetAnnotation { key: key.clone(), value: value.clone() })?;
+        self.0.meta.lock().expect("journal").1.insert(key, value);
+        self.0.publish();
+        Ok(Response::new(sdk::Empty {}))
+    }
+
+    type WatchGameServerStream = ReceiverStream<Result<sdk::GameServer, Status>>;
+
+    async fn watch_game_server(&self, _: Request<sdk::Empty>) -> Result<Response<Self::WatchGameServerStream>, Status> {
+        self.0.record(Call::WatchGameServer)?;
+        let (tx, rx) = tokio::sync::mpsc::channel(WATCH_QUEUE);
+        let (mut changes, mut gone) = (self.0.published.subscribe(), self.1.clone());
+        tokio::spawn(async move {
+            loop {
+                let current = changes.borrow_and_update().clone();
+                if tx.send(Ok(current)).await.is_err() {
+                    return;
+                }
+                let stopped = tokio::select! {
+                    changed = changes.changed() => changed.is_err(),
+                    // A sidecar that goes away ends its streams.
+                    _ = gone.wait_for(|gone| *gone) => true,
+                };
+                if stopped {
+                    let _ = tx.send(Err(Status::unavailable("the fake sidecar stopped"))).await;
+                    return;
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(rx)))
     }
 }
 
@@ -163,7 +264,10 @@ impl beta::sdk_server::Sdk for Beta {
             return Err(Status::out_of_range(format!("counter {} would go below zero", update.name)));
         }
         *count += update.count_diff;
-        Ok(Response::new(beta::Counter { name: update.name, count: *count, capacity: 1000 }))
+        let count = *count;
+        drop(counters);
+        self.0.publish();
+        Ok(Response::new(beta::Counter { name: update.name, count, capacity: 1000 }))
     }
 
     async fn add_list_value(
@@ -202,7 +306,7 @@ pub struct FakeSidecar {
     addr: SocketAddr,
     journal: Journal,
     stop: Option<oneshot::Sender<()>>,
-    gone: tokio::sync::watch::Sender<bool>,
+    gone: watch::Sender<bool>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -219,7 +323,7 @@ impl FakeSidecar {
         let listener = tokio::net::TcpListener::bind(addr).await?;
         let addr = listener.local_addr()?;
         let (stop, stopped) = oneshot::channel::<()>();
-        let (gone, gone_rx) = tokio::sync::watch::channel(false);
+        let (gone, gone_rx) = watch::channel(false);
         let serve: ServeFuture = Box::pin({
             let journal = journal.clone();
             async move {

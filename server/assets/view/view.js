@@ -21,11 +21,41 @@ const view = {
   lastDragSent: 0, pendingTarget: null,
   replay: { t: 0, playing: false, last: 0, lastSeek: 0 },
   error: null, refused: null,
+  token: "", rooms: null, // the token the page gave, and the rooms it may watch (`/rooms`)
 };
+
+// The room this page shows: `/room/NAME`, or (`/`) the server's front room.
+const ROOM = (() => {
+  const m = location.pathname.match(/^\/room\/([^/]+)/);
+  return m ? decodeURIComponent(m[1]) : null;
+})();
+
+// ---------- rooms ----------
+// The server's rooms this page's token may watch, as links (the token travels in the link's hash, as here).
+function listRooms() {
+  const headers = view.token ? { Authorization: `Bearer ${view.token}` } : {};
+  fetch("/rooms", { headers, cache: "no-store" })
+    .then((r) => r.json())
+    .then((list) => {
+      view.rooms = list.rooms.map((r) => r.name);
+      const nav = $("rooms");
+      nav.replaceChildren(...list.rooms.map((r) => {
+        const a = document.createElement("a");
+        a.href = `/room/${encodeURIComponent(r.name)}${location.hash}`;
+        a.textContent = `${r.name} (${r.scene})`;
+        if (r.name === ROOM) a.className = "here";
+        return a;
+      }));
+      nav.hidden = list.rooms.length < 2;
+      updateStatus();
+    })
+    .catch(() => {});
+}
 
 // ---------- connection ----------
 function connect() {
-  const ws = new WebSocket(`ws://${location.host}/ws`);
+  const path = ROOM === null ? "/ws" : `/room/${encodeURIComponent(ROOM)}/ws`;
+  const ws = new WebSocket(`ws://${location.host}${path}`);
   view.ws = ws;
   ws.onmessage = (e) => {
     let m;
@@ -50,7 +80,7 @@ const handlers = {
     $("mode").textContent = m.mode;
     if (m.auth === "token") {
       const fromUrl = new URLSearchParams(location.hash.slice(1)).get("token");
-      if (fromUrl !== null) send({ type: "auth", token: fromUrl });
+      if (fromUrl !== null) { view.token = fromUrl; send({ type: "auth", token: fromUrl }); }
       else { $("auth").hidden = false; $("token").focus(); }
     } else {
       send({ type: "auth" });
@@ -64,6 +94,7 @@ const handlers = {
     $("conn").textContent = `connected (${m.role})`;
     $("scene-name").textContent = m.scene.name;
     $("hint").textContent = m.can_grab ? "drag an operational point to pull it" : "watching";
+    listRooms();
     fitCamera();
     if (m.replay) {
       $("timeline").hidden = false;
@@ -103,7 +134,8 @@ function message(text) { $("messages").textContent = text; }
 
 $("auth").addEventListener("submit", (e) => {
   e.preventDefault();
-  send({ type: "auth", token: $("token").value });
+  view.token = $("token").value;
+  send({ type: "auth", token: view.token });
 });
 
 // ---------- geometry helpers ----------
@@ -416,7 +448,7 @@ function updateStatus() {
     frames: view.frames, fps: view.framesPerS, first_frame_ms: view.firstFrameMs, refused: view.refused, error: view.error,
     role: view.welcome ? view.welcome.role : null, can_grab: view.welcome ? view.welcome.can_grab : false,
     size: size(), grabbed: view.grab ? view.grab.user : null, target: view.grab ? view.grab.target : null,
-    scene: view.scene ? view.scene.name : null, camera: view.planar ? null : [view.cam3.yaw, view.cam3.pitch], replay_t: view.welcome && view.welcome.replay ? view.replay.t : null,
+    scene: view.scene ? view.scene.name : null, room: ROOM, rooms: view.rooms, camera: view.planar ? null : [view.cam3.yaw, view.cam3.pitch], replay_t: view.welcome && view.welcome.replay ? view.replay.t : null,
   };
   if (f) {
     const b = view.planar ? null : basis();

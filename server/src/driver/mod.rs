@@ -308,7 +308,9 @@ impl Server {
         let heartbeat = config.fleet.as_ref().map(|f| f.heartbeat().clone());
         let executor = rooms::Executor::start(config.rt_threads, config.realtime, heartbeat)
             .map_err(|e| ServerError::Thread { which: "rooms", what: e.to_string() })?;
+        let view = config.view.as_ref().map(|v| crate::view::ViewSite::start(v.listen)).transpose()?;
         let host = Arc::new(rooms::Host {
+            view,
             endpoint: endpoint.clone(),
             executor: executor.clone(),
             table: Mutex::new(std::collections::BTreeMap::new()),
@@ -319,12 +321,16 @@ impl Server {
         });
         for spec in config.room_specs() {
             let name = spec.name.clone();
-            if let Err(error) = host.open(spec) {
+            if let Err(error) = host.open(spec, false) {
                 executor.shutdown();
                 return Err(ServerError::Room { room: name, source: Box::new(error) });
             }
         }
-        // The fleet hears of the server first, then of its rooms (later rooms as they open).
+        // The fleet hears of the server first, then of its rooms (later rooms as they open); the rooms its
+        // allocations ask for are created through the host.
+        if let Some(fleet) = &config.fleet {
+            fleet.offer_rooms(Arc::downgrade(&host) as std::sync::Weak<dyn crate::fleet::allocation::RoomCreator>);
+        }
         host.announce(local_addr);
         let accept = tokio::spawn(accept_loop(endpoint.clone(), host.clone()));
         Ok(ServerHandle { local_addr, fingerprint: identity.fingerprint.clone(), host, endpoint, accept })
@@ -351,9 +357,9 @@ impl ServerHandle {
         &self.fingerprint
     }
 
-    /// Where the first room's web view is served (`--view`), if it is.
+    /// Where the rooms' web view is served (`--view`), if it is: `/` lists them, `/room/NAME` shows one.
     pub fn view_addr(&self) -> Option<SocketAddr> {
-        self.host.first(|room| room.view.as_ref().map(ViewHandle::local_addr)).flatten()
+        self.host.view.as_ref().map(crate::view::ViewSite::local_addr)
     }
 
     /// Statistics so far of the first room (the only one of a `--scene` server).
@@ -402,6 +408,9 @@ impl ServerHandle {
         let mut reports = Vec::new();
         for room in opened {
             reports.push(room.finish().await?);
+        }
+        if let Some(view) = self.host.view.as_ref() {
+            view.site.shutdown.send_replace(true);
         }
         let executor = self.host.executor.clone();
         let _ = tokio::task::spawn_blocking(move || executor.shutdown()).await;
@@ -470,14 +479,15 @@ impl OpenRoom {
 
 /// Opens a room: compiles its scene, builds its VE and rings, starts its recorder, view and collector, and
 /// places it on the executor (refused when the budget has no room).
-pub(crate) fn open_room(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError> {
+/// `allocated`: opened for a fleet's allocation, which counted it.
+pub(crate) fn open_room(host: &rooms::Host, spec: rooms::RoomSpec, allocated: bool) -> Result<OpenRoom, ServerError> {
     match spec.scene.kind {
-        SceneKind::Planar => open_room_with::<Planar>(host, spec),
-        SceneKind::Spatial => open_room_with::<Spatial>(host, spec),
+        SceneKind::Planar => open_room_with::<Planar>(host, spec, allocated),
+        SceneKind::Spatial => open_room_with::<Spatial>(host, spec, allocated),
     }
 }
 
-fn open_room_with<S: Space>(host: &rooms::Host, spec: rooms::RoomSpec) -> Result<OpenRoom, ServerError>
+fn open_room_with<S: Space>(host: &rooms::Host, spec: rooms::RoomSpec, allocated: bool) -> Result<OpenRoom, ServerError>
 where
     VeCore<S>: Send,
 {
@@ -517,10 +527,10 @@ where
         Some((tx, handle)) => (Some(tx), Some(handle)),
         None => (None, None),
     };
-    // The view serves the first room (the only one of a `--scene` server).
-    let view_config = config.view.as_ref().filter(|_| host.is_empty());
+    // Every room is on the view's site (`/room/NAME`).
+    let view_config = config.view.as_ref().zip(host.view.as_ref());
     let (view_tap, view_reader) = match view_config {
-        Some(v) => {
+        Some((v, _)) => {
             let (tap, reader) = crate::view::tap::<S>(n, ve_config.max_users, ve_config.ve_rate_hz, v.frame_rate_hz);
             (Some(tap), Some(reader))
         }
@@ -536,7 +546,7 @@ where
         stop: stop.clone(),
     };
     let (shutdown, _) = watch::channel(false);
-    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone()));
+    let fleet = Arc::new(FleetRoom::new(config.fleet.clone(), spec.name.clone(), allocated));
     let on_close = {
         let (shutdown, fleet) = (shutdown.clone(), fleet.clone());
         Box::new(move |_reason: &str| {
@@ -574,14 +584,14 @@ where
         return Err(error.into());
     }
     let view = match (view_config, view_reader) {
-        (Some(view), Some(reader)) => {
+        (Some((view, site)), Some(reader)) => {
             let source = LiveSource {
                 scene: spec.scene.clone(),
                 scene_label: spec.scene_label.clone(),
                 reader,
                 access: spec.access.clone(),
             };
-            match crate::view::start_live_with(view, source, Some(shared.gateway.clone())) {
+            match crate::view::start_room_view(site, &spec.name, view, source, Some(shared.gateway.clone())) {
                 Ok(handle) => {
                     let _ = shared.view.set(handle.counters());
                     Some(handle)

@@ -143,7 +143,7 @@ async fn run_session(
         connection: connection.clone(),
         counters: counters.clone(),
     });
-    let fleet_user = crate::fleet::user_label(&hello.client_name, user);
+    let fleet_user = crate::fleet::user_label(&shared.name, &hello.client_name, user);
     shared.tell_fleet(crate::fleet::FleetEvent::UserJoined { user: fleet_user.clone() });
     tracing::info!(user, name = %hello.client_name, role = ?hello.role, op = %welcome.scene.op_name, position_scale = welcome.mapping.position_scale, force_scale = welcome.mapping.force_scale, coupling_stiffness = ?welcome.coupling.stiffness, coupling_damping = ?welcome.coupling.damping, remote = %connection.remote_address(), "session started");
 

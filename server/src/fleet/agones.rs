@@ -6,13 +6,18 @@
 //!   `health.periodSeconds × failureThreshold`; see `deploy/agones/fleet.yaml` and docs/fleet.md);
 //! - rooms as the Counter [`ROOMS_COUNTER`] and users as the List [`USERS_LIST`] (the SDK's beta API), and
 //!   `Ready` again when the last room closes while the server serves on (back to the fleet's pool);
-//! - `Shutdown` once drained.
+//! - `Shutdown` once drained;
+//! - the GameServer watched (`WatchGameServer`, [`super::watch`]) from before `Ready`: a new allocation's
+//!   annotations ([`super::allocation`]) become a room, created through the server's rooms as the admin
+//!   command creates them and counted by the allocation itself; a room refused lowers the count again (and
+//!   a server left with no room is `Ready` again).
 //!
 //! A sidecar that errors or goes away is retried with backoff and reported in the log, never a crash: each
 //! call is retried for [`RETRY_FOR`], the health stream is reopened when it ends. Connecting is bounded
 //! ([`AgonesConfig::connect_within`]; the SDK's own wait is 30 s), so a server started without a sidecar
 //! fails at once with one line.
 
+use std::collections::HashMap;
 use std::future::Future;
 use std::time::{Duration, Instant};
 
@@ -21,8 +26,12 @@ use tokio::sync::mpsc::error::TrySendError;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
-use super::allocation::{room_request, AllocationRefused, RoomCreator, RoomRequest};
-use super::{FleetEvent, FleetEvents, Heartbeat};
+use super::allocation::{
+    room_request, AllocationRefused, AllocationTracker, RoomCreator, RoomRequest, MAX_REASON, REFUSED_ANNOTATION,
+};
+use super::sidecar::{describe, FIRST_BACKOFF, MAX_BACKOFF};
+use super::watch::GameServerWatch;
+use super::{FleetEvent, FleetEvents, Heartbeat, RoomsSlot};
 
 /// The Counter of rooms on the server (the FleetAutoscaler scales on it; an allocation raises it).
 pub const ROOMS_COUNTER: &str = "rooms";
@@ -32,9 +41,6 @@ pub const USERS_LIST: &str = "users";
 pub const DEFAULT_CONNECT_WITHIN: Duration = Duration::from_secs(3);
 /// How long one call is retried before it is given up (and reported).
 pub const RETRY_FOR: Duration = Duration::from_secs(10);
-/// The first wait between retries; it doubles up to [`MAX_BACKOFF`].
-const FIRST_BACKOFF: Duration = Duration::from_millis(100);
-const MAX_BACKOFF: Duration = Duration::from_secs(2);
 /// The SDK's port when neither the configuration nor `AGONES_SDK_GRPC_PORT` names one.
 const DEFAULT_SDK_PORT: u16 = 9357;
 
@@ -118,22 +124,49 @@ impl AgonesAdapter {
     }
 }
 
-/// Turns the driver's events into SDK calls, in order; pings from a task of its own.
+/// Turns the driver's events into SDK calls, in order, and the fleet's allocations into rooms; pings from a
+/// task of its own.
 async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
-    let FleetEvents { mut events, heartbeat } = events;
+    let FleetEvents { mut events, heartbeat, rooms: server_rooms } = events;
     let (stop_health, health_stopped) = watch::channel(false);
     let health = tokio::spawn(ping_while_beating(sdk.clone(), heartbeat, health_period, health_stopped));
     // Rooms open, and whether the server drains: a server whose last room closed while it serves on goes back
     // to the pool of Ready servers (an allocation had made it Allocated).
     let (mut rooms, mut draining) = (0usize, false);
-    while let Some(event) = events.recv().await {
+    // The GameServer watch, open once the server listens with rooms to offer allocations.
+    let mut gameserver: Option<GameServerWatch> = None;
+    let mut allocations = AllocationTracker::default();
+    loop {
+        let event = tokio::select! {
+            event = events.recv() => match event {
+                Some(event) => event,
+                None => break,
+            },
+            annotations = next_update(&mut gameserver) => {
+                let refused = allocations.is_new(&annotations) && !take_allocation(&sdk, &server_rooms, &annotations).await;
+                if refused && rooms == 0 && !draining {
+                    tracing::info!("Agones: no room; Ready again");
+                    retried("Ready", &sdk, |mut s| async move { s.ready().await }).await;
+                }
+                continue;
+            }
+        };
         match event {
             FleetEvent::Listening { addr } => {
+                // The watch opens before Ready: no allocation reaches a Ready server unwatched.
+                if gameserver.is_none() && server_rooms.get().is_some() {
+                    gameserver = Some(GameServerWatch::open(&sdk).await);
+                }
                 tracing::info!(%addr, "Agones: Ready");
                 retried("Ready", &sdk, |mut s| async move { s.ready().await }).await;
             }
-            FleetEvent::RoomOpened { room } => {
+            FleetEvent::RoomOpened { room, allocated } => {
                 rooms += 1;
+                if allocated {
+                    // The allocation raised the count already.
+                    tracing::info!(room, "Agones: allocated room open");
+                    continue;
+                }
                 tracing::info!(room, "Agones: rooms + 1");
                 let increment = |s: Sdk| async move { s.beta().clone().increment_counter(ROOMS_COUNTER, 1).await };
                 retried("UpdateCounter rooms +1", &sdk, increment).await;
@@ -177,6 +210,29 @@ async fn follow(sdk: Sdk, health_period: Duration, events: FleetEvents) {
     }
 }
 
+/// Creates the room a new allocation asks for through the server's rooms; whether it was.
+async fn take_allocation(sdk: &Sdk, server_rooms: &RoomsSlot, annotations: &HashMap<String, String>) -> bool {
+    let Some(creator) = server_rooms.get() else {
+        tracing::warn!("Agones: an allocation arrived as the server stopped; no room created");
+        return false;
+    };
+    match create_allocated_room(sdk, creator.as_ref(), annotations).await {
+        Ok(request) => {
+            tracing::info!(room = request.room, scene = request.scene, "Agones: allocation: room created");
+            true
+        }
+        Err(_) => false,
+    }
+}
+
+/// The next GameServer update's annotations, or never without a watch.
+async fn next_update(watch: &mut Option<GameServerWatch>) -> HashMap<String, String> {
+    match watch {
+        Some(watch) => watch.next().await,
+        None => std::future::pending().await,
+    }
+}
+
 /// Calls `call` until it succeeds or [`RETRY_FOR`] has passed, waiting with exponential backoff between
 /// tries; each failure is reported, and a call given up is said in the log (never a panic).
 async fn retried<F, Fut>(what: &str, sdk: &Sdk, call: F) -> bool
@@ -203,18 +259,6 @@ where
         }
     }
     false
-}
-
-/// The SDK's error with its causes (its own text for a failed call is only "rpc failure").
-fn describe(error: &agones::errors::Error) -> String {
-    let mut text = error.to_string();
-    let mut source = std::error::Error::source(error);
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text
 }
 
 /// Pings every `period` while `heartbeat` advances; reopens the health stream (with backoff) when it ends.
@@ -268,20 +312,27 @@ async fn ping_while_beating(sdk: Sdk, heartbeat: Heartbeat, period: Duration, mu
     }
 }
 
-/// The allocation → room path, for the rooms executor to call when `Sdk::watch_gameserver` shows a new
-/// allocation: the room the annotations ask for is created by `creator`; when it cannot be (a scene the
-/// server cannot load, a name taken), the refusal is reported and the `rooms` count the allocation raised
-/// is lowered again.
+/// The allocation → room path, taken when the GameServer watch shows a new allocation: the room the
+/// annotations ask for is created by `creator` (the server's rooms, as the admin command creates them);
+/// when it cannot be (a scene the server cannot load, a name taken, a draining server), the refusal is
+/// reported (in the log, and in the GameServer's [`REFUSED_ANNOTATION`] for the lobby) and the `rooms` count
+/// the allocation raised is lowered again.
 pub async fn create_allocated_room(
     sdk: &Sdk,
-    creator: &impl RoomCreator,
-    annotations: &std::collections::HashMap<String, String>,
+    creator: &dyn RoomCreator,
+    annotations: &HashMap<String, String>,
 ) -> Result<RoomRequest, AllocationRefused> {
     let created = room_request(annotations).and_then(|request| creator.create(&request).map(|()| request));
     if let Err(refusal) = &created {
         tracing::warn!(%refusal, "Agones: allocation refused; rooms - 1");
         let decrement = |s: Sdk| async move { s.beta().clone().decrement_counter(ROOMS_COUNTER, 1).await };
         retried("UpdateCounter rooms -1 (allocation refused)", sdk, decrement).await;
+        let reason: String = refusal.to_string().chars().take(MAX_REASON).collect();
+        let annotate = |mut s: Sdk| {
+            let reason = reason.clone();
+            async move { s.set_annotation(REFUSED_ANNOTATION, reason).await }
+        };
+        retried("SetAnnotation kinloop.dev/refused", sdk, annotate).await;
     }
     created
 }

@@ -1,11 +1,13 @@
 //! From an Agones allocation to a room: a lobby's GameServerAllocation raises the server's `rooms` Counter
 //! and names the room it wants in the GameServer's annotations ([`ROOM_ANNOTATION`], [`SCENE_ANNOTATION`];
 //! `deploy/agones/allocation.yaml`). The server reads them (`Sdk::watch_gameserver`), creates the room
-//! (the run-time admin command of the rooms executor), and, when it cannot, refuses with the reason and
-//! lowers the counter again so that the fleet's count stays true.
+//! (the run-time admin command of the rooms executor), and, when it cannot, refuses with the reason (in the
+//! log and in the [`REFUSED_ANNOTATION`], where the lobby reads it) and lowers the counter again so that the
+//! fleet's count stays true.
 //!
-//! [`room_request`] is the parsing and the checks; [`RoomCreator`] is what the rooms executor implements. A
-//! one-room server hosts the room it started with and refuses any other.
+//! [`AllocationTracker`] tells a new allocation from an update that repeats it; [`room_request`] is the
+//! parsing and the checks; [`RoomCreator`] is what the server's rooms implement (through the admin
+//! command's path).
 
 use std::collections::HashMap;
 
@@ -13,6 +15,10 @@ use std::collections::HashMap;
 pub const ROOM_ANNOTATION: &str = "kinloop.dev/room";
 /// The annotation naming its scene (a built-in name or a path inside the server's image).
 pub const SCENE_ANNOTATION: &str = "kinloop.dev/scene";
+/// The annotation the server writes when it refuses an allocation: the reason, for the lobby.
+pub const REFUSED_ANNOTATION: &str = "kinloop.dev/refused";
+/// Longest reason written there.
+pub const MAX_REASON: usize = 1024;
 /// Longest room or scene name taken from an annotation.
 pub const MAX_NAME: usize = 128;
 
@@ -75,30 +81,32 @@ pub fn room_request(annotations: &HashMap<String, String>) -> Result<RoomRequest
     Ok(RoomRequest { room: name(ROOM_ANNOTATION)?, scene: name(SCENE_ANNOTATION)? })
 }
 
-/// What creates rooms at run time (the rooms executor); the adapter lowers the `rooms` counter again when
-/// it refuses.
-pub trait RoomCreator {
+/// What creates rooms at run time (the server's rooms, as the admin command does); the adapter lowers the
+/// `rooms` counter again when it refuses.
+pub trait RoomCreator: Send + Sync {
     /// Creates `request`'s room, or says why not.
     fn create(&self, request: &RoomRequest) -> Result<(), AllocationRefused>;
 }
 
-/// A one-room server: it hosts the room it started with (any allocation for its scene lands there) and
-/// refuses rooms of other scenes.
-#[derive(Clone, Debug)]
-pub struct OneRoom {
-    /// The scene it serves, as named on its command line.
-    pub scene: String,
+/// Tells a new allocation from a GameServer update that only repeats the last one. The sidecar streams the
+/// whole GameServer at every change (a counter moved, a list grew, the state changed), so an update is an
+/// allocation only when the allocation annotations differ from the last update's: each allocation names
+/// its own room (a lobby names rooms uniquely), and one whose annotations repeat the last room's is not
+/// seen. Updates without either annotation (a GameServer never allocated) are none.
+#[derive(Clone, Debug, Default)]
+pub struct AllocationTracker {
+    last: Option<(Option<String>, Option<String>)>,
 }
 
-impl RoomCreator for OneRoom {
-    fn create(&self, request: &RoomRequest) -> Result<(), AllocationRefused> {
-        if request.scene == self.scene {
-            return Ok(());
+impl AllocationTracker {
+    /// Whether `annotations` (of the newest GameServer update) carry an allocation not seen before.
+    pub fn is_new(&mut self, annotations: &HashMap<String, String>) -> bool {
+        let names = (annotations.get(ROOM_ANNOTATION).cloned(), annotations.get(SCENE_ANNOTATION).cloned());
+        if names == (None, None) || self.last.as_ref() == Some(&names) {
+            return false;
         }
-        Err(AllocationRefused::Unavailable {
-            room: request.room.clone(),
-            why: format!("this server holds one room, of scene {}, not {}", self.scene, request.scene),
-        })
+        self.last = Some(names);
+        true
     }
 }
 
@@ -125,11 +133,16 @@ mod tests {
     }
 
     #[test]
-    fn a_one_room_server_takes_its_scene_and_refuses_another_with_the_reason() {
-        let server = OneRoom { scene: "paper-testbed".into() };
-        let ask = |scene: &str| RoomRequest { room: "r".into(), scene: scene.into() };
-        assert_eq!(server.create(&ask("paper-testbed")), Ok(()));
-        let refused = server.create(&ask("chain50_loops5")).unwrap_err().to_string();
-        assert!(refused.contains("paper-testbed") && refused.contains("chain50_loops5"), "{refused}");
+    fn an_allocation_is_new_when_its_annotations_change_and_repeats_are_not() {
+        let mut tracker = AllocationTracker::default();
+        assert!(!tracker.is_new(&annotations(&[("other", "x")])), "a GameServer never allocated");
+        let lab3 = annotations(&[(ROOM_ANNOTATION, "lab-3"), (SCENE_ANNOTATION, "paper-testbed")]);
+        assert!(tracker.is_new(&lab3));
+        assert!(!tracker.is_new(&lab3), "the same allocation streamed again (a counter moved)");
+        let lab4 = annotations(&[(ROOM_ANNOTATION, "lab-4"), (SCENE_ANNOTATION, "paper-testbed")]);
+        assert!(tracker.is_new(&lab4));
+        let half = annotations(&[(ROOM_ANNOTATION, "lab-5")]);
+        assert!(tracker.is_new(&half), "an allocation missing its scene is new (and refused)");
+        assert!(tracker.is_new(&lab3), "an earlier room's name again, after another: new");
     }
 }

@@ -31,6 +31,7 @@ mod hub;
 pub mod messages;
 pub mod replay;
 pub mod sample;
+pub mod site;
 mod socket;
 pub mod tap;
 
@@ -236,11 +237,15 @@ pub(crate) struct ViewShared {
     pub shutdown: watch::Sender<bool>,
 }
 
-/// A running view.
+/// A running view of one room (or one recording) on a [`ViewSite`].
 pub struct ViewHandle {
     addr: SocketAddr,
     shared: Arc<ViewShared>,
-    serve: JoinHandle<()>,
+    /// The room's name on the site.
+    name: String,
+    site: Arc<site::Site>,
+    /// The site, when this view started it for itself (a recording, `--synthetic-users`).
+    own_site: Option<ViewSite>,
     hub: Option<JoinHandle<()>>,
 }
 
@@ -260,11 +265,13 @@ impl ViewHandle {
         self.shared.counters.snapshot()
     }
 
-    /// Closes every page (grabs are released) and stops serving.
+    /// Closes every page of the room (grabs are released) and takes it off the site; stops the site if
+    /// this view started it.
     pub async fn shutdown(mut self) -> ViewStats {
         self.shared.shutdown.send_replace(true);
-        if tokio::time::timeout(Duration::from_secs(3), &mut self.serve).await.is_err() {
-            self.serve.abort();
+        self.site.remove(&self.name);
+        if let Some(site) = self.own_site.take() {
+            site.shutdown().await;
         }
         if let Some(hub) = &self.hub {
             hub.abort();
@@ -276,9 +283,50 @@ impl ViewHandle {
 impl Drop for ViewHandle {
     fn drop(&mut self) {
         self.shared.shutdown.send_replace(true);
-        self.serve.abort();
+        self.site.remove(&self.name);
         if let Some(hub) = &self.hub {
             hub.abort();
+        }
+    }
+}
+
+/// A running site: the HTTP server on the view's address.
+pub struct ViewSite {
+    addr: SocketAddr,
+    pub(crate) site: Arc<site::Site>,
+    serve: Option<JoinHandle<()>>,
+}
+
+impl ViewSite {
+    /// Binds `listen` and serves the rooms added to it. Must be called inside a tokio runtime.
+    pub fn start(listen: SocketAddr) -> Result<ViewSite, ViewError> {
+        tokio::runtime::Handle::try_current().map_err(|_| ViewError::NoRuntime)?;
+        let site = Arc::new(site::Site::default());
+        let (addr, serve) = http::serve(listen, site.clone())?;
+        Ok(ViewSite { addr, site, serve: Some(serve) })
+    }
+
+    /// Where the pages are served.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Stops serving (after the rooms' pages have closed, at most a few seconds).
+    pub async fn shutdown(mut self) {
+        self.site.shutdown.send_replace(true);
+        if let Some(mut serve) = self.serve.take() {
+            if tokio::time::timeout(Duration::from_secs(3), &mut serve).await.is_err() {
+                serve.abort();
+            }
+        }
+    }
+}
+
+impl Drop for ViewSite {
+    fn drop(&mut self) {
+        self.site.shutdown.send_replace(true);
+        if let Some(serve) = &self.serve {
+            serve.abort();
         }
     }
 }
@@ -337,13 +385,23 @@ pub struct LiveSource {
     pub access: Access,
 }
 
-/// Starts a live view with no server to grab through (`--synthetic-users`): pages watch.
+/// The name a view's only room has on a site of its own.
+const ONLY_ROOM: &str = "default";
+
+/// Starts a live view on a site of its own with no server to grab through (`--synthetic-users`): pages
+/// watch.
 pub fn start_live(config: &ViewConfig, source: LiveSource) -> Result<ViewHandle, ViewError> {
-    start_live_with(config, source, None)
+    check(config)?;
+    let site = ViewSite::start(config.listen)?;
+    let mut view = start_room_view(&site, ONLY_ROOM, config, source, None)?;
+    view.own_site = Some(site);
+    Ok(view)
 }
 
-/// Starts a live view; `server` makes grabs possible.
-pub(crate) fn start_live_with(
+/// Starts the live view of room `name` on `site`; `server` makes grabs possible.
+pub(crate) fn start_room_view(
+    site: &ViewSite,
+    name: &str,
     config: &ViewConfig,
     source: LiveSource,
     server: Option<Arc<Gateway>>,
@@ -364,13 +422,15 @@ pub(crate) fn start_live_with(
         browsers: Mutex::new(Vec::new()),
         shutdown: watch::channel(false).0,
     });
-    let (addr, serve) = http::serve(config.listen, shared.clone())?;
     let hub = tokio::spawn(hub::run(
         hub::Hub { geometry, reader: source.reader, kind, frames: frames_tx, server },
         shared.clone(),
     ));
-    tracing::info!(%addr, "view: http://{addr}/");
-    Ok(ViewHandle { addr, shared, serve, hub: Some(hub) })
+    site.site.add(name, shared.clone());
+    let addr = site.local_addr();
+    tracing::info!(%addr, room = name, "view: http://{addr}/room/{name}");
+    let (name, site) = (name.to_owned(), site.site.clone());
+    Ok(ViewHandle { addr, shared, name, site, own_site: None, hub: Some(hub) })
 }
 
 /// Serves a recording on `config.listen` (`kinloop view`).
@@ -386,9 +446,12 @@ pub fn start_replay(config: &ViewConfig, access: Access, replay: replay::Replay)
         browsers: Mutex::new(Vec::new()),
         shutdown: watch::channel(false).0,
     });
-    let (addr, serve) = http::serve(config.listen, shared.clone())?;
+    let own = ViewSite::start(config.listen)?;
+    own.site.add(ONLY_ROOM, shared.clone());
+    let addr = own.local_addr();
     tracing::info!(%addr, "replay: http://{addr}/");
-    Ok(ViewHandle { addr, shared, serve, hub: None })
+    let site = own.site.clone();
+    Ok(ViewHandle { addr, shared, name: ONLY_ROOM.into(), site, own_site: Some(own), hub: None })
 }
 
 fn check(config: &ViewConfig) -> Result<(), ViewError> {

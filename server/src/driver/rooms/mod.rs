@@ -28,6 +28,8 @@ pub const DEFAULT_ROOM: &str = "default";
 
 /// The server's rooms and what opening another needs.
 pub(crate) struct Host {
+    /// The web view's site (`--view`), every room on it.
+    pub view: Option<crate::view::ViewSite>,
     /// The server's endpoint.
     pub endpoint: kinloop_protocol::quic::Endpoint,
     /// The rooms' executor.
@@ -45,8 +47,9 @@ pub(crate) struct Host {
 }
 
 impl Host {
-    /// Opens a room and adds it to the table; a name already open is refused.
-    pub fn open(&self, spec: RoomSpec) -> Result<(), ServerError> {
+    /// Opens a room and adds it to the table; a name already open is refused. `allocated`: opened for a
+    /// fleet's allocation, which counted it.
+    pub fn open(&self, spec: RoomSpec, allocated: bool) -> Result<(), ServerError> {
         if self.table.lock().map(|t| t.contains_key(&spec.name)).unwrap_or(true) {
             return Err(ServerError::Thread {
                 which: "rooms",
@@ -54,7 +57,7 @@ impl Host {
             });
         }
         let name = spec.name.clone();
-        let opened = open_room(self, spec)?;
+        let opened = open_room(self, spec, allocated)?;
         if self.announced.load(Ordering::Acquire) {
             opened.shared.fleet.opened();
         }
@@ -78,11 +81,6 @@ impl Host {
         if let Some(fleet) = &self.template.fleet {
             fleet.send(event);
         }
-    }
-
-    /// Whether no room is open.
-    pub fn is_empty(&self) -> bool {
-        self.table.lock().map(|t| t.is_empty()).unwrap_or(true)
     }
 
     /// Applies `f` to the first room by name.
