@@ -9,6 +9,7 @@ pub mod export;
 pub mod generate;
 pub mod import;
 pub mod inspect;
+pub mod load;
 pub mod simulate;
 pub mod timer_floor;
 pub mod view;

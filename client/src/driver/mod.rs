@@ -15,6 +15,7 @@ pub mod real;
 pub mod record;
 pub mod rt_loop;
 mod session;
+pub mod shared_clock;
 pub mod stop_signal;
 pub mod timing;
 
@@ -102,13 +103,36 @@ impl ClientStats {
 pub struct ClientHandle {
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
-    loop_thread: Option<JoinHandle<CoreStats>>,
+    loop_thread: Option<LoopEnd>,
     net_thread: Option<JoinHandle<()>>,
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
     welcome: Welcome,
     device: String,
     gains: ControllerGains,
+}
+
+/// Where a client's haptic loop runs: a thread of its own, or a clock shared with other clients.
+enum LoopEnd {
+    Own(JoinHandle<CoreStats>),
+    Shared(shared_clock::SharedEnd),
+}
+
+impl LoopEnd {
+    fn is_finished(&self) -> bool {
+        match self {
+            LoopEnd::Own(thread) => thread.is_finished(),
+            LoopEnd::Shared(end) => end.is_finished(),
+        }
+    }
+
+    /// The loop's last counters, once it has ended (it was asked to stop).
+    fn join(self) -> Option<CoreStats> {
+        match self {
+            LoopEnd::Own(thread) => thread.join().ok(),
+            LoopEnd::Shared(end) => end.join(),
+        }
+    }
 }
 
 /// A client: see [`Client::start`].
@@ -225,7 +249,7 @@ impl ClientHandle {
 
     /// True once the loop has stopped (duration over, device lost, or shut down).
     pub fn is_finished(&self) -> bool {
-        self.loop_thread.as_ref().is_none_or(|t| t.is_finished())
+        self.loop_thread.as_ref().is_none_or(LoopEnd::is_finished)
     }
 
     /// A fatal network error that stopped the client, if any.
@@ -271,7 +295,7 @@ impl ClientHandle {
     pub fn shutdown(mut self) -> ClientStats {
         self.shared.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.loop_thread.take() {
-            self.finish_with(t.join().ok());
+            self.finish_with(t.join());
         }
         if let Some(t) = self.net_thread.take() {
             let _ = t.join();
