@@ -31,16 +31,23 @@ fn strings(args: &[&str]) -> Vec<String> {
     args.iter().map(|a| (*a).to_owned()).collect()
 }
 
+/// `kinloop-server --rooms` with `rooms` (the file's text) and one real-time thread, in `dir`; the server,
+/// its address and its certificate's fingerprint.
+fn serve_rooms(test: &str, rooms: &str, dir: &std::path::Path) -> (ChildProcess, std::net::SocketAddr, String) {
+    std::fs::write(dir.join("rooms.toml"), rooms).unwrap();
+    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
+    let mut server = ChildProcess::spawn(test, &Role::Program { program: Program::Server, args }, dir, "server");
+    let (addr, fingerprint) =
+        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    (server, addr, fingerprint)
+}
+
 #[test]
 fn a_two_millisecond_room_does_not_make_the_other_rooms_users_miss() {
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
     let dir = common::temp_dir();
-    std::fs::write(dir.path().join("rooms.toml"), ROOMS).unwrap();
-    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
-    let mut server = ChildProcess::spawn(NAME, &Role::Program { program: Program::Server, args }, dir.path(), "server");
-    let (addr, fingerprint) =
-        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let (mut server, addr, fingerprint) = serve_rooms(NAME, ROOMS, dir.path());
     let client = |room: &str, op: &str, seconds: &str, tag: &str| {
         let mut args = vec!["--server".to_owned(), addr.to_string(), "--fingerprint".to_owned(), fingerprint.clone()];
         args.extend(strings(&["--room", room, "--op", op, "--duration", seconds, "--user", "firm", "--json"]));
@@ -100,11 +107,7 @@ fn four_users_in_two_rooms_render_from_one_load_process() {
     common::child::serve_if_child();
     let _bounded = common::bounded(LOAD, Duration::from_secs(120));
     let dir = common::temp_dir();
-    std::fs::write(dir.path().join("rooms.toml"), TWO_ROOMS).unwrap();
-    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
-    let mut server = ChildProcess::spawn(LOAD, &Role::Program { program: Program::Server, args }, dir.path(), "server");
-    let (addr, fingerprint) =
-        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let (mut server, addr, fingerprint) = serve_rooms(LOAD, TWO_ROOMS, dir.path());
     // Users 1 and 4 join bench-a, 2 and 5 bench-b, 3 a room that does not exist.
     let mut args = vec!["--server".to_owned(), addr.to_string(), "--fingerprint".to_owned(), fingerprint];
     args.extend(strings(&["--users", "5", "--rooms", "bench-a,bench-b,nowhere", "--duration", "6", "--json"]));

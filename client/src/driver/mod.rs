@@ -36,6 +36,7 @@ use network::network_thread;
 use real::OpenedDevice;
 use rt_loop::{LoopReport, LoopShared};
 use session::NetShared;
+use shared_clock::LoopEnd;
 use timing::LatenessSummary;
 
 /// What a client has measured.
@@ -110,29 +111,6 @@ pub struct ClientHandle {
     welcome: Welcome,
     device: String,
     gains: ControllerGains,
-}
-
-/// Where a client's haptic loop runs: a thread of its own, or a clock shared with other clients.
-enum LoopEnd {
-    Own(JoinHandle<CoreStats>),
-    Shared(shared_clock::SharedEnd),
-}
-
-impl LoopEnd {
-    fn is_finished(&self) -> bool {
-        match self {
-            LoopEnd::Own(thread) => thread.is_finished(),
-            LoopEnd::Shared(end) => end.is_finished(),
-        }
-    }
-
-    /// The loop's last counters, once it has ended (it was asked to stop).
-    fn join(self) -> Option<CoreStats> {
-        match self {
-            LoopEnd::Own(thread) => thread.join().ok(),
-            LoopEnd::Shared(end) => end.join(),
-        }
-    }
 }
 
 /// A client: see [`Client::start`].

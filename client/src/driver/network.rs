@@ -22,7 +22,7 @@ use super::real::{OpenedDevice, RealSpec};
 use super::record::{self, TickRecord};
 use super::rt_loop::{self, LoopBody, LoopRings, LoopSettings, LoopShared};
 use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, NetShared, Session};
-use super::LoopEnd;
+use super::shared_clock::LoopEnd;
 use crate::core::{ControllerGains, CoreConfig, HapticCore, ModelForm};
 use crate::device::hd::OpenedHd;
 use crate::device::presets::SimulatedDeviceBuildError;

@@ -216,6 +216,29 @@ fn run_clock(rate_hz: f64, realtime: bool, arrivals: &mpsc::Receiver<Box<dyn Mem
     rota.finish_all(start.elapsed());
 }
 
+/// Where a client's haptic loop runs: a thread of its own, or a clock shared with other clients.
+pub(super) enum LoopEnd {
+    Own(JoinHandle<CoreStats>),
+    Shared(SharedEnd),
+}
+
+impl LoopEnd {
+    pub(super) fn is_finished(&self) -> bool {
+        match self {
+            LoopEnd::Own(thread) => thread.is_finished(),
+            LoopEnd::Shared(end) => end.is_finished(),
+        }
+    }
+
+    /// The loop's last counters, once it has ended (it was asked to stop).
+    pub(super) fn join(self) -> Option<CoreStats> {
+        match self {
+            LoopEnd::Own(thread) => thread.join().ok(),
+            LoopEnd::Shared(end) => end.join(),
+        }
+    }
+}
+
 /// What a client on a shared clock keeps of its loop: whether it ended, and its last counters.
 pub(super) struct SharedEnd {
     stats: mpsc::Receiver<CoreStats>,
