@@ -9,5 +9,6 @@ pub mod cli;
 pub mod demo;
 pub mod experiments;
 pub mod generate;
+pub mod load;
 pub mod rounding;
 pub mod scene_arg;

@@ -24,6 +24,10 @@ enum Command {
                             still writes the summary and charts."
     )]
     Demo(cli::demo::DemoArgs),
+    /// N real client sessions from this process, their haptic loops stepped in turn on one clock thread
+    /// (not a real-time thread each), so a server's capacity is measured with its clients off its critical
+    /// path; prints each user's lateness, device-local-model RMS, clamped share and uplink loss.
+    Load(cli::load::LoadArgs),
     /// Everything the dynamics core knows at one configuration: q̈, λ, Λ⁻¹, its SVD, the constraint count.
     Inspect(cli::inspect::InspectArgs),
     /// Integrate a scene and report closure error, energy error and cost per step.
@@ -62,6 +66,7 @@ fn main() -> ExitCode {
 fn run(cli: &Cli) -> Result<()> {
     match &cli.command {
         Command::Demo(a) => cli::demo::run(a),
+        Command::Load(a) => cli::load::run(a),
         Command::Inspect(a) => cli::inspect::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Bench(a) => cli::bench::run(a),

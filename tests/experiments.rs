@@ -427,7 +427,7 @@ fn pauses_time_each_tick_after_each_kind_of_pause() {
 
 /// Every point of the capacity experiment is a real-time run that happened: one room, each user count's loop
 /// timed and its stages reported, the idle loop's floor measured beside it, the synthetic users' books
-/// accepted, the linkage whole. (How fast the loop runs is the machine's doing, not asserted here.)
+/// accepted, the linkage whole; and on the rooms axis, every room's real clients rendered. (How fast the loop runs is the machine's doing, not asserted here.)
 #[test]
 fn capacity_runs_each_user_count_beside_the_timer_floor() {
     let dir = tempfile::tempdir().unwrap();
@@ -441,6 +441,17 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
         assert!((0.0..=1.0).contains(&p.miss_rate) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
         assert_eq!((p.energy_reports_refused, p.state_restores), (0, 0), "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
+    }
+    // The rooms axis: every user of every room rendered from the load design, each room whole.
+    let axis: Vec<(usize, usize)> = r.rooms_axis.iter().map(|p| (p.rooms, p.users_per_room)).collect();
+    assert_eq!(axis, [(1, 2), (2, 2)], "quick rooms grid");
+    for p in &r.rooms_axis {
+        assert_eq!(p.users_rendered, p.rooms * p.users_per_room, "{p:?}");
+        assert!(p.step_us_p50_worst > 0.0 && p.step_us_p50_worst <= p.step_us_p99_worst, "{p:?}");
+        assert!((0.0..=1.0).contains(&p.miss_rate_worst) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
+        assert_eq!(p.state_restores, 0, "{p:?}");
+        assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
+        assert!(p.device_lm_rms_mm_median > 0.0 && p.device_lm_rms_mm_max < 50.0, "{p:?}");
     }
 }
 

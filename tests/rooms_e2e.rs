@@ -4,7 +4,9 @@
 //! users do not miss (its per-room `--json` deadline misses stay under 1 % of ticks, where sharing the
 //! thread with a 2 ms tick at 1 kHz would miss nearly every one), the calm room never restores, a client
 //! asking the slow room is refused with a reason it prints, and one asking for a room that does not exist
-//! learns which rooms do.
+//! learns which rooms do. And `kinloop load` in a process of its own drives two rooms of two users each
+//! from one shared clock thread: every user renders, and one asking for a room that does not exist is
+//! reported while the others carry on.
 
 mod common;
 
@@ -29,16 +31,23 @@ fn strings(args: &[&str]) -> Vec<String> {
     args.iter().map(|a| (*a).to_owned()).collect()
 }
 
+/// `kinloop-server --rooms` with `rooms` (the file's text) and one real-time thread, in `dir`; the server,
+/// its address and its certificate's fingerprint.
+fn serve_rooms(test: &str, rooms: &str, dir: &std::path::Path) -> (ChildProcess, std::net::SocketAddr, String) {
+    std::fs::write(dir.join("rooms.toml"), rooms).unwrap();
+    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
+    let mut server = ChildProcess::spawn(test, &Role::Program { program: Program::Server, args }, dir, "server");
+    let (addr, fingerprint) =
+        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    (server, addr, fingerprint)
+}
+
 #[test]
 fn a_two_millisecond_room_does_not_make_the_other_rooms_users_miss() {
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(120));
     let dir = common::temp_dir();
-    std::fs::write(dir.path().join("rooms.toml"), ROOMS).unwrap();
-    let args = strings(&["--rooms", "rooms.toml", "--rt-threads", "1", "--listen", "127.0.0.1:0", "--json"]);
-    let mut server = ChildProcess::spawn(NAME, &Role::Program { program: Program::Server, args }, dir.path(), "server");
-    let (addr, fingerprint) =
-        server.wait_for_stdout("the server prints its address", Duration::from_secs(30), listening);
+    let (mut server, addr, fingerprint) = serve_rooms(NAME, ROOMS, dir.path());
     let client = |room: &str, op: &str, seconds: &str, tag: &str| {
         let mut args = vec!["--server".to_owned(), addr.to_string(), "--fingerprint".to_owned(), fingerprint.clone()];
         args.extend(strings(&["--room", room, "--op", op, "--duration", seconds, "--user", "firm", "--json"]));
@@ -79,4 +88,64 @@ fn a_two_millisecond_room_does_not_make_the_other_rooms_users_miss() {
     assert_eq!(ve["core"]["state_restores"].as_u64(), Some(0), "{ve}");
     assert_eq!(ve["core"]["users_joined"].as_u64(), Some(2), "{ve}");
     assert!(ve["core"]["max_closure_error"].as_f64().unwrap() <= 1e-6, "{ve}");
+}
+
+const LOAD: &str = "four_users_in_two_rooms_render_from_one_load_process";
+
+const TWO_ROOMS: &str = "
+[[room]]
+name = \"bench-a\"
+scene = \"fourbar-crank-rocker\"
+
+[[room]]
+name = \"bench-b\"
+scene = \"paper-testbed\"
+";
+
+#[test]
+fn four_users_in_two_rooms_render_from_one_load_process() {
+    common::child::serve_if_child();
+    let _bounded = common::bounded(LOAD, Duration::from_secs(120));
+    let dir = common::temp_dir();
+    let (mut server, addr, fingerprint) = serve_rooms(LOAD, TWO_ROOMS, dir.path());
+    // Users 1 and 4 join bench-a, 2 and 5 bench-b, 3 a room that does not exist.
+    let mut args = vec!["--server".to_owned(), addr.to_string(), "--fingerprint".to_owned(), fingerprint];
+    args.extend(strings(&["--users", "5", "--rooms", "bench-a,bench-b,nowhere", "--duration", "6", "--json"]));
+    let mut load = ChildProcess::spawn(LOAD, &Role::Program { program: Program::Load, args }, dir.path(), "load");
+    let status = load.exit_status(Duration::from_secs(60));
+    assert!(status.success(), "kinloop load exited with {status}:\n{}", load.log_tail());
+    let outcome = json_object(&load.stdout());
+    println!("load: {outcome}");
+    assert_eq!(outcome["rendered"], 4, "{outcome}");
+    assert_eq!(outcome["refused"], 1, "{outcome}");
+    let users = outcome["per_user"].as_array().expect("per_user");
+    let nowhere = &users[2];
+    assert_eq!(nowhere["room"], "nowhere");
+    let why = nowhere["error"].as_str().expect("the refused user says why");
+    assert!(why.contains("rooms: bench-a, bench-b"), "the refusal does not list the rooms: {why}");
+    for (i, room) in [(0, "bench-a"), (1, "bench-b"), (3, "bench-a"), (4, "bench-b")] {
+        let user = &users[i];
+        assert_eq!(user["room"], room, "{user}");
+        assert_eq!(user["rendered"], true, "{user}");
+        let ticks = user["ticks"].as_f64().unwrap();
+        assert!(ticks >= 5000.0, "user {} ran {ticks} ticks of 6000: {user}", i + 1);
+        // Snapshots at the VE's 1 kHz reach every user of the load process, with room for a busy machine.
+        assert!(user["snapshots_received"].as_f64().unwrap() >= 0.5 * ticks, "{user}");
+        let rms = user["device_lm_rms_mm"].as_f64().unwrap();
+        assert!(rms > 0.0 && rms < 20.0, "the hand's device-OP distance {rms} mm: {user}");
+        assert!(user["max_force_ratio"].as_f64().unwrap() <= 1.0, "{user}");
+        assert!(user["uplinks_sent"].as_f64().unwrap() > 0.5 * ticks, "{user}");
+    }
+    // The two users of a room hold different operational points where the scene has several.
+    assert_ne!(users[0]["op"], users[3]["op"], "{outcome}");
+    server.interrupt();
+    let status = server.exit_status(Duration::from_secs(20));
+    assert!(status.success(), "the server exited with {status}:\n{}", server.log_tail());
+    let json = json_object(&server.stdout());
+    for room in json["rooms"].as_array().expect("rooms") {
+        let core = &room["stats"]["ve"]["core"];
+        assert_eq!(core["users_joined"].as_u64(), Some(2), "{room}");
+        assert_eq!(core["state_restores"].as_u64(), Some(0), "{room}");
+        assert!(core["max_closure_error"].as_f64().unwrap() <= 1e-6, "{room}");
+    }
 }

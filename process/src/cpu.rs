@@ -1,5 +1,6 @@
-//! The CPU time the calling thread has used: a real-time loop that waits with a hybrid sleep (sleeping,
-//! then spinning to its deadline) reports it beside its timing, so a figure bought by spinning shows its cost.
+//! CPU clocks: the calling thread's (a real-time loop that waits with a hybrid sleep, sleeping then spinning
+//! to its deadline, reports it beside its timing, so a figure bought by spinning shows its cost) and the
+//! whole process's (a load generator reports it beside what it drove).
 
 use std::time::Duration;
 
@@ -8,15 +9,33 @@ use std::time::Duration;
 pub fn thread_cpu_time() -> Option<Duration> {
     #[cfg(unix)]
     {
-        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-        // SAFETY: `t` is a valid, writable timespec for the duration of the call.
-        let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
-        (rc == 0).then(|| Duration::new(t.tv_sec as u64, t.tv_nsec as u32))
+        cpu_clock(libc::CLOCK_THREAD_CPUTIME_ID)
     }
     #[cfg(not(unix))]
     {
         None
     }
+}
+
+/// CPU time every thread of this process has used (user and system), or `None` where the platform has no
+/// process CPU clock: what a process that drives many loops costs the machine it shares.
+pub fn process_cpu_time() -> Option<Duration> {
+    #[cfg(unix)]
+    {
+        cpu_clock(libc::CLOCK_PROCESS_CPUTIME_ID)
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
+}
+
+#[cfg(unix)]
+fn cpu_clock(id: libc::clockid_t) -> Option<Duration> {
+    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `t` is a valid, writable timespec for the duration of the call.
+    let rc = unsafe { libc::clock_gettime(id, &mut t) };
+    (rc == 0).then(|| Duration::new(t.tv_sec as u64, t.tv_nsec as u32))
 }
 
 #[cfg(test)]

@@ -80,12 +80,7 @@ fn parse_hand(s: &str) -> Result<HandKind, String> {
 }
 
 fn parse_users(s: &str) -> Result<usize, String> {
-    let n: usize = s.parse().map_err(|_| format!("{s:?} is not a whole number"))?;
-    if (1..=MAX_USERS).contains(&n) {
-        Ok(n)
-    } else {
-        Err(format!("{n} users: between 1 and {MAX_USERS}"))
-    }
+    super::parse_user_count(s, MAX_USERS)
 }
 
 fn parse_seconds(s: &str) -> Result<Duration, String> {

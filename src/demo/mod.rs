@@ -1,6 +1,7 @@
 //! `kinloop demo`: the whole system in one process, in real time. A VE server ([`Server::start`]) hosts the
 //! scene (by default the paper's testbed) on an ephemeral loopback port with an ephemeral certificate; N
-//! clients ([`Client::start`]) connect over real QUIC, pinning the server's certificate fingerprint, each
+//! clients ([`Client::start`]) connect over real QUIC, pinning the server's certificate fingerprint (more
+//! than one with their haptic loops on one shared clock thread, as `kinloop load`'s users), each
 //! with `kinloop-client`'s defaults: the scene's device (sim:paper planar, sim:touch spatial), the server's
 //! mapping and gains, and a simulated hand touring its OP's reach, relaxed and firm in turn. The users are
 //! spread over the scene's operational points in turn. With `--paper-push` they all hold the first OP and
@@ -25,8 +26,9 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kinloop_client::device::{DevicePreset, DhdRequest, HdRequest};
+use kinloop_client::driver::shared_clock::SharedClock;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
-use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_client::user::{HandSpec, UserSpec};
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::emulator::LinkConfig;
@@ -40,14 +42,12 @@ use crate::charts::{self, Chart, Legend};
 use crate::experiments::paper::{count_chart, device_op_distance, distance_series, trajectory_chart, wrench_chart};
 use kinloop_harness::ClientSample;
 
-/// Most users the demo starts (each is a 1 kHz thread on this machine).
+/// Most users the demo starts (beyond one, their loops share one clock thread).
 pub const MAX_USERS: usize = 64;
 /// Longest demo.
 pub const MAX_DURATION: Duration = Duration::from_secs(3600);
 /// How long after the requested duration the demo waits for the clients' loops to end by themselves.
 const FINISH_GRACE: Duration = Duration::from_secs(5);
-/// Users whose haptic loops spin before their deadlines at real-time priority; with more, every loop sleeps.
-const SPINNING_USERS: usize = 2;
 /// Users drawn in the device-OP distance chart (more lines are unreadable).
 const DISTANCE_CHART_USERS: usize = 8;
 
@@ -261,10 +261,7 @@ fn user_of(options: &DemoOptions, i: usize) -> (String, UserSpec) {
     if options.paper_push {
         return (ops[0].name.clone(), UserSpec::Constant(user_wrench(options.scene.kind, options.users)));
     }
-    let hand = options
-        .hand
-        .clone()
-        .unwrap_or_else(|| HandSpec::touring(if i.is_multiple_of(2) { HandKind::Soft } else { HandKind::Firm }));
+    let hand = options.hand.clone().unwrap_or_else(|| crate::load::hand_in_turn(i));
     let first = options.first_op.as_ref().and_then(|name| ops.iter().position(|o| &o.name == name)).unwrap_or(0);
     (ops[(first + i) % ops.len()].name.clone(), UserSpec::Hand(hand))
 }
@@ -307,7 +304,14 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
             cancel.store(true, Ordering::Relaxed);
         })
     });
-    let clients = match start_clients(options, &server, &dir, ve_epoch) {
+    // One user runs as kinloop-client does, on a loop thread of its own; more share one clock thread, as
+    // `kinloop load`'s users do, so the demo shows what the server does rather than what many real-time
+    // threads do to a small machine.
+    let clock = match options.users {
+        1 => None,
+        _ => Some(SharedClock::start(1000.0, options.realtime).context("starting the shared haptic clock")?),
+    };
+    let clients = match start_clients(options, &server, &dir, ve_epoch, clock.as_ref().map(|(c, _)| c)) {
         Ok(clients) => clients,
         Err(e) => {
             // Nothing may outlive a failed start: the server's threads stop with it.
@@ -327,6 +331,10 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
             })
             .collect()
     });
+    if let Some((clock, thread)) = clock {
+        drop(clock);
+        thread.join();
+    }
     let server_stats = runtime.block_on(server.shutdown()).context("shutting the server down")?;
     if let Some(task) = ctrl_c {
         task.abort();
@@ -352,6 +360,7 @@ fn start_clients(
     server: &ServerHandle,
     dir: &Path,
     ve_epoch: Instant,
+    clock: Option<&SharedClock>,
 ) -> Result<Vec<(ClientHandle, UserSummary)>> {
     let mut clients: Vec<(ClientHandle, UserSummary)> = Vec::with_capacity(options.users);
     for i in 0..options.users {
@@ -369,11 +378,8 @@ fn start_clients(
         config.duration = Some(options.duration);
         config.link = side_link(&options.link, i as u64 + 1);
         config.record = Some(dir.join(format!("user{}.csv", i + 1)));
-        // Two spinning SCHED_FIFO loops fill a 2-core machine: beyond them the loops sleep, at normal
-        // priority, and leave the cores to the VE and the network.
-        let crowded = options.users > SPINNING_USERS;
-        config.realtime_priority = options.realtime && !crowded;
-        config.busy_wait = !crowded;
+        config.realtime_priority = options.realtime;
+        config.clock = clock.cloned();
         config.client_name = name.clone();
         config.report_interval = options.duration.max(Duration::from_secs(1));
         match Client::start(config) {

@@ -7,9 +7,10 @@
 //! (`server/ve_tick_users_N`) for the real-time/benchmark ratio, and whether the linkage stayed whole.
 //!
 //! Synthetic users follow the VE, so their tracking is the VE's own and not a client's: what this reports of
-//! the session is its stability (restores, closure). A `rooms` parameter (1: one room per server) names the
-//! second axis the rooms-per-server work adds. Wall-clock, on whatever the machine is doing: the run says how
-//! loaded it was (`load_average`), and the timer floor beside each point is the measure of the machine.
+//! the session is its stability (restores, closure). The second axis, rooms per server with real clients
+//! from the load design, is [`super::capacity_rooms`]. Wall-clock, on whatever the machine is doing: the run
+//! says how loaded it was (`load_average`), and the timer floor beside each point is the measure of the
+//! machine.
 
 use std::time::Duration;
 
@@ -19,6 +20,7 @@ use kinloop_server::bench::{realtime_run, ve_tick_users, RealtimeRun};
 use kinloop_server::core::VeConfig;
 use serde::{Deserialize, Serialize};
 
+use super::capacity_rooms::{self, RoomsPoint};
 use super::common::{Options, Output, Report};
 use crate::charts::{Chart, Legend, Series};
 use crate::rounding::round;
@@ -28,7 +30,7 @@ use crate::rounding::round;
 pub struct CapacitySummary {
     /// The one-line answer.
     pub answer: String,
-    /// Rooms per server (1 until a server hosts several).
+    /// Rooms per server on the users axis (1).
     pub rooms: usize,
     /// The host's 1-minute load average when the run began (`None` where `/proc/loadavg` is unreadable).
     pub load_average: Option<f64>,
@@ -36,6 +38,10 @@ pub struct CapacitySummary {
     pub seconds_per_point: f64,
     /// One point per user count.
     pub points: Vec<CapacityPoint>,
+    /// Seconds each point of the rooms axis ran (and its idle loop before it).
+    pub seconds_per_rooms_point: f64,
+    /// The rooms axis: rooms per server × users per room, real clients from the load design.
+    pub rooms_axis: Vec<RoomsPoint>,
 }
 
 /// One user count in one room.
@@ -157,6 +163,32 @@ pub fn run(options: &Options) -> Result<Report> {
         .with(Series::line("idle loop (timer floor)", xs(|p| 100.0 * p.floor_miss_rate)));
     out.chart("misses_vs_users", &chart)?;
 
+    let rooms_seconds = options.pick(10.0, 2.0);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("kinloop-capacity-net")
+        .enable_all()
+        .build()?;
+    let mut rooms_axis = Vec::new();
+    for (rooms, users) in capacity_rooms::grid(options.quick) {
+        if options.progress {
+            eprintln!("capacity: {rooms} rooms of {users} users, {rooms_seconds} s");
+        }
+        rooms_axis.push(capacity_rooms::measure(rooms, users, rooms_seconds, &runtime)?);
+    }
+    runtime.shutdown_timeout(Duration::from_secs(1));
+    let rx = |f: fn(&RoomsPoint) -> f64| rooms_axis.iter().map(|p| (p.rooms as f64, f(p))).collect::<Vec<_>>();
+    let chart = Chart::new("VE step against rooms per server (2 users each, real clients)", "rooms", "step (us)")
+        .legend(Legend::UpperLeft)
+        .with(Series::line("worst room, p50", rx(|p| p.step_us_p50_worst)))
+        .with(Series::line("worst room, p99", rx(|p| p.step_us_p99_worst)));
+    out.chart("step_vs_rooms", &chart)?;
+    let chart = Chart::new("Deadline misses against rooms, beside the idle loop's", "rooms", "missed ticks (%)")
+        .legend(Legend::UpperLeft)
+        .with(Series::line("worst room", rx(|p| 100.0 * p.miss_rate_worst)))
+        .with(Series::line("idle loop (timer floor)", rx(|p| 100.0 * p.floor_miss_rate)));
+    out.chart("misses_vs_rooms", &chart)?;
+
     let last = points.last().ok_or_else(|| anyhow!("no points"))?;
     let answer = format!(
         "{} users in one room: step p50 {} us, p99 {} us ({}x the back-to-back {} us); misses {:.3} % beside the \
@@ -170,10 +202,32 @@ pub fn run(options: &Options) -> Result<Report> {
         100.0 * last.floor_miss_rate,
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),
     );
-    let results = CapacitySummary { answer, rooms: 1, load_average: load, seconds_per_point: seconds, points };
+    let answer = match rooms_axis.last() {
+        Some(r) => format!(
+            "{answer} {} rooms of {}: worst room's step p99 {} us, misses {:.3} % beside the floor's {:.3} %, {} \
+             restores, device-LM RMS median {} mm.",
+            r.rooms,
+            r.users_per_room,
+            r.step_us_p99_worst,
+            100.0 * r.miss_rate_worst,
+            100.0 * r.floor_miss_rate,
+            r.state_restores,
+            r.device_lm_rms_mm_median
+        ),
+        None => answer,
+    };
+    let results = CapacitySummary {
+        answer,
+        rooms: 1,
+        load_average: load,
+        seconds_per_point: seconds,
+        points,
+        seconds_per_rooms_point: rooms_seconds,
+        rooms_axis,
+    };
     out.finish(
         "Users per room against the real-time VE loop's step, misses beside the timer floor, and stability",
-        "5 points of 2 x 10 s; --quick 2 points of 2 x 0.5 s",
+        "users: 5 points of 2 x 10 s, rooms: 4 points of 2 x 10 s; --quick 2 + 2 points of 2 x 0.5 s and 2 x 2 s",
         serde_json::to_value(&results)?,
     )
 }

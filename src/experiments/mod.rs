@@ -20,6 +20,7 @@
 //! wall-clock and are the only numbers that vary between runs.
 
 pub mod capacity;
+pub mod capacity_rooms;
 pub mod common;
 pub mod delay_point;
 pub mod impedance;

@@ -41,8 +41,8 @@ pub enum Role {
     RoomServer { listen: SocketAddr, cert: PathBuf, key: PathBuf, room_key: PathBuf, record: PathBuf },
     /// `kinloop-client --server SERVER --fingerprint FP --op OP --user constant:WRENCH`.
     Client { server: SocketAddr, fingerprint: String, name: String, op: String, wrench: Vec<f64> },
-    /// `PROGRAM ARGS...` through the program's own `main` (`kinloop_server::cli::main` or
-    /// `kinloop_client::cli::main`): its argument parsing, its output and its exit code.
+    /// `PROGRAM ARGS...` through the program's own `main` (`kinloop_server::cli::main`,
+    /// `kinloop_client::cli::main` or `kinloop::cli::load::main`): its argument parsing, its output and its exit code.
     Program { program: Program, args: Vec<String> },
 }
 
@@ -53,14 +53,17 @@ pub enum Program {
     Server,
     /// `kinloop-client`.
     Client,
+    /// `kinloop load`.
+    Load,
 }
 
 impl Program {
-    /// The binary's name.
+    /// The binary's name (the command's, for `kinloop load`).
     pub fn name(self) -> &'static str {
         match self {
             Program::Server => "kinloop-server",
             Program::Client => "kinloop-client",
+            Program::Load => "kinloop load",
         }
     }
 
@@ -75,6 +78,7 @@ impl Program {
         let code = match self {
             Program::Server => kinloop_server::cli::main(command_line),
             Program::Client => kinloop_client::cli::main(command_line),
+            Program::Load => kinloop::cli::load::main(command_line),
         };
         if code == std::process::ExitCode::SUCCESS {
             0

@@ -34,8 +34,12 @@ pub struct ClientConfig {
     pub room: String,
     /// How the server is trusted.
     pub trust: Trust,
-    /// Operational point to hold; `None`: the scene's first.
+    /// Operational point to hold; `None`: the scene's operational points taken in turn, this one's turn
+    /// being `op_turn` (0: the first).
     pub op: Option<String>,
+    /// With `op` unset, which of the scene's operational points (modulo their count) to hold: clients
+    /// started together spread over them.
+    pub op_turn: usize,
     /// The simulated device; `None`: the one for the scene's space ([`DevicePreset::for_kind`]).
     pub device: Option<DevicePreset>,
     /// A Force Dimension device through the DHD SDK instead of the simulated one (`--device dhd`).
@@ -72,6 +76,10 @@ pub struct ClientConfig {
     pub client_name: String,
     /// Interval of the periodic timing log.
     pub report_interval: Duration,
+    /// Step the haptic loop on this clock, shared with other clients of the process, instead of a thread
+    /// of its own (`rt_loop`); `realtime_priority` and `busy_wait` are then the clock's. A device whose
+    /// vendor owns the clock (`hd`) keeps its own.
+    pub clock: Option<super::shared_clock::SharedClock>,
 }
 
 impl ClientConfig {
@@ -86,6 +94,7 @@ impl ClientConfig {
             room: String::new(),
             trust,
             op: None,
+            op_turn: 0,
             device: None,
             dhd: None,
             hd: None,
@@ -103,6 +112,7 @@ impl ClientConfig {
             busy_wait: true,
             client_name: "kinloop-client".into(),
             report_interval: Duration::from_secs(5),
+            clock: None,
         }
     }
 }

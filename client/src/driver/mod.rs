@@ -15,6 +15,7 @@ pub mod real;
 pub mod record;
 pub mod rt_loop;
 mod session;
+pub mod shared_clock;
 pub mod stop_signal;
 pub mod timing;
 
@@ -35,6 +36,7 @@ use network::network_thread;
 use real::OpenedDevice;
 use rt_loop::{LoopReport, LoopShared};
 use session::NetShared;
+use shared_clock::LoopEnd;
 use timing::LatenessSummary;
 
 /// What a client has measured.
@@ -102,7 +104,7 @@ impl ClientStats {
 pub struct ClientHandle {
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
-    loop_thread: Option<JoinHandle<CoreStats>>,
+    loop_thread: Option<LoopEnd>,
     net_thread: Option<JoinHandle<()>>,
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
@@ -225,7 +227,7 @@ impl ClientHandle {
 
     /// True once the loop has stopped (duration over, device lost, or shut down).
     pub fn is_finished(&self) -> bool {
-        self.loop_thread.as_ref().is_none_or(|t| t.is_finished())
+        self.loop_thread.as_ref().is_none_or(LoopEnd::is_finished)
     }
 
     /// A fatal network error that stopped the client, if any.
@@ -271,7 +273,7 @@ impl ClientHandle {
     pub fn shutdown(mut self) -> ClientStats {
         self.shared.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.loop_thread.take() {
-            self.finish_with(t.join().ok());
+            self.finish_with(t.join());
         }
         if let Some(t) = self.net_thread.take() {
             let _ = t.join();

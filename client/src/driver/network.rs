@@ -20,16 +20,17 @@ use super::config::{ClientConfig, ClientError};
 use super::device_clock;
 use super::real::{OpenedDevice, RealSpec};
 use super::record::{self, TickRecord};
-use super::rt_loop::{self, LoopRings, LoopSettings, LoopShared};
+use super::rt_loop::{self, LoopBody, LoopRings, LoopSettings, LoopShared};
 use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, NetShared, Session};
-use crate::core::{ControllerGains, CoreConfig, CoreStats, HapticCore, ModelForm};
+use super::shared_clock::LoopEnd;
+use crate::core::{ControllerGains, CoreConfig, HapticCore, ModelForm};
 use crate::device::hd::OpenedHd;
 use crate::device::presets::SimulatedDeviceBuildError;
 use crate::device::{DevicePreset, HapticDevice, SimulatedRig};
 use crate::user::UserContext;
 
 pub(super) struct Started {
-    pub(super) loop_thread: JoinHandle<CoreStats>,
+    pub(super) loop_thread: LoopEnd,
     pub(super) helpers: Vec<JoinHandle<()>>,
     pub(super) welcome: Welcome,
     pub(super) device: String,
@@ -138,7 +139,11 @@ pub fn choose(
     };
     let op = match &config.op {
         Some(op) => op.clone(),
-        None => scene.ops.first().cloned().ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
+        None => scene
+            .ops
+            .get(config.op_turn % scene.ops.len().max(1))
+            .cloned()
+            .ok_or_else(|| format!("scene {} has no operational point", scene.name))?,
     };
     let form = match config.form {
         ModelForm::Op => LocalModelForm::OpSpace,
@@ -285,11 +290,20 @@ async fn run<S: Space>(
         report_every: (config.rate_hz * config.report_interval.as_secs_f64()).max(1.0) as u64,
     };
     let loop_shared = shared.clone();
-    let loop_thread = std::thread::Builder::new().name("kinloop-haptic".into()).spawn(move || match rig {
-        Haptic::Polled(device) => rt_loop::run(device, core, loop_rings, loop_shared, settings),
-        Haptic::Clocked(opened) => device_clock::run(opened, core, loop_rings, loop_shared, settings),
-    });
-    let loop_thread = match loop_thread {
+    let loop_end = match (rig, &config.clock) {
+        (Haptic::Polled(device), Some(clock)) => clock
+            .join(LoopBody::new(device, core, loop_rings, loop_shared, settings))
+            .map(LoopEnd::Shared)
+            .ok_or_else(|| std::io::Error::other("the shared haptic clock has stopped")),
+        (rig, _) => std::thread::Builder::new()
+            .name("kinloop-haptic".into())
+            .spawn(move || match rig {
+                Haptic::Polled(device) => rt_loop::run(device, core, loop_rings, loop_shared, settings),
+                Haptic::Clocked(opened) => device_clock::run(opened, core, loop_rings, loop_shared, settings),
+            })
+            .map(LoopEnd::Own),
+    };
+    let loop_thread = match loop_end {
         Ok(t) => t,
         Err(e) => {
             abandon(endpoint, &session.connection, b"client cannot start").await;

@@ -177,6 +177,11 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
         LoopBody { device, core, rings, shared, settings, ticks: 0, session: 1 }
     }
 
+    /// What the loop shares with the rest of its client.
+    pub fn shared(&self) -> &LoopShared {
+        &self.shared
+    }
+
     /// One tick at `now` (time since the loop started).
     pub fn step(&mut self, now: Duration) -> Flow {
         let (rings, shared, core, session) = (&mut self.rings, &self.shared, &mut self.core, &mut self.session);

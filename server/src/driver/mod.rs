@@ -578,7 +578,9 @@ where
         drain: config.drain,
         fleet,
     });
-    let hosted = rooms::Hosted::new(ve_thread::VeLoop::new(core, io, Instant::now()), spec.knobs);
+    // The room's time starts on the executor's grid, so the rooms of a thread are due together.
+    let epoch = host.executor.grid_start(ve_config.ve_period());
+    let hosted = rooms::Hosted::new(ve_thread::VeLoop::new(core, io, epoch), spec.knobs);
     if let Err(error) = host.executor.place(Box::new(hosted), cell) {
         shared.fleet.closed();
         return Err(error.into());

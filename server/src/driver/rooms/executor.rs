@@ -224,6 +224,17 @@ impl Executor {
         self.pulse.stall_until_ns.store(until.as_nanos().max(1) as u64, Ordering::Relaxed);
     }
 
+    /// The first instant on the executor's grid of `period` (its start plus a whole number of periods) not
+    /// before now. Rooms of one rate whose time starts there share their deadlines, so a thread wakes once a
+    /// period for all of them, not once for each: rooms started at scattered moments would each have the
+    /// thread wake (and spin for the end of its sleep) at a phase of their own.
+    pub fn grid_start(&self, period: Duration) -> Instant {
+        let since = self.pulse.epoch.elapsed().as_nanos();
+        let period = period.as_nanos().max(1);
+        let periods = since.div_ceil(period);
+        self.pulse.epoch + Duration::from_nanos(u64::try_from(periods * period).unwrap_or(u64::MAX))
+    }
+
     /// Real-time threads (the quarantine thread not counted).
     pub fn rt_threads(&self) -> usize {
         self.threads.len()
@@ -435,5 +446,25 @@ mod tests {
         }
         assert!(slow.cost() > Duration::from_micros(1900), "a 2 ms room reads {:?}", slow.cost());
         assert!(slow.load() > BUDGET_SHARE);
+    }
+
+    /// Rooms opened at scattered moments start on one grid: their deadlines differ by whole periods.
+    #[test]
+    fn rooms_opened_apart_start_on_the_executors_grid() {
+        let executor = Executor::start(1, false, None).expect("threads");
+        let period = Duration::from_millis(1);
+        let first = executor.grid_start(period);
+        std::thread::sleep(Duration::from_micros(2_300));
+        let before = Instant::now();
+        let second = executor.grid_start(period);
+        assert!(
+            second >= before && second < before + period,
+            "{:?} after now",
+            second.saturating_duration_since(before)
+        );
+        let apart = second.duration_since(first).as_nanos();
+        assert_eq!(apart % period.as_nanos(), 0, "{apart} ns apart");
+        assert!(apart >= 2 * period.as_nanos(), "{apart} ns apart");
+        executor.shutdown();
     }
 }

@@ -1,0 +1,133 @@
+//! The `capacity` experiment's rooms axis: how many rooms one server carries. Each point starts a real
+//! `kinloop_server::Server` hosting R rooms of the paper's testbed (its real-time executor, QUIC on
+//! loopback) and drives U real client sessions into each from [`crate::load`] (one shared clock thread
+//! stepping every user's haptic core, not a real-time thread each), for the point's seconds; the idle
+//! timer floor is measured just before it, with the same clock and sleep and no work. It reports each
+//! room's VE step (p50, p99) and deadline misses beside that floor, restores and closure, and each user's
+//! device-to-local-model RMS and uplink loss, against the same figures of one room alone (the first point).
+//!
+//! The clients share the machine with the server they load (they are in this process): the load's CPU use
+//! is reported beside the point, and on a small machine a separate `kinloop load` process is the cleaner
+//! measure (docs/benchmarks.md has both).
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use anyhow::{anyhow, Context, Result};
+use kinloop_client::driver::rt_loop::timer_floor;
+use kinloop_protocol::quic::Trust;
+use kinloop_server::driver::rooms::{RoomSpec, TestKnobs};
+use kinloop_server::{Access, Server, ServerConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::load::{self, LoadOptions};
+use crate::rounding::round;
+
+/// One point of the rooms axis: R rooms of U users on one server.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RoomsPoint {
+    /// Rooms on the server.
+    pub rooms: usize,
+    /// Users in each room.
+    pub users_per_room: usize,
+    /// Users that rendered, of `rooms × users_per_room`.
+    pub users_rendered: usize,
+    /// Median VE step (µs), the largest over the rooms.
+    pub step_us_p50_worst: f64,
+    /// 99th percentile (µs), the largest over the rooms.
+    pub step_us_p99_worst: f64,
+    /// Fraction of VE ticks woken more than half a period late, the largest over the rooms.
+    pub miss_rate_worst: f64,
+    /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
+    pub floor_miss_rate: f64,
+    /// States restored, over every room.
+    pub state_restores: u64,
+    /// Largest closure residual over every room (m).
+    pub max_closure_error_m: f64,
+    /// Rooms moved off the real-time threads for overrunning.
+    pub rooms_quarantined: usize,
+    /// Device-to-local-model RMS (mm), the median over the users.
+    pub device_lm_rms_mm_median: f64,
+    /// ... the largest.
+    pub device_lm_rms_mm_max: f64,
+    /// Uplinks the server missed (by sequence number), the largest share over the users.
+    pub uplink_loss_worst: f64,
+    /// The load's haptic ticks more than 500 µs late, over every user, as a share of its ticks.
+    pub load_miss_rate: f64,
+    /// CPU the load (every client in this process) used, in cores.
+    pub load_cpu_cores: Option<f64>,
+}
+
+/// The rooms axis's grid: (rooms, users per room), the first being the one room alone the others are read
+/// against.
+pub fn grid(quick: bool) -> Vec<(usize, usize)> {
+    if quick {
+        vec![(1, 2), (2, 2)]
+    } else {
+        vec![(1, 2), (4, 2), (8, 2), (16, 2)]
+    }
+}
+
+/// Measures R rooms of U users for `seconds`, the idle loop first.
+pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtime::Runtime) -> Result<RoomsPoint> {
+    let duration = Duration::from_secs_f64(seconds);
+    let (floor, _) = timer_floor(1000.0, duration, true);
+    let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
+        .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
+    let mut config = ServerConfig::new(scene.clone(), "paper-testbed", SocketAddr::from(([127, 0, 0, 1], 0)));
+    let names: Vec<String> = (1..=rooms).map(|i| format!("room{i}")).collect();
+    config.rooms = names
+        .iter()
+        .map(|name| RoomSpec {
+            name: name.clone(),
+            scene: scene.clone(),
+            scene_label: "paper-testbed".into(),
+            access: Access::open(),
+            max_users: users,
+            record: None,
+            knobs: TestKnobs::default(),
+        })
+        .collect();
+    config.stats_every = None;
+    let server = {
+        let _inside = runtime.enter();
+        Server::start(config).context("starting the server")?
+    };
+    let mut options = LoadOptions::new(
+        server.local_addr().to_string(),
+        Trust::Fingerprint(server.fingerprint().to_owned()),
+        rooms * users,
+    );
+    options.rooms = names;
+    options.duration = duration;
+    let outcome = load::run(&options);
+    let reports = server.room_stats();
+    runtime.block_on(server.shutdown()).context("shutting the server down")?;
+    let outcome = outcome?;
+
+    let ves: Vec<_> = reports.iter().map(|r| &r.stats.ve).collect();
+    let worst = |f: &dyn Fn(&kinloop_server::driver::VeLoopStats) -> f64| ves.iter().map(|v| f(v)).fold(0.0, f64::max);
+    let mut rms: Vec<f64> = outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm).collect();
+    rms.sort_by(f64::total_cmp);
+    let load_ticks: u64 = outcome.per_user.iter().map(|u| u.ticks).sum();
+    Ok(RoomsPoint {
+        rooms,
+        users_per_room: users,
+        users_rendered: outcome.rendered,
+        step_us_p50_worst: round(worst(&|v| v.step_time.p50_ns as f64) / 1e3, 2),
+        step_us_p99_worst: round(worst(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
+        miss_rate_worst: worst(&|v| v.deadline_misses as f64 / v.step_time.samples.max(1) as f64),
+        floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
+        state_restores: ves.iter().map(|v| v.core.state_restores).sum(),
+        max_closure_error_m: worst(&|v| v.core.max_closure_error),
+        rooms_quarantined: reports.iter().filter(|r| r.quarantined).count(),
+        device_lm_rms_mm_median: rms.get(rms.len() / 2).copied().map_or(0.0, |r| round(r, 3)),
+        device_lm_rms_mm_max: round(rms.last().copied().unwrap_or(0.0), 3),
+        uplink_loss_worst: reports
+            .iter()
+            .flat_map(|r| r.stats.per_user.iter().map(|u| u.uplink_loss))
+            .fold(0.0, f64::max),
+        load_miss_rate: outcome.lateness_misses as f64 / load_ticks.max(1) as f64,
+        load_cpu_cores: outcome.cpu_cores.map(|c| round(c, 3)),
+    })
+}
