@@ -1,8 +1,6 @@
 //! Real QUIC over 127.0.0.1: the handshake, its distinct failures, datagrams, oversize snapshots and the
 //! emulated link's delay. Every test is bounded by a timeout and uses ephemeral ports.
 
-use crate::support;
-
 use std::future::Future;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
