@@ -52,17 +52,8 @@ pub fn read_equality(e: &Element, tree: &Tree, warnings: &mut Warnings) -> Resul
     }
     let body_name = |i: Option<usize>| i.map_or_else(|| GROUND.to_string(), |i| tree.bodies[i].name.clone());
     Ok(Some(CutSpec {
-        name,
-        kind,
-        body_a: body_name(a),
-        point_a: point_a.as_slice().to_vec(),
-        body_b: body_name(b),
         point_b,
-        axis: None,
-        axis_b: None,
-        spring: None,
-        damping: 0.0,
-        range: None,
+        ..CutSpec::between(name, kind, body_name(a), point_a.as_slice().to_vec(), body_name(b))
     }))
 }
 

@@ -167,18 +167,15 @@ impl Layout {
             .iter()
             .enumerate()
             .map(|(k, pin)| CutSpec {
-                name: format!("pin-{k}"),
-                kind: CutKindSpec::Pin,
-                body_a: self.bodies[pin.body].name.clone(),
-                point_a: local(pin.at, self.bodies[pin.body].pivot, self.angle(pin.body)),
-                body_b: pin.other.map_or(GROUND.to_string(), |o| self.bodies[o].name.clone()),
                 // Written out (not left to be taken from q0), so that compiling checks the layout's geometry.
                 point_b: Some(pin.other.map_or(pin.at.to_vec(), |o| self.body_point(o, pin.at))),
-                axis: None,
-                axis_b: None,
-                spring: None,
-                damping: 0.0,
-                range: None,
+                ..CutSpec::between(
+                    format!("pin-{k}"),
+                    CutKindSpec::Pin,
+                    self.bodies[pin.body].name.clone(),
+                    local(pin.at, self.bodies[pin.body].pivot, self.angle(pin.body)),
+                    pin.other.map_or(GROUND.to_string(), |o| self.bodies[o].name.clone()),
+                )
             })
             .collect();
         Scene {

@@ -110,19 +110,7 @@ pub fn chain(links: usize, loops: usize) -> Scene {
     let cuts = (1..=loops)
         .map(|j| {
             let k = links * j / loops;
-            CutSpec {
-                name: format!("pin{j}"),
-                kind: CutKindSpec::Pin,
-                body_a: name(k - 1),
-                point_a: vec![LENGTH, 0.0],
-                body_b: "ground".into(),
-                point_b: None,
-                axis: None,
-                axis_b: None,
-                spring: None,
-                damping: 0.0,
-                range: None,
-            }
+            CutSpec::between(format!("pin{j}"), CutKindSpec::Pin, name(k - 1), vec![LENGTH, 0.0], "ground".into())
         })
         .collect();
     Scene {

@@ -313,6 +313,26 @@ pub struct CutSpec {
     pub range: Option<[f64; 2]>,
 }
 
+impl CutSpec {
+    /// A bare cut of `kind` between `point_a` of `body_a` and `body_b`: its point on `body_b` taken from q0, no
+    /// axis, spring, damping or range. Set those with struct update syntax.
+    pub fn between(name: String, kind: CutKindSpec, body_a: String, point_a: Vec<f64>, body_b: String) -> Self {
+        CutSpec {
+            name,
+            kind,
+            body_a,
+            point_a,
+            body_b,
+            point_b: None,
+            axis: None,
+            axis_b: None,
+            spring: None,
+            damping: 0.0,
+            range: None,
+        }
+    }
+}
+
 impl CutKindSpec {
     /// True when the cut's freedom is a translation (its springs and ranges are in metres).
     pub fn slides(self) -> bool {

@@ -86,19 +86,13 @@ fn build(spec: &Spec, kind: SceneKind) -> Scene {
         .map(|(k, &(a, b, along))| {
             let a = a % n;
             let b = b % (n + 1);
-            CutSpec {
-                name: format!("c{k}"),
-                kind: if d == 2 { CutKindSpec::Pin } else { CutKindSpec::Spherical },
-                body_a: name(a),
-                point_a: v(along * spec.bodies[a].2, 0.0),
-                body_b: if b == n || b == a { "ground".into() } else { name(b) },
-                point_b: None,
-                axis: None,
-                axis_b: None,
-                spring: None,
-                damping: 0.0,
-                range: None,
-            }
+            CutSpec::between(
+                format!("c{k}"),
+                if d == 2 { CutKindSpec::Pin } else { CutKindSpec::Spherical },
+                name(a),
+                v(along * spec.bodies[a].2, 0.0),
+                if b == n || b == a { "ground".into() } else { name(b) },
+            )
         })
         .collect();
     Scene {

@@ -6,6 +6,7 @@
 mod support;
 
 mod bench_hooks;
+mod loopback;
 mod passivity;
 mod quic_server;
 mod random_sessions;

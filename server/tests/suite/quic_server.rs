@@ -2,26 +2,21 @@
 //! snapshots and leaves; a bad token is refused with `BadToken` and nothing else; shutdown tells clients.
 
 use std::future::Future;
-use std::net::SocketAddr;
 use std::time::Duration;
 
 use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
 use kinloop_protocol::quic::{
-    client_endpoint, connect, recv_control, send_control, ConnectError, ConnectedSession, DatagramReceiver,
-    DatagramSender, EndpointOptions, Trust,
+    connect, recv_control, send_control, ConnectError, ConnectedSession, DatagramReceiver, DatagramSender,
 };
 use kinloop_protocol::{
-    Control, Datagram, DeviceCaps, Hello, Join, LocalModelForm, RefusalReason, Role, SceneKind, SessionShape, Uplink,
-    PROTOCOL_VERSION,
+    Control, Datagram, Hello, RefusalReason, Role, SceneKind, SessionShape, Uplink, PROTOCOL_VERSION,
 };
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 
+use crate::loopback::{endpoint, join_link2, loopback};
+
 async fn bounded<T>(test: impl Future<Output = T>) -> T {
     tokio::time::timeout(Duration::from_secs(30), test).await.expect("the test took longer than 30 s")
-}
-
-fn loopback() -> SocketAddr {
-    SocketAddr::from(([127, 0, 0, 1], 0))
 }
 
 fn start(tokens: &str) -> ServerHandle {
@@ -42,19 +37,8 @@ fn hello(token: &str, role: Role) -> Hello {
     }
 }
 
-fn join_link2() -> Join {
-    Join {
-        op: "link2".into(),
-        device: DeviceCaps { max_force_n: 20.0, continuous_force_n: 10.0, ..DeviceCaps::generous("sim", 3) },
-        form: LocalModelForm::OpSpace,
-        mapping: Default::default(),
-    }
-}
-
 async fn join(server: &ServerHandle, token: &str, role: Role) -> Result<ConnectedSession, ConnectError> {
-    let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
-    let client = client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap();
-    connect(&client, server.local_addr(), "localhost", &hello(token, role), |_| Ok(join_link2())).await
+    connect(&endpoint(server), server.local_addr(), "localhost", &hello(token, role), |_| Ok(join_link2())).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -4,24 +4,20 @@
 //! closed with a reason its users are told while the other room goes on.
 
 use std::future::Future;
-use std::net::SocketAddr;
 use std::time::Duration;
 
 use kinloop_linkage::model::builtin;
-use kinloop_protocol::quic::{admin, client_endpoint, connect, recv_control, ConnectError, EndpointOptions, Trust};
+use kinloop_protocol::quic::{admin, connect, recv_control, ConnectError};
 use kinloop_protocol::{
-    AdminAnswer, AdminCommand, AdminRequest, Control, DeviceCaps, Hello, Join, LocalModelForm, RefusalReason, Role,
-    PROTOCOL_VERSION,
+    AdminAnswer, AdminCommand, AdminRequest, Control, Hello, Join, RefusalReason, Role, PROTOCOL_VERSION,
 };
 use kinloop_server::driver::rooms::{load_rooms_file, RoomsFileError};
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 
+use crate::loopback::{endpoint, join_link2, loopback};
+
 async fn bounded<T>(test: impl Future<Output = T>) -> T {
     tokio::time::timeout(Duration::from_secs(30), test).await.expect("the test took longer than 30 s")
-}
-
-fn loopback() -> SocketAddr {
-    SocketAddr::from(([127, 0, 0, 1], 0))
 }
 
 /// Writes `files` into a fresh directory and loads `rooms.toml` from it.
@@ -55,20 +51,6 @@ fn hello(token: &str, room: &str) -> Hello {
         role: Role::Manipulator,
         room: room.into(),
     }
-}
-
-fn join_link2() -> Join {
-    Join {
-        op: "link2".into(),
-        device: DeviceCaps { max_force_n: 20.0, continuous_force_n: 10.0, ..DeviceCaps::generous("sim", 3) },
-        form: LocalModelForm::OpSpace,
-        mapping: Default::default(),
-    }
-}
-
-fn endpoint(server: &ServerHandle) -> kinloop_protocol::quic::Endpoint {
-    let options = EndpointOptions { client_bind: loopback(), ..EndpointOptions::default() };
-    client_endpoint(&Trust::Fingerprint(server.fingerprint().to_string()), &options).unwrap()
 }
 
 async fn command(server: &ServerHandle, token: &str, command: AdminCommand) -> AdminAnswer {
