@@ -21,7 +21,7 @@ pub mod stats;
 pub mod ve_thread;
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -36,7 +36,7 @@ use kinloop_protocol::quic::{
 };
 use kinloop_protocol::room_key::{scene_hash, RoomKey};
 use kinloop_protocol::SessionShape;
-use rtrb::RingBuffer;
+use rtrb::{Producer, RingBuffer};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
@@ -436,9 +436,12 @@ pub(crate) struct OpenRoom {
     shared: Arc<Shared>,
     collector: JoinHandle<()>,
     stop: Arc<AtomicBool>,
-    recorder: Option<(Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>)>,
+    recorder: Option<Recorder>,
     view: Option<ViewHandle>,
 }
+
+/// A room's record writer: the flag that tells it the rows are done, and its thread (rows written).
+type Recorder = (Arc<AtomicBool>, std::thread::JoinHandle<std::io::Result<u64>>);
 
 impl OpenRoom {
     /// Tells its sessions to leave (with `reason`); [`OpenRoom::finish`] then stops its VE.
@@ -514,17 +517,11 @@ where
     let (event_tx, event_rx) = RingBuffer::new(EVENT_RING);
     let (stats_tx, stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
-    let recorder = match &spec.record {
+    let (row_tx, recorder) = match &spec.record {
         Some(path) => {
-            let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
-            let done = Arc::new(AtomicBool::new(false));
-            let thread = record::spawn_writer(path, record::header::<S>(nq, n, m), row_rx, done.clone())?;
-            Some((row_tx, (done, thread)))
+            let (row_tx, recorder) = start_recorder::<S>(path, (nq, n, m))?;
+            (Some(row_tx), Some(recorder))
         }
-        None => None,
-    };
-    let (row_tx, recorder) = match recorder {
-        Some((tx, handle)) => (Some(tx), Some(handle)),
         None => (None, None),
     };
     // Every room is on the view's site (`/room/NAME`).
@@ -609,6 +606,17 @@ where
     };
     let collector = tokio::spawn(collect(shared.clone(), stats_rx, event_rx, config.stats_every));
     Ok(OpenRoom { shared, collector, stop, recorder, view })
+}
+
+/// The writer thread of a room's `--record` file and the VE thread's end of its ring.
+fn start_recorder<S: Space>(
+    path: &Path,
+    (nq, n, m): (usize, usize, usize),
+) -> Result<(Producer<f64>, Recorder), ServerError> {
+    let (row_tx, row_rx) = RingBuffer::new(RECORD_RING);
+    let done = Arc::new(AtomicBool::new(false));
+    let thread = record::spawn_writer(path, record::header::<S>(nq, n, m), row_rx, done.clone())?;
+    Ok((row_tx, (done, thread)))
 }
 
 /// Accepts connections until shutdown; then, while the sessions end (each bounded by the drain), refuses
