@@ -59,8 +59,8 @@ const SERVER: Layers = Layers {
 const CLIENT: Layers =
     Layers { dir: "client/src", ranks: &[("axes", 0), ("device", 1), ("core", 2), ("user", 3), ("driver", 4)] };
 
-/// Scene arguments and number rounding < the linkage generator < charts < experiments and the demo < the
-/// command line.
+/// Scene arguments and number rounding < the linkage generator < charts and the load process < experiments and
+/// the demo < the command line.
 const ROOT: Layers = Layers {
     dir: "src",
     ranks: &[
@@ -68,6 +68,7 @@ const ROOT: Layers = Layers {
         ("rounding", 0),
         ("generate", 1),
         ("charts", 2),
+        ("load", 2),
         ("experiments", 3),
         ("demo", 3),
         ("cli", 4),
