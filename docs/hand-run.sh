@@ -1,4 +1,4 @@
-# A session by hand, from the top of a checkout. The README quotes this file; tests/hand_run.rs runs its
+# A session by hand, from the top of a checkout. The README quotes this file; tests/slow/hand_run.rs runs its
 # `cargo run` lines as written (with a free port and the printed fingerprint), so they cannot drift.
 
 # 1. In one terminal, the server (Ctrl-C stops it). It prints the address it listens on and the SHA-256

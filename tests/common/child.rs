@@ -1,7 +1,7 @@
 //! Servers and clients in child processes, to kill them as a crash or a power cut would (SIGKILL: no close
 //! frame, no goodbye), or to run the programs themselves on a command line.
 //!
-//! The child is this very test binary, re-executed to run only the test that spawned it (`--exact NAME`)
+//! The child is this very test binary, re-executed to run only the test that spawned it (`--exact PATH`)
 //! with the role in an environment variable: that test calls [`serve_if_child`] first, which runs the role
 //! and exits the process. The child thus runs the same drivers as `kinloop-server` / `kinloop-client`
 //! (`Server::start` with a certificate directory, `Client::start`), or the programs' very `main` on a
@@ -17,6 +17,7 @@ use std::io::Read;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use kinloop_client::driver::Client;
@@ -203,6 +204,27 @@ pub struct ChildProcess {
     what: String,
 }
 
+/// The path of this binary's test named `name` as `--exact` wants it (`module::name` in a binary whose
+/// tests are modules): the binary lists its own tests once, and exactly one must end in `name`.
+pub fn test_path(name: &str) -> String {
+    static LISTED: OnceLock<Vec<String>> = OnceLock::new();
+    let listed = LISTED.get_or_init(|| {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        let out = Command::new(exe).args(["--list"]).output().expect("the test binary lists its tests");
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| l.strip_suffix(": test"))
+            .map(String::from)
+            .collect()
+    });
+    let suffix = format!("::{name}");
+    let found: Vec<&String> = listed.iter().filter(|path| *path == name || path.ends_with(&suffix)).collect();
+    match found.as_slice() {
+        [one] => one.to_string(),
+        _ => panic!("{} tests of this binary are named `{name}`: {found:?}", found.len()),
+    }
+}
+
 impl ChildProcess {
     /// Re-executes this test binary to run `role` inside the test named `test`, in `dir`; its log (stderr),
     /// stdout and ready file go to `dir` under `tag`.
@@ -237,7 +259,7 @@ impl ChildProcess {
         let ready = dir.join(format!("{tag}.ready"));
         let _ = std::fs::remove_file(&ready);
         let child = command
-            .args([test, "--exact", "--nocapture", "--test-threads=1"])
+            .args([test_path(test).as_str(), "--exact", "--nocapture", "--test-threads=1"])
             .current_dir(dir)
             .env(ROLE_VAR, serde_json::to_string(role).expect("role as JSON"))
             .env(READY_VAR, &ready)

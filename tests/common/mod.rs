@@ -15,7 +15,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// The machine has two cores and each session spins a VE loop and a haptic loop per client: sessions in
-/// one test binary run one after another (test binaries already run one after another under cargo).
+/// one test binary run one after another, as cargo runs one test binary after another.
 static SERIAL: Mutex<()> = Mutex::new(());
 
 /// Held for the whole test: the serial lock and a watchdog that ends the process when the test overruns
@@ -26,10 +26,16 @@ pub struct Bounded {
     _disarm: mpsc::Sender<()>,
 }
 
+/// The serial lock alone, for a test or a part of one that runs real time or a heavy loop without a
+/// hard limit of its own.
+pub fn serial() -> MutexGuard<'static, ()> {
+    // A test that failed while holding the lock poisons it; the next one is still welcome.
+    SERIAL.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// Starts a test that must finish within `limit` (counted once it holds the serial lock).
 pub fn bounded(name: &'static str, limit: Duration) -> Bounded {
-    // A test that failed while holding the lock poisons it; the next one is still welcome.
-    let serial = SERIAL.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let serial = serial();
     let (disarm, armed) = mpsc::channel::<()>();
     std::thread::spawn(move || {
         if let Err(mpsc::RecvTimeoutError::Timeout) = armed.recv_timeout(limit) {

@@ -1,7 +1,6 @@
-//! The root package's fast tests that run no child processes, in one binary: each test binary of a release
-//! build compiles and optimises its own copy of the generic code it reaches, so one binary builds far faster
-//! than one per file. Tests that re-run their binary as a child process (`common::child`) and the slow tier
-//! keep binaries of their own.
+//! The root package's fast tests in one binary: each test binary of a release build compiles and optimises its
+//! own copy of the generic code it reaches, so one binary builds far faster than one per file. The slow tier
+//! is `tests/slow/` and `tests/experiments.rs`.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -9,6 +8,7 @@ mod common;
 mod bench_markdown;
 mod devices_cli;
 mod dhd_demo;
+mod e2e_refusals;
 mod e2e_session;
 mod generate;
 mod harness;

@@ -81,7 +81,7 @@ pub enum EndpointError {
 /// stream over a 2 s round trip (1 kHz x 2 KB x 2 s). BBR paces its start-up at the initial window per round
 /// trip and grows it only as acknowledgements return, so with quinn's 240 KB a 1 kHz snapshot stream (~0.4 MB/s)
 /// over a 1 s round trip loses a large share of its datagrams for its first seconds: the client's force fades
-/// and its model restarts on stale poses (`tests/e2e_latency.rs` runs such a session in real time). The streams
+/// and its model restarts on stale poses (`tests/slow/e2e_latency.rs` runs such a session in real time). The streams
 /// are rate-limited by the application (latest-wins, one datagram a tick), so the larger window admits the
 /// designed rate at once, not a burst.
 pub const INITIAL_WINDOW_BYTES: u64 = 4 * 1024 * 1024;
@@ -97,7 +97,7 @@ pub fn transport_config(opts: &EndpointOptions) -> Result<TransportConfig, Endpo
         .datagram_send_buffer_size(opts.datagram_send_buffer)
         // The default (Cubic) takes random loss for congestion and throttles the 1 kHz datagram streams far
         // below what the loss alone leaves, so that under bursty loss the client's force fades for want of
-        // snapshots (tests/e2e_faults.rs holds a session at 30 % bursty loss without stale ticks), and its slow
+        // snapshots (tests/slow/e2e_faults.rs holds a session at 30 % bursty loss without stale ticks), and its slow
         // start starves a delayed session's first moments. BBR is model-based, not loss-based; quinn marks it
         // experimental, so this is one line to revert.
         .congestion_controller_factory(std::sync::Arc::new({

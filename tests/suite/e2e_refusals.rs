@@ -4,7 +4,7 @@
 //! welcome, not after the 5 s idle timeout. And a join whose device is impossible is refused naming what is
 //! wrong, the scene's kind and its axes.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

@@ -1,7 +1,7 @@
 //! A latency sweep over real QUIC: the link emulator behind both endpoints' sockets delays every packet
 //! each way, and the session is measured as a user would see it.
 
-mod common;
+use crate::common;
 
 use std::time::{Duration, Instant};
 

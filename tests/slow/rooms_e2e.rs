@@ -8,7 +8,7 @@
 //! from one shared clock thread: every user renders, and one asking for a room that does not exist is
 //! reported while the others carry on.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

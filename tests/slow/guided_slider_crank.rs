@@ -8,6 +8,8 @@ use kinloop_client::user::HandKind;
 
 #[test]
 fn the_guided_slider_crank_renders_on_every_device_by_default() {
+    // A heavy loop: it waits for the real-time sessions of the other tests rather than take a core from them.
+    let _serial = crate::common::serial();
     let pairs = points(&["guided-slider-crank"], &[HandKind::Soft, HandKind::Firm]).unwrap();
     let perfect: Vec<_> = pairs.into_iter().filter(|p| p.network == Network::Perfect).collect();
     assert_eq!(perfect.len(), 2 * 3 * 2, "two OPs x three devices x two hands");

@@ -4,7 +4,7 @@
 //! linkage where it was. Before the kill, a forged and a stale offer to B are refused and counted.
 //! See docs/resume.md.
 
-mod common;
+use crate::common;
 
 use std::net::SocketAddr;
 use std::path::Path;

@@ -8,7 +8,7 @@
 //! 170-270 ms gaps for the first seconds at this round trip, and the output faded and the model restarted over
 //! each gap (0-6 % of ticks clamped with the firm hand, 1-13 % with the poke).
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

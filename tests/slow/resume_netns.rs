@@ -4,7 +4,7 @@
 //! and the client moves to B, at another address, which resumes the linkage where A had it. See
 //! docs/resume.md.
 
-mod common;
+use crate::common;
 
 use std::net::SocketAddr;
 use std::process::Command;

@@ -4,10 +4,10 @@
 //! round trip. Demos run one at a time (each is a VE thread and a 1 kHz thread per user on two cores) and
 //! each is bounded in time.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
-use std::sync::{mpsc, Mutex};
+use std::sync::mpsc;
 use std::time::Duration;
 
 use kinloop::demo::{self, records, DemoOptions, DemoReport, DemoSummary};
@@ -19,8 +19,6 @@ use kinloop_linkage::math::space::SceneKind;
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use serde_json::Value;
 
-/// Real-time demos must not share the two cores with each other, nor with the timer-floor loop.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 /// Longest a demo of a couple of seconds may take, start-up and charts included.
 const BOUND: Duration = Duration::from_secs(60);
 
@@ -35,7 +33,7 @@ fn options(out: &Path, users: usize, seconds: f64) -> DemoOptions {
 }
 
 fn run_bounded(options: DemoOptions) -> DemoReport {
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let _turn = common::serial();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         let _ = tx.send(demo::run(&options));
@@ -83,7 +81,7 @@ fn run_on_time(dir: &Path, make: impl Fn(&Path) -> DemoOptions) -> Attempted {
     let mut calm_budget = CALM_WAIT;
     for attempt in 0..ATTEMPTS {
         let probes = {
-            let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            let _turn = common::serial();
             common::wait_for_calm(&mut calm_budget)
         };
         if probes.len() > 1 {
@@ -290,7 +288,7 @@ fn bad_settings_are_refused_before_anything_starts() {
 #[test]
 fn timer_floor_reports_an_idle_loops_lateness() {
     // Its loop spins under SCHED_FIFO: beside a demo it would take a core from the demo's real-time loops.
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let _turn = common::serial();
     let bin = env!("CARGO_BIN_EXE_kinloop");
     let out = std::process::Command::new(bin).args(["timer-floor", "--duration", "0.3", "--json"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

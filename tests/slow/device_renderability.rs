@@ -5,7 +5,7 @@
 //! thread runs the client's loop, with a hand that tours the OP's reach. Each pair must render by the
 //! matrix's bounds.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -26,7 +26,7 @@ fn programs(name: &'static str, fake: PathBuf) -> Programs {
         let role = Role::Program { program, args: args.to_vec() };
         let mut command = Command::new(std::env::current_exe().expect("the test binary's path"));
         command
-            .args([name, "--exact", "--nocapture", "--test-threads=1"])
+            .args([common::child::test_path(name).as_str(), "--exact", "--nocapture", "--test-threads=1"])
             .env("KINLOOP_E2E_ROLE", serde_json::to_string(&role).expect("a role"))
             // The child lives while its stdin is open: as long as the runner holds it.
             .stdin(Stdio::piped());

@@ -3,7 +3,7 @@
 //! with only a free port and the fingerprint the server prints put in. A renamed flag, a package `cargo
 //! run -p` cannot run, or a client that does not get through fails here.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 
@@ -12,7 +12,7 @@ use common::workspace;
 
 const NAME: &str = "the_documented_hand_run_works_as_written";
 /// The file the README quotes.
-const SCRIPT: &str = include_str!("../docs/hand-run.sh");
+const SCRIPT: &str = include_str!("../../docs/hand-run.sh");
 /// Where the script's `$FINGERPRINT` goes.
 const FINGERPRINT: &str = "$FINGERPRINT";
 

@@ -5,7 +5,7 @@
 //! the linkage where it was, without a force step, and the client's recording marks the time between the
 //! two servers as session 0. See docs/resume.md.
 
-mod common;
+use crate::common;
 
 use std::time::{Duration, Instant};
 

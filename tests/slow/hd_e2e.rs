@@ -10,7 +10,7 @@
 //! The fake is a dev-dependency of this package, so cargo builds its cdylib beside this test's binary; the
 //! test fails (never skips) when it is not there.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 
