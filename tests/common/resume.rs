@@ -3,15 +3,19 @@
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use tempfile::TempDir;
 
 use kinloop_client::driver::ClientHandle;
 use kinloop_protocol::quic::{RoomCa, Trust};
 use kinloop_protocol::room_key::RoomKey;
 use kinloop_server::{Identity, ServerConfig};
 
-use super::child::Role;
+use super::child::{self, Role};
 use super::live::{self, OPS};
 use super::records::{self, Step, Tick};
+use super::Bounded;
 
 /// The resume goals: the linkage resumed within 1 mm and 1° of where it was, the client back within
 /// 2 s of the kill, and no force step above 0.2 N at the reconnection.
@@ -53,6 +57,30 @@ pub fn room_server(mut config: ServerConfig, dir: &Path, side: &str) -> ServerCo
     config.room_key = Some(RoomKey::load(&dir.join("room.key")).expect("room key"));
     config.record = Some(dir.join(format!("{side}.csv")));
     config
+}
+
+/// What a resume test stands on: this binary serving as the child it was started as (if it was), the serial
+/// lock and a minute's hard limit, and a fresh directory holding a room's files ([`room_files`]).
+pub struct Stage {
+    pub dir: TempDir,
+    /// The room key's bytes.
+    pub secret: Vec<u8>,
+    _bounded: Bounded,
+}
+
+impl Stage {
+    pub fn set(test: &'static str) -> Stage {
+        child::serve_if_child();
+        let bounded = super::bounded(test, Duration::from_secs(60));
+        let dir = super::temp_dir();
+        let secret = room_files(dir.path());
+        Stage { dir, secret, _bounded: bounded }
+    }
+
+    /// A file in the stage's directory.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
 }
 
 /// A room's files in `dir`: `ca.pem`, `a.pem`/`a.key` and `b.pem`/`b.key` (issued by the CA for

@@ -19,11 +19,9 @@ use kinloop_server::ServerConfig;
 #[test]
 fn a_terminated_server_drains_its_client_to_another_and_exits_zero() {
     const NAME: &str = "a_terminated_server_drains_its_client_to_another_and_exits_zero";
-    common::child::serve_if_child();
-    let _bounded = common::bounded(NAME, Duration::from_secs(60));
-    let dir = common::temp_dir();
-    let path = |name: &str| dir.path().join(name);
-    resume::room_files(dir.path());
+    let stage = resume::Stage::set(NAME);
+    let dir = &stage.dir;
+    let path = |name: &str| stage.path(name);
     let file = |name: &str| path(name).display().to_string();
     let args = [
         "--scene",

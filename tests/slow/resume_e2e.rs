@@ -38,12 +38,10 @@ fn offer_to(rt: &tokio::runtime::Runtime, addr: SocketAddr, ca: &Path, offer: &R
 #[test]
 fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
     const NAME: &str = "a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was";
-    common::child::serve_if_child();
-    let _bounded = common::bounded(NAME, Duration::from_secs(60));
-    let dir = common::temp_dir();
-    let path = |name: &str| dir.path().join(name);
-    let secret = resume::room_files(dir.path());
-    let key = RoomKey::from_bytes(&secret).expect("room key");
+    let stage = resume::Stage::set(NAME);
+    let (dir, secret) = (&stage.dir, &stage.secret);
+    let path = |name: &str| stage.path(name);
+    let key = RoomKey::from_bytes(secret).expect("room key");
 
     let role = resume::server_role(dir.path(), "a", live::LOOPBACK);
     let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
@@ -99,11 +97,9 @@ fn a_killed_server_is_replaced_and_the_linkage_resumes_where_it_was() {
 #[test]
 fn a_client_whose_servers_are_all_gone_holds_zero_force_while_it_keeps_looking() {
     const NAME: &str = "a_client_whose_servers_are_all_gone_holds_zero_force_while_it_keeps_looking";
-    common::child::serve_if_child();
-    let _bounded = common::bounded(NAME, Duration::from_secs(60));
-    let dir = common::temp_dir();
-    let path = |name: &str| dir.path().join(name);
-    resume::room_files(dir.path());
+    let stage = resume::Stage::set(NAME);
+    let dir = &stage.dir;
+    let path = |name: &str| stage.path(name);
     let role = resume::server_role(dir.path(), "a", live::LOOPBACK);
     let mut server_a = ChildProcess::spawn(NAME, &role, dir.path(), "server-a");
     let a_addr = server_a.ready(Duration::from_secs(15)).addr;

@@ -66,11 +66,9 @@ impl Drop for Hosts {
 #[test]
 fn a_server_killed_on_one_host_is_replaced_on_another_and_the_linkage_resumes() {
     const NAME: &str = "a_server_killed_on_one_host_is_replaced_on_another_and_the_linkage_resumes";
-    common::child::serve_if_child();
-    let _bounded = common::bounded(NAME, Duration::from_secs(60));
-    let dir = common::temp_dir();
-    let path = |name: &str| dir.path().join(name);
-    resume::room_files(dir.path());
+    let stage = resume::Stage::set(NAME);
+    let dir = &stage.dir;
+    let path = |name: &str| stage.path(name);
     let pid = std::process::id();
     let (hosts, addresses) = Hosts::make(&format!("kl{}", pid % 10_000), 100 + (pid % 100) as u8);
     let mut servers = Vec::new();
