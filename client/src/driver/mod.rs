@@ -149,7 +149,7 @@ impl Client {
         let start = NetStart { config, real, addresses, shared: shared.clone(), net: net.clone(), started };
         let net_end = match network {
             Some(network) => {
-                let endpoint = network.endpoint_for(&start.config)?;
+                let endpoint = network.endpoint_for(&start.config.trust, start.config.link.as_ref())?;
                 let (done, ended) = mpsc::channel::<()>();
                 network.spawn(async move {
                     network_task(start, endpoint).await;

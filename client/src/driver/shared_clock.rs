@@ -376,7 +376,9 @@ mod tests {
         drop(joins);
         let rounds = Arc::new(std::sync::atomic::AtomicU64::new(0));
         let counted = rounds.clone();
-        let hook: RoundHook = Box::new(move || drop(counted.fetch_add(1, Ordering::Relaxed)));
+        let hook: RoundHook = Box::new(move || {
+            counted.fetch_add(1, Ordering::Relaxed);
+        });
         run_clock(10_000.0, false, &arrivals, Some(hook));
         assert_eq!(seen.lock().unwrap().len(), 15, "every member stepped its 5 ticks");
         // Five rounds that step the three members, and the sixth in which they stop.

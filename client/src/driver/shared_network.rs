@@ -13,10 +13,10 @@ use std::sync::{mpsc, Arc, Mutex};
 use std::time::Duration;
 
 use kinloop_process::realtime::{try_fifo_priority, NETWORK_PRIORITY};
-use kinloop_protocol::quic::{client_endpoint, Endpoint, EndpointOptions, Trust};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_protocol::quic::{client_endpoint, Endpoint, EndpointError, EndpointOptions, Trust};
 use tokio::sync::Notify;
 
-use super::config::{ClientConfig, ClientError};
 use super::shared_clock::RoundHook;
 use super::uplinks::Outlet;
 
@@ -28,7 +28,8 @@ const PUMP_POLL: Duration = Duration::from_millis(5);
 const CLOSE_LINGER: Duration = Duration::from_secs(1);
 
 /// The network side shared by many clients of one process; cloned into each client's
-/// [`ClientConfig::network`]. The runtime stops when the last handle goes (or at [`SharedNetwork::finish`]).
+/// [`ClientConfig::network`](super::ClientConfig::network). The runtime stops when the last handle goes (or
+/// at [`SharedNetwork::finish`]).
 #[derive(Clone)]
 pub struct SharedNetwork {
     inner: Arc<Inner>,
@@ -62,7 +63,7 @@ impl SharedNetwork {
     /// A runtime of `worker_threads` (at least one) and its uplink pump; with `realtime`, its workers ask
     /// for SCHED_FIFO below the shared clock's priority
     /// ([`NETWORK_PRIORITY`](kinloop_process::realtime::NETWORK_PRIORITY)).
-    pub fn start(worker_threads: usize, realtime: bool) -> Result<Self, ClientError> {
+    pub fn start(worker_threads: usize, realtime: bool) -> std::io::Result<Self> {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(worker_threads.max(1))
             .thread_name("kinloop-net")
@@ -74,8 +75,7 @@ impl SharedNetwork {
                 }
             })
             .enable_all()
-            .build()
-            .map_err(|e| ClientError::Runtime(e.to_string()))?;
+            .build()?;
         let (outlets, arrivals) = mpsc::channel();
         let wake = Arc::new(Notify::new());
         runtime.spawn(pump(arrivals, wake.clone()));
@@ -91,19 +91,24 @@ impl SharedNetwork {
         Box::new(move || wake.notify_one())
     }
 
-    /// The endpoint a client of `config` uses: the shared one for its trust (made on first use), or `None`
-    /// when its link is emulated (it makes its own, on this runtime).
-    pub(super) fn endpoint_for(&self, config: &ClientConfig) -> Result<Option<Endpoint>, ClientError> {
-        if config.link.as_ref().is_some_and(|link| !link.is_transparent()) {
+    /// The endpoint of a client that trusts servers as `trust` says: the shared one for that trust (made on
+    /// first use), or `None` when its `link` is emulated (it makes its own, on this runtime).
+    pub(super) fn endpoint_for(
+        &self,
+        trust: &Trust,
+        link: Option<&LinkConfig>,
+    ) -> Result<Option<Endpoint>, EndpointError> {
+        if link.is_some_and(|link| !link.is_transparent()) {
             return Ok(None);
         }
-        let mut endpoints = self.inner.endpoints.lock().map_err(|_| ClientError::Runtime("endpoints".into()))?;
-        if let Some((_, endpoint)) = endpoints.iter().find(|(trust, _)| *trust == config.trust) {
+        // A poisoned list is still a list of endpoints.
+        let mut endpoints = self.inner.endpoints.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some((_, endpoint)) = endpoints.iter().find(|(known, _)| known == trust) {
             return Ok(Some(endpoint.clone()));
         }
         let _inside = self.inner.handle.enter();
-        let endpoint = client_endpoint(&config.trust, &EndpointOptions::default())?;
-        endpoints.push((config.trust.clone(), endpoint.clone()));
+        let endpoint = client_endpoint(trust, &EndpointOptions::default())?;
+        endpoints.push((trust.clone(), endpoint.clone()));
         Ok(Some(endpoint))
     }
 
