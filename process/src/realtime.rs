@@ -15,16 +15,27 @@ pub enum RealtimePriorityError {
 /// Priority asked for: high among real-time threads, below the kernel's own (99).
 pub const REALTIME_PRIORITY: u8 = 80;
 
+/// Priority asked for the network runtime's workers of a process that runs real-time loops (a server's
+/// executor, a load's shared clock): below the loops, so that a loop never waits for them, and above every
+/// normal thread, so that on a machine busy with other work the datagrams of a thousand-hertz session are
+/// still read and sent every millisecond (tokio's workers park when they have nothing to do).
+pub const NETWORK_PRIORITY: u8 = 40;
+
 /// Runs the calling thread under SCHED_FIFO at [`REALTIME_PRIORITY`].
 pub fn try_realtime_priority() -> Result<(), RealtimePriorityError> {
+    try_fifo_priority(REALTIME_PRIORITY)
+}
+
+/// Runs the calling thread under SCHED_FIFO at `priority` (1-99).
+pub fn try_fifo_priority(priority: u8) -> Result<(), RealtimePriorityError> {
     #[cfg(unix)]
     {
         use thread_priority::unix::{
             set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
         };
         use thread_priority::{ThreadPriority, ThreadPriorityValue};
-        let value = ThreadPriorityValue::try_from(REALTIME_PRIORITY)
-            .map_err(|e| RealtimePriorityError::Refused(format!("priority {REALTIME_PRIORITY}: {e:?}")))?;
+        let value = ThreadPriorityValue::try_from(priority)
+            .map_err(|e| RealtimePriorityError::Refused(format!("priority {priority}: {e:?}")))?;
         set_thread_priority_and_policy(
             thread_native_id(),
             ThreadPriority::Crossplatform(value),

@@ -352,7 +352,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         rooms,
     };
     let many = !config.rooms.is_empty();
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    // The QUIC side's workers below the executor's real-time threads and above the machine's other work
+    // (when the OS grants it; the executor says so when it does not).
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .on_thread_start(|| {
+            drop(kinloop_process::realtime::try_fifo_priority(kinloop_process::realtime::NETWORK_PRIORITY))
+        })
+        .enable_all()
+        .build()?;
     runtime.block_on(async move {
         let agones = if cli.agones { Some(start_agones(cli.agones_health_ms, &mut config).await?) } else { None };
         let server = Server::start(config)?;

@@ -55,6 +55,9 @@ pub struct LoadArgs {
     /// Ask SCHED_FIFO for the one clock thread that steps every user's loop.
     #[arg(long)]
     pub realtime: bool,
+    /// Worker threads of the one runtime every user's network side shares.
+    #[arg(long, value_name = "N", default_value_t = load::NETWORK_THREADS, value_parser = parse_net_threads)]
+    pub net_threads: usize,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -65,6 +68,13 @@ const MAX_DURATION_S: f64 = 86_400.0;
 
 fn parse_users(s: &str) -> Result<usize, String> {
     super::parse_user_count(s, MAX_USERS)
+}
+
+fn parse_net_threads(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=16).contains(&n) => Ok(n),
+        _ => Err(format!("{s:?}: worker threads, 1 to 16")),
+    }
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {
@@ -97,6 +107,7 @@ pub fn options(args: &LoadArgs) -> Result<LoadOptions> {
     options.duration = Duration::from_secs_f64(args.duration);
     options.rate_hz = args.rate;
     options.realtime = args.realtime;
+    options.network_threads = args.net_threads;
     Ok(options)
 }
 

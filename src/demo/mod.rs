@@ -27,6 +27,7 @@ use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kinloop_client::device::{DevicePreset, DhdRequest, HdRequest};
 use kinloop_client::driver::shared_clock::SharedClock;
+use kinloop_client::driver::shared_network::SharedNetwork;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandSpec, UserSpec};
 use kinloop_linkage::model::builtin::PAPER_WRENCH;
@@ -272,9 +273,16 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     check(options)?;
     let dir = options.out.join("demo");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
+    // The server's QUIC side as kinloop-server runs it: below the real-time loops, above other work.
+    let realtime = options.realtime;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("kinloop-demo-net")
+        .on_thread_start(move || {
+            if realtime {
+                drop(kinloop_process::realtime::try_fifo_priority(kinloop_process::realtime::NETWORK_PRIORITY));
+            }
+        })
         .enable_all()
         .build()
         .context("starting the network runtime")?;
@@ -307,11 +315,18 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     // One user runs as kinloop-client does, on a loop thread of its own; more share one clock thread, as
     // `kinloop load`'s users do, so the demo shows what the server does rather than what many real-time
     // threads do to a small machine.
-    let clock = match options.users {
-        1 => None,
-        _ => Some(SharedClock::start(1000.0, options.realtime).context("starting the shared haptic clock")?),
+    let (clock, network) = match options.users {
+        1 => (None, None),
+        _ => {
+            let network = SharedNetwork::start(crate::load::NETWORK_THREADS, options.realtime)
+                .context("starting the shared network")?;
+            let clock = SharedClock::start(1000.0, options.realtime, Some(network.round_hook()))
+                .context("starting the shared haptic clock")?;
+            (Some(clock), Some(network))
+        }
     };
-    let clients = match start_clients(options, &server, &dir, ve_epoch, clock.as_ref().map(|(c, _)| c)) {
+    let shared = clock.as_ref().map(|(c, _)| c).zip(network.as_ref());
+    let clients = match start_clients(options, &server, &dir, ve_epoch, shared) {
         Ok(clients) => clients,
         Err(e) => {
             // Nothing may outlive a failed start: the server's threads stop with it.
@@ -334,6 +349,9 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     if let Some((clock, thread)) = clock {
         drop(clock);
         thread.join();
+    }
+    if let Some(network) = network {
+        network.finish();
     }
     let server_stats = runtime.block_on(server.shutdown()).context("shutting the server down")?;
     if let Some(task) = ctrl_c {
@@ -360,7 +378,7 @@ fn start_clients(
     server: &ServerHandle,
     dir: &Path,
     ve_epoch: Instant,
-    clock: Option<&SharedClock>,
+    shared: Option<(&SharedClock, &SharedNetwork)>,
 ) -> Result<Vec<(ClientHandle, UserSummary)>> {
     let mut clients: Vec<(ClientHandle, UserSummary)> = Vec::with_capacity(options.users);
     for i in 0..options.users {
@@ -379,7 +397,8 @@ fn start_clients(
         config.link = side_link(&options.link, i as u64 + 1);
         config.record = Some(dir.join(format!("user{}.csv", i + 1)));
         config.realtime_priority = options.realtime;
-        config.clock = clock.cloned();
+        config.clock = shared.map(|(clock, _)| clock.clone());
+        config.network = shared.map(|(_, network)| network.clone());
         config.client_name = name.clone();
         config.report_interval = options.duration.max(Duration::from_secs(1));
         match Client::start(config) {

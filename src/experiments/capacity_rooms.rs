@@ -100,6 +100,8 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
     );
     options.rooms = names;
     options.duration = duration;
+    // As `kinloop load --realtime`: the clock and the network worker at SCHED_FIFO when granted.
+    options.realtime = true;
     let outcome = load::run(&options);
     let reports = server.room_stats();
     runtime.block_on(server.shutdown()).context("shutting the server down")?;

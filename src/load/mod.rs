@@ -1,9 +1,10 @@
 //! `kinloop load`: many real client sessions from one process, so a server's capacity is measured with
 //! its clients off its critical path. Each user is a whole `kinloop-client` ([`Client::start`]: the same
 //! handshake, network side, haptic core and simulated device with a scripted hand), but their haptic loops
-//! all run on one [`SharedClock`] thread, stepped in turn at the loop rate, instead of one real-time thread
-//! each. A user the server refuses (an unknown room, a room over budget) is reported with the reason and
-//! the others carry on.
+//! all run on one [`SharedClock`] thread, stepped in turn at the loop rate, and their network sides on one
+//! [`SharedNetwork`] (a runtime of a few worker threads, one QUIC endpoint, one uplink pump the clock wakes
+//! once a round), instead of a real-time thread, a runtime thread and an uplink thread each. A user the
+//! server refuses (an unknown room, a room over budget) is reported with the reason and the others carry on.
 //!
 //! The demo's many users run on the same design ([`crate::demo`]), as do the clients of the `capacity`
 //! experiment's rooms axis.
@@ -12,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use kinloop_client::driver::shared_clock::{ClockThread, SharedClock};
+use kinloop_client::driver::shared_network::SharedNetwork;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_protocol::quic::Trust;
@@ -45,7 +47,12 @@ pub struct LoadOptions {
     pub rate_hz: f64,
     /// Ask SCHED_FIFO for the one clock thread.
     pub realtime: bool,
+    /// Worker threads of the runtime every user's network side shares.
+    pub network_threads: usize,
 }
+
+/// The shared runtime's worker threads unless asked otherwise: one, beside the clock thread.
+pub const NETWORK_THREADS: usize = 1;
 
 impl LoadOptions {
     /// `users` users of the default room on `server`, 10 s at 1 kHz, hands in turn, normal priority.
@@ -61,6 +68,7 @@ impl LoadOptions {
             duration: Duration::from_secs(10),
             rate_hz: 1000.0,
             realtime: false,
+            network_threads: NETWORK_THREADS,
         }
     }
 
@@ -86,8 +94,8 @@ pub fn hand_in_turn(i: usize) -> HandSpec {
     HandSpec::touring(if i.is_multiple_of(2) { HandKind::Soft } else { HandKind::Firm })
 }
 
-/// The client configuration of user `i` of `options`, on `clock`.
-pub fn client_config(options: &LoadOptions, i: usize, clock: &SharedClock) -> ClientConfig {
+/// The client configuration of user `i` of `options`, on `clock` and `network`.
+pub fn client_config(options: &LoadOptions, i: usize, clock: &SharedClock, network: &SharedNetwork) -> ClientConfig {
     let mut config = ClientConfig::new(options.server.clone(), options.trust.clone());
     config.server_name = options.server_name.clone();
     config.token = options.token.clone();
@@ -99,6 +107,7 @@ pub fn client_config(options: &LoadOptions, i: usize, clock: &SharedClock) -> Cl
     config.client_name = format!("load-user{}", i + 1);
     config.report_interval = options.duration.max(Duration::from_secs(1));
     config.clock = Some(clock.clone());
+    config.network = Some(network.clone());
     config
 }
 
@@ -138,11 +147,22 @@ pub struct LoadedUser {
     pub max_force_ratio: f64,
     /// Uplinks the core let out.
     pub uplinks_built: u64,
-    /// Uplinks the network side sent.
+    /// Uplinks dropped between the loop and the network side (no free buffer, or the ring full).
+    pub uplinks_dropped: u64,
+    /// Uplinks the network side dropped unsent because newer ones were queued behind them (it fell behind).
+    pub uplinks_superseded: u64,
+    /// Uplinks the network side handed to QUIC.
     pub uplinks_sent: u64,
-    /// Share of the core's uplinks that never left (dropped between loop and network, or refused by the
-    /// connection); what the network then loses the server counts.
+    /// Uplinks QUIC put on the wire (datagram frames sent); the rest of those handed to it were dropped
+    /// from its send buffer, oldest first, before they could leave.
+    pub uplinks_transmitted: u64,
+    /// Share of the core's uplinks that never left the process (`1 - transmitted / built`); what the
+    /// network then loses the server counts.
     pub uplink_loss: f64,
+    /// Packets this user's connection sent that QUIC declared lost.
+    pub packets_lost: u64,
+    /// Snapshots QUIC received for this user (datagram frames), before its receive buffer.
+    pub snapshots_arrived: u64,
     /// Snapshots received.
     pub snapshots_received: u64,
     /// Median ping round trip (ms).
@@ -170,8 +190,13 @@ impl LoadedUser {
             clamped_fraction: 0.0,
             max_force_ratio: 0.0,
             uplinks_built: 0,
+            uplinks_dropped: 0,
+            uplinks_superseded: 0,
             uplinks_sent: 0,
+            uplinks_transmitted: 0,
             uplink_loss: 0.0,
+            packets_lost: 0,
+            snapshots_arrived: 0,
             snapshots_received: 0,
             rtt_ms_p50: None,
             reconnects: 0,
@@ -194,8 +219,13 @@ impl LoadedUser {
             clamped_fraction: share(core.clamped_ticks, core.ticks),
             max_force_ratio: stats.max_force_ratio,
             uplinks_built: core.uplinks_sent,
+            uplinks_dropped: stats.uplinks_dropped,
+            uplinks_superseded: stats.uplinks_superseded,
             uplinks_sent: stats.uplinks_sent,
-            uplink_loss: share(core.uplinks_sent.saturating_sub(stats.uplinks_sent), core.uplinks_sent),
+            uplinks_transmitted: stats.quic.datagrams_transmitted,
+            uplink_loss: share(core.uplinks_sent.saturating_sub(stats.quic.datagrams_transmitted), core.uplinks_sent),
+            packets_lost: stats.quic.packets_lost,
+            snapshots_arrived: stats.quic.datagrams_arrived,
             snapshots_received: stats.snapshots_received,
             rtt_ms_p50: stats.rtt_ms_p50,
             reconnects: stats.reconnects,
@@ -240,6 +270,7 @@ pub struct LoadSummary {
 pub struct Load {
     clock: Option<SharedClock>,
     thread: ClockThread,
+    network: SharedNetwork,
     users: Vec<(String, String, Result<ClientHandle, String>)>,
     started: Instant,
     cpu_at_start: Option<Duration>,
@@ -256,12 +287,14 @@ impl Load {
             options.users
         );
         let cpu_at_start = kinloop_process::cpu::process_cpu_time();
-        let (clock, thread) =
-            SharedClock::start(options.rate_hz, options.realtime).context("starting the shared haptic clock")?;
+        let network =
+            SharedNetwork::start(options.network_threads, options.realtime).context("starting the shared network")?;
+        let (clock, thread) = SharedClock::start(options.rate_hz, options.realtime, Some(network.round_hook()))
+            .context("starting the shared haptic clock")?;
         let started = Instant::now();
         let users = (0..options.users)
             .map(|i| {
-                let config = client_config(options, i, &clock);
+                let config = client_config(options, i, &clock, &network);
                 let (name, room) = (config.client_name.clone(), config.room.clone());
                 let client = Client::start(config).map_err(|e| kinloop_process::report::one_line(&e));
                 if let Err(why) = &client {
@@ -273,6 +306,7 @@ impl Load {
         Ok(Load {
             clock: Some(clock),
             thread,
+            network,
             users,
             started,
             cpu_at_start,
@@ -295,8 +329,8 @@ impl Load {
     }
 
     /// Stops every user (all at once), stops the clock, and sums up.
-    pub fn finish(mut self) -> LoadSummary {
-        let users = std::mem::take(&mut self.users);
+    pub fn finish(self) -> LoadSummary {
+        let Load { clock, thread, network, users, started, cpu_at_start, duration, rate_hz } = self;
         let outcomes: Vec<LoadedUser> = std::thread::scope(|scope| {
             let leaving: Vec<_> = users
                 .into_iter()
@@ -313,18 +347,19 @@ impl Load {
                 .collect();
             leaving.into_iter().filter_map(|t| t.join().ok()).collect()
         });
-        drop(self.clock.take());
-        self.thread.join();
-        let wall_s = self.started.elapsed().as_secs_f64();
+        drop(clock);
+        thread.join();
+        network.finish();
+        let wall_s = started.elapsed().as_secs_f64();
         let cpu_s = kinloop_process::cpu::process_cpu_time()
-            .zip(self.cpu_at_start)
+            .zip(cpu_at_start)
             .map(|(now, then)| now.saturating_sub(then).as_secs_f64());
         LoadSummary {
             users: outcomes.len(),
             rendered: outcomes.iter().filter(|u| u.rendered).count(),
             refused: outcomes.iter().filter(|u| u.error.is_some()).count(),
-            duration_s: self.duration.as_secs_f64(),
-            rate_hz: self.rate_hz,
+            duration_s: duration.as_secs_f64(),
+            rate_hz,
             wall_s,
             cpu_s,
             cpu_cores: cpu_s.map(|c| c / wall_s.max(1e-9)),

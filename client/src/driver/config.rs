@@ -80,6 +80,10 @@ pub struct ClientConfig {
     /// of its own (`rt_loop`); `realtime_priority` and `busy_wait` are then the clock's. A device whose
     /// vendor owns the clock (`hd`) keeps its own.
     pub clock: Option<super::shared_clock::SharedClock>,
+    /// Run the network side on this runtime and endpoint, shared with other clients of the process, instead
+    /// of a runtime thread (and an uplink thread) of its own; with `clock` too, the uplinks leave through
+    /// the network's pump, which the clock wakes once a round.
+    pub network: Option<super::shared_network::SharedNetwork>,
 }
 
 impl ClientConfig {
@@ -113,6 +117,7 @@ impl ClientConfig {
             client_name: "kinloop-client".into(),
             report_interval: Duration::from_secs(5),
             clock: None,
+            network: None,
         }
     }
 }

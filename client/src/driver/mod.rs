@@ -5,6 +5,8 @@
 //! Threads: the haptic loop (SCHED_FIFO when permitted); the network thread (a current-thread tokio
 //! runtime: handshake, snapshot reception, pings, reconnection with exponential backoff); an uplink sender
 //! (parked until the loop unparks it: futex wake, no lock on the loop's side); a CSV writer with `--record`.
+//! The many clients of one process share instead one clock thread for their loops ([`shared_clock`]) and
+//! one runtime, endpoint and uplink pump for their network sides ([`shared_network`]).
 //! When the server goes away the loop keeps running: its snapshots age, the core fades the force out, and
 //! a new session's core (re-indexed to the new first snapshot) is handed over when the client reconnects.
 
@@ -16,8 +18,10 @@ pub mod record;
 pub mod rt_loop;
 mod session;
 pub mod shared_clock;
+pub mod shared_network;
 pub mod stop_signal;
 pub mod timing;
+mod uplinks;
 
 use std::net::{SocketAddr, ToSocketAddrs};
 use std::sync::atomic::Ordering;
@@ -32,10 +36,11 @@ use crate::device::dhd::{DhdLibrary, OpenedDhd};
 use crate::device::hd::{HdLibrary, OpenedHd};
 pub use config::{ClientConfig, ClientError};
 pub use network::choose;
-use network::network_thread;
+use network::{network_task, network_thread, NetStart};
 use real::OpenedDevice;
 use rt_loop::{LoopReport, LoopShared};
 use session::NetShared;
+pub use session::QuicCounts;
 use shared_clock::LoopEnd;
 use timing::LatenessSummary;
 
@@ -58,6 +63,10 @@ pub struct ClientStats {
     pub uplinks_sent: u64,
     /// Uplinks dropped between loop and network.
     pub uplinks_dropped: u64,
+    /// Uplinks dropped unsent because newer ones were queued behind them (the sender fell behind).
+    pub uplinks_superseded: u64,
+    /// What QUIC counted: datagrams that left and arrived, packets lost.
+    pub quic: QuicCounts,
     /// Sessions after the first.
     pub reconnects: u64,
     /// Record rows dropped.
@@ -90,6 +99,10 @@ impl ClientStats {
             "snapshots_rejected": core.snapshots_rejected,
             "uplinks_sent": self.uplinks_sent,
             "uplinks_dropped": self.uplinks_dropped,
+            "uplinks_superseded": self.uplinks_superseded,
+            "uplinks_transmitted": self.quic.datagrams_transmitted,
+            "snapshots_arrived": self.quic.datagrams_arrived,
+            "packets_lost": self.quic.packets_lost,
             "stale_ticks": core.stale_ticks,
             "clamped_ticks": core.clamped_ticks,
             "non_finite_events": core.non_finite_events,
@@ -105,7 +118,7 @@ pub struct ClientHandle {
     shared: Arc<LoopShared>,
     net: Arc<NetShared>,
     loop_thread: Option<LoopEnd>,
-    net_thread: Option<JoinHandle<()>>,
+    net_end: Option<NetEnd>,
     helper_threads: Vec<JoinHandle<()>>,
     started: Instant,
     welcome: Welcome,
@@ -131,18 +144,32 @@ impl Client {
         let shared = Arc::new(LoopShared::default());
         let silence_limit = (addresses.len() > 1).then_some(config::SILENT_SERVER);
         let net = Arc::new(NetShared { silence_limit, ..NetShared::default() });
-        let (started_tx, started_rx) = mpsc::channel();
-        let (thread_shared, thread_net) = (shared.clone(), net.clone());
-        let net_thread = std::thread::Builder::new()
-            .name("kinloop-net".into())
-            .spawn(move || network_thread(config, real, addresses, thread_shared, thread_net, started_tx))
-            .map_err(|e| ClientError::Runtime(e.to_string()))?;
+        let (started, started_rx) = mpsc::channel();
+        let network = config.network.clone();
+        let start = NetStart { config, real, addresses, shared: shared.clone(), net: net.clone(), started };
+        let net_end = match network {
+            Some(network) => {
+                let endpoint = network.endpoint_for(&start.config.trust, start.config.link.as_ref())?;
+                let (done, ended) = mpsc::channel::<()>();
+                network.spawn(async move {
+                    network_task(start, endpoint).await;
+                    drop(done);
+                });
+                NetEnd::Task(ended)
+            }
+            None => NetEnd::Thread(
+                std::thread::Builder::new()
+                    .name("kinloop-net".into())
+                    .spawn(move || network_thread(start))
+                    .map_err(|e| ClientError::Runtime(e.to_string()))?,
+            ),
+        };
         match started_rx.recv() {
             Ok(Ok(started)) => Ok(ClientHandle {
                 shared,
                 net,
                 loop_thread: Some(started.loop_thread),
-                net_thread: Some(net_thread),
+                net_end: Some(net_end),
                 helper_threads: started.helpers,
                 started: Instant::now(),
                 welcome: started.welcome,
@@ -150,12 +177,12 @@ impl Client {
                 gains: started.gains,
             }),
             Ok(Err(e)) => {
-                let _ = net_thread.join();
+                net_end.join();
                 Err(e)
             }
             Err(_) => {
-                let _ = net_thread.join();
-                Err(ClientError::Runtime("the network thread ended before the session started".into()))
+                net_end.join();
+                Err(ClientError::Runtime("the network side ended before the session started".into()))
             }
         }
     }
@@ -212,6 +239,8 @@ impl ClientHandle {
             snapshots_received: self.net.snapshots_received.load(Ordering::Relaxed),
             uplinks_sent: self.net.uplinks_sent.load(Ordering::Relaxed),
             uplinks_dropped: self.shared.uplinks_dropped.load(Ordering::Relaxed),
+            uplinks_superseded: self.net.uplinks_superseded.load(Ordering::Relaxed),
+            quic: self.net.quic.total(),
             reconnects: self.net.reconnects.load(Ordering::Relaxed),
             records_dropped: self.shared.records_dropped.load(Ordering::Relaxed),
             device_lost: self.shared.device_lost.load(Ordering::Relaxed),
@@ -275,8 +304,8 @@ impl ClientHandle {
         if let Some(t) = self.loop_thread.take() {
             self.finish_with(t.join());
         }
-        if let Some(t) = self.net_thread.take() {
-            let _ = t.join();
+        if let Some(end) = self.net_end.take() {
+            end.join();
         }
         for t in self.helper_threads.drain(..) {
             let _ = t.join();
@@ -306,6 +335,26 @@ impl ClientHandle {
 impl Drop for ClientHandle {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Where a client's network side runs: a thread of its own, or a task on a shared runtime (which drops the
+/// sender when it ends).
+enum NetEnd {
+    Thread(JoinHandle<()>),
+    Task(mpsc::Receiver<()>),
+}
+
+/// Longest a client waits for a network task on a shared runtime to end once asked to stop (it leaves its
+/// session within a few hundred milliseconds unless the runtime is stuck).
+const NET_END_PATIENCE: Duration = Duration::from_secs(5);
+
+impl NetEnd {
+    fn join(self) {
+        match self {
+            NetEnd::Thread(thread) => drop(thread.join()),
+            NetEnd::Task(ended) => drop(ended.recv_timeout(NET_END_PATIENCE)),
+        }
     }
 }
 

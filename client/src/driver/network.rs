@@ -1,5 +1,7 @@
-//! The network thread: the first handshake, the session's haptic side (rig, core, haptic loop, uplink
-//! sender, recorder) and its rings, and reconnection with exponential backoff when the session is lost.
+//! The network side, on a runtime thread of the client's own ([`network_thread`]) or as a task on a runtime
+//! shared by many clients ([`network_task`]): the first handshake, the session's haptic side (rig, core,
+//! haptic loop, uplink outlet, recorder) and its rings, and reconnection with exponential backoff when the
+//! session is lost.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -21,8 +23,9 @@ use super::device_clock;
 use super::real::{OpenedDevice, RealSpec};
 use super::record::{self, TickRecord};
 use super::rt_loop::{self, LoopBody, LoopRings, LoopSettings, LoopShared};
-use super::session::{drain_reports, leave, send_uplinks, serve_session, NetRings, NetShared, Session};
+use super::session::{drain_reports, leave, serve_session, NetRings, NetShared, Session};
 use super::shared_clock::LoopEnd;
+use super::uplinks::{send_uplinks, Outlet};
 use crate::core::{ControllerGains, CoreConfig, HapticCore, ModelForm};
 use crate::device::hd::OpenedHd;
 use crate::device::presets::SimulatedDeviceBuildError;
@@ -41,75 +44,103 @@ pub(super) struct Started {
 /// nothing, and the server keeps the user until its idle timeout.
 const CLOSE_LINGER: Duration = Duration::from_secs(1);
 
-/// Closes a session that will not run and waits (at most [`CLOSE_LINGER`]) for the server to be told, so it
-/// drops the user at once.
-async fn abandon(endpoint: &Endpoint, connection: &kinloop_protocol::quic::Connection, why: &'static [u8]) {
+/// A client's QUIC endpoint: its own, or one shared with the other clients of its process.
+struct ClientEndpoint {
+    quic: Endpoint,
+    own: bool,
+}
+
+impl ClientEndpoint {
+    /// Waits (at most [`CLOSE_LINGER`]) for the closing connections to tell their server, on an endpoint of
+    /// the client's own; a shared one outlives the client, and its owner lingers once for every client
+    /// (`SharedNetwork::finish`).
+    async fn linger(&self) {
+        if self.own {
+            let _ = tokio::time::timeout(CLOSE_LINGER, self.quic.wait_idle()).await;
+        }
+    }
+}
+
+/// Closes a session that will not run and lets the server be told, so it drops the user at once.
+async fn abandon(endpoint: &ClientEndpoint, connection: &kinloop_protocol::quic::Connection, why: &'static [u8]) {
     connection.close(kinloop_protocol::quic::close_codes::NORMAL, why);
-    let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
+    endpoint.linger().await;
 }
 
 const SNAPSHOT_RING: usize = 16;
 const UPLINK_RING: usize = 64;
 const RECORD_RING: usize = 16_384;
 
-pub(super) fn network_thread(
-    config: ClientConfig,
-    real: Option<OpenedDevice>,
-    addresses: Vec<SocketAddr>,
-    shared: Arc<LoopShared>,
-    net: Arc<NetShared>,
-    started: mpsc::Sender<Result<Started, ClientError>>,
-) {
-    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
-        Ok(rt) => rt,
+/// What the network side needs from the client that starts it.
+pub(super) struct NetStart {
+    pub(super) config: ClientConfig,
+    pub(super) real: Option<OpenedDevice>,
+    pub(super) addresses: Vec<SocketAddr>,
+    pub(super) shared: Arc<LoopShared>,
+    pub(super) net: Arc<NetShared>,
+    pub(super) started: mpsc::Sender<Result<Started, ClientError>>,
+}
+
+/// The network side on a current-thread runtime of its own (the calling thread's).
+pub(super) fn network_thread(start: NetStart) {
+    match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(runtime) => runtime.block_on(network_task(start, None)),
         Err(e) => {
-            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+            let _ = start.started.send(Err(ClientError::Runtime(e.to_string())));
+        }
+    }
+}
+
+/// The network side as a task, on `endpoint` (shared with other clients) or, without one, on an endpoint of
+/// its own; runs until the client stops.
+pub(super) async fn network_task(start: NetStart, endpoint: Option<Endpoint>) {
+    let NetStart { config, real, addresses, shared, net, started } = start;
+    let endpoint = match endpoint {
+        Some(quic) => ClientEndpoint { quic, own: false },
+        None => {
+            let opts = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
+            match client_endpoint(&config.trust, &opts) {
+                Ok(quic) => ClientEndpoint { quic, own: true },
+                Err(e) => {
+                    let _ = started.send(Err(e.into()));
+                    return;
+                }
+            }
+        }
+    };
+    let mut chosen = None;
+    let spec = real.as_ref().map(OpenedDevice::spec);
+    let mut first = Err(ConnectError::Declined("no server address".into()));
+    for (i, address) in addresses.iter().enumerate() {
+        first = open_session(&endpoint.quic, *address, &config, spec.as_ref(), None, &mut chosen).await.map(|s| (i, s));
+        match &first {
+            Ok(_) | Err(ConnectError::Refused(_) | ConnectError::Declined(_)) => break,
+            Err(e) => tracing::warn!(server = %address, error = %e, "cannot connect; trying the next server"),
+        }
+    }
+    let (current, session) = match first {
+        Ok(s) => s,
+        Err(source) => {
+            // The handshake closed the connection; the server hears of it before the caller (who may exit
+            // at once) hears why.
+            endpoint.linger().await;
+            let _ = started.send(Err(ClientError::Connect { server: config.server.clone(), source }));
             return;
         }
     };
-    runtime.block_on(async move {
-        let opts = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
-        let endpoint = match client_endpoint(&config.trust, &opts) {
-            Ok(e) => e,
-            Err(e) => {
-                let _ = started.send(Err(e.into()));
-                return;
-            }
-        };
-        let mut chosen = None;
-        let spec = real.as_ref().map(OpenedDevice::spec);
-        let mut first = Err(ConnectError::Declined("no server address".into()));
-        for (i, address) in addresses.iter().enumerate() {
-            first = open_session(&endpoint, *address, &config, spec.as_ref(), None, &mut chosen).await.map(|s| (i, s));
-            match &first {
-                Ok(_) | Err(ConnectError::Refused(_) | ConnectError::Declined(_)) => break,
-                Err(e) => tracing::warn!(server = %address, error = %e, "cannot connect; trying the next server"),
-            }
+    // The session opened, so the chooser ran.
+    let Some(device) = chosen else { return };
+    let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
+    match session.welcome.scene.kind {
+        SceneKind::Planar => {
+            let dialer = Dialer { config, model: None, addresses, current, endpoint };
+            run::<Planar>(dialer, real, session, shared, net, started).await
         }
-        let (current, session) = match first {
-            Ok(s) => s,
-            Err(source) => {
-                // The handshake closed the connection; the server hears of it before the caller (who may exit
-                // at once) hears why.
-                let _ = tokio::time::timeout(CLOSE_LINGER, endpoint.wait_idle()).await;
-                let _ = started.send(Err(ClientError::Connect { server: config.server.clone(), source }));
-                return;
-            }
-        };
-        // The session opened, so the chooser ran.
-        let Some(device) = chosen else { return };
-        let config = ClientConfig { device: Some(device), op: Some(session.welcome.scene.op_name.clone()), ..config };
-        match session.welcome.scene.kind {
-            SceneKind::Planar => {
-                let dialer = Dialer { config, model: None, addresses, current, endpoint };
-                run::<Planar>(dialer, real, session, shared, net, started).await
-            }
-            SceneKind::Spatial => {
-                let dialer = Dialer { config, model: None, addresses, current, endpoint };
-                run::<Spatial>(dialer, real, session, shared, net, started).await
-            }
+        SceneKind::Spatial => {
+            let dialer = Dialer { config, model: None, addresses, current, endpoint };
+            run::<Spatial>(dialer, real, session, shared, net, started).await
         }
-    });
+    }
 }
 
 fn hello(config: &ClientConfig) -> Hello {
@@ -255,20 +286,35 @@ async fn run<S: Space>(
     });
     let sender_slot: Arc<Mutex<Option<DatagramSender>>> =
         Arc::new(Mutex::new(Some(DatagramSender::new(session.connection.clone()))));
-    let uplink_thread = {
-        let (slot, shared, net) = (sender_slot.clone(), shared.clone(), net.clone());
-        let handle = tokio::runtime::Handle::current();
-        std::thread::Builder::new().name("kinloop-uplink".into()).spawn(move || {
-            let _guard = handle.enter();
-            send_uplinks(uplinks_rx, free_tx, slot, shared, net)
-        })
+    let outlet = Outlet {
+        uplinks: uplinks_rx,
+        free: free_tx,
+        sender: sender_slot.clone(),
+        shared: shared.clone(),
+        net: net.clone(),
     };
-    let uplink_thread = match uplink_thread {
-        Ok(t) => t,
-        Err(e) => {
-            abandon(endpoint, &session.connection, b"client cannot start").await;
-            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
-            return;
+    // A loop on the shared clock has its uplinks sent by the shared network's pump, which the clock wakes
+    // once a round; any other loop unparks an uplink thread of its client's own after each push.
+    let on_shared_clock = matches!(rig, Haptic::Polled(_)) && config.clock.is_some();
+    let uplink_thread = match config.network.as_ref().filter(|_| on_shared_clock) {
+        Some(network) => {
+            network.pump_for(outlet);
+            None
+        }
+        None => {
+            let handle = tokio::runtime::Handle::current();
+            let thread = std::thread::Builder::new().name("kinloop-uplink".into()).spawn(move || {
+                let _guard = handle.enter();
+                send_uplinks(outlet)
+            });
+            match thread {
+                Ok(t) => Some(t),
+                Err(e) => {
+                    abandon(endpoint, &session.connection, b"client cannot start").await;
+                    let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+                    return;
+                }
+            }
         }
     };
     let loop_rings = LoopRings {
@@ -280,7 +326,7 @@ async fn run<S: Space>(
         spent_cores: spent_cores_tx,
         records,
         reports: reports_tx,
-        uplink_sender: Some(uplink_thread.thread().clone()),
+        uplink_sender: uplink_thread.as_ref().map(|t| t.thread().clone()),
     };
     let settings = LoopSettings {
         rate_hz: config.rate_hz,
@@ -311,7 +357,7 @@ async fn run<S: Space>(
             return;
         }
     };
-    helpers.push(uplink_thread);
+    helpers.extend(uplink_thread);
     let welcome = session.welcome.clone();
     let device = match &model {
         Some(model) => model.label(),
@@ -329,7 +375,7 @@ async fn run<S: Space>(
     keep_connected(&mut dialer, session, &mut rings, &sender_slot, &shared, &net).await;
     drain_reports(&mut rings, &net);
     // Give the close frame a moment to leave.
-    let _ = tokio::time::timeout(CLOSE_LINGER, dialer.endpoint.wait_idle()).await;
+    dialer.endpoint.linger().await;
 }
 
 /// A session's device: polled by kinloop's loop, or clocked by the vendor's servo thread.
@@ -390,7 +436,7 @@ struct Dialer {
     model: Option<RealSpec>,
     addresses: Vec<SocketAddr>,
     current: usize,
-    endpoint: Endpoint,
+    endpoint: ClientEndpoint,
 }
 
 impl Dialer {
@@ -405,8 +451,14 @@ impl Dialer {
             let index = (self.current + step) % count;
             let address = self.addresses[index];
             let mut chosen = None;
-            let attempt =
-                open_session(&self.endpoint, address, &self.config, self.model.as_ref(), offer.as_ref(), &mut chosen);
+            let attempt = open_session(
+                &self.endpoint.quic,
+                address,
+                &self.config,
+                self.model.as_ref(),
+                offer.as_ref(),
+                &mut chosen,
+            );
             // A dead server never answers: with others to try, each gets a short while.
             let attempt = if count > 1 {
                 tokio::time::timeout(DIAL_PATIENCE, attempt).await.unwrap_or(Err(ConnectError::Timeout))
@@ -463,6 +515,7 @@ async fn keep_connected<S: Space>(
     let mut backoff = Duration::from_millis(100);
     loop {
         let ended = serve_session(&mut session, rings, shared, net).await;
+        net.quic.session_ended(&session.connection);
         if let Ok(mut slot) = sender_slot.lock() {
             *slot = None;
         }

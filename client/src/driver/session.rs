@@ -1,13 +1,13 @@
-//! One live session on the network thread: its control stream, the snapshots it receives for the haptic
-//! loop, the loop's reports it logs, and the uplink sender thread that sends what the loop produces.
+//! One live session on the network side: its control stream, the snapshots it receives for the haptic
+//! loop, and the loop's reports it logs (the uplinks leave through `super::uplinks`).
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use kinloop_linkage::math::space::Space;
-use kinloop_protocol::quic::{ConnectedSession, DatagramReceiver, DatagramSender};
-use kinloop_protocol::{Control, Datagram, Uplink, Welcome};
+use kinloop_protocol::quic::{ConnectedSession, DatagramReceiver};
+use kinloop_protocol::{Control, Datagram, Welcome};
 
 use super::rt_loop::{LoopReport, LoopShared};
 use crate::core::HapticCore;
@@ -17,6 +17,8 @@ use crate::core::HapticCore;
 pub(super) struct NetShared {
     pub(super) snapshots_received: AtomicU64,
     pub(super) uplinks_sent: AtomicU64,
+    /// Uplinks dropped unsent because newer ones were queued behind them (`uplinks::BACKLOG`).
+    pub(super) uplinks_superseded: AtomicU64,
     pub(super) reconnects: AtomicU64,
     pub(super) rtt_ms: Mutex<Vec<f64>>,
     pub(super) last_report: Mutex<Option<LoopReport>>,
@@ -28,6 +30,70 @@ pub(super) struct NetShared {
     pub(super) resumes_refused: AtomicU64,
     /// A session whose server sends nothing for this long is lost (`None`: only when QUIC says so).
     pub(super) silence_limit: Option<Duration>,
+    /// What QUIC itself counted, over every session.
+    pub(super) quic: QuicTally,
+}
+
+/// What QUIC counted of a client's datagrams: frames that left in packets, frames that arrived, packets
+/// declared lost. Beside the client's own counts, they tell where an uplink or a snapshot went missing
+/// (never queued, dropped from QUIC's send buffer, lost on the way, or dropped from a receive buffer).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct QuicCounts {
+    /// Datagram frames sent (uplinks).
+    pub datagrams_transmitted: u64,
+    /// Datagram frames received (snapshots), before the receive buffer.
+    pub datagrams_arrived: u64,
+    /// Packets this client sent that QUIC declared lost.
+    pub packets_lost: u64,
+}
+
+impl QuicCounts {
+    fn of(connection: &kinloop_protocol::quic::Connection) -> Self {
+        let s = connection.stats();
+        QuicCounts {
+            datagrams_transmitted: s.frame_tx.datagram,
+            datagrams_arrived: s.frame_rx.datagram,
+            packets_lost: s.path.lost_packets,
+        }
+    }
+
+    fn plus(self, other: QuicCounts) -> Self {
+        QuicCounts {
+            datagrams_transmitted: self.datagrams_transmitted + other.datagrams_transmitted,
+            datagrams_arrived: self.datagrams_arrived + other.datagrams_arrived,
+            packets_lost: self.packets_lost + other.packets_lost,
+        }
+    }
+}
+
+/// [`QuicCounts`] of the sessions that ended, and of the live one as last looked at.
+#[derive(Debug, Default)]
+pub(super) struct QuicTally {
+    ended: Mutex<QuicCounts>,
+    live: Mutex<QuicCounts>,
+}
+
+impl QuicTally {
+    /// Looks at the live session's counters.
+    pub(super) fn observe(&self, connection: &kinloop_protocol::quic::Connection) {
+        if let Ok(mut live) = self.live.lock() {
+            *live = QuicCounts::of(connection);
+        }
+    }
+
+    /// The live session ended: its counters join the ended sessions'.
+    pub(super) fn session_ended(&self, connection: &kinloop_protocol::quic::Connection) {
+        if let (Ok(mut ended), Ok(mut live)) = (self.ended.lock(), self.live.lock()) {
+            *ended = ended.plus(QuicCounts::of(connection));
+            *live = QuicCounts::default();
+        }
+    }
+
+    /// Every session's counts so far.
+    pub(super) fn total(&self) -> QuicCounts {
+        let ended = self.ended.lock().map(|c| *c).unwrap_or_default();
+        ended.plus(self.live.lock().map(|c| *c).unwrap_or_default())
+    }
 }
 
 /// The network side's ends of the rings.
@@ -168,6 +234,7 @@ pub(super) async fn serve_session<S: Space>(
             },
             _ = housekeeping.tick() => {
                 drain_reports(rings, net);
+                net.quic.observe(&session.connection);
                 if shared.stop.load(Ordering::Relaxed) {
                     return "stopping".into();
                 }
@@ -177,35 +244,5 @@ pub(super) async fn serve_session<S: Space>(
             },
             reason = session.connection.closed() => return reason.to_string(),
         }
-    }
-}
-
-/// The uplink sender thread: parked until the loop pushes, sends, returns the buffers.
-pub(super) fn send_uplinks(
-    mut uplinks: rtrb::Consumer<Uplink>,
-    mut free: rtrb::Producer<Uplink>,
-    sender: Arc<Mutex<Option<DatagramSender>>>,
-    shared: Arc<LoopShared>,
-    net: Arc<NetShared>,
-) {
-    loop {
-        while let Ok(uplink) = uplinks.pop() {
-            let message = Datagram::Uplink(uplink);
-            if let Ok(guard) = sender.lock() {
-                if let Some(s) = guard.as_ref() {
-                    if s.send(&message).is_ok() {
-                        net.uplinks_sent.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
-            }
-            if let Datagram::Uplink(buffer) = message {
-                // Back to the loop for reuse: it never allocates a buffer of its own.
-                let _ = free.push(buffer);
-            }
-        }
-        if shared.stop.load(Ordering::Relaxed) && uplinks.is_empty() {
-            break;
-        }
-        std::thread::park_timeout(Duration::from_millis(10));
     }
 }

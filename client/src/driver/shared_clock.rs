@@ -148,17 +148,23 @@ impl ClockThread {
     }
 }
 
+/// What a shared clock calls after each round, once whatever the number of members: the shared network's
+/// wake of its uplink pump ([`super::shared_network::SharedNetwork::round_hook`]), so that the uplinks of
+/// every member leave with one wake-up rather than one per member.
+pub type RoundHook = Box<dyn FnMut() + Send>;
+
 /// How long an idle clock waits for a member before looking again.
 const IDLE_WAIT: Duration = Duration::from_millis(20);
 
 impl SharedClock {
     /// Starts the clock's thread at `rate_hz`; with `realtime`, it asks for SCHED_FIFO (one real-time
     /// thread for every member). It sleeps to each deadline without spinning, so its CPU use is its work.
-    pub fn start(rate_hz: f64, realtime: bool) -> std::io::Result<(Self, ClockThread)> {
+    /// `after_round` is called after each round.
+    pub fn start(rate_hz: f64, realtime: bool, after_round: Option<RoundHook>) -> std::io::Result<(Self, ClockThread)> {
         let (joins, arrivals) = mpsc::channel::<Box<dyn Member>>();
         let thread = std::thread::Builder::new()
             .name("kinloop-shared-clock".into())
-            .spawn(move || run_clock(rate_hz, realtime, &arrivals))?;
+            .spawn(move || run_clock(rate_hz, realtime, &arrivals, after_round))?;
         Ok((SharedClock { joins }, ClockThread(thread)))
     }
 
@@ -179,7 +185,12 @@ impl SharedClock {
 }
 
 /// The clock's thread: takes members as they come, sleeps to each deadline (no spin), steps a round.
-fn run_clock(rate_hz: f64, realtime: bool, arrivals: &mpsc::Receiver<Box<dyn Member>>) {
+fn run_clock(
+    rate_hz: f64,
+    realtime: bool,
+    arrivals: &mpsc::Receiver<Box<dyn Member>>,
+    mut after_round: Option<RoundHook>,
+) {
     if realtime {
         if let Err(why) = try_realtime_priority() {
             tracing::warn!(%why, "could not switch the shared haptic clock to SCHED_FIFO");
@@ -212,6 +223,9 @@ fn run_clock(rate_hz: f64, realtime: bool, arrivals: &mpsc::Receiver<Box<dyn Mem
         }
         sleeper.sleep_until(start + rota.deadline());
         rota.round(&mut || start.elapsed());
+        if let Some(hook) = after_round.as_mut() {
+            hook();
+        }
     }
     rota.finish_all(start.elapsed());
 }
@@ -352,6 +366,25 @@ mod tests {
 
     /// Each member's lateness is how long after the round's deadline its own step began: the last in a long
     /// round is the latest.
+    #[test]
+    fn the_round_hook_runs_once_a_round_whatever_the_members() {
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let (joins, arrivals) = mpsc::channel::<Box<dyn Member>>();
+        for name in ['a', 'b', 'c'] {
+            joins.send(noted(name, 5, &seen).0).unwrap();
+        }
+        drop(joins);
+        let rounds = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let counted = rounds.clone();
+        let hook: RoundHook = Box::new(move || {
+            counted.fetch_add(1, Ordering::Relaxed);
+        });
+        run_clock(10_000.0, false, &arrivals, Some(hook));
+        assert_eq!(seen.lock().unwrap().len(), 15, "every member stepped its 5 ticks");
+        // Five rounds that step the three members, and the sixth in which they stop.
+        assert_eq!(rounds.load(Ordering::Relaxed), 6);
+    }
+
     #[test]
     fn lateness_is_measured_per_member_from_the_rounds_deadline() {
         let seen = Arc::new(Mutex::new(Vec::new()));

@@ -258,6 +258,7 @@ impl Shared {
                 let c = &e.counters;
                 let load = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
                 let (received, lost) = (load(&c.uplinks_received), load(&c.uplinks_lost));
+                let quic = e.connection.stats();
                 UserStats {
                     user_id: e.user_id,
                     name: e.name.clone(),
@@ -267,6 +268,10 @@ impl Shared {
                     uplinks_lost: lost,
                     uplink_loss: if received + lost > 0 { lost as f64 / (received + lost) as f64 } else { 0.0 },
                     uplinks_undecodable: load(&c.uplinks_undecodable),
+                    uplinks_dropped: load(&c.uplinks_dropped),
+                    datagrams_arrived: quic.frame_rx.datagram,
+                    datagrams_transmitted: quic.frame_tx.datagram,
+                    packets_lost: quic.path.lost_packets,
                     snapshots_sent: load(&c.snapshots_sent),
                     snapshot_bytes: load(&c.snapshot_bytes),
                     snapshots_oversize: load(&c.snapshots_oversize),

@@ -23,6 +23,15 @@ pub struct UserStats {
     pub uplink_loss: f64,
     /// Datagrams the codec refused.
     pub uplinks_undecodable: u64,
+    /// Uplinks received that the VE's ring had no room for.
+    pub uplinks_dropped: u64,
+    /// Datagram frames QUIC took off the wire from this user (uplinks). More than `uplinks_received`: the
+    /// rest waited in QUIC's receive buffer longer than newer ones let them (oldest dropped).
+    pub datagrams_arrived: u64,
+    /// Datagram frames QUIC put on the wire to this user (snapshots).
+    pub datagrams_transmitted: u64,
+    /// Packets the server sent on this connection that QUIC declared lost.
+    pub packets_lost: u64,
     /// Snapshots sent.
     pub snapshots_sent: u64,
     /// Bytes of snapshots sent.
