@@ -15,6 +15,11 @@
 //! spec, same defaults, so the same welcome), and hands it to the fake (`FAKE_DHD_TOUR`, `FAKE_HD_TOUR`).
 //! The handle starts at the OP's place, as a simulated rig's does.
 //!
+//! Default flags include the loop's priority: kinloop's own loop (DHD) asks for SCHED_FIFO as a user's does,
+//! and the fake OpenHaptics library's servo thread asks for it as the vendor's does. A loop left at normal
+//! priority on a loaded host runs its ticks in bursts and gaps, and the client's core then steps its local
+//! model over the gaps with gains designed for one period, which the simulated matrices never meet.
+//!
 //! A pair renders by the matrix's bounds: the client ends well, no VE restore, no withheld snapshot, no
 //! non-finite value; loops closed; at most 5 % of ticks clamped; device-OP RMS (the device against the VE's
 //! OP at the same instant, in device space, from both programs' `--record` files) within 5 mm on a perfect
@@ -414,7 +419,7 @@ fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Pa
     };
     let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", device_flag]
         .into_iter()
-        .chain(["--op", &point.op, "--no-realtime", "--json", "--record", "client.csv", "--duration"])
+        .chain(["--op", &point.op, "--json", "--record", "client.csv", "--duration"])
         .map(String::from)
         .collect();
     args.push(seconds.to_string());
