@@ -156,3 +156,41 @@ fn the_openhaptics_library_and_its_device_are_reported_with_force_output_never_e
     let events = std::fs::read_to_string(&hd_record).unwrap_or_default();
     assert!(!events.lines().any(|l| l == "A"), "calibration ran unasked: {events}");
 }
+
+/// `--check` with an HD device: the vendor's servo thread calls a reading callback for a second, forces
+/// never enabled, and kinloop's own loop runs beside it in the same command, each loop's lateness reported.
+#[test]
+fn check_reports_the_servo_threads_lateness_beside_kinloops_own_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, hd_record) = (dir.path().join("record.txt"), dir.path().join("hd.txt"));
+    let hd = common::fake_hd_library().display().to_string();
+    let hd_record_text = hd_record.display().to_string();
+    let env = [
+        ("KINLOOP_DHD_LIB", "/nonexistent/libdhd.so"),
+        ("KINLOOP_HD_LIB", hd.as_str()),
+        ("FAKE_HD_RECORD", hd_record_text.as_str()),
+    ];
+    let out = devices(&["--check", "--json"], &record, &env);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let check = &report["hd"]["check"];
+    let (servo, own) = (&check["servo"], &check["kinloop_loop"]);
+    // Frames were read, none failed, and each loop measured its ticks' lateness.
+    assert!(servo["reads"].as_u64().is_some_and(|n| n > 0), "{check}");
+    assert_eq!(servo["failed_reads"], 0, "{check}");
+    for l in [servo, own] {
+        assert!(l["ticks"].as_u64().is_some_and(|n| n > 0), "{check}");
+        let (p99, max) = (l["lateness_us_p99"].as_f64().unwrap(), l["lateness_us_max"].as_f64().unwrap());
+        assert!(p99 >= 0.0 && p99 <= max, "{check}");
+    }
+    let events = std::fs::read_to_string(&hd_record).unwrap_or_default();
+    assert!(!events.lines().any(|l| l == "E 1"), "force output was enabled: {events}");
+    // Every frame the callbacks ended output nothing.
+    let frames: Vec<&str> = events.lines().filter(|l| l.starts_with("F ")).collect();
+    assert!(!frames.is_empty(), "the callbacks ended no frame: {events}");
+    for f in frames {
+        let force: Vec<f64> = f.split_whitespace().skip(2).map(|x| x.parse().unwrap()).collect();
+        assert_eq!(force, [0.0; 3], "{f}");
+    }
+    assert_eq!(events.lines().last(), Some("D"), "the device is disabled: {events}");
+}
