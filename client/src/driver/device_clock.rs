@@ -147,6 +147,10 @@ pub fn run<S: Space>(
     let started = Instant::now();
     while !beat.ended.load(Ordering::Acquire) && !shared.stop.load(Ordering::Relaxed) {
         std::thread::sleep(WATCH);
+        // This thread may wake long after the body ended (a loaded host): an ended body is no silence.
+        if beat.ended.load(Ordering::Acquire) {
+            break;
+        }
         let last = Duration::from_nanos(beat.last_ns.load(Ordering::Relaxed));
         let since = started.elapsed().saturating_sub(last);
         if since > SILENT_LIMIT {
