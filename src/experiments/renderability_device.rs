@@ -25,9 +25,9 @@
 //! OP at the same instant, in device space, from both programs' `--record` files) within 5 mm on a perfect
 //! network and 10 mm at 50 ms. The two records' clocks are matched by the time zero each program reports
 //! on the system clock (the server's `ve.epoch_unix_s`, the client's `loop_epoch_unix_s`), which both
-//! programs read on this one machine: matching them by when each printed a line instead was off by up to
-//! hundreds of milliseconds on a loaded host (the lines are read late, and the client's loop starts on its
-//! own thread), which a touring hand turns into millimetres of RMS the rendering never had.
+//! programs read on this one machine. Matching them by when each printed a line is late by whatever the
+//! host delays the reading (and the client's loop starts on its own thread), and a touring hand turns each
+//! 10 ms of mismatch into about half a millimetre of RMS.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
