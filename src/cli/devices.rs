@@ -19,7 +19,8 @@ use serde_json::{json, Value};
 #[derive(clap::Args, Debug)]
 pub struct DevicesArgs {
     /// Open each device with forces off, read its position for one second at 1 kHz, and print the workspace
-    /// seen and the rate reached.
+    /// seen and the rate reached; for an OpenHaptics device, its servo thread's lateness beside kinloop's own
+    /// loop's.
     #[arg(long)]
     pub check: bool,
     /// Print one JSON object.
@@ -28,9 +29,9 @@ pub struct DevicesArgs {
 }
 
 /// The haptic loop's rate, at which `--check` reads (Hz).
-const CHECK_RATE_HZ: f64 = 1000.0;
+pub(super) const CHECK_RATE_HZ: f64 = 1000.0;
 /// How long `--check` reads.
-const CHECK_DURATION: Duration = Duration::from_secs(1);
+pub(super) const CHECK_DURATION: Duration = Duration::from_secs(1);
 /// USB vendor IDs of the devices the DHD library drives: Force Dimension's, and FTDI's with the Falcon's
 /// product ID (Novint used FTDI's chip).
 const USB_IDS: [(&str, Option<&str>, &str); 2] =
@@ -39,7 +40,7 @@ const USB_IDS: [(&str, Option<&str>, &str); 2] =
 /// Surveys the DHD library and its devices and prints what it found; fails when no library or no device
 /// could be used, so scripts can test the exit code.
 pub fn run(args: &DevicesArgs) -> Result<()> {
-    let hd = super::devices_hd::survey();
+    let hd = super::devices_hd::survey(args.check);
     let hd_usable = hd["usable"].as_bool() == Some(true);
     let library = match DhdLibrary::find() {
         Ok(library) => Arc::new(library),

@@ -1,15 +1,23 @@
 //! The OpenHaptics part of `kinloop devices`: whether `libHD` was found (where kinloop looked and which
 //! variable to set when not), and the device `hdInitDevice` opens by default, described by the figures it
-//! reports (`hdGetDoublev`) and its calibration state, with force output never enabled. The search, the
-//! calls and the units are `kinloop_client::device::hd`'s; this file only reports them.
+//! reports (`hdGetDoublev`) and its calibration state, with force output never enabled. With `--check`, the
+//! vendor's servo thread calls a reading callback for a second (`driver::device_clock::check`), and
+//! kinloop's own loop then runs empty for as long on the same machine (`driver::rt_loop::timer_floor`): the
+//! two loops' lateness side by side. The search, the calls and the units are `kinloop_client::device::hd`'s;
+//! this file only reports them.
 
 use kinloop_client::device::hd::library::{candidates, LIBRARY_VARIABLE, SDK_VARIABLE};
 use kinloop_client::device::hd::{HdLibrary, OpenedHd};
 use kinloop_client::device::HdRequest;
+use kinloop_client::driver::device_clock;
+use kinloop_client::driver::rt_loop::timer_floor;
+
+use super::devices::{CHECK_DURATION, CHECK_RATE_HZ};
 use serde_json::{json, Value};
 
-/// The HD library and its default device as JSON (`"usable"`: a device was described).
-pub fn survey() -> Value {
+/// The HD library and its default device as JSON (`"usable"`: a device was described); with `check`, the
+/// two loops' lateness (see the module documentation).
+pub fn survey(check: bool) -> Value {
     let library = match HdLibrary::find() {
         Ok(library) => library,
         Err(e) => {
@@ -36,11 +44,30 @@ pub fn survey() -> Value {
                 "damping_n_s_per_m": s.max_damping,
                 "calibrated": calibrated,
             });
+            let check = check.then(|| loops_lateness(&opened));
             // Dropping `opened` disables the device (force output was never enabled).
-            json!({ "library": path, "usable": true, "error": Value::Null, "device": device })
+            json!({ "library": path, "usable": true, "error": Value::Null, "device": device, "check": check })
         }
         Err(e) => json!({ "library": path, "usable": false, "error": e.to_string() }),
     }
+}
+
+/// The servo thread's lateness reading `opened` for [`CHECK_DURATION`], then kinloop's own loop's, empty, for
+/// as long (SCHED_FIFO when granted, as a session's).
+fn loops_lateness(opened: &OpenedHd) -> Value {
+    let servo = device_clock::check(opened, CHECK_RATE_HZ, CHECK_DURATION);
+    let (own, fifo) = timer_floor(CHECK_RATE_HZ, CHECK_DURATION, true);
+    json!({
+        "servo": {
+            "reads": servo.reads, "failed_reads": servo.failed_reads, "ticks": servo.lateness.ticks,
+            "lateness_us_p50": servo.lateness.p50_us, "lateness_us_p99": servo.lateness.p99_us,
+            "lateness_us_max": servo.lateness.max_us,
+        },
+        "kinloop_loop": {
+            "ticks": own.ticks, "realtime_priority": fifo, "lateness_us_p50": own.p50_us,
+            "lateness_us_p99": own.p99_us, "lateness_us_max": own.max_us,
+        },
+    })
 }
 
 /// The survey as text.
@@ -71,4 +98,20 @@ pub fn print_text(hd: &Value) {
             _ => "",
         }
     );
+    let c = &hd["check"];
+    if !c.is_null() {
+        let (servo, own) = (&c["servo"], &c["kinloop_loop"]);
+        let us = |v: &Value| v.as_f64().map_or_else(|| "?".into(), |x| format!("{x:.0}"));
+        println!(
+            "    check (forces off, 1 s each): the servo thread's callbacks {} reads, {} failed, lateness p99 {} µs, \
+             max {} µs; kinloop's own loop (empty{}) lateness p99 {} µs, max {} µs",
+            servo["reads"],
+            servo["failed_reads"],
+            us(&servo["lateness_us_p99"]),
+            us(&servo["lateness_us_max"]),
+            if own["realtime_priority"].as_bool() == Some(true) { ", SCHED_FIFO" } else { ", normal priority" },
+            us(&own["lateness_us_p99"]),
+            us(&own["lateness_us_max"]),
+        );
+    }
 }

@@ -15,11 +15,19 @@
 //! spec, same defaults, so the same welcome), and hands it to the fake (`FAKE_DHD_TOUR`, `FAKE_HD_TOUR`).
 //! The handle starts at the OP's place, as a simulated rig's does.
 //!
+//! Default flags include the loop's priority: kinloop's own loop (DHD) asks for SCHED_FIFO as a user's does,
+//! and the fake OpenHaptics library's servo thread asks for it as the vendor's does. A loop left at normal
+//! priority on a loaded host runs its ticks in bursts and gaps, and the client's core then steps its local
+//! model over the gaps with gains designed for one period, which the simulated matrices never meet.
+//!
 //! A pair renders by the matrix's bounds: the client ends well, no VE restore, no withheld snapshot, no
 //! non-finite value; loops closed; at most 5 % of ticks clamped; device-OP RMS (the device against the VE's
 //! OP at the same instant, in device space, from both programs' `--record` files) within 5 mm on a perfect
-//! network and 10 mm at 50 ms. The two clocks are matched by when each program said it started (the
-//! server's address line, the client's "holding" line), to a millisecond or so.
+//! network and 10 mm at 50 ms. The two records' clocks are matched by the time zero each program reports
+//! on the system clock (the server's `ve.epoch_unix_s`, the client's `loop_epoch_unix_s`), which both
+//! programs read on this one machine. Matching them by when each printed a line is late by whatever the
+//! host delays the reading (and the client's loop starts on its own thread), and a touring hand turns each
+//! 10 ms of mismatch into about half a millimetre of RMS.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -404,7 +412,6 @@ fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Pa
     };
     let address = line_starting(&mut out, "kinloop-server listening on")
         .with_context(|| format!("the server's log ends:\n{}", log_tail(dir)))?;
-    let server_started = Instant::now();
     let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
     let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
     let (address, fingerprint) = (last_word(&address), last_word(&fingerprint));
@@ -414,7 +421,7 @@ fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Pa
     };
     let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", device_flag]
         .into_iter()
-        .chain(["--op", &point.op, "--no-realtime", "--json", "--record", "client.csv", "--duration"])
+        .chain(["--op", &point.op, "--json", "--record", "client.csv", "--duration"])
         .map(String::from)
         .collect();
     args.push(seconds.to_string());
@@ -439,18 +446,18 @@ fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Pa
     let lines = log.lock().map_err(|_| anyhow!("the client's log"))?.clone();
     let client_log: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
     std::fs::write(dir.join("client.log"), &client_log)?;
-    let holding = lines.iter().find(|(_, l)| l.contains("kinloop-client: holding")).map(|(t, _)| *t);
-    let offset_s = holding.map_or(0.0, |t| t.saturating_duration_since(server_started).as_secs_f64());
+    let holding = lines.iter().any(|(_, l)| l.contains("kinloop-client: holding"));
     if !server_status.success() {
         bail!("kinloop-server failed (see {})", dir.join("server.log").display());
     }
-    Ok(Ran {
-        server: json_in(&server_out).context("the server's JSON statistics")?,
-        client: json_in(&client_out).unwrap_or(Value::Null),
-        client_ok: status.success() && holding.is_some(),
-        client_log,
-        offset_s,
-    })
+    let server = json_in(&server_out).context("the server's JSON statistics")?;
+    let client = json_in(&client_out).unwrap_or(Value::Null);
+    let epochs = (client["loop_epoch_unix_s"].as_f64(), server["ve"]["epoch_unix_s"].as_f64());
+    let offset_s = match epochs {
+        (Some(client), Some(ve)) => client - ve,
+        _ => f64::NAN,
+    };
+    Ok(Ran { server, client, client_ok: status.success() && holding && offset_s.is_finite(), client_log, offset_s })
 }
 
 /// Reads lines from `out` until one holds `prefix`; that line from `prefix` on (a launcher may print

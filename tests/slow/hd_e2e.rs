@@ -117,7 +117,10 @@ fn an_hd_device_renders_the_testbed_from_the_vendors_servo_thread() {
     common::child::serve_if_child();
     let _bounded = common::bounded(NAME, Duration::from_secs(60));
     let tour = "0,0,0;30,20,0;-30,10,0".to_string();
+    let unix_s = || std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_secs_f64();
+    let before = unix_s();
     let run = run_hd(NAME, "hd", "3", &[("FAKE_HD_TOUR", tour), ("FAKE_HD_HAND", "firm".into())]);
+    let after = unix_s();
     assert!(run.success, "the client fails:\n{}", run.stderr);
     assert_released("session", &run);
     assert!(run.stderr.contains("with hd (Touch (fake))"), "the device is named:\n{}", run.stderr);
@@ -133,6 +136,9 @@ fn an_hd_device_renders_the_testbed_from_the_vendors_servo_thread() {
     let (ticks, rate) = (summary["ticks"].as_f64().unwrap_or(0.0), summary["loop_rate_hz"].as_f64().unwrap_or(0.0));
     assert!((800.0..=1100.0).contains(&rate), "loop rate {rate} Hz over {ticks} ticks");
     assert!(forces.len() as f64 >= 0.9 * ticks, "{} frames for {ticks} ticks", forces.len());
+    // The loop's time zero on the system clock (what lines its record up with the server's) fell in the run.
+    let epoch = summary["loop_epoch_unix_s"].as_f64().expect("the loop's time zero");
+    assert!(before < epoch && epoch < after, "{epoch} outside {before}..{after}");
 }
 
 #[test]

@@ -125,34 +125,68 @@ fn a_missing_library_fails_listing_every_place_looked_and_the_variables() {
     assert_eq!(report["looked"][0], missing.display().to_string().as_str());
 }
 
-#[test]
-fn the_openhaptics_library_and_its_device_are_reported_with_force_output_never_enabled() {
-    let dir = tempfile::tempdir().unwrap();
-    let (record, hd_record) = (dir.path().join("record.txt"), dir.path().join("hd.txt"));
+/// `kinloop devices ARGS` with no DHD library and the fake HD one (its variables `env` on top), in `dir`:
+/// the output and the fake's record.
+fn hd_only(args: &[&str], dir: &Path, env: &[(&str, &str)]) -> (Output, String) {
+    let (record, hd_record) = (dir.join("record.txt"), dir.join("hd.txt"));
     let hd = common::fake_hd_library().display().to_string();
     let hd_record_text = hd_record.display().to_string();
-    // No DHD library, an HD one: the HD device is reported and the command succeeds.
-    let env = [
+    let mut all = vec![
         ("KINLOOP_DHD_LIB", "/nonexistent/libdhd.so"),
         ("KINLOOP_HD_LIB", hd.as_str()),
         ("FAKE_HD_RECORD", hd_record_text.as_str()),
     ];
-    let out = devices(&[], &record, &env);
+    all.extend_from_slice(env);
+    let out = devices(args, &record, &all);
+    (out, std::fs::read_to_string(&hd_record).unwrap_or_default())
+}
+
+#[test]
+fn the_openhaptics_library_and_its_device_are_reported_with_force_output_never_enabled() {
+    let dir = tempfile::tempdir().unwrap();
+    let hd = common::fake_hd_library().display().to_string();
+    // No DHD library, an HD one: the HD device is reported and the command succeeds.
+    let (out, events) = hd_only(&[], dir.path(), &[]);
     let stdout = text(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
     assert!(stdout.contains(&format!("HD library (OpenHaptics): {hd}")), "{stdout}");
     // The figures the fake reports through hdGetDoublev, converted: 0.4 N/mm is 400 N/m.
     assert!(stdout.contains("peak force 3.3 N") && stdout.contains("stiffness 400.0 N/m"), "{stdout}");
     assert!(stdout.contains("DHD library: not found"), "{stdout}");
-    let events = std::fs::read_to_string(&hd_record).unwrap_or_default();
     assert!(!events.lines().any(|l| l == "E 1"), "force output was enabled: {events}");
     assert_eq!(events.lines().last(), Some("D"), "the device is disabled: {events}");
     // A device that needs calibrating says so, and nothing is run to calibrate it.
-    let mut env = env.to_vec();
-    env.push(("FAKE_HD_CALIBRATION", "update"));
-    let out = devices(&["--json"], &record, &env);
+    let (out, events) = hd_only(&["--json"], dir.path(), &[("FAKE_HD_CALIBRATION", "update")]);
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     assert_eq!(report["hd"]["device"]["calibrated"], false, "{report}");
-    let events = std::fs::read_to_string(&hd_record).unwrap_or_default();
     assert!(!events.lines().any(|l| l == "A"), "calibration ran unasked: {events}");
+}
+
+/// `--check` with an HD device: the vendor's servo thread calls a reading callback for a second, forces
+/// never enabled, and kinloop's own loop runs beside it in the same command, each loop's lateness reported.
+#[test]
+fn check_reports_the_servo_threads_lateness_beside_kinloops_own_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, events) = hd_only(&["--check", "--json"], dir.path(), &[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let check = &report["hd"]["check"];
+    let (servo, own) = (&check["servo"], &check["kinloop_loop"]);
+    // Frames were read, none failed, and each loop measured its ticks' lateness.
+    assert!(servo["reads"].as_u64().is_some_and(|n| n > 0), "{check}");
+    assert_eq!(servo["failed_reads"], 0, "{check}");
+    for l in [servo, own] {
+        assert!(l["ticks"].as_u64().is_some_and(|n| n > 0), "{check}");
+        let (p99, max) = (l["lateness_us_p99"].as_f64().unwrap(), l["lateness_us_max"].as_f64().unwrap());
+        assert!(p99 >= 0.0 && p99 <= max, "{check}");
+    }
+    assert!(!events.lines().any(|l| l == "E 1"), "force output was enabled: {events}");
+    // Every frame the callbacks ended output nothing.
+    let frames: Vec<&str> = events.lines().filter(|l| l.starts_with("F ")).collect();
+    assert!(!frames.is_empty(), "the callbacks ended no frame: {events}");
+    for f in frames {
+        let force: Vec<f64> = f.split_whitespace().skip(2).map(|x| x.parse().unwrap()).collect();
+        assert_eq!(force, [0.0; 3], "{f}");
+    }
+    assert_eq!(events.lines().last(), Some("D"), "the device is disabled: {events}");
 }

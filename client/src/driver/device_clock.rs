@@ -12,7 +12,8 @@
 //! happened, and drops the device, which disables it.
 //!
 //! Lateness, for the same histogram kinloop's loop fills: how far each callback came after one period
-//! from the one before.
+//! from the one before ([`Beats`]). [`check`] measures it with no session: a callback that only reads the
+//! device, forces off (`kinloop devices --check`).
 
 use std::ffi::{c_uint, c_void};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -23,9 +24,10 @@ use std::time::{Duration, Instant};
 use kinloop_linkage::math::space::Space;
 
 use super::rt_loop::{Flow, LoopBody, LoopRings, LoopSettings, LoopShared};
+use super::timing::{LatenessHistogram, LatenessSummary};
 use crate::core::{CoreStats, HapticCore};
 use crate::device::hd::library::constants;
-use crate::device::hd::{HdDevice, OpenedHd};
+use crate::device::hd::{HdDevice, HdLibrary, OpenedHd};
 use crate::device::DeviceError;
 
 /// A scheduler that has not called back for this long has stopped: the client ends.
@@ -44,12 +46,35 @@ struct Beat {
     panicked: AtomicBool,
 }
 
-/// The callback's own state, used only by the servo thread while scheduled.
-struct Clocked<S: Space> {
-    body: LoopBody<S, HdDevice<S>>,
+/// The callbacks' clock: time since the first, and each callback's lateness after one period from the one
+/// before.
+struct Beats {
     start: Instant,
     period_ns: u64,
     previous_ns: Option<u64>,
+}
+
+impl Beats {
+    fn new(rate_hz: f64) -> Beats {
+        Beats { start: Instant::now(), period_ns: (1e9 / rate_hz) as u64, previous_ns: None }
+    }
+
+    /// A callback now: its time since the start, its lateness recorded in `lateness`.
+    fn beat(&mut self, lateness: &LatenessHistogram) -> Duration {
+        let now = self.start.elapsed();
+        let ns = now.as_nanos() as u64;
+        if let Some(previous) = self.previous_ns {
+            lateness.record(ns.saturating_sub(previous + self.period_ns));
+        }
+        self.previous_ns = Some(ns);
+        now
+    }
+}
+
+/// The callback's own state, used only by the servo thread while scheduled.
+struct Clocked<S: Space> {
+    body: LoopBody<S, HdDevice<S>>,
+    beats: Beats,
     beat: Arc<Beat>,
     shared: Arc<LoopShared>,
     /// The device error that ended the body, for the waiting thread to say.
@@ -58,13 +83,8 @@ struct Clocked<S: Space> {
 
 impl<S: Space> Clocked<S> {
     fn tick(&mut self) -> c_uint {
-        let now = self.start.elapsed();
-        let ns = now.as_nanos() as u64;
-        if let Some(previous) = self.previous_ns {
-            self.shared.lateness.record(ns.saturating_sub(previous + self.period_ns));
-        }
-        self.previous_ns = Some(ns);
-        self.beat.last_ns.store(ns, Ordering::Relaxed);
+        let now = self.beats.beat(&self.shared.lateness);
+        self.beat.last_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
         match self.body.step(now) {
             Flow::Continue => constants::CALLBACK_CONTINUE,
             Flow::Stop(error) => {
@@ -107,12 +127,10 @@ pub fn run<S: Space>(
     let library = opened.library();
     let device = opened.into_device::<S>();
     let beat = Arc::new(Beat::default());
-    let period_ns = (1e9 / settings.rate_hz) as u64;
+    let beats = Beats::new(settings.rate_hz);
     let mut clocked = Box::new(Clocked {
         body: LoopBody::new(device, core, rings, shared.clone(), settings),
-        start: Instant::now(),
-        period_ns,
-        previous_ns: None,
+        beats,
         beat: beat.clone(),
         shared: shared.clone(),
         error: None,
@@ -129,6 +147,10 @@ pub fn run<S: Space>(
     let started = Instant::now();
     while !beat.ended.load(Ordering::Acquire) && !shared.stop.load(Ordering::Relaxed) {
         std::thread::sleep(WATCH);
+        // This thread may wake long after the body ended (a loaded host): an ended body is no silence.
+        if beat.ended.load(Ordering::Acquire) {
+            break;
+        }
         let last = Duration::from_nanos(beat.last_ns.load(Ordering::Relaxed));
         let since = started.elapsed().saturating_sub(last);
         if since > SILENT_LIMIT {
@@ -151,7 +173,85 @@ pub fn run<S: Space>(
     if let Some(e) = clocked.error.take() {
         tracing::error!("{e}; the loop stops");
     }
-    let now = clocked.start.elapsed();
+    let now = clocked.beats.start.elapsed();
     let Clocked { body, .. } = *clocked;
     body.finish(now)
+}
+
+/// What [`check`] measured.
+#[derive(Clone, Copy, Debug)]
+pub struct ServoCheck {
+    /// The callbacks' lateness, as a session's loop measures it.
+    pub lateness: LatenessSummary,
+    /// Frames whose position read back finite.
+    pub reads: u64,
+    /// Frames that raised an HD error or read a non-finite position.
+    pub failed_reads: u64,
+}
+
+/// A reading callback's state (see [`check`]).
+struct Probe {
+    library: &'static HdLibrary,
+    handle: c_uint,
+    beats: Beats,
+    lateness: LatenessHistogram,
+    duration: Duration,
+    reads: u64,
+    failed_reads: u64,
+    /// The callback returned `HD_CALLBACK_DONE` (read by the waiting thread).
+    done: AtomicBool,
+}
+
+/// The servo thread's entry for [`check`]: a frame that reads the position and commands nothing.
+unsafe extern "system" fn probe_tick(data: *mut c_void) -> c_uint {
+    // SAFETY: `data` is the `Probe` `check` scheduled and keeps alive until the scheduler has stopped.
+    let probe = unsafe { &mut *data.cast::<Probe>() };
+    let now = probe.beats.beat(&probe.lateness);
+    let mut p = [f64::NAN; 3];
+    probe.library.begin_frame(probe.handle);
+    probe.library.get_doubles(constants::CURRENT_POSITION, &mut p);
+    probe.library.end_frame(probe.handle);
+    if probe.library.error().is_none() && p.iter().all(|x| x.is_finite()) {
+        probe.reads += 1;
+    } else {
+        probe.failed_reads += 1;
+    }
+    if now >= probe.duration {
+        probe.done.store(true, Ordering::Release);
+        constants::CALLBACK_DONE
+    } else {
+        constants::CALLBACK_CONTINUE
+    }
+}
+
+/// Runs a callback on `opened`'s servo thread for `duration` (at most twice that, if the scheduler stops
+/// calling back), with force output as it was (off, from [`OpenedHd::describe`]): each callback reads the
+/// position in a frame, and its lateness is recorded as a session's loop records it at `rate_hz`.
+pub fn check(opened: &OpenedHd, rate_hz: f64, duration: Duration) -> ServoCheck {
+    let library = opened.library();
+    let mut probe = Box::new(Probe {
+        library,
+        handle: opened.handle(),
+        beats: Beats::new(rate_hz),
+        lateness: LatenessHistogram::default(),
+        duration,
+        reads: 0,
+        failed_reads: 0,
+        done: AtomicBool::new(false),
+    });
+    let data: *mut Probe = &mut *probe;
+    // SAFETY: `probe` outlives the schedule (dropped after hdStopScheduler and hdUnschedule below), and this
+    // thread does not touch it until then.
+    let handle = unsafe { library.schedule(probe_tick, data.cast(), constants::MAX_SCHEDULER_PRIORITY) };
+    library.start_scheduler();
+    let started = Instant::now();
+    // SAFETY: `done` is an atomic, shared with the callback by design; nothing else of `probe` is read here.
+    let done = unsafe { &(*data).done };
+    while !done.load(Ordering::Acquire) && started.elapsed() < duration * 2 {
+        std::thread::sleep(WATCH);
+    }
+    library.stop_scheduler();
+    library.unschedule(handle);
+    let _ = library.error();
+    ServoCheck { lateness: probe.lateness.summary(), reads: probe.reads, failed_reads: probe.failed_reads }
 }

@@ -77,6 +77,9 @@ pub struct ClientStats {
     pub resumes: u64,
     /// Reconnections on which the server refused that state.
     pub resumes_refused: u64,
+    /// The haptic loop's time zero on the system clock (s since the Unix epoch), once it ticked: the record's
+    /// times count from it.
+    pub loop_epoch_unix_s: Option<f64>,
 }
 
 impl ClientStats {
@@ -109,6 +112,7 @@ impl ClientStats {
             "reconnects": self.reconnects,
             "records_dropped": self.records_dropped,
             "device_lost": self.device_lost,
+            "loop_epoch_unix_s": self.loop_epoch_unix_s,
         })
     }
 }
@@ -246,6 +250,9 @@ impl ClientHandle {
             device_lost: self.shared.device_lost.load(Ordering::Relaxed),
             resumes: self.net.resumes.load(Ordering::Relaxed),
             resumes_refused: self.net.resumes_refused.load(Ordering::Relaxed),
+            loop_epoch_unix_s: Some(self.shared.epoch_unix_ns.load(Ordering::Relaxed))
+                .filter(|&ns| ns > 0)
+                .map(|ns| ns as f64 * 1e-9),
         }
     }
 

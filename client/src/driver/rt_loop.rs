@@ -41,6 +41,9 @@ pub struct LoopShared {
     /// Set by the network side when it loses its server; cleared by the loop when the next session's core
     /// takes over (the record marks the ticks in between as session 0).
     pub between_servers: AtomicBool,
+    /// The loop's time zero on the system clock (ns since the Unix epoch), set at its first tick (0 before):
+    /// what a record's times count from, for a reader that lines them up with another program's.
+    pub epoch_unix_ns: AtomicU64,
 }
 
 impl LoopShared {
@@ -186,6 +189,9 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
     pub fn step(&mut self, now: Duration) -> Flow {
         let (rings, shared, core, session) = (&mut self.rings, &self.shared, &mut self.core, &mut self.session);
         shared.elapsed_ns.store(now.as_nanos() as u64, Ordering::Relaxed);
+        if self.ticks == 0 && shared.epoch_unix_ns.load(Ordering::Relaxed) == 0 {
+            shared.epoch_unix_ns.store(unix_ns_at(now), Ordering::Relaxed);
+        }
         if shared.stop.load(Ordering::Relaxed) || self.settings.duration.is_some_and(|d| now >= d) {
             return Flow::Stop(None);
         }
@@ -341,6 +347,13 @@ pub fn paced(rate_hz: f64, duration: Duration, mut tick: impl FnMut(Duration)) -
         ticker.advance();
     }
     lateness.summary()
+}
+
+/// The system clock's reading (ns since the Unix epoch) `since` ago: a clock's time zero, read once (the
+/// system clock is read through the vDSO, without blocking).
+pub fn unix_ns_at(since: Duration) -> u64 {
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    u64::try_from(now.saturating_sub(since).as_nanos()).unwrap_or(u64::MAX)
 }
 
 fn zero<S: Space>() -> S::OpVec {

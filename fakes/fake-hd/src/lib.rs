@@ -6,7 +6,11 @@
 //!
 //! As the vendor's library does, it owns the clock: `hdStartScheduler` starts a servo thread that, every
 //! millisecond, advances the plant and calls each callback `hdScheduleAsynchronous` registered, until the
-//! callback returns `HD_CALLBACK_DONE` or `hdUnschedule` removes it. A force set in a frame
+//! callback returns `HD_CALLBACK_DONE` or `hdUnschedule` removes it. The servo thread is paced as the
+//! device's is (OpenHaptics' scheduler runs its servo loop in a high-priority thread at the device's own
+//! 1 kHz): it asks for real-time priority (SCHED_FIFO, where the system grants it; otherwise it runs at
+//! normal priority), and a tick it missed is lost, never made up by a burst of late ticks (a device's
+//! servo exchange cannot happen in the past; see [`next_tick`]). A force set in a frame
 //! (`hdSetDoublev(HD_CURRENT_FORCE)` between `hdBeginFrame` and `hdEndFrame`) is output from the frame's end.
 //! A stalled servo loop: OpenHaptics' headers do not say what the device does when no frame ends; the fake
 //! takes the conservative reading, that the amplifiers hold a force for [`FORCE_HOLD`] after the last frame
@@ -94,6 +98,9 @@ const HANDLE: Hhd = 0;
 const SERVO_PERIOD: Duration = Duration::from_millis(1);
 /// How long the amplifiers hold a force after the last frame ended (see the module documentation).
 pub const FORCE_HOLD: Duration = Duration::from_millis(5);
+/// The servo thread's SCHED_FIFO priority, when granted (below kinloop's own loop's 80: the servo thread is
+/// the vendor's, not kinloop's).
+const SERVO_PRIORITY: u8 = 70;
 
 /// The Touch's figures as the device reports them (`shared/haptics-facts.md`): 3.3 N peak, 0.88 N
 /// continuous (OpenHaptics' figure), 0.4 N/mm and 0.004 N s/mm rendered stably, a usable workspace of
@@ -619,14 +626,39 @@ pub extern "system" fn hdStopScheduler() {
     }
 }
 
-/// The servo loop: absolute deadlines every [`SERVO_PERIOD`]; the scheduled callbacks called in order of
-/// scheduling, outside the scheduler's lock (they call back into the library).
+/// The tick after `tick` whose deadline (`start + tick · period`) is still to come at `elapsed` since the
+/// start: the next one, or, when the servo thread fell behind, the first one not yet due; the ticks in
+/// between are lost.
+pub fn next_tick(tick: u64, elapsed: Duration, period: Duration) -> u64 {
+    let due = (elapsed.as_nanos() / period.as_nanos().max(1)) as u64;
+    (tick + 1).max(due + 1)
+}
+
+/// Real-time priority for the calling thread, where the system grants it (see the module documentation).
+fn servo_priority() {
+    #[cfg(unix)]
+    {
+        use thread_priority::unix::{
+            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
+        };
+        use thread_priority::{ThreadPriority, ThreadPriorityValue};
+        if let Ok(value) = ThreadPriorityValue::try_from(SERVO_PRIORITY) {
+            let fifo = ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo);
+            let _ = set_thread_priority_and_policy(thread_native_id(), ThreadPriority::Crossplatform(value), fifo);
+        }
+    }
+}
+
+/// The servo loop: absolute deadlines every [`SERVO_PERIOD`], missed ones skipped ([`next_tick`]); the
+/// scheduled callbacks called in order of scheduling, outside the scheduler's lock (they call back into the
+/// library). Fault ticks (`stall:N:MS`) count servo ticks run.
 fn servo(running: &AtomicBool, stall: Option<(u64, Duration)>) {
+    servo_priority();
     let start = Instant::now();
-    let mut tick: u64 = 0;
+    let (mut tick, mut ran): (u64, u64) = (0, 0);
     while running.load(Ordering::Relaxed) {
-        tick += 1;
-        if let Some((_, pause)) = stall.filter(|(n, _)| *n == tick) {
+        ran += 1;
+        if let Some((_, pause)) = stall.filter(|(n, _)| *n == ran) {
             with_device((), |d| d.note(format_args!("X stall")));
             std::thread::sleep(pause);
             with_device((), Device::step);
@@ -643,9 +675,27 @@ fn servo(running: &AtomicBool, stall: Option<(u64, Duration)>) {
         if lock(&SCHEDULER).callbacks.is_empty() {
             with_device((), Device::step);
         }
+        tick = next_tick(tick, start.elapsed(), SERVO_PERIOD);
         let deadline = start + SERVO_PERIOD * u32::try_from(tick).unwrap_or(u32::MAX);
         if let Some(wait) = deadline.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_servo_thread_that_fell_behind_skips_the_ticks_it_missed() {
+        let ms = Duration::from_millis;
+        // On time: the next tick.
+        assert_eq!(next_tick(1, Duration::from_micros(1_200), ms(1)), 2);
+        assert_eq!(next_tick(0, Duration::ZERO, ms(1)), 1);
+        // Tick 1 ran 5.3 ms in: ticks 2 to 5 are lost, the next is due at 6 ms, never a burst of late ones.
+        assert_eq!(next_tick(1, Duration::from_micros(5_300), ms(1)), 6);
+        // Exactly at a deadline that has come: that one is gone too.
+        assert_eq!(next_tick(3, ms(7), ms(1)), 8);
     }
 }

@@ -210,7 +210,10 @@ impl<S: Space> VeLoop<S> {
         stats.step_time = self.histogram.summary();
         stats.stages = self.stages.summary();
         stats.core = self.core.metrics();
-        stats.wall_s = self.epoch.elapsed().as_secs_f64();
+        let since_epoch = self.epoch.elapsed();
+        stats.wall_s = since_epoch.as_secs_f64();
+        let unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        stats.epoch_unix_s = unix.saturating_sub(since_epoch).as_secs_f64();
         stats.cpu_s = self.cpu_at_start.zip(thread_cpu_time()).map(|(a, b)| b.saturating_sub(a).as_secs_f64());
         let _ = self.io.stats.push(*stats);
     }

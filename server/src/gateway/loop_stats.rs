@@ -169,6 +169,9 @@ pub struct VeLoopStats {
     pub cpu_s: Option<f64>,
     /// Seconds since the loop started.
     pub wall_s: f64,
+    /// The loop's time zero (VE time 0, what the record's times count from) on the system clock, seconds
+    /// since the Unix epoch: for a reader that lines the record up with another program's.
+    pub epoch_unix_s: f64,
     /// Wake-ups later than half a period after their deadline.
     pub deadline_misses: u64,
     /// Latest wake-up after its deadline (ns).

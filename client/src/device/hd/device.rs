@@ -208,6 +208,11 @@ impl OpenedHd {
         self.lease.library
     }
 
+    /// The handle `hdInitDevice` gave.
+    pub fn handle(&self) -> c_uint {
+        self.lease.handle
+    }
+
     /// The device for a scene of space `S`.
     pub fn into_device<S: Space>(self) -> HdDevice<S> {
         let spec = self.spec.device_spec(S::KIND);
