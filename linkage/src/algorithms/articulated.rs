@@ -14,6 +14,10 @@
 //! `I S_c S_cᵀ I / (S_cᵀ I S_c)` — ABA's recursion, folded into the parent. When it is joint k's turn,
 //! column k of what remains is `S_iᵀ I^A_k S_k`, and LTL divides it by the square root of its diagonal.
 //!
+//! **Armature.** A joint's armature `a_k` adds to `D_kk` only, so it adds to the pivot: `U_kk² = S_kᵀ I^A_k S_k
+//! + a_k`, and the parent carries `I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk²` (ABA's `D_i = S_iᵀ I^A_i S_i + a_i`,
+//! as in MuJoCo and Pinocchio's rotor inertia).
+//!
 //! **Why faster.** D costs one dot product per nonzero of U plus the composite inertias, and factoring it
 //! `O(Σ_k depth_k²)` more. Here the factorization *is* the dot products, plus one `DIM×DIM` update per body
 //! (the step benchmarks show what it saves, most on long chains). D itself is then
@@ -54,7 +58,7 @@ pub fn factor<S: Space>(model: &Model<S>, data: &mut Data<S>) -> Result<(), Dyna
             inertia += carried;
         }
         let f = S::inertia_mul(&inertia, &s[k]);
-        let pivot = s[k].dot(&f);
+        let pivot = s[k].dot(&f) + model.joints[k].armature;
         if pivot.is_nan() || pivot <= 0.0 {
             return Err(DynamicsError::MassNotPositive { joint: k, pivot });
         }
