@@ -21,7 +21,7 @@ use kinloop_mjcf::{export, import_file};
 use nalgebra::DVector;
 
 /// The armature every joint of a shipped scene is given: of the order of its links' inertias about their
-/// joints (a tenth of a 0.1 kg, 0.1 m link's), so a dropped armature shows in the motion.
+/// joints (a tenth of 0.1 kg at 0.1 m), so a dropped armature shows in the motion.
 const ARMATURE_KG_M2: f64 = 1e-4;
 /// The same for prismatic joints (a tenth of a 0.1 kg slider).
 const ARMATURE_KG: f64 = 1e-2;
