@@ -52,8 +52,7 @@ use kinloop_linkage::{
     model::data::Data, model::Model,
 };
 use kinloop_protocol::{
-    Datagram, LocalModelForm, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
-    Uplink, Welcome,
+    Datagram, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
