@@ -14,8 +14,8 @@
 //! `I S_c S_cᵀ I / (S_cᵀ I S_c)` — ABA's recursion, folded into the parent. When it is joint k's turn,
 //! column k of what remains is `S_iᵀ I^A_k S_k`, and LTL divides it by the square root of its diagonal.
 //!
-//! **Armature.** A joint's armature `a_k` adds to `D_kk` only, so it adds to the pivot: `U_kk² = S_kᵀ I^A_k S_k
-//! + a_k`, and the parent carries `I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk²` (ABA's `D_i = S_iᵀ I^A_i S_i + a_i`,
+//! **Armature.** A joint's armature `a_k` adds to `D_kk` only, so it adds to the pivot, `U_kk² = S_kᵀ I^A_k S_k
+//! plus a_k`, and the parent carries `I^A_k - I^A_k S_k S_kᵀ I^A_k / U_kk²` (ABA's `D_i = S_iᵀ I^A_i S_i + a_i`,
 //! as in MuJoCo and Pinocchio's rotor inertia).
 //!
 //! **Why faster.** D costs one dot product per nonzero of U plus the composite inertias, and factoring it
