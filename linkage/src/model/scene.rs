@@ -523,6 +523,11 @@ impl Scene {
     }
 }
 
+/// For `skip_serializing_if`: a default of zero is left out of written scenes.
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -546,9 +551,4 @@ mod tests {
         let err = Scene::from_toml_str("kind = \"curved\"\n", "k.toml").unwrap_err();
         assert!(err.to_string().contains("curved"), "{err}");
     }
-}
-
-/// For `skip_serializing_if`: a default of zero is left out of written scenes.
-fn is_zero(x: &f64) -> bool {
-    *x == 0.0
 }
