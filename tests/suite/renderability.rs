@@ -100,10 +100,12 @@ fn the_ball_jointed_delta_renders_with_the_configuration_space_local_model() {
     use nalgebra::DVector;
     use std::time::Duration;
 
-    /// The local model's (q, q̇, the frozen terms' q) as each tick found it, and when.
+    /// When a tick found the local model, and its q, q̇ and the frozen terms' q.
+    type State = (Duration, DVector<f64>, DVector<f64>, DVector<f64>);
+    /// Every tick's [`State`] while the configuration form steps.
     #[derive(Default)]
     struct Watch {
-        states: Vec<(Duration, DVector<f64>, DVector<f64>, DVector<f64>)>,
+        states: Vec<State>,
         ticks: usize,
     }
     impl CoreHooks<Spatial> for Watch {
