@@ -66,6 +66,7 @@ pub fn testbed_session() -> Result<(Welcome, Snapshot), BenchError> {
             kind: SceneKind::Planar,
             n: model.nv() as u32,
             m: model.nc() as u32,
+            ball_rates: Vec::new(),
             op_dim: 3,
             op_name: "link2".into(),
             length_scale: model.length_scale,

@@ -11,15 +11,16 @@ use kinloop_linkage::math::space::Spatial;
 use kinloop_linkage::model::builtin::{self, PAPER_WRENCH};
 use kinloop_linkage::model::scene::Scene;
 use kinloop_linkage::{
-    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
-    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, model::data::Data,
-    model::Model,
-};
-use kinloop_linkage::{
+    algorithms::configuration::ConfigLayout,
     algorithms::local_model::{
         op_space_terms, ConfigSpaceLocalModel, ConfigSpaceTerms, LocalModelTerms, OpSpaceLocalModel,
     },
     math::space::OpPose,
+};
+use kinloop_linkage::{
+    algorithms::dynamics::forward_dynamics, algorithms::dynamics::OpWrench, algorithms::integrator::step,
+    algorithms::integrator::Integrator, algorithms::integrator::StepConfig, math::space::Planar, model::data::Data,
+    model::Model,
 };
 use nalgebra::{Vector3, Vector6};
 
@@ -119,7 +120,7 @@ fn ball_joints_allocate_nothing() {
     let (mut q, mut qd) = (model.q0.clone(), model.qd0.clone());
     let mut user = OpWrench::<Spatial> { op: 0, wrench: Vector6::new(0.5, -0.2, 1.0, 0.0, 0.0, 0.0) };
     let mut terms = ConfigSpaceTerms::zeros_nq(model.nq(), model.nv(), model.nc(), 6);
-    let mut config = ConfigSpaceLocalModel::<Spatial>::new_nq(model.nq(), model.nv(), model.nc());
+    let mut config = ConfigSpaceLocalModel::<Spatial>::with_layout(ConfigLayout::of(&model), model.nc());
     for integrator in [Integrator::SemiImplicitEuler, Integrator::Rk4] {
         let cfg = StepConfig { integrator, dt: 1e-3, project: true, implicit_forces: true };
         step(&model, &mut data, &mut q, &mut qd, &mut user, &cfg).unwrap();

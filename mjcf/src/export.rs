@@ -181,9 +181,10 @@ impl Writer<'_> {
                     let suffix = if k == 0 { String::new() } else { format!(".{k}") };
                     let _ = writeln!(
                         self.out,
-                        "{pad}  <joint name=\"{}{suffix}\" type=\"hinge\" axis=\"{}\"/>",
+                        "{pad}  <joint name=\"{}{suffix}\" type=\"hinge\" axis=\"{}\"{}/>",
                         escape(&j.name),
-                        nums(v3(a).normalize().as_slice())
+                        nums(v3(a).normalize().as_slice()),
+                        armature(j)
                     );
                 }
                 return;
@@ -192,6 +193,7 @@ impl Writer<'_> {
         if j.damping > 0.0 {
             let _ = write!(attrs, " damping=\"{:?}\"", j.damping);
         }
+        attrs.push_str(&armature(j));
         if j.qd0 != 0.0 {
             self.dropped.push(format!("initial velocity of joint '{}'", j.name));
         }
@@ -423,4 +425,13 @@ pub fn lift(scene: &Scene) -> Scene {
     }
     s.obstacles.clear();
     s
+}
+
+/// ` armature="a"` for a joint with an armature (each of a universal joint's hinges gets its own), else nothing.
+fn armature(j: &JointSpec) -> String {
+    if j.armature > 0.0 {
+        format!(" armature=\"{:?}\"", j.armature)
+    } else {
+        String::new()
+    }
 }

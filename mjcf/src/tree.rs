@@ -170,6 +170,7 @@ impl Walk<'_> {
             qd0: 0.0,
             spring: None,
             damping: 0.0,
+            armature: 0.0,
             actuator: None,
             range: None,
         };
@@ -187,8 +188,18 @@ impl Walk<'_> {
             if axis_a.cross(&axis_b).norm() < 1e-9 {
                 return Err(b.error("the two hinges of a universal joint must not be parallel"));
             }
+            // A universal joint's two rates share one armature: the hinges' own when they agree.
+            let (arm_a, arm_b) = (non_negative(a, "armature")?, non_negative(b, "armature")?);
+            if arm_a == arm_b {
+                spec.armature = arm_a;
+            } else {
+                self.warnings.unusable(format!(
+                    "armature = {arm_a} and {arm_b} of the hinges of universal joint '{}' (one armature for both rates)",
+                    spec.name
+                ));
+            }
             for j in joints {
-                self.unused(j, &["stiffness", "damping", "armature", "frictionloss", "ref"], "universal joint")?;
+                self.unused(j, &["stiffness", "damping", "frictionloss", "ref"], "universal joint")?;
                 if j.attr("range").is_some() && j.attr("limited") != Some("false") {
                     self.warnings.unusable(format!("range of joint '{}' (a universal joint takes none)", name_of(j)));
                 }
@@ -216,15 +227,16 @@ impl Walk<'_> {
             _ => JointKindSpec::Ball,
         };
         spec.damping = non_negative(e, "damping")?;
+        spec.armature = non_negative(e, "armature")?;
         if kind == "ball" {
-            self.unused(e, &["stiffness", "armature", "frictionloss", "ref"], "ball joint")?;
+            self.unused(e, &["stiffness", "frictionloss", "ref"], "ball joint")?;
             if e.attr("range").is_some() && e.attr("limited") != Some("false") {
                 self.warnings.unusable(format!("range of ball joint '{}' (a cone limit)", spec.name));
             }
         } else {
             let axis = self.axis(e)?;
             spec.axis = Some(axis.as_slice().to_vec());
-            self.unused(e, &["armature", "frictionloss"], "joint")?;
+            self.unused(e, &["frictionloss"], "joint")?;
             // `ref`: the body as written is at qpos = ref, which is qpos0. kinloop's frame is the one at q = 0,
             // so it is turned (slid) back by ref, and q0 = ref.
             let reference = e.number("ref", 0.0)? * unit;

@@ -3,7 +3,7 @@
 /// Unusable items and unknown elements, in the order met.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Warnings {
-    /// Items kinloop has no term for (a tendon, a motor, a joint's armature), each named.
+    /// Items kinloop has no term for (a tendon, a motor, a joint's frictionloss), each named.
     pub unusable: Vec<String>,
     /// Elements the reader does not know, with their lines.
     pub unknown: Vec<String>,

@@ -1,6 +1,7 @@
 //! MJCF linkages written for the tests (a planar four-bar with default classes and geom-derived inertia; a
-//! planar slider-crank with layered links and a hinge written along −z; a spatial RSSR loop with a ball
-//! joint, explicit inertials and an include; a Delta robot with ball joints, frames and five connects), imported and compared with MuJoCo itself at closed, moving
+//! planar slider-crank with layered links, a hinge written along −z and armatures; a spatial RSSR loop with a
+//! ball joint, explicit inertials and an include; a Delta robot with ball joints, frames, five connects and
+//! armatures on its arms (through a default class) and on a ball), imported and compared with MuJoCo itself at closed, moving
 //! states: site positions, the mass matrix (`mj_fullM`), the bias and the passive and actuator forces to 1e-9
 //! relative, the constraint Jacobian's row space, and kinloop's constrained acceleration against the exact
 //! solve from MuJoCo's own M, forces and Jacobian (MuJoCo's `qacc` is soft, so it is not the reference).
@@ -124,6 +125,9 @@ fn imported_linkages_match_mujoco_terms() {
     for &(name, kind) in MODELS {
         let import = import_file(&model(name)).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(import.scene.kind, kind, "{name}: {}", import.reduction.describe());
+        // The slider-crank's and the Delta's armatures are imported (and so in M below), never warned about.
+        let warned = import.warnings.message(name).unwrap_or_default();
+        assert!(!warned.contains("armature"), "{name}: {warned}");
         match kind {
             SceneKind::Planar => {
                 let r = reduction(name, &import.reduction);

@@ -16,7 +16,7 @@ use crate::shape::{SceneKind, SessionShape};
 
 /// The planar testbed's session: a closed-loop planar linkage (k = 3).
 pub fn testbed_shape() -> SessionShape {
-    SessionShape { kind: SceneKind::Planar, n: 4, m: 2 }
+    SessionShape { kind: SceneKind::Planar, n: 4, nq: 4, m: 2 }
 }
 
 /// A realistic snapshot of the planar testbed: k = 3, no contacts, no other user, no configuration terms.

@@ -10,13 +10,21 @@ pub use kinloop_linkage::math::space::SceneKind;
 pub struct SessionShape {
     /// Planar or spatial.
     pub kind: SceneKind,
-    /// Number of generalized coordinates of the scene's tree.
+    /// Number of generalized velocities of the scene's tree (nv; q̇ and the columns of every Jacobian).
     pub n: usize,
+    /// Number of configuration coordinates (nq ≥ n: a ball joint's orientation is a unit quaternion, four
+    /// positions for its three rates).
+    pub nq: usize,
     /// Number of loop-closure rows.
     pub m: usize,
 }
 
 impl SessionShape {
+    /// The shape of every session on `model`.
+    pub fn of_model<S: kinloop_linkage::math::space::Space>(model: &kinloop_linkage::model::Model<S>) -> Self {
+        SessionShape { kind: S::KIND, n: model.nv(), nq: model.nq(), m: model.nc() }
+    }
+
     /// Operational-space dimension `k` (twists, wrenches): 3 planar, 6 spatial.
     pub fn op_dim(&self) -> usize {
         self.kind.op_dim()

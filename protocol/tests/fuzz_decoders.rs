@@ -48,9 +48,9 @@ static ALLOCATOR: LargestAllocation = LargestAllocation;
 const ALLOCATION_BOUND: usize = 1024 * 1024 + 64 * 1024;
 
 const SHAPES: [SessionShape; 3] = [
-    SessionShape { kind: SceneKind::Planar, n: 4, m: 2 },
-    SessionShape { kind: SceneKind::Spatial, n: 3, m: 1 },
-    SessionShape { kind: SceneKind::Planar, n: 0, m: 0 },
+    SessionShape { kind: SceneKind::Planar, n: 4, nq: 4, m: 2 },
+    SessionShape { kind: SceneKind::Spatial, n: 3, nq: 3, m: 1 },
+    SessionShape { kind: SceneKind::Planar, n: 0, nq: 0, m: 0 },
 ];
 
 /// Valid encodings of many messages of every kind, the seeds of the mutations.

@@ -272,7 +272,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
         return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
     }
     let (n, m) = (model.nv(), model.nc());
-    let shape = SessionShape { kind: S::KIND, n, m };
+    let shape = SessionShape::of_model(&model);
     let mut ve = run.ve.clone();
     ve.max_users = ve.max_users.max(run.users);
     let core = VeCore::new(model.clone(), ve)?;

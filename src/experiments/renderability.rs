@@ -27,7 +27,7 @@ use super::common::{session, sweep, Options, Output};
 use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::rounding::{num, round};
-use kinloop_harness::{ClientPlan, SessionPlan};
+use kinloop_harness::{ClientPlan, Recording, SessionPlan, SessionSummary};
 
 /// Largest closure error of a rendering pair (m).
 pub const CLOSURE_BOUND_M: f64 = 1e-6;
@@ -166,19 +166,28 @@ pub fn points(scenes: &[&str], hands: &[HandKind]) -> Result<Vec<Point>> {
 
 /// Runs one pair for `seconds` and judges it.
 pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
+    let (summary, rec) = session(&plan(point, seconds)?)?;
+    Ok(judged(point, &summary, &rec))
+}
+
+/// The session of one pair, `seconds` long: its one client a touring hand with default flags.
+pub fn plan(point: &Point, seconds: f64) -> Result<SessionPlan> {
     let (scene, _) = kinloop_mjcf::load::load(&point.scene)?;
     let mut client = ClientPlan::new("user", &point.op, point.device);
     client.user = UserSpec::Hand(HandSpec::touring(point.hand));
     let client = client.with_link(point.network.link(0x5eed));
-    let plan = SessionPlan {
+    Ok(SessionPlan {
         scene,
         ve: VeConfig::default(),
         clients: vec![client],
         duration: Duration::from_secs_f64(seconds),
         record_every: 1,
-    };
-    let (summary, rec) = session(&plan)?;
-    let verdict = judge(&summary, &rec);
+    })
+}
+
+/// A pair's session judged by every bound (see the module documentation).
+pub fn judged(point: &Point, summary: &SessionSummary, rec: &Recording) -> PointResult {
+    let verdict = judge(summary, rec);
     let c = &summary.clients[0];
     let mut failures = Vec::new();
     if !verdict.stable {
@@ -188,7 +197,7 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
         failures.push("non-finite value".into());
     }
     failures.extend(bound_failures(summary.max_closure_error, c.saturated_fraction, c.device_op_rms_m, point.network));
-    Ok(PointResult {
+    PointResult {
         point: point.clone(),
         renders: failures.is_empty(),
         failures,
@@ -203,7 +212,7 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
         force_scale: c.force_scale,
         coupling: c.coupling.clone(),
         gains: c.gains.clone(),
-    })
+    }
 }
 
 /// Length of a pair's session (s): long enough for the touring hand's whole tour, there and back, on every

@@ -158,6 +158,7 @@ impl Layout {
                 qd0: 0.0,
                 spring: None,
                 damping: 0.0,
+                armature: 0.0,
                 actuator: None,
                 range: None,
             });

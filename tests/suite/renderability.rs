@@ -82,3 +82,91 @@ fn the_five_bar_effector_renders_under_a_firm_hand_with_the_damping_in_the_chann
     let excess = designed.energy_excess_j.unwrap();
     assert!(excess < 0.5 * old.energy_excess_j, "designed {excess} J against the old split's {old:?}");
 }
+
+/// The ball-jointed Delta robot with the paper's configuration-space local model (eq 11): its snapshots
+/// carry nq = 31 positions against 24 rates, the client's model steps q with the VE's own configuration
+/// update, and the pair renders by the matrix's bounds on a Falcon at 50 ms. Between ticks the client's q
+/// is, to round-off, the VE's `configuration::integrate` of the q it started from (its own, or the newest
+/// snapshot's) by the q̇ it then held: the quaternions turn on the sphere instead of staying frozen.
+#[test]
+fn the_ball_jointed_delta_renders_with_the_configuration_space_local_model() {
+    use kinloop::experiments::renderability::{judged, plan};
+    use kinloop_client::core::{HapticCore, ModelForm, TickOutput};
+    use kinloop_client::device::DeviceState;
+    use kinloop_harness::{CoreHooks, Session};
+    use kinloop_linkage::algorithms::configuration::integrate;
+    use kinloop_linkage::math::space::Spatial;
+    use kinloop_linkage::model::Model;
+    use nalgebra::DVector;
+    use std::time::Duration;
+
+    /// When a tick found the local model, and its q, q̇ and the frozen terms' q.
+    type State = (Duration, DVector<f64>, DVector<f64>, DVector<f64>);
+    /// Every tick's [`State`] while the configuration form steps.
+    #[derive(Default)]
+    struct Watch {
+        states: Vec<State>,
+        ticks: usize,
+    }
+    impl CoreHooks<Spatial> for Watch {
+        fn tick<'c>(
+            &mut self,
+            _who: usize,
+            core: &'c mut HapticCore<Spatial>,
+            now: Duration,
+            device: &DeviceState<Spatial>,
+        ) -> TickOutput<'c, Spatial> {
+            self.ticks += 1;
+            match core.config_local_model() {
+                Some(c) => self.states.push((now, c.q.clone(), c.qd.clone(), c.terms().q.clone())),
+                None => self.states.clear(),
+            }
+            core.tick(now, device)
+        }
+    }
+
+    let point = pair("delta", "platform", DevicePreset::Falcon, HandKind::Soft);
+    let mut plan = plan(&point, 8.0).unwrap();
+    plan.clients[0].form = ModelForm::Config;
+    let model: Model<Spatial> = Model::compile(&plan.scene, "delta").unwrap();
+    assert_eq!((model.nq(), model.nv()), (31, 24));
+    let mut session = Session::<Spatial>::new(&plan).unwrap();
+    let mut watch = Watch::default();
+    let (mut stepped, mut held, mut turned, mut worst) = (0, 0, 0.0_f64, 0.0_f64);
+    // Checked in stretches, so the states need not all be kept.
+    for second in 1..=8 {
+        session.run_until_with(Duration::from_secs(second), &mut watch).unwrap();
+        for w in watch.states.windows(2) {
+            let ((t0, q0, _, _), (t1, q1, qd1, base)) = (&w[0], &w[1]);
+            let dt = (*t1 - *t0).as_secs_f64();
+            let mut from_own = q0.clone();
+            integrate(&model, &mut from_own, qd1, dt);
+            let mut from_update = base.clone();
+            integrate(&model, &mut from_update, qd1, dt);
+            let error = (q1 - &from_own).amax().min((q1 - &from_update).amax());
+            turned = turned.max((q1 - base).amax());
+            if error < 1e-12 {
+                stepped += 1;
+            } else if q1 == q0 || q1 == base {
+                // A tick with the hand off the handle holds the model still.
+                held += 1;
+            } else {
+                worst = worst.max(error);
+            }
+        }
+        watch.states.drain(..watch.states.len().saturating_sub(1));
+    }
+    assert_eq!(worst, 0.0, "the client's q left the VE's configuration update by {worst:e}");
+    assert!(stepped > 7000, "the configuration form stepped {stepped} of {} ticks ({held} held)", watch.ticks);
+    assert!(turned > 1e-6, "the client's q never moved from the snapshots' ({turned:e})");
+    let (summary, rec) = session.run(&mut |_| {}).unwrap();
+    let r = judged(&point, &summary, &rec);
+    assert!(
+        r.renders,
+        "{:?} (clamped {:.1} %, RMS {:.1} mm, closure {:.1e} m)",
+        r.failures,
+        r.clamped_fraction * 100.0,
+        r.device_op_rms_m * 1e3,
+        r.max_closure_error_m
+    );
+}

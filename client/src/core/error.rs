@@ -1,5 +1,6 @@
 //! Why a core could not be built for a session.
 
+use kinloop_linkage::algorithms::configuration::LayoutError;
 use kinloop_linkage::algorithms::op_path::PathError;
 use kinloop_linkage::math::space::SceneKind;
 
@@ -51,6 +52,9 @@ pub enum CoreError {
     /// A tick period that is not positive.
     #[error("the tick period must be positive")]
     Period,
+    /// The welcome's ball joints do not fit its rates (`welcome.scene.ball_rates`).
+    #[error("welcome.scene.ball_rates: {0}")]
+    BallRates(#[from] LayoutError),
     /// The welcome's OP path cannot be followed.
     #[error("the welcome's OP path: {0}")]
     Path(#[from] PathError),

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use kinloop_linkage::math::space::{MatOps, Space, VecOps};
 use kinloop_linkage::{
+    algorithms::configuration::ConfigLayout,
     algorithms::local_model::{ConfigSpaceTerms, ContactTerm, MAX_LOCAL_CONTACTS},
     math::space::OpPose,
 };
@@ -55,11 +56,13 @@ pub(crate) struct SnapshotTerms<S: Space> {
     /// Present only when the session carries configuration terms and this snapshot had them.
     pub config: Option<ConfigSpaceTerms>,
     pub has_config: bool,
+    /// Where q's ball joints sit (the welcome's), to check their quaternions.
+    layout: ConfigLayout,
 }
 
 impl<S: Space> SnapshotTerms<S> {
-    /// Empty terms; `config_shape` = `Some((n, m))` preallocates configuration terms.
-    pub fn new(config_shape: Option<(usize, usize)>) -> Self {
+    /// Empty terms; `config_shape` = `Some((layout, m))` preallocates configuration terms.
+    pub fn new(config_shape: Option<&(ConfigLayout, usize)>) -> Self {
         SnapshotTerms {
             seq: 0,
             received_at: Duration::ZERO,
@@ -74,7 +77,8 @@ impl<S: Space> SnapshotTerms<S> {
             constraint_count: 0,
             contacts: [ContactTerm::<S>::none(); MAX_LOCAL_CONTACTS],
             contact_count: 0,
-            config: config_shape.map(|(n, m)| ConfigSpaceTerms::zeros(n, m, S::DIM)),
+            config: config_shape.map(|(l, m)| ConfigSpaceTerms::zeros_nq(l.nq(), l.nv(), *m, S::DIM)),
+            layout: config_shape.map(|(l, _)| l.clone()).unwrap_or_default(),
             has_config: false,
         }
     }
@@ -112,6 +116,9 @@ impl<S: Space> SnapshotTerms<S> {
         self.fill_contacts(snap);
         self.has_config = false;
         if let (Some(terms), Some(wire)) = (self.config.as_mut(), snap.config.as_ref()) {
+            if self.layout.first_non_unit(&wire.q).is_some() {
+                return Err(SnapshotRejection::Implausible { field: "snapshot.config.q" });
+            }
             fill_config(terms, wire);
             self.has_config = true;
         }
@@ -144,7 +151,7 @@ impl<S: Space> SnapshotTerms<S> {
 /// Copies wire configuration terms, of the lengths the wire's checks found for the session, into
 /// preallocated ones (mass matrix from its packed upper triangle).
 fn fill_config(terms: &mut ConfigSpaceTerms, wire: &ConfigTerms) {
-    let n = terms.q.len();
+    let n = terms.qd.len();
     terms.q.copy_from_slice(&wire.q);
     terms.qd.copy_from_slice(&wire.qd);
     let mut index = 0;

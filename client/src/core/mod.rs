@@ -48,6 +48,8 @@ mod stages;
 
 use std::time::Duration;
 
+use kinloop_linkage::algorithms::configuration::ConfigLayout;
+use kinloop_linkage::algorithms::local_model::ConfigSpaceLocalModel;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::codec::limits::{MAX_SCENE_SPEED, MAX_SCENE_WRENCH};
@@ -165,7 +167,9 @@ impl<S: Space> HapticCore<S> {
         let device_mass = scales.mass_to_ve::<S>(&S::OpVec::from_slice(&device.mass));
         let gains = gains::resolve_gains::<S>(&config, welcome, &scales)?;
         let shape = scene.shape();
-        let config_shape = (config.form == ModelForm::Config).then_some((shape.n, shape.m));
+        let rates = scene.ball_rates.iter().map(|&r| r as usize).collect();
+        let layout = ConfigLayout::new(shape.n, rates)?;
+        let config_shape = (config.form == ModelForm::Config).then_some((layout, shape.m));
         let pose_len = OpPose::<S>::wire_len();
         let k = S::DIM;
         let uplink = Uplink::at_rest(0, k, pose_len);
@@ -184,11 +188,11 @@ impl<S: Space> HapticCore<S> {
             length_scale: scene.length_scale,
             user_id: welcome.user_id,
             shape,
-            incoming: Box::new(SnapshotTerms::new(config_shape)),
-            pending: Box::new(SnapshotTerms::new(config_shape)),
+            incoming: Box::new(SnapshotTerms::new(config_shape.as_ref())),
+            pending: Box::new(SnapshotTerms::new(config_shape.as_ref())),
             pending_fresh: false,
             newest_seq: None,
-            active: Box::new(SnapshotTerms::new(config_shape)),
+            active: Box::new(SnapshotTerms::new(config_shape.as_ref())),
             has_snapshot: false,
             model: LocalModel::new(config_shape),
             frame: ConstraintFrame::new(),
@@ -265,6 +269,11 @@ impl<S: Space> HapticCore<S> {
     /// True when the configuration-space form steps the local model.
     pub fn using_config_form(&self) -> bool {
         self.model.using_config()
+    }
+
+    /// The configuration-space local model (its q, q̇ and frozen terms) while it steps the model.
+    pub fn config_local_model(&self) -> Option<&ConfigSpaceLocalModel<S>> {
+        self.model.config_in_use()
     }
 
     /// This end's two-port books (the local model's port) and the VE coupling's as last accepted from a

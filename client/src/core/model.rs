@@ -4,6 +4,7 @@
 
 use kinloop_linkage::math::space::{MatOps, Space, VecOps};
 use kinloop_linkage::{
+    algorithms::configuration::ConfigLayout,
     algorithms::local_model::{
         ConfigSpaceLocalModel, ContactTerm, OpSpaceLocalModel, OpSpaceTerms, MAX_LOCAL_CONTACTS,
     },
@@ -24,12 +25,12 @@ pub(crate) struct LocalModel<S: Space> {
 }
 
 impl<S: Space> LocalModel<S> {
-    /// A model at rest at the origin; `config_shape = Some((n, m))` allocates the configuration form.
-    pub fn new(config_shape: Option<(usize, usize)>) -> Self {
+    /// A model at rest at the origin; `config_shape = Some((layout, m))` allocates the configuration form.
+    pub fn new(config_shape: Option<(ConfigLayout, usize)>) -> Self {
         let terms = OpSpaceTerms { inverse_inertia: S::OpMat::zero(), bias: S::OpVec::zero() };
         LocalModel {
             reduced: OpSpaceLocalModel::new(terms, OpPose::identity()),
-            config: config_shape.map(|(n, m)| ConfigSpaceLocalModel::new(n, m)),
+            config: config_shape.map(|(layout, m)| ConfigSpaceLocalModel::with_layout(layout, m)),
             using_config: false,
             config_refusals: 0,
         }
@@ -38,6 +39,11 @@ impl<S: Space> LocalModel<S> {
     /// True when the configuration-space form steps the model.
     pub fn using_config(&self) -> bool {
         self.using_config
+    }
+
+    /// The configuration-space form while it steps the model.
+    pub fn config_in_use(&self) -> Option<&ConfigSpaceLocalModel<S>> {
+        self.config.as_ref().filter(|_| self.using_config)
     }
 
     pub fn pose(&self) -> OpPose<S> {

@@ -356,6 +356,7 @@ impl<S: Space> Compiler<'_, S> {
             axis,
             spring,
             damping: self.non_negative(&format!("{jkey}.damping"), j.damping)?,
+            armature: self.non_negative(&format!("{jkey}.armature"), j.armature)?,
             actuator,
             range: None,
         };

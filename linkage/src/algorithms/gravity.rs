@@ -48,12 +48,14 @@ pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<
     e + cut_spring_energy(model, &data.kin) + limit_wall_energy(model, &data.kin, q)
 }
 
-/// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ` at the state of the last `forward_velocity`.
+/// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ + ½ Σ aᵢ q̇ᵢ²` (bodies, then armatures: `½ q̇ᵀ D q̇`) at the state of the last
+/// `forward_velocity`.
 pub fn kinetic_energy<S: Space>(model: &Model<S>, data: &Data<S>) -> f64 {
     (0..model.nv())
         .map(|i| {
             let v = &data.kin.body_velocity[i];
-            0.5 * v.dot(&S::inertia_mul(&data.kin.body_inertia[i], v))
+            let rate = data.kin.joint_rate[i];
+            0.5 * v.dot(&S::inertia_mul(&data.kin.body_inertia[i], v)) + 0.5 * model.joints[i].armature * rate * rate
         })
         .sum()
 }

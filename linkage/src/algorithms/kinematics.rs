@@ -85,6 +85,7 @@ pub fn forward_velocity<S: Space>(model: &Model<S>, data: &mut Data<S>, qd: &DVe
     data.terms_at.clear();
     let kin = &mut data.kin;
     let qd = qd.as_slice();
+    kin.joint_rate.copy_from_slice(qd);
     // Joint i - 1's values in registers for a child that follows its parent (see `forward_poses`).
     let mut previous = (S::Spatial::zero(), S::Spatial::zero());
     // The velocity of the body a ball joint hangs from, set at its slot 0 (slots 1 and 2 follow at once).

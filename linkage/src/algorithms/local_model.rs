@@ -13,6 +13,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::algorithms::configuration::ConfigLayout;
 use crate::algorithms::jacobian::frame_velocity;
 use crate::algorithms::kkt::RANK_TOLERANCE;
 use crate::math::dense;
@@ -261,6 +262,7 @@ fn as_column<V: VecOps>(v: &V) -> nalgebra::DVectorView<'_, f64> {
 /// All buffers are allocated at construction; updates and steps allocate nothing.
 #[derive(Clone, Debug)]
 pub struct ConfigSpaceLocalModel<S: Space> {
+    layout: ConfigLayout,
     terms: ConfigSpaceTerms,
     factor: DMatrix<f64>,
     z: DMatrix<f64>,
@@ -287,13 +289,15 @@ pub struct ConfigSpaceLocalModel<S: Space> {
 impl<S: Space> ConfigSpaceLocalModel<S> {
     /// Allocates for n joints and m closure rows.
     pub fn new(n: usize, m: usize) -> Self {
-        Self::new_nq(n, n, m)
+        Self::with_layout(ConfigLayout::flat(n), m)
     }
 
-    /// Allocates for nq configuration and n velocity coordinates (ball joints: nq > n) and m closure rows.
-    pub fn new_nq(nq: usize, n: usize, m: usize) -> Self {
-        let k = S::DIM;
+    /// Allocates for the configuration `layout` (ball joints: nq > n) and m closure rows; q moves by the
+    /// VE's own configuration update (`ConfigLayout::integrate`).
+    pub fn with_layout(layout: ConfigLayout, m: usize) -> Self {
+        let (nq, n, k) = (layout.nq(), layout.nv(), S::DIM);
         ConfigSpaceLocalModel {
+            layout,
             terms: ConfigSpaceTerms::zeros_nq(nq, n, m, k),
             factor: DMatrix::zeros(n, n),
             z: DMatrix::zeros(n, m),
@@ -414,11 +418,8 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
             acc[c] = row_dot(&self.terms.op_jacobian, c, &self.tmp_n) + self.terms.op_bias[c];
         }
         self.qd.axpy(dt, &self.tmp_n, 1.0);
-        // With ball joints (q longer than q̇) the frozen terms carry no joint layout to turn quaternions by:
-        // q stays at the update's, and what is rendered, the OP pose, comes from the twist as always.
-        if self.q.len() == self.qd.len() {
-            self.q.axpy(dt, &self.qd, 1.0);
-        }
+        // q ⊕ dt q̇: ball joints' quaternions turn on the sphere, exactly as the VE's q does.
+        self.layout.integrate(self.q.as_mut_slice(), self.qd.as_slice(), dt);
         // The OP twist is integrated from ẍ (not recomputed as Ĵ q̇) so that the frozen J̇q̇ counts, exactly
         // as in the reduced form.
         self.twist += acc * dt;

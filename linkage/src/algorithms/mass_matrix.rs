@@ -2,6 +2,7 @@
 //!
 //! With every quantity at the world origin, a subtree's composite inertia is the plain sum of its bodies'
 //! spatial inertias and `D_ji = S_jᵀ I^c_i S_i` for each joint j supporting body i: no transforms at all.
+//! A joint's armature (a rotor's reflected inertia, as MJCF's) adds to its diagonal entry, `D_ii += a_i`.
 
 use crate::algorithms::jacobian::support;
 use crate::algorithms::tree::subtree_sums;
@@ -35,6 +36,7 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
     if model.is_chain() {
         by_size!(n, N => {
             chain_small::<S, N>(&s[..N], &composite[..N], &mut a[..N * N]);
+            add_armature(model, a);
             data.mass_matrix_fresh = true;
             return;
         }, _ => ());
@@ -59,7 +61,16 @@ pub fn mass_matrix<S: Space>(model: &Model<S>, data: &mut Data<S>) {
             *dst = col[c];
         }
     }
+    add_armature(model, a);
     data.mass_matrix_fresh = true;
+}
+
+/// `D_ii += a_i` for every joint with an armature (`a`: D column-major, n×n).
+fn add_armature<S: Space>(model: &Model<S>, a: &mut [f64]) {
+    let n = model.nv();
+    for (i, joint) in model.joints.iter().enumerate().filter(|(_, j)| j.armature != 0.0) {
+        a[i * n + i] += joint.armature;
+    }
 }
 
 /// D of a chain of N joints from the composite inertias (see [`mass_matrix`]), both triangles.

@@ -103,6 +103,7 @@ pub fn chain(links: usize, loops: usize) -> Scene {
             qd0: 0.0,
             spring: None,
             damping: 0.0,
+            armature: 0.0,
             actuator: None,
             range: None,
         })

@@ -26,6 +26,8 @@ pub struct Kinematics<S: Space> {
     pub body_inertia: Vec<S::Inertia>,
     /// Spatial velocity v_i of each body (world frame).
     pub body_velocity: Vec<S::Spatial>,
+    /// The joint rates q̇ of the last `forward_velocity` (the armatures' kinetic energy needs them).
+    pub joint_rate: Vec<f64>,
     /// Velocity-product spatial acceleration of each body: its acceleration when q̈ = 0.
     pub bias_acceleration: Vec<S::Spatial>,
     /// Per joint, sin and cos at the last anchor of its angle (see `trig::AnchoredSinCos`).
@@ -41,6 +43,7 @@ impl<S: Space> Kinematics<S> {
             motion_subspace: vec![S::Spatial::zero(); n],
             body_inertia: vec![S::Inertia::zero(); n],
             body_velocity: vec![S::Spatial::zero(); n],
+            joint_rate: vec![0.0; n],
             bias_acceleration: vec![S::Spatial::zero(); n],
             sin_cos: vec![AnchoredSinCos::default(); n],
         }

@@ -97,6 +97,8 @@ pub struct Joint<S: Space> {
     pub spring: Option<Spring>,
     /// Viscous damping coefficient (0 when none).
     pub damping: f64,
+    /// Armature added to this rate's diagonal entry of D (0 when none), kg m² or kg.
+    pub armature: f64,
     /// Optional PD actuator.
     pub actuator: Option<Actuator>,
     /// Optional range of positions.

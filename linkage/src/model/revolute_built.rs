@@ -46,6 +46,7 @@ pub fn revolute_built(scene: &Scene, gimbal_mass: f64) -> Scene {
                 qd0: 0.0,
                 spring: None,
                 damping: j.damping,
+                armature: j.armature,
                 actuator: None,
                 range: None,
             });

@@ -207,6 +207,10 @@ pub struct JointSpec {
     /// Viscous damping, N m s/rad or N s/m (≥ 0).
     #[serde(default)]
     pub damping: f64,
+    /// Armature (a rotor's reflected inertia, MJCF's `armature`): added to this joint's diagonal entry of the
+    /// mass matrix D, kg m² (revolute; each rate of a ball or universal joint) or kg (prismatic), ≥ 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub armature: f64,
     /// A PD actuator (makes the linkage active).
     #[serde(default)]
     pub actuator: Option<ActuatorSpec>,
@@ -479,6 +483,7 @@ impl Scene {
                         sp.stiffness *= f2;
                     }
                     j.damping *= f2;
+                    j.armature *= f2;
                     if let Some(a) = &mut j.actuator {
                         a.kp *= f2;
                         a.kd *= f2;
@@ -516,6 +521,11 @@ impl Scene {
         }
         s
     }
+}
+
+/// For `skip_serializing_if`: a default of zero is left out of written scenes.
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 #[cfg(test)]

@@ -74,6 +74,7 @@ fn build(spec: &Spec, kind: SceneKind) -> Scene {
                 qd0: 0.0,
                 spring: None,
                 damping: 0.0,
+                armature: 0.0,
                 actuator: None,
                 range: None,
             }

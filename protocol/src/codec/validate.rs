@@ -9,6 +9,7 @@ use crate::messages::{
     ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
+use kinloop_linkage::algorithms::configuration::ConfigLayout;
 
 /// Checks a control message; control messages carry their own dimensions, so no session shape is needed.
 pub fn control(msg: &Control) -> Result<(), DecodeError> {
@@ -163,6 +164,17 @@ fn scene(s: &SceneSummary) -> Result<(), DecodeError> {
     scalar(Field::at("welcome.scene.length_scale"), s.length_scale, 1e-9, MAX_SCENE_POSITION)?;
     count(Field::at("welcome.scene.n"), s.n as usize, MAX_COORDINATES)?;
     count(Field::at("welcome.scene.m"), s.m as usize, MAX_CLOSURE_ROWS)?;
+    let field = Field::at("welcome.scene.ball_rates");
+    if s.kind == SceneKind::Planar && !s.ball_rates.is_empty() {
+        return Err(DecodeError::Inconsistent { field, what: "a planar scene has no ball joints" });
+    }
+    let rates = s.ball_rates.iter().map(|&r| r as usize).collect();
+    if ConfigLayout::new(s.n as usize, rates).is_err() {
+        return Err(DecodeError::Inconsistent {
+            field,
+            what: "each ball joint's three rates must fit in n, after the previous ball's",
+        });
+    }
     if usize::from(s.op_dim) != s.kind.op_dim() {
         return Err(DecodeError::Inconsistent {
             field: Field::at("welcome.scene.op_dim"),
@@ -313,7 +325,7 @@ fn contact(i: usize, c: &ContactTerm, shape: &SessionShape) -> Result<(), Decode
 
 fn config_terms(c: &ConfigTerms, shape: &SessionShape) -> Result<(), DecodeError> {
     let (n, m, k) = (shape.n, shape.m, shape.op_dim());
-    vector(Field::at("snapshot.config.q"), &c.q, n, MAX_SCENE_POSITION)?;
+    vector(Field::at("snapshot.config.q"), &c.q, shape.nq, MAX_SCENE_POSITION)?;
     vector(Field::at("snapshot.config.qd"), &c.qd, n, MAX_SCENE_SPEED)?;
     vector(Field::at("snapshot.config.mass_matrix"), &c.mass_matrix, triangle_len(n), MAX_SCENE_MATRIX_ENTRY)?;
     vector(Field::at("snapshot.config.closure_jacobian"), &c.closure_jacobian, m * n, MAX_SCENE_MATRIX_ENTRY)?;

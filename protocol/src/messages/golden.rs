@@ -15,7 +15,7 @@ fn unhex(parts: &[&str]) -> Vec<u8> {
     (0..digits.len()).step_by(2).map(|i| u8::from_str_radix(&digits[i..i + 2], 16).expect("hex")).collect()
 }
 
-const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
+const PLANAR_TESTBED: SessionShape = SessionShape { kind: SceneKind::Planar, n: 4, nq: 4, m: 2 };
 
 fn hello() -> Control {
     Control::Hello(Hello {
@@ -208,6 +208,7 @@ fn welcome() -> Control {
             kind: SceneKind::Planar,
             n: 4,
             m: 2,
+            ball_rates: Vec::new(),
             op_dim: 3,
             op_name: "ee".into(),
             length_scale: 0.0625,
@@ -240,6 +241,7 @@ const WELCOME_BYTES: &[&str] = &[
     "00",               // scene.kind Planar
     "04",               // scene.n 4
     "02",               // scene.m 2
+    "00",               // scene.ball_rates: none
     "03",               // scene.op_dim 3
     "02 6565",          // scene.op_name "ee"
     "000000000000b03f", // scene.length_scale 0.0625

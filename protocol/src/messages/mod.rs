@@ -39,7 +39,7 @@ pub use room::{ResumeAnswer, ResumeRefusal, RoomState};
 
 /// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
 /// landing that changes the wire (see the module documentation).
-pub const PROTOCOL_VERSION: u16 = 8;
+pub const PROTOCOL_VERSION: u16 = 9;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
 /// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.
@@ -188,10 +188,13 @@ pub struct SceneSummary {
     pub name: String,
     /// Planar or spatial.
     pub kind: SceneKind,
-    /// Generalized coordinates of the tree.
+    /// Generalized velocities of the tree (nv).
     pub n: u32,
     /// Loop-closure rows.
     pub m: u32,
+    /// The first rate of each ball joint, ascending (spatial scenes only): its orientation is a unit
+    /// quaternion in q, so nq = n + the number of balls (`kinloop_linkage`'s `ConfigLayout`).
+    pub ball_rates: Vec<u32>,
     /// Operational-space dimension `k` (must equal `kind.op_dim()`).
     pub op_dim: u8,
     /// Name of the operational point granted to this client.
@@ -204,7 +207,8 @@ pub struct SceneSummary {
 impl SceneSummary {
     /// The dimensions a session on this scene checks its snapshots and uplinks against.
     pub fn shape(&self) -> SessionShape {
-        SessionShape { kind: self.kind, n: self.n as usize, m: self.m as usize }
+        let (n, m) = (self.n as usize, self.m as usize);
+        SessionShape { kind: self.kind, n, nq: n + self.ball_rates.len(), m }
     }
 }
 
@@ -473,7 +477,8 @@ pub struct ContactTerm {
 /// [`LocalModelForm::ConfigSpace`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ConfigTerms {
-    /// Generalized coordinates, length `n`.
+    /// Generalized coordinates, length `nq` (each ball joint's unit quaternion `(w, x, y, z)` where
+    /// `SceneSummary::ball_rates` puts it).
     pub q: Vec<f64>,
     /// Generalized velocities, length `n`.
     pub qd: Vec<f64>,

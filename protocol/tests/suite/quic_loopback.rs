@@ -66,6 +66,7 @@ fn decide(_hello: &Hello, join: &Join) -> Result<Welcome, Refused> {
             kind: shape.kind,
             n: shape.n as u32,
             m: shape.m as u32,
+            ball_rates: Vec::new(),
             op_dim: 3,
             op_name: "ee".into(),
             length_scale: 0.05,
@@ -168,7 +169,7 @@ async fn oversize_snapshot_travels_on_a_stream_and_arrives_whole() {
         let accepted = server.session.await.unwrap().unwrap();
 
         // Configuration-space terms of a 40-coordinate scene: ≈ 14 KB, far over the ≈ 1.2 KB datagram limit.
-        let shape = SessionShape { kind: SceneKind::Planar, n: 40, m: 8 };
+        let shape = SessionShape { kind: SceneKind::Planar, n: 40, nq: 40, m: 8 };
         let mut snapshot = testbed_snapshot();
         snapshot.config = Some(ConfigTerms {
             q: vec![0.1; 40],

@@ -148,6 +148,7 @@ fn spatial_welcome() -> Welcome {
             kind: SceneKind::Spatial,
             n: 6,
             m: 0,
+            ball_rates: Vec::new(),
             op_dim: 6,
             op_name: "ee".into(),
             length_scale: 0.05,
@@ -276,4 +277,42 @@ fn a_malformed_room_state_is_refused_naming_the_field() {
     let mut long_tag = state;
     long_tag.tag = vec![0; 65];
     assert_eq!(field_of(&decode(long_tag).unwrap_err()), "room_state.tag");
+}
+
+/// A scene with ball joints: its welcome says where their rates start, and its configuration terms carry nq
+/// positions (one more per ball) against nv rates. A q of nv positions, or rates that do not fit, are typed
+/// errors naming the field.
+#[test]
+fn ball_joints_make_q_longer_than_its_rates_and_both_are_checked() {
+    let mut welcome = spatial_welcome();
+    let check = |w: &Welcome| decode_control(&encode_control(&Control::Welcome(w.clone())).unwrap());
+    (welcome.scene.n, welcome.scene.m) = (3, 1);
+    welcome.scene.ball_rates = vec![0];
+    assert!(check(&welcome).is_ok());
+    let shape = welcome.scene.shape();
+    assert_eq!((shape.n, shape.nq), (3, 4));
+    let (_, mut snapshot) = support::full_spatial_snapshot();
+    let decode = |s: &Snapshot| decode_datagram(&encode_datagram(&Datagram::Snapshot(s.clone())).unwrap(), &shape);
+    // One position per rate: the quaternion does not fit.
+    let error = decode(&snapshot).unwrap_err();
+    assert!(matches!(error, DecodeError::WrongLength { got: 3, expected: 4, .. }), "{error:?}");
+    assert_eq!(field_of(&error), "snapshot.config.q");
+    snapshot.config.as_mut().unwrap().q = vec![1.0, 0.0, 0.0, 0.0];
+    assert!(decode(&snapshot).is_ok());
+    // Rates as many as positions: q̇ is checked against nv.
+    snapshot.config.as_mut().unwrap().qd = vec![0.0; 4];
+    assert_eq!(field_of(&decode(&snapshot).unwrap_err()), "snapshot.config.qd");
+    // A ball whose three rates run past n, two that overlap, and a ball in a planar scene.
+    for (kind, n, rates) in
+        [(SceneKind::Spatial, 3, vec![1]), (SceneKind::Spatial, 6, vec![0, 2]), (SceneKind::Planar, 3, vec![0])]
+    {
+        let mut bad = spatial_welcome();
+        (bad.scene.kind, bad.scene.n, bad.scene.ball_rates) = (kind, n, rates);
+        if kind == SceneKind::Planar {
+            bad = Welcome { coupling: CouplingGains { stiffness: vec![1.0; 3], damping: vec![1.0; 3] }, ..bad };
+            bad.scene.op_dim = 3;
+        }
+        let error = check(&bad).unwrap_err();
+        assert_eq!(field_of(&error), "welcome.scene.ball_rates", "{error:?}");
+    }
 }

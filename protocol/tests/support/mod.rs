@@ -8,7 +8,7 @@ use proptest::prelude::*;
 /// Any session shape with small n and m.
 pub fn shape() -> impl Strategy<Value = SessionShape> {
     (prop_oneof![Just(SceneKind::Planar), Just(SceneKind::Spatial)], 0usize..8, 0usize..6)
-        .prop_map(|(kind, n, m)| SessionShape { kind, n, m })
+        .prop_map(|(kind, n, m)| SessionShape { kind, n, nq: n, m })
 }
 
 fn within(bound: f64) -> impl Strategy<Value = f64> {
@@ -287,6 +287,7 @@ fn welcome() -> impl Strategy<Value = Welcome> {
                     kind,
                     n,
                     m,
+                    ball_rates: Vec::new(),
                     op_dim: k as u8,
                     op_name: op_name.clone(),
                     length_scale: 0.05,
@@ -341,7 +342,7 @@ pub fn control() -> impl Strategy<Value = Control> {
 
 /// A spatial snapshot with a contact, another user and configuration terms: every optional part present.
 pub fn full_spatial_snapshot() -> (SessionShape, Snapshot) {
-    let shape = SessionShape { kind: SceneKind::Spatial, n: 3, m: 1 };
+    let shape = SessionShape { kind: SceneKind::Spatial, n: 3, nq: 3, m: 1 };
     let snapshot = Snapshot {
         seq: 9,
         server_time_s: 0.5,

@@ -41,6 +41,7 @@ pub mod ve_forces;
 
 use std::time::Duration;
 
+use kinloop_linkage::algorithms::configuration::ConfigLayout;
 use kinloop_linkage::algorithms::contact::{Contact, PenaltyContacts};
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use kinloop_linkage::algorithms::reach::{survey_op, OpReach, SurveyConfig};
@@ -51,8 +52,7 @@ use kinloop_linkage::{
     model::data::Data, model::Model,
 };
 use kinloop_protocol::{
-    Datagram, LocalModelForm, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot,
-    Uplink, Welcome,
+    Datagram, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -299,7 +299,7 @@ impl<S: Space> VeCore<S> {
             order_version: u64::MAX,
         };
         Ok(VeCore {
-            shape: SessionShape { kind: S::KIND, n, m },
+            shape: SessionShape::of_model(&model),
             snapshot_period: config.snapshot_period(),
             period,
             step_config,
@@ -386,18 +386,6 @@ impl<S: Space> VeCore<S> {
                 available: self.model.ops.iter().map(|o| o.name.clone()).collect(),
             });
         };
-        // The wire's configuration terms carry one position per rate (`snapshot.config.q` of length n = nv):
-        // a ball joint's quaternion does not fit, and the operational-space form needs no q.
-        if request.form == LocalModelForm::ConfigSpace && self.model.has_balls() {
-            self.metrics.joins_refused += 1;
-            return Err(RefusalReason::Unservable {
-                what: format!(
-                    "snapshot.config.q: the configuration-space local model sends n = {} positions, but this scene's ball joints take nq = {}; ask for the operational-space form",
-                    self.model.nv(),
-                    self.model.nq()
-                ),
-            });
-        }
         let reach = &self.reaches[op];
         let manipulator = request.role == Role::Manipulator;
         let designed = match &request.device {
@@ -693,6 +681,7 @@ impl<S: Space> VeCore<S> {
                 kind: S::KIND,
                 n: self.model.nv() as u32,
                 m: self.model.nc() as u32,
+                ball_rates: ConfigLayout::of(&self.model).ball_rates().iter().map(|&r| r as u32).collect(),
                 op_dim: S::DIM as u8,
                 op_name: self.model.ops[op].name.clone(),
                 length_scale: self.model.length_scale,

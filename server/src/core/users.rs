@@ -85,11 +85,11 @@ pub struct SnapshotSlot {
 impl SnapshotSlot {
     /// Storage for a user of `model` with the given form.
     pub fn new<S: Space>(model: &Model<S>, user: UserId, form: LocalModelForm) -> Self {
-        let (n, m, k) = (model.nv(), model.nc(), S::DIM);
+        let (nq, n, m, k) = (model.nq(), model.nv(), model.nc(), S::DIM);
         let pose_len = kinloop_linkage::math::space::OpPose::<S>::wire_len();
         let point = <S::Point as kinloop_linkage::math::space::VecOps>::LEN;
         let config = (form == LocalModelForm::ConfigSpace).then(|| ConfigTerms {
-            q: Vec::with_capacity(n),
+            q: Vec::with_capacity(nq),
             qd: Vec::with_capacity(n),
             mass_matrix: Vec::with_capacity(n * (n + 1) / 2),
             closure_jacobian: Vec::with_capacity(m * n),
@@ -137,7 +137,7 @@ impl SnapshotSlot {
             message: Datagram::Snapshot(snapshot),
             spare_contacts,
             pending: false,
-            config_scratch: (form == LocalModelForm::ConfigSpace).then(|| ConfigSpaceTerms::zeros(n, m, k)),
+            config_scratch: (form == LocalModelForm::ConfigSpace).then(|| ConfigSpaceTerms::zeros_nq(nq, n, m, k)),
         }
     }
 

@@ -565,7 +565,7 @@ where
         gateway: Arc::new(Gateway {
             commands: Arc::new(CommandSender::new(command_tx)),
             users: UserRegistry::default(),
-            shape: SessionShape { kind: S::KIND, n, m },
+            shape: SessionShape { kind: S::KIND, n, nq, m },
             snapshot_ring_bytes: 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m)),
         }),
         endpoint: host.endpoint.clone(),

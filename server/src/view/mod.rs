@@ -410,7 +410,7 @@ pub(crate) fn start_room_view(
     check(config)?;
     let geometry = draw::geometry(&source.scene, &source.scene_label)?;
     let kind = source.scene.kind;
-    let shape = SessionShape { kind, n: geometry.info().n, m: 0 };
+    let shape = SessionShape { kind, n: geometry.info().n, nq: geometry.info().n, m: 0 };
     let shape = server.as_ref().map_or(shape, |s| s.shape);
     let (frames_tx, frames_rx) = watch::channel(None);
     let shared = Arc::new(ViewShared {

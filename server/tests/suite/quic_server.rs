@@ -49,7 +49,7 @@ async fn a_client_joins_pushes_receives_snapshots_and_the_server_says_goodbye() 
         let welcome = &session.welcome;
         assert_eq!(welcome.scene.op_name, "link2");
         assert_eq!((welcome.scene.n, welcome.scene.m, welcome.scene.kind), (4, 2, SceneKind::Planar));
-        let shape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
+        let shape = SessionShape { kind: SceneKind::Planar, n: 4, nq: 4, m: 2 };
         let sender = DatagramSender::new(session.connection.clone());
         let mut receiver = DatagramReceiver::new(session.connection.clone(), shape);
 

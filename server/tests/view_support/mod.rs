@@ -188,7 +188,7 @@ impl Pusher {
         let join = Join { op: "link2".into(), device, form: LocalModelForm::OpSpace, mapping: Default::default() };
         let mut session =
             connect(&endpoint, server.local_addr(), "localhost", &hello, |_| Ok(join)).await.expect("joined");
-        let shape = SessionShape { kind: SceneKind::Planar, n: 4, m: 2 };
+        let shape = SessionShape { kind: SceneKind::Planar, n: 4, nq: 4, m: 2 };
         let push = Arc::new(AtomicBool::new(true));
         let stop = Arc::new(AtomicBool::new(false));
         let ops_by_step = Arc::new(Mutex::new(BTreeMap::new()));
