@@ -5,7 +5,7 @@
 //! is the one difference the encoding adds. Every joint is given an armature first, so the motion shows
 //! whether the export carries it.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::integrator::{step, Integrator, StepConfig};

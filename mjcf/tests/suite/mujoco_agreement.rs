@@ -9,7 +9,7 @@
 //! compared in MuJoCo's coordinates (a hinge along −n negated back, a site's depth along n restored), and
 //! their motion and Λ⁻¹ at the sites against their own spatial import, a second formulation.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kinloop_linkage::algorithms::assemble::assemble;
