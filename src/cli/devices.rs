@@ -6,13 +6,15 @@
 //! `kinloop_client::device::dhd`'s; this file only reports them.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{bail, Result};
 use kinloop_client::device::dhd::library::{candidates, LIBRARY_VARIABLE, SDK_VARIABLE};
 use kinloop_client::device::dhd::specs::ModelSpec;
 use kinloop_client::device::dhd::{frames, DhdError, DhdLibrary, OpenedDhd};
 use kinloop_client::driver::rt_loop::paced;
+
+use super::devices_hd::{CHECK_DURATION, CHECK_RATE_HZ};
 use serde_json::{json, Value};
 
 /// Arguments of `kinloop devices`.
@@ -28,10 +30,6 @@ pub struct DevicesArgs {
     pub json: bool,
 }
 
-/// The haptic loop's rate, at which `--check` reads (Hz).
-pub(super) const CHECK_RATE_HZ: f64 = 1000.0;
-/// How long `--check` reads.
-pub(super) const CHECK_DURATION: Duration = Duration::from_secs(1);
 /// USB vendor IDs of the devices the DHD library drives: Force Dimension's, and FTDI's with the Falcon's
 /// product ID (Novint used FTDI's chip).
 const USB_IDS: [(&str, Option<&str>, &str); 2] =

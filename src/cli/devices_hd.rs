@@ -6,14 +6,19 @@
 //! two loops' lateness side by side. The search, the calls and the units are `kinloop_client::device::hd`'s;
 //! this file only reports them.
 
+use std::time::Duration;
+
 use kinloop_client::device::hd::library::{candidates, LIBRARY_VARIABLE, SDK_VARIABLE};
 use kinloop_client::device::hd::{HdLibrary, OpenedHd};
 use kinloop_client::device::HdRequest;
 use kinloop_client::driver::device_clock;
 use kinloop_client::driver::rt_loop::timer_floor;
-
-use super::devices::{CHECK_DURATION, CHECK_RATE_HZ};
 use serde_json::{json, Value};
+
+/// The haptic loop's rate, at which `--check` reads both kinds of device (Hz).
+pub(super) const CHECK_RATE_HZ: f64 = 1000.0;
+/// How long `--check` reads.
+pub(super) const CHECK_DURATION: Duration = Duration::from_secs(1);
 
 /// The HD library and its default device as JSON (`"usable"`: a device was described); with `check`, the
 /// two loops' lateness (see the module documentation).
