@@ -293,28 +293,13 @@ async fn run<S: Space>(
         shared: shared.clone(),
         net: net.clone(),
     };
-    // A loop on the shared clock has its uplinks sent by the shared network's pump, which the clock wakes
-    // once a round; any other loop unparks an uplink thread of its client's own after each push.
     let on_shared_clock = matches!(rig, Haptic::Polled(_)) && config.clock.is_some();
-    let uplink_thread = match config.network.as_ref().filter(|_| on_shared_clock) {
-        Some(network) => {
-            network.pump_for(outlet);
-            None
-        }
-        None => {
-            let handle = tokio::runtime::Handle::current();
-            let thread = std::thread::Builder::new().name("kinloop-uplink".into()).spawn(move || {
-                let _guard = handle.enter();
-                send_uplinks(outlet)
-            });
-            match thread {
-                Ok(t) => Some(t),
-                Err(e) => {
-                    abandon(endpoint, &session.connection, b"client cannot start").await;
-                    let _ = started.send(Err(ClientError::Runtime(e.to_string())));
-                    return;
-                }
-            }
+    let uplink_thread = match start_uplink_sender(config, on_shared_clock, outlet) {
+        Ok(thread) => thread,
+        Err(e) => {
+            abandon(endpoint, &session.connection, b"client cannot start").await;
+            let _ = started.send(Err(ClientError::Runtime(e.to_string())));
+            return;
         }
     };
     let loop_rings = LoopRings {
@@ -376,6 +361,26 @@ async fn run<S: Space>(
     drain_reports(&mut rings, &net);
     // Give the close frame a moment to leave.
     dialer.endpoint.linger().await;
+}
+
+/// Who sends the uplinks the loop pushes: a loop on the shared clock has them sent by the shared network's
+/// pump, which the clock wakes once a round (no thread); any other loop unparks an uplink thread of its
+/// client's own after each push (returned).
+fn start_uplink_sender(
+    config: &ClientConfig,
+    on_shared_clock: bool,
+    outlet: Outlet,
+) -> std::io::Result<Option<JoinHandle<()>>> {
+    if let Some(network) = config.network.as_ref().filter(|_| on_shared_clock) {
+        network.pump_for(outlet);
+        return Ok(None);
+    }
+    let handle = tokio::runtime::Handle::current();
+    let thread = std::thread::Builder::new().name("kinloop-uplink".into()).spawn(move || {
+        let _guard = handle.enter();
+        send_uplinks(outlet)
+    })?;
+    Ok(Some(thread))
 }
 
 /// A session's device: polled by kinloop's loop, or clocked by the vendor's servo thread.
