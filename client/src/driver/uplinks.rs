@@ -34,11 +34,11 @@ pub(super) struct Outlet {
 impl Outlet {
     /// Sends what is queued through the session's sender; true once the loop has stopped and nothing is left.
     pub(super) fn drain(&mut self) -> bool {
+        // One lock for the whole drain, not one a datagram: the pump drains every user each round.
         let sender = self.sender.clone();
-        self.drain_with(&mut |message| {
-            let guard = sender.lock().ok();
-            guard.as_ref().and_then(|g| g.as_ref()).is_some_and(|s| s.send(message).is_ok())
-        })
+        let guard = sender.lock().ok();
+        let connection = guard.as_ref().and_then(|g| g.as_ref());
+        self.drain_with(&mut |message| connection.is_some_and(|s| s.send(message).is_ok()))
     }
 
     /// [`Outlet::drain`] with `send` (true: handed to QUIC) in place of the connection.
