@@ -36,6 +36,12 @@ pub fn gravity_forces<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVecto
 /// Potential energy of gravity, springs and the range walls at the configuration of the last
 /// `forward_kinematics`.
 pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<f64>) -> f64 {
+    field_energy(model, data, q) + limit_wall_energy(model, &data.kin, q)
+}
+
+/// The potential whose gradient is G (gravity, joint and cut springs) at the configuration of the last
+/// `forward_kinematics`: [`potential_energy`] without the range walls, whose forces are joint forces.
+pub fn field_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<f64>) -> f64 {
     let mut e = 0.0;
     for (i, body) in model.bodies.iter().enumerate() {
         e -= body.mass * model.gravity.dot(&data.kin.com[i]);
@@ -45,7 +51,7 @@ pub fn potential_energy<S: Space>(model: &Model<S>, data: &Data<S>, q: &DVector<
             e += 0.5 * s.stiffness * (q[joint.q_index] - s.rest).powi(2);
         }
     }
-    e + cut_spring_energy(model, &data.kin) + limit_wall_energy(model, &data.kin, q)
+    e + cut_spring_energy(model, &data.kin)
 }
 
 /// Kinetic energy `½ Σ vᵢᵀ Iᵢ vᵢ + ½ Σ aᵢ q̇ᵢ²` (bodies, then armatures: `½ q̇ᵀ D q̇`) at the state of the last

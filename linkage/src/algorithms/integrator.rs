@@ -5,6 +5,7 @@ use nalgebra::DVector;
 
 use crate::algorithms::configuration;
 use crate::algorithms::dynamics::{check_state, drop_implicit_mass, dynamics_terms, Forces};
+use crate::algorithms::energy_guard::EnergyGuard;
 use crate::algorithms::implicit_joint_forces::add_implicit_joint_terms;
 use crate::algorithms::kinematics::forward_poses;
 use crate::algorithms::kkt;
@@ -99,7 +100,27 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
     forces: &mut F,
     cfg: &StepConfig,
 ) -> Result<StepReport, DynamicsError> {
+    step_guarded(model, data, q, qd, forces, cfg, None)
+}
+
+/// [`step`] with the step's energy account ([`EnergyGuard`]): semi-implicit Euler steps take out of the
+/// kinetic energy what earlier steps made; other schemes leave the guard reset. On error the state is left as
+/// it was before any correction.
+pub fn step_guarded<S: Space, F: Forces<S> + ?Sized>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    q: &mut DVector<f64>,
+    qd: &mut DVector<f64>,
+    forces: &mut F,
+    cfg: &StepConfig,
+    mut guard: Option<&mut EnergyGuard>,
+) -> Result<StepReport, DynamicsError> {
     check_state(model, q, qd)?;
+    if cfg.integrator != Integrator::SemiImplicitEuler {
+        if let Some(g) = guard.take() {
+            g.reset();
+        }
+    }
     let dt = cfg.dt;
     // Kept to restore the state should the step end non-finite (RK4 keeps it anyway for its stages).
     dense::copy(data.integ.q_start.as_mut_slice(), q.as_slice());
@@ -108,6 +129,12 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
     match cfg.integrator {
         Integrator::SemiImplicitEuler | Integrator::ExplicitEuler => {
             dynamics_terms(model, data, q, qd, forces);
+            if let Some(g) = guard.as_deref_mut() {
+                if g.open_step(model, data, q, qd) {
+                    // q̇ was scaled: B, the dampers and the stabilization depend on it.
+                    dynamics_terms(model, data, q, qd, forces);
+                }
+            }
             report = StepReport { closure_error: data.closure_residual.norm() };
             // The matrix is zero unless the last step used it: clear it only then (n² writes otherwise wasted).
             drop_implicit_mass(data);
@@ -123,6 +150,9 @@ pub fn step<S: Space, F: Forces<S> + ?Sized>(
             if cfg.integrator == Integrator::SemiImplicitEuler {
                 add_scaled(qd, dt, &data.qdd);
                 advance(model, q, dt, qd);
+                if let Some(g) = guard {
+                    g.close_step(model, data, dt, qd);
+                }
             } else {
                 advance(model, q, dt, qd);
                 add_scaled(qd, dt, &data.qdd);

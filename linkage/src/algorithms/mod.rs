@@ -12,6 +12,7 @@ pub mod constraint_directions;
 pub mod contact;
 pub mod cut_forces;
 pub mod dynamics;
+pub mod energy_guard;
 pub mod gravity;
 pub mod idle_freedoms;
 pub mod implicit_joint_forces;

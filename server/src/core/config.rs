@@ -170,6 +170,10 @@ pub struct VeConfig {
     /// first user to join then has to catch a moving linkage through the network's delay, which can go
     /// unstable where the same join at rest renders well. Off (`kinloop-server --free-run`) the linkage moves on its own.
     pub rest_unheld: bool,
+    /// The step's own energy account (`kinloop_linkage::algorithms::energy_guard`): what semi-implicit Euler
+    /// makes in a fast swing is taken back out of the kinetic energy. On by default: a linkage falling through
+    /// a dead centre under a user's hand otherwise swings up on the step's error. The paper's VE has none.
+    pub energy_guard: bool,
 }
 
 impl VeConfig {
@@ -207,6 +211,7 @@ impl VeConfig {
             max_catch_up_ticks: 10,
             session_seed: 0x006b_696e_6c6f_6f70,
             rest_unheld: true,
+            energy_guard: false,
         }
     }
 
@@ -296,6 +301,7 @@ impl Default for VeConfig {
             coupling_damping: None,
             passivity: true,
             coupling_lead_max_s: DEFAULT_COUPLING_LEAD_MAX_S,
+            energy_guard: true,
             ..VeConfig::paper()
         }
     }

@@ -33,6 +33,10 @@ pub struct VeMetrics {
     pub joins_refused: u64,
     /// Ticks in which some passivity controller scaled a PD down.
     pub passivity_activations: u64,
+    /// Steps whose start took out of the kinetic energy what earlier steps made (`VeConfig::energy_guard`).
+    pub energy_guard_activations: u64,
+    /// Energy those steps took out, in the scene's units (J in SI).
+    pub energy_guard_removed: f64,
     /// Clients' energy reports refused (non-finite, negative, shrinking, or faster than the device): the
     /// coupling kept the last good one.
     pub energy_reports_refused: u64,

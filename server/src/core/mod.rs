@@ -48,8 +48,8 @@ use kinloop_linkage::algorithms::reach::{survey_op, OpReach, SurveyConfig};
 use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{
-    algorithms::integrator::step, algorithms::integrator::StepConfig, math::space::Space, math::space::VecOps,
-    model::data::Data, model::Model,
+    algorithms::energy_guard::EnergyGuard, algorithms::integrator::step_guarded, algorithms::integrator::StepConfig,
+    math::space::Space, math::space::VecOps, model::data::Data, model::Model,
 };
 use kinloop_protocol::{
     Datagram, Mapping, OpSummary, RefusalReason, Role, SceneInfo, SceneSummary, SessionShape, Snapshot, Uplink, Welcome,
@@ -222,6 +222,8 @@ pub struct VeCore<S: Space> {
     qd: DVector<f64>,
     /// Restore point: q at the start of the last step that began with the loop closed (see `tick`).
     checkpoint_q: DVector<f64>,
+    /// The step's energy account (`VeConfig::energy_guard`), reset whenever the state is set from outside.
+    energy_guard: EnergyGuard,
     /// q at the start of the current step (after a successful step, the previous restore point: scratch).
     step_start_q: DVector<f64>,
     lambda: DVector<f64>,
@@ -307,6 +309,7 @@ impl<S: Space> VeCore<S> {
             reaches,
             held: None,
             checkpoint_q: q.clone(),
+            energy_guard: EnergyGuard::default(),
             step_start_q: q.clone(),
             lambda: DVector::zeros(m),
             q,

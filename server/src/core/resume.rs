@@ -76,6 +76,7 @@ impl<S: Space> VeCore<S> {
         };
         self.q.copy_from(&q);
         self.qd.copy_from_slice(qd);
+        self.energy_guard.reset();
         self.checkpoint_q.copy_from(&q);
         self.step_start_q.copy_from(&q);
         self.lambda.fill(0.0);

@@ -67,6 +67,7 @@ impl<S: Space> VeCore<S> {
             // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`). The
             // couplings' step wrenches were cleared by `update_couplings`.
             self.qd.fill(0.0);
+            self.energy_guard.reset();
             self.finish_tick(at);
             return;
         }
@@ -80,14 +81,16 @@ impl<S: Space> VeCore<S> {
             stage: 0,
         };
         let broken = BROKEN_CLOSURE_PER_LENGTH * self.model.length_scale;
-        let stepped = step(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut forces, &self.step_config)
-            .and_then(|report| {
-                if report.closure_error <= broken {
-                    Ok(report)
-                } else {
-                    Err(DynamicsError::ClosureBroken { residual: report.closure_error, limit: broken })
-                }
-            });
+        let guard = self.config.energy_guard.then_some(&mut self.energy_guard);
+        let stepped =
+            step_guarded(&self.model, &mut self.data, &mut self.q, &mut self.qd, &mut forces, &self.step_config, guard)
+                .and_then(|report| {
+                    if report.closure_error <= broken {
+                        Ok(report)
+                    } else {
+                        Err(DynamicsError::ClosureBroken { residual: report.closure_error, limit: broken })
+                    }
+                });
         match stepped {
             Ok(report) => {
                 // The step began closed: its start is the new restore point (a swap, not a second copy).
@@ -102,6 +105,7 @@ impl<S: Space> VeCore<S> {
                 // Restoring the velocity too would replay the same divergence: restore at rest.
                 self.q.copy_from(&self.checkpoint_q);
                 self.qd.fill(0.0);
+                self.energy_guard.reset();
                 for c in &mut self.couplings {
                     c.step_wrench = S::OpVec::zero();
                 }
@@ -114,6 +118,8 @@ impl<S: Space> VeCore<S> {
 
     /// The bookkeeping that ends every tick, stepped or at rest.
     fn finish_tick(&mut self, at: Duration) {
+        self.metrics.energy_guard_activations = self.energy_guard.activations;
+        self.metrics.energy_guard_removed = self.energy_guard.removed;
         self.remove_faded_users();
         self.step += 1;
         self.metrics.ticks += 1;
