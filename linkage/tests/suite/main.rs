@@ -8,6 +8,7 @@ mod common;
 mod ball_joints;
 mod constraints;
 mod dead_centres;
+mod energy_guard;
 mod implicit_joint_forces;
 mod joint_loads;
 mod layers;
