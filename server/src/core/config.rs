@@ -168,9 +168,7 @@ pub struct VeConfig {
     /// Hold the linkage at rest while no manipulator's coupling holds it (the VE does not step, its
     /// velocity is zero). A linkage left to itself falls and swings for as long as the server runs, and the
     /// first user to join then has to catch a moving linkage through the network's delay, which can go
-    /// unstable where the same join at rest renders well. It waits until a coupling has faded fully in, not
-    /// only begun to: a linkage released to a coupling at a fraction of its weight falls away from its user
-    /// meanwhile. Off (`kinloop-server --free-run`) the linkage moves on its own.
+    /// unstable where the same join at rest renders well. Off (`kinloop-server --free-run`) the linkage moves on its own.
     pub rest_unheld: bool,
     /// The step's own energy account (`kinloop_linkage::algorithms::energy_guard`): what semi-implicit Euler
     /// makes in a fast swing is taken back out of the kinetic energy. On by default: a linkage falling through

@@ -228,9 +228,6 @@ pub struct VeCore<S: Space> {
     step_start_q: DVector<f64>,
     lambda: DVector<f64>,
     closure_error: f64,
-    /// Some coupling has faded fully in since the linkage last waited at rest (`VeConfig::rest_unheld`): until
-    /// then it waits, so that no user's fade-in drops it (see `tick`).
-    taken_up: bool,
     step: u64,
     last_tick_at: Duration,
     next_tick_at: Duration,
@@ -318,7 +315,6 @@ impl<S: Space> VeCore<S> {
             q,
             qd,
             closure_error: 0.0,
-            taken_up: false,
             step: 0,
             last_tick_at: Duration::ZERO,
             next_tick_at: period,

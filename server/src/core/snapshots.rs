@@ -105,7 +105,6 @@ impl<S: Space> VeCore<S> {
         let time_s = self.last_tick_at.as_secs_f64();
         // Each snapshot counts the other manipulators (its own user aside): all its local model needs of them.
         let manipulators = self.users.iter().filter(|user| user.role == Role::Manipulator).count();
-        let released = self.released_share();
         for position in 0..self.scratch.order.len() {
             let index = self.scratch.order[position];
             if self.users[index].presence != Presence::Present {
@@ -140,12 +139,6 @@ impl<S: Space> VeCore<S> {
                 snapshot.energy.received_j.copy_from_slice(&books.received_j[..k]);
                 snapshot.energy.emitted_j.copy_from_slice(&books.emitted_j[..k]);
                 snapshot.ve_step = self.step;
-                // A linkage waiting at rest for its first holder (`tick`) does not accelerate: its local models
-                // take up the free acceleration b̂ as the VE will, with the coupling's fade, instead of rendering
-                // a fall the VE does not make (the device would drive the hand down and back for nothing).
-                if released < 1.0 {
-                    snapshot.bias_accel.iter_mut().for_each(|b| *b *= released);
-                }
                 // The OP's terms are the same numbers in every snapshot built from `at_op`: checked once.
                 let checked = if at_op.checked {
                     validate::snapshot_user_terms(snapshot, &self.shape)

@@ -63,18 +63,9 @@ impl<S: Space> VeCore<S> {
     fn tick(&mut self, at: Duration) {
         let dt = self.step_config.dt;
         self.update_couplings(at, dt);
-        if self.couplings.iter().all(|c| c.weight <= 0.0) {
-            self.taken_up = false;
-        } else if self.couplings.iter().any(|c| c.weight >= 1.0) {
-            self.taken_up = true;
-        }
-        if self.config.rest_unheld && !self.taken_up {
-            // No one holds the linkage yet: it waits for its users at rest (`VeConfig::rest_unheld`) until a
-            // coupling has faded fully in. A coupling fading in holds only its weight's share of the load
-            // (force channel and K_g alike), so a linkage released at the first uplink falls under what its
-            // user does not hold yet, as far as `F / (w K_g)`: with K_g designed on the OP's lightest
-            // effective mass, centimetres at the device for a heavy link. The couplings' step wrenches were
-            // cleared by `update_couplings`.
+        if self.config.rest_unheld && self.couplings.iter().all(|c| c.weight <= 0.0) {
+            // No one holds the linkage: it waits for its users at rest (`VeConfig::rest_unheld`). The
+            // couplings' step wrenches were cleared by `update_couplings`.
             self.qd.fill(0.0);
             self.energy_guard.reset();
             self.finish_tick(at);
@@ -133,16 +124,6 @@ impl<S: Space> VeCore<S> {
         self.step += 1;
         self.metrics.ticks += 1;
         self.last_tick_at = at;
-    }
-
-    /// The share of its loads the linkage is released to: all of them once a coupling has faded fully in (or
-    /// without `VeConfig::rest_unheld`); until then, while it waits at rest, the fullest coupling's weight.
-    pub(super) fn released_share(&self) -> f64 {
-        if !self.config.rest_unheld || self.taken_up {
-            1.0
-        } else {
-            self.couplings.iter().map(|c| c.weight).fold(0.0, f64::max)
-        }
     }
 
     /// The static loads the VE holds for users with gravity compensation, at the current state (the OP wrench
