@@ -5,7 +5,6 @@
 use crate::common;
 
 use common::*;
-use kinloop_linkage::testing::paper_testbed;
 use kinloop_linkage::algorithms::dynamics::OpWrench;
 use kinloop_linkage::algorithms::energy_guard::EnergyGuard;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
@@ -14,6 +13,7 @@ use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_veloci
 use kinloop_linkage::math::space::{Planar, Space};
 use kinloop_linkage::model::data::Data;
 use kinloop_linkage::model::Model;
+use kinloop_linkage::testing::paper_testbed;
 use nalgebra::{DVector, Vector3};
 
 fn energy<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>, qd: &DVector<f64>) -> (f64, f64) {
@@ -101,7 +101,8 @@ fn the_account_books_a_users_work_as_the_points_displacement_gives_it() {
         step_guarded(&model, &mut data, &mut q, &mut qd, &mut push, &cfg, Some(&mut guard)).unwrap();
         forward_kinematics(&model, &mut data, &q);
         let (now, turned) = (op_position(&data), data.kin.body_rot[model.ops[op].body].angle());
-        work += push.wrench[0] * (now[0] - at[0]) + push.wrench[1] * (now[1] - at[1]) + push.wrench[2] * (turned - angle);
+        work +=
+            push.wrench[0] * (now[0] - at[0]) + push.wrench[1] * (now[1] - at[1]) + push.wrench[2] * (turned - angle);
         (at, angle) = (now, turned);
     }
     let (t, _) = energy(&model, &mut data, &q, &qd);
