@@ -40,6 +40,7 @@
 //! | [`kkt`](algorithms::kkt) | the KKT solve, rank-revealing for redundant closures | eq 4 |
 //! | [`dynamics`](algorithms::dynamics) | the forward-dynamics pipeline, external forces | eq 1-4 |
 //! | [`integrator`](algorithms::integrator) | Euler, semi-implicit Euler, RK4, projection | |
+//! | [`energy_guard`](algorithms::energy_guard) | the step's energy account: what the step makes, taken back out | |
 //! | [`op_space`](algorithms::op_space) | Λ⁻¹ with loops closed and open | eq 5-9 |
 //! | [`constraint_directions`](algorithms::constraint_directions) | SVD of Λ⁻¹, unit-consistent constraint count | eq 10, 12 |
 //! | [`local_model`](algorithms::local_model) | configuration-space and reduced operational-space local models | eq 11, 13 |
