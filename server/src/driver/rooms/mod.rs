@@ -209,6 +209,10 @@ where
         }
     }
 
+    fn warm(&mut self) {
+        self.ve.warm();
+    }
+
     fn stopped(&self) -> bool {
         self.ve.stopped()
     }
