@@ -3,7 +3,7 @@
 //! A VE tick after the loop's sleep costs several times the same tick back to back (`kinloop experiment
 //! pauses`): whatever ran while the thread slept evicted its code and data from the core's caches, and the
 //! tick refetches them as it goes. With one user most of that is the code's: a tick of a second, separate
-//! VE just before brings the real one close to its back-to-back time (the pauses experiment's `warmed`
+//! VE just before brings the real one close to its back-to-back time (the pauses experiment's `rehearsed`
 //! points). So the loop wakes a little before its deadline, as its hybrid sleep always did to spin out the
 //! period's end, and spends the start of that spin on a [`Rehearsal`]: a one-user VE on the same linkage and
 //! configuration, ticked and encoded as the real VE is, whose own state nobody reads. The rest of the spin
