@@ -1,5 +1,6 @@
-//! The VE thread: wakes at absolute deadlines `epoch + k·period` (spin_sleep's hybrid sleep, SCHED_FIFO
-//! when granted), moves uplinks in and snapshots out through lock-free rings, and runs the core.
+//! The VE thread: wakes at absolute deadlines `epoch + k·period` (a native sleep, then a warm-up and a spin
+//! to the deadline: `super::rehearsal`; SCHED_FIFO when granted), moves uplinks in and snapshots out through
+//! lock-free rings, and runs the core.
 //!
 //! It never blocks, never allocates for a fixed set of users, and never logs per tick: events go to a ring
 //! that a tokio task turns into log lines, statistics are copied out every 100 ms. Joins and leaves arrive

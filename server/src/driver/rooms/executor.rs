@@ -48,6 +48,8 @@ pub trait Steppable: Send {
     fn tick(&mut self);
     /// Readies the caches for its coming tick, shortly before the deadline (`crate::driver::rehearsal`).
     fn warm(&mut self) {}
+    /// It was taken in by a thread that runs at real-time priority (`realtime`) or not.
+    fn placed(&mut self, _realtime: bool) {}
     /// Whether it was told to stop.
     fn stopped(&self) -> bool;
     /// Users in it now.
@@ -374,7 +376,8 @@ fn run_thread(
 ) {
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
-        while let Ok(slot) = inbox.pop() {
+        while let Ok(mut slot) = inbox.pop() {
+            slot.room.placed(granted);
             slots.push(slot);
         }
         if stop.load(Ordering::Acquire) {

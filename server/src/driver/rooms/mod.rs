@@ -213,6 +213,10 @@ where
         self.ve.warm();
     }
 
+    fn placed(&mut self, realtime: bool) {
+        self.ve.stats.realtime_priority = realtime;
+    }
+
     fn stopped(&self) -> bool {
         self.ve.stopped()
     }
