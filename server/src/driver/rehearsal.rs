@@ -101,7 +101,8 @@ mod tests {
 
     #[test]
     fn a_rehearsal_steps_its_own_ve_with_its_user_and_encodes_its_snapshots() {
-        let model = crate::bench::testbed().expect("the testbed loads");
+        let scene = kinloop_linkage::model::builtin::scene("paper-testbed").expect("built in").expect("parses");
+        let model = Model::<kinloop_linkage::math::space::Planar>::compile(&scene, "paper-testbed").expect("compiles");
         let mut rehearsal = Rehearsal::new(&model, &VeConfig::paper()).expect("the paper's configuration");
         assert!(rehearsal.user.is_some(), "the testbed's OP takes the rehearsal's user");
         for _ in 0..50 {
