@@ -398,7 +398,7 @@ fn scale_op_form_is_flat_and_ve_cost_grows_with_links() {
     assert!(r.snapshot_over_datagram_budget.op_form_largest_bytes >= Some(large.snapshot_bytes_op));
 }
 
-/// Every point of the pauses experiment is a tick that ran: users, pauses and both ways of waiting, percentiles
+/// Every point of the pauses experiment is a tick that ran: users, pauses and the three ways of waiting, percentiles
 /// in order, and the ratios at the longest pause computed from those points. (How large the ratios come out is
 /// the machine's doing, a measurement, not asserted here.)
 #[test]
@@ -407,12 +407,12 @@ fn pauses_time_each_tick_after_each_kind_of_pause() {
     let report = run(Name::Pauses, dir.path());
     let r: PausesSummary = serde_json::from_value(report.summary["results"].clone()).expect("typed summary");
     let points = &r.points;
-    // Quick grid: 1 and 4 users; pauses 0 (once), 100 and 900 us slept and spun.
-    assert_eq!(points.len(), 2 * (1 + 2 * 2), "{points:?}");
+    // Quick grid: 1 and 4 users; pauses 0 (once), 100 and 900 us slept, spun and rehearsed.
+    assert_eq!(points.len(), 2 * (1 + 2 * 3), "{points:?}");
     for p in points {
         let (p10, p50, p90) = (p.tick_us_p10, p.tick_us_p50, p.tick_us_p90);
         assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90.is_finite(), "{p:?}");
-        assert!(p.how == "sleep" || p.how == "spin", "{p:?}");
+        assert!(["sleep", "spin", "rehearsed"].contains(&p.how.as_str()), "{p:?}");
     }
     assert_eq!(r.longest_pause_us, 900);
     assert_eq!(r.ratios_at_longest_pause.len(), 2);
@@ -422,6 +422,11 @@ fn pauses_time_each_tick_after_each_kind_of_pause() {
         };
         let (base, slept) = (find(0, "sleep").tick_us_p50, find(900, "sleep").tick_us_p50);
         assert!((ratio.sleep_over_back_to_back - slept / base).abs() <= 0.01 + 1e-3 * slept / base, "{ratio:?}");
+        let rehearsed = find(900, "rehearsed").tick_us_p50;
+        assert!(
+            (ratio.rehearsal_over_back_to_back - rehearsed / base).abs() <= 0.01 + 1e-3 * rehearsed / base,
+            "{ratio:?}"
+        );
     }
 }
 

@@ -22,6 +22,7 @@ use rtrb::RingBuffer;
 use serde::Serialize;
 
 use crate::core::{JoinRequest, VeConfig, VeConfigError, VeCore};
+use crate::driver::rehearsal::Rehearsal;
 use crate::driver::ve_thread::{self, VeThreadIo};
 use crate::gateway::{take_latest_frame, Command, UserLink, VeLoopStats, FRAME_HEADER};
 use crate::synthetic::SyntheticUser;
@@ -179,13 +180,16 @@ pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
     Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
 }
 
-/// How a real-time loop waits between ticks.
+/// How a real-time loop waits between ticks (and readies itself for the next).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pause {
     /// The thread sleeps (`std::thread::sleep`): the core may idle or run other work.
     Sleep,
     /// The thread busy-waits on the clock: the core stays with it.
     Spin,
+    /// The thread sleeps, then ticks a one-user VE of its own on the same linkage before the timed tick,
+    /// as the VE loop does before each deadline (`crate::driver::rehearsal`).
+    Rehearsed,
 }
 
 impl Pause {
@@ -194,6 +198,7 @@ impl Pause {
         match self {
             Pause::Sleep => "sleep",
             Pause::Spin => "spin",
+            Pause::Rehearsed => "rehearsed",
         }
     }
 }
@@ -203,11 +208,18 @@ impl Pause {
 /// does, rather than back to back (whatever ran meanwhile has evicted part of its working set).
 pub fn ve_tick_after_pauses(users: usize, pause: Duration, how: Pause, ticks: usize) -> Result<Vec<f64>, BenchError> {
     let mut bench = TickBench::new(users, 100)?;
+    let mut rehearsal = Rehearsal::new(bench.core.model(), bench.core.config());
     let mut times = Vec::with_capacity(ticks);
     for _ in 0..ticks {
         if !pause.is_zero() {
             match how {
                 Pause::Sleep => std::thread::sleep(pause),
+                Pause::Rehearsed => {
+                    std::thread::sleep(pause);
+                    if let Some(rehearsal) = rehearsal.as_mut() {
+                        rehearsal.rehearse();
+                    }
+                }
                 Pause::Spin => {
                     let until = Instant::now() + pause;
                     while Instant::now() < until {

@@ -175,3 +175,22 @@ fn the_view_tap_allocates_nothing_per_tick() {
     assert_eq!(calls, 0);
     assert!(tap.published >= 8 && tap.dropped > 0, "published {}, dropped {}", tap.published, tap.dropped);
 }
+
+/// The rehearsal the VE loop runs before each deadline (`kinloop_server::driver::rehearsal`), and the
+/// prefetch beside it, allocate nothing once its user holds the linkage.
+#[test]
+fn the_rehearsal_before_a_deadline_allocates_nothing() {
+    let model = Model::<Planar>::compile(&scene("paper-testbed"), "paper-testbed").unwrap();
+    let core = VeCore::new(model.clone(), VeConfig::paper()).unwrap();
+    let mut rehearsal = kinloop_server::driver::rehearsal::Rehearsal::new(&model, &VeConfig::paper()).unwrap();
+    for _ in 0..10 {
+        rehearsal.rehearse();
+    }
+    let calls = allocator_calls(|| {
+        for _ in 0..200 {
+            rehearsal.rehearse();
+            core.prefetch();
+        }
+    });
+    assert_eq!(calls, 0);
+}

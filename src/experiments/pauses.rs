@@ -6,8 +6,9 @@
 //! caches, and the next tick fetches them again. Each point here ticks a testbed VE with N users
 //! (`kinloop_server::bench::ve_tick_after_pauses`: every user's uplink, the step, every user's snapshot)
 //! after a pause of P µs, slept (`std::thread::sleep`, as the VE thread's spin_sleep does for most of a
-//! period) or busy-waited (the core stays with the thread), and reports the percentiles of the single tick's
-//! time. P = 0 is the benchmark's back-to-back case.
+//! period), busy-waited (the core stays with the thread), or slept and then rehearsed (a tick of a one-user VE
+//! of its own, as the VE loop runs before each deadline: `kinloop_server::driver::rehearsal`), and reports
+//! the percentiles of the single tick's time. P = 0 is the benchmark's back-to-back case.
 //!
 //! Wall-clock, single-threaded, on whatever the machine is doing: the numbers move from run to run, the
 //! ratios between pauses much less.
@@ -23,6 +24,9 @@ use serde_json::Value;
 use super::common::{sweep, Options, Output, Report};
 use crate::charts::{Chart, Legend, Series};
 use crate::rounding::round;
+
+/// The ways a point waits before each timed tick.
+const HOWS: [Pause; 3] = [Pause::Sleep, Pause::Spin, Pause::Rehearsed];
 
 /// One point: users, pause, how, and the tick's percentiles (ns).
 #[derive(Clone, Debug)]
@@ -71,7 +75,7 @@ pub struct PausePoint {
     pub users: usize,
     /// The pause before each timed tick (µs).
     pub pause_us: u64,
-    /// How the pause was spent: `sleep` or `spin`.
+    /// How the pause was spent: `sleep`, `spin` or `rehearsed`.
     pub how: String,
     /// 10th percentile of the tick (µs).
     pub tick_us_p10: f64,
@@ -92,10 +96,14 @@ pub struct PauseRatio {
     pub after_sleep_us: f64,
     /// Median tick after the longest pause, spun (µs).
     pub after_spin_us: f64,
+    /// Median tick after the longest pause, slept and then rehearsed (µs).
+    pub after_rehearsal_us: f64,
     /// `after_sleep_us / back_to_back_us`.
     pub sleep_over_back_to_back: f64,
     /// `after_spin_us / back_to_back_us`.
     pub spin_over_back_to_back: f64,
+    /// `after_rehearsal_us / back_to_back_us`.
+    pub rehearsal_over_back_to_back: f64,
 }
 
 /// What each point times and how it waits.
@@ -109,6 +117,8 @@ pub struct PausesSetup {
     pub sleep: String,
     /// How a spun pause is spent.
     pub spin: String,
+    /// How a rehearsed pause is spent.
+    pub rehearsed: String,
 }
 
 fn point_summary(m: &Measured) -> PausePoint {
@@ -131,7 +141,7 @@ pub fn run(options: &Options) -> Result<Report> {
     let mut grid = Vec::new();
     for &n in &users {
         for &p in &pauses_us {
-            for how in [Pause::Sleep, Pause::Spin] {
+            for how in HOWS {
                 // Without a pause the two ways are the same measurement.
                 if p > 0 || how == Pause::Sleep {
                     grid.push((n, p, how));
@@ -153,7 +163,7 @@ pub fn run(options: &Options) -> Result<Report> {
     )
     .legend(Legend::UpperLeft);
     for &n in &users {
-        for how in [Pause::Sleep, Pause::Spin] {
+        for how in HOWS {
             let series: Vec<(f64, f64)> =
                 pauses_us.iter().filter_map(|&p| at(n, p, how)).map(|m| (m.pause_us as f64, m.p50_ns / 1e3)).collect();
             let who = if n == 1 { "1 user".to_string() } else { format!("{n} users") };
@@ -169,6 +179,7 @@ pub fn run(options: &Options) -> Result<Report> {
             let base = at(n, 0, Pause::Sleep)?.p50_ns;
             let slept = at(n, longest, Pause::Sleep)?.p50_ns;
             let spun = at(n, longest, Pause::Spin)?.p50_ns;
+            let rehearsed = at(n, longest, Pause::Rehearsed)?.p50_ns;
             Some(PauseRatio {
                 users: n,
                 back_to_back_us: round(base / 1e3, 3),
@@ -176,21 +187,26 @@ pub fn run(options: &Options) -> Result<Report> {
                 after_spin_us: round(spun / 1e3, 3),
                 sleep_over_back_to_back: round(slept / base, 2),
                 spin_over_back_to_back: round(spun / base, 2),
+                after_rehearsal_us: round(rehearsed / 1e3, 3),
+                rehearsal_over_back_to_back: round(rehearsed / base, 2),
             })
         })
         .collect();
     // The answer prints the numbers as the JSON does.
     let first = ratios.first().map(serde_json::to_value).transpose()?.unwrap_or(Value::Null);
     let answer = format!(
-        "After a {longest} us pause a {}-user tick took {} us (p50) slept and {} us spun, against {} us back to back \
-         ({}x and {}x): a real-time loop pays for refetching its working set on every tick, which the benchmark's \
-         back-to-back ticks never show.",
+        "After a {longest} us pause a {}-user tick took {} us (p50) slept, {} us spun and {} us slept then \
+         rehearsed, against {} us back to back ({}x, {}x and {}x): a real-time loop pays for refetching its working \
+         set on every tick, which the benchmark's back-to-back ticks never show, and a rehearsal before the \
+         deadline pays most of it ahead.",
         first["users"],
         first["after_sleep_us"],
         first["after_spin_us"],
+        first["after_rehearsal_us"],
         first["back_to_back_us"],
         first["sleep_over_back_to_back"],
         first["spin_over_back_to_back"],
+        first["rehearsal_over_back_to_back"],
     );
     let results = PausesSummary {
         answer,
@@ -201,12 +217,15 @@ pub fn run(options: &Options) -> Result<Report> {
             ticks_per_point: ticks,
             sleep: "std::thread::sleep(pause) before each timed tick".into(),
             spin: "busy-wait on Instant::now() for the pause before each timed tick".into(),
+            rehearsed: "std::thread::sleep(pause), then one tick of a one-user VE of its own on the same linkage \
+                        (kinloop_server::driver::rehearsal::Rehearsal), before each timed tick"
+                .into(),
         },
         points: points.iter().map(point_summary).collect(),
     };
     out.finish(
         "A VE tick after the pause a real-time loop takes, against back-to-back ticks",
-        "39 points of 2,000 ticks; --quick fewer",
+        "57 points of 2,000 ticks; --quick fewer",
         serde_json::to_value(&results)?,
     )
 }

@@ -49,10 +49,11 @@ const PROCESS: Layers = Layers { dir: "process/src", ranks: &[("realtime", 0), (
 const RECORD: Layers =
     Layers { dir: "record/src", ranks: &[("axes", 0), ("rows", 0), ("schema", 1), ("write", 2), ("read", 2)] };
 
-/// The sans-IO VE and access control < the gateway the driver and the view share < the view < the driver.
+/// The sans-IO VE and access control < the gateway the driver and the view share, and the synthetic user the
+/// driver's rehearsal and the benchmarks share < the view < the driver.
 const SERVER: Layers = Layers {
     dir: "server/src",
-    ranks: &[("access", 0), ("core", 0), ("gateway", 1), ("fleet", 1), ("view", 2), ("driver", 3)],
+    ranks: &[("access", 0), ("core", 0), ("gateway", 1), ("fleet", 1), ("synthetic", 1), ("view", 2), ("driver", 3)],
 };
 
 /// Axes < devices < the haptic core < the simulated user < the driver.

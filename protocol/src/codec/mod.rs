@@ -130,6 +130,23 @@ pub fn encode_datagram_into(msg: &Datagram, buf: &mut Vec<u8>) -> Result<(), Enc
     encode_limited::<_, MAX_DATAGRAM_MESSAGE_BYTES>(msg, buf)
 }
 
+/// Encodes a datagram message into the start of `out`, returning its length: bincode's slice writer, without
+/// a `Vec`'s growth checks at every field (the VE encodes a snapshot per user each round). An `out` shorter than
+/// the datagram limit refuses what would not fit in it as too large.
+pub fn encode_datagram_into_slice(msg: &Datagram, out: &mut [u8]) -> Result<usize, EncodeError> {
+    let limit = out.len().min(MAX_DATAGRAM_MESSAGE_BYTES);
+    match bincode::serde::encode_into_slice(msg, &mut out[..limit], config::standard()) {
+        Ok(len) => Ok(len),
+        Err(bincode::error::EncodeError::UnexpectedEnd) => {
+            // Rare: the full encoding says how large it was.
+            let mut whole = Vec::new();
+            encode_datagram_into(msg, &mut whole)?;
+            Err(EncodeError::TooLarge { len: whole.len(), limit })
+        }
+        Err(e) => Err(EncodeError::Serializer(e.to_string())),
+    }
+}
+
 /// Decodes a datagram message and validates it against the session's dimensions.
 pub fn decode_datagram(bytes: &[u8], shape: &SessionShape) -> Result<Datagram, DecodeError> {
     let msg = decode_limited::<Datagram, MAX_DATAGRAM_MESSAGE_BYTES>(bytes)?;

@@ -31,6 +31,7 @@ pub mod guards;
 pub mod metrics;
 pub mod passivity;
 pub mod playout;
+pub mod prefetch;
 mod resume;
 pub mod round_trip;
 pub mod sharing;

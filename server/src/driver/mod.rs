@@ -14,6 +14,7 @@
 //! tasks take; the VE thread owns every consumer and producer it touches and never waits.
 
 mod record;
+pub mod rehearsal;
 pub mod room;
 pub mod rooms;
 mod session;

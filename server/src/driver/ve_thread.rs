@@ -1,5 +1,6 @@
-//! The VE thread: wakes at absolute deadlines `epoch + k·period` (spin_sleep's hybrid sleep, SCHED_FIFO
-//! when granted), moves uplinks in and snapshots out through lock-free rings, and runs the core.
+//! The VE thread: wakes at absolute deadlines `epoch + k·period` (a native sleep, then a warm-up and a spin
+//! to the deadline: `super::rehearsal`; SCHED_FIFO when granted), moves uplinks in and snapshots out through
+//! lock-free rings, and runs the core.
 //!
 //! It never blocks, never allocates for a fixed set of users, and never logs per tick: events go to a ring
 //! that a tokio task turns into log lines, statistics are copied out every 100 ms. Joins and leaves arrive
@@ -15,10 +16,12 @@ use kinloop_process::realtime::try_realtime_priority;
 use kinloop_protocol::codec;
 use rtrb::{Consumer, Producer};
 
+use crate::core::prefetch::prefetch;
 use crate::core::{UserId, VeCore, VeEvent};
 use crate::gateway::{push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats};
 use crate::view::ViewTap;
 
+use super::rehearsal::{wait_warmed, Rehearsal};
 use super::room::{Room, ROOM_STATE_PERIOD};
 
 struct ActiveLink {
@@ -53,9 +56,8 @@ pub fn run<S: Space>(core: VeCore<S>, io: VeThreadIo, realtime: bool) -> VeLoopS
     };
     let mut ve = VeLoop::new(core, io, Instant::now());
     ve.stats.realtime_priority = granted;
-    let sleeper = spin_sleep::SpinSleeper::default();
     while !ve.stopped() {
-        sleeper.sleep_until(ve.next_deadline());
+        wait_warmed(ve.next_deadline(), granted, || ve.warm());
         ve.tick();
     }
     ve.finish()
@@ -83,6 +85,8 @@ pub struct VeLoop<S: Space> {
     epoch: Instant,
     /// CPU time of the thread that made the loop (a room's executor thread is shared with other rooms).
     cpu_at_start: Option<Duration>,
+    /// The one-user VE whose tick warms the caches before a deadline ([`Self::warm`]).
+    rehearsal: Option<Rehearsal<S>>,
     iterations: u64,
 }
 
@@ -94,6 +98,7 @@ impl<S: Space> VeLoop<S> {
         let room_every = (core.config().ve_rate_hz * ROOM_STATE_PERIOD.as_secs_f64()).round().max(1.0) as u64;
         let links = Vec::with_capacity(2 * core.config().max_users);
         let round = Round::with_capacity(2 * core.config().max_users);
+        let rehearsal = Rehearsal::new(core.model(), core.config());
         VeLoop {
             core,
             io,
@@ -107,7 +112,24 @@ impl<S: Space> VeLoop<S> {
             round,
             epoch,
             cpu_at_start: thread_cpu_time(),
+            rehearsal,
             iterations: 0,
+        }
+    }
+
+    /// Warms the caches for the coming tick (`super::rehearsal`): called shortly before its deadline, after
+    /// the thread's sleep.
+    pub fn warm(&mut self) {
+        if let Some(rehearsal) = self.rehearsal.as_mut() {
+            rehearsal.rehearse();
+        }
+        self.core.prefetch();
+        prefetch(&self.links);
+        for l in &self.links {
+            // The uplink waiting at the head of each ring, as the intake will read it.
+            if let Ok(sample) = l.link.uplinks.peek() {
+                prefetch(std::slice::from_ref(sample));
+            }
         }
     }
 
@@ -258,7 +280,8 @@ struct Round {
     ends: Vec<(usize, usize)>,
     /// Per link index: its frame went into its ring this round.
     pushed: Vec<bool>,
-    scratch: Vec<u8>,
+    /// One snapshot's encoding (as long as the largest datagram).
+    scratch: Box<[u8]>,
 }
 
 impl Round {
@@ -267,7 +290,7 @@ impl Round {
             bytes: Vec::new(),
             ends: Vec::with_capacity(links),
             pushed: Vec::with_capacity(links),
-            scratch: Vec::with_capacity(codec::limits::MAX_DATAGRAM_MESSAGE_BYTES),
+            scratch: vec![0; codec::limits::MAX_DATAGRAM_MESSAGE_BYTES].into_boxed_slice(),
         }
     }
 
@@ -278,10 +301,8 @@ impl Round {
 
     /// Encodes a snapshot for link `at`; false when the codec refused it.
     fn encode(&mut self, at: usize, datagram: &kinloop_protocol::Datagram) -> bool {
-        if codec::encode_datagram_into(datagram, &mut self.scratch).is_err() {
-            return false;
-        }
-        self.bytes.extend_from_slice(&self.scratch);
+        let Ok(len) = codec::encode_datagram_into_slice(datagram, &mut self.scratch) else { return false };
+        self.bytes.extend_from_slice(&self.scratch[..len]);
         self.ends.push((at, self.bytes.len()));
         if self.pushed.len() <= at {
             self.pushed.resize(at + 1, false);

@@ -1,35 +1,46 @@
 //! Snapshot frames in a byte ring: the VE thread commits `[len: u32 LE][bytes]` whole, a session's send task
 //! (or the view's socket) reads them and keeps only the newest.
 
+use std::mem::MaybeUninit;
+
 use rtrb::{Consumer, Producer};
 
 /// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
 pub const FRAME_HEADER: usize = 4;
 
 /// Appends `[len: u32 LE][bytes]` to a snapshot ring in one commit; false when it has no room. The frame is
-/// copied as slices (at most two, where the ring wraps), not byte by byte through an iterator.
+/// copied as slices (at most two, where the ring wraps) into the ring's uninitialised slots: each byte is
+/// written once (an initialised chunk would first fill them with zeros).
 pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
     let total = FRAME_HEADER + bytes.len();
-    let Ok(mut chunk) = ring.write_chunk(total) else { return false };
+    let Ok(mut chunk) = ring.write_chunk_uninit(total) else { return false };
     let header = (bytes.len() as u32).to_le_bytes();
     let (a, b) = chunk.as_mut_slices();
     write_at(a, b, 0, &header);
     write_at(a, b, FRAME_HEADER, bytes);
-    chunk.commit_all();
+    // SAFETY: the two writes above cover the chunk's `total` slots (header then body, across the wrap).
+    unsafe { chunk.commit_all() };
     true
 }
 
 /// Writes `src` at byte `at` of the concatenation of `a` and `b` (a ring chunk's two halves), which must
 /// have room for it.
-fn write_at(a: &mut [u8], b: &mut [u8], at: usize, src: &[u8]) {
+fn write_at(a: &mut [MaybeUninit<u8>], b: &mut [MaybeUninit<u8>], at: usize, src: &[u8]) {
     let in_a = a.len().saturating_sub(at).min(src.len());
     if in_a > 0 {
-        a[at..at + in_a].copy_from_slice(&src[..in_a]);
+        copy_into(&mut a[at..at + in_a], &src[..in_a]);
     }
     let rest = &src[in_a..];
     if !rest.is_empty() {
         let b_at = at + in_a - a.len();
-        b[b_at..b_at + rest.len()].copy_from_slice(rest);
+        copy_into(&mut b[b_at..b_at + rest.len()], rest);
+    }
+}
+
+/// Copies `src` into the equally long `dst` (the compiler makes it one `memcpy`).
+fn copy_into(dst: &mut [MaybeUninit<u8>], src: &[u8]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        d.write(*s);
     }
 }
 

@@ -22,6 +22,7 @@ use std::time::{Duration, Instant};
 
 use rtrb::{Consumer, Producer, RingBuffer};
 
+use crate::driver::rehearsal::wait_warmed;
 use crate::fleet::Heartbeat;
 
 /// Weight of the newest step time in a room's cost average (about the last 64 ticks).
@@ -45,6 +46,10 @@ pub trait Steppable: Send {
     fn next_deadline(&self) -> Instant;
     /// One tick.
     fn tick(&mut self);
+    /// Readies the caches for its coming tick, shortly before the deadline (`crate::driver::rehearsal`).
+    fn warm(&mut self) {}
+    /// It was taken in by a thread that runs at real-time priority (`realtime`) or not.
+    fn placed(&mut self, _realtime: bool) {}
     /// Whether it was told to stop.
     fn stopped(&self) -> bool;
     /// Users in it now.
@@ -348,24 +353,31 @@ fn spawn_thread(
     let (producer, consumer) = RingBuffer::new(INBOX);
     let name = index.map_or("kinloop-rooms-q".to_string(), |i| format!("kinloop-rooms-{i}"));
     let handle = std::thread::Builder::new().name(name).spawn(move || {
-        if realtime {
-            if let Err(why) = kinloop_process::realtime::try_realtime_priority() {
-                tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority");
-            }
-        }
-        run_thread(consumer, &stop, quarantine.as_deref(), &pulse)
+        let granted = realtime
+            && kinloop_process::realtime::try_realtime_priority()
+                .inspect_err(|why| tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority"))
+                .is_ok();
+        run_thread(consumer, &stop, quarantine.as_deref(), &pulse, granted)
     })?;
     Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
 }
 
-/// One thread's loop: take new rooms, sleep until the earliest deadline, step every room that is due
-/// (each inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away. A
-/// real-time thread (one with a quarantine to send rooms to) also passes the `pulse` every time round.
-fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&ThreadEnd>, pulse: &Pulse) {
-    let sleeper = spin_sleep::SpinSleeper::default();
+/// One thread's loop: take new rooms, sleep until the earliest deadline (warming the caches with the room
+/// due first just before it: the rooms of a kind share its code), step every room that is due (each inside
+/// `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away. A real-time
+/// thread (one with a quarantine to send rooms to) also passes the `pulse` every time round; `granted` says
+/// whether it runs at real-time priority.
+fn run_thread(
+    mut inbox: Consumer<Slot>,
+    stop: &AtomicBool,
+    quarantine: Option<&ThreadEnd>,
+    pulse: &Pulse,
+    granted: bool,
+) {
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
-        while let Ok(slot) = inbox.pop() {
+        while let Ok(mut slot) = inbox.pop() {
+            slot.room.placed(granted);
             slots.push(slot);
         }
         if stop.load(Ordering::Acquire) {
@@ -384,8 +396,17 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: Option<&
                 i += 1;
             }
         }
-        let next = slots.iter().map(|s| s.room.next_deadline()).min();
-        sleeper.sleep_until(next.unwrap_or_else(|| Instant::now() + IDLE));
+        let first = slots.iter_mut().min_by_key(|s| s.room.next_deadline());
+        match first {
+            Some(slot) => {
+                let deadline = slot.room.next_deadline();
+                // A warm-up is a hint: one that panics (in its rehearsal's own VE) leaves the room to its tick.
+                wait_warmed(deadline, granted, || {
+                    let _ = catch_unwind(AssertUnwindSafe(|| slot.room.warm()));
+                });
+            }
+            None => std::thread::sleep(IDLE),
+        }
         let mut i = 0;
         while i < slots.len() {
             if slots[i].room.next_deadline() > Instant::now() {

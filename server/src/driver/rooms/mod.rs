@@ -209,6 +209,14 @@ where
         }
     }
 
+    fn warm(&mut self) {
+        self.ve.warm();
+    }
+
+    fn placed(&mut self, realtime: bool) {
+        self.ve.stats.realtime_priority = realtime;
+    }
+
     fn stopped(&self) -> bool {
         self.ve.stopped()
     }
