@@ -626,7 +626,12 @@ impl<S: Space> VeCore<S> {
 
     /// Counters.
     pub fn metrics(&self) -> VeMetrics {
-        self.metrics
+        // The energy account keeps its own counters; they are read here rather than copied every tick.
+        VeMetrics {
+            energy_guard_activations: self.energy_guard.activations,
+            energy_guard_removed: self.energy_guard.removed,
+            ..self.metrics
+        }
     }
 
     /// The state after the last tick.

@@ -118,8 +118,6 @@ impl<S: Space> VeCore<S> {
 
     /// The bookkeeping that ends every tick, stepped or at rest.
     fn finish_tick(&mut self, at: Duration) {
-        self.metrics.energy_guard_activations = self.energy_guard.activations;
-        self.metrics.energy_guard_removed = self.energy_guard.removed;
         self.remove_faded_users();
         self.step += 1;
         self.metrics.ticks += 1;
