@@ -608,3 +608,92 @@ fn imported_linkages_render_by_default_on_devices_of_their_kind() {
     }
     assert!(failing.is_empty(), "pairs that do not render:\n{}", failing.join("\n"));
 }
+
+#[test]
+fn zz_measure_floor() {
+    use kinloop::experiments::renderability::DEVICES;
+    use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+    use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial};
+    use kinloop_linkage::model::Model;
+    use kinloop_protocol::MappingRequest;
+    use kinloop_server::core::design::choose_mapping;
+    fn one<S: Space>(
+        scene: &kinloop_linkage::model::scene::Scene,
+        name: &str,
+        devices: &[kinloop_client::device::presets::DevicePreset],
+    ) {
+        let model = Model::<S>::compile(scene, name).unwrap();
+        for (i, op) in scene.ops.iter().enumerate() {
+            let reach = survey_op(&model, i, &SurveyConfig::default()).unwrap();
+            for d in devices {
+                let Ok(spec) = d.spec(scene.kind) else { continue };
+                let caps = spec.caps();
+                let m = caps.mass[0];
+                let mapping = choose_mapping(&reach, &caps, &MappingRequest::default(), true).unwrap();
+                let (cp, cf) = (mapping.position_scale, mapping.force_scale);
+                let light = 1.0 / reach.inverse_mass_max;
+                let med = 1.0 / reach.inverse_mass_median;
+                let heavy = 1.0 / reach.inverse_mass_min;
+                let r = |mo: f64| mo * cf / cp / m;
+                eprintln!(
+                    "FLOOR {name}:{} {} cp {cp:.4} cf {cf:.4} M {m} mlight {light:.4} mmed {med:.4} mheavy {heavy:.3e} ratio_light {:.4} ratio_med {:.4} load {:.3} dof {} rigid {} path {} Ilight {:.3e} tourlen {}",
+                    op.name, d.name(), r(light), r(med), reach.static_force_n, reach.dof, mapping.rigid_grasp, reach.path.is_some(), 1.0 / reach.inverse_rotational_inertia_max, reach.tour.len()
+                );
+            }
+        }
+    }
+    let models = format!("{}/mjcf/tests/models", env!("CARGO_MANIFEST_DIR"));
+    let mut names: Vec<String> =
+        kinloop_linkage::model::builtin::SCENE_FILES.iter().map(|(n, _)| n.to_string()).collect();
+    for m in ["planar-four-bar.xml", "planar-slider-crank.xml", "delta.xml"] {
+        names.push(format!("{models}/{m}"));
+    }
+    names.push("/tmp/bare-four-bar.xml".into());
+    for name in &names {
+        let (scene, _) = kinloop_mjcf::load::load(name).unwrap();
+        match scene.kind {
+            SceneKind::Planar => one::<Planar>(&scene, name, &DEVICES),
+            SceneKind::Spatial => one::<Spatial>(&scene, name, &DEVICES),
+        }
+    }
+}
+
+#[test]
+fn zz_forced() {
+    use kinloop::experiments::common::{session, sweep};
+    use kinloop::experiments::renderability::{judged, plan, Network, Point};
+    use kinloop_client::device::presets::DevicePreset;
+    use kinloop_client::user::HandKind;
+    let spec = std::env::var("ZZ_FORCED").unwrap();
+    // scene|op|device|scale,scale,...;...
+    let mut jobs = Vec::new();
+    for item in spec.split(';').filter(|s| !s.is_empty()) {
+        let f: Vec<&str> = item.split('|').collect();
+        let device: DevicePreset = f[2].parse().unwrap();
+        for s in f[3].split(',') {
+            let scale: f64 = s.parse().unwrap();
+            for hand in [HandKind::Soft, HandKind::Firm] {
+                let network = if f.get(4) == Some(&"0") { Network::Perfect } else { Network::Delayed50 };
+                let p = Point { scene: f[0].into(), op: f[1].into(), device, network, hand };
+                jobs.push((p, scale));
+            }
+        }
+    }
+    let results = sweep("forced", &jobs, 2, false, |(p, scale)| {
+        let mut pl = plan(p, 40.0)?;
+        if *scale > 0.0 {
+            pl.clients[0].mapping.force_scale = Some(*scale);
+        }
+        let (summary, rec) = session(&pl)?;
+        Ok((judged(p, &summary, &rec), *scale))
+    })
+    .unwrap();
+    for (r, scale) in &results {
+        let p = &r.point;
+        eprintln!(
+            "FORCED {}:{} {:?} {:?} {:?} asked {scale} cf {:.4} cp {:.4} renders {} clamped {:.2} % rms {:.2} mm {:?} gains {:.3?} coupling {:.3?}",
+            p.scene.rsplit('/').next().unwrap_or(""), p.op, p.device, p.network, p.hand, r.force_scale, r.position_scale,
+            r.renders, r.clamped_fraction * 100.0, r.device_op_rms_m * 1e3, r.failures, r.gains, r.coupling
+        );
+    }
+}
