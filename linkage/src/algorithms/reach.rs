@@ -102,10 +102,6 @@ pub struct OpReach<S: Space> {
     pub inverse_mass_max: f64,
     /// Largest eigenvalue of the angular block of Λ⁻¹ over the samples (1/(kg m²)).
     pub inverse_rotational_inertia_max: f64,
-    /// TEMP measure: smallest and median of the linear block's largest eigenvalue over the samples.
-    pub inverse_mass_min: f64,
-    /// TEMP.
-    pub inverse_mass_median: f64,
     /// Dimension of the closed configuration manifold at `q0` (the linkage's degrees of freedom).
     pub dof: usize,
     /// On a linkage of one degree of freedom, the OP's whole path in order, one walk step apart: one lap of
@@ -358,8 +354,6 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         static_force_max_n: 0.0,
         inverse_mass_max: 0.0,
         inverse_rotational_inertia_max: 0.0,
-        inverse_mass_min: f64::INFINITY,
-        inverse_mass_median: 0.0,
         dof,
         path: None,
     };
@@ -372,7 +366,6 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         data: Data::new(model),
         forces: Vec::new(),
         torques: Vec::new(),
-        lams: Vec::new(),
     };
     samples.visit(&q0, &start, true, &mut reach);
     if dof == 0 {
@@ -492,7 +485,6 @@ struct Samples<'m, S: Space> {
     data: Data<S>,
     forces: Vec<f64>,
     torques: Vec<f64>,
-    lams: Vec<f64>,
 }
 
 impl<S: Space> Samples<'_, S> {
@@ -513,10 +505,7 @@ impl<S: Space> Samples<'_, S> {
         }
         if let Ok((load, _)) = static_op_load(self.model, &mut self.data, q, &self.zero_qd, self.op) {
             let inverse = self.data.op.inverse_inertia;
-            let lam = block_max_eigenvalue::<S>(&inverse, 0..lin);
-            reach.inverse_mass_max = reach.inverse_mass_max.max(lam);
-            reach.inverse_mass_min = reach.inverse_mass_min.min(lam);
-            self.lams.push(lam);
+            reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
             reach.inverse_rotational_inertia_max =
                 reach.inverse_rotational_inertia_max.max(block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
             let (f, t) = (S::op_lin(&load).norm(), S::op_ang(&load).norm());
@@ -541,8 +530,6 @@ impl<S: Space> Samples<'_, S> {
         if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
             reach.inverse_rotational_inertia_max = 0.0;
         }
-        self.lams.sort_by(f64::total_cmp);
-        reach.inverse_mass_median = self.lams.get(self.lams.len() / 2).copied().unwrap_or(0.0);
         reach.static_force_max_n = self.forces.iter().fold(0.0, |a: f64, b| a.max(*b));
         reach.static_force_n = percentile_90(&mut self.forces);
         reach.static_torque_nm = percentile_90(&mut self.torques);
