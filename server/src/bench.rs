@@ -2,6 +2,8 @@
 //!
 //! - [`ve_tick_users`]: `server/ve_tick_users_N`, one VE tick with N users on the paper's testbed — every
 //!   user's uplink, the dynamics with every coupling, and every user's snapshot terms — in ns per tick;
+//! - [`ve_loop_users`]: `server/ve_loop_users_N`, the VE loop's whole iteration with N users back to back
+//!   (the tick above plus encoding, ring pushes, wake-ups and the loop's statistics: [`LoopBench`]), in ns;
 //! - [`ve_tick_after_pauses`]: the same tick timed one by one after pauses, as a real-time loop takes them
 //!   (`kinloop experiment pauses`);
 //! - [`realtime_run`]: the real VE thread (absolute deadlines, spin_sleep, SCHED_FIFO when allowed) with N
@@ -24,9 +26,14 @@ use serde::Serialize;
 use crate::core::{JoinRequest, VeConfig, VeConfigError, VeCore};
 use crate::driver::rehearsal::Rehearsal;
 use crate::driver::ve_thread::{self, VeThreadIo};
-use crate::gateway::{take_latest_frame, Command, UserLink, VeLoopStats, FRAME_HEADER};
+use crate::gateway::VeLoopStats;
 use crate::synthetic::SyntheticUser;
 use crate::view::ViewTap;
+
+mod loop_bench;
+
+use loop_bench::SyntheticJoins;
+pub use loop_bench::{ve_loop_stats, ve_loop_users, LoopBench};
 
 /// Why a measurement could not run.
 #[derive(Debug, thiserror::Error)]
@@ -283,30 +290,14 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
     if model.ops.is_empty() && run.users > 0 {
         return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
     }
-    let (n, m) = (model.nv(), model.nc());
     let shape = SessionShape::of_model(&model);
     let mut ve = run.ve.clone();
     ve.max_users = ve.max_users.max(run.users);
     let core = VeCore::new(model.clone(), ve)?;
-    let (mut command_tx, command_rx) = RingBuffer::new(run.users.max(1) + 4);
+    let SyntheticJoins { commands: command_rx, mut clients, replies } = SyntheticJoins::queue(&model, run.users)?;
     let (event_tx, mut event_rx) = RingBuffer::new(1024);
     let (stats_tx, _stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
-    let mut clients = Vec::new();
-    let mut replies = Vec::new();
-    let ring_bytes = 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m));
-    for i in 0..run.users {
-        let (uplink_tx, uplink_rx) = RingBuffer::new(64);
-        let (snapshot_tx, snapshot_rx) = RingBuffer::new(ring_bytes);
-        let (reply_tx, reply_rx) = tokio::sync::oneshot::channel();
-        let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: Arc::default() };
-        let command = Command::Join { request: join_request(&model, i, S::DIM), link, reply: reply_tx };
-        if command_tx.push(command).is_err() {
-            return Err(BenchError::Thread("command ring"));
-        }
-        clients.push((uplink_tx, snapshot_rx));
-        replies.push(reply_rx);
-    }
     let io = VeThreadIo {
         commands: command_rx,
         events: event_tx,
@@ -330,21 +321,13 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
             let mut frame = Vec::new();
             let mut received = 0u64;
             let mut seq = 0u64;
-            let mut synthetic = vec![SyntheticUser::new(users); users];
             let started = Instant::now();
             while !client_stop.load(Ordering::Relaxed) {
                 seq += 1;
                 let time_s = started.elapsed().as_secs_f64();
-                for (i, (uplinks, snapshots)) in clients.iter_mut().enumerate() {
-                    if ids[i].is_none() || take_latest_frame(snapshots, &mut frame) == 0 {
-                        continue;
-                    }
-                    received += 1;
-                    if let Ok(Datagram::Snapshot(s)) = codec::decode_datagram(&frame, &shape) {
-                        synthetic[i].on_snapshot(&s);
-                    }
-                    if let Some(sample) = synthetic[i].uplink(seq, time_s) {
-                        let _ = uplinks.push(*sample);
+                for (client, id) in clients.iter_mut().zip(&ids) {
+                    if id.is_some() && client.exchange(seq, time_s, &mut frame, &shape) {
+                        received += 1;
                     }
                 }
                 std::thread::sleep(Duration::from_millis(1));

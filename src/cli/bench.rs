@@ -219,6 +219,17 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
             .with_context(|| name.clone())?;
         r.timing_with_goal(&name, t, Some(ve_tick_goal_ns(users)));
     }
+    for users in VE_TICK_USERS {
+        let name = format!("server/ve_loop_users_{users}");
+        if !r.wanted(&name) {
+            continue;
+        }
+        // The VE loop's whole iteration (the tick, encoding, ring pushes, wake-ups, statistics), what the
+        // real-time thread does each deadline: `experiment capacity` reads its real time against this.
+        let t = measure_batches(budget, |calls| kinloop_server::bench::ve_loop_users(users, calls))
+            .with_context(|| name.clone())?;
+        r.timing(&name, t);
+    }
     if r.wanted("client/tick_testbed") {
         let t = measure_batches(budget, kinloop_client::bench::client_tick_testbed).context("client/tick_testbed")?;
         r.timing_with_goal("client/tick_testbed", t, Some(CLIENT_TICK_GOAL_NS));

@@ -147,14 +147,36 @@ impl<S: Space> VeLoop<S> {
     pub fn tick(&mut self) {
         let deadline = self.next_deadline();
         let woke = Instant::now();
-        let (core, io, stats, links, round, stages) =
-            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.round, &mut self.stages);
+        let stats = &mut self.stats;
         let lateness = woke.saturating_duration_since(deadline);
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
         if lateness > self.half_period {
             stats.deadline_misses += 1;
         }
         let now = woke - self.epoch;
+        self.round(woke, now);
+    }
+
+    /// One iteration run at once, as if it were due now: what `kinloop bench`'s `server/ve_loop_users_N`
+    /// times back to back (`crate::bench::LoopBench`), the same work as [`Self::tick`] less its deadline's
+    /// bookkeeping.
+    pub fn tick_back_to_back(&mut self) {
+        let now = self.core.poll_timeout();
+        self.round(Instant::now(), now);
+    }
+
+    /// Forgets the loop's timing so far (the step's and the stages' histograms), keeping its counters: a
+    /// benchmark's warm-up is not what it times.
+    pub fn restart_timing(&mut self) {
+        self.histogram = LatencyHistogram::default();
+        self.stages = StageHistograms::default();
+    }
+
+    /// The iteration's work after its wake-up at `woke`, VE time `now`: every stage, timed, and the loop's
+    /// statistics.
+    fn round(&mut self, woke: Instant, now: Duration) {
+        let (core, io, stats, links, round, stages) =
+            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.round, &mut self.stages);
         let mut clock = StageClock { last: woke };
         serve_commands(core, &mut io.commands, links, now);
         for l in links.iter_mut() {
