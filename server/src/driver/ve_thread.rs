@@ -18,7 +18,9 @@ use rtrb::{Consumer, Producer};
 
 use crate::core::prefetch::prefetch;
 use crate::core::{UserId, VeCore, VeEvent};
-use crate::gateway::{push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats};
+use crate::gateway::{
+    prefetch_next_frame, push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats,
+};
 use crate::view::ViewTap;
 
 use super::rehearsal::{wait_warmed, Rehearsal};
@@ -125,11 +127,14 @@ impl<S: Space> VeLoop<S> {
         }
         self.core.prefetch();
         prefetch(&self.links);
-        for l in &self.links {
-            // The uplink waiting at the head of each ring, as the intake will read it.
+        let frame_len = self.round.frame_len();
+        for l in &mut self.links {
+            // The uplink waiting at the head of each ring, as the intake will read it, and the snapshot
+            // ring's slots the round's frame will fill.
             if let Ok(sample) = l.link.uplinks.peek() {
                 prefetch(std::slice::from_ref(sample));
             }
+            prefetch_next_frame(&mut l.link.snapshots, frame_len);
         }
     }
 
@@ -346,6 +351,11 @@ impl Round {
             start = end;
         }
         dropped
+    }
+
+    /// The mean length of the last round's frames (zero before the first).
+    fn frame_len(&self) -> usize {
+        self.bytes.len() / self.ends.len().max(1)
     }
 
     /// Each encoded frame with its link index.
