@@ -443,6 +443,13 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
     for p in &r.points {
         assert!(p.step_us_p50 > 0.0 && p.step_us_p50 <= p.step_us_p99 && p.bench_us > 0.0, "{p:?}");
         assert!(p.stages_us_p50.step > 0.0 && p.stages_us_p50.snapshot_terms > 0.0, "{p:?}");
+        // Like with like: the loop's whole iteration back to back, its stages, and the ratios read from them.
+        assert!(p.loop_bench_us_p50 > 0.0 && p.bench_stages_us_p50.encode > 0.0, "{p:?}");
+        let whole = p.step_us_p50 / p.loop_bench_us_p50;
+        assert!((p.realtime_over_loop_bench - whole).abs() <= 0.02 * whole + 0.01, "{p:?}");
+        let own = |s: &kinloop::experiments::capacity::StageMedians| s.intake + s.step + s.snapshot_terms;
+        let stages = own(&p.stages_us_p50) / own(&p.bench_stages_us_p50);
+        assert!((p.ve_stages_over_bench - stages).abs() <= 0.02 * stages + 0.01, "{p:?}");
         assert!((0.0..=1.0).contains(&p.miss_rate) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
         assert_eq!((p.energy_reports_refused, p.state_restores), (0, 0), "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");

@@ -2,6 +2,8 @@
 //!
 //! - [`ve_tick_users`]: `server/ve_tick_users_N`, one VE tick with N users on the paper's testbed — every
 //!   user's uplink, the dynamics with every coupling, and every user's snapshot terms — in ns per tick;
+//! - [`ve_loop_users`]: `server/ve_loop_users_N`, the VE loop's whole iteration with N users back to back
+//!   (the tick above plus encoding, ring pushes, wake-ups and the loop's statistics: [`LoopBench`]), in ns;
 //! - [`ve_tick_after_pauses`]: the same tick timed one by one after pauses, as a real-time loop takes them
 //!   (`kinloop experiment pauses`);
 //! - [`realtime_run`]: the real VE thread (absolute deadlines, spin_sleep, SCHED_FIFO when allowed) with N
@@ -18,15 +20,19 @@ use kinloop_linkage::{
     model::scene::Scene, model::Model,
 };
 use kinloop_protocol::{codec, Datagram, DeviceCaps, LocalModelForm, Role, SessionShape};
-use rtrb::RingBuffer;
+use rtrb::{Consumer, RingBuffer};
 use serde::Serialize;
 
-use crate::core::{JoinRequest, VeConfig, VeConfigError, VeCore};
+use crate::core::{JoinRequest, VeConfig, VeConfigError, VeCore, VeEvent};
 use crate::driver::rehearsal::Rehearsal;
-use crate::driver::ve_thread::{self, VeThreadIo};
-use crate::gateway::{take_latest_frame, Command, UserLink, VeLoopStats, FRAME_HEADER};
+use crate::driver::ve_thread::{self, VeLoop, VeThreadIo};
+use crate::gateway::VeLoopStats;
 use crate::synthetic::SyntheticUser;
 use crate::view::ViewTap;
+
+mod synthetic_clients;
+
+use synthetic_clients::{SyntheticClient, SyntheticJoins};
 
 /// Why a measurement could not run.
 #[derive(Debug, thiserror::Error)]
@@ -180,6 +186,100 @@ pub fn ve_tick_users(users: usize, iters: u64) -> Result<f64, BenchError> {
     Ok(start.elapsed().as_nanos() as f64 / iters.max(1) as f64)
 }
 
+/// The VE loop on the testbed with `users` synthetic users behind its rings (all on `link2`, as
+/// [`TickBench`]), iterated back to back: the VE loop's whole iteration as the real-time thread runs it less
+/// its wait, through the same [`VeLoop`] (the function the driver calls each deadline). Between iterations each
+/// synthetic client drains its snapshot ring, decodes the newest frame and pushes its next uplink (not timed,
+/// and on the same thread: the rings' lines stay in this core's caches, where in real time the consumer's core
+/// last held them).
+pub struct LoopBench {
+    ve: VeLoop<Planar>,
+    clients: Vec<SyntheticClient>,
+    events: Consumer<VeEvent>,
+    stats: Consumer<VeLoopStats>,
+    shape: SessionShape,
+    frame: Vec<u8>,
+    seq: u64,
+}
+
+impl LoopBench {
+    /// Joins the users (the first iteration serves their joins) and iterates `warm_up` times more; the
+    /// loop's timing starts after.
+    pub fn new(users: usize, warm_up: u64) -> Result<Self, BenchError> {
+        let model = testbed()?;
+        let shape = SessionShape::of_model(&model);
+        let mut config = VeConfig::paper();
+        config.max_users = users.max(1);
+        let core = VeCore::new(model.clone(), config)?;
+        let requests: Vec<JoinRequest> = (0..users).map(|i| join_request(&model, i, 3)).collect();
+        let joins = SyntheticJoins::queue(&model, &requests).ok_or(BenchError::Thread("command ring"))?;
+        let (event_tx, events) = RingBuffer::new(1024);
+        let (stats_tx, stats) = RingBuffer::new(4);
+        let io = VeThreadIo {
+            commands: joins.commands,
+            events: event_tx,
+            stats: stats_tx,
+            record: None,
+            view: None,
+            room: None,
+            stop: Arc::new(AtomicBool::new(false)),
+        };
+        let ve = VeLoop::new(core, io, Instant::now());
+        let mut bench = LoopBench { ve, clients: joins.clients, events, stats, shape, frame: Vec::new(), seq: 0 };
+        bench.iterate();
+        for (index, mut reply) in joins.replies.into_iter().enumerate() {
+            match reply.try_recv() {
+                Ok(Ok(_)) => {}
+                Ok(Err(reason)) => return Err(BenchError::Refused { index, reason }),
+                Err(_) => return Err(BenchError::Thread("VE loop")),
+            }
+        }
+        for _ in 0..warm_up {
+            bench.iterate();
+        }
+        bench.ve.restart_timing();
+        Ok(bench)
+    }
+
+    /// One timed iteration of the loop, after the clients' turn; returns its time.
+    pub fn iterate(&mut self) -> Duration {
+        self.seq += 1;
+        let time_s = self.seq as f64 * 1e-3;
+        for client in &mut self.clients {
+            client.exchange(self.seq, time_s, &mut self.frame, &self.shape);
+        }
+        while self.events.pop().is_ok() {}
+        while self.stats.pop().is_ok() {}
+        let start = Instant::now();
+        self.ve.tick_back_to_back();
+        start.elapsed()
+    }
+
+    /// The loop's statistics so far (its step and stage percentiles are of the iterations since the
+    /// warm-up).
+    pub fn finish(self) -> VeLoopStats {
+        self.ve.finish()
+    }
+}
+
+/// Mean ns of one VE loop iteration with `users` users (see [`LoopBench`]), `iters` timed after `iters / 10`
+/// of warm-up.
+pub fn ve_loop_users(users: usize, iters: u64) -> Result<f64, BenchError> {
+    let mut bench = LoopBench::new(users, (iters / 10).max(10))?;
+    let total: Duration = (0..iters).map(|_| bench.iterate()).sum();
+    Ok(total.as_nanos() as f64 / iters.max(1) as f64)
+}
+
+/// The loop's statistics over `iters` back-to-back iterations with `users` users, after `iters / 10` of
+/// warm-up: its step's and each stage's percentiles, as the real-time loop reports them.
+pub fn ve_loop_stats(users: usize, iters: u64) -> Result<VeLoopStats, BenchError> {
+    let mut bench = LoopBench::new(users, (iters / 10).max(10))?;
+    for _ in 0..iters {
+        bench.iterate();
+    }
+    Ok(bench.finish())
+}
+
 /// How a real-time loop waits between ticks (and readies itself for the next).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pause {
@@ -283,30 +383,16 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
     if model.ops.is_empty() && run.users > 0 {
         return Err(BenchError::NoOperationalPoint { scene: run.scene_label });
     }
-    let (n, m) = (model.nv(), model.nc());
     let shape = SessionShape::of_model(&model);
     let mut ve = run.ve.clone();
     ve.max_users = ve.max_users.max(run.users);
     let core = VeCore::new(model.clone(), ve)?;
-    let (mut command_tx, command_rx) = RingBuffer::new(run.users.max(1) + 4);
+    let requests: Vec<JoinRequest> = (0..run.users).map(|i| join_request(&model, i, S::DIM)).collect();
+    let SyntheticJoins { commands: command_rx, mut clients, replies } =
+        SyntheticJoins::queue(&model, &requests).ok_or(BenchError::Thread("command ring"))?;
     let (event_tx, mut event_rx) = RingBuffer::new(1024);
     let (stats_tx, _stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
-    let mut clients = Vec::new();
-    let mut replies = Vec::new();
-    let ring_bytes = 4 * (FRAME_HEADER + ve_thread::snapshot_size_bound::<S>(n, m));
-    for i in 0..run.users {
-        let (uplink_tx, uplink_rx) = RingBuffer::new(64);
-        let (snapshot_tx, snapshot_rx) = RingBuffer::new(ring_bytes);
-        let (reply_tx, reply_rx) = tokio::sync::oneshot::channel();
-        let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: Arc::default() };
-        let command = Command::Join { request: join_request(&model, i, S::DIM), link, reply: reply_tx };
-        if command_tx.push(command).is_err() {
-            return Err(BenchError::Thread("command ring"));
-        }
-        clients.push((uplink_tx, snapshot_rx));
-        replies.push(reply_rx);
-    }
     let io = VeThreadIo {
         commands: command_rx,
         events: event_tx,
@@ -330,21 +416,13 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
             let mut frame = Vec::new();
             let mut received = 0u64;
             let mut seq = 0u64;
-            let mut synthetic = vec![SyntheticUser::new(users); users];
             let started = Instant::now();
             while !client_stop.load(Ordering::Relaxed) {
                 seq += 1;
                 let time_s = started.elapsed().as_secs_f64();
-                for (i, (uplinks, snapshots)) in clients.iter_mut().enumerate() {
-                    if ids[i].is_none() || take_latest_frame(snapshots, &mut frame) == 0 {
-                        continue;
-                    }
-                    received += 1;
-                    if let Ok(Datagram::Snapshot(s)) = codec::decode_datagram(&frame, &shape) {
-                        synthetic[i].on_snapshot(&s);
-                    }
-                    if let Some(sample) = synthetic[i].uplink(seq, time_s) {
-                        let _ = uplinks.push(*sample);
+                for (client, id) in clients.iter_mut().zip(&ids) {
+                    if id.is_some() && client.exchange(seq, time_s, &mut frame, &shape) {
+                        received += 1;
                     }
                 }
                 std::thread::sleep(Duration::from_millis(1));

@@ -209,15 +209,24 @@ pub fn measure_suite(args: &BenchArgs) -> Result<Vec<Row>> {
         });
         r.timing("local_model/testbed", t);
     }
-    for users in VE_TICK_USERS {
-        let name = format!("server/ve_tick_users_{users}");
-        if !r.wanted(&name) {
-            continue;
+    // `ve_tick`: the VE's own stages, against the tick's goal; `ve_loop`: the loop's whole iteration (the tick,
+    // encoding, ring pushes, wake-ups, statistics), what the real-time thread does each deadline and what
+    // `experiment capacity` reads its real time against. Each batch builds its own VE (set-up not timed) and
+    // runs it `calls` times from the paper's start.
+    type VeCase = fn(usize, u64) -> Result<f64, kinloop_server::bench::BenchError>;
+    let ve_cases: [(&str, VeCase, bool); 2] = [
+        ("ve_tick", kinloop_server::bench::ve_tick_users, true),
+        ("ve_loop", kinloop_server::bench::ve_loop_users, false),
+    ];
+    for (case, run_case, has_goal) in ve_cases {
+        for users in VE_TICK_USERS {
+            let name = format!("server/{case}_users_{users}");
+            if !r.wanted(&name) {
+                continue;
+            }
+            let t = measure_batches(budget, |calls| run_case(users, calls)).with_context(|| name.clone())?;
+            r.timing_with_goal(&name, t, has_goal.then(|| ve_tick_goal_ns(users)));
         }
-        // Each batch builds its own VE (set-up not timed) and ticks it `calls` times from the paper's start.
-        let t = measure_batches(budget, |calls| kinloop_server::bench::ve_tick_users(users, calls))
-            .with_context(|| name.clone())?;
-        r.timing_with_goal(&name, t, Some(ve_tick_goal_ns(users)));
     }
     if r.wanted("client/tick_testbed") {
         let t = measure_batches(budget, kinloop_client::bench::client_tick_testbed).context("client/tick_testbed")?;

@@ -163,6 +163,22 @@ pub fn human(s: &DemoSummary) -> String {
         s.ve_deadline_misses,
         if s.ve_realtime_priority { "on" } else { "off" }
     );
+    let st = &s.ve_stages;
+    let us = |p: &kinloop_server::gateway::Percentiles| p.p50_ns as f64 / 1e3;
+    out += &format!(
+        "  VE tick stages (p50 µs): intake {:.2}, step {:.2}, snapshot terms {:.2}, encode {:.2}, ring push {:.2}, \
+         wake {:.2}, events+record {:.2}, view {:.2}, stats {:.2}; VE thread CPU {}\n",
+        us(&st.intake),
+        us(&st.step),
+        us(&st.snapshot_terms),
+        us(&st.encode),
+        us(&st.ring_push),
+        us(&st.wake),
+        us(&st.events_record),
+        us(&st.view),
+        us(&st.stats),
+        s.ve_cpu_fraction.map_or("unknown".to_string(), |f| format!("{:.1} %", 100.0 * f)),
+    );
     out += &format!(
         "  haptic  {} ticks: lateness p50 {:.1} µs, p99 {:.1} µs (worst user), max {:.1} µs; {} misses (> 500 µs late)\n",
         s.loop_ticks, s.loop_lateness_us_p50, s.loop_lateness_us_p99, s.loop_lateness_us_max, s.loop_misses

@@ -173,6 +173,11 @@ pub struct DemoSummary {
     pub ve_tick_us_p99: f64,
     /// ... largest.
     pub ve_tick_us_max: f64,
+    /// The VE loop iteration's stages (p50/p99/max ns each), as the server's `--json` reports them
+    /// (`ve.stages`).
+    pub ve_stages: kinloop_server::gateway::StageTimes,
+    /// CPU time of the VE thread over its wall time (its spin before each deadline included).
+    pub ve_cpu_fraction: Option<f64>,
     /// VE wake-ups later than half a period.
     pub ve_deadline_misses: u64,
     /// Whether the VE thread got SCHED_FIFO.
@@ -515,6 +520,8 @@ fn summarize(
         ve_tick_us_p50: us(ve.step_time.p50_ns),
         ve_tick_us_p99: us(ve.step_time.p99_ns),
         ve_tick_us_max: us(ve.step_time.max_ns),
+        ve_stages: ve.stages,
+        ve_cpu_fraction: ve.cpu_s.map(|cpu| cpu / ve.wall_s.max(1e-9)),
         ve_deadline_misses: ve.deadline_misses,
         ve_realtime_priority: ve.realtime_priority,
         loop_ticks: stats.iter().map(|s| s.lateness.ticks).sum(),

@@ -3,8 +3,11 @@
 //! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time
 //! (p50, p99), its deadline misses beside the idle timer floor measured in the same run just before it
 //! (`kinloop_client::driver::rt_loop::timer_floor`, the same clock and sleep with no work), the thread's CPU
-//! use beside the figure (its hybrid sleep spins), the back-to-back benchmark of the same tick
-//! (`server/ve_tick_users_N`) for the real-time/benchmark ratio, and whether the linkage stayed whole.
+//! use beside the figure (its hybrid sleep spins), and whether the linkage stayed whole. Beside each point,
+//! the same loop's iterations back to back (`server/ve_loop_users_N`: the same `VeLoop`, its rings drained
+//! between iterations) give two like-with-like ratios: the whole iteration in real time over the whole
+//! iteration back to back, and the VE's own stages (intake, step, snapshot terms) over the same stages back
+//! to back. The VE tick alone back to back (`server/ve_tick_users_N`) is reported too.
 //!
 //! Synthetic users follow the VE, so their tracking is the VE's own and not a client's: what this reports of
 //! the session is its stability (restores, closure). The second axis, rooms per server with real clients
@@ -16,8 +19,9 @@ use std::time::Duration;
 
 use anyhow::{anyhow, Result};
 use kinloop_client::driver::rt_loop::timer_floor;
-use kinloop_server::bench::{realtime_run, ve_tick_users, RealtimeRun};
+use kinloop_server::bench::{realtime_run, ve_loop_stats, ve_tick_users, RealtimeRun};
 use kinloop_server::core::VeConfig;
+use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
 
 use super::capacity_rooms::{self, RoomsPoint};
@@ -57,8 +61,16 @@ pub struct CapacityPoint {
     pub bench_us: f64,
     /// `step_us_p50 / bench_us`.
     pub realtime_over_bench: f64,
-    /// The step's stages (p50, µs): intake, step, snapshot terms, encode, ring push, wake-up.
+    /// The whole loop iteration back to back (`server/ve_loop_users_N`), median (µs).
+    pub loop_bench_us_p50: f64,
+    /// `step_us_p50 / loop_bench_us_p50`: the whole iteration in real time over the same back to back.
+    pub realtime_over_loop_bench: f64,
+    /// The VE's own stages (intake + step + snapshot terms, p50s) in real time over the same back to back.
+    pub ve_stages_over_bench: f64,
+    /// The step's stages (p50, µs): intake, step, snapshot terms, encode, ring push, wake-up, stats.
     pub stages_us_p50: StageMedians,
+    /// The same stages back to back (`server/ve_loop_users_N`).
+    pub bench_stages_us_p50: StageMedians,
     /// Fraction of the VE loop's ticks woken more than half a period late.
     pub miss_rate: f64,
     /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
@@ -92,6 +104,29 @@ pub struct StageMedians {
     pub ring_push: f64,
     /// Wake-ups.
     pub wake: f64,
+    /// Events, recorder, view tap and the loop's statistics.
+    pub rest: f64,
+}
+
+impl StageMedians {
+    fn of(ve: &VeLoopStats) -> Self {
+        let us = |ns: u64| round(ns as f64 / 1e3, 2);
+        let s = &ve.stages;
+        StageMedians {
+            intake: us(s.intake.p50_ns),
+            step: us(s.step.p50_ns),
+            snapshot_terms: us(s.snapshot_terms.p50_ns),
+            encode: us(s.encode.p50_ns),
+            ring_push: us(s.ring_push.p50_ns),
+            wake: us(s.wake.p50_ns),
+            rest: us(s.events_record.p50_ns + s.view.p50_ns + s.stats.p50_ns),
+        }
+    }
+
+    /// The VE's own stages: intake, step and snapshot terms.
+    fn ve_own(&self) -> f64 {
+        self.intake + self.step + self.snapshot_terms
+    }
 }
 
 fn load_average() -> Option<f64> {
@@ -106,23 +141,22 @@ fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint
     let run = RealtimeRun { scene, scene_label: "paper-testbed".into(), users, duration, ve: VeConfig::paper() };
     let report = realtime_run(run).map_err(|e| anyhow!("{users} users: {e}"))?;
     let bench_ns = ve_tick_users(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
+    let looped = ve_loop_stats(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
     let ve = report.ve;
     let us = |ns: u64| round(ns as f64 / 1e3, 2);
     let ticks = ve.step_time.samples.max(1) as f64;
+    let (stages, bench_stages) = (StageMedians::of(&ve), StageMedians::of(&looped));
     Ok(CapacityPoint {
         users,
         step_us_p50: us(ve.step_time.p50_ns),
         step_us_p99: us(ve.step_time.p99_ns),
         bench_us: round(bench_ns / 1e3, 2),
         realtime_over_bench: round(ve.step_time.p50_ns as f64 / bench_ns.max(1.0), 2),
-        stages_us_p50: StageMedians {
-            intake: us(ve.stages.intake.p50_ns),
-            step: us(ve.stages.step.p50_ns),
-            snapshot_terms: us(ve.stages.snapshot_terms.p50_ns),
-            encode: us(ve.stages.encode.p50_ns),
-            ring_push: us(ve.stages.ring_push.p50_ns),
-            wake: us(ve.stages.wake.p50_ns),
-        },
+        loop_bench_us_p50: us(looped.step_time.p50_ns),
+        realtime_over_loop_bench: round(ve.step_time.p50_ns as f64 / looped.step_time.p50_ns.max(1) as f64, 2),
+        ve_stages_over_bench: round(stages.ve_own() / bench_stages.ve_own().max(1e-3), 2),
+        stages_us_p50: stages,
+        bench_stages_us_p50: bench_stages,
         miss_rate: ve.deadline_misses as f64 / ticks,
         floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
         cpu_fraction: ve.cpu_s.map(|cpu| round(cpu / ve.wall_s.max(1e-9), 3)),
@@ -155,7 +189,8 @@ pub fn run(options: &Options) -> Result<Report> {
         .legend(Legend::UpperLeft)
         .with(Series::line("real time, p50", xs(|p| p.step_us_p50)))
         .with(Series::line("real time, p99", xs(|p| p.step_us_p99)))
-        .with(Series::line("back to back (bench)", xs(|p| p.bench_us)));
+        .with(Series::line("back to back, whole iteration", xs(|p| p.loop_bench_us_p50)))
+        .with(Series::line("back to back, VE tick alone", xs(|p| p.bench_us)));
     out.chart("step_vs_users", &chart)?;
     let chart = Chart::new("Deadline misses against users, beside the idle loop's", "users", "missed ticks (%)")
         .legend(Legend::UpperLeft)
@@ -191,13 +226,14 @@ pub fn run(options: &Options) -> Result<Report> {
 
     let last = points.last().ok_or_else(|| anyhow!("no points"))?;
     let answer = format!(
-        "{} users in one room: step p50 {} us, p99 {} us ({}x the back-to-back {} us); misses {:.3} % beside the \
-         idle loop's {:.3} %; load average {}.",
+        "{} users in one room: step p50 {} us, p99 {} us ({}x the same iteration back to back, {} us; the VE's own \
+         stages {}x); misses {:.3} % beside the idle loop's {:.3} %; load average {}.",
         last.users,
         last.step_us_p50,
         last.step_us_p99,
-        last.realtime_over_bench,
-        last.bench_us,
+        last.realtime_over_loop_bench,
+        last.loop_bench_us_p50,
+        last.ve_stages_over_bench,
         100.0 * last.miss_rate,
         100.0 * last.floor_miss_rate,
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),

@@ -164,6 +164,10 @@ fn assert_sane(report: &DemoReport, users: usize) {
         assert!(written.get(key).is_some(), "summary.json has {key}: {text}");
     }
     assert_eq!(written["users"], users);
+    for stage in ["intake", "step", "snapshot_terms", "encode", "ring_push", "wake", "stats"] {
+        let samples = written["ve_stages"][stage]["samples"].as_u64().unwrap_or(0);
+        assert!(samples > 100, "summary.json's ve_stages.{stage} has {samples} samples: {text}");
+    }
     assert_eq!(written["per_user"].as_array().map(Vec::len), Some(users));
 }
 

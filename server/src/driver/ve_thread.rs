@@ -18,7 +18,9 @@ use rtrb::{Consumer, Producer};
 
 use crate::core::prefetch::prefetch;
 use crate::core::{UserId, VeCore, VeEvent};
-use crate::gateway::{push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats};
+use crate::gateway::{
+    prefetch_next_frame, push_frame, Command, LatencyHistogram, StageHistograms, UserLink, VeLoopStats,
+};
 use crate::view::ViewTap;
 
 use super::rehearsal::{wait_warmed, Rehearsal};
@@ -125,11 +127,14 @@ impl<S: Space> VeLoop<S> {
         }
         self.core.prefetch();
         prefetch(&self.links);
-        for l in &self.links {
-            // The uplink waiting at the head of each ring, as the intake will read it.
+        let frame_len = self.round.frame_len();
+        for l in &mut self.links {
+            // The uplink waiting at the head of each ring, as the intake will read it, and the snapshot
+            // ring's slots the round's frame will fill.
             if let Ok(sample) = l.link.uplinks.peek() {
                 prefetch(std::slice::from_ref(sample));
             }
+            prefetch_next_frame(&mut l.link.snapshots, frame_len);
         }
     }
 
@@ -147,14 +152,36 @@ impl<S: Space> VeLoop<S> {
     pub fn tick(&mut self) {
         let deadline = self.next_deadline();
         let woke = Instant::now();
-        let (core, io, stats, links, round, stages) =
-            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.round, &mut self.stages);
+        let stats = &mut self.stats;
         let lateness = woke.saturating_duration_since(deadline);
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
         if lateness > self.half_period {
             stats.deadline_misses += 1;
         }
         let now = woke - self.epoch;
+        self.round(woke, now);
+    }
+
+    /// One iteration run at once, as if it were due now: what `kinloop bench`'s `server/ve_loop_users_N`
+    /// times back to back (`crate::bench::LoopBench`), the same work as [`Self::tick`] less its deadline's
+    /// bookkeeping.
+    pub fn tick_back_to_back(&mut self) {
+        let now = self.core.poll_timeout();
+        self.round(Instant::now(), now);
+    }
+
+    /// Forgets the loop's timing so far (the step's and the stages' histograms), keeping its counters: a
+    /// benchmark's warm-up is not what it times.
+    pub fn restart_timing(&mut self) {
+        self.histogram = LatencyHistogram::default();
+        self.stages = StageHistograms::default();
+    }
+
+    /// The iteration's work after its wake-up at `woke`, VE time `now`: every stage, timed, and the loop's
+    /// statistics.
+    fn round(&mut self, woke: Instant, now: Duration) {
+        let (core, io, stats, links, round, stages) =
+            (&mut self.core, &mut self.io, &mut self.stats, &mut self.links, &mut self.round, &mut self.stages);
         let mut clock = StageClock { last: woke };
         serve_commands(core, &mut io.commands, links, now);
         for l in links.iter_mut() {
@@ -324,6 +351,11 @@ impl Round {
             start = end;
         }
         dropped
+    }
+
+    /// The mean length of the last round's frames (zero before the first).
+    fn frame_len(&self) -> usize {
+        self.bytes.len() / self.ends.len().max(1)
     }
 
     /// Each encoded frame with its link index.

@@ -5,6 +5,8 @@ use std::mem::MaybeUninit;
 
 use rtrb::{Consumer, Producer};
 
+use crate::core::prefetch::prefetch_for_write;
+
 /// Bytes of a snapshot frame's length prefix in a user's snapshot ring.
 pub const FRAME_HEADER: usize = 4;
 
@@ -21,6 +23,17 @@ pub fn push_frame(ring: &mut Producer<u8>, bytes: &[u8]) -> bool {
     // SAFETY: the two writes above cover the chunk's `total` slots (header then body, across the wrap).
     unsafe { chunk.commit_all() };
     true
+}
+
+/// Prefetches, for writing, the slots of a snapshot ring that the next frame of `len` bytes (header
+/// included) will fill: lines the consumer's core last read, brought over before the push needs them. Nothing
+/// is written or committed (an uncommitted chunk leaves the ring as it was).
+pub fn prefetch_next_frame(ring: &mut Producer<u8>, len: usize) {
+    if let Ok(mut chunk) = ring.write_chunk_uninit(FRAME_HEADER + len) {
+        let (a, b) = chunk.as_mut_slices();
+        prefetch_for_write(a);
+        prefetch_for_write(b);
+    }
 }
 
 /// Writes `src` at byte `at` of the concatenation of `a` and `b` (a ring chunk's two halves), which must
@@ -88,6 +101,26 @@ mod tests {
         assert_eq!(take_latest_frame(&mut rx, &mut out), 0);
         // Wrapping around the ring's end.
         for i in 0..20u8 {
+            assert!(push_frame(&mut tx, &[i; 13]));
+            assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
+            assert_eq!(out, [i; 13]);
+        }
+    }
+
+    #[test]
+    fn prefetching_the_next_frame_leaves_the_ring_as_it_was() {
+        let (mut tx, mut rx) = rtrb::RingBuffer::new(64);
+        assert!(push_frame(&mut tx, b"kept"));
+        let free = tx.slots();
+        prefetch_next_frame(&mut tx, 20);
+        prefetch_next_frame(&mut tx, 1000);
+        assert_eq!(tx.slots(), free, "nothing committed");
+        let mut out = Vec::new();
+        assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
+        assert_eq!(out, b"kept");
+        // Across the ring's end, the prefetch's two halves.
+        for i in 0..20u8 {
+            prefetch_next_frame(&mut tx, 13);
             assert!(push_frame(&mut tx, &[i; 13]));
             assert_eq!(take_latest_frame(&mut rx, &mut out), 1);
             assert_eq!(out, [i; 13]);

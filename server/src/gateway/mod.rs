@@ -9,7 +9,7 @@ mod loop_stats;
 mod users;
 
 pub use commands::{Command, CommandSender, UserLink};
-pub use frames::{push_frame, take_latest_frame, FRAME_HEADER};
+pub use frames::{prefetch_next_frame, push_frame, take_latest_frame, FRAME_HEADER};
 pub use loop_stats::{LatencyHistogram, Percentiles, StageHistograms, StageTimes, VeLoopStats};
 pub use users::{PoseTap, UserCounters, UserEntry, UserRegistry};
 

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use kinloop_server::bench::{realtime_run, ve_tick_users, RealtimeRun, TickBench};
+use kinloop_server::bench::{realtime_run, ve_loop_users, ve_tick_users, LoopBench, RealtimeRun, TickBench};
 use kinloop_server::VeConfig;
 
 #[test]
@@ -12,6 +12,32 @@ fn ve_tick_hook_measures_every_user_count() {
         assert!(ns.is_finite() && ns > 0.0, "{users} users: {ns}");
         eprintln!("server/ve_tick_users_{users}: {ns:.0} ns");
     }
+}
+
+/// The loop's benchmark runs the VE loop's whole iteration with its rings live: every user's snapshot
+/// reaches its client through the ring, every client's uplink reaches the VE through its ring, and the
+/// loop's timing covers only the iterations after the warm-up, every stage of each.
+#[test]
+fn loop_bench_moves_every_snapshot_and_uplink_through_the_rings() {
+    for users in [1, 16] {
+        let mut bench = LoopBench::new(users, 20).unwrap();
+        for _ in 0..200 {
+            bench.iterate();
+        }
+        let stats = bench.finish();
+        assert_eq!(stats.core.users as usize, users);
+        assert_eq!(stats.step_time.samples, 200, "{users} users: the warm-up is not timed");
+        for (stage, times) in [("encode", stats.stages.encode), ("ring push", stats.stages.ring_push)] {
+            assert_eq!(times.samples, 200, "{users} users: {stage}");
+            assert!(times.p50_ns > 0, "{users} users: {stage}");
+        }
+        assert_eq!(stats.snapshots_dropped, 0, "{users} users");
+        assert_eq!(stats.core.state_restores, 0, "{users} users");
+        // Each iteration's uplinks answer the snapshots of the one before (the first iterations had none).
+        assert!(stats.core.uplinks_accepted >= 215 * users as u64, "{users} users: {:?}", stats.core);
+    }
+    let ns = ve_loop_users(4, 100).unwrap();
+    assert!(ns.is_finite() && ns > 0.0, "{ns}");
 }
 
 /// The ticks the benchmark times are those of a linkage in motion, whatever the number of users: their shares
