@@ -18,14 +18,11 @@ impl<S: Space> VeCore<S> {
 /// targets without the instruction nothing happens).
 pub fn prefetch<T>(items: &[T]) {
     #[cfg(target_arch = "x86_64")]
-    {
+    each_line(items, |line| {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let start = items.as_ptr().cast::<i8>();
-        for offset in (0..std::mem::size_of_val(items)).step_by(64) {
-            // SAFETY: a prefetch never faults and reads nothing; the address is inside the slice.
-            unsafe { _mm_prefetch(start.wrapping_add(offset), _MM_HINT_T0) };
-        }
-    }
+        // SAFETY: a prefetch never faults and reads nothing; the address is inside the slice.
+        unsafe { _mm_prefetch(line.cast::<i8>(), _MM_HINT_T0) };
+    });
     #[cfg(not(target_arch = "x86_64"))]
     let _ = items;
 }
@@ -35,16 +32,21 @@ pub fn prefetch<T>(items: &[T]) {
 /// it); a hint, nothing is read or written (on targets without the instruction nothing happens).
 pub fn prefetch_for_write<T>(items: &[T]) {
     #[cfg(target_arch = "x86_64")]
-    {
-        let start = items.as_ptr().cast::<u8>();
-        for offset in (0..std::mem::size_of_val(items)).step_by(64) {
-            // SAFETY: a prefetch never faults, reads and writes nothing; the address is inside the slice.
-            // CPUs without PREFETCHW (before Broadwell) execute it as a no-op.
-            unsafe {
-                std::arch::asm!("prefetchw [{0}]", in(reg) start.wrapping_add(offset), options(nostack, readonly, preserves_flags))
-            };
-        }
-    }
+    each_line(items, |line| {
+        // SAFETY: a prefetch never faults, reads and writes nothing; the address is inside the slice.
+        // CPUs without PREFETCHW (before Broadwell) execute it as a no-op.
+        unsafe { std::arch::asm!("prefetchw [{0}]", in(reg) line, options(nostack, readonly, preserves_flags)) };
+    });
     #[cfg(not(target_arch = "x86_64"))]
     let _ = items;
+}
+
+/// Calls `hint` with an address in each 64-byte cache line of `items`' memory.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn each_line<T>(items: &[T], hint: impl Fn(*const u8)) {
+    let start = items.as_ptr().cast::<u8>();
+    for offset in (0..std::mem::size_of_val(items)).step_by(64) {
+        hint(start.wrapping_add(offset));
+    }
 }
