@@ -17,7 +17,7 @@ pub enum Which {
     All,
 }
 
-const WHICH: [Which; 15] = [
+const WHICH: [Which; 16] = [
     Which::One(Name::Paper),
     Which::One(Name::SpeedAccuracy),
     Which::One(Name::Stability),
@@ -32,6 +32,7 @@ const WHICH: [Which; 15] = [
     Which::One(Name::RenderabilityHd),
     Which::One(Name::LatencyLive),
     Which::One(Name::Robustness),
+    Which::One(Name::RobustnessLive),
     Which::All,
 ];
 
@@ -69,7 +70,8 @@ pub struct ExperimentArgs {
     /// experiments take it: latency, latency-live, renderability, renderability-live.
     #[arg(long, value_name = "S")]
     pub seconds: Option<f64>,
-    /// The generator seeds `robustness` runs, a half-open range `A..B` (default its fixed CI sample).
+    /// The generator seeds `robustness` and `robustness-live` run, a half-open range `A..B` (default the fixed CI
+    /// sample).
     #[arg(long, value_name = "A..B", value_parser = parse_seeds)]
     pub seeds: Option<std::ops::Range<u64>>,
 }
@@ -128,6 +130,7 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         eprintln!("experiment {}{} ...", name.as_str(), if args.quick { " (quick)" } else { "" });
         let report = match (name, &args.seeds) {
             (Name::Robustness, Some(seeds)) => experiments::robustness::run_seeds(&options, seeds.clone())?,
+            (Name::RobustnessLive, seeds) => experiments::robustness_live::run(&options, seeds.clone())?,
             _ => experiments::run(name, &options)?,
         };
         println!(

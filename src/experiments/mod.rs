@@ -30,9 +30,11 @@ pub mod lead;
 pub mod model_update;
 pub mod paper;
 pub mod pauses;
+pub mod programs;
 pub mod renderability;
 pub mod renderability_device;
 pub mod robustness;
+pub mod robustness_live;
 pub mod scale;
 pub mod speed_accuracy;
 pub mod stability;
@@ -75,6 +77,8 @@ pub enum Name {
     LatencyLive,
     /// Generated linkages with default settings.
     Robustness,
+    /// A sample of them in real processes, beside virtual time.
+    RobustnessLive,
 }
 
 impl Name {
@@ -117,6 +121,9 @@ impl Name {
                 "3 scenes x 2 devices x 100-1000 ms one way in real time over loopback QUIC (about 5 min)"
             }
             Name::Robustness => "generated linkages (--seeds A..B) x OPs x devices x hands x 0-1000 ms one way",
+            Name::RobustnessLive => {
+                "generated linkages (--seeds A..B) x OPs x devices x 0-300 ms in real processes, beside virtual time"
+            }
         }
     }
 
@@ -132,6 +139,7 @@ impl Name {
                 | Name::RenderabilityDhd
                 | Name::RenderabilityHd
                 | Name::Robustness
+                | Name::RobustnessLive
         )
     }
 
@@ -152,6 +160,7 @@ impl Name {
             Name::RenderabilityHd => "renderability-hd",
             Name::LatencyLive => "latency-live",
             Name::Robustness => "robustness",
+            Name::RobustnessLive => "robustness-live",
         }
     }
 }
@@ -173,5 +182,6 @@ pub fn run(name: Name, options: &Options) -> Result<Report> {
         Name::RenderabilityHd => renderability_device::run(Vendor::Hd, options),
         Name::LatencyLive => latency_live::run(options),
         Name::Robustness => robustness::run(options),
+        Name::RobustnessLive => robustness_live::run(options, None),
     }
 }

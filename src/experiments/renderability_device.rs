@@ -23,19 +23,12 @@
 //! A pair renders by the matrix's bounds: the client ends well, no VE restore, no withheld snapshot, no
 //! non-finite value; loops closed; at most 5 % of ticks clamped; device-OP RMS (the device against the VE's
 //! OP at the same instant, in device space, from both programs' `--record` files) within 5 mm on a perfect
-//! network and 10 mm at 50 ms. The two records' clocks are matched by the time zero each program reports
-//! on the system clock (the server's `ve.epoch_unix_s`, the client's `loop_epoch_unix_s`), which both
-//! programs read on this one machine. Matching them by when each printed a line is late by whatever the
-//! host delays the reading (and the client's loop starts on its own thread), and a touring hand turns each
-//! 10 ms of mismatch into about half a millimetre of RMS.
+//! network and 10 mm at 50 ms. The programs are run, and their records read, by [`super::programs`].
 
-use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, Context, Result};
 use serde::Serialize;
 use serde_json::{json, Value};
 
@@ -53,6 +46,7 @@ use kinloop_protocol::{LocalModelForm, MappingRequest, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 
 use super::common::{sweep, Options, Output};
+use super::programs::{self, Launch, Launcher, Measured, Pair, Ran};
 use super::renderability::{bound_failures, scene_ops, Network};
 use crate::rounding::{num, round};
 
@@ -178,8 +172,6 @@ impl FakeDevice {
 pub const HANDS: [HandKind; 2] = [HandKind::Soft, HandKind::Firm];
 /// A pair's session (s), as `renderability-live`'s; `--quick` halves it.
 pub const SECONDS: f64 = 4.0;
-/// How long the server outlives the client's session: its start-up, the connection and the leave (s).
-const SERVER_MARGIN_S: f64 = 2.5;
 
 /// One pair of the matrix.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -239,45 +231,23 @@ pub fn points(vendor: Vendor, scenes: &[&str], hands: &[HandKind]) -> Result<Vec
     Ok(out)
 }
 
-/// How a program is started: its name (`kinloop-server`, `kinloop-client`) and arguments to a command.
-pub type Launch = dyn Fn(&str, &[String]) -> Command + Sync;
-
 /// The programs a pair runs: `kinloop-server`, `kinloop-client` and the vendor's fake library.
 pub struct Programs {
-    launch: Box<Launch>,
+    launcher: Launcher,
     /// The fake library.
     pub fake: PathBuf,
 }
 
 impl Programs {
-    /// Programs started by `launch` (tests re-execute their own binary as each program), the fake at `fake`.
+    /// Programs started by `launch` (tests re-execute their own binary as each), the fake at `fake`.
     pub fn launched_by(launch: Box<Launch>, fake: PathBuf) -> Programs {
-        Programs { launch, fake }
+        Programs { launcher: Launcher::launched_by(launch), fake }
     }
 
-    /// The programs beside this executable (cargo puts `kinloop`, `kinloop-server` and `kinloop-client` in
-    /// one folder, and the fake library in it or in its `deps`), the library from the vendor's variable
-    /// (`KINLOOP_DHD_LIB`, `KINLOOP_HD_LIB`) when set.
+    /// The programs beside this executable, the library from the vendor's variable (`KINLOOP_DHD_LIB`,
+    /// `KINLOOP_HD_LIB`) when set, else beside this executable or in its `deps`.
     pub fn beside_this_program(vendor: Vendor) -> Result<Programs> {
-        let exe = std::env::current_exe().context("this program's path")?;
-        let dir = exe.parent().context("this program's folder")?.to_owned();
-        for name in ["kinloop-server", "kinloop-client"] {
-            let path = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-            if !path.is_file() {
-                bail!("{} is missing: build the workspace (cargo build --release --workspace)", path.display());
-            }
-        }
-        let fake = fake_library_beside_this_program(vendor)?;
-        let launch = move |program: &str, args: &[String]| {
-            let mut command = Command::new(dir.join(format!("{program}{}", std::env::consts::EXE_SUFFIX)));
-            command.args(args);
-            command
-        };
-        Ok(Programs { launch: Box::new(launch), fake })
-    }
-
-    fn command(&self, program: &str, args: Vec<String>) -> Command {
-        (self.launch)(program, &args)
+        Ok(Programs { launcher: Launcher::beside_this_program()?, fake: fake_library_beside_this_program(vendor)? })
     }
 }
 
@@ -337,170 +307,34 @@ fn tour_in<S: Space>(scene: &Scene, op: &str, spec: DeviceSpec, device: FakeDevi
 }
 
 /// A child's lines on one stream, each with when it was read.
-type Lines = Arc<Mutex<Vec<(Instant, String)>>>;
-
-/// Reads `stream` line by line on a thread, timestamping each line.
-fn collect_lines(stream: impl Read + Send + 'static) -> (Lines, std::thread::JoinHandle<()>) {
-    let lines: Lines = Arc::new(Mutex::new(Vec::new()));
-    let sink = lines.clone();
-    let handle = std::thread::spawn(move || {
-        for line in BufReader::new(stream).lines().map_while(|l| l.ok()) {
-            if let Ok(mut v) = sink.lock() {
-                v.push((Instant::now(), line));
-            }
-        }
-    });
-    (lines, handle)
-}
-
-/// Waits for `child` up to `limit`, killing it after.
-fn wait_bounded(child: &mut Child, limit: Duration, what: &str) -> Result<std::process::ExitStatus> {
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait()? {
-            return Ok(status);
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            let _ = child.wait();
-            bail!("{what} did not end within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// The link flags of `network` for one side (`seed` differs per side).
-fn link_flags(network: Network, seed: u64) -> Vec<String> {
-    match network {
-        Network::Perfect => Vec::new(),
-        Network::Delayed50 => {
-            ["--delay", "50ms", "--jitter", "5ms", "--seed", &seed.to_string()].map(String::from).to_vec()
-        }
-    }
-}
-
-/// What the two programs left: the server's JSON statistics, the client's, its log, and the clock offset.
-struct Ran {
-    server: Value,
-    client: Value,
-    client_log: String,
-    client_ok: bool,
-    offset_s: f64,
+fn network_flags(network: Network, seed: u64) -> Vec<String> {
+    let link = network.link(seed);
+    programs::link_flags(link.delay, link.jitter, seed)
 }
 
 /// Runs the server and the client of `point` for `seconds` in `dir`.
 fn run_programs(point: &DevicePoint, seconds: f64, programs: &Programs, dir: &Path) -> Result<Ran> {
     let tour = device_tour(point, &programs.fake)?;
-    let mut args: Vec<String> = ["--scene", &point.scene, "--listen", "127.0.0.1:0", "--cert-dir", "cert"]
-        .into_iter()
-        .chain(["--record", "ve.csv", "--json", "--stats-every", "0", "--duration"])
-        .map(String::from)
-        .collect();
-    args.push((seconds + SERVER_MARGIN_S).to_string());
-    args.extend(link_flags(point.network, 1));
-    let mut server = programs
-        .command("kinloop-server", args)
-        .current_dir(dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::from(std::fs::File::create(dir.join("server.log"))?))
-        .spawn()
-        .context("starting kinloop-server")?;
-    let mut out = BufReader::new(server.stdout.take().context("the server's stdout")?);
-    let log_tail = |dir: &Path| {
-        let text = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
-        text.lines().rev().take(5).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n")
-    };
-    let address = line_starting(&mut out, "kinloop-server listening on")
-        .with_context(|| format!("the server's log ends:\n{}", log_tail(dir)))?;
-    let fingerprint = line_starting(&mut out, "certificate fingerprint")?;
-    let last_word = |l: &str| l.split_whitespace().last().unwrap_or("").to_owned();
-    let (address, fingerprint) = (last_word(&address), last_word(&fingerprint));
-    let device_flag = match point.device.vendor() {
+    let device = match point.device.vendor() {
         Vendor::Dhd => "dhd",
         Vendor::Hd => "hd",
     };
-    let mut args: Vec<String> = ["--server", &address, "--fingerprint", &fingerprint, "--device", device_flag]
-        .into_iter()
-        .chain(["--op", &point.op, "--json", "--record", "client.csv", "--duration"])
-        .map(String::from)
-        .collect();
-    args.push(seconds.to_string());
-    args.extend(link_flags(point.network, 2));
-    let mut client = programs
-        .command("kinloop-client", args)
-        .env(point.device.vendor().library_variable(), &programs.fake)
-        .envs(point.device.fake_env(point.hand, &tour))
-        .current_dir(dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("starting kinloop-client")?;
-    let (log, reader) = collect_lines(client.stderr.take().context("the client's stderr")?);
-    let mut client_out = String::new();
-    client.stdout.take().context("the client's stdout")?.read_to_string(&mut client_out)?;
-    let status = wait_bounded(&mut client, Duration::from_secs_f64(seconds + 30.0), "kinloop-client")?;
-    let _ = reader.join();
-    let server_status = wait_bounded(&mut server, Duration::from_secs_f64(seconds + 30.0), "kinloop-server")?;
-    let mut server_out = String::new();
-    out.read_to_string(&mut server_out)?;
-    let lines = log.lock().map_err(|_| anyhow!("the client's log"))?.clone();
-    let client_log: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
-    std::fs::write(dir.join("client.log"), &client_log)?;
-    let holding = lines.iter().any(|(_, l)| l.contains("kinloop-client: holding"));
-    if !server_status.success() {
-        bail!("kinloop-server failed (see {})", dir.join("server.log").display());
-    }
-    let server = json_in(&server_out).context("the server's JSON statistics")?;
-    let client = json_in(&client_out).unwrap_or(Value::Null);
-    let epochs = (client["loop_epoch_unix_s"].as_f64(), server["ve"]["epoch_unix_s"].as_f64());
-    let offset_s = match epochs {
-        (Some(client), Some(ve)) => client - ve,
-        _ => f64::NAN,
+    let mut client_env = vec![(point.device.vendor().library_variable().to_owned(), path_text(&programs.fake))];
+    client_env.extend(point.device.fake_env(point.hand, &tour).into_iter().map(|(k, v)| (k.to_owned(), v)));
+    let pair = Pair {
+        scene: point.scene.clone(),
+        op: point.op.clone(),
+        device: device.into(),
+        client_flags: Vec::new(),
+        client_env,
+        links: [network_flags(point.network, 1), network_flags(point.network, 2)],
     };
-    Ok(Ran { server, client, client_ok: status.success() && holding && offset_s.is_finite(), client_log, offset_s })
+    programs::run(&pair, seconds, &programs.launcher, dir)
 }
 
-/// Reads lines from `out` until one holds `prefix`; that line from `prefix` on (a launcher may print
-/// before it, as a test harness does).
-fn line_starting(out: &mut impl BufRead, prefix: &str) -> Result<String> {
-    let mut line = String::new();
-    loop {
-        line.clear();
-        if out.read_line(&mut line)? == 0 {
-            bail!("the server ended before printing {prefix:?}");
-        }
-        if let Some(at) = line.find(prefix) {
-            return Ok(line[at..].trim_end().to_owned());
-        }
-    }
-}
-
-/// The JSON object a program printed last on its stdout (anything before it is skipped).
-fn json_in(text: &str) -> Result<Value> {
-    let start = text.find('{').context("no JSON object")?;
-    Ok(serde_json::from_str(&text[start..])?)
-}
-
-/// Device-OP RMS in device space (m): the client's ticks with output against the VE's OP at the same
-/// instant, over the scene's linear axes.
-fn device_op_rms(dir: &Path, kind: SceneKind, offset_s: f64, position_scale: f64) -> Result<f64> {
-    let mut samples = crate::demo::records::read_client(&dir.join("client.csv"), kind)?;
-    let ve = crate::demo::records::read_ve(&dir.join("ve.csv"), kind)?;
-    let user = ve.iter().find_map(|v| v.users.first().map(|u| u.0)).context("the user in the VE's record")?;
-    crate::demo::records::merge(&mut samples, &ve, user, offset_s);
-    let linear = kind.point_dim();
-    let squares: Vec<f64> = samples
-        .iter()
-        .filter(|s| s.gain > 0.0)
-        .filter_map(|s| {
-            let op = s.ve_op.as_ref()?;
-            Some((0..linear).map(|i| (s.device[i] - op[i]).powi(2)).sum::<f64>())
-        })
-        .collect();
-    if squares.is_empty() {
-        bail!("no tick with output to compare");
-    }
-    Ok((squares.iter().sum::<f64>() / squares.len() as f64).sqrt() * position_scale)
+fn path_text(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
 }
 
 /// Runs one pair for `seconds` in a folder under `scratch` and judges it.
@@ -509,34 +343,23 @@ pub fn evaluate(point: &DevicePoint, seconds: f64, programs: &Programs, scratch:
     std::fs::create_dir_all(&dir)?;
     let ran = run_programs(point, seconds, programs, &dir)?;
     let kind = builtin::scene(&point.scene).context("built in")??.kind;
-    let core = &ran.server["ve"]["core"];
-    let count = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
-    let (restores, withheld) = (count(&core["state_restores"]), count(&core["snapshots_withheld"]));
-    let closure = count(&core["max_closure_error"]);
-    let c = &ran.client;
-    let non_finite = count(&c["non_finite_events"]);
-    let clamped = count(&c["clamped_fraction"]);
-    let scale = count(&c["session"]["position_scale"]);
-    let mut failures = Vec::new();
-    if !ran.client_ok {
-        let last = ran.client_log.lines().rfind(|l| l.contains("error")).unwrap_or("no error line");
-        failures.push(format!("the client failed: {last}"));
-    }
-    if !(restores == 0.0 && withheld == 0.0 && non_finite == 0.0) {
-        failures
-            .push(format!("unstable: {restores} VE restores, {withheld} snapshots withheld, {non_finite} non-finite"));
-    }
-    let rms = if ran.client_ok { device_op_rms(&dir, kind, ran.offset_s, scale)? } else { f64::NAN };
-    failures.extend(bound_failures(closure, clamped, rms, point.network));
+    let measured = Measured::of(&ran, &dir, kind)?;
+    let mut failures = measured.failures;
+    failures.extend(bound_failures(
+        measured.max_closure_error,
+        measured.clamped_fraction,
+        measured.device_op_rms_m,
+        point.network,
+    ));
     let result = DeviceResult {
         point: point.clone(),
         renders: failures.is_empty(),
         failures,
-        clamped_fraction: clamped,
-        device_op_rms_m: rms,
-        device_model_rms_m: count(&c["tracking_error_rms_m"]),
-        max_closure_error_m: closure,
-        ve_restores: restores as u64,
+        clamped_fraction: measured.clamped_fraction,
+        device_op_rms_m: measured.device_op_rms_m,
+        device_model_rms_m: measured.device_model_rms_m,
+        max_closure_error_m: measured.max_closure_error,
+        ve_restores: measured.ve_restores,
     };
     // Each pair's verdict beside its records, so a long run can be read while it goes.
     std::fs::write(dir.join("result.json"), serde_json::to_string_pretty(&result)?)?;

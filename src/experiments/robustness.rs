@@ -129,7 +129,7 @@ pub fn points(linkages: &[Generated], hands: &[HandKind], delays: &[u64]) -> Vec
 }
 
 /// The scene's length scale (what closure is judged against), or why it does not compile.
-fn length_scale(g: &Generated) -> Result<f64, String> {
+pub(crate) fn length_scale(g: &Generated) -> Result<f64, String> {
     let compiled = match g.scene.kind {
         SceneKind::Planar => Model::<Planar>::compile(&g.scene, &g.scene.name).map(|m| m.length_scale),
         SceneKind::Spatial => Model::<Spatial>::compile(&g.scene, &g.scene.name).map(|m| m.length_scale),
@@ -176,20 +176,13 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
     let Some(c) = summary.clients.first() else { return refused("the session had no client".into()) };
     let closure_relative = summary.max_closure_error / scale;
     let mut failures: Vec<String> = verdict.reasons.iter().map(|r| format!("unstable: {r}")).collect();
-    if closure_relative.is_nan() || closure_relative > CLOSURE_RELATIVE {
-        failures.push(format!("closure: {closure_relative:.1e} of the length scale"));
-    }
-    if c.saturated_fraction.is_nan() || c.saturated_fraction > CLAMPED_BOUND {
-        failures.push(format!("saturation: {:.1} % clamped", c.saturated_fraction * 100.0));
-    }
-    let rms_bound = match point.delay_ms {
-        0 => RMS_PERFECT_M,
-        d if d <= 50 => RMS_DELAYED_M,
-        _ => UNHEARD_FACTOR * c.device_unheard_rms_m,
-    };
-    if c.device_op_rms_m.is_nan() || c.device_op_rms_m > rms_bound {
-        failures.push(format!("tracking: RMS {:.1} mm > {:.1} mm", c.device_op_rms_m * 1e3, rms_bound * 1e3));
-    }
+    failures.extend(bound_failures(
+        point.delay_ms,
+        closure_relative,
+        c.saturated_fraction,
+        c.device_op_rms_m,
+        c.device_unheard_rms_m,
+    ));
     Outcome {
         point: point.clone(),
         failures,
@@ -201,6 +194,34 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
         closure_relative,
         energy_excess: verdict.energy_excess_j,
     }
+}
+
+/// The bounds beyond stability a session at one-way `delay_ms` is held to: closure (its largest error over
+/// the length scale), clamped ticks, and device-OP RMS (device space, m) against the delay's bound, at 300 ms
+/// and beyond [`UNHEARD_FACTOR`] times the unheard-motion floor `unheard_rms_m`. NaN fails.
+pub fn bound_failures(
+    delay_ms: u64,
+    closure_relative: f64,
+    clamped_fraction: f64,
+    rms_m: f64,
+    unheard_rms_m: f64,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    if closure_relative.is_nan() || closure_relative > CLOSURE_RELATIVE {
+        failures.push(format!("closure: {closure_relative:.1e} of the length scale"));
+    }
+    if clamped_fraction.is_nan() || clamped_fraction > CLAMPED_BOUND {
+        failures.push(format!("saturation: {:.1} % clamped", clamped_fraction * 100.0));
+    }
+    let rms_bound = match delay_ms {
+        0 => RMS_PERFECT_M,
+        d if d <= 50 => RMS_DELAYED_M,
+        _ => UNHEARD_FACTOR * unheard_rms_m,
+    };
+    if rms_m.is_nan() || rms_m > rms_bound {
+        failures.push(format!("tracking: RMS {:.1} mm > {:.1} mm", rms_m * 1e3, rms_bound * 1e3));
+    }
+    failures
 }
 
 /// The class of a failure reason (its words before the colon).

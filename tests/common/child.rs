@@ -421,3 +421,19 @@ pub fn json_object(stdout: &str) -> serde_json::Value {
         _ => panic!("no JSON object in:\n{stdout}"),
     }
 }
+
+/// Starts the programs of test `name` (this test binary re-executed as each, see [`Role::Program`]) for the
+/// experiments that run `kinloop-server` and `kinloop-client` themselves (`kinloop::experiments::programs`).
+pub fn launch_as_programs_of(name: &'static str) -> Box<kinloop::experiments::programs::Launch> {
+    Box::new(move |program: &str, args: &[String]| {
+        let program = Program::named(program).unwrap_or_else(|| panic!("{program} is not a kinloop program"));
+        let role = Role::Program { program, args: args.to_vec() };
+        let mut command = Command::new(std::env::current_exe().expect("the test binary's path"));
+        command
+            .args([test_path(name).as_str(), "--exact", "--nocapture", "--test-threads=1"])
+            .env("KINLOOP_E2E_ROLE", serde_json::to_string(&role).expect("a role"))
+            // The child lives while its stdin is open: as long as the runner holds it.
+            .stdin(std::process::Stdio::piped());
+        command
+    })
+}

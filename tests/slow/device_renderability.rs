@@ -8,10 +8,9 @@
 use crate::common;
 
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::child::{serve_if_child, Program, Role};
+use common::child::{launch_as_programs_of, serve_if_child};
 use kinloop::experiments::renderability::Network;
 use kinloop::experiments::renderability_device::{evaluate, DevicePoint, FakeDevice, Programs};
 use kinloop_client::user::HandKind;
@@ -21,18 +20,7 @@ const SECONDS: f64 = 2.0;
 
 /// The programs of test `name` (this binary re-executed as each), the fake library at `fake`.
 fn programs(name: &'static str, fake: PathBuf) -> Programs {
-    let launch = move |program: &str, args: &[String]| {
-        let program = Program::named(program).unwrap_or_else(|| panic!("{program} is not a kinloop program"));
-        let role = Role::Program { program, args: args.to_vec() };
-        let mut command = Command::new(std::env::current_exe().expect("the test binary's path"));
-        command
-            .args([common::child::test_path(name).as_str(), "--exact", "--nocapture", "--test-threads=1"])
-            .env("KINLOOP_E2E_ROLE", serde_json::to_string(&role).expect("a role"))
-            // The child lives while its stdin is open: as long as the runner holds it.
-            .stdin(Stdio::piped());
-        command
-    };
-    Programs::launched_by(Box::new(launch), fake)
+    Programs::launched_by(launch_as_programs_of(name), fake)
 }
 
 fn pair(scene: &str, op: &str, device: FakeDevice, network: Network, hand: HandKind) -> DevicePoint {

@@ -19,4 +19,5 @@ mod hand_run;
 mod hd_e2e;
 mod resume_e2e;
 mod resume_netns;
+mod robustness_live;
 mod rooms_e2e;
