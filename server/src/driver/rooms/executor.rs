@@ -8,7 +8,8 @@
 //!   plus the room's estimate ([`ROOM_ESTIMATE`] per tick) stays within [`BUDGET_SHARE`]; a new user joins
 //!   only if its room's thread load plus the user's estimate (its room's measured cost per user, at least
 //!   [`USER_ESTIMATE`]) stays within it. Refusals say the load and the share.
-//! - **Isolation.** A room whose own load passes the share is moved off its real-time thread to the
+//! - **Isolation.** A room whose own load passes the share, or whose last [`OVERRUN_STREAK`] ticks each
+//!   took more than the share of a period, is moved off its real-time thread to the
 //!   quarantine thread (normal priority, `super::quarantine`), so it never delays a room within budget; it
 //!   refuses new users, and is stepped there in slow motion within a CPU budget of its own. A
 //!   tick that panics is caught (`catch_unwind`): that room is closed with the reason, its users told; the
@@ -17,7 +18,7 @@
 //!   none, so a fleet manager's health pings stop when the stepping stalls (`crate::fleet`).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -33,6 +34,11 @@ pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
 pub const MAX_CHARGED_PERIODS: f64 = 4.0;
 /// The share of each real-time thread's time that rooms may fill; the rest absorbs jitter.
 pub const BUDGET_SHARE: f64 = 0.7;
+/// Consecutive ticks each longer than [`BUDGET_SHARE`] of a period that send a room to the quarantine at
+/// once, before its cost average has caught up: a room that takes 2 ms a tick at 1 kHz would otherwise hold
+/// its thread for a few dozen ticks (its average climbing from [`ROOM_ESTIMATE`]), and make every other room
+/// there miss as many deadlines. One long tick (a preemption, a page fault) is not a streak.
+pub const OVERRUN_STREAK: u32 = 3;
 /// A new room's cost per tick before it is measured.
 pub const ROOM_ESTIMATE: Duration = Duration::from_micros(50);
 /// The least a new user is expected to add to its room's tick.
@@ -72,6 +78,8 @@ pub struct RoomCell {
     /// Ticks per second.
     pub rate_hz: f64,
     cost_ns: AtomicU64,
+    /// Consecutive ticks longer than the share of a period (only its thread writes it).
+    streak: AtomicU32,
     users: AtomicUsize,
     thread: AtomicUsize,
     quarantined: AtomicBool,
@@ -88,6 +96,7 @@ impl RoomCell {
             name,
             rate_hz,
             cost_ns: AtomicU64::new(f64::to_bits(ROOM_ESTIMATE.as_nanos() as f64)),
+            streak: AtomicU32::new(0),
             users: AtomicUsize::new(0),
             thread: AtomicUsize::new(0),
             quarantined: AtomicBool::new(false),
@@ -106,6 +115,12 @@ impl RoomCell {
     /// The share of a second the room takes.
     pub fn load(&self) -> f64 {
         self.cost().as_secs_f64() * self.rate_hz
+    }
+
+    /// Whether it takes more than a real-time thread's share: its cost average says so, or its last
+    /// [`OVERRUN_STREAK`] ticks each took more than the share of a period.
+    pub fn overruns(&self) -> bool {
+        self.load() > BUDGET_SHARE || self.streak.load(Ordering::Relaxed) >= OVERRUN_STREAK
     }
 
     /// The thread that steps it.
@@ -170,6 +185,9 @@ impl RoomCell {
         let old = f64::from_bits(self.cost_ns.load(Ordering::Relaxed));
         let new = old + EWMA_WEIGHT * (charged - old);
         self.cost_ns.store(new.to_bits(), Ordering::Relaxed);
+        let long = step.as_secs_f64() * self.rate_hz > BUDGET_SHARE;
+        let streak = if long { self.streak.load(Ordering::Relaxed).saturating_add(1) } else { 0 };
+        self.streak.store(streak, Ordering::Relaxed);
         self.users.store(users, Ordering::Relaxed);
     }
 
@@ -469,7 +487,7 @@ fn run_thread(inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadEnd, 
             let cell = slots[i].cell.clone();
             cell.record(started.elapsed(), users);
             match ticked {
-                Ok(()) if cell.load() > BUDGET_SHARE => {
+                Ok(()) if cell.overruns() => {
                     let slot = slots.swap_remove(i);
                     slot.cell.quarantined.store(true, Ordering::Relaxed);
                     tracing::warn!(room = %cell.name, cost_us = cell.cost().as_secs_f64() * 1e6, "the room overruns its share; moved to the quarantine thread");
@@ -491,14 +509,24 @@ mod tests {
     use super::*;
 
     #[test]
-    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_still_reads_slow() {
+    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_overruns_within_a_streak() {
         let quiet = RoomCell::new("quiet".into(), 1000.0, Box::new(|_| {}));
         for _ in 0..200 {
             quiet.record(Duration::from_micros(20), 1);
         }
         quiet.record(Duration::from_millis(200), 1);
         assert!(quiet.load() < 0.1, "one 200 ms tick made the room {:.0} % busy", quiet.load() * 100.0);
+        assert!(!quiet.overruns(), "one long tick is not a streak");
+        quiet.record(Duration::from_millis(2), 1);
+        quiet.record(Duration::from_micros(20), 1);
+        quiet.record(Duration::from_millis(2), 1);
+        assert!(!quiet.overruns(), "long ticks apart are not a streak");
         let slow = RoomCell::new("slow".into(), 1000.0, Box::new(|_| {}));
+        for tick in 0..OVERRUN_STREAK {
+            assert!(!slow.overruns(), "{tick} long ticks");
+            slow.record(Duration::from_millis(2), 1);
+        }
+        assert!(slow.overruns(), "a streak of {OVERRUN_STREAK} ticks of 2 ms at 1 kHz");
         for _ in 0..400 {
             slow.record(Duration::from_millis(2), 1);
         }
