@@ -16,6 +16,7 @@
 //! experiment's own chart code.
 
 pub mod records;
+pub mod twin;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -89,6 +90,8 @@ pub struct DemoOptions {
     pub first_op: Option<String>,
     /// Every user's hand and what it intends (`None`: relaxed and firm in turn, touring the reach).
     pub hand: Option<HandSpec>,
+    /// Afterwards, run the same session in virtual time ([`twin`]) and report it beside.
+    pub twin: bool,
 }
 
 impl DemoOptions {
@@ -112,6 +115,7 @@ impl DemoOptions {
             hd: None,
             first_op: None,
             hand: None,
+            twin: false,
         })
     }
 }
@@ -206,6 +210,8 @@ pub struct DemoSummary {
     pub snapshots_withheld: u64,
     /// Each user.
     pub per_user: Vec<UserSummary>,
+    /// The same session in virtual time (`--twin`), when asked for.
+    pub twin: Option<twin::TwinSummary>,
     /// Files written in the output directory, `summary.json` last.
     pub files: Vec<String>,
 }
@@ -368,6 +374,12 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
 
     let mut summary = summarize(options, finished, &server_stats, wall_s, cancelled);
     summary.files = draw(options, &dir, &mut summary.per_user)?;
+    if options.twin {
+        let joins: Vec<Duration> =
+            summary.per_user.iter().map(|u| Duration::from_secs_f64(u.record_offset_s.max(0.0))).collect();
+        let round_trip = Duration::from_secs_f64(summary.rtt_ms_p50.unwrap_or(0.0).max(0.0) / 1e3);
+        summary.twin = Some(twin::run(options, &joins, round_trip)?);
+    }
     summary.files.push("ve.csv".into());
     summary.files.extend((1..=summary.users).map(|i| format!("user{i}.csv")));
     summary.files.push("summary.json".into());
@@ -536,6 +548,7 @@ fn summarize(
         ve_restores: ve.core.state_restores,
         snapshots_withheld: ve.core.snapshots_withheld,
         per_user,
+        twin: None,
         files: Vec::new(),
     }
 }

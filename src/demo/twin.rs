@@ -1,0 +1,115 @@
+//! The demo's twin (`kinloop demo --twin`): the same session in virtual time through `kinloop_harness`, so
+//! what the real-time demo measures can be read against the floor its physics and sharing rule set.
+//!
+//! The twin has the demo's scene, VE configuration, users, operational points, devices and hands; each user
+//! joins when the real one's loop started (the real joins are a few milliseconds apart, and hands touring
+//! one path a few milliseconds apart are part of what each user feels); and each direction of every link
+//! is half the real session's median ping round trip (which holds the demo's emulated delay, if any), its
+//! jitter the emulated one plus a third of what the loopback adds. What the real demo measures above the twin is real time's: the
+//! scheduling of the VE, the shared clock and the network side on the machine's cores.
+
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use kinloop_client::device::DevicePreset;
+use kinloop_harness::{ClientPlan, SessionPlan};
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::ServerConfig;
+use serde::Serialize;
+
+use super::{user_of, DemoOptions};
+
+/// The twin's part of the demo's summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct TwinSummary {
+    /// Each direction's mean one-way delay (ms): half the real median ping round trip, at least the demo's
+    /// emulated delay.
+    pub one_way_ms: f64,
+    /// Its standard deviation (ms).
+    pub jitter_ms: f64,
+    /// Virtual seconds simulated.
+    pub duration_s: f64,
+    /// Each user's device-OP RMS in the twin (mm, the device's space), in the demo's user order.
+    pub device_op_rms_mm: Vec<f64>,
+    /// States the twin's VE restored.
+    pub ve_restores: u64,
+    /// Largest closure residual in the twin's VE (m).
+    pub max_closure_error: f64,
+    /// Wall-clock seconds the twin took.
+    pub wall_s: f64,
+}
+
+/// The twin's link for one user: the demo's `link` lengthened to `half_round_trip` (the measured trip holds
+/// the emulated delay), the loopback's part adding a third of itself as jitter; the demo's seed offset by
+/// `user`.
+fn twin_link(link: &LinkConfig, half_round_trip: Duration, user: u64) -> LinkConfig {
+    let loopback = half_round_trip.saturating_sub(link.delay);
+    LinkConfig {
+        delay: link.delay + loopback,
+        jitter: link.jitter + loopback / 3,
+        seed: link.seed.wrapping_add(0x7717_0000 + user),
+        ..link.clone()
+    }
+}
+
+/// The twin's plan: `options`' session, user i joining at `join_at[i]`, every link `options.link`
+/// lengthened to half of `round_trip`.
+pub fn plan(options: &DemoOptions, join_at: &[Duration], round_trip: Duration) -> Result<SessionPlan> {
+    let mut ve = ServerConfig::new(options.scene.clone(), "twin", ([127, 0, 0, 1], 0).into()).ve;
+    ve.max_users = ve.max_users.max(options.users);
+    let device = options.device.unwrap_or_else(|| DevicePreset::for_kind(options.scene.kind));
+    let clients = (0..options.users)
+        .map(|i| {
+            let (op, user) = user_of(options, i);
+            let mut client = ClientPlan::new(&format!("demo-user{}", i + 1), &op, device);
+            client.user = user;
+            client.join_at = join_at.get(i).copied().unwrap_or_default();
+            client.with_link(twin_link(&options.link, round_trip / 2, i as u64))
+        })
+        .collect();
+    Ok(SessionPlan { scene: options.scene.clone(), ve, clients, duration: options.duration, record_every: 1000 })
+}
+
+/// Runs the twin of `options` (see the module documentation).
+pub fn run(options: &DemoOptions, join_at: &[Duration], round_trip: Duration) -> Result<TwinSummary> {
+    let plan = plan(options, join_at, round_trip)?;
+    let started = std::time::Instant::now();
+    let (summary, _) = kinloop_harness::run(&plan, &mut |_| {}).context("the demo's twin in virtual time")?;
+    let link = &plan.clients.first().map(|c| c.uplink.clone()).unwrap_or_default();
+    Ok(TwinSummary {
+        one_way_ms: link.delay.as_secs_f64() * 1e3,
+        jitter_ms: link.jitter.as_secs_f64() * 1e3,
+        duration_s: summary.duration_s,
+        device_op_rms_mm: summary.clients.iter().map(|c| c.device_op_rms_m * 1e3).collect(),
+        ve_restores: summary.ve_restores,
+        max_closure_error: summary.max_closure_error,
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_twin_has_the_demos_users_joins_and_a_link_of_half_the_round_trip() {
+        let mut options = DemoOptions::new("unused").expect("the testbed");
+        options.users = 3;
+        options.link.delay = Duration::from_millis(2);
+        let joins = [Duration::ZERO, Duration::from_micros(2700), Duration::from_micros(5400)];
+        let plan = plan(&options, &joins, Duration::from_micros(300)).expect("a plan");
+        assert_eq!(plan.clients.len(), 3);
+        for (i, client) in plan.clients.iter().enumerate() {
+            assert_eq!(client.join_at, joins[i]);
+            assert_eq!(client.op, user_of(&options, i).0);
+            assert_eq!(client.uplink.delay, Duration::from_micros(2000), "the measured trip holds the emulated");
+            assert_eq!(client.uplink.jitter, Duration::ZERO);
+        }
+        assert_ne!(plan.clients[0].uplink.seed, plan.clients[1].uplink.seed);
+        let loopback = super::plan(&options, &joins, Duration::from_micros(4600)).expect("a plan");
+        assert_eq!(loopback.clients[0].uplink.delay, Duration::from_micros(2300));
+        assert_eq!(loopback.clients[0].uplink.jitter, Duration::from_micros(100));
+        assert!(plan.ve.max_users >= 3);
+        assert_eq!(plan.duration, options.duration);
+    }
+}
