@@ -74,6 +74,10 @@ pub struct DemoArgs {
     /// measured loopback round trip) and report each user's tracking there beside the real one's.
     #[arg(long)]
     pub twin: bool,
+    /// Pin the server's real-time thread and network workers to the last CPU (as `kinloop-server
+    /// --pin-network`): the VE's wake-up of the network side each round stays on one CPU.
+    #[arg(long)]
+    pub pin_network: bool,
 }
 
 fn parse_hand(s: &str) -> Result<HandKind, String> {
@@ -128,6 +132,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         first_op: args.op.clone(),
         hand: args.hand.map(HandSpec::touring),
         twin: args.twin,
+        pin_network: args.pin_network,
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {

@@ -92,6 +92,8 @@ pub struct DemoOptions {
     pub hand: Option<HandSpec>,
     /// Afterwards, run the same session in virtual time ([`twin`]) and report it beside.
     pub twin: bool,
+    /// Pin the server's real-time thread and network workers to one CPU (`ServerConfig::network_cpu`).
+    pub pin_network: bool,
 }
 
 impl DemoOptions {
@@ -116,6 +118,7 @@ impl DemoOptions {
             first_op: None,
             hand: None,
             twin: false,
+            pin_network: false,
         })
     }
 }
@@ -286,10 +289,14 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
     // The server's QUIC side as kinloop-server runs it: below the real-time loops, above other work.
     let realtime = options.realtime;
+    let network_cpu = options.pin_network.then(kinloop_process::affinity::last_cpu);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("kinloop-demo-net")
         .on_thread_start(move || {
+            if let Some(cpu) = network_cpu {
+                drop(kinloop_process::affinity::pin_current_thread(cpu));
+            }
             if realtime {
                 drop(kinloop_process::realtime::try_fifo_priority(kinloop_process::realtime::NETWORK_PRIORITY));
             }
@@ -304,6 +311,7 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     config.link = side_link(&options.link, 0);
     config.record = Some(dir.join("ve.csv"));
     config.realtime = options.realtime;
+    config.network_cpu = network_cpu;
     config.view = options.view.clone();
     let server = {
         let _inside = runtime.enter();

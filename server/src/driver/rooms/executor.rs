@@ -256,8 +256,14 @@ pub fn default_rt_threads() -> usize {
 
 impl Executor {
     /// Starts `threads` real-time threads (SCHED_FIFO when `realtime` and granted) and the quarantine thread;
-    /// the real-time threads advance `heartbeat`, if given, on every pass.
-    pub fn start(threads: usize, realtime: bool, heartbeat: Option<Heartbeat>) -> std::io::Result<Arc<Executor>> {
+    /// the real-time threads advance `heartbeat`, if given, on every pass. The first is pinned to CPU `pin`,
+    /// if given (`ServerConfig::network_cpu`).
+    pub fn start(
+        threads: usize,
+        realtime: bool,
+        heartbeat: Option<Heartbeat>,
+        pin: Option<usize>,
+    ) -> std::io::Result<Arc<Executor>> {
         let stop = Arc::new(AtomicBool::new(false));
         let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
         let quarantine_stop = stop.clone();
@@ -268,6 +274,11 @@ impl Executor {
         for index in 0..threads.max(1) {
             let (stop, quarantine, pulse) = (stop.clone(), quarantine.clone(), pulse.clone());
             let (end, handle) = spawn_thread(format!("kinloop-rooms-{index}"), move |inbox| {
+                if let Some(cpu) = pin.filter(|_| index == 0) {
+                    if let Err(why) = kinloop_process::affinity::pin_current_thread(cpu) {
+                        tracing::warn!(%why, "the first rooms thread is not pinned");
+                    }
+                }
                 let granted = realtime
                     && kinloop_process::realtime::try_realtime_priority()
                         .inspect_err(
@@ -537,7 +548,7 @@ mod tests {
     /// Rooms opened at scattered moments start on one grid: their deadlines differ by whole periods.
     #[test]
     fn rooms_opened_apart_start_on_the_executors_grid() {
-        let executor = Executor::start(1, false, None).expect("threads");
+        let executor = Executor::start(1, false, None, None).expect("threads");
         let period = Duration::from_millis(1);
         let first = executor.grid_start(period);
         std::thread::sleep(Duration::from_micros(2_300));
@@ -597,7 +608,7 @@ mod tests {
     /// cap, while it goes on stepping (in slow motion, its time one period a tick).
     #[test]
     fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
-        let executor = Executor::start(1, false, None).expect("threads");
+        let executor = Executor::start(1, false, None, None).expect("threads");
         let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0)));
         let stop = Arc::new(AtomicBool::new(false));
         let room = Spinner {
