@@ -112,4 +112,21 @@ mod tests {
         assert!(plan.ve.max_users >= 3);
         assert_eq!(plan.duration, options.duration);
     }
+
+    #[test]
+    fn a_twin_of_two_hands_reports_each_users_tracking_and_a_stable_ve() {
+        let mut options = DemoOptions::new("unused").expect("the testbed");
+        options.users = 2;
+        options.duration = Duration::from_secs(2);
+        let joins = [Duration::ZERO, Duration::from_millis(3)];
+        let twin = run(&options, &joins, Duration::from_micros(300)).expect("the twin runs");
+        assert_eq!(twin.device_op_rms_mm.len(), 2);
+        for rms in &twin.device_op_rms_mm {
+            assert!(rms.is_finite() && *rms > 0.0 && *rms < 1.0, "{twin:?}");
+        }
+        assert_eq!(twin.ve_restores, 0, "{twin:?}");
+        assert!(twin.max_closure_error < 1e-6, "{twin:?}");
+        assert!((twin.one_way_ms - 0.15).abs() < 1e-9, "{twin:?}");
+        assert!((twin.duration_s - 2.0).abs() < 0.01, "{twin:?}");
+    }
 }

@@ -442,6 +442,14 @@ pub(super) fn let_go_of_stopped(slots: &mut Vec<Slot>) {
     }
 }
 
+/// Lets go of every room a stopping thread still holds: their final statistics published, their cells done.
+pub(super) fn finish_all(slots: Vec<Slot>) {
+    for slot in slots {
+        slot.room.finish();
+        slot.cell.mark_done();
+    }
+}
+
 /// Closes room `i`, whose tick panicked with `panic`: its state is not to be trusted, so it is dropped, not
 /// finished, and its users are told why.
 pub(super) fn close_panicked(slots: &mut Vec<Slot>, i: usize, panic: Box<dyn std::any::Any + Send>) {
@@ -509,10 +517,7 @@ fn run_thread(inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadEnd, 
             }
         }
     }
-    for slot in slots {
-        slot.room.finish();
-        slot.cell.mark_done();
-    }
+    finish_all(slots);
 }
 
 #[cfg(test)]

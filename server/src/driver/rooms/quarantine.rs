@@ -23,7 +23,7 @@ use kinloop_process::cpu::thread_cpu_time;
 use rtrb::Consumer;
 use serde::Serialize;
 
-use super::executor::{close_panicked, let_go_of_stopped, Slot, IDLE, INBOX};
+use super::executor::{close_panicked, finish_all, let_go_of_stopped, Slot, IDLE, INBOX};
 
 /// The most of one core the quarantine thread's rooms take together (CPU time over wall time).
 pub const QUARANTINE_SHARE: f64 = 0.25;
@@ -140,10 +140,7 @@ pub(super) fn run(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
         }
         std::thread::sleep(rest_after(busy, QUARANTINE_SHARE));
     }
-    for slot in slots {
-        slot.room.finish();
-        slot.cell.mark_done();
-    }
+    finish_all(slots);
 }
 
 #[cfg(test)]
