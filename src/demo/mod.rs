@@ -386,7 +386,14 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
         let joins: Vec<Duration> =
             summary.per_user.iter().map(|u| Duration::from_secs_f64(u.record_offset_s.max(0.0))).collect();
         let round_trip = Duration::from_secs_f64(summary.rtt_ms_p50.unwrap_or(0.0).max(0.0) / 1e3);
-        summary.twin = Some(twin::run(options, &joins, round_trip)?);
+        let session = twin::TwinSession {
+            scene: options.scene.clone(),
+            users: (0..options.users).map(|i| user_of(options, i)).collect(),
+            device: options.device,
+            link: options.link.clone(),
+            duration: options.duration,
+        };
+        summary.twin = Some(twin::run(&session, &joins, round_trip)?);
     }
     summary.files.push("ve.csv".into());
     summary.files.extend((1..=summary.users).map(|i| format!("user{i}.csv")));

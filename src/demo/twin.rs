@@ -12,12 +12,27 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use kinloop_client::device::DevicePreset;
+use kinloop_client::user::UserSpec;
 use kinloop_harness::{ClientPlan, SessionPlan};
+use kinloop_linkage::model::scene::Scene;
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::ServerConfig;
 use serde::Serialize;
 
-use super::{user_of, DemoOptions};
+/// The demo's session as the twin repeats it.
+#[derive(Clone, Debug)]
+pub struct TwinSession {
+    /// The linkage.
+    pub scene: Scene,
+    /// Each user's operational point and hand, in the demo's order.
+    pub users: Vec<(String, UserSpec)>,
+    /// The device every user holds (`None`: the scene's default).
+    pub device: Option<DevicePreset>,
+    /// The demo's emulated link (each side applies it to what it sends).
+    pub link: LinkConfig,
+    /// How long the clients run.
+    pub duration: Duration,
+}
 
 /// The twin's part of the demo's summary.
 #[derive(Clone, Debug, Serialize)]
@@ -52,27 +67,29 @@ fn twin_link(link: &LinkConfig, half_round_trip: Duration, user: u64) -> LinkCon
     }
 }
 
-/// The twin's plan: `options`' session, user i joining at `join_at[i]`, every link `options.link`
+/// The twin's plan: `session`, user i joining at `join_at[i]`, every link `session.link`
 /// lengthened to half of `round_trip`.
-pub fn plan(options: &DemoOptions, join_at: &[Duration], round_trip: Duration) -> Result<SessionPlan> {
-    let mut ve = ServerConfig::new(options.scene.clone(), "twin", ([127, 0, 0, 1], 0).into()).ve;
-    ve.max_users = ve.max_users.max(options.users);
-    let device = options.device.unwrap_or_else(|| DevicePreset::for_kind(options.scene.kind));
-    let clients = (0..options.users)
-        .map(|i| {
-            let (op, user) = user_of(options, i);
-            let mut client = ClientPlan::new(&format!("demo-user{}", i + 1), &op, device);
-            client.user = user;
+pub fn plan(session: &TwinSession, join_at: &[Duration], round_trip: Duration) -> SessionPlan {
+    let mut ve = ServerConfig::new(session.scene.clone(), "twin", ([127, 0, 0, 1], 0).into()).ve;
+    ve.max_users = ve.max_users.max(session.users.len());
+    let device = session.device.unwrap_or_else(|| DevicePreset::for_kind(session.scene.kind));
+    let clients = session
+        .users
+        .iter()
+        .enumerate()
+        .map(|(i, (op, user))| {
+            let mut client = ClientPlan::new(&format!("demo-user{}", i + 1), op, device);
+            client.user = user.clone();
             client.join_at = join_at.get(i).copied().unwrap_or_default();
-            client.with_link(twin_link(&options.link, round_trip / 2, i as u64))
+            client.with_link(twin_link(&session.link, round_trip / 2, i as u64))
         })
         .collect();
-    Ok(SessionPlan { scene: options.scene.clone(), ve, clients, duration: options.duration, record_every: 1000 })
+    SessionPlan { scene: session.scene.clone(), ve, clients, duration: session.duration, record_every: 1000 }
 }
 
-/// Runs the twin of `options` (see the module documentation).
-pub fn run(options: &DemoOptions, join_at: &[Duration], round_trip: Duration) -> Result<TwinSummary> {
-    let plan = plan(options, join_at, round_trip)?;
+/// Runs the twin of `session` (see the module documentation).
+pub fn run(session: &TwinSession, join_at: &[Duration], round_trip: Duration) -> Result<TwinSummary> {
+    let plan = plan(session, join_at, round_trip);
     let started = std::time::Instant::now();
     let (summary, _) = kinloop_harness::run(&plan, &mut |_| {}).context("the demo's twin in virtual time")?;
     let link = &plan.clients.first().map(|c| c.uplink.clone()).unwrap_or_default();
@@ -91,35 +108,44 @@ pub fn run(options: &DemoOptions, join_at: &[Duration], round_trip: Duration) ->
 mod tests {
     use super::*;
 
+    /// The testbed with `users` hands, soft and firm in turn, on its first OP, for `seconds`.
+    fn testbed(users: usize, seconds: u64) -> TwinSession {
+        let scene = kinloop_linkage::model::builtin::scene("paper-testbed").expect("built in").expect("parses");
+        let op = scene.ops[0].name.clone();
+        TwinSession {
+            users: (0..users).map(|i| (op.clone(), UserSpec::Hand(crate::load::hand_in_turn(i)))).collect(),
+            scene,
+            device: None,
+            link: LinkConfig::default(),
+            duration: Duration::from_secs(seconds),
+        }
+    }
+
     #[test]
     fn the_twin_has_the_demos_users_joins_and_a_link_of_half_the_round_trip() {
-        let mut options = DemoOptions::new("unused").expect("the testbed");
-        options.users = 3;
-        options.link.delay = Duration::from_millis(2);
+        let mut session = testbed(3, 60);
+        session.link.delay = Duration::from_millis(2);
         let joins = [Duration::ZERO, Duration::from_micros(2700), Duration::from_micros(5400)];
-        let plan = plan(&options, &joins, Duration::from_micros(300)).expect("a plan");
+        let plan = plan(&session, &joins, Duration::from_micros(300));
         assert_eq!(plan.clients.len(), 3);
         for (i, client) in plan.clients.iter().enumerate() {
             assert_eq!(client.join_at, joins[i]);
-            assert_eq!(client.op, user_of(&options, i).0);
+            assert_eq!(client.op, session.users[i].0);
             assert_eq!(client.uplink.delay, Duration::from_micros(2000), "the measured trip holds the emulated");
             assert_eq!(client.uplink.jitter, Duration::ZERO);
         }
         assert_ne!(plan.clients[0].uplink.seed, plan.clients[1].uplink.seed);
-        let loopback = super::plan(&options, &joins, Duration::from_micros(4600)).expect("a plan");
+        let loopback = super::plan(&session, &joins, Duration::from_micros(4600));
         assert_eq!(loopback.clients[0].uplink.delay, Duration::from_micros(2300));
         assert_eq!(loopback.clients[0].uplink.jitter, Duration::from_micros(100));
         assert!(plan.ve.max_users >= 3);
-        assert_eq!(plan.duration, options.duration);
+        assert_eq!(plan.duration, session.duration);
     }
 
     #[test]
     fn a_twin_of_two_hands_reports_each_users_tracking_and_a_stable_ve() {
-        let mut options = DemoOptions::new("unused").expect("the testbed");
-        options.users = 2;
-        options.duration = Duration::from_secs(2);
         let joins = [Duration::ZERO, Duration::from_millis(3)];
-        let twin = run(&options, &joins, Duration::from_micros(300)).expect("the twin runs");
+        let twin = run(&testbed(2, 2), &joins, Duration::from_micros(300)).expect("the twin runs");
         assert_eq!(twin.device_op_rms_mm.len(), 2);
         for rms in &twin.device_op_rms_mm {
             assert!(rms.is_finite() && *rms > 0.0 && *rms < 1.0, "{twin:?}");

@@ -27,6 +27,7 @@ use rtrb::{Consumer, Producer, RingBuffer};
 use super::quarantine::{self, QuarantineReport, QuarantineTally};
 use crate::driver::rehearsal::wait_warmed;
 use crate::fleet::Heartbeat;
+use kinloop_process::cpu::thread_cpu_time;
 
 /// Weight of the newest step time in a room's cost average (about the last 64 ticks).
 pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
@@ -44,9 +45,9 @@ pub const ROOM_ESTIMATE: Duration = Duration::from_micros(50);
 /// The least a new user is expected to add to its room's tick.
 pub const USER_ESTIMATE: Duration = Duration::from_micros(10);
 /// Rooms waiting to be taken by one thread.
-pub(super) const INBOX: usize = 64;
+const INBOX: usize = 64;
 /// How long an idle thread sleeps between looks at its inbox.
-pub(super) const IDLE: Duration = Duration::from_millis(1);
+const IDLE: Duration = Duration::from_millis(1);
 
 /// A room as a thread steps it (its VE loop behind the room's test knobs).
 pub trait Steppable: Send {
@@ -155,14 +156,14 @@ impl RoomCell {
     }
 
     /// The quarantine thread took it: its tally starts.
-    pub(super) fn begin_quarantine(&self) {
+    fn begin_quarantine(&self) {
         if let Ok(mut tally) = self.quarantine.lock() {
             *tally = Some(QuarantineTally::new(Duration::from_secs_f64(1.0 / self.rate_hz.max(1e-3))));
         }
     }
 
     /// One tick in quarantine: its CPU time, and how far behind real time its deadline was.
-    pub(super) fn note_quarantine_tick(&self, busy: Duration, behind: Duration) {
+    fn note_quarantine_tick(&self, busy: Duration, behind: Duration) {
         if let Ok(mut tally) = self.quarantine.lock() {
             if let Some(t) = tally.as_mut() {
                 t.busy += busy;
@@ -173,11 +174,11 @@ impl RoomCell {
     }
 
     /// The executor let it go.
-    pub(super) fn mark_done(&self) {
+    fn mark_done(&self) {
         self.done.store(true, Ordering::Release);
     }
 
-    pub(super) fn record(&self, step: Duration, users: usize) {
+    fn record(&self, step: Duration, users: usize) {
         // One tick is charged at most MAX_CHARGED_PERIODS periods: a thread preempted mid-tick on a busy host
         // (or a page fault storm) must not make a room look over budget for the next hundred ticks, while a
         // room that really takes a few periods a tick still reads as what it takes.
@@ -208,12 +209,12 @@ pub struct OverBudget {
     pub what: String,
 }
 
-pub(super) struct Slot {
-    pub room: Box<dyn Steppable>,
-    pub cell: Arc<RoomCell>,
+struct Slot {
+    room: Box<dyn Steppable>,
+    cell: Arc<RoomCell>,
 }
 
-pub(super) struct ThreadEnd {
+struct ThreadEnd {
     inbox: Mutex<Producer<Slot>>,
 }
 
@@ -268,7 +269,7 @@ impl Executor {
         let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
         let quarantine_stop = stop.clone();
         let (quarantine, quarantine_handle) =
-            spawn_thread("kinloop-rooms-q".into(), move |inbox| quarantine::run(inbox, &quarantine_stop))?;
+            spawn_thread("kinloop-rooms-q".into(), move |inbox| run_quarantine(inbox, &quarantine_stop))?;
         let mut ends = Vec::new();
         let mut handles = vec![quarantine_handle];
         for index in 0..threads.max(1) {
@@ -428,8 +429,51 @@ fn spawn_thread(
     Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
 }
 
+/// The quarantine thread's loop (the rule: `super::quarantine`): take the rooms sent here, step the one furthest behind (its deadline the
+/// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics.
+fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
+    let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
+    loop {
+        while let Ok(mut slot) = inbox.pop() {
+            slot.room.placed(false);
+            slot.cell.begin_quarantine();
+            slots.push(slot);
+        }
+        if stop.load(Ordering::Acquire) {
+            break;
+        }
+        let_go_of_stopped(&mut slots);
+        let Some(i) = (0..slots.len()).min_by_key(|&i| slots[i].room.next_deadline()) else {
+            std::thread::sleep(IDLE);
+            continue;
+        };
+        let deadline = slots[i].room.next_deadline();
+        let started = Instant::now();
+        if let Some(ahead) = deadline.checked_duration_since(started) {
+            // Within real time again: wait for the deadline (a little at a time, to see new rooms and stop).
+            std::thread::sleep(ahead.min(IDLE));
+            continue;
+        }
+        let cpu_before = thread_cpu_time();
+        let room = &mut slots[i].room;
+        let ticked = catch_unwind(AssertUnwindSafe(|| room.tick_behind()));
+        let wall = started.elapsed();
+        // Without a thread CPU clock, the tick's wall time (at least its CPU time) is charged.
+        let busy = thread_cpu_time().zip(cpu_before).map_or(wall, |(after, before)| after.saturating_sub(before));
+        let users = room.users();
+        let cell = slots[i].cell.clone();
+        cell.record(wall, users);
+        cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
+        if let Err(panic) = ticked {
+            close_panicked(&mut slots, i, panic);
+        }
+        std::thread::sleep(quarantine::rest_after(busy, quarantine::QUARANTINE_SHARE));
+    }
+    finish_all(slots);
+}
+
 /// Lets go of the rooms told to stop: their final statistics published, their cells marked done.
-pub(super) fn let_go_of_stopped(slots: &mut Vec<Slot>) {
+fn let_go_of_stopped(slots: &mut Vec<Slot>) {
     let mut i = 0;
     while i < slots.len() {
         if slots[i].room.stopped() {
@@ -443,7 +487,7 @@ pub(super) fn let_go_of_stopped(slots: &mut Vec<Slot>) {
 }
 
 /// Lets go of every room a stopping thread still holds: their final statistics published, their cells done.
-pub(super) fn finish_all(slots: Vec<Slot>) {
+fn finish_all(slots: Vec<Slot>) {
     for slot in slots {
         slot.room.finish();
         slot.cell.mark_done();
@@ -452,7 +496,7 @@ pub(super) fn finish_all(slots: Vec<Slot>) {
 
 /// Closes room `i`, whose tick panicked with `panic`: its state is not to be trusted, so it is dropped, not
 /// finished, and its users are told why.
-pub(super) fn close_panicked(slots: &mut Vec<Slot>, i: usize, panic: Box<dyn std::any::Any + Send>) {
+fn close_panicked(slots: &mut Vec<Slot>, i: usize, panic: Box<dyn std::any::Any + Send>) {
     let what = panic
         .downcast_ref::<&str>()
         .map(|s| s.to_string())

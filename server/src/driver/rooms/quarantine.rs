@@ -1,5 +1,5 @@
-//! The quarantine thread: rooms that overran a real-time thread's share, stepped in slow motion within a CPU
-//! budget, so that a room which costs more than its rate allows takes no more of the machine than
+//! The quarantine's rule and what it reports: rooms that overran a real-time thread's share, stepped in slow
+//! motion by the executor's quarantine thread (`super::executor`'s `run_quarantine`) within a CPU budget, so that a room which costs more than its rate allows takes no more of the machine than
 //! [`QUARANTINE_SHARE`] of one core (the rest stays with QUIC, the load and the view).
 //!
 //! - **Slow motion.** A quarantined room is stepped one tick at a time at its own next deadline, however far
@@ -14,16 +14,9 @@
 //!
 //! The thread runs at normal priority and admits no users to its rooms (`Executor::admit_user`).
 
-use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::AtomicBool;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use kinloop_process::cpu::thread_cpu_time;
-use rtrb::Consumer;
 use serde::Serialize;
-
-use super::executor::{close_panicked, finish_all, let_go_of_stopped, Slot, IDLE, INBOX};
 
 /// The most of one core the quarantine thread's rooms take together (CPU time over wall time).
 pub const QUARANTINE_SHARE: f64 = 0.25;
@@ -98,49 +91,6 @@ fn finite_or_null<S: serde::Serializer>(value: &f64, serializer: S) -> Result<S:
     } else {
         serializer.serialize_none()
     }
-}
-
-/// The quarantine thread's loop: take the rooms sent here, step the one furthest behind (its deadline the
-/// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics.
-pub(super) fn run(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
-    let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
-    loop {
-        while let Ok(mut slot) = inbox.pop() {
-            slot.room.placed(false);
-            slot.cell.begin_quarantine();
-            slots.push(slot);
-        }
-        if stop.load(Ordering::Acquire) {
-            break;
-        }
-        let_go_of_stopped(&mut slots);
-        let Some(i) = (0..slots.len()).min_by_key(|&i| slots[i].room.next_deadline()) else {
-            std::thread::sleep(IDLE);
-            continue;
-        };
-        let deadline = slots[i].room.next_deadline();
-        let started = Instant::now();
-        if let Some(ahead) = deadline.checked_duration_since(started) {
-            // Within real time again: wait for the deadline (a little at a time, to see new rooms and stop).
-            std::thread::sleep(ahead.min(IDLE));
-            continue;
-        }
-        let cpu_before = thread_cpu_time();
-        let room = &mut slots[i].room;
-        let ticked = catch_unwind(AssertUnwindSafe(|| room.tick_behind()));
-        let wall = started.elapsed();
-        // Without a thread CPU clock, the tick's wall time (at least its CPU time) is charged.
-        let busy = thread_cpu_time().zip(cpu_before).map_or(wall, |(after, before)| after.saturating_sub(before));
-        let users = room.users();
-        let cell = slots[i].cell.clone();
-        cell.record(wall, users);
-        cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
-        if let Err(panic) = ticked {
-            close_panicked(&mut slots, i, panic);
-        }
-        std::thread::sleep(rest_after(busy, QUARANTINE_SHARE));
-    }
-    finish_all(slots);
 }
 
 #[cfg(test)]
