@@ -70,6 +70,14 @@ pub struct DemoArgs {
     /// Every user's hand: soft, firm, release or poke (default: soft and firm in turn).
     #[arg(long, value_name = "KIND", value_parser = parse_hand)]
     pub hand: Option<HandKind>,
+    /// Afterwards, run the same session in virtual time (same users, hands and join times, a link of the
+    /// measured loopback round trip) and report each user's tracking there beside the real one's.
+    #[arg(long)]
+    pub twin: bool,
+    /// Pin the server's real-time thread and network workers to the last CPU (as `kinloop-server
+    /// --pin-network`): the VE's wake-up of the network side each round stays on one CPU.
+    #[arg(long)]
+    pub pin_network: bool,
 }
 
 fn parse_hand(s: &str) -> Result<HandKind, String> {
@@ -123,6 +131,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         },
         first_op: args.op.clone(),
         hand: args.hand.map(HandSpec::touring),
+        twin: args.twin,
+        pin_network: args.pin_network,
     };
     let report = demo::run(&options).context("kinloop demo")?;
     if args.json {
@@ -202,6 +212,16 @@ pub fn human(s: &DemoSummary) -> String {
             fmt_opt(u.device_op_max_mm, "mm", 2),
             c["max_force_ratio"].as_f64().unwrap_or(f64::NAN),
             c["snapshots_received"]
+        );
+    }
+    if let Some(t) = &s.twin {
+        let rms: Vec<String> = t.device_op_rms_mm.iter().map(|r| format!("{r:.2}")).collect();
+        out += &format!(
+            "  twin    the same session in virtual time ({:.3} ± {:.3} ms one way): device-OP rms per user {} mm; {} restores\n",
+            t.one_way_ms,
+            t.jitter_ms,
+            rms.join(", "),
+            t.ve_restores
         );
     }
     out

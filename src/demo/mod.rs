@@ -16,6 +16,7 @@
 //! experiment's own chart code.
 
 pub mod records;
+pub mod twin;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -89,6 +90,10 @@ pub struct DemoOptions {
     pub first_op: Option<String>,
     /// Every user's hand and what it intends (`None`: relaxed and firm in turn, touring the reach).
     pub hand: Option<HandSpec>,
+    /// Afterwards, run the same session in virtual time ([`twin`]) and report it beside.
+    pub twin: bool,
+    /// Pin the server's real-time thread and network workers to one CPU (`ServerConfig::network_cpu`).
+    pub pin_network: bool,
 }
 
 impl DemoOptions {
@@ -112,6 +117,8 @@ impl DemoOptions {
             hd: None,
             first_op: None,
             hand: None,
+            twin: false,
+            pin_network: false,
         })
     }
 }
@@ -206,6 +213,8 @@ pub struct DemoSummary {
     pub snapshots_withheld: u64,
     /// Each user.
     pub per_user: Vec<UserSummary>,
+    /// The same session in virtual time (`--twin`), when asked for.
+    pub twin: Option<twin::TwinSummary>,
     /// Files written in the output directory, `summary.json` last.
     pub files: Vec<String>,
 }
@@ -280,10 +289,14 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
     // The server's QUIC side as kinloop-server runs it: below the real-time loops, above other work.
     let realtime = options.realtime;
+    let network_cpu = options.pin_network.then(kinloop_process::affinity::last_cpu);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("kinloop-demo-net")
         .on_thread_start(move || {
+            if let Some(cpu) = network_cpu {
+                drop(kinloop_process::affinity::pin_current_thread(cpu));
+            }
             if realtime {
                 drop(kinloop_process::realtime::try_fifo_priority(kinloop_process::realtime::NETWORK_PRIORITY));
             }
@@ -298,6 +311,7 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     config.link = side_link(&options.link, 0);
     config.record = Some(dir.join("ve.csv"));
     config.realtime = options.realtime;
+    config.network_cpu = network_cpu;
     config.view = options.view.clone();
     let server = {
         let _inside = runtime.enter();
@@ -368,6 +382,19 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
 
     let mut summary = summarize(options, finished, &server_stats, wall_s, cancelled);
     summary.files = draw(options, &dir, &mut summary.per_user)?;
+    if options.twin {
+        let joins: Vec<Duration> =
+            summary.per_user.iter().map(|u| Duration::from_secs_f64(u.record_offset_s.max(0.0))).collect();
+        let round_trip = Duration::from_secs_f64(summary.rtt_ms_p50.unwrap_or(0.0).max(0.0) / 1e3);
+        let session = twin::TwinSession {
+            scene: options.scene.clone(),
+            users: (0..options.users).map(|i| user_of(options, i)).collect(),
+            device: options.device,
+            link: options.link.clone(),
+            duration: options.duration,
+        };
+        summary.twin = Some(twin::run(&session, &joins, round_trip)?);
+    }
     summary.files.push("ve.csv".into());
     summary.files.extend((1..=summary.users).map(|i| format!("user{i}.csv")));
     summary.files.push("summary.json".into());
@@ -536,6 +563,7 @@ fn summarize(
         ve_restores: ve.core.state_restores,
         snapshots_withheld: ve.core.snapshots_withheld,
         per_user,
+        twin: None,
         files: Vec::new(),
     }
 }

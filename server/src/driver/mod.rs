@@ -119,6 +119,10 @@ pub struct ServerConfig {
     pub rooms: Vec<rooms::RoomSpec>,
     /// Real-time threads stepping the rooms (`--rt-threads`).
     pub rt_threads: usize,
+    /// The CPU the executor's first real-time thread is pinned to (`--pin-network`), where the caller pins
+    /// its network runtime's workers too ([`kinloop_process::affinity`]): each round's wake-up of the network
+    /// side is then a run-queue insertion on that CPU, not an interrupt to the other. `None`: not pinned.
+    pub network_cpu: Option<usize>,
     /// Tokens of the admin command (`--admin-token`); `None`: no admin command is accepted.
     pub admin: Option<Access>,
 }
@@ -143,6 +147,7 @@ impl ServerConfig {
             fleet: None,
             rooms: Vec::new(),
             rt_threads: rooms::default_rt_threads(),
+            network_cpu: None,
             admin: None,
         }
     }
@@ -312,7 +317,7 @@ impl Server {
         let local_addr =
             endpoint.local_addr().map_err(|source| EndpointError::Socket { addr: config.listen, source })?;
         let heartbeat = config.fleet.as_ref().map(|f| f.heartbeat().clone());
-        let executor = rooms::Executor::start(config.rt_threads, config.realtime, heartbeat)
+        let executor = rooms::Executor::start(config.rt_threads, config.realtime, heartbeat, config.network_cpu)
             .map_err(|e| ServerError::Thread { which: "rooms", what: e.to_string() })?;
         let view = config.view.as_ref().map(|v| crate::view::ViewSite::start(v.listen)).transpose()?;
         let host = Arc::new(rooms::Host {

@@ -164,7 +164,8 @@ impl<S: Space> VeLoop<S> {
 
     /// One iteration run at once, as if it were due now: what `kinloop bench`'s `server/ve_loop_users_N`
     /// times back to back (`crate::bench::LoopBench`), the same work as [`Self::tick`] less its deadline's
-    /// bookkeeping.
+    /// bookkeeping. The VE's time advances one period however late the call comes, so a quarantined room
+    /// runs it in slow motion (`super::rooms::quarantine`).
     pub fn tick_back_to_back(&mut self) {
         let now = self.core.poll_timeout();
         self.round(Instant::now(), now);

@@ -8,22 +8,26 @@
 //!   plus the room's estimate ([`ROOM_ESTIMATE`] per tick) stays within [`BUDGET_SHARE`]; a new user joins
 //!   only if its room's thread load plus the user's estimate (its room's measured cost per user, at least
 //!   [`USER_ESTIMATE`]) stays within it. Refusals say the load and the share.
-//! - **Isolation.** A room whose own load passes the share is moved off its real-time thread to the
-//!   quarantine thread (normal priority), so it never delays a room within budget; it refuses new users. A
+//! - **Isolation.** A room whose own load passes the share, or whose last [`OVERRUN_STREAK`] ticks each
+//!   took more than the share of a period, is moved off its real-time thread to the
+//!   quarantine thread (normal priority, `super::quarantine`), so it never delays a room within budget; it
+//!   refuses new users, and is stepped there in slow motion within a CPU budget of its own. A
 //!   tick that panics is caught (`catch_unwind`): that room is closed with the reason, its users told; the
 //!   thread's other rooms go on.
 //! - **Liveness.** Every pass of a real-time thread's loop advances the fleet's [`Heartbeat`], rooms or
 //!   none, so a fleet manager's health pings stop when the stepping stalls (`crate::fleet`).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use rtrb::{Consumer, Producer, RingBuffer};
 
+use super::quarantine::{self, QuarantineReport, QuarantineTally};
 use crate::driver::rehearsal::wait_warmed;
 use crate::fleet::Heartbeat;
+use kinloop_process::cpu::thread_cpu_time;
 
 /// Weight of the newest step time in a room's cost average (about the last 64 ticks).
 pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
@@ -31,6 +35,11 @@ pub const EWMA_WEIGHT: f64 = 1.0 / 64.0;
 pub const MAX_CHARGED_PERIODS: f64 = 4.0;
 /// The share of each real-time thread's time that rooms may fill; the rest absorbs jitter.
 pub const BUDGET_SHARE: f64 = 0.7;
+/// Consecutive ticks each longer than [`BUDGET_SHARE`] of a period that send a room to the quarantine at
+/// once, before its cost average has caught up: a room that takes 2 ms a tick at 1 kHz would otherwise hold
+/// its thread for a few dozen ticks (its average climbing from [`ROOM_ESTIMATE`]), and make every other room
+/// there miss as many deadlines. One long tick (a preemption, a page fault) is not a streak.
+pub const OVERRUN_STREAK: u32 = 3;
 /// A new room's cost per tick before it is measured.
 pub const ROOM_ESTIMATE: Duration = Duration::from_micros(50);
 /// The least a new user is expected to add to its room's tick.
@@ -46,6 +55,11 @@ pub trait Steppable: Send {
     fn next_deadline(&self) -> Instant;
     /// One tick.
     fn tick(&mut self);
+    /// One tick at its own next deadline however far behind real time that is: its time advances one
+    /// period, never skipped forward (the quarantine's slow motion, `super::quarantine`).
+    fn tick_behind(&mut self) {
+        self.tick();
+    }
     /// Readies the caches for its coming tick, shortly before the deadline (`crate::driver::rehearsal`).
     fn warm(&mut self) {}
     /// It was taken in by a thread that runs at real-time priority (`realtime`) or not.
@@ -65,11 +79,14 @@ pub struct RoomCell {
     /// Ticks per second.
     pub rate_hz: f64,
     cost_ns: AtomicU64,
+    /// Consecutive ticks longer than the share of a period (only its thread writes it).
+    streak: AtomicU32,
     users: AtomicUsize,
     thread: AtomicUsize,
     quarantined: AtomicBool,
     done: AtomicBool,
     closed: Mutex<Option<String>>,
+    quarantine: Mutex<Option<QuarantineTally>>,
     on_close: Box<dyn Fn(&str) + Send + Sync>,
 }
 
@@ -80,11 +97,13 @@ impl RoomCell {
             name,
             rate_hz,
             cost_ns: AtomicU64::new(f64::to_bits(ROOM_ESTIMATE.as_nanos() as f64)),
+            streak: AtomicU32::new(0),
             users: AtomicUsize::new(0),
             thread: AtomicUsize::new(0),
             quarantined: AtomicBool::new(false),
             done: AtomicBool::new(false),
             closed: Mutex::new(None),
+            quarantine: Mutex::new(None),
             on_close,
         }
     }
@@ -97,6 +116,12 @@ impl RoomCell {
     /// The share of a second the room takes.
     pub fn load(&self) -> f64 {
         self.cost().as_secs_f64() * self.rate_hz
+    }
+
+    /// Whether it takes more than a real-time thread's share: its cost average says so, or its last
+    /// [`OVERRUN_STREAK`] ticks each took more than the share of a period.
+    pub fn overruns(&self) -> bool {
+        self.load() > BUDGET_SHARE || self.streak.load(Ordering::Relaxed) >= OVERRUN_STREAK
     }
 
     /// The thread that steps it.
@@ -124,6 +149,35 @@ impl RoomCell {
         self.closed.lock().ok().and_then(|c| c.clone())
     }
 
+    /// What the quarantine measured of it (its CPU share, slowdown and lag), once it was quarantined.
+    pub fn quarantine_report(&self) -> Option<QuarantineReport> {
+        let tally = *self.quarantine.lock().ok()?;
+        tally.map(|t| t.report(Instant::now()))
+    }
+
+    /// The quarantine thread took it: its tally starts.
+    fn begin_quarantine(&self) {
+        if let Ok(mut tally) = self.quarantine.lock() {
+            *tally = Some(QuarantineTally::new(Duration::from_secs_f64(1.0 / self.rate_hz.max(1e-3))));
+        }
+    }
+
+    /// One tick in quarantine: its CPU time, and how far behind real time its deadline was.
+    fn note_quarantine_tick(&self, busy: Duration, behind: Duration) {
+        if let Ok(mut tally) = self.quarantine.lock() {
+            if let Some(t) = tally.as_mut() {
+                t.busy += busy;
+                t.ticks += 1;
+                t.behind = behind;
+            }
+        }
+    }
+
+    /// The executor let it go.
+    fn mark_done(&self) {
+        self.done.store(true, Ordering::Release);
+    }
+
     fn record(&self, step: Duration, users: usize) {
         // One tick is charged at most MAX_CHARGED_PERIODS periods: a thread preempted mid-tick on a busy host
         // (or a page fault storm) must not make a room look over budget for the next hundred ticks, while a
@@ -132,6 +186,9 @@ impl RoomCell {
         let old = f64::from_bits(self.cost_ns.load(Ordering::Relaxed));
         let new = old + EWMA_WEIGHT * (charged - old);
         self.cost_ns.store(new.to_bits(), Ordering::Relaxed);
+        let long = step.as_secs_f64() * self.rate_hz > BUDGET_SHARE;
+        let streak = if long { self.streak.load(Ordering::Relaxed).saturating_add(1) } else { 0 };
+        self.streak.store(streak, Ordering::Relaxed);
         self.users.store(users, Ordering::Relaxed);
     }
 
@@ -200,16 +257,37 @@ pub fn default_rt_threads() -> usize {
 
 impl Executor {
     /// Starts `threads` real-time threads (SCHED_FIFO when `realtime` and granted) and the quarantine thread;
-    /// the real-time threads advance `heartbeat`, if given, on every pass.
-    pub fn start(threads: usize, realtime: bool, heartbeat: Option<Heartbeat>) -> std::io::Result<Arc<Executor>> {
+    /// the real-time threads advance `heartbeat`, if given, on every pass. The first is pinned to CPU `pin`,
+    /// if given (`ServerConfig::network_cpu`).
+    pub fn start(
+        threads: usize,
+        realtime: bool,
+        heartbeat: Option<Heartbeat>,
+        pin: Option<usize>,
+    ) -> std::io::Result<Arc<Executor>> {
         let stop = Arc::new(AtomicBool::new(false));
         let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
-        let (quarantine, quarantine_handle) = spawn_thread(None, false, stop.clone(), None, pulse.clone())?;
+        let quarantine_stop = stop.clone();
+        let (quarantine, quarantine_handle) =
+            spawn_thread("kinloop-rooms-q".into(), move |inbox| run_quarantine(inbox, &quarantine_stop))?;
         let mut ends = Vec::new();
         let mut handles = vec![quarantine_handle];
         for index in 0..threads.max(1) {
-            let (end, handle) =
-                spawn_thread(Some(index), realtime, stop.clone(), Some(quarantine.clone()), pulse.clone())?;
+            let (stop, quarantine, pulse) = (stop.clone(), quarantine.clone(), pulse.clone());
+            let (end, handle) = spawn_thread(format!("kinloop-rooms-{index}"), move |inbox| {
+                if let Some(cpu) = pin.filter(|_| index == 0) {
+                    if let Err(why) = kinloop_process::affinity::pin_current_thread(cpu) {
+                        tracing::warn!(%why, "the first rooms thread is not pinned");
+                    }
+                }
+                let granted = realtime
+                    && kinloop_process::realtime::try_realtime_priority()
+                        .inspect_err(
+                            |why| tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority"),
+                        )
+                        .is_ok();
+                run_thread(inbox, &stop, &quarantine, &pulse, granted)
+            })?;
             ends.push(end);
             handles.push(handle);
         }
@@ -336,44 +414,107 @@ fn push(end: &ThreadEnd, slot: Slot) {
     if let Ok(mut inbox) = end.inbox.lock() {
         if let Err(rtrb::PushError::Full(slot)) = inbox.push(slot) {
             slot.cell.close("the executor's inbox was full".into());
-            slot.cell.done.store(true, Ordering::Release);
+            slot.cell.mark_done();
         }
     }
 }
 
-/// Starts a thread: real-time thread `index`, or the quarantine thread (`index` `None`, where `quarantine`
-/// is also `None`: it has nowhere further to send a room).
+/// Starts a thread named `name` that runs `body` on the consumer end of its inbox.
 fn spawn_thread(
-    index: Option<usize>,
-    realtime: bool,
-    stop: Arc<AtomicBool>,
-    quarantine: Option<Arc<ThreadEnd>>,
-    pulse: Arc<Pulse>,
+    name: String,
+    body: impl FnOnce(Consumer<Slot>) + Send + 'static,
 ) -> std::io::Result<(Arc<ThreadEnd>, std::thread::JoinHandle<()>)> {
     let (producer, consumer) = RingBuffer::new(INBOX);
-    let name = index.map_or("kinloop-rooms-q".to_string(), |i| format!("kinloop-rooms-{i}"));
-    let handle = std::thread::Builder::new().name(name).spawn(move || {
-        let granted = realtime
-            && kinloop_process::realtime::try_realtime_priority()
-                .inspect_err(|why| tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority"))
-                .is_ok();
-        run_thread(consumer, &stop, quarantine.as_deref(), &pulse, granted)
-    })?;
+    let handle = std::thread::Builder::new().name(name).spawn(move || body(consumer))?;
     Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
 }
 
-/// One thread's loop: take new rooms, sleep until the earliest deadline (warming the caches with the room
-/// due first just before it: the rooms of a kind share its code), step every room that is due (each inside
-/// `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones away. A real-time
-/// thread (one with a quarantine to send rooms to) also passes the `pulse` every time round; `granted` says
-/// whether it runs at real-time priority.
-fn run_thread(
-    mut inbox: Consumer<Slot>,
-    stop: &AtomicBool,
-    quarantine: Option<&ThreadEnd>,
-    pulse: &Pulse,
-    granted: bool,
-) {
+/// The quarantine thread's loop (the rule: `super::quarantine`): take the rooms sent here, step the one furthest behind (its deadline the
+/// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics.
+fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
+    let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
+    loop {
+        while let Ok(mut slot) = inbox.pop() {
+            slot.room.placed(false);
+            slot.cell.begin_quarantine();
+            slots.push(slot);
+        }
+        if stop.load(Ordering::Acquire) {
+            break;
+        }
+        let_go_of_stopped(&mut slots);
+        let Some(i) = (0..slots.len()).min_by_key(|&i| slots[i].room.next_deadline()) else {
+            std::thread::sleep(IDLE);
+            continue;
+        };
+        let deadline = slots[i].room.next_deadline();
+        let started = Instant::now();
+        if let Some(ahead) = deadline.checked_duration_since(started) {
+            // Within real time again: wait for the deadline (a little at a time, to see new rooms and stop).
+            std::thread::sleep(ahead.min(IDLE));
+            continue;
+        }
+        let cpu_before = thread_cpu_time();
+        let room = &mut slots[i].room;
+        let ticked = catch_unwind(AssertUnwindSafe(|| room.tick_behind()));
+        let wall = started.elapsed();
+        // Without a thread CPU clock, the tick's wall time (at least its CPU time) is charged.
+        let busy = thread_cpu_time().zip(cpu_before).map_or(wall, |(after, before)| after.saturating_sub(before));
+        let users = room.users();
+        let cell = slots[i].cell.clone();
+        cell.record(wall, users);
+        cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
+        if let Err(panic) = ticked {
+            close_panicked(&mut slots, i, panic);
+        }
+        std::thread::sleep(quarantine::rest_after(busy, quarantine::QUARANTINE_SHARE));
+    }
+    finish_all(slots);
+}
+
+/// Lets go of the rooms told to stop: their final statistics published, their cells marked done.
+fn let_go_of_stopped(slots: &mut Vec<Slot>) {
+    let mut i = 0;
+    while i < slots.len() {
+        if slots[i].room.stopped() {
+            let slot = slots.swap_remove(i);
+            slot.room.finish();
+            slot.cell.mark_done();
+        } else {
+            i += 1;
+        }
+    }
+}
+
+/// Lets go of every room a stopping thread still holds: their final statistics published, their cells done.
+fn finish_all(slots: Vec<Slot>) {
+    for slot in slots {
+        slot.room.finish();
+        slot.cell.mark_done();
+    }
+}
+
+/// Closes room `i`, whose tick panicked with `panic`: its state is not to be trusted, so it is dropped, not
+/// finished, and its users are told why.
+fn close_panicked(slots: &mut Vec<Slot>, i: usize, panic: Box<dyn std::any::Any + Send>) {
+    let what = panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic".into());
+    let slot = slots.swap_remove(i);
+    let cell = slot.cell.clone();
+    drop(slot);
+    cell.close(format!("the room's simulation failed ({what}); it is closed"));
+    cell.mark_done();
+}
+
+/// A real-time thread's loop: take new rooms, sleep until the earliest deadline (warming the caches with the
+/// room due first just before it: the rooms of a kind share its code), step every room that is due (each
+/// inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones to the
+/// `quarantine`; pass the `pulse` every time round. `granted` says whether it runs at real-time priority.
+fn run_thread(inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadEnd, pulse: &Pulse, granted: bool) {
+    let mut inbox = inbox;
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
         while let Ok(mut slot) = inbox.pop() {
@@ -383,19 +524,8 @@ fn run_thread(
         if stop.load(Ordering::Acquire) {
             break;
         }
-        if quarantine.is_some() {
-            pulse.pass();
-        }
-        let mut i = 0;
-        while i < slots.len() {
-            if slots[i].room.stopped() {
-                let slot = slots.swap_remove(i);
-                slot.room.finish();
-                slot.cell.done.store(true, Ordering::Release);
-            } else {
-                i += 1;
-            }
-        }
+        pulse.pass();
+        let_go_of_stopped(&mut slots);
         let first = slots.iter_mut().min_by_key(|s| s.room.next_deadline());
         match first {
             Some(slot) => {
@@ -420,33 +550,18 @@ fn run_thread(
             let cell = slots[i].cell.clone();
             cell.record(started.elapsed(), users);
             match ticked {
-                Ok(()) if quarantine.is_some() && cell.load() > BUDGET_SHARE => {
+                Ok(()) if cell.overruns() => {
                     let slot = slots.swap_remove(i);
                     slot.cell.quarantined.store(true, Ordering::Relaxed);
                     tracing::warn!(room = %cell.name, cost_us = cell.cost().as_secs_f64() * 1e6, "the room overruns its share; moved to the quarantine thread");
-                    if let Some(end) = quarantine {
-                        push(end, slot);
-                    }
+                    push(quarantine, slot);
                 }
                 Ok(()) => i += 1,
-                Err(panic) => {
-                    let what = panic
-                        .downcast_ref::<&str>()
-                        .map(|s| s.to_string())
-                        .or_else(|| panic.downcast_ref::<String>().cloned())
-                        .unwrap_or_else(|| "a panic".into());
-                    // The room's state is not to be trusted: it is dropped, not finished.
-                    drop(slots.swap_remove(i));
-                    cell.close(format!("the room's simulation failed ({what}); it is closed"));
-                    cell.done.store(true, Ordering::Release);
-                }
+                Err(panic) => close_panicked(&mut slots, i, panic),
             }
         }
     }
-    for slot in slots {
-        slot.room.finish();
-        slot.cell.done.store(true, Ordering::Release);
-    }
+    finish_all(slots);
 }
 
 #[cfg(test)]
@@ -454,14 +569,24 @@ mod tests {
     use super::*;
 
     #[test]
-    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_still_reads_slow() {
+    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_overruns_within_a_streak() {
         let quiet = RoomCell::new("quiet".into(), 1000.0, Box::new(|_| {}));
         for _ in 0..200 {
             quiet.record(Duration::from_micros(20), 1);
         }
         quiet.record(Duration::from_millis(200), 1);
         assert!(quiet.load() < 0.1, "one 200 ms tick made the room {:.0} % busy", quiet.load() * 100.0);
+        assert!(!quiet.overruns(), "one long tick is not a streak");
+        quiet.record(Duration::from_millis(2), 1);
+        quiet.record(Duration::from_micros(20), 1);
+        quiet.record(Duration::from_millis(2), 1);
+        assert!(!quiet.overruns(), "long ticks apart are not a streak");
         let slow = RoomCell::new("slow".into(), 1000.0, Box::new(|_| {}));
+        for tick in 0..OVERRUN_STREAK {
+            assert!(!slow.overruns(), "{tick} long ticks");
+            slow.record(Duration::from_millis(2), 1);
+        }
+        assert!(slow.overruns(), "a streak of {OVERRUN_STREAK} ticks of 2 ms at 1 kHz");
         for _ in 0..400 {
             slow.record(Duration::from_millis(2), 1);
         }
@@ -472,7 +597,7 @@ mod tests {
     /// Rooms opened at scattered moments start on one grid: their deadlines differ by whole periods.
     #[test]
     fn rooms_opened_apart_start_on_the_executors_grid() {
-        let executor = Executor::start(1, false, None).expect("threads");
+        let executor = Executor::start(1, false, None, None).expect("threads");
         let period = Duration::from_millis(1);
         let first = executor.grid_start(period);
         std::thread::sleep(Duration::from_micros(2_300));
@@ -487,5 +612,86 @@ mod tests {
         assert_eq!(apart % period.as_nanos(), 0, "{apart} ns apart");
         assert!(apart >= 2 * period.as_nanos(), "{apart} ns apart");
         executor.shutdown();
+    }
+
+    /// A room whose every tick spins `cost` of CPU; it counts, from inside its tick, the CPU time its ticks
+    /// took and how many it stepped behind real time.
+    struct Spinner {
+        cost: Duration,
+        epoch: Instant,
+        ticks: u64,
+        counted: Arc<(AtomicU64, AtomicU64)>,
+        stop: Arc<AtomicBool>,
+    }
+
+    impl Steppable for Spinner {
+        fn next_deadline(&self) -> Instant {
+            self.epoch + Duration::from_millis(self.ticks)
+        }
+        fn tick(&mut self) {
+            let (started, cpu) = (Instant::now(), kinloop_process::cpu::thread_cpu_time());
+            while started.elapsed() < self.cost {
+                std::hint::spin_loop();
+            }
+            self.ticks = (started.duration_since(self.epoch).as_millis() as u64 + 1).max(self.ticks + 1);
+            let busy = kinloop_process::cpu::thread_cpu_time().zip(cpu).map_or(Duration::ZERO, |(b, a)| b - a);
+            self.counted.0.fetch_add(busy.as_nanos() as u64, Ordering::Relaxed);
+        }
+        fn tick_behind(&mut self) {
+            let before = self.ticks;
+            self.tick();
+            self.ticks = before + 1;
+            self.counted.1.fetch_add(1, Ordering::Relaxed);
+        }
+        fn stopped(&self) -> bool {
+            self.stop.load(Ordering::Relaxed)
+        }
+        fn users(&self) -> usize {
+            1
+        }
+        fn finish(self: Box<Self>) {}
+    }
+
+    /// A room that takes 2 ms a tick at 1 kHz is quarantined, and there its ticks take no more than the
+    /// quarantine's share of a core: the CPU time the room counts itself, over the time since, stays under the
+    /// cap, while it goes on stepping (in slow motion, its time one period a tick).
+    #[test]
+    fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
+        let executor = Executor::start(1, false, None, None).expect("threads");
+        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0)));
+        let stop = Arc::new(AtomicBool::new(false));
+        let room = Spinner {
+            cost: Duration::from_millis(2),
+            epoch: Instant::now(),
+            ticks: 0,
+            counted: counted.clone(),
+            stop: stop.clone(),
+        };
+        let cell = Arc::new(RoomCell::new("slow".into(), 1000.0, Box::new(|_| {})));
+        executor.place(Box::new(room), cell.clone()).expect("placed");
+        let waited = Instant::now();
+        while cell.quarantine_report().is_none() {
+            assert!(waited.elapsed() < Duration::from_secs(10), "never quarantined: cost {:?}", cell.cost());
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(cell.quarantined());
+        assert!(matches!(executor.admit_user(&cell), Err(OverBudget { .. })), "a quarantined room admits a user");
+        let (busy_at, ticks_at, since) =
+            (counted.0.load(Ordering::Relaxed), counted.1.load(Ordering::Relaxed), Instant::now());
+        std::thread::sleep(Duration::from_millis(1500));
+        let busy = Duration::from_nanos(counted.0.load(Ordering::Relaxed) - busy_at);
+        let ticks = counted.1.load(Ordering::Relaxed) - ticks_at;
+        let wall = since.elapsed();
+        let report = cell.quarantine_report().expect("quarantined");
+        stop.store(true, Ordering::Relaxed);
+        executor.shutdown();
+        // One tick may straddle the window's start without its rest inside the window.
+        let share = busy.saturating_sub(Duration::from_millis(3)).as_secs_f64() / wall.as_secs_f64();
+        println!("{ticks} ticks, busy {busy:?} in {wall:?} (share {share:.3}); report {report:?}");
+        assert!(ticks >= 10, "the quarantined room stepped {ticks} ticks");
+        assert!(share <= quarantine::QUARANTINE_SHARE, "the quarantined room took {share:.3} of a core");
+        assert!(report.share_of_core <= quarantine::QUARANTINE_SHARE + 0.01, "{report:?}");
+        assert!(report.slowdown > 1.0, "in slow motion: {report:?}");
+        assert!(report.behind_real_time_s > 0.1, "behind real time: {report:?}");
     }
 }

@@ -6,6 +6,7 @@
 pub(crate) mod admin;
 mod executor;
 mod file;
+mod quarantine;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -18,6 +19,7 @@ use tokio::sync::watch;
 
 pub use executor::{default_rt_threads, Executor, OverBudget, RoomCell, Steppable, BUDGET_SHARE};
 pub use file::{load_entry, load_rooms_file, EntryShape, RoomSpec, RoomsFileError, TestKnobs};
+pub use quarantine::{rest_after, QuarantineReport, QUARANTINE_SHARE};
 
 use super::ve_thread::VeLoop;
 use super::{open_room, OpenRoom, ServerConfig, ServerError, ServerStats, Shared};
@@ -154,6 +156,8 @@ pub struct RoomReport {
     pub quarantined: bool,
     /// Its step cost as the executor measured it (EWMA, µs), test knobs included.
     pub cost_us: f64,
+    /// What the quarantine measured of it (CPU share, slowdown, lag behind real time), when quarantined.
+    pub quarantine: Option<QuarantineReport>,
     /// Why it closed on its own (its simulation failed), if it did.
     pub closed: Option<String>,
     /// The room's statistics, as a one-room server reports them.
@@ -168,6 +172,7 @@ impl RoomReport {
             thread: shared.cell.thread(),
             quarantined: shared.cell.quarantined(),
             cost_us: shared.cell.cost().as_secs_f64() * 1e6,
+            quarantine: shared.cell.quarantine_report(),
             closed: shared.cell.closed_reason(),
             stats: shared.stats(),
         }
@@ -185,6 +190,26 @@ impl<S: Space> Hosted<S> {
     pub fn new(ve: VeLoop<S>, knobs: TestKnobs) -> Self {
         Hosted { ve, knobs, ticks: 0 }
     }
+
+    /// One tick of its VE, at the deadline it was due or (`behind`, in quarantine) at its VE's own next tick
+    /// however late, then the test knobs.
+    fn step(&mut self, behind: bool) {
+        let started = std::time::Instant::now();
+        if behind {
+            self.ve.tick_back_to_back();
+        } else {
+            self.ve.tick();
+        }
+        self.ticks += 1;
+        if self.knobs.panic_after_ticks.is_some_and(|at| self.ticks >= at) {
+            panic!("test knob: debug_panic_after_ticks");
+        }
+        if let Some(cost) = self.knobs.cost {
+            while started.elapsed() < cost {
+                std::hint::spin_loop();
+            }
+        }
+    }
 }
 
 impl<S: Space> Steppable for Hosted<S>
@@ -196,17 +221,11 @@ where
     }
 
     fn tick(&mut self) {
-        let started = std::time::Instant::now();
-        self.ve.tick();
-        self.ticks += 1;
-        if self.knobs.panic_after_ticks.is_some_and(|at| self.ticks >= at) {
-            panic!("test knob: debug_panic_after_ticks");
-        }
-        if let Some(cost) = self.knobs.cost {
-            while started.elapsed() < cost {
-                std::hint::spin_loop();
-            }
-        }
+        self.step(false);
+    }
+
+    fn tick_behind(&mut self) {
+        self.step(true);
     }
 
     fn warm(&mut self) {
