@@ -513,7 +513,8 @@ where
     let scene_info = core.scene_info();
     for op in 0..core.model().ops.len() {
         if let Some(reach) = core.reach(op) {
-            tracing::info!(room = %spec.name, op = %core.model().ops[op].name, reach_m = ?reach.extent().as_slice(), static_force_n = reach.static_force_n, lightest_mass_kg = 1.0 / reach.inverse_mass_max, "operational point surveyed");
+            // In the scene's own units (a scene written in mm and g is surveyed in them): no SI suffixes.
+            tracing::info!(room = %spec.name, op = %core.model().ops[op].name, reach = ?reach.extent().as_slice(), static_force = reach.static_force_n, lightest_mass = 1.0 / reach.inverse_mass_max, "operational point surveyed, in the scene's units");
         }
     }
     let room = config.room_key.clone().map(|key| {
