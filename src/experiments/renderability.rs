@@ -23,7 +23,7 @@ use kinloop_linkage::{math::space::SceneKind, model::builtin};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::VeConfig;
 
-use super::common::{session, sweep, Options, Output};
+use super::common::{session, sweep, Options, Output, Report};
 use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::rounding::{num, round};
@@ -221,7 +221,7 @@ pub fn judged(point: &Point, summary: &SessionSummary, rec: &Recording) -> Point
 pub const SECONDS: f64 = 40.0;
 
 /// Runs the experiment (see the module documentation).
-pub fn run(options: &Options) -> Result<super::Report> {
+pub fn run(options: &Options) -> Result<Report> {
     let out = Output::new("renderability", options)?;
     let all = points(&[], &HANDS)?;
     let seconds = options.session_seconds(SECONDS, 3.0);
@@ -241,7 +241,7 @@ pub fn run(options: &Options) -> Result<super::Report> {
 /// harness predicts: it catches what virtual time leaves out (a VE that ran before the join, the real
 /// network stack, the loops' timing). The energy criterion needs the every-tick recording the harness
 /// keeps, so here "stable" is no VE restore, no withheld snapshot and no non-finite value.
-pub fn run_live(options: &Options) -> Result<super::Report> {
+pub fn run_live(options: &Options) -> Result<Report> {
     let out = Output::new("renderability-live", options)?;
     let hands: &[HandKind] = if options.quick { &HANDS[..1] } else { &HANDS };
     let all = points(&[], hands)?;
@@ -369,13 +369,7 @@ pub fn bound_failures(closure_m: f64, clamped: f64, rms_m: f64, network: Network
 }
 
 /// Charts and `summary.json` of a run of the matrix.
-fn report(
-    mut out: Output,
-    results: &[PointResult],
-    seconds: f64,
-    title: &str,
-    runtime_note: &str,
-) -> Result<super::Report> {
+fn report(mut out: Output, results: &[PointResult], seconds: f64, title: &str, runtime_note: &str) -> Result<Report> {
     let hands = HANDS;
     let rows: Vec<String> = {
         let mut rows: Vec<String> = Vec::new();

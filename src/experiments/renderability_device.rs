@@ -45,7 +45,7 @@ use kinloop_linkage::model::{builtin, scene::Scene, Model};
 use kinloop_protocol::{LocalModelForm, MappingRequest, Role};
 use kinloop_server::core::{JoinRequest, VeConfig, VeCore};
 
-use super::common::{sweep, Options, Output};
+use super::common::{sweep, Options, Output, Report};
 use super::programs::{self, Launch, Launcher, Measured, Pair, Ran};
 use super::renderability::{bound_failures, scene_ops, Network};
 use crate::rounding::{num, round};
@@ -367,7 +367,7 @@ pub fn evaluate(point: &DevicePoint, seconds: f64, programs: &Programs, scratch:
 }
 
 /// Runs `vendor`'s experiment (see the module documentation), one pair at a time.
-pub fn run(vendor: Vendor, options: &Options) -> Result<super::Report> {
+pub fn run(vendor: Vendor, options: &Options) -> Result<Report> {
     let name = vendor.experiment();
     let out = Output::new(name, options)?;
     let programs = Programs::beside_this_program(vendor)?;

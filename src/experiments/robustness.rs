@@ -37,7 +37,7 @@ use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::design::PREDICTED_REFUSAL;
 use kinloop_server::core::VeConfig;
 
-use super::common::{session, sweep, Options, Output};
+use super::common::{session, sweep, Options, Output, Report};
 use super::renderability::{CLAMPED_BOUND, DEVICES, RMS_DELAYED_M, RMS_PERFECT_M};
 use super::verdict::judge;
 use crate::charts::HeatMap;
@@ -230,13 +230,13 @@ fn failure_class(reason: &str) -> &str {
 }
 
 /// Runs the experiment on the default seeds (see [`run_seeds`]).
-pub fn run(options: &Options) -> Result<super::Report> {
+pub fn run(options: &Options) -> Result<Report> {
     run_seeds(options, DEFAULT_SEEDS)
 }
 
 /// Runs the experiment on the linkages of `seeds`. `--quick` keeps the soft hand and delays 0 and 300 ms,
 /// with 10 s sessions.
-pub fn run_seeds(options: &Options, seeds: Range<u64>) -> Result<super::Report> {
+pub fn run_seeds(options: &Options, seeds: Range<u64>) -> Result<Report> {
     let out = Output::new("robustness", options)?;
     let linkages: Vec<Generated> = seeds.clone().map(|s| generate(s, None)).collect();
     let hands: &[HandKind] = if options.quick { &[HandKind::Soft] } else { &HandKind::ALL };
@@ -281,7 +281,7 @@ fn report(
     outcomes: &[Outcome],
     seeds: Range<u64>,
     seconds: f64,
-) -> Result<super::Report> {
+) -> Result<Report> {
     let class_of: BTreeMap<u64, &Generated> = linkages.iter().map(|g| (g.seed, g)).collect();
     let rows: Vec<String> = Class::ALL.iter().map(|c| c.name().to_string()).collect();
     let columns: Vec<String> = DELAYS_MS.iter().map(|d| format!("{d} ms")).collect();

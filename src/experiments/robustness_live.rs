@@ -26,7 +26,7 @@ use serde_json::json;
 
 use kinloop_client::user::HandKind;
 
-use super::common::{sweep, Options, Output};
+use super::common::{sweep, Options, Output, Report};
 use super::programs::{self, Launcher, Measured, Pair};
 use super::robustness::{self, Point, DEFAULT_SEEDS};
 use crate::charts::HeatMap;
@@ -65,7 +65,7 @@ impl LiveOutcome {
 }
 
 /// Runs the sample on `seeds` (the CI sample when `None`), with the programs beside this executable.
-pub fn run(options: &Options, seeds: Option<Range<u64>>) -> Result<super::Report> {
+pub fn run(options: &Options, seeds: Option<Range<u64>>) -> Result<Report> {
     let out = Output::new("robustness-live", options)?;
     let seeds = seeds.unwrap_or(DEFAULT_SEEDS);
     let launcher = Launcher::beside_this_program()?;
@@ -136,7 +136,7 @@ pub fn evaluate(
 }
 
 /// The chart and `summary.json`.
-fn report(mut out: Output, outcomes: &[LiveOutcome], seeds: Range<u64>, seconds: f64) -> Result<super::Report> {
+fn report(mut out: Output, outcomes: &[LiveOutcome], seeds: Range<u64>, seconds: f64) -> Result<Report> {
     let row = |o: &LiveOutcome| format!("{}:{}", o.point.seed, o.point.op);
     let column = |o: &LiveOutcome| format!("{} {} ms", o.point.device.name(), o.point.delay_ms);
     let mut rows: Vec<String> = Vec::new();
