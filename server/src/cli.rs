@@ -360,7 +360,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let network_cpu = config.network_cpu;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
-        .on_thread_start(move || network_thread_start(network_cpu))
+        // The QUIC side's workers below the executor's real-time threads and above the machine's other work.
+        .on_thread_start(move || kinloop_process::realtime::start_network_worker(network_cpu, true))
         .enable_all()
         .build()?;
     runtime.block_on(async move {
@@ -441,16 +442,6 @@ async fn terminated() {
         }
     }
     std::future::pending::<()>().await
-}
-
-/// What each network worker of a server asks as it starts: SCHED_FIFO below the executor's real-time threads
-/// and above the machine's other work (when the OS grants it; the executor says so when it does not), and
-/// CPU `pin`, if given (`ServerConfig::network_cpu`).
-pub fn network_thread_start(pin: Option<usize>) {
-    if let Some(cpu) = pin {
-        drop(kinloop_process::affinity::pin_current_thread(cpu));
-    }
-    drop(kinloop_process::realtime::try_fifo_priority(kinloop_process::realtime::NETWORK_PRIORITY));
 }
 
 #[cfg(test)]
