@@ -161,15 +161,8 @@ fn report(mut out: Output, outcomes: &[LiveOutcome], seeds: Range<u64>, seconds:
     let twin = count(&|o| o.virtual_failures.is_empty());
     let both = count(&|o| o.live_failures.is_empty() && o.virtual_failures.is_empty());
     let neither = count(&|o| !o.live_failures.is_empty() && !o.virtual_failures.is_empty());
-    let by_delay: Vec<_> = outcomes
-        .iter()
-        .map(|o| o.point.delay_ms)
-        .fold(Vec::new(), |mut v, d| {
-            if !v.contains(&d) {
-                v.push(d);
-            }
-            v
-        })
+    let delays: std::collections::BTreeSet<u64> = outcomes.iter().map(|o| o.point.delay_ms).collect();
+    let by_delay: Vec<_> = delays
         .into_iter()
         .map(|d| {
             let of: Vec<&LiveOutcome> = outcomes.iter().filter(|o| o.point.delay_ms == d).collect();

@@ -513,8 +513,7 @@ fn close_panicked(slots: &mut Vec<Slot>, i: usize, panic: Box<dyn std::any::Any 
 /// room due first just before it: the rooms of a kind share its code), step every room that is due (each
 /// inside `catch_unwind`, its cost measured), let go of stopped rooms, send overrunning ones to the
 /// `quarantine`; pass the `pulse` every time round. `granted` says whether it runs at real-time priority.
-fn run_thread(inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadEnd, pulse: &Pulse, granted: bool) {
-    let mut inbox = inbox;
+fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadEnd, pulse: &Pulse, granted: bool) {
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
         while let Ok(mut slot) = inbox.pop() {
