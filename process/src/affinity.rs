@@ -59,6 +59,19 @@ pub fn pin_current_thread(cpu: usize) -> Result<(), AffinityError> {
     }
 }
 
+/// What a server's network worker asks as it starts: CPU `pin`, if given (beside the real-time thread that
+/// wakes it each round), and, when `realtime`, SCHED_FIFO at [`NETWORK_PRIORITY`](crate::realtime::NETWORK_PRIORITY).
+/// Either may be refused; the worker then runs where and as the OS lets it (the real-time loops say when they
+/// are not granted their own priority).
+pub fn start_network_worker(pin: Option<usize>, realtime: bool) {
+    if let Some(cpu) = pin {
+        drop(pin_current_thread(cpu));
+    }
+    if realtime {
+        drop(crate::realtime::try_fifo_priority(crate::realtime::NETWORK_PRIORITY));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

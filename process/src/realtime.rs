@@ -21,19 +21,6 @@ pub const REALTIME_PRIORITY: u8 = 80;
 /// still read and sent every millisecond (tokio's workers park when they have nothing to do).
 pub const NETWORK_PRIORITY: u8 = 40;
 
-/// What a server's network worker asks as it starts: CPU `pin`, if given (beside the real-time thread that
-/// wakes it each round, `crate::affinity`), and, when `realtime`, SCHED_FIFO at [`NETWORK_PRIORITY`]. Either
-/// may be refused; the worker then runs where and as the OS lets it (the real-time loops say when they are not
-/// granted their own priority).
-pub fn start_network_worker(pin: Option<usize>, realtime: bool) {
-    if let Some(cpu) = pin {
-        drop(crate::affinity::pin_current_thread(cpu));
-    }
-    if realtime {
-        drop(try_fifo_priority(NETWORK_PRIORITY));
-    }
-}
-
 /// Runs the calling thread under SCHED_FIFO at [`REALTIME_PRIORITY`].
 pub fn try_realtime_priority() -> Result<(), RealtimePriorityError> {
     try_fifo_priority(REALTIME_PRIORITY)

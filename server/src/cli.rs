@@ -361,7 +361,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         // The QUIC side's workers below the executor's real-time threads and above the machine's other work.
-        .on_thread_start(move || kinloop_process::realtime::start_network_worker(network_cpu, true))
+        .on_thread_start(move || kinloop_process::affinity::start_network_worker(network_cpu, true))
         .enable_all()
         .build()?;
     runtime.block_on(async move {

@@ -293,7 +293,7 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("kinloop-demo-net")
-        .on_thread_start(move || kinloop_process::realtime::start_network_worker(network_cpu, realtime))
+        .on_thread_start(move || kinloop_process::affinity::start_network_worker(network_cpu, realtime))
         .enable_all()
         .build()
         .context("starting the network runtime")?;
