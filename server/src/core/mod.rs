@@ -542,7 +542,9 @@ impl<S: Space> VeCore<S> {
         let u = &mut self.users[index];
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
-        u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s);
+        if let Some(trip_s) = u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s) {
+            self.metrics.sharing.note_sample(trip_s);
+        }
         u.hand_off = sample.flags & kinloop_protocol::uplink_flags::HAND_OFF != 0;
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];
