@@ -11,10 +11,10 @@
 //! The estimate is a high percentile of the recent samples ([`WINDOW`] of them, the longest
 //! [`IGNORED_PER_WINDOW`] set aside): what it is used for (`sharing::others_weight`) must hold through the
 //! jitter, not its mean, but a lone late sample (a stall of the host's scheduling, say) must not rule the
-//! weight for the next seconds; and the estimate is the longest of every pushing user's, so one user's spike
-//! would rule the whole room. A step to a longer trip is followed as soon as more samples than are set aside
-//! have shown it (within [`IGNORED_PER_WINDOW`] + 1 samples of its arrival), a shorter one once the window has
-//! passed.
+//! weight for the next seconds; and the sharing rule takes the longest of every pushing user's estimates, so
+//! one user's spike would rule the whole room. A step to a longer trip is followed as soon as more samples
+//! than are set aside have shown it (within [`IGNORED_PER_WINDOW`] + 1 samples of its arrival), a shorter one
+//! once the window has passed.
 //!
 //! A client cannot make the estimate shorter than the truth by more than it shortens its own stated age,
 //! and an age longer than the time since the snapshot was built (a sample below zero) is ignored; a client
@@ -43,7 +43,7 @@ pub struct RoundTrip {
     /// `(seq, server time)` of the snapshots built whose seq is a multiple of [`STRIDE`], indexed by
     /// `seq / STRIDE % BUILT_KEPT`.
     built: Box<[(u64, f64)]>,
-    /// The last [`WINDOW`] samples (s), the newest at `next_sample - 1`.
+    /// The last [`WINDOW`] samples (s), sample n (counted from 0) at `n % WINDOW`.
     samples: [f64; WINDOW],
     /// Samples heard so far (the window holds the last `min(heard, WINDOW)`).
     heard: usize,
