@@ -206,7 +206,7 @@ pub fn realtime_loop_sim(
                 seq += 1;
                 let mut s = snapshot.clone();
                 s.seq = seq;
-                let _ = snapshots_tx.push(s);
+                let _ = snapshots_tx.push((std::time::Instant::now(), s));
                 while spent_rx.pop().is_ok() {}
                 while let Ok(u) = uplinks_rx.pop() {
                     let _ = free_tx.push(u);

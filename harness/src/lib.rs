@@ -204,6 +204,8 @@ pub struct SessionSummary {
     pub client_compute_us_per_s: f64,
     /// VE states that went non-finite and were restored.
     pub ve_restores: u64,
+    /// The round trips the VE weighted the users' sharing of one another's hands by.
+    pub ve_sharing: kinloop_server::core::metrics::SharingMetrics,
     /// Per-client results.
     pub clients: Vec<ClientSummary>,
     /// Wall-clock seconds the whole simulation took.
@@ -715,6 +717,7 @@ impl<S: Space> Session<S> {
             ve_compute_us_per_s: self.ve_compute.as_secs_f64() * 1e6 / seconds,
             client_compute_us_per_s: client_compute.as_secs_f64() * 1e6 / seconds,
             ve_restores: metrics.state_restores,
+            ve_sharing: metrics.sharing,
             clients,
             wall_s: wall.as_secs_f64(),
         };

@@ -211,6 +211,8 @@ pub struct DemoSummary {
     pub ve_restores: u64,
     /// Snapshots the VE withheld (dynamics failed, or a term outside the wire's ranges).
     pub snapshots_withheld: u64,
+    /// The round trips the VE weighted the users' sharing of one another's hands by.
+    pub sharing: kinloop_server::core::metrics::SharingMetrics,
     /// Each user.
     pub per_user: Vec<UserSummary>,
     /// The same session in virtual time (`--twin`), when asked for.
@@ -555,6 +557,7 @@ fn summarize(
         uplinks_rejected: ve.core.uplinks_rejected,
         ve_restores: ve.core.state_restores,
         snapshots_withheld: ve.core.snapshots_withheld,
+        sharing: ve.core.sharing,
         per_user,
         twin: None,
         files: Vec::new(),

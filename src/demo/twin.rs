@@ -16,6 +16,7 @@ use kinloop_client::user::UserSpec;
 use kinloop_harness::{ClientPlan, SessionPlan};
 use kinloop_linkage::model::scene::Scene;
 use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::core::metrics::SharingMetrics;
 use kinloop_server::ServerConfig;
 use serde::Serialize;
 
@@ -50,6 +51,8 @@ pub struct TwinSummary {
     pub ve_restores: u64,
     /// Largest closure residual in the twin's VE (m).
     pub max_closure_error: f64,
+    /// The round trips the twin's VE weighted the sharing by.
+    pub sharing: SharingMetrics,
     /// Wall-clock seconds the twin took.
     pub wall_s: f64,
 }
@@ -100,6 +103,7 @@ pub fn run(session: &TwinSession, join_at: &[Duration], round_trip: Duration) ->
         device_op_rms_mm: summary.clients.iter().map(|c| c.device_op_rms_m * 1e3).collect(),
         ve_restores: summary.ve_restores,
         max_closure_error: summary.max_closure_error,
+        sharing: summary.ve_sharing,
         wall_s: started.elapsed().as_secs_f64(),
     })
 }

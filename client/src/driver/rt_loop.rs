@@ -75,8 +75,8 @@ pub struct LoopReport {
 
 /// The loop's ends of the rings.
 pub struct LoopRings<S: Space> {
-    /// Snapshots from the network.
-    pub snapshots: rtrb::Consumer<Snapshot>,
+    /// Snapshots from the network, each with when it arrived.
+    pub snapshots: rtrb::Consumer<(Instant, Snapshot)>,
     /// Used snapshots back to the network side, to be dropped there.
     pub spent_snapshots: rtrb::Producer<Snapshot>,
     /// Uplinks to send.
@@ -164,6 +164,8 @@ pub struct LoopBody<S: Space, D: HapticDevice<S>> {
     shared: Arc<LoopShared>,
     settings: LoopSettings,
     ticks: u64,
+    /// The last tick's time (since the loop started).
+    last_tick: Duration,
     /// The session whose core renders: 1 for the first, one more for each that took over.
     session: u32,
 }
@@ -177,7 +179,7 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
         shared: Arc<LoopShared>,
         settings: LoopSettings,
     ) -> Self {
-        LoopBody { device, core, rings, shared, settings, ticks: 0, session: 1 }
+        LoopBody { device, core, rings, shared, settings, ticks: 0, last_tick: Duration::ZERO, session: 1 }
     }
 
     /// What the loop shares with the rest of its client.
@@ -196,6 +198,7 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
             return Flow::Stop(None);
         }
         self.ticks += 1;
+        let last_tick = std::mem::replace(&mut self.last_tick, now);
         // A new session's core replaces the old one, which goes back to be dropped off this thread; not before
         // the old one has faded out (a server that drains says so at once, and the old core may still push),
         // so the force never steps from the old session's to the new one's zero.
@@ -212,9 +215,12 @@ impl<S: Space, D: HapticDevice<S>> LoopBody<S, D> {
         core.set_one_way_delay(Duration::from_nanos(shared.one_way_delay_ns.load(Ordering::Relaxed)));
         // While the next session's core waits for the old one to fade, the new server's snapshots wait for it.
         while rings.cores.is_empty() {
-            let Ok(snapshot) = rings.snapshots.pop() else { break };
-            // Refused snapshots are counted by the core.
-            let _ = core.handle_snapshot(now, &snapshot);
+            let Ok((arrived, snapshot)) = rings.snapshots.pop() else { break };
+            // Dated at its arrival, as in virtual time, so that the age the uplinks report leaves the network's
+            // round trip to the VE without this loop's wait for its tick; it came after the last tick emptied
+            // the ring. Refused snapshots are counted by the core.
+            let received = now.saturating_sub(arrived.elapsed()).max(last_tick).min(now);
+            let _ = core.handle_snapshot(received, &snapshot);
             if let Err(rtrb::PushError::Full(snapshot)) = rings.spent_snapshots.push(snapshot) {
                 std::mem::forget(snapshot);
             }

@@ -98,7 +98,7 @@ impl QuicTally {
 
 /// The network side's ends of the rings.
 pub(super) struct NetRings<S: Space> {
-    pub(super) snapshots: rtrb::Producer<kinloop_protocol::Snapshot>,
+    pub(super) snapshots: rtrb::Producer<(Instant, kinloop_protocol::Snapshot)>,
     pub(super) spent_snapshots: rtrb::Consumer<kinloop_protocol::Snapshot>,
     pub(super) cores: rtrb::Producer<Box<HapticCore<S>>>,
     pub(super) spent_cores: rtrb::Consumer<Box<HapticCore<S>>>,
@@ -193,7 +193,7 @@ pub(super) async fn serve_session<S: Space>(
                     net.snapshots_received.fetch_add(1, Ordering::Relaxed);
                     while rings.spent_snapshots.pop().is_ok() {}
                     // A full ring means the loop is behind: this snapshot is dropped, a newer one follows.
-                    let _ = rings.snapshots.push(snapshot);
+                    let _ = rings.snapshots.push((heard, snapshot));
                 }
                 Ok(Datagram::Uplink(_)) => {}
                 Err(e) if e.is_fatal() => return e.to_string(),

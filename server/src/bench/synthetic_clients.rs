@@ -10,15 +10,15 @@ use kinloop_protocol::{codec, Datagram, SessionShape};
 use rtrb::{Consumer, Producer, RingBuffer};
 use tokio::sync::oneshot;
 
-use crate::core::{JoinRequest, Joined, UplinkSample};
+use crate::core::{JoinRequest, Joined};
 use crate::driver::ve_thread;
-use crate::gateway::{take_latest_frame, Command, UserLink, FRAME_HEADER};
+use crate::gateway::{take_latest_frame, ArrivedUplink, Command, UserLink, FRAME_HEADER};
 use crate::synthetic::SyntheticUser;
 
 /// The client's side of one synthetic user: its ends of the user's rings and the user who reads the
 /// snapshots and writes the uplinks.
 pub(super) struct SyntheticClient {
-    uplinks: Producer<UplinkSample>,
+    uplinks: Producer<ArrivedUplink>,
     snapshots: Consumer<u8>,
     user: SyntheticUser,
 }
@@ -34,7 +34,7 @@ impl SyntheticClient {
             self.user.on_snapshot(&s);
         }
         if let Some(sample) = self.user.uplink(seq, time_s) {
-            let _ = self.uplinks.push(*sample);
+            let _ = self.uplinks.push(ArrivedUplink::now(*sample));
         }
         true
     }

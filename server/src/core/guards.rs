@@ -36,6 +36,9 @@ pub struct UplinkSample {
     pub last_snapshot_seq: u64,
     /// How long it had held it when the uplink left (s).
     pub last_snapshot_age_s: f64,
+    /// How long the uplink waited on the server between its arrival and the call that hands it to the VE (s;
+    /// a driver that takes uplinks in at its tick says so): the round trip is dated at the arrival.
+    pub waited_s: f64,
     /// F_h, first `op_dim` entries used.
     pub hand_wrench: [f64; MAX_OP_DIM],
     /// Local-model OP pose, first `pose_len` entries used.
@@ -62,6 +65,7 @@ impl UplinkSample {
             flags: 0,
             last_snapshot_seq: 0,
             last_snapshot_age_s: 0.0,
+            waited_s: 0.0,
             hand_wrench: [0.0; MAX_OP_DIM],
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],
@@ -90,6 +94,7 @@ impl UplinkSample {
             flags: uplink.flags,
             last_snapshot_seq: uplink.last_snapshot_seq,
             last_snapshot_age_s: uplink.last_snapshot_age_s,
+            waited_s: 0.0,
             hand_wrench: [0.0; MAX_OP_DIM],
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],

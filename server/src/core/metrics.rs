@@ -50,4 +50,47 @@ pub struct VeMetrics {
     pub resumes_accepted: u64,
     /// Offered room states refused (by the VE, or by the driver for their signature, scene or age).
     pub resumes_refused: u64,
+    /// The round trips the users' sharing of one another's hands was judged by (`sharing`).
+    pub sharing: SharingMetrics,
+}
+
+/// Upper edges (s) of [`SharingMetrics`]' round-trip bins; the last bin holds everything longer.
+pub const TRIP_BIN_EDGES_S: [f64; 7] = [0.25e-3, 0.5e-3, 1e-3, 2e-3, 4e-3, 8e-3, 16e-3];
+
+/// What the weight of the other users' hands was judged by: the round-trip samples heard and, per snapshot
+/// round with two or more pushing users, the exchange's round trip (`sharing::others_weight`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SharingMetrics {
+    /// Round-trip samples heard, every user's (`round_trip::RoundTrip::heard`).
+    pub samples: u64,
+    /// Those samples by length, in the bins [`TRIP_BIN_EDGES_S`] bound.
+    pub sample_bins: [u64; 8],
+    /// Snapshot rounds with two or more pushing users.
+    pub rounds: u64,
+    /// Those rounds whose exchange round trip took the others' hands below whole for the users with the most
+    /// others (longer than the exchange delay over their number, or unmeasured).
+    pub rounds_weighted: u64,
+    /// Rounds in which the longest estimate alone, without the jitter buffer's hold, was over that bound.
+    pub rounds_over_by_estimate: u64,
+    /// Rounds in which some pushing user's jitter buffer was holding (its hold added to the round trip).
+    pub rounds_held: u64,
+    /// Rounds in which some pushing user's round trip was not measured yet.
+    pub rounds_unmeasured: u64,
+    /// Pushing users whose own round trip (hold included) was over the bound, summed over the rounds.
+    pub users_over: u64,
+    /// The exchange's round trip per round (unmeasured ones aside), in the bins [`TRIP_BIN_EDGES_S`] bound.
+    pub trip_bins: [u64; 8],
+}
+
+impl SharingMetrics {
+    /// Counts a round-trip sample of `sample_s`.
+    pub fn note_sample(&mut self, sample_s: f64) {
+        self.samples += 1;
+        self.sample_bins[bin(sample_s)] += 1;
+    }
+}
+
+/// The bin of a round trip of `trip_s`.
+pub fn bin(trip_s: f64) -> usize {
+    TRIP_BIN_EDGES_S.iter().take_while(|edge| trip_s > **edge).count()
 }

@@ -542,7 +542,11 @@ impl<S: Space> VeCore<S> {
         let u = &mut self.users[index];
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
-        u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s);
+        // A wait that is no duration at all is taken as none: the uplink arrived now.
+        let arrived_s = now.as_secs_f64() - if sample.waited_s.is_finite() { sample.waited_s.max(0.0) } else { 0.0 };
+        if let Some(trip_s) = u.round_trip.heard(arrived_s, sample.last_snapshot_seq, sample.last_snapshot_age_s) {
+            self.metrics.sharing.note_sample(trip_s);
+        }
         u.hand_off = sample.flags & kinloop_protocol::uplink_flags::HAND_OFF != 0;
         if u.role == Role::Manipulator {
             let c = &mut self.couplings[index];

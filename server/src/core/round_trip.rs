@@ -3,9 +3,18 @@
 //! Every uplink names the newest snapshot its client had applied (`Uplink::last_snapshot_seq`) and how long
 //! the client had held it when the uplink left (`Uplink::last_snapshot_age_s`). The VE keeps the time it built
 //! each recent snapshot, so an uplink arriving at `t` gives a sample `t − built − age`: the downlink's delay
-//! plus the uplink's, with everything the client did in between taken out. The estimate follows a longer
-//! sample at once and a shorter one slowly (about a second of a 1 kHz stream): what it is used for
-//! (`sharing::others_weight`) must hold through the worst of the jitter, not its mean.
+//! plus the uplink's, with everything the client did in between taken out. A driver that takes uplinks in
+//! at its next tick says how long each waited for it (`UplinkSample::waited_s`), so the sample is dated at
+//! the uplink's arrival: the network's trip, not the VE's tick quantum (as in virtual time, where uplinks are
+//! handed over as they arrive).
+//!
+//! The estimate is a high percentile of the recent samples ([`WINDOW`] of them, the longest
+//! [`IGNORED_PER_WINDOW`] set aside): what it is used for (`sharing::others_weight`) must hold through the
+//! jitter, not its mean, but a lone late sample (a stall of the host's scheduling, say) must not rule the
+//! weight for the next seconds; and the sharing rule takes the longest of every pushing user's estimates, so
+//! one user's spike would rule the whole room. A step to a longer trip is followed as soon as more samples
+//! than are set aside have shown it (within [`IGNORED_PER_WINDOW`] + 1 samples of its arrival), a shorter one
+//! once the window has passed.
 //!
 //! A client cannot make the estimate shorter than the truth by more than it shortens its own stated age,
 //! and an age longer than the time since the snapshot was built (a sample below zero) is ignored; a client
@@ -17,8 +26,11 @@ pub const STRIDE: u64 = 4;
 /// Snapshot build times kept per user: 4 s of 1 kHz snapshots at [`STRIDE`], beyond any round trip the VE
 /// shares.
 pub const BUILT_KEPT: usize = 1024;
-/// How far a shorter sample moves the estimate toward itself, per sample.
-pub const RELEASE_PER_SAMPLE: f64 = 1e-3;
+/// Recent samples kept per user for the estimate: 256 ms of a 1 kHz snapshot stream at [`STRIDE`].
+pub const WINDOW: usize = 64;
+/// The longest samples of a full window set aside as spikes (1/16 of it: the estimate is the window's 94th
+/// percentile); a window still filling sets aside the same share of what it holds.
+pub const IGNORED_PER_WINDOW: usize = 4;
 /// Samples longer than this (s) are ignored: not a round trip but a client that stopped applying snapshots.
 pub const MAX_SAMPLE_S: f64 = 10.0;
 /// How fast the shortest round trip may rise, seconds per second: a route that got slower is followed in
@@ -31,6 +43,10 @@ pub struct RoundTrip {
     /// `(seq, server time)` of the snapshots built whose seq is a multiple of [`STRIDE`], indexed by
     /// `seq / STRIDE % BUILT_KEPT`.
     built: Box<[(u64, f64)]>,
+    /// The last [`WINDOW`] samples (s), sample n (counted from 0) at `n % WINDOW`.
+    samples: [f64; WINDOW],
+    /// Samples heard so far (the window holds the last `min(heard, WINDOW)`).
+    heard: usize,
     estimate_s: Option<f64>,
     /// The shortest sample, crept up by [`SHORTEST_CREEP`] per second since (see [`RoundTrip::shortest_s`]).
     shortest_s: Option<f64>,
@@ -43,6 +59,8 @@ impl RoundTrip {
     pub fn new() -> Self {
         RoundTrip {
             built: vec![(0, 0.0); BUILT_KEPT].into_boxed_slice(),
+            samples: [0.0; WINDOW],
+            heard: 0,
             estimate_s: None,
             shortest_s: None,
             last_sample_at_s: 0.0,
@@ -71,10 +89,9 @@ impl RoundTrip {
         if !(0.0..=MAX_SAMPLE_S).contains(&sample) {
             return None;
         }
-        self.estimate_s = Some(match self.estimate_s {
-            Some(estimate) if sample < estimate => estimate + (sample - estimate) * RELEASE_PER_SAMPLE,
-            _ => sample,
-        });
+        self.samples[self.heard % WINDOW] = sample;
+        self.heard += 1;
+        self.estimate_s = Some(high_percentile(&self.samples[..self.heard.min(WINDOW)]));
         self.shortest_s = Some(match self.shortest_s {
             Some(shortest) => (shortest + SHORTEST_CREEP * (arrival_s - self.last_sample_at_s).max(0.0)).min(sample),
             None => sample,
@@ -94,6 +111,17 @@ impl RoundTrip {
     pub fn estimate_s(&self) -> Option<f64> {
         self.estimate_s
     }
+}
+
+/// The longest of `kept` once its longest share set aside ([`IGNORED_PER_WINDOW`] per [`WINDOW`]), on a
+/// copy (the VE tick calls it for every user's sample: no allocation).
+fn high_percentile(kept: &[f64]) -> f64 {
+    let mut sorted = [0.0; WINDOW];
+    let sorted = &mut sorted[..kept.len()];
+    sorted.copy_from_slice(kept);
+    let ignored = kept.len() * IGNORED_PER_WINDOW / WINDOW;
+    let rank = kept.len() - 1 - ignored;
+    *sorted.select_nth_unstable_by(rank, f64::total_cmp).1
 }
 
 fn slot(seq: u64) -> usize {
@@ -156,19 +184,57 @@ mod tests {
         assert!((shortest - 0.110).abs() < 1e-3, "{shortest}");
     }
 
+    /// Feeds `rt` snapshot `k · STRIDE` built at `k · 4 ms` for each `k` in `ks`, each answered after the trip
+    /// `trip(k)`; returns the estimate after each.
+    fn feed(rt: &mut RoundTrip, ks: std::ops::Range<u64>, trip: impl Fn(u64) -> f64) -> Vec<f64> {
+        ks.map(|k| {
+            let (seq, built) = (k * STRIDE, k as f64 * 4e-3);
+            rt.built(seq, built);
+            rt.heard(built + trip(k), seq, 0.0).expect("a kept snapshot gives a sample");
+            rt.estimate_s().expect("measured")
+        })
+        .collect()
+    }
+
     #[test]
-    fn a_longer_trip_is_followed_at_once_and_a_shorter_one_slowly() {
+    fn lone_spikes_do_not_move_the_estimate() {
+        // A 0.3 ms trip with a 6 ms stall every 100th sample (the host's scheduling, say), and once two in a row.
         let mut rt = RoundTrip::new();
-        rt.built(STRIDE, 0.0);
-        rt.heard(0.050, STRIDE, 0.0);
-        rt.heard(0.200, STRIDE, 0.0);
-        assert_eq!(rt.estimate_s(), Some(0.200));
-        for _ in 0..100 {
-            rt.heard(0.050, STRIDE, 0.0);
-        }
-        let e = rt.estimate_s().unwrap();
-        // 100 samples at 1e-3: about a tenth of the way down.
-        assert!(e > 0.180 && e < 0.190, "{e}");
+        let estimates = feed(&mut rt, 1..2000, |k| if k % 100 == 0 || k == 1501 { 6e-3 } else { 0.3e-3 });
+        let after_the_first_window = &estimates[WINDOW..];
+        let worst = after_the_first_window.iter().fold(0.0f64, |a, &b| a.max(b));
+        assert!((worst - 0.3e-3).abs() < 1e-12, "a spike moved the estimate to {worst}");
+        // Four stalls within one window, the most it sets aside, still leave it at the trip.
+        let estimates = feed(&mut rt, 2000..2100, |k| if k % 16 == 0 { 6e-3 } else { 0.3e-3 });
+        assert!(estimates.iter().all(|&e| (e - 0.3e-3).abs() < 1e-12), "{estimates:?}");
+    }
+
+    #[test]
+    fn a_longer_trip_is_followed_within_a_few_samples_and_a_shorter_one_after_a_window() {
+        let mut rt = RoundTrip::new();
+        feed(&mut rt, 1..500, |_| 0.3e-3);
+        // The route jumps from 0.3 ms to 50 ms: the estimate covers it from the fifth long sample on.
+        let estimates = feed(&mut rt, 500..600, |_| 0.050);
+        let followed_after = estimates.iter().position(|&e| e > 0.050 - 1e-9).expect("followed");
+        assert_eq!(followed_after + 1, IGNORED_PER_WINDOW + 1, "{:?}", &estimates[..8]);
+        assert!(estimates[followed_after..].iter().all(|&e| e > 0.050 - 1e-9));
+        // Back to 1 ms: the 50 ms samples rule until only the set-aside share of them is left in the window.
+        let estimates = feed(&mut rt, 600..800, |_| 1e-3);
+        let released_after = estimates.iter().position(|&e| e < 0.049).expect("released");
+        assert_eq!(released_after + 1, WINDOW - IGNORED_PER_WINDOW, "{:?}", &estimates[..8]);
+        assert!((estimates.last().unwrap() - 1e-3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_first_samples_are_taken_whole() {
+        // A window still filling sets aside its share only: under 16 samples, none, so a first long sample
+        // (a client still starting) is the estimate until the short ones outnumber it.
+        let mut rt = RoundTrip::new();
+        let estimates = feed(&mut rt, 1..40, |k| if k == 1 { 0.010 } else { 1e-3 });
+        let near = |e: f64, trip: f64| (e - trip).abs() < 1e-9;
+        assert!(near(estimates[0], 0.010), "{}", estimates[0]);
+        assert!(near(estimates[14], 0.010), "15 samples set none aside: {}", estimates[14]);
+        assert!(near(estimates[15], 1e-3), "16 set the longest aside: {}", estimates[15]);
     }
 
     #[test]

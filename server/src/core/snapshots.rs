@@ -64,6 +64,7 @@ use kinloop_protocol::{ConfigTerms, ContactTerm, Role};
 use nalgebra::{DMatrix, DVector};
 
 use super::events::VeEvent;
+use super::metrics::{self, SharingMetrics};
 use super::sharing::{inertial_weight, others_weight, shared_bias};
 use super::users::{Presence, User};
 use super::ve_forces::{Evaluation, VeForces};
@@ -92,6 +93,7 @@ impl<S: Space> VeCore<S> {
         // A new state: nothing computed at any OP yet.
         scratch.at_op.forget();
         let exchange = hands_share(&self.model, &self.data, &self.users, &self.couplings, scratch);
+        note_exchange(&mut self.metrics.sharing, &self.users, &self.couplings, &exchange, self.config.exchange_delay_s);
         if self.contacts.is_some() {
             detect_contacts(
                 &self.model,
@@ -284,8 +286,7 @@ fn hands_share<S: Space>(
     let mut exchange = Exchange { pushing: 0, round_trip_s: Some(0.0) };
     for (user, c) in users.iter().zip(couplings).filter(|(_, c)| c.is_active()) {
         exchange.pushing += 1;
-        let held_s = if c.playout.holding() { c.playout.buffer_s() } else { 0.0 };
-        let trip = user.round_trip.estimate_s().map(|t| t + held_s);
+        let trip = user.round_trip.estimate_s().map(|t| t + held_s(c));
         exchange.round_trip_s = exchange.round_trip_s.zip(trip).map(|(a, b)| a.max(b));
     }
     let hands = &mut scratch.hands_qdd;
@@ -319,6 +320,45 @@ fn hands_share<S: Space>(
     }
     constrained_response(model, data, hands.as_mut_slice(), &mut scratch.response);
     exchange
+}
+
+/// What the jitter buffer holds a user's uplinks (s), which lengthens every exchange through that user.
+fn held_s<S: Space>(coupling: &Coupling<S>) -> f64 {
+    if coupling.playout.holding() {
+        coupling.playout.buffer_s()
+    } else {
+        0.0
+    }
+}
+
+/// Counts what the round's weight of the others' hands was judged by (`metrics::SharingMetrics`).
+fn note_exchange<S: Space>(
+    sharing: &mut SharingMetrics,
+    users: &[User],
+    couplings: &[Coupling<S>],
+    exchange: &Exchange,
+    exchange_delay_s: f64,
+) {
+    if exchange.pushing < 2 {
+        return;
+    }
+    let others = exchange.pushing - 1;
+    let below_whole = |trip_s: Option<f64>| others_weight(others, trip_s, exchange_delay_s) < 1.0;
+    sharing.rounds += 1;
+    let (mut held, mut longest_estimate_s) = (false, Some(0.0f64));
+    for (user, c) in users.iter().zip(couplings).filter(|(_, c)| c.is_active()) {
+        held |= c.playout.holding();
+        let estimate_s = user.round_trip.estimate_s();
+        longest_estimate_s = longest_estimate_s.zip(estimate_s).map(|(a, b)| a.max(b));
+        sharing.users_over += u64::from(below_whole(estimate_s.map(|t| t + held_s(c))));
+    }
+    sharing.rounds_held += u64::from(held);
+    sharing.rounds_unmeasured += u64::from(exchange.round_trip_s.is_none());
+    sharing.rounds_weighted += u64::from(below_whole(exchange.round_trip_s));
+    sharing.rounds_over_by_estimate += u64::from(below_whole(longest_estimate_s));
+    if let Some(trip_s) = exchange.round_trip_s {
+        sharing.trip_bins[metrics::bin(trip_s)] += 1;
+    }
 }
 
 enum SnapshotFailure {

@@ -19,7 +19,7 @@ use super::rooms::admin::serve_admin;
 use super::rooms::Host;
 use super::Shared;
 use crate::core::{JoinRequest, UplinkSample};
-use crate::gateway::{take_latest_frame, Command, UserCounters, UserEntry, UserLink};
+use crate::gateway::{take_latest_frame, ArrivedUplink, Command, UserCounters, UserEntry, UserLink};
 
 /// Uplinks waiting for the VE thread per user (about 64 ms at 1 kHz).
 const UPLINK_RING: usize = 64;
@@ -126,7 +126,7 @@ async fn resume(shared: &Shared, remote: std::net::SocketAddr, offer: RoomState)
 async fn run_session(
     session: AcceptedSession,
     shared: Arc<Shared>,
-    mut uplinks: rtrb::Producer<UplinkSample>,
+    mut uplinks: rtrb::Producer<ArrivedUplink>,
     snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
 ) {
@@ -168,7 +168,7 @@ async fn run_session(
                         }
                         counters.poses.store(&uplink.device_pose, &uplink.model_pose);
                         let counter = match UplinkSample::from_uplink(&uplink) {
-                            Ok(sample) if uplinks.push(sample).is_ok() => None,
+                            Ok(sample) if uplinks.push(ArrivedUplink::now(sample)).is_ok() => None,
                             Ok(_) => Some(&counters.uplinks_dropped),
                             Err(_) => Some(&counters.uplinks_undecodable),
                         };

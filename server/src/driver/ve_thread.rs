@@ -186,9 +186,9 @@ impl<S: Space> VeLoop<S> {
         let mut clock = StageClock { last: woke };
         serve_commands(core, &mut io.commands, links, now);
         for l in links.iter_mut() {
-            while let Ok(sample) = l.link.uplinks.pop() {
+            while let Ok(arrived) = l.link.uplinks.pop() {
                 // Rejections are counted (and reported once per burst) by the core.
-                let _ = core.handle_uplink_sample(now, l.user, &sample);
+                let _ = core.handle_uplink_sample(now, l.user, &arrived.taken_in(woke));
             }
         }
         clock.lap(&mut stages.intake);

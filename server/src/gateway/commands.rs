@@ -39,10 +39,32 @@ pub enum Command {
     },
 }
 
+/// An uplink as the network side hands it to the VE thread: the sample and when it arrived, so that the VE
+/// thread, which takes it in at its next tick, says how long it waited (`UplinkSample::waited_s`).
+#[derive(Clone, Copy, Debug)]
+pub struct ArrivedUplink {
+    /// When it arrived.
+    pub at: Instant,
+    /// What it carries.
+    pub sample: UplinkSample,
+}
+
+impl ArrivedUplink {
+    /// `sample`, arrived now.
+    pub fn now(sample: UplinkSample) -> Self {
+        ArrivedUplink { at: Instant::now(), sample }
+    }
+
+    /// The sample as the VE takes it in at `woke`, with the time it waited since its arrival.
+    pub fn taken_in(&self, woke: Instant) -> UplinkSample {
+        UplinkSample { waited_s: woke.saturating_duration_since(self.at).as_secs_f64(), ..self.sample }
+    }
+}
+
 /// The VE thread's ends of one user's rings.
 pub struct UserLink {
     /// Uplinks from the user's receive task.
-    pub uplinks: Consumer<UplinkSample>,
+    pub uplinks: Consumer<ArrivedUplink>,
     /// Length-prefixed encoded snapshots to the user's send task.
     pub snapshots: Producer<u8>,
     /// Wakes the send task.

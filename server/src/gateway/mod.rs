@@ -8,7 +8,7 @@ mod frames;
 mod loop_stats;
 mod users;
 
-pub use commands::{Command, CommandSender, UserLink};
+pub use commands::{ArrivedUplink, Command, CommandSender, UserLink};
 pub use frames::{prefetch_next_frame, push_frame, take_latest_frame, FRAME_HEADER};
 pub use loop_stats::{LatencyHistogram, Percentiles, StageHistograms, StageTimes, VeLoopStats};
 pub use users::{PoseTap, UserCounters, UserEntry, UserRegistry};

@@ -129,6 +129,7 @@ impl Grip {
             flags: 0,
             last_snapshot_seq: snapshot.seq,
             last_snapshot_age_s: 0.0,
+            waited_s: 0.0,
             hand_wrench: hand,
             model_pose: [0.0; MAX_POSE_LEN],
             model_twist: [0.0; MAX_OP_DIM],

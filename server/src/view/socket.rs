@@ -19,8 +19,8 @@ use super::compose::UserInfo;
 use super::grab::Grip;
 use super::messages::{FromPage, ToPage, Welcome, VERSION};
 use super::{short, Counter, Source, ViewShared, MAX_EVENTS_PER_S, MAX_MESSAGE_BYTES};
-use crate::core::{JoinRequest, UplinkSample};
-use crate::gateway::{take_latest_frame, Command, Gateway, UserLink};
+use crate::core::JoinRequest;
+use crate::gateway::{take_latest_frame, ArrivedUplink, Command, Gateway, UserLink};
 
 /// A page has this long to send `auth`.
 const AUTH_PATIENCE: Duration = Duration::from_secs(30);
@@ -219,7 +219,7 @@ struct Grab {
     server: Arc<Gateway>,
     user: u32,
     op: String,
-    uplinks: rtrb::Producer<UplinkSample>,
+    uplinks: rtrb::Producer<ArrivedUplink>,
     snapshots: rtrb::Consumer<u8>,
     notify: Arc<Notify>,
     grip: Grip,
@@ -417,7 +417,7 @@ impl Page {
         }
         let Ok(Datagram::Snapshot(snapshot)) = codec::decode_datagram(&self.frame, shape) else { return };
         let Some(sample) = g.grip.uplink(self.epoch.elapsed(), &snapshot, g.snapshot_period_s) else { return };
-        if g.uplinks.push(sample).is_err() {
+        if g.uplinks.push(ArrivedUplink::now(sample)).is_err() {
             self.view.counters.bump(Counter::UplinksDropped);
         }
     }
