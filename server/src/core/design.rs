@@ -49,9 +49,10 @@
 //! joins (the QUIC connection's round trip after the handshake; the virtual-time harness passes its emulated
 //! link's): a client that understated its round trip would be given a coupling too stiff for the VE every
 //! user shares. A join without a measured round trip gets the floor ([`CouplingFrequency::designed`]).
-//! Mid-session the VE's round-trip estimate (`round_trip`, less the VE period an uplink may wait for a tick)
-//! can only soften the coupling ([`soften`]): when it exceeds what the frequency holds, the gains go down to
-//! the rule's for the longer trip. Lowering `K` at a
+//! Mid-session the delay the VE measures can only soften the coupling ([`soften`]): its round-trip estimate
+//! (`round_trip`, less the VE period an uplink may wait for a tick) plus what a gap between uplinks (lost
+//! ones) held the reference beyond a device period. When that exceeds what the frequency holds, the gains go
+//! down to the rule's for the longer delay. Lowering `K` at a
 //! stretch `e` removes `½ ΔK e²` from the spring and lowering `B` only dissipates less, so the change takes
 //! energy out and puts none in. The gains never rise mid-session: a rise stores energy at the stretch that no
 //! one put in (the passivity controller pays for its own rises of β from its account).
@@ -366,21 +367,23 @@ impl CouplingFrequency {
     }
 }
 
-/// Softens a coupling designed at `frequency` when the round trip the VE measures mid-session
-/// (`estimate_s`, `round_trip::RoundTrip::estimate_s`) is longer than it holds: the gains keep the OP's mass
-/// and damping ratio and take the new frequency, `K ← K (ω'/ω)²`, `B ← B ω'/ω`. The VE hears an uplink only
-/// at its next tick, so its estimate counts up to a VE period of waiting that the rate margin budgets
-/// already (a perfect link measures one period): that period is taken off before the rule. Returns whether
+/// Softens a coupling designed at `frequency` when the delay the VE measures mid-session is longer than it
+/// holds: the gains keep the OP's mass and damping ratio and take the new frequency, `K ← K (ω'/ω)²`,
+/// `B ← B ω'/ω`. The delay is the round trip (`estimate_s`, `round_trip::RoundTrip::estimate_s`) less the VE
+/// period (the VE hears an uplink only at its next tick, a wait the rate margin budgets already: a perfect
+/// link measures one period), plus what the gap since the user's previous uplink (`gap_s`) held the
+/// coupling's reference beyond a device period (lost uplinks: a delay no round trip shows). Returns whether
 /// the gains changed.
 pub fn soften<S: Space>(
     frequency: &mut CouplingFrequency,
     estimate_s: Option<f64>,
+    gap_s: f64,
     stiffness: &mut S::OpVec,
     damping: &mut S::OpVec,
 ) -> bool {
-    let ve_period_s = 1.0 / frequency.ve_rate_hz;
-    let network = estimate_s.map(|trip| (trip - ve_period_s).max(0.0));
-    let Some(softer) = network.and_then(|trip| frequency.softened(trip)) else {
+    let trip = estimate_s.map_or(0.0, |trip| (trip - 1.0 / frequency.ve_rate_hz).max(0.0));
+    let held = (gap_s - 1.0 / frequency.device_rate_hz).max(0.0);
+    let Some(softer) = frequency.softened(trip + held) else {
         return false;
     };
     let ratio = softer.omega / frequency.omega;
@@ -509,7 +512,7 @@ mod tests {
         // Estimates as the VE measures them, a VE period (1 ms) above the network's round trip.
         for trip in [1e-3, 1.5e-3, 2e-3, 2.1e-3, 1.5e-3, 0.0, 3e-3, 2e-3, 0.1, 0.0, 3.0] {
             let before = k;
-            let changed = soften::<Planar>(&mut frequency, Some(trip), &mut k, &mut b);
+            let changed = soften::<Planar>(&mut frequency, Some(trip), 1e-3, &mut k, &mut b);
             assert_eq!(changed, k != before, "{trip}");
             assert!(trip > 2e-3 || !changed, "a round trip within a millisecond changed the gains");
             assert!(k.iter().zip(stiffest.iter()).all(|(now, most)| now <= most), "K rose at {trip} s");
@@ -522,9 +525,15 @@ mod tests {
         }
         assert_eq!(frequency.omega, TAU * COUPLING_HZ);
         let mut default = CouplingFrequency::designed(1000.0, 1000.0, None);
-        assert!(!soften::<Planar>(&mut default, Some(10.0), &mut k, &mut b));
-        assert!(!soften::<Planar>(&mut frequency, None, &mut k, &mut b));
-        assert!(!soften::<Planar>(&mut frequency, Some(f64::NAN), &mut k, &mut b));
+        assert!(!soften::<Planar>(&mut default, Some(10.0), 1.0, &mut k, &mut b));
+        assert!(!soften::<Planar>(&mut frequency, None, 1.0, &mut k, &mut b));
+        assert!(!soften::<Planar>(&mut frequency, Some(f64::NAN), 1e-3, &mut k, &mut b));
+        // Lost uplinks: on a perfect round trip, a gap of 3 ms holds the reference 2 ms beyond a device
+        // period, which 20 Hz does not hold and 10 Hz does.
+        let mut fast = CouplingFrequency::designed(1000.0, 1000.0, Some(0.0));
+        assert!(!soften::<Planar>(&mut fast, Some(1e-3), 1e-3, &mut k, &mut b));
+        assert!(soften::<Planar>(&mut fast, Some(1e-3), 3e-3, &mut k, &mut b));
+        assert!((fast.omega - TAU * 10.0).abs() < 1e-9);
     }
 
     #[test]

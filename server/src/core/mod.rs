@@ -566,12 +566,15 @@ impl<S: Space> VeCore<S> {
             self.metrics.uplinks_clipped += 1;
         }
         let u = &mut self.users[index];
+        // The gap since the previous uplink (not since the join's grasp, which waits for the client to start).
+        let gap_s = u.last_seq.and(u.last_uplink_at).map_or(0.0, |at| now.saturating_sub(at).as_secs_f64());
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
         u.round_trip.heard(now.as_secs_f64(), sample.last_snapshot_seq, sample.last_snapshot_age_s);
         if let Some(frequency) = &mut u.coupling_frequency {
             let c = &mut self.couplings[index];
-            if design::soften::<S>(frequency, u.round_trip.estimate_s(), &mut c.stiffness, &mut c.damping) {
+            let trip = u.round_trip.estimate_s();
+            if design::soften::<S>(frequency, trip, gap_s, &mut c.stiffness, &mut c.damping) {
                 u.thresholds = device_side::user_thresholds::<S>(&self.config, &u.mapping, &c.stiffness);
                 self.metrics.couplings_softened += 1;
             }
