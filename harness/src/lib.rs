@@ -403,7 +403,13 @@ impl<S: Space> Session<S> {
             device: p.device.as_ref().map(|d| d.spec().caps()),
             mapping: p.plan.mapping.clone(),
         };
-        let joined = self.ve.join(now, request).map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
+        // The server's own view of the link, as the QUIC driver takes it from the connection: the emulated
+        // links' mean delays both ways.
+        let round_trip = p.plan.uplink.delay + p.plan.downlink.delay;
+        let joined = self
+            .ve
+            .join_measured(now, request, Some(round_trip))
+            .map_err(|e| anyhow!("{} refused: {e}", p.plan.name))?;
         // The wire's checks on the welcome, as the network's handshake makes them: what a real client would be
         // refused, a simulated one is too.
         if let Err(error) = kinloop_protocol::codec::validate::welcome(&joined.welcome) {

@@ -281,16 +281,18 @@ pub async fn accept(
     admit: impl FnOnce(&Hello) -> Result<SceneInfo, Refused>,
     decide: impl FnOnce(&Hello, &Join) -> Result<Welcome, Refused>,
 ) -> Result<AcceptedSession, AcceptError> {
-    accept_with(incoming, admit, |hello, join| std::future::ready(decide(&hello, &join))).await
+    accept_with(incoming, admit, |hello, join, _| std::future::ready(decide(&hello, &join))).await
 }
 
 /// [`accept`] with an asynchronous decision on the join, for servers whose admission lives elsewhere (the
 /// VE server asks its simulation thread, which owns the users). `decide` gets copies of the hello and the
-/// join; the whole handshake, decisions included, is bounded by [`HANDSHAKE_TIMEOUT`].
+/// join and the connection's round trip as QUIC measured it so far (the handshake and the hello's exchange:
+/// the server's own view of the link, delays emulated below QUIC included); the whole handshake, decisions
+/// included, is bounded by [`HANDSHAKE_TIMEOUT`].
 pub async fn accept_with<A, F, Fut>(incoming: Incoming, admit: A, decide: F) -> Result<AcceptedSession, AcceptError>
 where
     A: FnOnce(&Hello) -> Result<SceneInfo, Refused>,
-    F: FnOnce(Hello, Join) -> Fut,
+    F: FnOnce(Hello, Join, Duration) -> Fut,
     Fut: std::future::Future<Output = Result<Welcome, Refused>>,
 {
     let no_key = |_| std::future::ready(ResumeAnswer::Refused(ResumeRefusal::NoRoomKey));
@@ -310,7 +312,7 @@ where
     A: FnOnce(&Hello) -> Result<SceneInfo, Refused>,
     R: FnOnce(RoomState) -> RFut,
     RFut: std::future::Future<Output = ResumeAnswer>,
-    F: FnOnce(Hello, Join) -> Fut,
+    F: FnOnce(Hello, Join, Duration) -> Fut,
     Fut: std::future::Future<Output = Result<Welcome, Refused>>,
 {
     let handshake = async {
@@ -354,7 +356,7 @@ where
             Err(ControlStreamError::Decode(error)) => return Err(refuse(&connection, send, invalid_join(&error)).await),
             Err(error) => return Err(error.into()),
         };
-        let welcome = match decide(hello.clone(), join.clone()).await {
+        let welcome = match decide(hello.clone(), join.clone(), connection.rtt()).await {
             Ok(welcome) => welcome,
             Err(refused) => return Err(refuse(&connection, send, refused).await),
         };

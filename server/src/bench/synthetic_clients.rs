@@ -65,7 +65,7 @@ impl SyntheticJoins {
             let (snapshot_tx, snapshot_rx) = RingBuffer::new(ring_bytes);
             let (reply_tx, reply_rx) = oneshot::channel();
             let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: Arc::default() };
-            let command = Command::Join { request: request.clone(), link, reply: reply_tx };
+            let command = Command::Join { request: request.clone(), round_trip: None, link, reply: reply_tx };
             command_tx.push(command).ok()?;
             clients.push(SyntheticClient {
                 uplinks: uplink_tx,

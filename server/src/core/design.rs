@@ -26,12 +26,36 @@
 //! `I = 1 / max λ(Λ⁻¹_ωω)` (the blocks of eq 9's Λ⁻¹), `K = m ω_g²`, `B = 2 ζ m ω_g`, critically damped.
 //! Since Λ⁻¹ is positive semi-definite, its largest eigenvalue is at most the sum of its blocks' largest,
 //! so along every direction of the coupled OP (rotation and translation tied by the loops) the coupling's
-//! frequency is at most `√2 ω_g`. `ω_g` is [`COUPLING_HZ`] and at most a fiftieth of the VE rate and of the
-//! device's rate (the uplinks that move its reference), far below both. The paper's gains
+//! frequency is at most `√2 ω_g`. The paper's gains
 //! (K_g = 1000 N/m, 10⁴ N·m/rad) put the testbed's link 2 at 2.6 Hz in translation but, on OPs that turn
 //! about a nearly fixed point, the angular 10⁴ N·m/rad made a loop with the local model that the VE could
 //! not hold (README, Known limits of earlier versions): designed from the inertia, no OP gets a coupling
 //! stiffer than its own mass can follow.
+//!
+//! **The frequency and the round trip.** The coupling's loop has three delays: a VE step, a device period
+//! (the uplinks that move its reference) and the user's network round trip `T` (the OP goes out in a
+//! snapshot, the local model follows it, its pose comes back in an uplink). A critically damped PD on a mass
+//! crosses over at `ω_c = √(2 + √5) ω_g ≈ 2.06 ω_g` with a phase margin of `atan(2 √(2 + √5)) ≈ 76°`, and a
+//! delay `τ` takes `ω_c τ` of it. Each delay may last at most a [`RATE_MARGIN`]th of the coupling's period
+//! (`ω_g τ ≤ 2π / 50`, 15° at the crossover): one delay at its bound leaves 61°, all three 32°. So
+//! ```text
+//! f_g = min(f_VE / 50, f_device / 50, max(COUPLING_HZ, 1 / (50 T)))
+//! ```
+//! [`COUPLING_HZ`] (8 Hz) is the floor, the default every delay gets: on a round trip of 2.5 ms or more the
+//! phase rule alone would ask for less, and the loop is held by what the local model predicts over the delay
+//! and by the passivity controller (`passivity`), not by the PD's phase margin. The coupling is stiffer only
+//! where the delay itself leaves the PD well damped: `1 / (50 T)` below 2.5 ms, up to the rate margins' cap
+//! (20 Hz at 1 kHz, reached at `T ≤ 1 ms`). `T` is the server's own measurement of the user's link when it
+//! joins (the QUIC connection's round trip after the handshake; the virtual-time harness passes its emulated
+//! link's): a client that understated its round trip would be given a coupling too stiff for the VE every
+//! user shares. A join without a measured round trip gets the floor ([`CouplingFrequency::designed`]).
+//! Mid-session the delay the VE measures can only soften the coupling ([`soften`]): its round-trip estimate
+//! (`round_trip`, less the VE period an uplink may wait for a tick) plus what a gap between uplinks (lost
+//! ones) held the reference beyond a device period. When that exceeds what the frequency holds, the gains go
+//! down to the rule's for the longer delay. Lowering `K` at a
+//! stretch `e` removes `½ ΔK e²` from the spring and lowering `B` only dissipates less, so the change takes
+//! energy out and puts none in. The gains never rise mid-session: a rise stores energy at the stretch that no
+//! one put in (the passivity controller pays for its own rises of β from its account).
 
 use kinloop_linkage::algorithms::reach::OpReach;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
@@ -292,11 +316,83 @@ fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_sc
     device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle
 }
 
-/// The graphics controller's natural frequency (rad/s) for a VE at `ve_rate_hz` and a device at
-/// `device_rate_hz`.
-pub fn coupling_frequency(ve_rate_hz: f64, device_rate_hz: f64) -> f64 {
-    let hz = COUPLING_HZ.min(ve_rate_hz / RATE_MARGIN).min(device_rate_hz / RATE_MARGIN);
-    std::f64::consts::TAU * hz
+/// The graphics controller's natural frequency for one user, and what it was chosen from (see the module
+/// documentation, "The frequency and the round trip").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CouplingFrequency {
+    /// The natural frequency in use (rad/s).
+    pub omega: f64,
+    /// The VE's rate (Hz).
+    pub ve_rate_hz: f64,
+    /// The rate at which the user's device moves the coupling's reference (Hz).
+    pub device_rate_hz: f64,
+}
+
+impl CouplingFrequency {
+    /// The frequency for a VE at `ve_rate_hz`, a device at `device_rate_hz` and the user's network round trip
+    /// as the server measured it (`None`: not measured, which gets [`COUPLING_HZ`]): the rule of the module
+    /// documentation, `min(rates / RATE_MARGIN, max(COUPLING_HZ, 1 / (RATE_MARGIN T)))`.
+    pub fn designed(ve_rate_hz: f64, device_rate_hz: f64, round_trip_s: Option<f64>) -> Self {
+        let rates_hz = ve_rate_hz.min(device_rate_hz) / RATE_MARGIN;
+        // A round trip of zero allows any frequency the rates do; an unknown or impossible one, none above
+        // the default.
+        let trip_hz = match round_trip_s {
+            Some(trip) if trip >= 0.0 => 1.0 / (RATE_MARGIN * trip),
+            _ => COUPLING_HZ,
+        };
+        let hz = COUPLING_HZ.max(trip_hz).min(rates_hz);
+        CouplingFrequency { omega: std::f64::consts::TAU * hz, ve_rate_hz, device_rate_hz }
+    }
+
+    /// The longest round trip (s) this frequency was designed for: a coupling above [`COUPLING_HZ`] holds a
+    /// round trip of at most a [`RATE_MARGIN`]th of its period; one at or below it, any.
+    pub fn holds_round_trip_s(&self) -> f64 {
+        if self.omega > std::f64::consts::TAU * COUPLING_HZ {
+            std::f64::consts::TAU / (RATE_MARGIN * self.omega)
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// The frequency for a round trip measured mid-session, when it is longer than this one holds: never
+    /// stiffer than this one (a rise stores energy at the spring's stretch that no one put in; lowering the
+    /// gains removes `½ ΔK e²`, which only takes energy out). `None` while the round trip is held.
+    pub fn softened(&self, round_trip_s: f64) -> Option<Self> {
+        // NaN is no measurement.
+        if round_trip_s.is_nan() || round_trip_s <= self.holds_round_trip_s() {
+            return None;
+        }
+        let designed = CouplingFrequency::designed(self.ve_rate_hz, self.device_rate_hz, Some(round_trip_s));
+        (designed.omega < self.omega).then_some(designed)
+    }
+}
+
+/// Softens a coupling designed at `frequency` when the delay the VE measures mid-session is longer than it
+/// holds: the gains keep the OP's mass and damping ratio and take the new frequency, `K ← K (ω'/ω)²`,
+/// `B ← B ω'/ω`. The delay is the round trip (`estimate_s`, `round_trip::RoundTrip::estimate_s`) less the VE
+/// period (the VE hears an uplink only at its next tick, a wait the rate margin budgets already: a perfect
+/// link measures one period), plus what the gap since the user's previous uplink (`gap_s`) held the
+/// coupling's reference beyond a device period (lost uplinks: a delay no round trip shows). Returns whether
+/// the gains changed.
+pub fn soften<S: Space>(
+    frequency: &mut CouplingFrequency,
+    estimate_s: Option<f64>,
+    gap_s: f64,
+    stiffness: &mut S::OpVec,
+    damping: &mut S::OpVec,
+) -> bool {
+    let trip = estimate_s.map_or(0.0, |trip| (trip - 1.0 / frequency.ve_rate_hz).max(0.0));
+    let held = (gap_s - 1.0 / frequency.device_rate_hz).max(0.0);
+    let Some(softer) = frequency.softened(trip + held) else {
+        return false;
+    };
+    let ratio = softer.omega / frequency.omega;
+    for a in 0..S::DIM {
+        stiffness[a] *= ratio * ratio;
+        damping[a] *= ratio;
+    }
+    *frequency = softer;
+    true
 }
 
 /// K_g and B_g per operational axis for the OP of `reach` (see the module documentation). `torque`: the
@@ -336,6 +432,109 @@ fn is_positive(x: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::TAU;
+
+    /// The frequency (Hz) the rule gives at 1 kHz rates for a round trip `trip` (s).
+    fn hz(trip: Option<f64>) -> f64 {
+        CouplingFrequency::designed(1000.0, 1000.0, trip).omega / TAU
+    }
+
+    /// The phase margin (rad) of a critically damped PD on a unit mass at `omega` behind a loop delay of
+    /// `delay_s`, computed numerically: the open loop `(B s + K) e^{-s τ} / s²` crosses |L| = 1 where a
+    /// bisection finds it, and the margin is `π + arg L` there.
+    fn delayed_phase_margin(omega: f64, delay_s: f64) -> f64 {
+        let (k, b) = (omega * omega, 2.0 * COUPLING_DAMPING_RATIO * omega);
+        let gain = |w: f64| (b * b * w * w + k * k).sqrt() / (w * w);
+        let (mut lo, mut hi) = (1e-3 * omega, 1e3 * omega);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if gain(mid) > 1.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let crossover = 0.5 * (lo + hi);
+        (b * crossover / k).atan() - crossover * delay_s
+    }
+
+    /// The rule of the module documentation at 1 kHz: a round trip of a millisecond or less gets the rate
+    /// margins' 20 Hz, 1.25 ms 16 Hz, 2.5 ms and beyond (a 100 ms link) the default 8 Hz, as does a join
+    /// whose round trip was not measured or is not a duration.
+    #[test]
+    fn a_fast_link_gets_a_stiffer_coupling_and_a_slow_one_the_default() {
+        let close = |got: f64, want: f64| (got - want).abs() < 1e-9 * want;
+        for (trip, want) in [(Some(0.0), 20.0), (Some(1e-3), 20.0), (Some(1.25e-3), 16.0), (Some(2.5e-3), 8.0)] {
+            assert!(close(hz(trip), want), "{trip:?}: {} Hz", hz(trip));
+        }
+        for trip in [Some(0.1), Some(1.0), None, Some(f64::NAN), Some(-1e-3), Some(f64::INFINITY)] {
+            assert_eq!(hz(trip), COUPLING_HZ, "{trip:?}");
+        }
+    }
+
+    /// Over round trips from 0 to 0.2 s and rates from 100 Hz to 10 kHz: the frequency never rises with the
+    /// round trip, never exceeds a fiftieth of either rate, is never below the default unless a rate demands
+    /// it, and above the default the PD behind the round trip keeps more than 60° of phase margin (computed
+    /// numerically, not from the rule's constants).
+    #[test]
+    fn the_frequency_falls_with_the_round_trip_within_the_rate_margins() {
+        for (ve, device) in [(1000.0, 1000.0), (1000.0, 4000.0), (10000.0, 1000.0), (100.0, 1000.0), (4000.0, 4000.0)] {
+            let mut last = f64::INFINITY;
+            for i in 0..=2000 {
+                let trip = i as f64 * 1e-4;
+                let omega = CouplingFrequency::designed(ve, device, Some(trip)).omega;
+                assert!(omega <= last, "{ve}/{device} Hz: rises at {trip} s");
+                last = omega;
+                let rates = TAU * f64::min(ve, device) / RATE_MARGIN;
+                assert!(omega <= rates * (1.0 + 1e-12), "{ve}/{device} Hz at {trip} s: {omega} rad/s");
+                assert!(omega >= (TAU * COUPLING_HZ).min(rates) * (1.0 - 1e-12));
+                if omega > TAU * COUPLING_HZ * (1.0 + 1e-12) {
+                    let margin = delayed_phase_margin(omega, trip).to_degrees();
+                    assert!(margin > 60.0, "{ve}/{device} Hz at {trip} s: {margin}°");
+                }
+            }
+        }
+    }
+
+    /// Mid-session the frequency only goes down: a round trip within what it holds changes nothing, a longer
+    /// one lowers K by (ω'/ω)² and B by ω'/ω (the damping ratio kept), a shorter one afterwards does not
+    /// raise them again, and gains designed at the default are never softened.
+    #[test]
+    fn a_longer_round_trip_only_softens_the_coupling() {
+        use kinloop_linkage::math::space::Planar;
+        use nalgebra::Vector3;
+        let mass = Vector3::new(2.0, 2.0, 0.01);
+        let mut frequency = CouplingFrequency::designed(1000.0, 1000.0, Some(0.0));
+        let omega0 = frequency.omega;
+        assert_eq!(omega0, TAU * 20.0);
+        let (mut k, mut b) = (mass * omega0 * omega0, mass * 2.0 * omega0);
+        let mut stiffest = k;
+        // Estimates as the VE measures them, a VE period (1 ms) above the network's round trip.
+        for trip in [1e-3, 1.5e-3, 2e-3, 2.1e-3, 1.5e-3, 0.0, 3e-3, 2e-3, 0.1, 0.0, 3.0] {
+            let before = k;
+            let changed = soften::<Planar>(&mut frequency, Some(trip), 1e-3, &mut k, &mut b);
+            assert_eq!(changed, k != before, "{trip}");
+            assert!(trip > 2e-3 || !changed, "a round trip within a millisecond changed the gains");
+            assert!(k.iter().zip(stiffest.iter()).all(|(now, most)| now <= most), "K rose at {trip} s");
+            stiffest = k;
+            let omega = frequency.omega;
+            for a in 0..3 {
+                assert!((k[a] - mass[a] * omega * omega).abs() <= 1e-12 * k[a]);
+                assert!((b[a] - 2.0 * mass[a] * omega).abs() <= 1e-12 * b[a]);
+            }
+        }
+        assert_eq!(frequency.omega, TAU * COUPLING_HZ);
+        let mut default = CouplingFrequency::designed(1000.0, 1000.0, None);
+        assert!(!soften::<Planar>(&mut default, Some(10.0), 1.0, &mut k, &mut b));
+        assert!(!soften::<Planar>(&mut frequency, None, 1.0, &mut k, &mut b));
+        assert!(!soften::<Planar>(&mut frequency, Some(f64::NAN), 1e-3, &mut k, &mut b));
+        // Lost uplinks: on a perfect round trip, a gap of 3 ms holds the reference 2 ms beyond a device
+        // period, which 20 Hz does not hold and 10 Hz does.
+        let mut fast = CouplingFrequency::designed(1000.0, 1000.0, Some(0.0));
+        assert!(!soften::<Planar>(&mut fast, Some(1e-3), 1e-3, &mut k, &mut b));
+        assert!(soften::<Planar>(&mut fast, Some(1e-3), 3e-3, &mut k, &mut b));
+        assert!((fast.omega - TAU * 10.0).abs() < 1e-9);
+    }
 
     #[test]
     fn the_load_maps_below_both_the_continuous_and_the_peak_bound() {

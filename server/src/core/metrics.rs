@@ -40,6 +40,9 @@ pub struct VeMetrics {
     /// Clients' energy reports refused (non-finite, negative, shrinking, or faster than the device): the
     /// coupling kept the last good one.
     pub energy_reports_refused: u64,
+    /// Couplings softened mid-session because their user's round trip grew beyond what they were designed
+    /// for (`design::soften`).
+    pub couplings_softened: u64,
     /// Closure residual norm at the start of the last step (m).
     pub closure_error: f64,
     /// Largest closure residual seen (m).

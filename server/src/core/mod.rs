@@ -131,6 +131,10 @@ pub struct UserState<S: Space> {
     pub wrench: S::OpVec,
     /// Fade weight of the last step.
     pub weight: f64,
+    /// The coupling's K_g per axis as it stands (designed at the join, softened since if the round trip grew).
+    pub coupling_stiffness: S::OpVec,
+    /// The pose the coupling pulls the OP toward (the user's local model as heard, led).
+    pub coupling_target: OpPose<S>,
     /// Constraint count of the user's last snapshot.
     pub constraint_count: u8,
     /// The user's passivity account.
@@ -172,6 +176,8 @@ impl<S: Space> VeState<'_, S> {
             op_pose: c.op_pose,
             wrench: c.step_wrench,
             weight: c.weight,
+            coupling_stiffness: c.stiffness,
+            coupling_target: c.target_pose,
             constraint_count: u.constraint_count,
             passivity: u.passivity,
             heard_until_s: c.heard_time_s,
@@ -372,7 +378,21 @@ impl<S: Space> VeCore<S> {
     /// (no hand wrench, the OP's pose as the reference) until the user's first uplink takes over, and fades
     /// out again if none comes within `silent_timeout`. Otherwise a linkage under gravity would fall for the
     /// network's round trip and the fade-in, and the user's first moments would be spent catching it.
+    ///
+    /// The user's round trip is not measured here: its coupling gets the default frequency
+    /// ([`VeCore::join_measured`] takes the driver's measurement).
     pub fn join(&mut self, now: Duration, request: JoinRequest) -> Result<Joined, RefusalReason> {
+        self.join_measured(now, request, None)
+    }
+
+    /// [`VeCore::join`] for a user whose network round trip the server measured (the driver's view of the
+    /// link, never the client's word): the coupling's frequency follows it (`design::CouplingFrequency`).
+    pub fn join_measured(
+        &mut self,
+        now: Duration,
+        request: JoinRequest,
+        round_trip: Option<Duration>,
+    ) -> Result<Joined, RefusalReason> {
         let present = self.present_users();
         if present >= self.config.max_users {
             self.metrics.joins_refused += 1;
@@ -423,9 +443,14 @@ impl<S: Space> VeCore<S> {
                 return Err(RefusalReason::Device { what: error.to_string() });
             }
         };
-        let (stiffness, damping) = self.fixed_gains.unwrap_or_else(|| {
-            design::coupling_gains(reach, design::coupling_frequency(self.config.ve_rate_hz, device_rate), torque)
-        });
+        let (frequency, (stiffness, damping)) = match self.fixed_gains {
+            Some(gains) => (None, gains),
+            None => {
+                let trip = round_trip.map(|t| t.as_secs_f64());
+                let f = design::CouplingFrequency::designed(self.config.ve_rate_hz, device_rate, trip);
+                (Some(f), design::coupling_gains(reach, f.omega, torque))
+            }
+        };
         let user_id = self.next_user_id;
         self.next_user_id += 1;
         let point = &self.model.ops[op];
@@ -457,6 +482,7 @@ impl<S: Space> VeCore<S> {
             hand_off: false,
             let_go: false,
             round_trip: round_trip::RoundTrip::new(),
+            coupling_frequency: frequency,
             rejections: RejectionBurst::default(),
             constraint_count: 0,
             slot: SnapshotSlot::new(&self.model, user_id, request.form),
@@ -540,12 +566,22 @@ impl<S: Space> VeCore<S> {
             self.metrics.uplinks_clipped += 1;
         }
         let u = &mut self.users[index];
+        // The gap since the previous uplink (not since the join's grasp, which waits for the client to start).
+        let gap_s = u.last_seq.and(u.last_uplink_at).map_or(0.0, |at| now.saturating_sub(at).as_secs_f64());
         u.last_seq = Some(sample.seq);
         u.last_uplink_at = Some(now);
         // A wait that is no duration at all is taken as none: the uplink arrived now.
         let arrived_s = now.as_secs_f64() - if sample.waited_s.is_finite() { sample.waited_s.max(0.0) } else { 0.0 };
         if let Some(trip_s) = u.round_trip.heard(arrived_s, sample.last_snapshot_seq, sample.last_snapshot_age_s) {
             self.metrics.sharing.note_sample(trip_s);
+        }
+        if let Some(frequency) = &mut u.coupling_frequency {
+            let c = &mut self.couplings[index];
+            let trip = u.round_trip.estimate_s();
+            if design::soften::<S>(frequency, trip, gap_s, &mut c.stiffness, &mut c.damping) {
+                u.thresholds = device_side::user_thresholds::<S>(&self.config, &u.mapping, &c.stiffness);
+                self.metrics.couplings_softened += 1;
+            }
         }
         u.hand_off = sample.flags & kinloop_protocol::uplink_flags::HAND_OFF != 0;
         if u.role == Role::Manipulator {

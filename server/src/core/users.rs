@@ -197,6 +197,9 @@ pub struct User {
     pub let_go: bool,
     /// The network's round trip to this user (see `round_trip`).
     pub round_trip: super::round_trip::RoundTrip,
+    /// The coupling's frequency as designed for the user's round trip, softened as it grows (see `design`);
+    /// `None` when the gains are fixed (`VeConfig::coupling_stiffness`).
+    pub coupling_frequency: Option<super::design::CouplingFrequency>,
     /// Current burst of rejected uplinks.
     pub rejections: RejectionBurst,
     /// Constraint count of the last snapshot.

@@ -58,7 +58,7 @@ pub async fn serve(incoming: Incoming, host: Arc<Host>) {
             None => ResumeAnswer::Refused(ResumeRefusal::NoRoomKey),
         }
     };
-    let handshake = accept_resuming(incoming, admit, resume, move |hello, join| async move {
+    let handshake = accept_resuming(incoming, admit, resume, move |hello, join, round_trip| async move {
         let shared = routed_ref.get().ok_or_else(|| refused(RefusalReason::Malformed { what: "no room".into() }))?;
         shared
             .executor
@@ -69,7 +69,9 @@ pub async fn serve(incoming: Incoming, host: Arc<Host>) {
         let notify = Arc::new(Notify::new());
         let (reply_tx, reply_rx) = oneshot::channel();
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
-        let command = Command::Join { request: JoinRequest::from_handshake(&hello, &join), link, reply: reply_tx };
+        // The round trip QUIC measured over the handshake: the server's own view of the link (see `design`).
+        let request = JoinRequest::from_handshake(&hello, &join);
+        let command = Command::Join { request, round_trip: Some(round_trip), link, reply: reply_tx };
         let shutting_down = || refused(RefusalReason::Malformed { what: "the server is shutting down".into() });
         shared.gateway.commands.send(command).await.map_err(|_| shutting_down())?;
         let joined = reply_rx.await.map_err(|_| shutting_down())?.map_err(refused)?;

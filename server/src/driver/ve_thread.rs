@@ -374,8 +374,8 @@ fn serve_commands<S: Space>(
 ) {
     while let Ok(command) = commands.pop() {
         match command {
-            Command::Join { request, link, reply } => {
-                let decision = core.join(now, request);
+            Command::Join { request, round_trip, link, reply } => {
+                let decision = core.join_measured(now, request, round_trip);
                 if let Ok(joined) = &decision {
                     links.push(ActiveLink { user: joined.user_id, link });
                 }

@@ -18,6 +18,8 @@ pub enum Command {
     Join {
         /// What the client asked for.
         request: JoinRequest,
+        /// The user's network round trip as the server measured it (the QUIC connection's), if it did.
+        round_trip: Option<Duration>,
         /// The VE thread's ends of the user's rings.
         link: UserLink,
         /// Where the decision goes.

@@ -373,7 +373,7 @@ impl Page {
         };
         let link = UserLink { uplinks: uplink_rx, snapshots: snapshot_tx, notify: notify.clone() };
         let name = request.name.clone();
-        let decided = match server.commands.send(Command::Join { request, link, reply }).await {
+        let decided = match server.commands.send(Command::Join { request, round_trip: None, link, reply }).await {
             Ok(()) => tokio::time::timeout(JOIN_PATIENCE, decision).await,
             Err(()) => return self.reply(ToPage::Error { message: "the VE is not running".into() }),
         };

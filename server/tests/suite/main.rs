@@ -6,6 +6,7 @@
 mod support;
 
 mod bench_hooks;
+mod coupling_frequency;
 mod loopback;
 mod passivity;
 mod quic_server;
