@@ -13,6 +13,7 @@ mod quic_server;
 mod random_sessions;
 mod resume;
 mod rooms;
+mod round_trips;
 mod synthetic_load;
 mod ve_ball_joints;
 mod ve_core;
