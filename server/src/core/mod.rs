@@ -21,6 +21,7 @@
 //! Allocation: join and leave allocate (per-user buffers); ticks, uplinks and snapshots for a fixed set of
 //! users do not (the `no_allocation` test counts).
 
+mod closing;
 pub mod config;
 pub mod coupling;
 pub mod design;

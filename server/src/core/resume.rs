@@ -4,19 +4,14 @@
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::assemble::assemble;
 use kinloop_linkage::algorithms::kinematics::{forward_kinematics, forward_velocity};
-use kinloop_linkage::algorithms::loop_closure::closure_residual;
 use kinloop_linkage::math::space::Space;
 use kinloop_protocol::codec::limits::{MAX_POSITION, MAX_SPEED};
 use kinloop_protocol::ResumeRefusal;
 use nalgebra::DVector;
 
+use super::closing::close_loops;
 use super::{VeCore, VeEvent, BROKEN_CLOSURE_PER_LENGTH};
-
-/// Residual, in length scales, to which a resumed configuration is re-assembled (as `Model::compile` closes
-/// q0).
-const ASSEMBLY_PER_LENGTH: f64 = 1e-12;
 
 impl<S: Space> VeCore<S> {
     /// Resumes the room from an authenticated state `(q, q̇)`: refused while users are present (the live
@@ -53,26 +48,13 @@ impl<S: Space> VeCore<S> {
         if let Some(i) = beyond(qd, MAX_SPEED) {
             return Err(ResumeRefusal::Shape { what: format!("qd[{i}] = {} is beyond ±{MAX_SPEED}", qd[i]) });
         }
-        let q = DVector::from_column_slice(q);
-        forward_kinematics(&self.model, &mut self.data, &q);
-        closure_residual(&self.model, &mut self.data);
-        let residual_m = if self.model.has_loops() { self.data.closure_residual.norm() } else { 0.0 };
-        let tolerance_m = BROKEN_CLOSURE_PER_LENGTH * self.model.length_scale;
-        let refused = ResumeRefusal::Loops { residual_m, tolerance_m };
-        if residual_m > tolerance_m {
-            self.restore_kinematics();
-            return Err(refused);
-        }
-        let q = if self.model.has_loops() {
-            match assemble(&self.model, &q, ASSEMBLY_PER_LENGTH * self.model.length_scale) {
-                Ok(assembly) => assembly.q,
-                Err(_) => {
-                    self.restore_kinematics();
-                    return Err(refused);
-                }
+        let q = match close_loops(&self.model, &mut self.data, &DVector::from_column_slice(q)) {
+            Ok(closed) => closed.q,
+            Err(residual_m) => {
+                self.restore_kinematics();
+                let tolerance_m = BROKEN_CLOSURE_PER_LENGTH * self.model.length_scale;
+                return Err(ResumeRefusal::Loops { residual_m, tolerance_m });
             }
-        } else {
-            q
         };
         self.q.copy_from(&q);
         self.qd.copy_from_slice(qd);

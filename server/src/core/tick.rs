@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use super::closing::close_loops;
 use super::*;
 
 impl<S: Space> VeCore<S> {
@@ -102,7 +103,15 @@ impl<S: Space> VeCore<S> {
                 self.book_step_wrenches(dt);
             }
             Err(error) => {
-                // Restoring the velocity too would replay the same divergence: restore at rest.
+                // Restoring the velocity too would replay the same divergence: restore at rest. A restore
+                // point began a step closed to `BROKEN_CLOSURE_PER_LENGTH`, which in violent motion is far
+                // above what a projected step leaves: it is assembled onto the loops (and stays the restore
+                // point, closed), so the VE goes on from a closed state.
+                if let Ok(closed) = close_loops(&self.model, &mut self.data, &self.checkpoint_q) {
+                    self.checkpoint_q.copy_from(&closed.q);
+                    self.closure_error = closed.residual;
+                    self.metrics.closure_error = closed.residual;
+                }
                 self.q.copy_from(&self.checkpoint_q);
                 self.qd.fill(0.0);
                 self.energy_guard.reset();
