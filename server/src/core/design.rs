@@ -18,18 +18,6 @@
 //! second on a minimum-jerk path (peak acceleration `5.77 d / T²`, Flash & Hogan 1985). Angles map one to
 //! one and torques by `c_f c_p`, so every axis scales power alike (`protocol::Mapping`).
 //!
-//! **The grasp.** On a device that renders torque the user holds the OP rigidly when the OP's lightest
-//! rotational inertia, times the torque scale `c_f c_p`, is within what the device can be made to feel
-//! (`renders_rotation`); otherwise as through a pin, and the coupling then holds only the OP's translation.
-//! Where the OP's path turns (the far end of a coupler's curve), the linkage moves mostly by turning the OP:
-//! a pin holds it there only through `J_vᵀ K_g J_v`, which falls with the OP's speed along its path, while the
-//! hand's force reaches the VE divided by `c_f`. Under delay a hand that pulls toward the far side of the turn
-//! then drives the VE's linkage round it before the local model and the device (heavy in the VE's units,
-//! `M c_p / c_f`) follow. A load that sets a small `c_f` (a position actuator's pull far from its target)
-//! does both at once: the grasp falls to a pin and the hand's force grows in the VE. So where the device holds
-//! the linkage at the smallest scale that holds the OP rigidly (static load within its continuous force, the
-//! load rule's bound, and static torque within its peak torque), the scale rises to it (`held_rigidly`).
-//!
 //! **The coupling.** The graphics controller ties the VE's OP to the user's local model (eq 4 applies it
 //! beside the force channel). It is a spring-damper on the OP's effective mass, and what makes it stable
 //! or not is its natural frequency against the rates and delays of the loop it closes (VE → snapshot →
@@ -278,7 +266,6 @@ pub fn choose_mapping<S: Space>(
     if device.max_torque_nm > 0.0 && torque_load > 0.0 {
         force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
     }
-    force_scale = held_rigidly(reach, device, position_scale, force_scale);
     if let Some(asked) = request.force_scale {
         if renders_force && asked * reach.static_force_n > device.max_force_n {
             // The load is positive here (a zero load fits any scale).
@@ -327,31 +314,6 @@ fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_sc
     let (_, inertia) = lightest(reach);
     let handle = device.mass.get(lin).copied().unwrap_or(0.0);
     device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle
-}
-
-/// The force scale `force_scale` raised, on a device that renders torque, to the smallest that holds the OP
-/// rigidly ([`renders_rotation`]: `c_f = I_handle / (MASS_REDUCTION · I_op · c_p)`), where the device still
-/// holds the linkage there: the static load within its continuous force (the load rule, [`check_holdable`])
-/// and the static torque within its peak torque (it publishes no continuous one). Unchanged otherwise (a
-/// scale already rigid, an OP too light in rotation to hold rigidly within the device's force, a device that
-/// renders no torque). Why (module documentation, "The grasp"): a pinned coupling holds only the OP's
-/// translation, and where the OP's path turns the linkage moves mostly by turning the OP.
-fn held_rigidly<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, position_scale: f64, force_scale: f64) -> f64 {
-    let lin = <S::Point as VecOps>::LEN;
-    let (_, inertia) = lightest(reach);
-    let handle = device.mass.get(lin).copied().unwrap_or(0.0);
-    if !(device.max_torque_nm > 0.0 && inertia.is_finite() && inertia > 0.0 && position_scale > 0.0) {
-        return force_scale;
-    }
-    let rigid = handle / (MASS_REDUCTION * inertia * position_scale);
-    let holds_force = reach.static_force_n * rigid <= device.continuous_force_n;
-    let holds_torque = reach.static_torque_nm * rigid * position_scale <= device.max_torque_nm;
-    if force_scale < rigid && holds_force && holds_torque {
-        // A hair above, so that `renders_rotation`'s product, rounded, is not a hair below the handle's.
-        rigid * (1.0 + 1e-12)
-    } else {
-        force_scale
-    }
 }
 
 /// The graphics controller's natural frequency for one user, and what it was chosen from (see the module
@@ -612,76 +574,5 @@ mod tests {
         assert!(text.starts_with(PREDICTED_REFUSAL) && text.contains("would change this"), "{text}");
         let compensated = Mapping { gravity_compensation: true, ..heavy };
         assert_eq!(check_holdable(&reach, &device, &compensated), Ok(()));
-    }
-
-    /// The grasp rule ([`held_rigidly`]) against the closed forms: on a device that renders torque, a load
-    /// whose scale would pin the grasp (a position actuator's pull far from its target: 68 N and 2.09 N m)
-    /// gets the smallest scale at which the OP's rotational inertia on the device is the quarter of the
-    /// handle's the impedance controller can reach, `I_handle / (4 I_op c_p)`; a load the device would not
-    /// hold continuously there, a static torque beyond its peak, a device without torque or a scale already
-    /// rigid keep the load's own scale, `min(0.35 F_cont / F, 0.35 · ½ τ_peak / (τ c_p))`.
-    #[test]
-    fn a_pinned_grasp_is_held_rigidly_where_the_device_holds_the_load() {
-        use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
-        use kinloop_linkage::math::space::Planar;
-        use kinloop_linkage::model::{builtin, Model};
-        let scene = builtin::scene("paper-testbed").expect("built in").expect("parses");
-        let model = Model::<Planar>::compile(&scene, "paper-testbed").expect("compiles");
-        let surveyed = survey_op(&model, 0, &SurveyConfig::default()).expect("surveys");
-        let paper = DeviceCaps {
-            workspace_min: vec![-0.15, -0.15, -TAU],
-            workspace_max: vec![0.15, 0.15, TAU],
-            max_force_n: 10.0,
-            continuous_force_n: 5.0,
-            max_torque_nm: 0.2,
-            mass: vec![1.0, 1.0, 0.005],
-            ..DeviceCaps::generous("paper", 3)
-        };
-        let (handle, quarter) = (0.005, 0.25);
-        let chosen = |force: f64, torque: f64, inertia: f64, device: &DeviceCaps| {
-            let reach = OpReach {
-                static_force_n: force,
-                static_torque_nm: torque,
-                inverse_rotational_inertia_max: 1.0 / inertia,
-                ..surveyed.clone()
-            };
-            choose_mapping(&reach, device, &MappingRequest::default(), true).expect("a mapping")
-        };
-        let close = |got: f64, want: f64| (got - want).abs() <= 1e-9 * want;
-        // The load's own scale, computed apart from the code: the force and the torque bounds.
-        let own = |force: f64, torque: f64, c_p: f64, renders_torque: bool| {
-            let by_force = LOAD_FRACTION * 5.0 / force;
-            if renders_torque {
-                by_force.min(LOAD_FRACTION * 0.5 * 0.2 / (torque * c_p))
-            } else {
-                by_force
-            }
-        };
-        // The actuated four-bar's load and its OP's lightest rotational inertia.
-        let (force, torque, inertia) = (68.0, 2.09, 0.0147);
-        let m = chosen(force, torque, inertia, &paper);
-        let c_p = m.position_scale;
-        let rigid = handle / (MASS_REDUCTION * inertia * c_p);
-        assert!(own(force, torque, c_p, true) < rigid, "the case pins the grasp at the load's own scale");
-        assert!(force * rigid <= 5.0 && torque * rigid * c_p <= 0.2, "the case holds the load rigidly");
-        assert!(close(m.force_scale, rigid), "{} against {rigid}", m.force_scale);
-        assert!(m.rigid_grasp);
-        assert!(close(inertia * m.force_scale * c_p, quarter * handle), "the device feels a quarter of its handle");
-        let reach = OpReach { static_force_n: force, static_torque_nm: torque, ..surveyed.clone() };
-        assert_eq!(check_holdable(&reach, &paper, &m), Ok(()));
-        // The load beyond the continuous force at the rigid scale, the torque beyond the peak: the load's own.
-        for (force, torque) in [(1.01 * 5.0 / rigid, torque), (force, 1.01 * 0.2 / (rigid * c_p))] {
-            let m = chosen(force, torque, inertia, &paper);
-            assert!(close(m.force_scale, own(force, torque, c_p, true)), "{force} N, {torque} N m");
-            assert!(!m.rigid_grasp);
-        }
-        // A device without torque: the force bound alone, pinned.
-        let falcon = DeviceCaps { max_torque_nm: 0.0, ..paper.clone() };
-        let m = chosen(force, torque, inertia, &falcon);
-        assert!(close(m.force_scale, own(force, torque, c_p, false)) && !m.rigid_grasp);
-        // An OP heavy enough in rotation to be held rigidly at the load's own scale: unchanged.
-        let heavy = 10.0 * handle / (MASS_REDUCTION * own(force, torque, c_p, true) * c_p);
-        let m = chosen(force, torque, heavy, &paper);
-        assert!(close(m.force_scale, own(force, torque, c_p, true)) && m.rigid_grasp);
     }
 }
