@@ -45,26 +45,15 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
 /// 40 % as the session ran away).
 #[test]
 fn seed_17s_crank_at_300_ms_keeps_its_local_model_on_the_cranks_circle() {
-    use kinloop_client::user::{HandSpec, UserSpec};
-    use kinloop_harness::{run, ClientPlan, SessionPlan};
-    use kinloop_server::core::VeConfig;
-    use std::time::Duration;
+    use kinloop::experiments::robustness::{evaluate, session_plan};
     let linkage = generate(17, None);
     let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[300]);
     let point =
         all.iter().find(|p| p.op == "op-crank" && p.device.name() == "sim:falcon").expect("the crank on a Falcon");
-    let outcome = kinloop::experiments::robustness::evaluate(&linkage, point, 10.0);
+    let outcome = evaluate(&linkage, point, 10.0);
     assert!(outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
-    let mut client = ClientPlan::new("user", &point.op, point.device);
-    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
-    let plan = SessionPlan {
-        scene: linkage.scene.clone(),
-        ve: VeConfig::default(),
-        clients: vec![client.with_link(point.link())],
-        duration: Duration::from_secs(10),
-        record_every: 1,
-    };
-    let (_, recording) = run(&plan, &mut |_| {}).expect("the session runs");
+    let plan = session_plan(&linkage, point, 10.0);
+    let (_, recording) = kinloop_harness::run(&plan, &mut |_| {}).expect("the session runs");
     let samples = &recording.clients[0];
     let planar = |v: &[f64]| (v[0], v[1]);
     let ve: Vec<(f64, f64)> = samples.iter().filter_map(|s| s.ve_op.as_deref().map(planar)).collect();
