@@ -137,6 +137,19 @@ pub(crate) fn length_scale(g: &Generated) -> Result<f64, String> {
     compiled.map_err(|e| e.to_string())
 }
 
+/// The session `point` runs on `g`'s linkage for `seconds`, every tick recorded, with the default VE.
+pub fn session_plan(g: &Generated, point: &Point, seconds: f64) -> SessionPlan {
+    let mut client = ClientPlan::new("user", &point.op, point.device);
+    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
+    SessionPlan {
+        scene: g.scene.clone(),
+        ve: VeConfig::default(),
+        clients: vec![client.with_link(point.link())],
+        duration: Duration::from_secs_f64(seconds),
+        record_every: 1,
+    }
+}
+
 /// Runs one session for `seconds` on the linkage `g` and judges it.
 pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
     let refused = |why: String| Outcome {
@@ -159,15 +172,7 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
         Ok(scale) => scale,
         Err(why) => return refused(why),
     };
-    let mut client = ClientPlan::new("user", &point.op, point.device);
-    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
-    let plan = SessionPlan {
-        scene: g.scene.clone(),
-        ve: VeConfig::default(),
-        clients: vec![client.with_link(point.link())],
-        duration: Duration::from_secs_f64(seconds),
-        record_every: 1,
-    };
+    let plan = session_plan(g, point, seconds);
     let (summary, rec) = match session(&plan) {
         Ok(ran) => ran,
         Err(e) => return refused(format!("{e:#}")),

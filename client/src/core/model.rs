@@ -95,6 +95,11 @@ impl<S: Space> LocalModel<S> {
         self.reduced.terms.inverse_inertia = *inverse_inertia;
     }
 
+    /// b̂ for the reduced form: the snapshot's, as the caller carries it to where the model is.
+    pub fn set_bias(&mut self, bias: &S::OpVec) {
+        self.reduced.terms.bias = *bias;
+    }
+
     /// One step of `dt_s` under the OP wrench `wrench`.
     pub fn step(&mut self, dt_s: f64, wrench: &S::OpVec) {
         match (&mut self.config, self.using_config) {

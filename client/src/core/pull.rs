@@ -1,10 +1,11 @@
 //! Stage 2 of a tick (paper Fig 3): the frame the controllers use and the local model's pull toward the VE.
 //!
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
-//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`); and the
-//! model's OP is pulled toward the VE's OP predicted to now, fast along the constrained directions (onto
-//! the path when there is one), slowly in the free ones (`CoreConfig::free_blend_time_constant`), no faster
-//! than the device-model coupling's dampers allow when `CoreConfig::passive_update` is on.
+//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), and the
+//! model steps with the snapshot's b̂ turned as they are; the model's OP is pulled toward the VE's OP
+//! predicted to now, fast along the constrained directions (onto the path when there is one), slowly in the
+//! free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
+//! allow when `CoreConfig::passive_update` is on.
 
 use std::time::Duration;
 
@@ -59,6 +60,18 @@ impl<S: Space> HapticCore<S> {
             self.model.apply_correction(&moved, &sped);
         }
         self.model.set_inverse_inertia(&self.local.inverse_inertia);
+        // On a path the model steps with the snapshot's b̂ turned as the frame is. At a regular point of a
+        // one-freedom path b̂ lies along the tangent where the VE was (its curvature's part aside); left
+        // unturned, a part |b̂| sin Δ of it pushes the model along the walls where it is, Δ the angle the
+        // frame turned, and the constrained pull (`blend_time_constant` τ) answers it only by holding the
+        // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. Its forces at rest where the model
+        // is (`place_frame` adds them to the frame's b̂) stay out of the model's step: their change along the
+        // path is a spring as stiff as the load turns near a dead centre, beyond an explicit step.
+        let bias = match &on_path {
+            Some((_, _, twist_turn)) => *twist_turn * self.active.bias,
+            None => self.active.bias,
+        };
+        self.model.set_bias(&bias);
     }
 
     /// How far the local model's constraint geometry is still trusted where the model is now, as this tick's
