@@ -33,7 +33,9 @@ pub(super) fn close_loops<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DV
     forward_kinematics(model, data, q);
     closure_residual(model, data);
     let residual = data.closure_residual.norm();
-    if !(residual <= BROKEN_CLOSURE_PER_LENGTH * model.length_scale) {
+    // A residual that is not a number is no closure either.
+    let within = residual.partial_cmp(&(BROKEN_CLOSURE_PER_LENGTH * model.length_scale));
+    if !matches!(within, Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
         return Err(residual);
     }
     match assemble(model, q, ASSEMBLY_PER_LENGTH * model.length_scale) {
