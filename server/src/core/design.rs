@@ -50,7 +50,7 @@
 //! link's): a client that understated its round trip would be given a coupling too stiff for the VE every
 //! user shares. A join without a measured round trip gets the floor ([`CouplingFrequency::designed`]).
 //! Mid-session the delay the VE measures can only soften the coupling ([`soften`]): its round-trip estimate
-//! (`round_trip`, less the VE period an uplink may wait for a tick) plus what a gap between uplinks (lost
+//! (`round_trip`, less the tick a client waits before it answers a snapshot) plus what a gap between uplinks (lost
 //! ones) held the reference beyond a device period. When that exceeds what the frequency holds, the gains go
 //! down to the rule's for the longer delay. Lowering `K` at a
 //! stretch `e` removes `½ ΔK e²` from the spring and lowering `B` only dissipates less, so the change takes
@@ -369,9 +369,10 @@ impl CouplingFrequency {
 
 /// Softens a coupling designed at `frequency` when the delay the VE measures mid-session is longer than it
 /// holds: the gains keep the OP's mass and damping ratio and take the new frequency, `K ← K (ω'/ω)²`,
-/// `B ← B ω'/ω`. The delay is the round trip (`estimate_s`, `round_trip::RoundTrip::estimate_s`) less the VE
-/// period (the VE hears an uplink only at its next tick, a wait the rate margin budgets already: a perfect
-/// link measures one period), plus what the gap since the user's previous uplink (`gap_s`) held the
+/// `B ← B ω'/ω`. The delay is the round trip (`estimate_s`, `round_trip::RoundTrip::estimate_s`, dated at the
+/// uplink's arrival) less one period: the client answers a snapshot at its next tick, a wait the rate margins
+/// budget already, so a perfect link measures up to one period (taken at the VE's rate, the device's at the
+/// default rates), plus what the gap since the user's previous uplink (`gap_s`) held the
 /// coupling's reference beyond a device period (lost uplinks: a delay no round trip shows). Returns whether
 /// the gains changed.
 pub fn soften<S: Space>(
@@ -509,7 +510,7 @@ mod tests {
         assert_eq!(omega0, TAU * 20.0);
         let (mut k, mut b) = (mass * omega0 * omega0, mass * 2.0 * omega0);
         let mut stiffest = k;
-        // Estimates as the VE measures them, a VE period (1 ms) above the network's round trip.
+        // Estimates as the VE measures them, a tick (1 ms) above the network's round trip.
         for trip in [1e-3, 1.5e-3, 2e-3, 2.1e-3, 1.5e-3, 0.0, 3e-3, 2e-3, 0.1, 0.0, 3.0] {
             let before = k;
             let changed = soften::<Planar>(&mut frequency, Some(trip), 1e-3, &mut k, &mut b);
