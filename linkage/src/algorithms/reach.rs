@@ -102,6 +102,10 @@ pub struct OpReach<S: Space> {
     pub inverse_mass_max: f64,
     /// Largest eigenvalue of the angular block of Λ⁻¹ over the samples (1/(kg m²)).
     pub inverse_rotational_inertia_max: f64,
+    /// Smallest turning radius of the OP over the samples (m; see `turning_radius_min`): on a linkage of one
+    /// degree of freedom, the OP's smallest distance from the instant centre of its motion. Infinite for an OP
+    /// that never turns.
+    pub turning_radius_min_m: f64,
     /// Dimension of the closed configuration manifold at `q0` (the linkage's degrees of freedom).
     pub dof: usize,
     /// On a linkage of one degree of freedom, the OP's whole path in order, one walk step apart: one lap of
@@ -354,6 +358,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         static_force_max_n: 0.0,
         inverse_mass_max: 0.0,
         inverse_rotational_inertia_max: 0.0,
+        turning_radius_min_m: f64::INFINITY,
         dof,
         path: None,
     };
@@ -366,6 +371,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         data: Data::new(model),
         forces: Vec::new(),
         torques: Vec::new(),
+        inverse_inertias: Vec::new(),
     };
     samples.visit(&q0, &start, true, &mut reach);
     if dof == 0 {
@@ -485,6 +491,8 @@ struct Samples<'m, S: Space> {
     data: Data<S>,
     forces: Vec<f64>,
     torques: Vec<f64>,
+    /// The largest eigenvalues of Λ⁻¹'s linear and angular blocks at each sample with inertia.
+    inverse_inertias: Vec<(f64, f64)>,
 }
 
 impl<S: Space> Samples<'_, S> {
@@ -505,9 +513,11 @@ impl<S: Space> Samples<'_, S> {
         }
         if let Ok((load, _)) = static_op_load(self.model, &mut self.data, q, &self.zero_qd, self.op) {
             let inverse = self.data.op.inverse_inertia;
-            reach.inverse_mass_max = reach.inverse_mass_max.max(block_max_eigenvalue::<S>(&inverse, 0..lin));
-            reach.inverse_rotational_inertia_max =
-                reach.inverse_rotational_inertia_max.max(block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
+            let (lambda_v, lambda_w) =
+                (block_max_eigenvalue::<S>(&inverse, 0..lin), block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
+            reach.inverse_mass_max = reach.inverse_mass_max.max(lambda_v);
+            reach.inverse_rotational_inertia_max = reach.inverse_rotational_inertia_max.max(lambda_w);
+            self.inverse_inertias.push((lambda_v, lambda_w));
             let (f, t) = (S::op_lin(&load).norm(), S::op_ang(&load).norm());
             if f.is_finite() && t.is_finite() {
                 self.forces.push(f);
@@ -530,10 +540,31 @@ impl<S: Space> Samples<'_, S> {
         if reach.inverse_rotational_inertia_max * l2 <= IMMOBILE_GROUP * scaled_largest {
             reach.inverse_rotational_inertia_max = 0.0;
         }
+        reach.turning_radius_min_m = turning_radius_min(&self.inverse_inertias, l2);
         reach.static_force_max_n = self.forces.iter().fold(0.0, |a: f64, b| a.max(*b));
         reach.static_force_n = percentile_90(&mut self.forces);
         reach.static_torque_nm = percentile_90(&mut self.torques);
     }
+}
+
+/// The OP's smallest turning radius over `samples`, each the largest eigenvalues `(λ_v, λ_ω)` of Λ⁻¹'s linear
+/// and angular blocks at one pose (eq 9), `l2` the square of the model's length scale: `min √(λ_v / λ_ω)`.
+/// On a linkage of one degree of freedom Λ⁻¹ = j jᵀ / m_s, with `j = (j_v, j_ω)` the OP's twist per unit of
+/// the linkage's coordinate and `m_s` its inertia there, so `√(λ_v / λ_ω) = |j_v| / |j_ω|`: the ratio of the
+/// OP's speed to its angular speed, its distance from the instant centre of its motion (a crank's tip turns
+/// about the crank's pivot at the crank's length everywhere; a coupler point near the instant centre turns
+/// more than it moves). On more degrees of freedom it compares the OP's most mobile translation with its most
+/// mobile rotation. Poses where the OP barely moves at all (both groups below [`IMMOBILE_GROUP`] of the
+/// largest over the samples, unit-consistent coordinates `(v, L ω)`: a jammed toggle, whose ratio is
+/// round-off) are not counted; an OP that never turns has an infinite radius.
+fn turning_radius_min(samples: &[(f64, f64)], l2: f64) -> f64 {
+    let mobility = |&(v, w): &(f64, f64)| v.max(w * l2);
+    let largest = samples.iter().map(mobility).fold(0.0, f64::max);
+    samples
+        .iter()
+        .filter(|s| mobility(s) > IMMOBILE_GROUP * largest && s.1 * l2 > IMMOBILE_GROUP * largest)
+        .map(|&(v, w)| (v / w).sqrt())
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Where a walk's `path` first comes back near its start after having gone away (a crank-rocker's coupler

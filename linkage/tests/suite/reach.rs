@@ -281,3 +281,47 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
         assert!((got - expected).norm() < 0.02 * expected.norm(), "crank turned {turn} rad: {got:?} vs {expected:?}");
     }
 }
+
+/// The coupler's instant centre at each pose of `coupler_curve` (same order): where the crank's line (from
+/// its pivot at the origin through its tip) meets the rocker's (from its pivot at (0.3, 0) through the pin),
+/// by Cramer's rule; with the coupler point, its turning radius there.
+fn coupler_turning_radii() -> Vec<f64> {
+    let (a, b, c, o2) = (0.1, 0.25, 0.2, Vector2::new(0.3, 0.0));
+    (0..3600)
+        .map(|k| {
+            let theta = std::f64::consts::TAU * k as f64 / 3600.0;
+            let tip = Vector2::new(a * theta.cos(), a * theta.sin());
+            let d = o2 - tip;
+            let dist = d.norm();
+            let along = (b * b - c * c + dist * dist) / (2.0 * dist);
+            let unit = d / dist;
+            let pin = tip + unit * along + Vector2::new(-unit.y, unit.x) * (b * b - along * along).sqrt();
+            // s tip = o2 + t (pin − o2): two equations in s and t.
+            let rocker = pin - o2;
+            let det = tip.x * -rocker.y + rocker.x * tip.y;
+            let s = (o2.x * -rocker.y + rocker.x * o2.y) / det;
+            ((tip + pin) * 0.5 - tip * s).norm()
+        })
+        .collect()
+}
+
+/// The survey's smallest turning radius (`OpReach::turning_radius_min_m`) against closed forms: a crank's tip
+/// turns about the crank's pivot at the crank's length at every pose (the crank-rocker's 0.1 m, the
+/// slider-crank's 0.05 m); the crank-rocker's coupler midpoint is nearest its instant centre (the crossing of
+/// the crank's and the rocker's lines) at the analytic minimum over a crank turn, which the survey, sampling
+/// real poses every few steps, meets from above within its sampling; the parallelogram's coupler never turns.
+#[test]
+fn the_smallest_turning_radius_is_the_distance_to_the_instant_centre() {
+    let radius = |scene: &str, op: &str| {
+        let model = planar(scene);
+        survey_op(&model, model.op_index(op).unwrap(), &SurveyConfig::default()).unwrap().turning_radius_min_m
+    };
+    for (scene, length) in [("fourbar-crank-rocker", 0.1), ("slider-crank", 0.05)] {
+        let r = radius(scene, "crank-tip");
+        assert!((r - length).abs() < 1e-9 * length, "{scene}'s crank tip: {r} m");
+    }
+    let exact = coupler_turning_radii().into_iter().fold(f64::INFINITY, f64::min);
+    let r = radius("fourbar-crank-rocker", "coupler");
+    assert!(r >= exact * (1.0 - 1e-9) && r < exact * 1.01, "the coupler's {r} m against {exact} m");
+    assert_eq!(radius("parallelogram", "coupler"), f64::INFINITY);
+}
