@@ -608,3 +608,128 @@ fn imported_linkages_render_by_default_on_devices_of_their_kind() {
     }
     assert!(failing.is_empty(), "pairs that do not render:\n{}", failing.join("\n"));
 }
+
+#[test]
+fn zz_forced() {
+    use kinloop::experiments::common::{session, sweep};
+    use kinloop::experiments::renderability::{judged, plan, Network, Point};
+    use kinloop_client::device::presets::DevicePreset;
+    use kinloop_client::user::HandKind;
+    let spec = std::env::var("ZZ_FORCED").unwrap();
+    let mut jobs = Vec::new();
+    for item in spec.split(';').filter(|s| !s.is_empty()) {
+        let f: Vec<&str> = item.split('|').collect();
+        let device: DevicePreset = f[2].parse().unwrap();
+        for s in f[3].split(',') {
+            let scale: f64 = s.parse().unwrap();
+            for hand in [HandKind::Soft, HandKind::Firm] {
+                let network = if f.get(4) == Some(&"0") { Network::Perfect } else { Network::Delayed50 };
+                let p = Point { scene: f[0].into(), op: f[1].into(), device, network, hand };
+                jobs.push((p, scale));
+            }
+        }
+    }
+    let results = sweep("forced", &jobs, 2, false, |(p, scale)| {
+        let mut pl = plan(p, 40.0)?;
+        if *scale > 0.0 {
+            pl.clients[0].mapping.force_scale = Some(*scale);
+        }
+        let (summary, rec) = session(&pl)?;
+        Ok((judged(p, &summary, &rec), *scale))
+    })
+    .unwrap();
+    for (r, scale) in &results {
+        let p = &r.point;
+        eprintln!(
+            "FORCED {}:{} {:?} {:?} {:?} asked {scale} cf {:.4} cp {:.4} renders {} clamped {:.2} % rms {:.2} mm {:?}",
+            p.scene.rsplit('/').next().unwrap_or(""),
+            p.op,
+            p.device,
+            p.network,
+            p.hand,
+            r.force_scale,
+            r.position_scale,
+            r.renders,
+            r.clamped_fraction * 100.0,
+            r.device_op_rms_m * 1e3,
+            r.failures
+        );
+    }
+}
+
+#[test]
+fn zz_seed() {
+    use kinloop::experiments::common::session;
+    use kinloop::experiments::robustness::{session_plan, Point};
+    use kinloop::generate::generate;
+    use kinloop_client::device::presets::DevicePreset;
+    use kinloop_client::user::HandKind;
+    use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+    use kinloop_linkage::math::space::Planar;
+    use kinloop_linkage::model::Model;
+    use kinloop_protocol::MappingRequest;
+    use kinloop_server::core::design::choose_mapping;
+    let seed: u64 = std::env::var("ZZ_SEED").unwrap().parse().unwrap();
+    let opname = std::env::var("ZZ_OP").unwrap();
+    let delay: u64 = std::env::var("ZZ_DELAY").unwrap().parse().unwrap();
+    let g = generate(seed, None);
+    eprintln!(
+        "SEED {seed} class {:?} units {:?} extras {:?} near_singular {}",
+        g.class, g.units, g.extras, g.near_singular
+    );
+    let model = Model::<Planar>::compile(&g.scene, &g.scene.name).unwrap();
+    let op = model.op_index(&opname).unwrap();
+    let reach = survey_op(&model, op, &SurveyConfig::default()).unwrap();
+    let caps = DevicePreset::Paper.spec(g.scene.kind).unwrap().caps();
+    let m = choose_mapping(&reach, &caps, &MappingRequest::default(), true).unwrap();
+    let r_g = (reach.inverse_mass_max / reach.inverse_rotational_inertia_max).sqrt();
+    eprintln!("REACH r_min {:.4e} r_g {:.4e} ratio {:.3} L {:.3e} F {:.4e} Fmax {:.4e} T {:.4e} m {:.4e} I {:.4e} dof {} mapping {:?} load_dev {:.3} N torque_dev {:.4} N m",
+        reach.turning_radius_min_m, r_g, reach.turning_radius_min_m / r_g, model.length_scale, reach.static_force_n, reach.static_force_max_n, reach.static_torque_nm,
+        1.0 / reach.inverse_mass_max, 1.0 / reach.inverse_rotational_inertia_max, reach.dof, m,
+        reach.static_force_n * m.force_scale, reach.static_torque_nm * m.force_scale * m.position_scale);
+    let point = Point { seed, op: opname.clone(), device: DevicePreset::Paper, hand: HandKind::Soft, delay_ms: delay };
+    let plan = session_plan(&g, &point, 10.0);
+    let (summary, rec) = session(&plan).unwrap();
+    let c = &summary.clients[0];
+    eprintln!(
+        "SESSION saturated {:.3} rms {:.2} mm restores {}",
+        c.saturated_fraction,
+        c.device_op_rms_m * 1e3,
+        summary.ve_restores
+    );
+    let samples = &rec.clients[0];
+    let cf = m.force_scale;
+    let cp = m.position_scale;
+    for w in 0..20 {
+        let (t0, t1) = (w as f64 * 0.5, w as f64 * 0.5 + 0.5);
+        let win: Vec<_> = samples.iter().filter(|s| s.t >= t0 && s.t < t1).collect();
+        if win.is_empty() {
+            continue;
+        }
+        let n = win.len() as f64;
+        let clamped = win.iter().filter(|s| s.clamp_scale < 1.0).count() as f64 / n;
+        let fmax = win.iter().map(|s| (s.command[0].powi(2) + s.command[1].powi(2)).sqrt()).fold(0.0, f64::max);
+        let tmax = win.iter().map(|s| s.command[2].abs()).fold(0.0, f64::max);
+        let hand = win.iter().map(|s| (s.hand[0].powi(2) + s.hand[1].powi(2)).sqrt()).sum::<f64>() / n;
+        let jc = win
+            .iter()
+            .map(|s| (s.joint_constraint[0].powi(2) + s.joint_constraint[1].powi(2)).sqrt())
+            .fold(0.0, f64::max);
+        let imp = win.iter().map(|s| (s.impedance[0].powi(2) + s.impedance[1].powi(2)).sqrt()).fold(0.0, f64::max);
+        let pc = win
+            .iter()
+            .map(|s| (s.position_channel[0].powi(2) + s.position_channel[1].powi(2)).sqrt())
+            .fold(0.0, f64::max);
+        let jct = win.iter().map(|s| s.joint_constraint[2].abs()).fold(0.0, f64::max);
+        let impt = win.iter().map(|s| s.impedance[2].abs()).fold(0.0, f64::max);
+        let pct = win.iter().map(|s| s.position_channel[2].abs()).fold(0.0, f64::max);
+        let last = win.last().unwrap();
+        eprintln!("W {t0:.1}s clamped {:.2} cmd|F|max {fmax:.3} |T|max {tmax:.4} hand(VE) {hand:.3e} (dev {:.3}) jc {jc:.3e}/{jct:.3e} imp {imp:.3e}/{impt:.3e} pc {pc:.3e}/{pct:.3e} count {} dev {:?} ve {:?}",
+            clamped, hand * cf, last.constraint_count, last.device, last.ve_op);
+    }
+    let _ = cp;
+    for s in samples.iter().filter(|s| s.t < 1.0).step_by(50) {
+        eprintln!("T {:.3} clamp {:.3} count {} cmd {:.3?} jc {:.3?} pc {:.3?} imp {:.3?} hand {:.3?} devtw {:.3?} modeltw {:.3?} gain {:.2}",
+            s.t, s.clamp_scale, s.constraint_count, s.command, s.joint_constraint, s.position_channel, s.impedance, s.hand, s.device_twist, s.model_twist, s.gain);
+    }
+}
