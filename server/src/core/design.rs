@@ -309,8 +309,7 @@ pub fn choose_mapping<S: Space>(
         position_scale,
         force_scale,
         gravity_compensation: request.gravity_compensation,
-        rigid_grasp: std::env::var("ZZ_RIGID")
-            .map_or(renders_rotation(reach, device, force_scale * position_scale), |v| v == "1"),
+        rigid_grasp: renders_rotation(reach, device, force_scale * position_scale),
     })
 }
 
@@ -367,7 +366,7 @@ fn held_rigidly<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, position_scal
     let (_, inertia) = lightest(reach);
     let handle = device.mass.get(lin).copied().unwrap_or(0.0);
     let applies = device.max_torque_nm > 0.0 && inertia > 0.0 && position_scale > 0.0 && moves_by_turning(reach);
-    if !applies || std::env::var_os("ZZ_NORULE").is_some() {
+    if !applies {
         return force_scale;
     }
     let rigid = handle / (MASS_REDUCTION * inertia * position_scale);
