@@ -18,24 +18,6 @@
 //! second on a minimum-jerk path (peak acceleration `5.77 d / T²`, Flash & Hogan 1985). Angles map one to
 //! one and torques by `c_f c_p`, so every axis scales power alike (`protocol::Mapping`).
 //!
-//! **The grasp.** On a device that renders torque the user holds the OP rigidly when the OP's lightest
-//! rotational inertia, times the torque scale `c_f c_p`, is within what the device can be made to feel
-//! (`renders_rotation`); otherwise as through a pin, and the coupling then holds only the OP's translation. A
-//! load that sets a small `c_f` (a position actuator's pull far from its target) does two things at once: the
-//! grasp falls to a pin and the hand's force, divided by `c_f`, grows in the VE. Along the linkage's motion
-//! at a pose where the OP moves by `(v, ω)` per unit of the motion, a rigid coupling holds it with
-//! `K_t |v|² + K_r |ω|²` and a pin with `K_t |v|²` alone; the gains' ratio is the OP's
-//! `r_g² = K_r / K_t = I / m` (lightest inertia and mass), so the pin keeps the share `r² / (r² + r_g²)`, with
-//! `r = |v| / |ω|` the OP's turning radius there (`OpReach::turning_radius_min_m`). An OP on a link that turns
-//! about a fixed pivot (a crank's tip) has `r = r_g` at every pose: the pin keeps half the hold, alike over the
-//! whole reach, and holding the OP's position holds the link. Where `r < r_g` the OP moves more by turning than
-//! by translating in the coupling's own measure (a coupler point near its instant centre, the far end of a
-//! coupler's curve), the pin loses most of the hold there, and under delay a hand pulling toward the far side
-//! of the turn drives the VE's linkage round it before the local model and the device (heavy in the VE's
-//! units, `M c_p / c_f`) follow. So there (`moves_by_turning`), where the device holds the linkage at the
-//! smallest scale that holds the OP rigidly (static load within its continuous force, the load rule's bound,
-//! and static torque within its peak torque), the scale rises to it (`held_rigidly`).
-//!
 //! **The coupling.** The graphics controller ties the VE's OP to the user's local model (eq 4 applies it
 //! beside the force channel). It is a spring-damper on the OP's effective mass, and what makes it stable
 //! or not is its natural frequency against the rates and delays of the loop it closes (VE → snapshot →
@@ -284,7 +266,6 @@ pub fn choose_mapping<S: Space>(
     if device.max_torque_nm > 0.0 && torque_load > 0.0 {
         force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
     }
-    force_scale = held_rigidly(reach, device, position_scale, force_scale);
     if let Some(asked) = request.force_scale {
         if renders_force && asked * reach.static_force_n > device.max_force_n {
             // The load is positive here (a zero load fits any scale).
@@ -333,51 +314,6 @@ fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_sc
     let (_, inertia) = lightest(reach);
     let handle = device.mass.get(lin).copied().unwrap_or(0.0);
     device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle
-}
-
-/// Relative margin below which the OP's smallest turning radius counts as its coupling's `r_g`: an OP on a link
-/// about a fixed pivot has the two equal, computed from eq 9's Λ⁻¹ at different poses (round-off).
-const TURNING_ROUND_OFF: f64 = 1e-6;
-
-/// Whether the OP somewhere moves more by turning than by translating, weighed by the coupling's gains (module
-/// documentation, "The grasp"): its smallest turning radius below `r_g = √(I / m)`, the ratio of its lightest
-/// rotational inertia and mass (the coupling's `K_r / K_t`). An OP that never turns does not; one that only
-/// turns (no translational coupling) does.
-fn moves_by_turning<S: Space>(reach: &OpReach<S>) -> bool {
-    let (mass, inertia) = lightest(reach);
-    if !inertia.is_finite() {
-        return false;
-    }
-    if !mass.is_finite() {
-        return true;
-    }
-    reach.turning_radius_min_m < (inertia / mass).sqrt() * (1.0 - TURNING_ROUND_OFF)
-}
-
-/// The force scale `force_scale` raised, on a device that renders torque, to the smallest that holds the OP
-/// rigidly ([`renders_rotation`]: `c_f = I_handle / (MASS_REDUCTION · I_op · c_p)`), where the pin would lose
-/// most of the coupling's hold ([`moves_by_turning`]) and the device still holds the linkage at that scale: the
-/// static load within its continuous force (the load rule, [`check_holdable`]) and the static torque within
-/// its peak torque (it publishes no continuous one). Unchanged otherwise (a scale already rigid, an OP whose
-/// translation carries its motion, an OP too light in rotation to hold rigidly within the device's force, a
-/// device that renders no torque).
-fn held_rigidly<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, position_scale: f64, force_scale: f64) -> f64 {
-    let lin = <S::Point as VecOps>::LEN;
-    let (_, inertia) = lightest(reach);
-    let handle = device.mass.get(lin).copied().unwrap_or(0.0);
-    let applies = device.max_torque_nm > 0.0 && inertia > 0.0 && position_scale > 0.0 && moves_by_turning(reach);
-    if !applies {
-        return force_scale;
-    }
-    let rigid = handle / (MASS_REDUCTION * inertia * position_scale);
-    let holds_force = reach.static_force_n * rigid <= device.continuous_force_n;
-    let holds_torque = reach.static_torque_nm * rigid * position_scale <= device.max_torque_nm;
-    if force_scale < rigid && holds_force && holds_torque {
-        // A hair above, so that `renders_rotation`'s product, rounded, is not a hair below the handle's.
-        rigid * (1.0 + 1e-12)
-    } else {
-        force_scale
-    }
 }
 
 /// The graphics controller's natural frequency for one user, and what it was chosen from (see the module
@@ -639,89 +575,5 @@ mod tests {
         assert!(text.starts_with(PREDICTED_REFUSAL) && text.contains("would change this"), "{text}");
         let compensated = Mapping { gravity_compensation: true, ..heavy };
         assert_eq!(check_holdable(&reach, &device, &compensated), Ok(()));
-    }
-
-    /// The grasp rule ([`held_rigidly`]) against the closed forms, on the crank-rocker's two OPs surveyed. The
-    /// coupler point, given the actuated four-bar's load (a position actuator's pull far from its target: 68 N
-    /// and 2.09 N m), whose own scale `min(0.35 F_cont / F, 0.35 · ½ τ_peak / (τ c_p))` pins the grasp,
-    /// turns about its instant centre nearer than its `r_g = √(I / m)`: it gets the smallest scale at which its
-    /// rotational inertia on the device is the quarter of the handle's the impedance controller can reach,
-    /// `I_handle / (4 I_op c_p)`. The crank's tip turns about the crank's pivot at the crank's length, which is
-    /// its `r_g` too: its pin keeps half the coupling's hold everywhere, and under its own load, pinned and
-    /// holdable rigidly, its scale stays the load's own. So do a load the device would not hold continuously at
-    /// the rigid scale, a static torque beyond its peak and a device without torque.
-    #[test]
-    fn a_pinned_grasp_is_held_rigidly_where_the_op_moves_by_turning() {
-        use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
-        use kinloop_linkage::math::space::Planar;
-        use kinloop_linkage::model::{builtin, Model};
-        let scene = builtin::scene("fourbar-crank-rocker").expect("built in").expect("parses");
-        let model = Model::<Planar>::compile(&scene, "fourbar-crank-rocker").expect("compiles");
-        let survey = |op: &str| survey_op(&model, model.op_index(op).expect("an OP"), &SurveyConfig::default());
-        let (coupler, crank_tip) = (survey("coupler").expect("surveys"), survey("crank-tip").expect("surveys"));
-        let paper = DeviceCaps {
-            workspace_min: vec![-0.15, -0.15, -TAU],
-            workspace_max: vec![0.15, 0.15, TAU],
-            max_force_n: 10.0,
-            continuous_force_n: 5.0,
-            max_torque_nm: 0.2,
-            mass: vec![1.0, 1.0, 0.005],
-            ..DeviceCaps::generous("paper", 3)
-        };
-        let (force, torque, handle, quarter) = (68.0, 2.09, 0.005, 0.25);
-        let loaded = |reach: &OpReach<Planar>, force: f64, torque: f64| OpReach {
-            static_force_n: force,
-            static_torque_nm: torque,
-            ..reach.clone()
-        };
-        let chosen = |reach: &OpReach<Planar>, device: &DeviceCaps| {
-            choose_mapping(reach, device, &MappingRequest::default(), true).expect("a mapping")
-        };
-        let close = |got: f64, want: f64| (got - want).abs() <= 1e-9 * want;
-        // The load's own scale, computed apart from the code: the force and the torque bounds.
-        let own = |force: f64, torque: f64, c_p: f64, renders_torque: bool| {
-            let by_force = LOAD_FRACTION * 5.0 / force;
-            if renders_torque {
-                by_force.min(LOAD_FRACTION * 0.5 * 0.2 / (torque * c_p))
-            } else {
-                by_force
-            }
-        };
-        let inertia = |reach: &OpReach<Planar>| 1.0 / reach.inverse_rotational_inertia_max;
-        let r_g = |reach: &OpReach<Planar>| (reach.inverse_mass_max / reach.inverse_rotational_inertia_max).sqrt();
-        // The crank's tip: r = r_g = 0.1 m, the crank's length.
-        assert!(close(crank_tip.turning_radius_min_m, 0.1) && close(r_g(&crank_tip), 0.1));
-        let (tip_force, tip_torque) = (crank_tip.static_force_n, crank_tip.static_torque_nm);
-        let m = chosen(&crank_tip, &paper);
-        let (rigid, tip_own) = (
-            handle / (MASS_REDUCTION * inertia(&crank_tip) * m.position_scale),
-            own(tip_force, tip_torque, m.position_scale, true),
-        );
-        let holds = tip_force * rigid <= 5.0 && tip_torque * rigid * m.position_scale <= 0.2;
-        assert!(tip_own < rigid && holds, "the pin at the crank's tip is not one the device could hold rigidly");
-        assert!(close(m.force_scale, tip_own) && !m.rigid_grasp);
-        // The coupler point: nearer its instant centre than its r_g somewhere.
-        assert!(coupler.turning_radius_min_m < 0.9 * r_g(&coupler), "{} m", coupler.turning_radius_min_m);
-        let reach = loaded(&coupler, force, torque);
-        let m = chosen(&reach, &paper);
-        let c_p = m.position_scale;
-        let rigid = handle / (MASS_REDUCTION * inertia(&coupler) * c_p);
-        assert!(own(force, torque, c_p, true) < rigid, "the case pins the grasp at the load's own scale");
-        assert!(force * rigid <= 5.0 && torque * rigid * c_p <= 0.2, "the case holds the load rigidly");
-        assert!(close(m.force_scale, rigid), "{} against {rigid}", m.force_scale);
-        assert!(m.rigid_grasp);
-        let seen = inertia(&coupler) * m.force_scale * c_p;
-        assert!(close(seen, quarter * handle), "the device feels a quarter of its handle");
-        assert_eq!(check_holdable(&reach, &paper, &m), Ok(()));
-        // The load beyond the continuous force at the rigid scale, the torque beyond the peak: the load's own.
-        for (force, torque) in [(1.01 * 5.0 / rigid, torque), (force, 1.01 * 0.2 / (rigid * c_p))] {
-            let m = chosen(&loaded(&coupler, force, torque), &paper);
-            assert!(close(m.force_scale, own(force, torque, c_p, true)), "{force} N, {torque} N m");
-            assert!(!m.rigid_grasp);
-        }
-        // A device without torque: the force bound alone, pinned.
-        let falcon = DeviceCaps { max_torque_nm: 0.0, ..paper.clone() };
-        let m = chosen(&reach, &falcon);
-        assert!(close(m.force_scale, own(force, torque, c_p, false)) && !m.rigid_grasp);
     }
 }
