@@ -15,23 +15,32 @@ fn planar(name: &str) -> Model<Planar> {
     Model::compile(&scene, name).unwrap()
 }
 
-/// The crank-rocker's coupler midpoint over a full crank turn, by circle intersection (crank 0.1 m at the
-/// origin, coupler 0.25 m, rocker 0.2 m at (0.3, 0), the branch of q0, where the coupler-rocker pin lies
-/// above the line from the rocker's pivot to the crank's tip).
-fn coupler_curve() -> Vec<Vector2<f64>> {
+/// The crank-rocker's crank tip and coupler-rocker pin at crank angle `theta`, by circle intersection (crank
+/// 0.1 m at the origin, coupler 0.25 m, rocker 0.2 m at (0.3, 0), the branch of q0, where the pin lies above
+/// the line from the rocker's pivot to the crank's tip).
+fn crank_rocker_joints(theta: f64) -> (Vector2<f64>, Vector2<f64>) {
     let (a, b, c, o2) = (0.1, 0.25, 0.2, Vector2::new(0.3, 0.0));
-    (0..3600)
-        .map(|k| {
-            let theta = std::f64::consts::TAU * k as f64 / 3600.0;
-            let tip = Vector2::new(a * theta.cos(), a * theta.sin());
-            let d = o2 - tip;
-            let dist = d.norm();
-            // The pin B: |B − tip| = b, |B − o2| = c.
-            let along = (b * b - c * c + dist * dist) / (2.0 * dist);
-            let across = (b * b - along * along).sqrt();
-            let unit = d / dist;
-            let normal = Vector2::new(-unit.y, unit.x);
-            let pin = tip + unit * along + normal * across;
+    let tip = Vector2::new(a * theta.cos(), a * theta.sin());
+    let d = o2 - tip;
+    let dist = d.norm();
+    // The pin B: |B − tip| = b, |B − o2| = c.
+    let along = (b * b - c * c + dist * dist) / (2.0 * dist);
+    let across = (b * b - along * along).sqrt();
+    let unit = d / dist;
+    let normal = Vector2::new(-unit.y, unit.x);
+    (tip, tip + unit * along + normal * across)
+}
+
+/// The crank angles of a full turn the analytic checks sample.
+fn crank_turn() -> impl Iterator<Item = f64> {
+    (0..3600).map(|k| std::f64::consts::TAU * k as f64 / 3600.0)
+}
+
+/// The crank-rocker's coupler midpoint over a full crank turn ([`crank_rocker_joints`]).
+fn coupler_curve() -> Vec<Vector2<f64>> {
+    crank_turn()
+        .map(|theta| {
+            let (tip, pin) = crank_rocker_joints(theta);
             (tip + pin) * 0.5
         })
         .collect()
@@ -282,20 +291,14 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
     }
 }
 
-/// The coupler's instant centre at each pose of `coupler_curve` (same order): where the crank's line (from
-/// its pivot at the origin through its tip) meets the rocker's (from its pivot at (0.3, 0) through the pin),
-/// by Cramer's rule; with the coupler point, its turning radius there.
+/// The coupler midpoint's turning radius over a full crank turn: its distance from the coupler's instant centre,
+/// where the crank's line (from its pivot at the origin through its tip) meets the rocker's (from its pivot at
+/// (0.3, 0) through the pin), by Cramer's rule.
 fn coupler_turning_radii() -> Vec<f64> {
-    let (a, b, c, o2) = (0.1, 0.25, 0.2, Vector2::new(0.3, 0.0));
-    (0..3600)
-        .map(|k| {
-            let theta = std::f64::consts::TAU * k as f64 / 3600.0;
-            let tip = Vector2::new(a * theta.cos(), a * theta.sin());
-            let d = o2 - tip;
-            let dist = d.norm();
-            let along = (b * b - c * c + dist * dist) / (2.0 * dist);
-            let unit = d / dist;
-            let pin = tip + unit * along + Vector2::new(-unit.y, unit.x) * (b * b - along * along).sqrt();
+    let o2 = Vector2::new(0.3, 0.0);
+    crank_turn()
+        .map(|theta| {
+            let (tip, pin) = crank_rocker_joints(theta);
             // s tip = o2 + t (pin − o2): two equations in s and t.
             let rocker = pin - o2;
             let det = tip.x * -rocker.y + rocker.x * tip.y;
