@@ -10,6 +10,7 @@ use kinloop::experiments::latency::LatencySummary;
 use kinloop::experiments::lead::ByDelay;
 use kinloop::experiments::paper::ModeSummary;
 use kinloop::experiments::pauses::PausesSummary;
+use kinloop::experiments::rate_ratio::{Decision, RateRatio};
 use kinloop::experiments::renderability::RenderabilitySummary;
 use kinloop::experiments::scale::ScaleSummary;
 use kinloop::experiments::speed_accuracy::{SpeedAccuracyPoint, SpeedAccuracySummary};
@@ -453,6 +454,7 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
         let stages = own(&p.stages_us_p50) / own(&p.bench_stages_us_p50);
         assert!((p.ve_stages_over_bench - stages).abs() <= 0.02 * stages + 0.01, "{p:?}");
         assert!((0.0..=1.0).contains(&p.miss_rate) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
+        misses_judged_from_the_counts_measured(&p.misses_vs_floor, p.miss_rate, p.floor_miss_rate);
         assert_eq!((p.energy_reports_refused, p.state_restores), (0, 0), "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
     }
@@ -463,10 +465,31 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
         assert_eq!(p.users_rendered, p.rooms * p.users_per_room, "{p:?}");
         assert!(p.step_us_p50_worst > 0.0 && p.step_us_p50_worst <= p.step_us_p99_worst, "{p:?}");
         assert!((0.0..=1.0).contains(&p.miss_rate_worst) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
+        misses_judged_from_the_counts_measured(&p.worst_room_vs_floor, p.miss_rate_worst, p.floor_miss_rate);
+        // Every room's ticks pooled: as many rooms' worth as the worst room's, each at 1 kHz.
+        let pooled = &p.misses_vs_floor;
+        assert!(pooled.ticks >= p.rooms as u64 * p.worst_room_vs_floor.ticks / 2, "{p:?}");
+        assert!(pooled.events >= p.worst_room_vs_floor.events, "{p:?}");
         assert_eq!(p.state_restores, 0, "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
         assert!(p.device_lm_rms_mm_median > 0.0 && p.device_lm_rms_mm_max < 50.0, "{p:?}");
     }
+}
+
+/// A misses judgement is made from the counts the point measured: its rates are the counts over the ticks,
+/// its ratio's interval holds the ratio, and its decision is where that interval lies against the bound.
+fn misses_judged_from_the_counts_measured(r: &RateRatio, rate: f64, floor_rate: f64) {
+    assert!(r.ticks > 0 && r.reference_ticks > 0, "{r:?}");
+    assert!((r.events as f64 / r.ticks as f64 - rate).abs() < 1e-12, "{r:?} against {rate}");
+    assert!((r.reference_events as f64 / r.reference_ticks as f64 - floor_rate).abs() < 1e-12, "{r:?}");
+    let high = r.high.unwrap_or(f64::INFINITY);
+    assert!(r.ratio.is_none_or(|ratio| r.low <= ratio && ratio <= high), "{r:?}");
+    let decided = match r.decision {
+        Decision::Within => high <= r.bound,
+        Decision::Beyond => r.low > r.bound,
+        Decision::Undecided => r.low <= r.bound && r.bound < high,
+    };
+    assert!(decided, "{r:?}");
 }
 
 /// Bad command lines are refused with a message, not a panic.

@@ -66,8 +66,9 @@ pub struct ExperimentArgs {
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
     /// Seconds per session instead of the experiment's own (latency 10, renderability 40, the live ones 10
-    /// and 4): e.g. `latency --seconds 40` judges every point over its hand's whole tour. Only the touring
-    /// experiments take it: latency, latency-live, renderability, renderability-live.
+    /// and 4): e.g. `latency --seconds 40` judges every point over its hand's whole tour. The touring
+    /// experiments take it, and `capacity` as each point's length (a longer point counts more of the rare
+    /// deadline misses, so its ratio to the idle loop's is decided more often).
     #[arg(long, value_name = "S")]
     pub seconds: Option<f64>,
     /// The generator seeds `robustness` and `robustness-live` run, a half-open range `A..B` (default the fixed CI

@@ -24,8 +24,9 @@ use kinloop_server::core::VeConfig;
 use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
 
-use super::capacity_rooms::{self, RoomsPoint};
+use super::capacity_rooms::{self, RoomsPoint, MISSES_BOUND};
 use super::common::{Options, Output, Report};
+use super::rate_ratio::RateRatio;
 use crate::charts::{Chart, Legend, Series};
 use crate::rounding::round;
 
@@ -75,6 +76,9 @@ pub struct CapacityPoint {
     pub miss_rate: f64,
     /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
     pub floor_miss_rate: f64,
+    /// The VE loop's misses against the idle loop's, with the ratio's interval judged against
+    /// [`MISSES_BOUND`].
+    pub misses_vs_floor: RateRatio,
     /// CPU time over wall time of the VE thread (its hybrid sleep's spinning included).
     pub cpu_fraction: Option<f64>,
     /// SCHED_FIFO granted to the VE thread.
@@ -159,6 +163,13 @@ fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint
         bench_stages_us_p50: bench_stages,
         miss_rate: ve.deadline_misses as f64 / ticks,
         floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
+        misses_vs_floor: RateRatio::new(
+            ve.deadline_misses,
+            ve.step_time.samples,
+            floor.misses,
+            floor.ticks,
+            MISSES_BOUND,
+        ),
         cpu_fraction: ve.cpu_s.map(|cpu| round(cpu / ve.wall_s.max(1e-9), 3)),
         realtime_priority: ve.realtime_priority,
         snapshots_dropped: ve.snapshots_dropped,
@@ -172,7 +183,7 @@ fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint
 pub fn run(options: &Options) -> Result<Report> {
     let mut out = Output::new("capacity", options)?;
     let users: Vec<usize> = options.pick(vec![1, 2, 4, 16, 64], vec![1, 4]);
-    let seconds = options.pick(10.0, 0.5);
+    let seconds = options.seconds.unwrap_or(options.pick(10.0, 0.5));
     let bench_iters = options.pick(5_000, 200);
     let load = load_average();
     let mut points = Vec::with_capacity(users.len());
@@ -198,7 +209,7 @@ pub fn run(options: &Options) -> Result<Report> {
         .with(Series::line("idle loop (timer floor)", xs(|p| 100.0 * p.floor_miss_rate)));
     out.chart("misses_vs_users", &chart)?;
 
-    let rooms_seconds = options.pick(10.0, 2.0);
+    let rooms_seconds = options.seconds.unwrap_or(options.pick(10.0, 2.0));
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("kinloop-capacity-net")
@@ -227,7 +238,7 @@ pub fn run(options: &Options) -> Result<Report> {
     let last = points.last().ok_or_else(|| anyhow!("no points"))?;
     let answer = format!(
         "{} users in one room: step p50 {} us, p99 {} us ({}x the same iteration back to back, {} us; the VE's own \
-         stages {}x); misses {:.3} % beside the idle loop's {:.3} %; load average {}.",
+         stages {}x); misses {:.3} % beside the idle loop's {:.3} %: {}; load average {}.",
         last.users,
         last.step_us_p50,
         last.step_us_p99,
@@ -236,17 +247,19 @@ pub fn run(options: &Options) -> Result<Report> {
         last.ve_stages_over_bench,
         100.0 * last.miss_rate,
         100.0 * last.floor_miss_rate,
+        last.misses_vs_floor.describe(),
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),
     );
     let answer = match rooms_axis.last() {
         Some(r) => format!(
-            "{answer} {} rooms of {}: worst room's step p99 {} us, misses {:.3} % beside the floor's {:.3} %, {} \
-             restores, device-LM RMS median {} mm.",
+            "{answer} {} rooms of {}: worst room's step p99 {} us, misses (every room's) {:.3} % beside the \
+             floor's {:.3} %: {}, {} restores, device-LM RMS median {} mm.",
             r.rooms,
             r.users_per_room,
             r.step_us_p99_worst,
-            100.0 * r.miss_rate_worst,
+            100.0 * r.misses_vs_floor.events as f64 / r.misses_vs_floor.ticks.max(1) as f64,
             100.0 * r.floor_miss_rate,
+            r.misses_vs_floor.describe(),
             r.state_restores,
             r.device_lm_rms_mm_median
         ),

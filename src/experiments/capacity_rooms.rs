@@ -20,6 +20,7 @@ use kinloop_server::driver::rooms::{RoomSpec, TestKnobs};
 use kinloop_server::{Access, Server, ServerConfig};
 use serde::{Deserialize, Serialize};
 
+use super::rate_ratio::RateRatio;
 use crate::load::{self, LoadOptions};
 use crate::rounding::round;
 
@@ -40,6 +41,11 @@ pub struct RoomsPoint {
     pub miss_rate_worst: f64,
     /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
     pub floor_miss_rate: f64,
+    /// Every room's misses pooled (the server's rate) against the idle loop's, with the ratio's interval
+    /// judged against [`MISSES_BOUND`].
+    pub misses_vs_floor: RateRatio,
+    /// The room that missed most against the idle loop, the same way.
+    pub worst_room_vs_floor: RateRatio,
     /// States restored, over every room.
     pub state_restores: u64,
     /// Largest closure residual over every room (m).
@@ -57,6 +63,9 @@ pub struct RoomsPoint {
     /// CPU the load (every client in this process) used, in cores.
     pub load_cpu_cores: Option<f64>,
 }
+
+/// The goal's bound on a server's deadline misses, as a multiple of the idle loop's on the same machine.
+pub const MISSES_BOUND: f64 = 1.5;
 
 /// The rooms axis's grid: (rooms, users per room), the first being the one room alone the others are read
 /// against.
@@ -112,6 +121,15 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
     let mut rms: Vec<f64> = outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm).collect();
     rms.sort_by(f64::total_cmp);
     let load_ticks: u64 = outcome.per_user.iter().map(|u| u.ticks).sum();
+    let against_floor =
+        |misses: u64, ticks: u64| RateRatio::new(misses, ticks, floor.misses, floor.ticks, MISSES_BOUND);
+    let counts = |v: &&kinloop_server::driver::VeLoopStats| (v.deadline_misses, v.step_time.samples);
+    let pooled = ves.iter().map(counts).fold((0, 0), |(m, t), (vm, vt)| (m + vm, t + vt));
+    // The worst room by its rate (a room that ran fewer ticks is not the better for it).
+    let worst_room = ves
+        .iter()
+        .map(counts)
+        .max_by(|a, b| (a.0 as f64 / a.1.max(1) as f64).total_cmp(&(b.0 as f64 / b.1.max(1) as f64)));
     Ok(RoomsPoint {
         rooms,
         users_per_room: users,
@@ -120,6 +138,8 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
         step_us_p99_worst: round(worst(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
         miss_rate_worst: worst(&|v| v.deadline_misses as f64 / v.step_time.samples.max(1) as f64),
         floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
+        misses_vs_floor: against_floor(pooled.0, pooled.1),
+        worst_room_vs_floor: worst_room.map_or_else(|| against_floor(0, 0), |(m, t)| against_floor(m, t)),
         state_restores: ves.iter().map(|v| v.core.state_restores).sum(),
         max_closure_error_m: worst(&|v| v.core.max_closure_error),
         rooms_quarantined: reports.iter().filter(|r| r.quarantined).count(),

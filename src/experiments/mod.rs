@@ -31,6 +31,7 @@ pub mod model_update;
 pub mod paper;
 pub mod pauses;
 pub mod programs;
+pub mod rate_ratio;
 pub mod renderability;
 pub mod renderability_device;
 pub mod robustness;
@@ -128,11 +129,14 @@ impl Name {
     }
 
     /// Whether `--seconds` sets its sessions' length: the experiments whose sessions are hands touring a
-    /// linkage (the others sweep ticks, rates or sizes, whose lengths are part of what they measure).
+    /// linkage, and `capacity`, whose points count rare deadline misses (a longer point narrows the interval
+    /// of its misses against the idle loop's; the others sweep ticks, rates or sizes, whose lengths are part
+    /// of what they measure).
     pub fn takes_seconds(self) -> bool {
         matches!(
             self,
-            Name::Latency
+            Name::Capacity
+                | Name::Latency
                 | Name::LatencyLive
                 | Name::Renderability
                 | Name::RenderabilityLive
