@@ -1,10 +1,11 @@
 //! Stage 2 of a tick (paper Fig 3): the frame the controllers use and the local model's pull toward the VE.
 //!
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
-//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), and the
-//! model steps with the snapshot's b̂ turned as they are; the model's OP is pulled toward the VE's OP
-//! predicted to now, fast along the constrained directions (onto the path when there is one), slowly in the
-//! free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
+//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
+//! steps with the snapshot's b̂ turned as they are, and it is held at a swing's limits, where the OP turns
+//! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
+//! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
+//! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
 //! allow when `CoreConfig::passive_update` is on.
 
 use std::time::Duration;
