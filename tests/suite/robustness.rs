@@ -38,18 +38,82 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
 
 /// Seed 17's crank (a crank-rocker in cm+g, its OP 41 mm from the pivot at the device) on a Falcon at 300 ms
 /// one way: the local model runs a round trip of motion ahead of the VE along the crank's circle. Per tick
-/// of the session, with the output fully in, the model stays on the circle the VE's OP is found on (its
-/// centre from three of the VE's recorded OPs, every recorded OP checked on it), within 2 % of the radius,
-/// and the session is stable. Stepped with the snapshot's b̂ unturned, the part of the crank's load along
-/// the walls where the model is held it ever further inside the circle (6 % of the radius after 3 s, then
-/// 40 % as the session ran away).
+/// of the session, with the output fully in, the model stays on the circle the VE's OP is found on, within
+/// 2 % of the radius, and the session is stable. Stepped with the snapshot's b̂ unturned, the part of the
+/// crank's load along the walls where the model is held it ever further inside the circle (6 % of the radius
+/// after 3 s, then 40 % as the session ran away).
 #[test]
 fn seed_17s_crank_at_300_ms_keeps_its_local_model_on_the_cranks_circle() {
+    let (worst, _) = model_on_the_ves_circle(17, "op-crank");
+    assert!(worst.off < 0.02, "the model {:.1} % of the radius off the circle at {} s", worst.off * 100.0, worst.t);
+}
+
+/// Seed 27's rocker (a change-point four-bar in SI, the rocker's circle 40 mm at the device) on a Falcon at
+/// 300 ms one way: the OP swings forth and back as the linkage goes on, so its path is one swing, limit to
+/// limit (`PathShape::Swing`). Per tick, with the output fully in, the model stays on the circle the VE's OP
+/// is found on within 2 % of the radius, and comes to the swing's limit (within 2 % of the radius) without
+/// running past it. With no path for such an OP the model ran on along the snapshot's tangent where the
+/// rocker turned back, 16-31 % of the radius outside the circle.
+#[test]
+fn seed_27s_rocker_at_300_ms_holds_its_local_model_on_the_rockers_swing() {
+    use kinloop_linkage::algorithms::op_path::PathShape;
+    use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+    use kinloop_linkage::{math::space::Planar, model::Model};
+    use std::f64::consts::{PI, TAU};
+    let (worst, circle) = model_on_the_ves_circle(27, "op-rocker");
+    assert!(worst.off < 0.02, "the model {:.1} % of the radius off the circle at {} s", worst.off * 100.0, worst.t);
+    let linkage = generate(27, None);
+    let model = Model::<Planar>::compile(&linkage.scene, "seed-27").expect("the generated scene compiles");
+    let op = model.op_index("op-rocker").expect("the rocker's OP");
+    let swing = survey_op(&model, op, &SurveyConfig::default()).expect("the survey").path.expect("a path");
+    assert_eq!(swing.shape(), PathShape::Swing);
+    // The swing's angles about the circle's centre, followed along it (a rocker may swing through ±π), and
+    // the model's, each taken within half a turn of the swing's middle.
+    let (mut lo, mut hi, mut last) = (f64::INFINITY, f64::NEG_INFINITY, None::<f64>);
+    for pose in swing.poses() {
+        let a = circle.angle((pose.position.x, pose.position.y));
+        let a = last.map_or(a, |l| l + (a - l + PI).rem_euclid(TAU) - PI);
+        (lo, hi, last) = (lo.min(a), hi.max(a), Some(a));
+    }
+    let middle = 0.5 * (lo + hi);
+    let (reached_lo, reached_hi) = circle
+        .model_angles
+        .iter()
+        .map(|a| middle + (a - middle + PI).rem_euclid(TAU) - PI)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), a| (l.min(a), h.max(a)));
+    assert!(reached_lo > lo - 0.02 && reached_hi < hi + 0.02, "[{reached_lo}, {reached_hi}] past [{lo}, {hi}]");
+    assert!(
+        reached_lo < lo + 0.02 || reached_hi > hi - 0.02,
+        "the model comes to a limit: [{reached_lo}, {reached_hi}] in [{lo}, {hi}]"
+    );
+}
+
+/// The model's largest distance off the VE's circle (a fraction of its radius) and when.
+struct Worst {
+    off: f64,
+    t: f64,
+}
+
+/// The circle the VE's OP is found on, and the model's angles about its centre with the output fully in.
+struct Circle {
+    centre: (f64, f64),
+    model_angles: Vec<f64>,
+}
+
+impl Circle {
+    fn angle(&self, p: (f64, f64)) -> f64 {
+        (p.1 - self.centre.1).atan2(p.0 - self.centre.0)
+    }
+}
+
+/// The session of seed `seed`'s `op` on a Falcon at 300 ms one way (soft hand, 10 s), checked stable; the
+/// circle the VE's OP is found on (its centre from three of the VE's recorded OPs spread out, every recorded
+/// OP checked on it), and per tick with the output fully in, how far the local model is off it.
+fn model_on_the_ves_circle(seed: u64, op: &str) -> (Worst, Circle) {
     use kinloop::experiments::robustness::{evaluate, session_plan};
-    let linkage = generate(17, None);
+    let linkage = generate(seed, None);
     let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[300]);
-    let point =
-        all.iter().find(|p| p.op == "op-crank" && p.device.name() == "sim:falcon").expect("the crank on a Falcon");
+    let point = all.iter().find(|p| p.op == op && p.device.name() == "sim:falcon").expect("the OP on a Falcon");
     let outcome = evaluate(&linkage, point, 10.0);
     assert!(outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
     let plan = session_plan(&linkage, point, 10.0);
@@ -57,23 +121,30 @@ fn seed_17s_crank_at_300_ms_keeps_its_local_model_on_the_cranks_circle() {
     let samples = &recording.clients[0];
     let planar = |v: &[f64]| (v[0], v[1]);
     let ve: Vec<(f64, f64)> = samples.iter().filter_map(|s| s.ve_op.as_deref().map(planar)).collect();
-    let (a, b, c) = (ve[0], ve[ve.len() / 2], ve[ve.len() - 1]);
+    // Three of them spread out: the first, the farthest from it, and the farthest from both.
+    let spread = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
+    let farthest =
+        |from: &dyn Fn((f64, f64)) -> f64| *ve.iter().max_by(|p, q| from(**p).total_cmp(&from(**q))).unwrap();
+    let a = ve[0];
+    let b = farthest(&|p| spread(p, a));
+    let c = farthest(&|p| spread(p, a).min(spread(p, b)));
     let centre = circumcentre(a, b, c);
     let distance = |p: (f64, f64)| (p.0 - centre.0).hypot(p.1 - centre.1);
     let radius = distance(a);
-    let spread = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
     assert!(spread(a, b).min(spread(b, c)).min(spread(a, c)) > 0.2 * radius, "three distinct VE poses");
     for p in &ve {
         assert!((distance(*p) - radius).abs() < 1e-6 * radius, "the VE's OP on one circle: {p:?}");
     }
-    let mut worst = (0.0, 0.0);
+    let mut worst = Worst { off: 0.0, t: 0.0 };
+    let mut circle = Circle { centre, model_angles: Vec::new() };
     for s in samples.iter().filter(|s| s.gain >= 1.0) {
         let off = (distance(planar(&s.model)) - radius).abs() / radius;
-        if off > worst.0 {
-            worst = (off, s.t);
+        if off > worst.off {
+            worst = Worst { off, t: s.t };
         }
+        circle.model_angles.push(circle.angle(planar(&s.model)));
     }
-    assert!(worst.0 < 0.02, "the model {:.1} % of the radius off the circle at {} s", worst.0 * 100.0, worst.1);
+    (worst, circle)
 }
 
 /// The centre of the circle through `a`, `b` and `c`.

@@ -1,15 +1,16 @@
 //! Stage 2 of a tick (paper Fig 3): the frame the controllers use and the local model's pull toward the VE.
 //!
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
-//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), and the
-//! model steps with the snapshot's b̂ turned as they are; the model's OP is pulled toward the VE's OP
-//! predicted to now, fast along the constrained directions (onto the path when there is one), slowly in the
-//! free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
+//! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
+//! steps with the snapshot's b̂ turned as they are, and it is held at a swing's limits, where the OP turns
+//! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
+//! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
+//! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
 //! allow when `CoreConfig::passive_update` is on.
 
 use std::time::Duration;
 
-use kinloop_linkage::algorithms::op_path::turn_between;
+use kinloop_linkage::algorithms::op_path::{turn_between, PathShape};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
 
@@ -58,6 +59,16 @@ impl<S: Space> HapticCore<S> {
                 sped = sped * fraction;
             }
             self.model.apply_correction(&moved, &sped);
+        }
+        if on_path.is_some() {
+            // A swing's limits hold the model where the OP turns back (`PathFollower::stop_at_limit`).
+            let held = self
+                .path
+                .as_ref()
+                .and_then(|f| f.stop_at_limit(&self.model.pose(), &self.model.twist(), self.length_scale));
+            if let Some((moved, sped)) = held {
+                self.model.apply_correction(&moved, &sped);
+            }
         }
         self.model.set_inverse_inertia(&self.local.inverse_inertia);
         // On a path the model steps with the snapshot's b̂ turned as the frame is. At a regular point of a
@@ -142,16 +153,21 @@ impl<S: Space> HapticCore<S> {
         let on = follower.path.nearest(&follower.query(&pose), follower.model_segment);
         follower.model_segment = Some(on.segment);
         // A model past the end of an open path (where the survey's walk stopped) is not where the path says:
-        // the path counts as little there as a tangent that far from its pose.
+        // the path counts as little there as a tangent that far from its pose. A swing's ends are limits the
+        // OP does not pass: the path counts whole there (`pull_model` holds the model at them).
         let reach = self.config.linearization_reach * l;
-        let along = (1.0 - self.trust) * linearization_trust(on.past_end, reach);
+        let past_end = if follower.path.shape() == PathShape::Swing { 0.0 } else { on.past_end };
+        let along = (1.0 - self.trust) * linearization_trust(past_end, reach);
         let turn = turn_between::<S>(&from, &on.tangent, along);
         let twist_turn = twist_turn::<S>(&turn, l);
         self.local = self.frame.turned(&turn, l);
-        if follower.rest_where_model_is {
+        if let (true, Some(here), Some(there)) =
+            (follower.rest_where_model_is, on.rest_acceleration, follower.snapshot_rest)
+        {
             // b̂ holds the forces at rest where the snapshot was taken; the model feels them where it is.
-            // Carried along unchanged they are a spring felt a round trip late, which makes energy.
-            self.local.bias += (on.rest_acceleration - twist_turn * follower.snapshot_rest) * along;
+            // Carried along unchanged they are a spring felt a round trip late, which makes energy. A swing
+            // carries none (its pose is two configurations): b̂ stays the snapshot's, turned.
+            self.local.bias += (here - twist_turn * there) * along;
         }
         // The walls are right as far as the tangent or the path is.
         self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);

@@ -329,17 +329,23 @@ fn a_welcome_whose_path_cannot_be_followed_is_refused_by_name() {
     let (mut welcome, _, config) = testbed();
     assert!(welcome.op.path.is_empty(), "the testbed has two degrees of freedom: no path");
     welcome.op.path = vec![0.1, 0.2, 0.0, 0.1, 0.2, 0.0];
-    welcome.op.path_rest_acceleration = vec![0.0, 0.0];
+    welcome.op.path_rest_acceleration = Some(vec![0.0, 0.0]);
     let error = HapticCore::<Planar>::new(config.clone(), &welcome).err().expect("refused");
     assert!(matches!(error, CoreError::Path(PathError::Repeated(0, 1))), "{error:?}");
     assert_eq!(error.to_string(), "the welcome's OP path: poses 0 and 1 of the path coincide");
     welcome.op.path = vec![0.1, 0.2, 0.0, 0.15, 0.2, 0.1];
-    welcome.op.path_rest_acceleration = vec![0.0];
+    welcome.op.path_rest_acceleration = Some(vec![0.0]);
     let error = HapticCore::<Planar>::new(config.clone(), &welcome).err().expect("refused");
     assert!(matches!(error, CoreError::Path(PathError::RestAcceleration { got: 1, poses: 2 })), "{error:?}");
     let mut ignoring = config.clone();
     ignoring.follow_path = false;
     assert!(HapticCore::<Planar>::new(ignoring, &welcome).is_ok());
-    welcome.op.path_rest_acceleration = vec![0.0, -1.0];
+    welcome.op.path_rest_acceleration = Some(vec![0.0, -1.0]);
+    assert!(HapticCore::<Planar>::new(config.clone(), &welcome).is_ok());
+    // A swing with accelerations at rest: its poses are two configurations each.
+    welcome.op.path_shape = kinloop_protocol::PathShape::Swing;
+    let error = HapticCore::<Planar>::new(config.clone(), &welcome).err().expect("refused");
+    assert!(matches!(error, CoreError::Path(PathError::RestAccelerationOnSwing)), "{error:?}");
+    welcome.op.path_rest_acceleration = None;
     assert!(HapticCore::<Planar>::new(config, &welcome).is_ok());
 }

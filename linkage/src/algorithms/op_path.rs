@@ -7,12 +7,19 @@
 //! holds the OP to the tangent *line* there; the path holds it to the curve wherever it has run, so the
 //! constrained directions can turn as the linkage's do ([`turn_between`]).
 //!
+//! A path has one of three shapes ([`PathShape`]): a closed lap (a crank's coupler curve), an open curve
+//! end to end (between dead points or stroke ends where the linkage itself stops), or a swing: one sweep,
+//! limit to limit, of an OP that swings forth and back while the linkage moves on (a rocker's output as its
+//! crank turns). A swing's limits are where the linkage's map from its coordinate to the OP folds: the OP
+//! stops there and comes back, whatever way the linkage goes on, so no pose lies beyond them.
+//!
 //! A path may carry, per pose, the OP's acceleration at rest there (gravity, springs, actuators: what moves
 //! the linkage when nothing holds it), which is along the tangent since the OP can only move along the path.
 //! A local model that has run ahead of its snapshot along the path feels these forces where it is, not where
 //! the snapshot was taken: a position-dependent force felt at a pose a round trip behind acts as a spring
 //! rendered late, which makes energy when the hand goes back and forth (a four-bar's weight, 1 s one way:
-//! about 1 J per tour).
+//! about 1 J per tour). A swing carries none: each of its poses is two configurations (the crank on either
+//! side of the fold), whose forces at rest differ, so they are not a function of the pose.
 //!
 //! Distances and tangents are in the unit-consistent coordinates of `constraint_directions` (`(x, L θ)`,
 //! `L` the scene's length scale). Queries allocate nothing and, given the segment of the last answer, look
@@ -23,16 +30,28 @@ use crate::algorithms::constraint_directions::scale_op;
 use crate::math::space::OpPose;
 use crate::math::space::{MatOps, Space, VecOps};
 
-/// A sampled OP path: poses in order, closed or open.
+/// How a path's ends are (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum PathShape {
+    /// End to end: the OP's path stops at its ends (a dead point, a stroke's end, where a survey's walk could
+    /// go no further).
+    Open,
+    /// The last pose leads back to the first.
+    Closed,
+    /// One sweep of an OP that swings forth and back while the linkage goes on: its ends are limits where
+    /// the OP turns back, and each pose is two configurations (no forces at rest per pose).
+    Swing,
+}
+
+/// A sampled OP path: poses in order, with its shape.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OpPath<S: Space> {
     poses: Vec<OpPose<S>>,
     /// Unit tangent at each pose (unit-consistent coordinates), pointing along the path's order.
     tangents: Vec<S::OpVec>,
-    /// The OP's acceleration at rest at each pose, along its tangent (unit-consistent, m/s²); zeros when not
-    /// given.
-    rest_acceleration: Vec<f64>,
-    closed: bool,
+    /// The OP's acceleration at rest at each pose, along its tangent (unit-consistent, m/s²), when given.
+    rest_acceleration: Option<Vec<f64>>,
+    shape: PathShape,
     length_scale: f64,
 }
 
@@ -48,8 +67,9 @@ pub struct PathPoint<S: Space> {
     pub distance: f64,
     /// The same distance when the point is an end of an open path (the pose is past it, or beside it), else 0.
     pub past_end: f64,
-    /// The OP's acceleration at rest there (physical units, linear first), interpolated.
-    pub rest_acceleration: S::OpVec,
+    /// The OP's acceleration at rest there (physical units, linear first), interpolated, when the path
+    /// carries it.
+    pub rest_acceleration: Option<S::OpVec>,
     /// The segment it lies on (a hint for the next query).
     pub segment: usize,
 }
@@ -77,12 +97,15 @@ pub enum PathError {
         /// Poses.
         poses: usize,
     },
+    /// Accelerations at rest given to a swing, whose poses are two configurations each.
+    #[error("a swing has no acceleration at rest per pose (each pose is two configurations)")]
+    RestAccelerationOnSwing,
 }
 
 impl<S: Space> OpPath<S> {
-    /// A path through `poses` in order (`closed`: the last leads back to the first), measured with the
-    /// scene's `length_scale`.
-    pub fn new(poses: Vec<OpPose<S>>, closed: bool, length_scale: f64) -> Result<Self, PathError> {
+    /// A path through `poses` in order, of `shape`, measured with the scene's `length_scale`.
+    pub fn new(poses: Vec<OpPose<S>>, shape: PathShape, length_scale: f64) -> Result<Self, PathError> {
+        let closed = shape == PathShape::Closed;
         if !(length_scale.is_finite() && length_scale > 0.0) {
             return Err(PathError::LengthScale(length_scale));
         }
@@ -114,16 +137,19 @@ impl<S: Space> OpPath<S> {
                 d * (1.0 / d.norm())
             })
             .collect();
-        Ok(OpPath { rest_acceleration: vec![0.0; n], poses, tangents, closed, length_scale })
+        Ok(OpPath { rest_acceleration: None, poses, tangents, shape, length_scale })
     }
 
     /// The path with the OP's acceleration at rest at each pose, along the pose's tangent ([`Self::tangent`];
-    /// unit-consistent, m/s²).
+    /// unit-consistent, m/s²). Refused on a swing.
     pub fn with_rest_acceleration(mut self, along: Vec<f64>) -> Result<Self, PathError> {
+        if self.shape == PathShape::Swing {
+            return Err(PathError::RestAccelerationOnSwing);
+        }
         if along.len() != self.poses.len() || along.iter().any(|a| !a.is_finite()) {
             return Err(PathError::RestAcceleration { got: along.len(), poses: self.poses.len() });
         }
-        self.rest_acceleration = along;
+        self.rest_acceleration = Some(along);
         Ok(self)
     }
 
@@ -132,10 +158,12 @@ impl<S: Space> OpPath<S> {
     /// part (along the position's tangent). An error when the OP turns without moving somewhere along the way.
     pub fn positions_only(&self) -> Result<Self, PathError> {
         let poses = self.poses.iter().map(|p| OpPose { position: p.position, rotation: S::rot_identity() }).collect();
-        let path = OpPath::new(poses, self.closed, self.length_scale)?;
+        let path = OpPath::new(poses, self.shape, self.length_scale)?;
+        let Some(rest) = &self.rest_acceleration else {
+            return Ok(path);
+        };
         // a = α t̃: its linear part is α |t̃_lin| along the unit linear tangent.
-        let along =
-            (0..self.poses.len()).map(|k| self.rest_acceleration[k] * S::op_lin(&self.tangents[k]).norm()).collect();
+        let along = (0..self.poses.len()).map(|k| rest[k] * S::op_lin(&self.tangents[k]).norm()).collect();
         path.with_rest_acceleration(along)
     }
 
@@ -144,9 +172,9 @@ impl<S: Space> OpPath<S> {
         self.tangents[k]
     }
 
-    /// The accelerations at rest, per pose, along the tangents.
-    pub fn rest_acceleration(&self) -> &[f64] {
-        &self.rest_acceleration
+    /// The accelerations at rest, per pose, along the tangents, when the path carries them.
+    pub fn rest_acceleration(&self) -> Option<&[f64]> {
+        self.rest_acceleration.as_deref()
     }
 
     /// The poses.
@@ -156,14 +184,32 @@ impl<S: Space> OpPath<S> {
 
     /// True when the last pose leads back to the first.
     pub fn is_closed(&self) -> bool {
-        self.closed
+        self.shape == PathShape::Closed
+    }
+
+    /// How the path's ends are.
+    pub fn shape(&self) -> PathShape {
+        self.shape
     }
 
     fn segments(&self) -> usize {
-        if self.closed {
+        if self.is_closed() {
             self.poses.len()
         } else {
             self.poses.len() - 1
+        }
+    }
+
+    /// The limit at the end of a swing that segment `k` leads to, with the unit direction out of the path
+    /// there (unit-consistent coordinates): the first pose and minus its tangent for the first segment, the
+    /// last and its tangent for the last. `None` inside, and on other shapes (an open path's end is where a
+    /// walk stopped, which a linkage may pass).
+    pub fn limit(&self, k: usize) -> Option<(OpPose<S>, S::OpVec)> {
+        let last = self.poses.len() - 1;
+        match (self.shape, k) {
+            (PathShape::Swing, 0) => Some((self.poses[0], -self.tangents[0])),
+            (PathShape::Swing, k) if k + 1 == last => Some((self.poses[last], self.tangents[last])),
+            _ => None,
         }
     }
 
@@ -190,7 +236,7 @@ impl<S: Space> OpPath<S> {
         };
         let mut best_distance = distance(best);
         let neighbours = |k: usize| -> [Option<usize>; 2] {
-            if self.closed {
+            if self.is_closed() {
                 [Some((k + segments - 1) % segments), Some((k + 1) % segments)]
             } else {
                 [k.checked_sub(1), (k + 1 < segments).then_some(k + 1)]
@@ -222,9 +268,11 @@ impl<S: Space> OpPath<S> {
             let d = scale_op::<S>(&self.poses[next].difference(&self.poses[best]), self.length_scale);
             d * (1.0 / d.norm())
         };
-        let along = self.rest_acceleration[best] * (1.0 - u) + self.rest_acceleration[next] * u;
-        let rest_acceleration = scale_op::<S>(&(tangent * along), 1.0 / self.length_scale);
-        let at_end = !self.closed && ((best == 0 && u == 0.0) || (best + 1 == segments && u == 1.0));
+        let rest_acceleration = self.rest_acceleration.as_ref().map(|rest| {
+            let along = rest[best] * (1.0 - u) + rest[next] * u;
+            scale_op::<S>(&(tangent * along), 1.0 / self.length_scale)
+        });
+        let at_end = !self.is_closed() && ((best == 0 && u == 0.0) || (best + 1 == segments && u == 1.0));
         let distance = offset.norm();
         PathPoint {
             pose: point,
@@ -301,7 +349,7 @@ mod tests {
     #[test]
     fn the_nearest_point_of_a_crank_tips_circle_is_radial_and_its_tangent_turns_with_it() {
         let (r, l) = (0.1, 0.1);
-        let path = OpPath::<Planar>::new(circle(360, r), true, l).unwrap();
+        let path = OpPath::<Planar>::new(circle(360, r), PathShape::Closed, l).unwrap();
         // A pose outside the circle at 100°, turned as the crank is there.
         let a = 100f64.to_radians();
         let pose =
@@ -323,7 +371,7 @@ mod tests {
     fn a_pinned_hand_sees_the_path_of_positions_with_the_linear_part_of_its_accelerations() {
         let (r, l, g) = (0.1, 0.1, 9.81);
         let poses = circle(360, r);
-        let full = OpPath::<Planar>::new(poses, true, l).unwrap();
+        let full = OpPath::<Planar>::new(poses, PathShape::Closed, l).unwrap();
         // θ̈ = −(g / r) cos a; the scaled tangent moves √(r² + L²) per radian.
         let along = (0..360)
             .map(|k| {
@@ -339,9 +387,39 @@ mod tests {
         assert!(p.distance < 1e-4 && p.pose.rotation == Planar::rot_identity(), "{p:?}");
         assert!(p.tangent[2].abs() < 1e-12);
         let expected = Vector2::new(-a.sin(), a.cos()) * (-g * a.cos());
-        let got = Vector2::new(p.rest_acceleration[0], p.rest_acceleration[1]);
+        let rest = p.rest_acceleration.expect("the path carries its forces at rest");
+        let got = Vector2::new(rest[0], rest[1]);
         assert!((got - expected).norm() < 1e-3 * g, "{got:?} vs {expected:?}");
-        assert_eq!(p.rest_acceleration[2], 0.0);
+        assert_eq!(rest[2], 0.0);
+    }
+
+    /// A rocker's swing: a quarter of its tip's circle, limit to limit. It carries no forces at rest and
+    /// refuses them; its first and last segments lead to limits whose outward directions point away from
+    /// the arc along its end tangents; inner segments have none, nor do an open path's ends.
+    #[test]
+    fn a_swing_has_limits_at_its_ends_and_no_forces_at_rest() {
+        let (r, l) = (0.2, 0.1);
+        let arc: Vec<OpPose<Planar>> = circle(360, r).into_iter().take(91).collect();
+        let swing = OpPath::<Planar>::new(arc.clone(), PathShape::Swing, l).unwrap();
+        assert_eq!(swing.shape(), PathShape::Swing);
+        assert!(swing.rest_acceleration().is_none() && !swing.is_closed());
+        assert_eq!(swing.clone().with_rest_acceleration(vec![0.0; 91]), Err(PathError::RestAccelerationOnSwing));
+        assert_eq!(swing.positions_only().unwrap().shape(), PathShape::Swing);
+        // Past the 90° limit along the circle's tangent there (−x, and the angle still turning).
+        let beyond = OpPose { position: Vector2::new(-0.01, r), rotation: Planar::rot_from_vector(&1.6) };
+        let on = swing.nearest(&beyond, Some(80));
+        assert_eq!(on.segment, 89);
+        assert!(on.past_end > 0.0 && on.rest_acceleration.is_none(), "{on:?}");
+        let (limit, out) = swing.limit(on.segment).expect("the last segment leads to a limit");
+        assert!((limit.position - Vector2::new(0.0, r)).norm() < 1e-12);
+        // Closed form: d/da (r cos a, r sin a, L a) at 90°, normalized (the end's one-sided chord is half a
+        // degree off it).
+        assert!((out - Vector3::new(-r, 0.0, l) / (r * r + l * l).sqrt()).norm() < 1e-2, "{out:?}");
+        let (start, back) = swing.limit(0).expect("the first segment leads to a limit");
+        assert!((start.position - Vector2::new(r, 0.0)).norm() < 1e-12);
+        assert!((back - Vector3::new(0.0, -r, -l) / (r * r + l * l).sqrt()).norm() < 1e-2, "{back:?}");
+        assert!(swing.limit(45).is_none());
+        assert!(OpPath::<Planar>::new(arc, PathShape::Open, l).unwrap().limit(0).is_none());
     }
 
     #[test]
@@ -355,7 +433,7 @@ mod tests {
                 .rev()
                 .map(|k| OpPose { position: Vector2::new(0.005 * k as f64, 0.01), rotation: Planar::rot_identity() }),
         );
-        let path = OpPath::<Planar>::new(poses, false, 0.1).unwrap();
+        let path = OpPath::<Planar>::new(poses, PathShape::Open, 0.1).unwrap();
         let between = OpPose { position: Vector2::new(0.05, 0.0049), rotation: Planar::rot_identity() };
         assert!(path.nearest(&between, None).pose.position.y < 0.005);
         // Coming from the return leg, the query stays on it.
@@ -393,11 +471,11 @@ mod tests {
     #[test]
     fn bad_paths_are_refused_with_what_is_wrong() {
         let mut poses = circle(8, 0.1);
-        assert_eq!(OpPath::<Planar>::new(poses[..1].to_vec(), false, 0.1), Err(PathError::TooShort(1)));
-        assert_eq!(OpPath::<Planar>::new(poses.clone(), true, 0.0), Err(PathError::LengthScale(0.0)));
+        assert_eq!(OpPath::<Planar>::new(poses[..1].to_vec(), PathShape::Open, 0.1), Err(PathError::TooShort(1)));
+        assert_eq!(OpPath::<Planar>::new(poses.clone(), PathShape::Closed, 0.0), Err(PathError::LengthScale(0.0)));
         poses[3] = poses[2];
-        assert_eq!(OpPath::<Planar>::new(poses.clone(), true, 0.1), Err(PathError::Repeated(2, 3)));
+        assert_eq!(OpPath::<Planar>::new(poses.clone(), PathShape::Closed, 0.1), Err(PathError::Repeated(2, 3)));
         poses[3].position.x = f64::NAN;
-        assert_eq!(OpPath::<Planar>::new(poses, true, 0.1), Err(PathError::NonFinite(3)));
+        assert_eq!(OpPath::<Planar>::new(poses, PathShape::Closed, 0.1), Err(PathError::NonFinite(3)));
     }
 }

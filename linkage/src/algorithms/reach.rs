@@ -35,7 +35,7 @@ use crate::algorithms::joint_limits::limit_wall_energy;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::local_model::op_acceleration;
 use crate::algorithms::loop_closure::loop_closure;
-use crate::algorithms::op_path::OpPath;
+use crate::algorithms::op_path::{OpPath, PathShape};
 use crate::algorithms::op_space::op_space_inertia;
 use crate::error::DynamicsError;
 use crate::math::space::OpPose;
@@ -114,8 +114,9 @@ pub struct OpReach<S: Space> {
     /// springs, actuators). Every pose the OP can take lies on it, so a client that knows it knows where the
     /// joints hold the OP far from where a snapshot linearized them (the constrained directions turn along
     /// the path; `kinloop_client`'s local model follows them), and what the forces at rest do there. `None`
-    /// on other linkages, whose reach is a surface or more, and where the OP turns back along its path while
-    /// the linkage moves on (a rocker's output: one pose, two configurations).
+    /// on other linkages, whose reach is a surface or more. Where the OP turns back along its path while the
+    /// linkage moves on (a rocker's output: one pose, two configurations), one sweep of it, limit to limit,
+    /// without forces at rest ([`PathShape::Swing`]).
     pub path: Option<OpPath<S>>,
 }
 
@@ -588,42 +589,60 @@ fn lap<S: Space>(path: &[OpPose<S>]) -> (Option<usize>, Vec<f64>) {
 
 /// The OP's path on a 1-DOF linkage from the walks forth and back from q0 (each up to its first turn, both
 /// starting at q0's pose; poses with the OP's acceleration at rest): one lap of the forth walk when it comes
-/// back to its start, else the back walk reversed followed by the forth one. `None` when the walks do not
-/// make a path (fewer than two distinct poses).
+/// back to its start, else the back walk reversed followed by the forth one; a swing ([`swing`]) when the OP
+/// turns back along its path while the linkage moves on. `None` when the walks do not make a path (fewer
+/// than two distinct poses, or an OP that comes back another way than it went).
 fn one_dof_path<S: Space>(
     forth: &[(OpPose<S>, S::OpVec)],
     back: &[(OpPose<S>, S::OpVec)],
     length_scale: f64,
 ) -> Option<OpPath<S>> {
     let forth_poses: Vec<OpPose<S>> = forth.iter().map(|p| p.0).collect();
-    let (samples, closed) = match lap(&forth_poses) {
+    let end_to_end = || -> Vec<(OpPose<S>, S::OpVec)> { back.iter().skip(1).rev().chain(forth).copied().collect() };
+    let (samples, shape) = match lap(&forth_poses) {
         (Some(mut end), _) => {
             // `lap` stops within 5 % of the extent of the start; the lap ends at the pose nearest to it.
             let from_start = |i: usize| (forth[i].0.position - forth[0].0.position).norm();
             while end + 1 < forth.len() && from_start(end + 1) < from_start(end) {
                 end += 1;
             }
-            (forth[..end].to_vec(), true)
+            (forth[..end].to_vec(), PathShape::Closed)
         }
-        (None, _) => {
-            let mut samples: Vec<(OpPose<S>, S::OpVec)> = back.iter().skip(1).rev().copied().collect();
-            samples.extend_from_slice(forth);
-            (samples, false)
-        }
+        (None, _) => (end_to_end(), PathShape::Open),
     };
-    let path = OpPath::new(samples.iter().map(|p| p.0).collect(), closed, length_scale).ok()?;
+    let path = OpPath::new(samples.iter().map(|p| p.0).collect(), shape, length_scale).ok()?;
     // An OP that turns back along its path while the linkage moves on (a rocker's output swings forth and
     // back while the crank turns) has one pose for two configurations, with different forces at rest, on a
-    // path that runs over itself: its pose does not say where the linkage is, and there is no path to give.
+    // path that runs over itself: its pose does not say where the linkage is, but the curve it sweeps still
+    // says where the OP can be.
     let n = path.poses().len();
+    let closed = path.is_closed();
     let turns_back =
         (0..n).filter(|&k| closed || k + 1 < n).any(|k| path.tangent(k).dot(&path.tangent((k + 1) % n)) < 0.0);
     if turns_back {
-        return None;
+        return swing(&end_to_end().iter().map(|p| p.0).collect::<Vec<_>>(), length_scale);
     }
     // At rest the OP can only accelerate along the path: its acceleration is the tangent's multiple.
     let along = (0..samples.len()).map(|k| path.tangent(k).dot(&scale_op::<S>(&samples[k].1, length_scale))).collect();
     path.with_rest_acceleration(along).ok()
+}
+
+/// Poses of a walk farther than this fraction of the length scale from the swing chosen from it mean the OP
+/// comes back another way than it went (a survey step's chord sags far less than this off the curve).
+const SWING_TOLERANCE: f64 = 0.01;
+
+/// One sweep of an OP that swings forth and back while the linkage goes on (`PathShape::Swing`), from the
+/// poses of a `walk` in order: the longest run between two turns (poses where the OP's motion reverses:
+/// the limits where the linkage's map to the OP folds), when every pose of the walk lies on it (within
+/// [`SWING_TOLERANCE`]: the OP sweeps one curve both ways, as a rocker's arc). `None` when the walk turns
+/// fewer than twice or leaves the sweep.
+fn swing<S: Space>(walk: &[OpPose<S>], length_scale: f64) -> Option<OpPath<S>> {
+    let step = |k: usize| scale_op::<S>(&walk[k + 1].difference(&walk[k]), length_scale);
+    let turns: Vec<usize> = (1..walk.len().saturating_sub(1)).filter(|&k| step(k - 1).dot(&step(k)) < 0.0).collect();
+    let arc = |(a, b): (usize, usize)| (a..b).map(|k| step(k).norm()).sum::<f64>();
+    let (a, b) = turns.windows(2).map(|w| (w[0], w[1])).max_by(|x, y| arc(*x).total_cmp(&arc(*y)))?;
+    let path = OpPath::new(walk[a..=b].to_vec(), PathShape::Swing, length_scale).ok()?;
+    walk.iter().all(|p| path.nearest(p, None).distance <= SWING_TOLERANCE * length_scale).then_some(path)
 }
 
 /// Up to `count` poses of `path` evenly spaced by the OP's arc length, stopping where a closed path comes

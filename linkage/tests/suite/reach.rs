@@ -4,9 +4,11 @@
 
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
+use kinloop_linkage::algorithms::op_path::PathShape;
 use kinloop_linkage::algorithms::reach::{static_op_load, survey_op, SurveyConfig};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::model::builtin;
+use kinloop_linkage::model::scene::OpSpec;
 use kinloop_linkage::{math::space::Planar, model::data::Data, model::Model};
 use nalgebra::{DMatrix, DVector, Vector2, Vector3};
 
@@ -246,12 +248,51 @@ fn the_crank_rockers_coupler_path_is_one_lap_of_its_coupler_curve() {
     let reach = survey_op(&testbed, testbed.op_index("link2").unwrap(), &SurveyConfig::default()).unwrap();
     assert_eq!((reach.dof, reach.path.is_some()), (2, false));
     // The Watt six-bar's link5 swings forth and back while its crank turns round: one pose of link5 is two
-    // configurations, so there is no path to give (its walk does pass each pose twice, going opposite ways).
+    // configurations (its walk passes each pose twice, going opposite ways), so its path is one swing.
     let six_bar = planar("watt-six-bar");
     let reach = survey_op(&six_bar, six_bar.op_index("link5").unwrap(), &SurveyConfig::default()).unwrap();
-    assert_eq!((reach.dof, reach.path.is_some()), (1, false));
+    assert_eq!((reach.dof, reach.path.map(|p| p.shape())), (1, Some(PathShape::Swing)));
     let reach = survey_op(&six_bar, six_bar.op_index("coupler").unwrap(), &SurveyConfig::default()).unwrap();
     assert!(reach.path.is_some_and(|p| p.is_closed()), "the six-bar's coupler goes round");
+}
+
+/// The crank-rocker's rocker tip (the coupler-rocker pin) swings on its circle about the rocker's pivot while
+/// the crank turns round: its path is one swing (`PathShape::Swing`), limit to limit, without forces at rest.
+/// Against the circle intersection: every pose on the circle, the rocker's angle monotone along the swing,
+/// and the swing's ends at the extremes of the rocker's angle over a crank turn.
+#[test]
+fn the_crank_rockers_rocker_tip_path_is_one_swing_between_the_rockers_limits() {
+    let mut scene = builtin::scene("fourbar-crank-rocker").unwrap().unwrap();
+    scene.ops.push(OpSpec { name: "rocker-tip".into(), body: "rocker".into(), point: vec![0.2, 0.0] });
+    let model = Model::<Planar>::compile(&scene, "fourbar-crank-rocker").unwrap();
+    let reach = survey_op(&model, model.op_index("rocker-tip").unwrap(), &SurveyConfig::default()).unwrap();
+    let path = reach.path.expect("the rocker's tip has a swing");
+    assert_eq!(path.shape(), PathShape::Swing);
+    assert!(path.rest_acceleration().is_none(), "a pose of the swing is two configurations");
+    let o2 = Vector2::new(0.3, 0.0);
+    let angle = |p: &Vector2<f64>| (p.y - o2.y).atan2(p.x - o2.x);
+    // The pin over a crank turn (the coupler midpoint is halfway between the crank's tip and the pin).
+    let (a, b) = (0.1, 0.25);
+    let pins: Vec<f64> = (0..3600)
+        .map(|k| {
+            let theta = std::f64::consts::TAU * k as f64 / 3600.0;
+            let tip = Vector2::new(a * theta.cos(), a * theta.sin());
+            let (d, c) = (o2 - tip, 0.2);
+            let (dist, unit) = (d.norm(), d.normalize());
+            let along = (b * b - c * c + dist * dist) / (2.0 * dist);
+            angle(&(tip + unit * along + Vector2::new(-unit.y, unit.x) * (b * b - along * along).sqrt()))
+        })
+        .collect();
+    let (lo, hi) = pins.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+    let angles: Vec<f64> = path.poses().iter().map(|p| angle(&p.position)).collect();
+    for p in path.poses() {
+        assert!(((p.position - o2).norm() - 0.2).abs() < 1e-9, "a swing pose off the rocker's circle: {p:?}");
+    }
+    let rising = angles[1] > angles[0];
+    assert!(angles.windows(2).all(|w| (w[1] > w[0]) == rising), "the rocker's angle is monotone along the swing");
+    let (first, last) = (angles[0], angles[angles.len() - 1]);
+    let (start, end) = if rising { (first, last) } else { (last, first) };
+    assert!((start - lo).abs() < 2e-3 && (end - hi).abs() < 2e-3, "[{start}, {end}] against [{lo}, {hi}]");
 }
 
 /// The path's acceleration at rest against a second formulation: at configurations assembled from crank
@@ -284,7 +325,7 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
         let on = path.nearest(&OpPose::<Planar>::of_op(&model, &data, op), None);
         // Within the chords' sagitta of the curve (steps of a few mm).
         assert!(on.distance < 1e-4, "the configuration is on the path ({} m off)", on.distance);
-        let got = Vector3::from_column_slice(on.rest_acceleration.as_slice());
+        let got = Vector3::from_column_slice(on.rest_acceleration.expect("a coupler curve has them").as_slice());
         let expected = Vector3::from_column_slice(expected.as_slice());
         assert!(expected.norm() > 0.01, "gravity moves the coupler here: {expected:?}");
         assert!((got - expected).norm() < 0.02 * expected.norm(), "crank turned {turn} rad: {got:?} vs {expected:?}");

@@ -5,8 +5,8 @@ use super::error::{DecodeError, Field};
 use super::limits::*;
 use crate::messages::{
     uplink_flags, AdminAnswer, AdminCommand, AdminRequest, ConfigTerms, ContactTerm, Control, CouplingGains, Datagram,
-    DeviceCaps, Hello, Join, Mapping, MappingRequest, OpSummary, PortEnergy, RefusalReason, Refused, ResumeAnswer,
-    ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
+    DeviceCaps, Hello, Join, Mapping, MappingRequest, OpSummary, PathShape, PortEnergy, RefusalReason, Refused,
+    ResumeAnswer, ResumeRefusal, RoomState, SceneInfo, SceneSummary, Snapshot, Uplink, Welcome, MAX_PATH_POSES,
 };
 use crate::shape::{triangle_len, SceneKind, SessionShape};
 use kinloop_linkage::algorithms::configuration::ConfigLayout;
@@ -225,7 +225,13 @@ fn op_summary(o: &OpSummary, shape: &SessionShape) -> Result<(), DecodeError> {
     for (i, p) in o.path.chunks(shape.pose_dim()).enumerate() {
         pose(Field::in_item("welcome.op.path", i, "pose"), p, shape)?;
     }
-    vector(Field::at("welcome.op.path_rest_acceleration"), &o.path_rest_acceleration, poses, MAX_SCENE_ACCEL)
+    let rest = Field::at("welcome.op.path_rest_acceleration");
+    match (&o.path_rest_acceleration, o.path_shape) {
+        (None, _) => Ok(()),
+        // A swing's pose is two configurations: no acceleration at rest per pose.
+        (Some(a), PathShape::Swing) => length(rest, a.len(), 0),
+        (Some(a), _) => vector(rest, a, poses, MAX_SCENE_ACCEL),
+    }
 }
 
 fn refused(r: &Refused) -> Result<(), DecodeError> {

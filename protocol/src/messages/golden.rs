@@ -227,8 +227,8 @@ fn welcome() -> Control {
             inverse_mass_max: 4.0,
             inverse_rotational_inertia_max: 16.0,
             path: vec![0.25, 0.5, 0.0, 0.5, 0.5, 1.0],
-            path_rest_acceleration: vec![-2.0, 0.5],
-            path_closed: false,
+            path_rest_acceleration: Some(vec![-2.0, 0.5]),
+            path_shape: PathShape::Open,
         },
     })
 }
@@ -282,10 +282,11 @@ const WELCOME_BYTES: &[&str] = &[
     "000000000000e03f", // 0.5
     "000000000000e03f", // 0.5
     "000000000000f03f", // 1.0
-    "02",               // op.path_rest_acceleration: 2 values
+    "01",               // op.path_rest_acceleration: Some
+    "02",               // 2 values
     "00000000000000c0", // -2.0
     "000000000000e03f", // 0.5
-    "00",               // op.path_closed false
+    "00",               // op.path_shape Open
 ];
 
 fn snapshot() -> Datagram {

@@ -23,6 +23,7 @@
 
 use std::fmt;
 
+pub use kinloop_linkage::algorithms::op_path::PathShape;
 use kinloop_linkage::algorithms::reach::OpReach;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
@@ -39,7 +40,7 @@ pub use room::{ResumeAnswer, ResumeRefusal, RoomState};
 
 /// Version carried in [`Hello::version`]; a server refuses a client of another version. Bumped by one per
 /// landing that changes the wire (see the module documentation).
-pub const PROTOCOL_VERSION: u16 = 9;
+pub const PROTOCOL_VERSION: u16 = 10;
 
 /// Most poses of [`OpSummary::path`]: a survey's longer path is sent every other pose (or fewer). 512 spatial
 /// poses with their accelerations are 33 kB, within a control frame with the rest of the welcome.
@@ -293,9 +294,11 @@ pub struct OpSummary {
     pub path: Vec<f64>,
     /// The OP's acceleration at rest at each pose of `path` (gravity, springs, actuators), along the path's
     /// direction there (pose order; unit-consistent coordinates `(v, L ω)`, m/s²): one value per pose.
-    pub path_rest_acceleration: Vec<f64>,
-    /// `path`'s last pose leads back to its first.
-    pub path_closed: bool,
+    /// `None` when the path carries none: a swing's pose is two configurations, whose forces at rest differ.
+    pub path_rest_acceleration: Option<Vec<f64>>,
+    /// How `path`'s ends are: open, closed (its last pose leads back to its first) or a swing (its ends are
+    /// limits where the OP turns back while the linkage goes on).
+    pub path_shape: PathShape,
 }
 
 impl OpSummary {
@@ -305,12 +308,13 @@ impl OpSummary {
         for pose in &reach.tour {
             tour.extend_from_slice(pose.difference(now).as_slice());
         }
-        let (poses, rest) = reach.path.as_ref().map_or((&[][..], &[][..]), |p| (p.poses(), p.rest_acceleration()));
-        let stride = poses.len().div_ceil(MAX_PATH_POSES).max(1);
+        let (poses, rest) = reach.path.as_ref().map_or((&[][..], None), |p| (p.poses(), p.rest_acceleration()));
+        let shape = reach.path.as_ref().map_or(PathShape::Open, |p| p.shape());
+        let kept = path_samples(poses.len(), shape == PathShape::Closed);
         let wire = OpPose::<S>::wire_len();
-        let mut path = vec![0.0; poses.len().div_ceil(stride) * wire];
-        for (pose, out) in poses.iter().step_by(stride).zip(path.chunks_mut(wire)) {
-            pose.to_slice(out);
+        let mut path = vec![0.0; kept.len() * wire];
+        for (&k, out) in kept.iter().zip(path.chunks_mut(wire)) {
+            poses[k].to_slice(out);
         }
         OpSummary {
             position: now.position.as_slice().to_vec(),
@@ -322,10 +326,24 @@ impl OpSummary {
             inverse_mass_max: reach.inverse_mass_max,
             inverse_rotational_inertia_max: reach.inverse_rotational_inertia_max,
             path,
-            path_rest_acceleration: rest.iter().step_by(stride).copied().collect(),
-            path_closed: reach.path.as_ref().is_some_and(|p| p.is_closed()),
+            path_rest_acceleration: rest.map(|r| kept.iter().map(|&k| r[k]).collect()),
+            path_shape: shape,
         }
     }
+}
+
+/// Which of a path's `n` poses go on the wire: all when they fit in [`MAX_PATH_POSES`], else every few, and
+/// the last of a path that is not `closed` (an end where the OP stops or turns back stays where it is).
+fn path_samples(n: usize, closed: bool) -> Vec<usize> {
+    if n <= MAX_PATH_POSES {
+        return (0..n).collect();
+    }
+    if closed {
+        return (0..n).step_by(n.div_ceil(MAX_PATH_POSES)).collect();
+    }
+    let mut kept: Vec<usize> = (0..n - 1).step_by((n - 1).div_ceil(MAX_PATH_POSES - 1)).collect();
+    kept.push(n - 1);
+    kept
 }
 
 /// Successful handshake reply, server → client.

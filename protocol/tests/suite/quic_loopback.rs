@@ -85,8 +85,8 @@ fn decide(_hello: &Hello, join: &Join) -> Result<Welcome, Refused> {
             inverse_mass_max: 1.0,
             inverse_rotational_inertia_max: 100.0,
             path: Vec::new(),
-            path_rest_acceleration: Vec::new(),
-            path_closed: false,
+            path_rest_acceleration: None,
+            path_shape: PathShape::Open,
         },
     })
 }

@@ -167,8 +167,8 @@ fn spatial_welcome() -> Welcome {
             inverse_mass_max: 1.0,
             inverse_rotational_inertia_max: 1.0,
             path: Vec::new(),
-            path_rest_acceleration: Vec::new(),
-            path_closed: false,
+            path_rest_acceleration: None,
+            path_shape: PathShape::Open,
         },
     }
 }
@@ -190,15 +190,22 @@ fn a_welcomes_path_is_checked_pose_by_pose() {
     let check = |w: &Welcome| decode_control(&encode_control(&Control::Welcome(w.clone())).unwrap());
     let pose = [0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0];
     welcome.op.path = [pose, pose].concat();
-    welcome.op.path_rest_acceleration = vec![0.5, -9.81];
-    welcome.op.path_closed = true;
+    welcome.op.path_rest_acceleration = Some(vec![0.5, -9.81]);
+    welcome.op.path_shape = PathShape::Closed;
     assert!(check(&welcome).is_ok());
     // One acceleration per pose, finite.
-    welcome.op.path_rest_acceleration.push(0.0);
+    welcome.op.path_rest_acceleration = Some(vec![0.5, -9.81, 0.0]);
     assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path_rest_acceleration");
-    welcome.op.path_rest_acceleration = vec![0.5, f64::NAN];
+    welcome.op.path_rest_acceleration = Some(vec![0.5, f64::NAN]);
     assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path_rest_acceleration");
-    welcome.op.path_rest_acceleration = vec![0.5, -9.81];
+    // A swing carries none (each of its poses is two configurations); without them it passes.
+    welcome.op.path_shape = PathShape::Swing;
+    welcome.op.path_rest_acceleration = Some(vec![0.5, -9.81]);
+    assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path_rest_acceleration");
+    welcome.op.path_rest_acceleration = None;
+    assert!(check(&welcome).is_ok());
+    welcome.op.path_shape = PathShape::Closed;
+    welcome.op.path_rest_acceleration = Some(vec![0.5, -9.81]);
     // A quaternion that is not unit, in the second pose.
     welcome.op.path[10] = 0.5;
     let error = check(&welcome).unwrap_err();
@@ -209,13 +216,13 @@ fn a_welcomes_path_is_checked_pose_by_pose() {
     welcome.op.path[8] = f64::NAN;
     assert_eq!(field_of(&check(&welcome).unwrap_err()), "welcome.op.path[1].pose");
     // Half a pose left over.
-    welcome.op.path_rest_acceleration = vec![0.0];
+    welcome.op.path_rest_acceleration = Some(vec![0.0]);
     welcome.op.path = [&pose[..], &pose[..3]].concat();
     let error = check(&welcome).unwrap_err();
     assert!(matches!(error, DecodeError::WrongLength { got: 10, expected: 7, .. }), "{error:?}");
     // Too many poses.
     welcome.op.path = pose.repeat(MAX_PATH_POSES + 1);
-    welcome.op.path_rest_acceleration = vec![0.0; MAX_PATH_POSES + 1];
+    welcome.op.path_rest_acceleration = Some(vec![0.0; MAX_PATH_POSES + 1]);
     assert!(matches!(check(&welcome), Err(DecodeError::TooMany { .. })));
 }
 

@@ -267,8 +267,8 @@ fn welcome() -> impl Strategy<Value = Welcome> {
                                 SceneKind::Spatial => [&c[..3], &[1.0, 0.0, 0.0, 0.0][..]].concat(),
                             })
                             .collect(),
-                        path_rest_acceleration: tour.chunks(k).take(3).map(|c| c[0] * 10.0).collect(),
-                        path_closed: tour.len() % 2 == 1,
+                        path_rest_acceleration: Some(tour.chunks(k).take(3).map(|c| c[0] * 10.0).collect()),
+                        path_shape: if tour.len() % 2 == 1 { PathShape::Closed } else { PathShape::Open },
                         reach_min: position.clone(),
                         reach_max: position.iter().zip(&extent).map(|(p, e)| p + e).collect(),
                         position,
