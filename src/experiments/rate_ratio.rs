@@ -9,6 +9,11 @@
 //! `π = n₁ R / (n₁ R + n₂)`, where `R = r₁ / r₂` is the ratio of the rates (the conditional method for a
 //! rate ratio, exact in that it never covers less than its level). The Clopper–Pearson interval of `π` maps
 //! monotonically onto `R = π n₂ / ((1 − π) n₁)`.
+//!
+//! **What it assumes.** Independent misses. A stall of the machine makes every tick it spans late, and every
+//! room on a stalled thread, so misses come in bursts and the counts spread more than Poisson counts do: the
+//! interval is then narrower than the truth, and a decision from pooled rooms (which share their threads'
+//! stalls) the least safe of all. Counting stalls (runs of late ticks) instead of ticks would remove that.
 
 use serde::{Deserialize, Serialize};
 
