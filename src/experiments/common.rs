@@ -18,7 +18,12 @@ use nalgebra::DVector;
 
 use crate::charts::{self, Chart, HeatMap, StabilityMap};
 use crate::rounding::{round, significant};
-use kinloop_harness::{Recording, SessionPlan, SessionSummary};
+use kinloop_client::device::presets::DevicePreset;
+use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_harness::{ClientPlan, Recording, SessionPlan, SessionSummary};
+use kinloop_linkage::model::scene::Scene;
+use kinloop_protocol::emulator::LinkConfig;
+use kinloop_server::core::VeConfig;
 
 /// How an experiment runs.
 #[derive(Clone, Debug)]
@@ -247,6 +252,28 @@ pub fn paper_plan(seconds: f64) -> Result<SessionPlan> {
     plan.duration = Duration::from_secs_f64(seconds);
     plan.record_every = 1;
     Ok(plan)
+}
+
+/// One user touring `op` of `scene` with a `hand` of the kind on `device` over `link`, with default flags and
+/// the default VE, for `seconds`, recording every tick: the session the renderability and robustness matrices
+/// judge a pair by.
+pub fn touring_plan(
+    scene: Scene,
+    op: &str,
+    device: DevicePreset,
+    hand: HandKind,
+    link: LinkConfig,
+    seconds: f64,
+) -> SessionPlan {
+    let mut client = ClientPlan::new("user", op, device);
+    client.user = UserSpec::Hand(HandSpec::touring(hand));
+    SessionPlan {
+        scene,
+        ve: VeConfig::default(),
+        clients: vec![client.with_link(link)],
+        duration: Duration::from_secs_f64(seconds),
+        record_every: 1,
+    }
 }
 
 /// Positions (x, y) of an operational point over time (s, m).

@@ -130,16 +130,21 @@ pub fn binomial_cdf(k: u64, n: u64, p: f64) -> f64 {
         return 0.0;
     }
     let (ln_p, ln_q) = (p.ln(), (-p).ln_1p());
-    let mut ln_choose = 0.0f64;
-    let mut terms = Vec::with_capacity(k as usize + 1);
+    // A running log-sum-exp of the terms `ln C(n, i) + i ln p + (n − i) ln q`.
+    let (mut ln_choose, mut top, mut sum) = (0.0f64, f64::NEG_INFINITY, 0.0f64);
     for i in 0..=k {
         if i > 0 {
             ln_choose += ((n - i + 1) as f64).ln() - (i as f64).ln();
         }
-        terms.push(ln_choose + i as f64 * ln_p + (n - i) as f64 * ln_q);
+        let term = ln_choose + i as f64 * ln_p + (n - i) as f64 * ln_q;
+        if term > top {
+            sum = sum * (top - term).exp() + 1.0;
+            top = term;
+        } else {
+            sum += (term - top).exp();
+        }
     }
-    let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    (top + terms.iter().map(|t| (t - top).exp()).sum::<f64>().ln()).exp().min(1.0)
+    (top + sum.ln()).exp().min(1.0)
 }
 
 #[cfg(test)]

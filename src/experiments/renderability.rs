@@ -18,16 +18,15 @@ use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
 use kinloop_client::device::presets::DevicePreset;
-use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_client::user::{HandKind, HandSpec};
 use kinloop_linkage::{math::space::SceneKind, model::builtin};
 use kinloop_protocol::emulator::LinkConfig;
-use kinloop_server::core::VeConfig;
 
-use super::common::{session, sweep, Options, Output, Report};
+use super::common::{session, sweep, touring_plan, Options, Output, Report};
 use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::rounding::{num, round};
-use kinloop_harness::{ClientPlan, Recording, SessionPlan, SessionSummary};
+use kinloop_harness::{Recording, SessionPlan, SessionSummary};
 
 /// Largest closure error of a rendering pair (m).
 pub const CLOSURE_BOUND_M: f64 = 1e-6;
@@ -173,16 +172,7 @@ pub fn evaluate(point: &Point, seconds: f64) -> Result<PointResult> {
 /// The session of one pair, `seconds` long: its one client a touring hand with default flags.
 pub fn plan(point: &Point, seconds: f64) -> Result<SessionPlan> {
     let (scene, _) = kinloop_mjcf::load::load(&point.scene)?;
-    let mut client = ClientPlan::new("user", &point.op, point.device);
-    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
-    let client = client.with_link(point.network.link(0x5eed));
-    Ok(SessionPlan {
-        scene,
-        ve: VeConfig::default(),
-        clients: vec![client],
-        duration: Duration::from_secs_f64(seconds),
-        record_every: 1,
-    })
+    Ok(touring_plan(scene, &point.op, point.device, point.hand, point.network.link(0x5eed), seconds))
 }
 
 /// A pair's session judged by every bound (see the module documentation).

@@ -31,19 +31,18 @@ use serde::Serialize;
 use serde_json::json;
 
 use kinloop_client::device::presets::DevicePreset;
-use kinloop_client::user::{HandKind, HandSpec, UserSpec};
+use kinloop_client::user::HandKind;
 use kinloop_linkage::{math::space::Planar, math::space::SceneKind, math::space::Spatial, model::Model};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_server::core::design::PREDICTED_REFUSAL;
-use kinloop_server::core::VeConfig;
 
-use super::common::{session, sweep, Options, Output, Report};
+use super::common::{session, sweep, touring_plan, Options, Output, Report};
 use super::renderability::{CLAMPED_BOUND, DEVICES, RMS_DELAYED_M, RMS_PERFECT_M};
 use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::generate::{generate, Class, Generated};
 use crate::rounding::{num, round};
-use kinloop_harness::{ClientPlan, SessionPlan};
+use kinloop_harness::SessionPlan;
 
 /// Largest closure error of a session, as a fraction of the scene's length scale.
 pub const CLOSURE_RELATIVE: f64 = 1e-6;
@@ -139,15 +138,7 @@ pub(crate) fn length_scale(g: &Generated) -> Result<f64, String> {
 
 /// The session `point` runs on `g`'s linkage for `seconds`, every tick recorded, with the default VE.
 pub fn session_plan(g: &Generated, point: &Point, seconds: f64) -> SessionPlan {
-    let mut client = ClientPlan::new("user", &point.op, point.device);
-    client.user = UserSpec::Hand(HandSpec::touring(point.hand));
-    SessionPlan {
-        scene: g.scene.clone(),
-        ve: VeConfig::default(),
-        clients: vec![client.with_link(point.link())],
-        duration: Duration::from_secs_f64(seconds),
-        record_every: 1,
-    }
+    touring_plan(g.scene.clone(), &point.op, point.device, point.hand, point.link(), seconds)
 }
 
 /// Runs one session for `seconds` on the linkage `g` and judges it.
