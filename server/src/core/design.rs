@@ -21,7 +21,7 @@
 //! **The grasp.** On a device that renders torque the user holds the OP rigidly when the OP's lightest
 //! rotational inertia, times the torque scale `c_f c_p`, is within what the device can be made to feel
 //! (`renders_rotation`); otherwise as through a pin. Where a pin would lose most of the coupling's hold and
-//! the device's torque can carry a rigid grasp, the force scale rises to hold the OP rigidly ([`grasp`]).
+//! the device's torque can carry a rigid grasp, the force scale rises to hold the OP rigidly (`grasp`).
 //!
 //! **The coupling.** The graphics controller ties the VE's OP to the user's local model (eq 4 applies it
 //! beside the force channel). It is a spring-damper on the OP's effective mass, and what makes it stable
@@ -68,7 +68,7 @@ use kinloop_protocol::codec::limits::{MAX_MAPPING_SCALE, MIN_MAPPING_SCALE};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 
-pub mod grasp;
+mod grasp;
 use grasp::held_rigidly;
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.

@@ -1,10 +1,10 @@
 //! The grasp rule (see the parent module, "The grasp"): where a force scale that pins the grasp rises to the
 //! one that holds the OP rigidly.
 //!
-//! On a device that renders torque the user holds the OP rigidly when the OP's lightest
-//! rotational inertia, times the torque scale `c_f c_p`, is within what the device can be made to feel
-//! (`renders_rotation`); otherwise as through a pin, and the coupling then holds only the OP's translation. A
-//! load that sets a small `c_f` (a position actuator's pull far from its target) does two things at once: the
+//! On a device that renders torque the user holds the OP rigidly when the OP's lightest rotational inertia,
+//! times the torque scale `c_f c_p`, is within what the device can be made to feel (`renders_rotation`);
+//! otherwise as through a pin, and the coupling then holds only the OP's translation. A load that sets a small
+//! `c_f` (a position actuator's pull far from its target) does two things at once: the
 //! grasp falls to a pin and the hand's force, divided by `c_f`, grows in the VE. Along the linkage's motion
 //! at a pose where the OP moves by `(v, ω)` per unit of the motion, a rigid coupling holds it with
 //! `K_t |v|² + K_r |ω|²` and a pin with `K_t |v|²` alone; the gains' ratio is the OP's
@@ -62,7 +62,7 @@ pub(super) fn moves_by_turning<S: Space>(reach: &OpReach<S>) -> bool {
 
 /// A relaxed pace of the hand carrying the handle (device m/s), the one the rigid grasp's torque is judged at
 /// (module documentation): the simulated touring hand's (`kinloop_client::user::hand`).
-pub const HAND_PACE_M_S: f64 = 0.04;
+const HAND_PACE_M_S: f64 = 0.04;
 
 /// Largest angular acceleration of a point passing a fixed centre on a straight line, at unit pace and unit
 /// distance: `θ = atan(s)`, `θ'' = −2 s / (1 + s²)²`, largest in magnitude at `s = 1 / √3`, `3√3 / 8`.
