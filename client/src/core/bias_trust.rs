@@ -57,7 +57,7 @@ impl<S: Space> BiasTrust<S> {
         }
         if let Some((t, b)) = self.last {
             let dt = server_time_s - t;
-            if !(dt > 0.0) {
+            if dt <= 0.0 {
                 // Repeated or out of order: no rate, and the newest stays the newest.
                 return;
             }

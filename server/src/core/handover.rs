@@ -130,7 +130,7 @@ impl<S: Space> Handover<S> {
                 if couplings[i].weight >= 1.0 {
                     self.share -= fade_step;
                 }
-                if !(self.share > 0.0) {
+                if self.share <= 0.0 || self.share.is_nan() {
                     *self = Handover::default();
                 }
             }
