@@ -49,6 +49,24 @@ pub fn try_fifo_priority(priority: u8) -> Result<(), RealtimePriorityError> {
     }
 }
 
+/// Tells the stalls apart among a loop's deadline misses: a host stall makes every tick it spans late, and a
+/// loaded loop stays late for as long as it takes to catch up, so misses come in runs; each run is one stall.
+/// Stalls, unlike misses, come one at a time, which is what a rate's interval assumes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StallRuns {
+    last_missed: bool,
+}
+
+impl StallRuns {
+    /// Notes whether this wake-up missed its deadline; true when it begins a stall (a miss after an on-time
+    /// wake-up, or the first wake-up missing).
+    pub fn begins_stall(&mut self, missed: bool) -> bool {
+        let begins = missed && !self.last_missed;
+        self.last_missed = missed;
+        begins
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -79,5 +97,16 @@ mod tests {
         })
         .join()
         .expect("the probe thread");
+    }
+
+    /// A run of late wake-ups is one stall; an on-time one ends it.
+    #[test]
+    fn runs_of_misses_are_one_stall_each() {
+        let mut runs = StallRuns::default();
+        let misses = [false, true, true, true, false, true, false, false, true, true];
+        let stalls = misses.iter().filter(|m| runs.begins_stall(**m)).count();
+        assert_eq!(stalls, 3);
+        let mut first = StallRuns::default();
+        assert!(first.begins_stall(true), "a first wake-up that misses begins a stall");
     }
 }

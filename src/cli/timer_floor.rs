@@ -56,6 +56,7 @@ pub fn run(args: &TimerFloorArgs) -> Result<()> {
                 "loop_lateness_us_p99": lateness.p99_us,
                 "loop_lateness_us_max": lateness.max_us,
                 "loop_misses": lateness.misses,
+                "loop_stalls": lateness.stalls,
                 "miss_threshold_us": MISS_THRESHOLD_US,
                 "miss_rate": miss_rate,
                 "realtime_priority": fifo,
@@ -63,7 +64,7 @@ pub fn run(args: &TimerFloorArgs) -> Result<()> {
         );
     } else {
         println!(
-            "{} ticks, lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs; {} misses (> {} µs late, {:.3} %); SCHED_FIFO {}",
+            "{} ticks, lateness p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs; {} misses (> {} µs late, {:.3} %) in {} stalls; SCHED_FIFO {}",
             lateness.ticks,
             lateness.p50_us,
             lateness.p99_us,
@@ -71,6 +72,7 @@ pub fn run(args: &TimerFloorArgs) -> Result<()> {
             lateness.misses,
             MISS_THRESHOLD_US,
             100.0 * miss_rate,
+            lateness.stalls,
             if fifo { "on" } else { "off" }
         );
     }

@@ -79,6 +79,10 @@ pub struct CapacityPoint {
     /// The VE loop's misses against the idle loop's, with the ratio's interval judged against
     /// [`MISSES_BOUND`].
     pub misses_vs_floor: RateRatio,
+    /// The VE loop's stalls (runs of late wake-ups, each counted once) against the idle loop's, judged the
+    /// same way: misses come in runs (a host stall makes a loaded loop late until it has caught up), stalls
+    /// one at a time, as the interval assumes.
+    pub stalls_vs_floor: RateRatio,
     /// CPU time over wall time of the VE thread (its hybrid sleep's spinning included).
     pub cpu_fraction: Option<f64>,
     /// SCHED_FIFO granted to the VE thread.
@@ -170,6 +174,13 @@ fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint
             floor.ticks,
             MISSES_BOUND,
         ),
+        stalls_vs_floor: RateRatio::new(
+            ve.deadline_stalls,
+            ve.step_time.samples,
+            floor.stalls,
+            floor.ticks,
+            MISSES_BOUND,
+        ),
         cpu_fraction: ve.cpu_s.map(|cpu| round(cpu / ve.wall_s.max(1e-9), 3)),
         realtime_priority: ve.realtime_priority,
         snapshots_dropped: ve.snapshots_dropped,
@@ -238,7 +249,7 @@ pub fn run(options: &Options) -> Result<Report> {
     let last = points.last().ok_or_else(|| anyhow!("no points"))?;
     let answer = format!(
         "{} users in one room: step p50 {} us, p99 {} us ({}x the same iteration back to back, {} us; the VE's own \
-         stages {}x); misses {:.3} % beside the idle loop's {:.3} %: {}; load average {}.",
+         stages {}x); misses {:.3} % beside the idle loop's {:.3} %: {}; stalls: {}; load average {}.",
         last.users,
         last.step_us_p50,
         last.step_us_p99,
@@ -248,18 +259,21 @@ pub fn run(options: &Options) -> Result<Report> {
         100.0 * last.miss_rate,
         100.0 * last.floor_miss_rate,
         last.misses_vs_floor.describe(),
+        last.stalls_vs_floor.describe(),
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),
     );
     let answer = match rooms_axis.last() {
         Some(r) => format!(
             "{answer} {} rooms of {}: worst room's step p99 {} us, misses (every room's) {:.3} % beside the \
-             floor's {:.3} %: {}, {} restores, device-LM RMS median {} mm.",
+             floor's {:.3} %: {}; stalls: {}, the worst room's {}; {} restores, device-LM RMS median {} mm.",
             r.rooms,
             r.users_per_room,
             r.step_us_p99_worst,
             100.0 * r.misses_vs_floor.events as f64 / r.misses_vs_floor.ticks.max(1) as f64,
             100.0 * r.floor_miss_rate,
             r.misses_vs_floor.describe(),
+            r.stalls_vs_floor.describe(),
+            r.worst_room_stalls_vs_floor.describe(),
             r.state_restores,
             r.device_lm_rms_mm_median
         ),

@@ -46,6 +46,12 @@ pub struct RoomsPoint {
     pub misses_vs_floor: RateRatio,
     /// The room that missed most against the idle loop, the same way.
     pub worst_room_vs_floor: RateRatio,
+    /// Every room's stalls (runs of late wake-ups, each counted once) pooled against the idle loop's. A
+    /// stall of the executor's thread is one in each room on it, so the pooled count still comes in bursts;
+    /// a room's own count does not.
+    pub stalls_vs_floor: RateRatio,
+    /// The room with the most stalls against the idle loop's.
+    pub worst_room_stalls_vs_floor: RateRatio,
     /// States restored, over every room.
     pub state_restores: u64,
     /// Largest closure residual over every room (m).
@@ -121,15 +127,19 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
     let mut rms: Vec<f64> = outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm).collect();
     rms.sort_by(f64::total_cmp);
     let load_ticks: u64 = outcome.per_user.iter().map(|u| u.ticks).sum();
-    let against_floor =
-        |misses: u64, ticks: u64| RateRatio::new(misses, ticks, floor.misses, floor.ticks, MISSES_BOUND);
-    let counts = |v: &&kinloop_server::driver::VeLoopStats| (v.deadline_misses, v.step_time.samples);
-    let pooled = ves.iter().map(counts).fold((0, 0), |(m, t), (vm, vt)| (m + vm, t + vt));
-    // The worst room by its rate (a room that ran fewer ticks is not the better for it).
-    let worst_room = ves
-        .iter()
-        .map(counts)
-        .max_by(|a, b| (a.0 as f64 / a.1.max(1) as f64).total_cmp(&(b.0 as f64 / b.1.max(1) as f64)));
+    type Stats = kinloop_server::driver::VeLoopStats;
+    // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
+    // it), of the count `events` picks, each against the idle loop's `floor_events`.
+    let judged = |events: &dyn Fn(&Stats) -> u64, floor_events: u64| {
+        let against = |n: u64, ticks: u64| RateRatio::new(n, ticks, floor_events, floor.ticks, MISSES_BOUND);
+        let counts: Vec<(u64, u64)> = ves.iter().map(|v| (events(v), v.step_time.samples)).collect();
+        let pooled = counts.iter().fold((0, 0), |(n, t), (vn, vt)| (n + vn, t + vt));
+        let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
+        let worst = counts.iter().max_by(|a, b| rate(a).total_cmp(&rate(b))).copied().unwrap_or((0, 0));
+        (against(pooled.0, pooled.1), against(worst.0, worst.1))
+    };
+    let (misses_vs_floor, worst_room_vs_floor) = judged(&|v| v.deadline_misses, floor.misses);
+    let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&|v| v.deadline_stalls, floor.stalls);
     Ok(RoomsPoint {
         rooms,
         users_per_room: users,
@@ -138,8 +148,10 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
         step_us_p99_worst: round(worst(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
         miss_rate_worst: worst(&|v| v.deadline_misses as f64 / v.step_time.samples.max(1) as f64),
         floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
-        misses_vs_floor: against_floor(pooled.0, pooled.1),
-        worst_room_vs_floor: worst_room.map_or_else(|| against_floor(0, 0), |(m, t)| against_floor(m, t)),
+        misses_vs_floor,
+        worst_room_vs_floor,
+        stalls_vs_floor,
+        worst_room_stalls_vs_floor,
         state_restores: ves.iter().map(|v| v.core.state_restores).sum(),
         max_closure_error_m: worst(&|v| v.core.max_closure_error),
         rooms_quarantined: reports.iter().filter(|r| r.quarantined).count(),

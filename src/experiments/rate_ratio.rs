@@ -10,10 +10,12 @@
 //! rate ratio, exact in that it never covers less than its level). The Clopper–Pearson interval of `π` maps
 //! monotonically onto `R = π n₂ / ((1 − π) n₁)`.
 //!
-//! **What it assumes.** Independent misses. A stall of the machine makes every tick it spans late, and every
-//! room on a stalled thread, so misses come in bursts and the counts spread more than Poisson counts do: the
-//! interval is then narrower than the truth, and a decision from pooled rooms (which share their threads'
-//! stalls) the least safe of all. Counting stalls (runs of late ticks) instead of ticks would remove that.
+//! **What it assumes.** Independent misses. Each loop counts a miss per late wake-up, not per tick a stall
+//! spans (the idle loop skips the deadlines it slept through, the VE runs the ticks due in one iteration), and
+//! capacity counts stalls beside misses (runs of late wake-ups, one each) to show it. What stays dependent is
+//! the rooms: a stall of an executor thread is a miss in every room on it at once, so pooled over rooms the
+//! counts spread more than Poisson counts do and that interval is narrower than the truth; a single room's
+//! count (the worst room's ratio) has no such dependence.
 
 use serde::{Deserialize, Serialize};
 

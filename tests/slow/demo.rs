@@ -304,6 +304,8 @@ fn timer_floor_reports_an_idle_loops_lateness() {
     assert!(f("loop_lateness_us_p50") <= f("loop_lateness_us_p99"), "{v}");
     assert!(f("loop_lateness_us_p99") <= f("loop_lateness_us_max"), "{v}");
     assert!(f("loop_misses") <= f("ticks") && (f("miss_rate") - f("loop_misses") / f("ticks")).abs() < 1e-12);
+    // Stalls are runs of misses: no more of them than misses, and one at least while there is a miss.
+    assert!(f("loop_stalls") <= f("loop_misses") && (f("loop_stalls") > 0.0) == (f("loop_misses") > 0.0), "{v}");
     assert_eq!(f("miss_threshold_us"), 500.0);
     let bad = std::process::Command::new(bin).args(["timer-floor", "--rate", "0"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&bad.stderr);

@@ -2,7 +2,7 @@
 //! its absolute deadline each tick started) that the real-time thread updates with relaxed atomics (no lock,
 //! no allocation) and any other thread reads.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Ticks starting more than this late are deadline misses.
 pub const MISS_THRESHOLD_US: u64 = 500;
@@ -18,6 +18,9 @@ pub struct LatenessHistogram {
     max_ns: AtomicU64,
     ticks: AtomicU64,
     misses: AtomicU64,
+    stalls: AtomicU64,
+    /// Whether the last tick recorded was a miss (a stall's later misses are not new stalls).
+    last_missed: AtomicBool,
 }
 
 impl Default for LatenessHistogram {
@@ -28,6 +31,8 @@ impl Default for LatenessHistogram {
             max_ns: AtomicU64::new(0),
             ticks: AtomicU64::new(0),
             misses: AtomicU64::new(0),
+            stalls: AtomicU64::new(0),
+            last_missed: AtomicBool::new(false),
         }
     }
 }
@@ -45,6 +50,9 @@ pub struct LatenessSummary {
     pub max_us: f64,
     /// Ticks more than [`MISS_THRESHOLD_US`] late.
     pub misses: u64,
+    /// Runs of consecutive missed ticks: one host stall that makes several ticks late counts once, so that
+    /// stalls, unlike misses, come one at a time (what a rate's interval assumes).
+    pub stalls: u64,
 }
 
 impl LatenessHistogram {
@@ -57,8 +65,15 @@ impl LatenessHistogram {
         };
         self.max_ns.fetch_max(lateness_ns, Ordering::Relaxed);
         self.ticks.fetch_add(1, Ordering::Relaxed);
-        if us as u64 > MISS_THRESHOLD_US {
+        let missed = us as u64 > MISS_THRESHOLD_US;
+        if missed {
             self.misses.fetch_add(1, Ordering::Relaxed);
+        }
+        // A run of misses is one stall (`kinloop_process::realtime::StallRuns`, kept here in an atomic as
+        // the histogram is shared).
+        let missed_before = self.last_missed.swap(missed, Ordering::Relaxed);
+        if missed && !missed_before {
+            self.stalls.fetch_add(1, Ordering::Relaxed);
         }
     }
 
@@ -86,6 +101,29 @@ impl LatenessHistogram {
             p99_us: percentile(0.99),
             max_us,
             misses: self.misses.load(Ordering::Relaxed),
+            stalls: self.stalls.load(Ordering::Relaxed),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Misses count every late tick; stalls count each run of them once, however long.
+    #[test]
+    fn a_run_of_late_ticks_is_one_stall() {
+        let h = LatenessHistogram::default();
+        let late = (MISS_THRESHOLD_US + 1) * 1000;
+        // On time, a run of three late, on time, one late, a run of two late at the end.
+        for ns in [10_000, late, 3 * late, late, 20_000, late, 0, late, late] {
+            h.record(ns);
+        }
+        let s = h.summary();
+        assert_eq!((s.ticks, s.misses, s.stalls), (9, 6, 3), "{s:?}");
+        // Exactly at the threshold is on time (a miss is strictly later), and ends a run.
+        h.record(MISS_THRESHOLD_US * 1000);
+        h.record(late);
+        assert_eq!((h.summary().misses, h.summary().stalls), (7, 4));
     }
 }

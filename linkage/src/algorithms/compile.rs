@@ -172,6 +172,7 @@ impl<S: Space> Compiler<'_, S> {
             cuts: Vec::new(),
             closure_rows: 0,
             closure_rank: 0,
+            closure_row_weights: Vec::new(),
             ops,
             obstacles,
             gravity,
@@ -185,6 +186,7 @@ impl<S: Space> Compiler<'_, S> {
         model.has_springs |= model.cuts.iter().any(|c| c.spring.is_some_and(|s| s.stiffness > 0.0));
         model.has_joint_forces |= model.joints.iter().any(|j| j.range.is_some())
             || model.cuts.iter().any(|c| c.damping > 0.0 || c.range.is_some());
+        model.closure_row_weights = closure_row_weights(&model);
         model.closure_rank = generic_closure_rank(&model);
         Ok(model)
     }
@@ -659,6 +661,15 @@ fn chain_prefix<S: Space>(joints: &[Joint<S>]) -> Vec<bool> {
             }
             expect == 0
         })
+        .collect()
+}
+
+/// `Model::closure_row_weights`: `1/L²` for each length row, 1 for each angle row, in the rows' order.
+fn closure_row_weights<S: Space>(model: &Model<S>) -> Vec<f64> {
+    let per_length = 1.0 / (model.length_scale * model.length_scale);
+    let primitives = model.cuts.iter().flat_map(|c| &c.primitives);
+    primitives
+        .flat_map(|p| std::iter::repeat_n(if p.rows_are_lengths() { per_length } else { 1.0 }, p.rows()))
         .collect()
 }
 

@@ -10,8 +10,11 @@
 //! **Redundant closures and singular configurations.** S is singular when W loses rank (an overconstrained
 //! parallelogram, a spherical four-bar closed by a 5-equation revolute cut, a four-bar at a toggle). We never
 //! invert it: S is factored by a *diagonal-pivoted (rank-revealing) Cholesky* that picks, at each step, the
-//! closure row with the largest remaining pivot relative to its own diagonal `S_ii` (so the choice does not
-//! depend on units), and stops when that ratio falls below [`RANK_TOLERANCE`] or when it has kept
+//! closure row with the largest remaining pivot in the scene's own scale (`Model::closure_row_weights`: a
+//! length row's divided by L², so the choice does not depend on units, and a row vanishing at the current
+//! state, like a Bennett linkage's at its fold, is not kept in place of one that holds the loop), treats a
+//! row as dependent when its remaining pivot falls below [`RANK_TOLERANCE`] of its own diagonal `S_ii`, and
+//! stops when no independent row is left or when it has kept
 //! `Model::closure_rank` rows — the *generic* rank of W, found once at compile time by SVD on the manifold.
 //! The cap matters: off the manifold (drift, or an RK4 stage state) structurally redundant rows are no
 //! longer exactly dependent; their spurious singular value is proportional to the drift, and keeping such a
@@ -72,6 +75,7 @@ pub fn factor_closures<S: Space>(model: &Model<S>, data: &mut Data<S>) {
         kkt.schur_inv_diag.as_mut_slice(),
         RANK_TOLERANCE,
         model.closure_rank,
+        Some(&model.closure_row_weights),
     );
 }
 

@@ -361,6 +361,7 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
                 self.schur_inv_diag.as_mut_slice(),
                 RANK_TOLERANCE,
                 m,
+                None,
             );
         }
         // Response to an OP wrench, column by column: M = P Ĵᵀ.

@@ -97,12 +97,26 @@ pub fn sub_scaled(y: &mut [f64], alpha: f64, x: &[f64]) {
     }
 }
 
+/// A closure row whose diagonal of S, in the scene's units, is below this fraction of the largest counts as
+/// vanishing (see [`pivoted_cholesky`]): a tenth of the largest row's norm.
+pub const VANISHING_ROW: f64 = 1e-2;
+
 /// Diagonal-pivoted, rank-revealing Cholesky of the symmetric positive semi-definite `s` into the lower
 /// triangle of `l`, in pivoted order (`perm[k]` = row eliminated at step k). A row is dependent when its
 /// remaining pivot falls below `tolerance` times its own original diagonal, which makes the decision
 /// independent of each row's units. At most `max_rank` rows are kept. Returns the numerical rank. `scale`
 /// is scratch of length m; `inv_diag[k]` receives `1 / l_kk` for the kept rows, so that the solves
 /// multiply instead of dividing (a solve with two rows is a chain of four dependent divisions otherwise).
+///
+/// **Rows that vanish.** Relative to its own diagonal every row starts at 1, so without more the first row
+/// kept is row 0 however small it has become. With `weights`, which put the rows in common units
+/// (`Model::closure_row_weights`: 1/L² for a length row), a row's own diagonal is floored at
+/// [`VANISHING_ROW`] times the largest weighted diagonal (divided by its weight): a row that has all but
+/// vanished at the current state (a Bennett linkage's cut at its fold, where one of its point rows tends to
+/// zero) then counts as small, and is kept only after the rows that still hold the loop. Rows of comparable
+/// size are chosen and judged as without weights. The choice matters only where rows are dropped
+/// (`max_rank` or a singular state); the kept rows' solution is the same.
+#[allow(clippy::too_many_arguments)] // scratch and outputs are the caller's, preallocated
 pub fn pivoted_cholesky(
     s: &DMatrix<f64>,
     l: &mut DMatrix<f64>,
@@ -111,14 +125,15 @@ pub fn pivoted_cholesky(
     inv_diag: &mut [f64],
     tolerance: f64,
     max_rank: usize,
+    weights: Option<&[f64]>,
 ) -> usize {
     // The sizes of a few closure rows get their own copy with m a constant, so the loops unroll (their
     // bookkeeping otherwise outweighs a 2x2 factorization several times).
     match s.nrows() {
-        1 => pivoted_cholesky_m(1, s, l, perm, scale, inv_diag, tolerance, max_rank),
-        2 => pivoted_cholesky_2(s, l, perm, inv_diag, tolerance, max_rank),
-        3 => pivoted_cholesky_m(3, s, l, perm, scale, inv_diag, tolerance, max_rank),
-        m => pivoted_cholesky_m(m, s, l, perm, scale, inv_diag, tolerance, max_rank),
+        1 => pivoted_cholesky_m(1, s, l, perm, scale, inv_diag, tolerance, max_rank, weights),
+        2 => pivoted_cholesky_2(s, l, perm, inv_diag, tolerance, max_rank, weights),
+        3 => pivoted_cholesky_m(3, s, l, perm, scale, inv_diag, tolerance, max_rank, weights),
+        m => pivoted_cholesky_m(m, s, l, perm, scale, inv_diag, tolerance, max_rank, weights),
     }
 }
 
@@ -133,14 +148,17 @@ fn pivoted_cholesky_m(
     inv_diag: &mut [f64],
     tolerance: f64,
     max_rank: usize,
+    weights: Option<&[f64]>,
 ) -> usize {
     let a = &mut l.as_mut_slice()[..m * m];
     a.copy_from_slice(&s.as_slice()[..m * m]);
     let scale = &mut scale.as_mut_slice()[..m];
     let perm = &mut perm[..m];
+    let floor = weights.map_or(0.0, |w| VANISHING_ROW * (0..m).map(|i| a[i * m + i] * w[i]).fold(0.0, f64::max));
     for (i, (p, sc)) in perm.iter_mut().zip(scale.iter_mut()).enumerate() {
         *p = i;
-        *sc = a[i * m + i].max(f64::MIN_POSITIVE);
+        let own = weights.map_or(a[i * m + i], |w| a[i * m + i].max(floor / w[i]));
+        *sc = own.max(f64::MIN_POSITIVE);
     }
     let cap = m.min(max_rank);
     for k in 0..cap {
@@ -195,12 +213,15 @@ fn pivoted_cholesky_2(
     inv_diag: &mut [f64],
     tolerance: f64,
     max_rank: usize,
+    weights: Option<&[f64]>,
 ) -> usize {
     let [s00, s10, _, s11]: [f64; 4] = s.as_slice()[..4].try_into().expect("a 2x2 matrix");
     let out: &mut [f64; 4] = (&mut l.as_mut_slice()[..4]).try_into().expect("a 2x2 factor");
     *out = [s00, s10, s10, s11];
     perm[..2].copy_from_slice(&[0, 1]);
-    let scale = [s00.max(f64::MIN_POSITIVE), s11.max(f64::MIN_POSITIVE)];
+    let floor = weights.map_or(0.0, |w| VANISHING_ROW * 0.0f64.max(s00 * w[0]).max(s11 * w[1]));
+    let own = weights.map_or([s00, s11], |w| [s00.max(floor / w[0]), s11.max(floor / w[1])]);
+    let scale = [own[0].max(f64::MIN_POSITIVE), own[1].max(f64::MIN_POSITIVE)];
     let cap = max_rank.min(2);
     if cap == 0 {
         return 0;
@@ -395,16 +416,21 @@ mod tests {
         cases.extend([[1.0, 0.0, f64::INFINITY], [-1.0, 0.5, 2.0], [2.0, 2.0, 2.0]]);
         for [a, b, c] in cases {
             let s = DMatrix::from_column_slice(2, 2, &[a, b, b, c]);
-            for max_rank in 0..=2 {
+            let weightings: [Option<[f64; 2]>; 4] = [None, Some([1.0, 1.0]), Some([1e4, 1.0]), Some([1.0, 1e-6])];
+            for (max_rank, weighting) in (0..=2).flat_map(|r| weightings.map(|w| (r, w))) {
+                let weights = weighting.as_ref().map(|w| &w[..]);
                 for tolerance in [0.0, 1e-10, 0.5] {
                     let (mut l1, mut l2) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 2));
                     let (mut p1, mut p2) = ([9; 2], [9; 2]);
                     let (mut d1, mut d2) = ([0.0; 2], [0.0; 2]);
                     let mut scale = DVector::zeros(2);
                     let m = std::hint::black_box(2);
-                    let r1 = pivoted_cholesky_m(m, &s, &mut l1, &mut p1, &mut scale, &mut d1, tolerance, max_rank);
-                    let r2 = pivoted_cholesky_2(&s, &mut l2, &mut p2, &mut d2, tolerance, max_rank);
-                    let case = format!("S = [{a}, {b}; {b}, {c}], cap {max_rank}, tolerance {tolerance}");
+                    let r1 =
+                        pivoted_cholesky_m(m, &s, &mut l1, &mut p1, &mut scale, &mut d1, tolerance, max_rank, weights);
+                    let r2 = pivoted_cholesky_2(&s, &mut l2, &mut p2, &mut d2, tolerance, max_rank, weights);
+                    let case = format!(
+                        "S = [{a}, {b}; {b}, {c}], cap {max_rank}, tolerance {tolerance}, weights {weighting:?}"
+                    );
                     assert_eq!(r1, r2, "{case}: rank");
                     assert_eq!(p1, p2, "{case}: order");
                     let bits = |x: f64| x.to_bits();

@@ -193,6 +193,11 @@ pub enum ClosurePrimitive<S: Space> {
 }
 
 impl<S: Space> ClosurePrimitive<S> {
+    /// Whether this primitive's rows are lengths (rather than angles or unit-free products).
+    pub fn rows_are_lengths(&self) -> bool {
+        matches!(self, ClosurePrimitive::Coincident { .. } | ClosurePrimitive::OnPlane { .. })
+    }
+
     /// Number of closure equations (rows of W) this primitive contributes.
     pub fn rows(&self) -> usize {
         match self {
@@ -319,6 +324,10 @@ pub struct Model<S: Space> {
     pub closure_rows: usize,
     /// Generic rank of the closure Jacobian W on the constraint manifold (m minus the redundant closures).
     pub closure_rank: usize,
+    /// Per closure row, the weight that puts its entries of `S = W D⁻¹ Wᵀ` in common units: `1/L²` for a
+    /// row in length (a point's coincidence, a point on a plane), 1 for a row in angle (a perpendicularity, a
+    /// planar angle). The pivoted factorization of S chooses its rows by these (`dense::pivoted_cholesky`).
+    pub closure_row_weights: Vec<f64>,
     /// Operational points.
     pub ops: Vec<OpPoint<S>>,
     /// Obstacles.

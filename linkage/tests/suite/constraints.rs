@@ -108,6 +108,46 @@ fn redundant_closures_are_solved_without_nan() {
     run_free(&spherical, "spherical-four-bar");
 }
 
+/// A Bennett linkage (five closure rows of generic rank 2) swung by gravity through its folds stays on its
+/// own motion. At a fold (θ1 = 0, θ2 = π) one of its cut's point rows vanishes: a factorization that keeps that
+/// row and one other holds the loop with a single equation there, and the step leaves along a branch the other
+/// rows forbid (with rows chosen relative to their own size, 16 L open after 3 s at 5 rad/s). Checked against
+/// the Bennett's closed form rather than the code's own residual alone: θ3 = −θ1 and
+/// `tan(θ1/2) tan(θ2/2) = sin((β+α)/2) / sin((β−α)/2) = 1 + √3` (the scene file's comment), written as
+/// `sin(θ1/2) sin(θ2/2) − (1 + √3) cos(θ1/2) cos(θ2/2) = 0` to stay bounded at the fold.
+#[test]
+fn a_bennett_linkage_swings_through_its_folds_on_its_own_motion() {
+    let model: Model<Spatial> = compile(&builtin_scene("bennett-linkage"));
+    assert_eq!((model.nc(), model.closure_rank), (5, 2));
+    let k = 1.0 + 3f64.sqrt();
+    for speed in [0.5, 2.0, 5.0] {
+        let mut data = Data::new(&model);
+        let (mut q, mut qd) = (model.q0.clone(), DVector::from_vec(vec![speed, 0.0, -speed]));
+        forward_dynamics(&model, &mut data, &q, &qd, &mut ()).unwrap();
+        project(&model, &mut data, &mut q, &mut qd);
+        let cfg = StepConfig::euler(1e-3);
+        let (mut worst_rows, mut worst_form, mut folds_passed) = (0.0f64, 0.0f64, 0);
+        let mut side = q[0].sin() > 0.0;
+        for _ in 0..3000 {
+            step(&model, &mut data, &mut q, &mut qd, &mut (), &cfg).unwrap();
+            forward_poses(&model, &mut data, &q);
+            closure_residual(&model, &mut data);
+            worst_rows = worst_rows.max(data.closure_residual.amax() / model.length_scale);
+            let (h1, h2) = (q[0] / 2.0, q[1] / 2.0);
+            let relation = h1.sin() * h2.sin() - k * h1.cos() * h2.cos();
+            let opposite = (q[2] + q[0]).sin().abs();
+            worst_form = worst_form.max(relation.abs()).max(opposite);
+            if (q[0].sin() > 0.0) != side {
+                side = !side;
+                folds_passed += 1;
+            }
+        }
+        assert!(folds_passed >= 2, "speed {speed}: the swing passed {folds_passed} folds (the test needs some)");
+        assert!(worst_rows <= 1e-8, "speed {speed}: the loop opened by {worst_rows:.3e} of L on some row");
+        assert!(worst_form <= 1e-6, "speed {speed}: {worst_form:.3e} off the Bennett's closed-form motion");
+    }
+}
+
 fn run_free<S: kinloop_linkage::math::space::Space>(model: &Model<S>, name: &str) {
     let mut data = Data::new(model);
     let (mut q, mut qd) = (model.q0.clone(), DVector::zeros(model.nv()));

@@ -18,6 +18,11 @@
 //! second on a minimum-jerk path (peak acceleration `5.77 d / T²`, Flash & Hogan 1985). Angles map one to
 //! one and torques by `c_f c_p`, so every axis scales power alike (`protocol::Mapping`).
 //!
+//! **The grasp.** On a device that renders torque the user holds the OP rigidly when the OP's lightest
+//! rotational inertia, times the torque scale `c_f c_p`, is within what the device can be made to feel
+//! (`renders_rotation`); otherwise as through a pin. Where a pin would lose most of the coupling's hold and
+//! the device's torque can carry a rigid grasp, the force scale rises to hold the OP rigidly (`grasp`).
+//!
 //! **The coupling.** The graphics controller ties the VE's OP to the user's local model (eq 4 applies it
 //! beside the force channel). It is a spring-damper on the OP's effective mass, and what makes it stable
 //! or not is its natural frequency against the rates and delays of the loop it closes (VE → snapshot →
@@ -62,6 +67,9 @@ use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec::limits::{MAX_MAPPING_SCALE, MIN_MAPPING_SCALE};
 use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
+
+mod grasp;
+use grasp::held_rigidly;
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
 pub const WORKSPACE_FILL: f64 = 0.8;
@@ -266,6 +274,7 @@ pub fn choose_mapping<S: Space>(
     if device.max_torque_nm > 0.0 && torque_load > 0.0 {
         force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
     }
+    force_scale = held_rigidly(reach, device, position_scale, force_scale);
     if let Some(asked) = request.force_scale {
         if renders_force && asked * reach.static_force_n > device.max_force_n {
             // The load is positive here (a zero load fits any scale).
@@ -310,10 +319,13 @@ const MASS_REDUCTION: f64 = 4.0;
 /// handle's own (a serial arm's tip) turns faster than any controller of the handle can follow, and under
 /// delay its angular loop runs away.
 fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_scale: f64) -> bool {
-    let lin = <S::Point as VecOps>::LEN;
     let (_, inertia) = lightest(reach);
-    let handle = device.mass.get(lin).copied().unwrap_or(0.0);
-    device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle
+    device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle_inertia::<S>(device)
+}
+
+/// The handle's rotational inertia (kg m²): the device's first angular mass, zero if it has none.
+fn handle_inertia<S: Space>(device: &DeviceCaps) -> f64 {
+    device.mass.get(<S::Point as VecOps>::LEN).copied().unwrap_or(0.0)
 }
 
 /// The graphics controller's natural frequency for one user, and what it was chosen from (see the module

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_process::cpu::thread_cpu_time;
-use kinloop_process::realtime::try_realtime_priority;
+use kinloop_process::realtime::{try_realtime_priority, StallRuns};
 use kinloop_protocol::codec;
 use rtrb::{Consumer, Producer};
 
@@ -90,6 +90,8 @@ pub struct VeLoop<S: Space> {
     /// The one-user VE whose tick warms the caches before a deadline ([`Self::warm`]).
     rehearsal: Option<Rehearsal<S>>,
     iterations: u64,
+    /// The runs of late wake-ups (`VeLoopStats::deadline_stalls`).
+    stalls: StallRuns,
 }
 
 impl<S: Space> VeLoop<S> {
@@ -116,6 +118,7 @@ impl<S: Space> VeLoop<S> {
             cpu_at_start: thread_cpu_time(),
             rehearsal,
             iterations: 0,
+            stalls: StallRuns::default(),
         }
     }
 
@@ -155,9 +158,11 @@ impl<S: Space> VeLoop<S> {
         let stats = &mut self.stats;
         let lateness = woke.saturating_duration_since(deadline);
         stats.max_lateness_ns = stats.max_lateness_ns.max(lateness.as_nanos() as u64);
-        if lateness > self.half_period {
+        let missed = lateness > self.half_period;
+        if missed {
             stats.deadline_misses += 1;
         }
+        stats.deadline_stalls += u64::from(self.stalls.begins_stall(missed));
         let now = woke - self.epoch;
         self.round(woke, now);
     }

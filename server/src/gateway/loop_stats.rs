@@ -174,6 +174,9 @@ pub struct VeLoopStats {
     pub epoch_unix_s: f64,
     /// Wake-ups later than half a period after their deadline.
     pub deadline_misses: u64,
+    /// Runs of consecutive late wake-ups, each counted once: a host stall makes a loaded loop late for as
+    /// long as it takes to catch up (several misses), and stalls, unlike misses, come one at a time.
+    pub deadline_stalls: u64,
     /// Latest wake-up after its deadline (ns).
     pub max_lateness_ns: u64,
     /// Whether SCHED_FIFO was granted.
