@@ -156,3 +156,29 @@ fn circumcentre(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
         (n(a) * (c.0 - b.0) + n(b) * (a.0 - c.0) + n(c) * (b.0 - a.0)) / d,
     )
 }
+
+/// The Stephenson six-bar's output on `sim:paper` under a firm hand at 50 ms one way, over the touring hand's
+/// whole tour: held into its limit, the VE's OP swings there while the device stays put, and b̂ (the OP's
+/// `J̇ q̇` above all) flips at twice the swing's frequency; held for the delay as the impedance controller's
+/// feedforward, it arrives with the wrong sign and pumps the swing (up to 200 N asked of a 10 N device).
+/// Weighted by how little it changes over the horizon it is held for (`bias_trust`), the pair renders.
+#[test]
+fn the_stephenson_six_bars_output_held_into_its_limit_at_50_ms_renders() {
+    use kinloop::experiments::renderability::{evaluate, Network, Point, SECONDS};
+    use kinloop_client::device::presets::DevicePreset;
+    let p = Point {
+        scene: "stephenson-six-bar".into(),
+        op: "output".into(),
+        device: DevicePreset::Paper,
+        network: Network::Delayed50,
+        hand: HandKind::Firm,
+    };
+    let r = evaluate(&p, SECONDS).unwrap();
+    assert!(
+        r.renders,
+        "{:?} (clamped {:.1} %, RMS {:.2} mm)",
+        r.failures,
+        r.clamped_fraction * 100.0,
+        r.device_op_rms_m * 1e3
+    );
+}

@@ -37,6 +37,8 @@ pub(crate) struct SnapshotTerms<S: Space> {
     pub received_at: Duration,
     /// Client clock of the uplink the VE had used (0: none).
     pub uplink_time_s: f64,
+    /// The VE's clock at the state the snapshot describes (s).
+    pub server_time_s: f64,
     /// Other manipulators hold the linkage (the snapshot counts them).
     pub shared: bool,
     pub op_pose: OpPose<S>,
@@ -67,6 +69,7 @@ impl<S: Space> SnapshotTerms<S> {
             seq: 0,
             received_at: Duration::ZERO,
             uplink_time_s: 0.0,
+            server_time_s: 0.0,
             shared: false,
             op_pose: OpPose::identity(),
             op_twist: S::OpVec::zero(),
@@ -110,6 +113,7 @@ impl<S: Space> SnapshotTerms<S> {
             }
         }
         self.bias = S::OpVec::from_slice(&snap.bias_accel);
+        self.server_time_s = snap.server_time_s;
         self.directions.as_mut_slice().copy_from_slice(&snap.directions);
         self.singular_values = S::OpVec::from_slice(&snap.singular_values);
         self.constraint_count = snap.constraint_count;

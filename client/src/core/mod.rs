@@ -31,6 +31,8 @@ pub mod controllers;
 pub mod design;
 pub mod safety;
 
+mod bias_trust;
+
 mod deadband;
 mod error;
 mod gains;
@@ -67,6 +69,7 @@ pub use passive_update::TANK_CAPACITY_J as UPDATE_TANK_CAPACITY_J;
 pub use report::{ControllerWrenches, CoreStats, TickOutput, TickReport};
 pub use scales::Scales;
 
+use bias_trust::BiasTrust;
 use controllers::ConstraintFrame;
 use deadband::Deadband;
 use index::{Boxes, DeviceIndex};
@@ -113,6 +116,8 @@ pub struct HapticCore<S: Space> {
     path: Option<PathFollower<S>>,
     /// How far the walls of the frame in use are trusted where the model is (`place_frame`).
     trust: f64,
+    /// b̂'s rate on the VE's clock, which weighs it as the impedance controller's feedforward (`bias_trust`).
+    bias_trust: Box<BiasTrust<S>>,
     index: DeviceIndex<S>,
     gate: OutputGate,
     observer: HandObserver<S>,
@@ -199,6 +204,7 @@ impl<S: Space> HapticCore<S> {
             local: ConstraintFrame::new(),
             path,
             trust: 1.0,
+            bias_trust: Box::new(BiasTrust::new()),
             index: DeviceIndex::identity(scales.position),
             gate: OutputGate::new(&config.safety, config.period),
             observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
@@ -349,7 +355,7 @@ impl<S: Space> HapticCore<S> {
         let intake = self.intake(now, device, hand_off);
         self.pull_model(now, dt_s, &intake, device.hand_wrench.is_some());
         let hand = self.step_model(dt_s, device, &intake);
-        let asked = self.controllers(&intake, &hand);
+        let asked = self.controllers(now, &intake, &hand);
         let out = self.safety(now, dt_s, &device.twist, &intake, &asked);
         let mut flags = intake.flags | out.flags;
         let send = self.uplink(now, &intake, &mut flags, &hand.model, &asked.model_pose);

@@ -129,11 +129,15 @@ impl<S: Space> HapticCore<S> {
     /// The VE's OP predicted to `now`: the snapshot's pose moved along its twist for its age plus the one-way
     /// delay (at most the staleness limit).
     pub(super) fn predicted_op(&self, now: Duration) -> OpPose<S> {
-        let horizon =
-            (now.saturating_sub(self.active.received_at) + self.one_way_delay).min(self.config.safety.max_snapshot_age);
         let mut pose = self.active.op_pose;
-        pose.integrate(&self.active.op_twist, horizon.as_secs_f64());
+        pose.integrate(&self.active.op_twist, self.horizon(now).as_secs_f64());
         pose
+    }
+
+    /// How long the active snapshot's terms are held for at `now`: its age plus the one-way delay, at most
+    /// the staleness limit.
+    pub(super) fn horizon(&self, now: Duration) -> Duration {
+        (now.saturating_sub(self.active.received_at) + self.one_way_delay).min(self.config.safety.max_snapshot_age)
     }
 
     /// Makes the pending snapshot the active one.
@@ -146,6 +150,11 @@ impl<S: Space> HapticCore<S> {
         // where the VE holds it (jumping onto a VE that follows the model would walk both away).
         let restart = first || (self.gate.gain() == 0.0 && !hand_off);
         self.model.update(&self.active);
+        if restart {
+            self.bias_trust.reset();
+        }
+        let keep_s = self.config.safety.max_snapshot_age.as_secs_f64();
+        self.bias_trust.observe(self.active.server_time_s, &self.active.bias, self.length_scale, keep_s);
         self.frame.set_target(&self.active, &self.config.weighting, self.length_scale, restart, self.pinned());
         if let Some(f) = self.path.as_mut() {
             let on = f.path.nearest(&f.query(&self.active.op_pose), f.snapshot_segment);
@@ -211,7 +220,10 @@ impl<S: Space> HapticCore<S> {
 
     /// Stage 4: the controllers (section III, Fig 4), with `e = x_d ⊖ x_m`: joint constraint (stiffness or
     /// impedance mode), impedance with Λ̂⁻¹ in the free directions, position channels, contact force channel.
-    pub(super) fn controllers(&self, intake: &Intake<S>, hand: &HandWrenches<S>) -> Requests<S> {
+    ///
+    /// The impedance controller's b̂ is weighted by how little it changes over the horizon it is held for
+    /// (`bias_trust`).
+    pub(super) fn controllers(&self, now: Duration, intake: &Intake<S>, hand: &HandWrenches<S>) -> Requests<S> {
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
         let error = self.controlled(intake.device_pose.difference(&model_pose));
@@ -229,7 +241,8 @@ impl<S: Space> HapticCore<S> {
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         let imp = match hand.sensed {
             Some(hand) => {
-                impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &self.local.bias, &hand)
+                let bias = self.local.bias * self.bias_trust.weight(self.horizon(now).as_secs_f64());
+                impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &bias, &hand)
             }
             None => S::OpVec::zero(),
         };

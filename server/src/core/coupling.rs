@@ -52,6 +52,10 @@ pub struct Coupling<S: Space> {
     /// the force channel, so the user's local model, whose bias carries every hand but the user's own, is
     /// weightless too.
     pub held_load: S::OpVec,
+    /// The linkage's load the VE holds at this OP while this coupling takes over a linkage that waited at
+    /// rest (σ L, see `handover`; zero otherwise). Not faded, and in neither the hand's nor the controller's
+    /// books: it is the VE's own force.
+    pub hold: S::OpVec,
     /// The client time the PD's target stands for (s; 0 before the first uplink): the newest uplink's client
     /// clock plus the lead. Snapshots tell the client which of its local model's states the VE is answering
     /// (`Snapshot::uplink_time_s`).
@@ -113,6 +117,7 @@ impl<S: Space> Coupling<S> {
             twist_rate_envelope: S::OpVec::zero(),
             lead_s: 0.0,
             held_load: S::OpVec::zero(),
+            hold: S::OpVec::zero(),
             stiffness,
             damping,
             pd_scale: full_scale::<S>(),
@@ -272,7 +277,7 @@ impl<S: Space> Coupling<S> {
             // rather than free, and what the brake absorbs lets the account recover (see `passivity`).
             let beta = self.pd_scale[a];
             let brake = if self.brakes { -(1.0 - beta) * self.damping[a] * self.op_twist[a] } else { 0.0 };
-            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + beta * pd[a] + brake);
+            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + beta * pd[a] + brake) + self.hold[a];
         }
         f
     }
@@ -349,7 +354,7 @@ impl<S: Space> Coupling<S> {
     }
 
     /// The force channel as the VE applies it: the human's own force and any load held for the user (fade
-    /// included; zero for observers).
+    /// included; zero for observers). The handover's hold (`hold`) is not part of it.
     pub fn hand_part(&self) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
@@ -357,12 +362,13 @@ impl<S: Space> Coupling<S> {
         (self.hand_wrench + self.held_load) * self.weight
     }
 
-    /// The part of the applied wrench that is not the force channel: the (scaled) PD and its brake.
+    /// The part of the applied wrench that is neither the force channel nor the VE's hold (`hold`): the
+    /// (scaled) PD and its brake.
     pub fn controller_part(&self, wrench: &S::OpVec) -> S::OpVec {
         if !self.pushes {
             return S::OpVec::zero();
         }
-        *wrench - self.hand_part()
+        *wrench - self.hand_part() - self.hold
     }
 }
 

@@ -29,6 +29,7 @@ pub mod device_side;
 pub mod events;
 pub mod fade;
 pub mod guards;
+pub mod handover;
 pub mod metrics;
 pub mod passivity;
 pub mod playout;
@@ -226,6 +227,8 @@ pub struct VeCore<S: Space> {
     /// A workspace and a state at rest for the loads held for users with gravity compensation (made at the
     /// first such join).
     held: Option<(Data<S>, DVector<f64>)>,
+    /// The join's handover of a linkage that waited at rest (`handover`).
+    handover: handover::Handover<S>,
     q: DVector<f64>,
     qd: DVector<f64>,
     /// Restore point: q at the start of the last step that began with the loop closed (see `tick`).
@@ -316,6 +319,7 @@ impl<S: Space> VeCore<S> {
             fixed_gains,
             reaches,
             held: None,
+            handover: handover::Handover::default(),
             checkpoint_q: q.clone(),
             energy_guard: EnergyGuard::default(),
             step_start_q: q.clone(),
@@ -489,10 +493,12 @@ impl<S: Space> VeCore<S> {
             slot: SnapshotSlot::new(&self.model, user_id, request.form),
         });
         self.couplings.push(coupling);
-        if manipulator && self.users.last().is_some_and(|u| u.mapping.gravity_compensation) {
-            if self.held.is_none() {
-                self.held = Some((Data::new(&self.model), DVector::zeros(self.model.nv())));
-            }
+        // The workspace of the static loads: the held ones, and the handover's (`handover`).
+        let compensated = self.users.last().is_some_and(|u| u.mapping.gravity_compensation);
+        if manipulator && self.held.is_none() && (self.config.rest_unheld || compensated) {
+            self.held = Some((Data::new(&self.model), DVector::zeros(self.model.nv())));
+        }
+        if manipulator && compensated {
             self.update_held_loads();
         }
         self.roster_version += 1;

@@ -142,11 +142,7 @@ impl<S: Space> VeCore<S> {
             if !(u.mapping.gravity_compensation && u.role == Role::Manipulator) {
                 continue;
             }
-            let load = kinloop_linkage::algorithms::reach::static_op_load(&self.model, data, &self.q, at_rest, u.op);
-            c.held_load = match load {
-                Ok((load, _)) if load.is_finite() => load,
-                _ => S::OpVec::zero(),
-            };
+            c.held_load = static_load(&self.model, data, at_rest, &self.q, u.op);
         }
     }
 
@@ -157,8 +153,11 @@ impl<S: Space> VeCore<S> {
     /// rather than falling. With another user's hand on the linkage that hold would fight them (the others
     /// would pull against it at their devices' limits), so then it fades out like a silent user's, and fades
     /// back in when the hand returns (its model restarts on the VE).
+    ///
+    /// Then the join's handover (`handover`): the hold at the coupling furthest into its fade-in.
     fn update_couplings(&mut self, at: Duration, dt: f64) {
         let fade_s = self.config.fade_time.as_secs_f64();
+        let before = handover::before_tick(&self.handover, &self.couplings, self.model.length_scale);
         let mut activations = 0;
         let holding =
             |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
@@ -215,6 +214,14 @@ impl<S: Space> VeCore<S> {
         if activations > 0 {
             self.metrics.passivity_activations += 1;
         }
+        if self.config.rest_unheld {
+            let (model, q, users) = (&self.model, &self.q, &self.users);
+            let held = &mut self.held;
+            self.handover.update(before, &mut self.couplings, dt / fade_s, |i| match held.as_mut() {
+                Some((data, at_rest)) => static_load(model, data, at_rest, q, users[i].op),
+                None => S::OpVec::zero(),
+            });
+        }
     }
 
     /// After a successful step: the wrench each coupling effectively applied, and the passivity books.
@@ -242,6 +249,7 @@ impl<S: Space> VeCore<S> {
             if self.users[index].presence == Presence::Leaving && self.users[index].fade.is_off() {
                 let user = self.users.remove(index);
                 self.couplings.remove(index);
+                self.handover.removed(index);
                 self.roster_version += 1;
                 self.metrics.users_left += 1;
                 self.events.push(VeEvent::UserRemoved { user: user.id });
@@ -249,5 +257,20 @@ impl<S: Space> VeCore<S> {
                 index += 1;
             }
         }
+    }
+}
+
+/// The static load at OP `op` in state `q` at rest (`kinloop_linkage::algorithms::reach::static_op_load`),
+/// zero when it cannot be had.
+fn static_load<S: Space>(
+    model: &Model<S>,
+    data: &mut Data<S>,
+    at_rest: &DVector<f64>,
+    q: &DVector<f64>,
+    op: usize,
+) -> S::OpVec {
+    match kinloop_linkage::algorithms::reach::static_op_load(model, data, q, at_rest, op) {
+        Ok((load, _)) if load.is_finite() => load,
+        _ => S::OpVec::zero(),
     }
 }

@@ -23,7 +23,7 @@ pub enum Evaluation {
     /// An extra evaluation (snapshots): nothing is accumulated.
     Probe,
     /// The snapshot evaluation: as `Probe`, but each coupling applies only its hand wrench (force
-    /// channel), not its graphics-controller PD. Those are a numerical tie between the
+    /// channel) and the VE's hold at its OP (`handover`), not its graphics-controller PD. Those are a numerical tie between the
     /// VE and one user's local model, not a physical force: folded into another user's frozen bias they act
     /// as a stiff spring seen one snapshot late and without its stiffness, which made sessions with two
     /// users on one OP go unstable.
@@ -95,7 +95,7 @@ impl<S: Space> Forces<S> for VeForces<'_, S> {
             }
             let c = &mut self.couplings[i];
             if let (true, Some((_, sum))) = (c.is_active(), run.as_mut()) {
-                *sum += if hands_only { c.hand_part() } else { c.wrench };
+                *sum += if hands_only { c.hand_part() + c.hold } else { c.wrench };
             }
             if let Some(weight) = stage_weight {
                 c.step_wrench += c.wrench * weight;

@@ -7,6 +7,7 @@ mod support;
 
 mod bench_hooks;
 mod coupling_frequency;
+mod join_handover;
 mod loopback;
 mod passivity;
 mod quic_server;

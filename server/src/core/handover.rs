@@ -1,0 +1,233 @@
+//! The join's load handed over: a linkage that waited at rest (`VeConfig::rest_unheld`) is held by the VE
+//! while its first holder's coupling fades in, and handed to that coupling gradually, so it neither falls
+//! away under a half-faded coupling nor lurches into the spring as the fade ends.
+//!
+//! **The hold.** The VE applies `σ L` at the OP of the *carrier*, where `L` is the static load there
+//! (`kinloop_linkage::algorithms::reach::static_op_load`: the OP wrench that cancels gravity's and the
+//! springs' acceleration in the OP's free directions, taken at the state the carrier took the hold in) and
+//! `σ ∈ [0, 1]` the share still held. Each tick:
+//! - `σ ← min(σ, 1 − s)`, with `s` the share of `L` that the carrier's last applied wrench (its faded hand
+//!   and PD, the hold left out) carries along `L` (in unit-consistent coordinates `(f, τ / ℓ)`, ℓ the
+//!   scene's length scale): what the coupling has taken over is not held twice;
+//! - once the carrier's coupling is fully in, `σ` falls by `dt / fade_time`: the rest of the load passes to
+//!   the coupling over one more fade, slowly enough that the OP sinks into the spring without passing its
+//!   rest.
+//!
+//! `σ` never rises during a handover, so the hold only ever lets go.
+//!
+//! **Who carries it (the rule).** A handover begins only when a coupling starts to fade in while nobody held
+//! the linkage (every weight zero, the linkage resting): `σ = 1`. The carrier is the active coupling furthest
+//! into its fade (the largest weight; the earliest joined on a tie). If another coupling overtakes it (the
+//! carrier leaves or falls silent), the hold moves there with the same `σ` and a fresh `L` at that OP. A
+//! linkage already held by someone is not supported when a second user joins (the holder's coupling carries
+//! it); when every coupling has faded out the linkage rests again, and the next join hands it over afresh.
+//!
+//! **Books.** The hold is a force of the VE's own, like gravity: it is in neither the hand's nor the
+//! controller's books of the passivity observer (`Coupling::controller_part` leaves it out), the step's
+//! energy guard counts its work with every applied force, and the snapshot probe applies it
+//! (`Evaluation::ProbeHands`), so b̂ carries the linkage as the VE does while it is held (a local model
+//! without it would render a fall the VE does not make). It is not a hand, so no user's b̂ loses it.
+
+use kinloop_linkage::algorithms::constraint_directions::scale_op;
+use kinloop_linkage::math::space::{Space, VecOps};
+
+use super::coupling::Coupling;
+
+/// The handover in flight (see the module documentation).
+#[derive(Clone, Copy, Debug)]
+pub struct Handover<S: Space> {
+    /// σ: the share of `load` the VE still holds (0 when no handover is in flight).
+    pub share: f64,
+    /// L at the carrier's OP.
+    pub load: S::OpVec,
+    /// Index of the carrier among the couplings (valid for the tick it was chosen in).
+    pub carrier: Option<usize>,
+}
+
+impl<S: Space> Default for Handover<S> {
+    fn default() -> Self {
+        Handover { share: 0.0, load: S::OpVec::zero(), carrier: None }
+    }
+}
+
+/// What one tick's update needs to know about the couplings, gathered before their weights change.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Before {
+    /// Every coupling's weight was zero: nobody held the linkage.
+    pub unheld: bool,
+    /// `s`: the share of the hold's load the carrier's last applied wrench carried (0 without a carrier).
+    pub carried: f64,
+}
+
+/// The share of `load` that `wrench` carries along it, in unit-consistent coordinates `(f, τ / ℓ)`: the
+/// projection `⟨F, L⟩ / ⟨L, L⟩`; zero for a zero or non-finite load or wrench.
+pub fn carried_share<S: Space>(wrench: &S::OpVec, load: &S::OpVec, length_scale: f64) -> f64 {
+    let ell = if length_scale.is_finite() && length_scale > 0.0 { length_scale } else { 1.0 };
+    let (f, l) = (scale_op::<S>(wrench, 1.0 / ell), scale_op::<S>(load, 1.0 / ell));
+    let (along, norm) = (f.dot(&l), l.dot(&l));
+    let share = along / norm;
+    if norm > 0.0 && share.is_finite() {
+        share
+    } else {
+        0.0
+    }
+}
+
+/// `s` for the coming tick, from the couplings as the last step left them (before `update_couplings` clears
+/// their step wrenches): the carrier's applied wrench without its hold.
+pub fn before_tick<S: Space>(handover: &Handover<S>, couplings: &[Coupling<S>], length_scale: f64) -> Before {
+    let unheld = couplings.iter().all(|c| c.weight <= 0.0);
+    let carried = match handover.carrier.and_then(|i| couplings.get(i)) {
+        Some(c) if handover.share > 0.0 => carried_share::<S>(&(c.step_wrench - c.hold), &handover.load, length_scale),
+        _ => 0.0,
+    };
+    Before { unheld, carried }
+}
+
+/// The active coupling furthest into its fade (largest weight, earliest on a tie), if any.
+pub fn furthest_in<S: Space>(couplings: &[Coupling<S>]) -> Option<usize> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, c) in couplings.iter().enumerate().filter(|(_, c)| c.is_active()) {
+        if best.is_none_or(|(_, w)| c.weight > w) {
+            best = Some((i, c.weight));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
+impl<S: Space> Handover<S> {
+    /// Coupling `index` was removed: the carrier's index follows it (a removed carrier leaves none, and the
+    /// next update moves the hold).
+    pub fn removed(&mut self, index: usize) {
+        self.carrier = match self.carrier {
+            Some(c) if c > index => Some(c - 1),
+            Some(c) if c == index => None,
+            other => other,
+        };
+    }
+
+    /// One tick's update of σ and the carrier, after the couplings' weights for the tick are set; `load_at`
+    /// gives `L` at a coupling's OP (called when a handover begins or the hold moves). `fade_step` is
+    /// `dt / fade_time`. Writes each coupling's `hold` (σ L at the carrier, zero elsewhere).
+    pub fn update(
+        &mut self,
+        before: Before,
+        couplings: &mut [Coupling<S>],
+        fade_step: f64,
+        mut load_at: impl FnMut(usize) -> S::OpVec,
+    ) {
+        let carrier = furthest_in(couplings);
+        match carrier {
+            None => *self = Handover::default(),
+            Some(i) if before.unheld => *self = Handover { share: 1.0, load: load_at(i), carrier: Some(i) },
+            Some(i) if self.share > 0.0 => {
+                if self.carrier == Some(i) {
+                    self.share = self.share.min(1.0 - before.carried);
+                } else {
+                    self.load = load_at(i);
+                    self.carrier = Some(i);
+                }
+                if couplings[i].weight >= 1.0 {
+                    self.share -= fade_step;
+                }
+                if self.share <= 0.0 || self.share.is_nan() {
+                    *self = Handover::default();
+                }
+            }
+            Some(_) => *self = Handover::default(),
+        }
+        for (i, c) in couplings.iter_mut().enumerate() {
+            c.hold = if Some(i) == self.carrier { self.load * self.share } else { S::OpVec::zero() };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::math::space::Planar;
+    use nalgebra::{Vector2, Vector3};
+
+    fn coupling(weight: f64) -> Coupling<Planar> {
+        let mut c = Coupling::<Planar>::new(1, Vector2::zeros(), 3, Vector3::repeat(1.0), Vector3::repeat(0.1));
+        c.pushes = true;
+        c.weight = weight;
+        c
+    }
+
+    /// The share is a projection in `(f, τ / ℓ)`: a wrench equal to the load carries it all, a perpendicular
+    /// one none, and the answer does not change with the units (lengths ×1000: torques ×1000, ℓ ×1000).
+    #[test]
+    fn the_carried_share_is_the_unit_consistent_projection() {
+        let load = Vector3::new(0.0, 2.0, 0.03);
+        assert!((carried_share::<Planar>(&load, &load, 0.1) - 1.0).abs() < 1e-15);
+        assert!((carried_share::<Planar>(&(load * 0.25), &load, 0.1) - 0.25).abs() < 1e-15);
+        let across = Vector3::new(5.0, 0.0, 0.0);
+        assert_eq!(carried_share::<Planar>(&across, &load, 0.1), 0.0);
+        let wrench = Vector3::new(0.4, 1.1, -0.01);
+        let si = carried_share::<Planar>(&wrench, &load, 0.1);
+        let mm = carried_share::<Planar>(&Vector3::new(0.4, 1.1, -10.0), &Vector3::new(0.0, 2.0, 30.0), 100.0);
+        assert!((si - mm).abs() < 1e-12, "{si} vs {mm}");
+        // By hand: ⟨(0.4, 1.1, −0.1), (0, 2, 0.3)⟩ / ⟨(0, 2, 0.3), (0, 2, 0.3)⟩.
+        assert!((si - (2.2 - 0.03) / 4.09).abs() < 1e-12);
+        for bad in [Vector3::zeros(), Vector3::new(f64::NAN, 0.0, 0.0)] {
+            assert_eq!(carried_share::<Planar>(&wrench, &bad, 0.1), 0.0);
+        }
+    }
+
+    /// A handover begins at a join onto a resting linkage, holds all of L through the fade when the coupling
+    /// carries none of it, gives up what the coupling takes over, falls by `dt / fade_time` once the coupling
+    /// is in, and never rises; nobody holding ends it, and a linkage already held gets none.
+    #[test]
+    fn the_hold_begins_at_rest_gives_up_what_is_carried_and_falls_once_the_coupling_is_in() {
+        let load = Vector3::new(0.0, 3.0, 0.0);
+        let mut couplings = vec![coupling(0.0)];
+        let mut h = Handover::<Planar>::default();
+        let unheld = Before { unheld: true, carried: 0.0 };
+        couplings[0].weight = 0.01;
+        h.update(unheld, &mut couplings, 0.005, |_| load);
+        assert_eq!((h.share, h.carrier), (1.0, Some(0)));
+        assert_eq!(couplings[0].hold, load);
+        // Mid-fade the coupling carries 30 %: the hold gives it up; then it carries less: σ does not rise.
+        couplings[0].weight = 0.5;
+        h.update(Before { unheld: false, carried: 0.3 }, &mut couplings, 0.005, |_| unreachable!());
+        assert!((h.share - 0.7).abs() < 1e-15);
+        h.update(Before { unheld: false, carried: 0.1 }, &mut couplings, 0.005, |_| unreachable!());
+        assert!((h.share - 0.7).abs() < 1e-15);
+        // Fully in: it falls by the fade's step each tick, to zero, and stays there.
+        couplings[0].weight = 1.0;
+        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+        assert!((h.share - 0.695).abs() < 1e-12);
+        for _ in 0..200 {
+            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+        }
+        assert_eq!((h.share, h.carrier, couplings[0].hold), (0.0, None, Vector3::zeros()));
+        // A second user joining a held linkage: no hold.
+        couplings.push(coupling(0.01));
+        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+        assert_eq!((h.share, couplings[1].hold), (0.0, Vector3::zeros()));
+        // Nobody holds: no hold.
+        couplings.iter_mut().for_each(|c| c.weight = 0.0);
+        h.update(unheld, &mut couplings, 0.005, |_| unreachable!());
+        assert_eq!(h.carrier, None);
+    }
+
+    /// The hold is carried by the coupling furthest into its fade, and moves (same σ, a fresh L) when another
+    /// overtakes it.
+    #[test]
+    fn the_hold_moves_to_the_coupling_furthest_in() {
+        let mut couplings = vec![coupling(0.2), coupling(0.2)];
+        let mut h = Handover::<Planar>::default();
+        let load_at = |i: usize| Vector3::new(0.0, 1.0 + i as f64, 0.0);
+        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, 0.005, load_at);
+        assert_eq!(h.carrier, Some(0), "the earliest on a tie");
+        h.update(Before { unheld: false, carried: 0.4 }, &mut couplings, 0.005, load_at);
+        couplings[0].weight = 0.1;
+        couplings[1].weight = 0.3;
+        h.update(Before { unheld: false, carried: 0.9 }, &mut couplings, 0.005, load_at);
+        assert_eq!(h.carrier, Some(1));
+        assert!((h.share - 0.6).abs() < 1e-15, "the old carrier's share is not applied to the new load");
+        assert_eq!(couplings[0].hold, Vector3::zeros());
+        assert!((couplings[1].hold - Vector3::new(0.0, 1.2, 0.0)).norm() < 1e-15);
+    }
+}
