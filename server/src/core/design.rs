@@ -69,7 +69,9 @@ use kinloop_protocol::codec::validate;
 use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 
 mod grasp;
-use grasp::held_rigidly;
+#[cfg(test)]
+mod grasp_tests;
+use grasp::{held_rigidly, lightest, renders_rotation};
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
 pub const WORKSPACE_FILL: f64 = 0.8;
@@ -223,13 +225,6 @@ pub fn check_request<S: Space>(device: &DeviceCaps, request: &MappingRequest) ->
     Ok(())
 }
 
-/// The lightest effective masses of the reach: translational (kg) and rotational (kg m²); infinite where
-/// the OP does not move at all.
-fn lightest<S: Space>(reach: &OpReach<S>) -> (f64, f64) {
-    let inverse = |x: f64| if x > 0.0 { 1.0 / x } else { f64::INFINITY };
-    (inverse(reach.inverse_mass_max), inverse(reach.inverse_rotational_inertia_max))
-}
-
 /// The mapping for `device` at the OP of `reach` (see the module documentation), with what the client
 /// asked for taking precedence; a requested scale that would push the device past its peak force (static
 /// load; only for a user who renders forces, a manipulator) or its reach past the workspace is refused with
@@ -307,25 +302,6 @@ pub fn choose_mapping<S: Space>(
 /// most [`PEAK_SHARE`] of the peak.
 pub fn load_target(device: &DeviceCaps) -> f64 {
     (LOAD_FRACTION * device.continuous_force_n).min(PEAK_SHARE * device.max_force_n)
-}
-
-/// Largest factor by which a device can be made to feel lighter than it is (the client's impedance
-/// control bound, `MAX_MASS_REDUCTION` there).
-const MASS_REDUCTION: f64 = 4.0;
-
-/// Whether the user holds the OP rigidly: the device renders torque, and the OP's lightest rotational
-/// inertia, seen on the device (times the torque scale), is within what the device can be made to feel.
-/// Otherwise the OP is held as through a pin: an OP whose rotational inertia on the device is far below the
-/// handle's own (a serial arm's tip) turns faster than any controller of the handle can follow, and under
-/// delay its angular loop runs away.
-fn renders_rotation<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, torque_scale: f64) -> bool {
-    let (_, inertia) = lightest(reach);
-    device.max_torque_nm > 0.0 && inertia * torque_scale * MASS_REDUCTION >= handle_inertia::<S>(device)
-}
-
-/// The handle's rotational inertia (kg m²): the device's first angular mass, zero if it has none.
-fn handle_inertia<S: Space>(device: &DeviceCaps) -> f64 {
-    device.mass.get(<S::Point as VecOps>::LEN).copied().unwrap_or(0.0)
 }
 
 /// The graphics controller's natural frequency for one user, and what it was chosen from (see the module
