@@ -222,7 +222,10 @@ impl<S: Space> HapticCore<S> {
     /// impedance mode), impedance with Λ̂⁻¹ in the free directions, position channels, contact force channel.
     ///
     /// The impedance controller's b̂ is weighted by how little it changes over the horizon it is held for
-    /// (`bias_trust`).
+    /// (`bias_trust`), while this user holds the linkage alone. With others on it, b̂ carries their hands
+    /// too, which is how the users feel each other, and the server already weighs those by the measured round
+    /// trip (`server::core::sharing`): weighed again here, sixteen users sharing a push on one OP moved it
+    /// half as far as one user does.
     pub(super) fn controllers(&self, now: Duration, intake: &Intake<S>, hand: &HandWrenches<S>) -> Requests<S> {
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
@@ -241,7 +244,9 @@ impl<S: Space> HapticCore<S> {
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         let imp = match hand.sensed {
             Some(hand) => {
-                let bias = self.local.bias * self.bias_trust.weight(self.horizon(now).as_secs_f64());
+                let weight =
+                    if self.active.shared { 1.0 } else { self.bias_trust.weight(self.horizon(now).as_secs_f64()) };
+                let bias = self.local.bias * weight;
                 impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &bias, &hand)
             }
             None => S::OpVec::zero(),
