@@ -10,7 +10,9 @@
 //! their `server_time_s`) and held at its peak over the last `h` of that clock, and the norms in
 //! unit-consistent coordinates `(a, ℓ α)` (ℓ the scene's length scale). A steady b̂ (gravity on a slow
 //! linkage) keeps weight one; a b̂ that changes by its own size within the horizon gets a half. The weight
-//! only ever takes some of the feedforward away: the controller never asks for more than without it.
+//! only ever takes some of the feedforward away: the controller never asks for more than without it. It is
+//! applied while the user holds the linkage alone (`HapticCore::controllers`): a shared linkage's b̂ carries
+//! the other users' hands, which the server weighs by the round trip already.
 //!
 //! Snapshots whose server time does not advance (repeated, or out of order) are not differenced: they
 //! neither divide by zero nor make a rate. A gap (lost snapshots) spreads the change over the gap.
