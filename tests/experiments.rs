@@ -6,6 +6,7 @@ use std::process::Command;
 
 use kinloop::experiments::capacity::CapacitySummary;
 use kinloop::experiments::delay_point::{Loss, PointSummary};
+use kinloop::experiments::interleave::BlockPair;
 use kinloop::experiments::latency::LatencySummary;
 use kinloop::experiments::lead::ByDelay;
 use kinloop::experiments::paper::ModeSummary;
@@ -456,6 +457,7 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
         assert!((0.0..=1.0).contains(&p.miss_rate) && (0.0..=1.0).contains(&p.floor_miss_rate), "{p:?}");
         misses_judged_from_the_counts_measured(&p.misses_vs_floor, p.miss_rate, p.floor_miss_rate);
         stalls_judged_beside_misses(&p.stalls_vs_floor, &p.misses_vs_floor);
+        judged_over_the_blocks(&p.blocks, &p.misses_vs_floor, &p.stalls_vs_floor);
         assert_eq!((p.energy_reports_refused, p.state_restores), (0, 0), "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
     }
@@ -473,6 +475,7 @@ fn capacity_runs_each_user_count_beside_the_timer_floor() {
         assert!(pooled.events >= p.worst_room_vs_floor.events, "{p:?}");
         stalls_judged_beside_misses(&p.stalls_vs_floor, pooled);
         assert!(p.stalls_vs_floor.events >= p.worst_room_stalls_vs_floor.events, "{p:?}");
+        judged_over_the_blocks(&p.blocks, &p.worst_room_vs_floor, &p.worst_room_stalls_vs_floor);
         assert_eq!(p.state_restores, 0, "{p:?}");
         assert!(p.max_closure_error_m <= 1e-6, "{p:?}");
         assert!(p.device_lm_rms_mm_median > 0.0 && p.device_lm_rms_mm_max < 50.0, "{p:?}");
@@ -493,6 +496,19 @@ fn misses_judged_from_the_counts_measured(r: &RateRatio, rate: f64, floor_rate: 
         Decision::Undecided => r.low <= r.bound && r.bound < high,
     };
     assert!(decided, "{r:?}");
+}
+
+/// The idle loop alternated with the run in (the quick grid's) two blocks of equal length, and the judged
+/// counts are the blocks' sums on either side.
+fn judged_over_the_blocks(blocks: &[BlockPair], misses: &RateRatio, stalls: &RateRatio) {
+    assert_eq!(blocks.len(), 2, "{blocks:?}");
+    let sum = |f: fn(&BlockPair) -> u64| blocks.iter().map(f).sum::<u64>();
+    assert_eq!((sum(|b| b.run_misses), sum(|b| b.run_ticks)), (misses.events, misses.ticks), "{blocks:?}");
+    assert_eq!((sum(|b| b.floor_misses), sum(|b| b.floor_ticks)), (misses.reference_events, misses.reference_ticks));
+    assert_eq!((sum(|b| b.run_stalls), sum(|b| b.floor_stalls)), (stalls.events, stalls.reference_events));
+    // Each block ran its share on either side: the idle loop ticks at 1 kHz through its block.
+    let (first, second) = (blocks[0].floor_ticks as f64, blocks[1].floor_ticks as f64);
+    assert!(first > 0.0 && (first - second).abs() <= 0.1 * first.max(second) + 2.0, "{blocks:?}");
 }
 
 /// Stalls are runs of misses over the same ticks: at most as many as the misses and at least one while there

@@ -1,8 +1,8 @@
 //! `capacity`: how many users one room carries in real time. Each point runs the real VE thread (absolute
 //! deadlines, spin_sleep, SCHED_FIFO when granted) with N synthetic users (`kinloop_server::bench::realtime_run`:
 //! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time
-//! (p50, p99), its deadline misses beside the idle timer floor measured in the same run just before it
-//! (`kinloop_client::driver::rt_loop::timer_floor`, the same clock and sleep with no work), the thread's CPU
+//! (p50, p99), its deadline misses beside the idle timer floor measured in blocks alternating with it
+//! ([`super::interleave`]: the same clock and sleep with no work, so the floor is the machine's during the run), the thread's CPU
 //! use beside the figure (its hybrid sleep spins), and whether the linkage stayed whole. Beside each point,
 //! the same loop's iterations back to back (`server/ve_loop_users_N`: the same `VeLoop`, its rings drained
 //! between iterations) give two like-with-like ratios: the whole iteration in real time over the whole
@@ -18,7 +18,6 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, Result};
-use kinloop_client::driver::rt_loop::timer_floor;
 use kinloop_server::bench::{realtime_run, ve_loop_stats, ve_tick_users, RealtimeRun};
 use kinloop_server::core::VeConfig;
 use kinloop_server::driver::VeLoopStats;
@@ -26,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::capacity_rooms::{self, RoomsPoint, MISSES_BOUND};
 use super::common::{Options, Output, Report};
+use super::interleave::{interleave, median, BlockPair, Blocks};
 use super::rate_ratio::RateRatio;
 use crate::charts::{Chart, Legend, Series};
 use crate::rounding::round;
@@ -39,11 +39,11 @@ pub struct CapacitySummary {
     pub rooms: usize,
     /// The host's 1-minute load average when the run began (`None` where `/proc/loadavg` is unreadable).
     pub load_average: Option<f64>,
-    /// Seconds each point ran the VE thread (and the idle loop before it).
+    /// Seconds each point ran the VE thread (and as many the idle loop, in alternating blocks).
     pub seconds_per_point: f64,
     /// One point per user count.
     pub points: Vec<CapacityPoint>,
-    /// Seconds each point of the rooms axis ran (and its idle loop before it).
+    /// Seconds each point of the rooms axis ran (and as many the idle loop, in alternating blocks).
     pub seconds_per_rooms_point: f64,
     /// The rooms axis: rooms per server × users per room, real clients from the load design.
     pub rooms_axis: Vec<RoomsPoint>,
@@ -54,9 +54,9 @@ pub struct CapacitySummary {
 pub struct CapacityPoint {
     /// Users in the room.
     pub users: usize,
-    /// Median VE loop iteration (µs).
+    /// Median VE loop iteration (µs): the median block's.
     pub step_us_p50: f64,
-    /// 99th percentile (µs).
+    /// 99th percentile (µs): the worst block's.
     pub step_us_p99: f64,
     /// The same tick back to back (`server/ve_tick_users_N`, µs).
     pub bench_us: f64,
@@ -74,7 +74,7 @@ pub struct CapacityPoint {
     pub bench_stages_us_p50: StageMedians,
     /// Fraction of the VE loop's ticks woken more than half a period late.
     pub miss_rate: f64,
-    /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
+    /// Fraction of the idle loop's ticks more than 500 µs late, in blocks alternating with the VE loop's.
     pub floor_miss_rate: f64,
     /// The VE loop's misses against the idle loop's, with the ratio's interval judged against
     /// [`MISSES_BOUND`].
@@ -83,6 +83,8 @@ pub struct CapacityPoint {
     /// same way: misses come in runs (a host stall makes a loaded loop late until it has caught up), stalls
     /// one at a time, as the interval assumes.
     pub stalls_vs_floor: RateRatio,
+    /// The idle loop's and the VE loop's counts block by block, in the order they alternated.
+    pub blocks: Vec<BlockPair>,
     /// CPU time over wall time of the VE thread (its hybrid sleep's spinning included).
     pub cpu_fraction: Option<f64>,
     /// SCHED_FIFO granted to the VE thread.
@@ -141,52 +143,59 @@ fn load_average() -> Option<f64> {
     std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
 }
 
-fn measure(users: usize, seconds: f64, bench_iters: u64) -> Result<CapacityPoint> {
-    let duration = Duration::from_secs_f64(seconds);
-    let (floor, _) = timer_floor(1000.0, duration, true);
+fn measure(users: usize, seconds: f64, at_least_blocks: usize, bench_iters: u64) -> Result<CapacityPoint> {
     let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
         .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
-    let run = RealtimeRun { scene, scene_label: "paper-testbed".into(), users, duration, ve: VeConfig::paper() };
-    let report = realtime_run(run).map_err(|e| anyhow!("{users} users: {e}"))?;
+    let blocks = interleave(Blocks::covering(seconds, at_least_blocks), |duration| {
+        let run = RealtimeRun {
+            scene: scene.clone(),
+            scene_label: "paper-testbed".into(),
+            users,
+            duration,
+            ve: VeConfig::paper(),
+        };
+        realtime_run(run).map(|r| r.ve).map_err(|e| anyhow!("{users} users: {e}"))
+    })?;
     let bench_ns = ve_tick_users(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
     let looped = ve_loop_stats(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
-    let ve = report.ve;
+    let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
+    let pairs = blocks.pairs(|ve| (ve.deadline_misses, ve.deadline_stalls, ve.step_time.samples));
+    let ves = &blocks.runs;
+    let sum = |f: fn(&VeLoopStats) -> u64| ves.iter().map(f).sum::<u64>();
+    let (misses, stalls, ticks) =
+        (sum(|v| v.deadline_misses), sum(|v| v.deadline_stalls), sum(|v| v.step_time.samples));
+    // The block whose median step is the median block's speaks for the point's p50 and stages; its p99 is
+    // the worst block's, so that a block with a slow stretch is not averaged away.
+    let p50 = median(ves.iter().map(|v| v.step_time.p50_ns as f64).collect());
+    let typical = ves.iter().find(|v| v.step_time.p50_ns as f64 == p50).ok_or_else(|| anyhow!("no blocks"))?;
+    let p99_ns = ves.iter().map(|v| v.step_time.p99_ns).max().unwrap_or(0);
+    let cpu = ves.iter().map(|v| v.cpu_s).sum::<Option<f64>>();
+    let wall: f64 = ves.iter().map(|v| v.wall_s).sum();
     let us = |ns: u64| round(ns as f64 / 1e3, 2);
-    let ticks = ve.step_time.samples.max(1) as f64;
-    let (stages, bench_stages) = (StageMedians::of(&ve), StageMedians::of(&looped));
+    let (stages, bench_stages) = (StageMedians::of(typical), StageMedians::of(&looped));
+    let p50_ns = typical.step_time.p50_ns;
     Ok(CapacityPoint {
         users,
-        step_us_p50: us(ve.step_time.p50_ns),
-        step_us_p99: us(ve.step_time.p99_ns),
+        step_us_p50: us(p50_ns),
+        step_us_p99: us(p99_ns),
         bench_us: round(bench_ns / 1e3, 2),
-        realtime_over_bench: round(ve.step_time.p50_ns as f64 / bench_ns.max(1.0), 2),
+        realtime_over_bench: round(p50_ns as f64 / bench_ns.max(1.0), 2),
         loop_bench_us_p50: us(looped.step_time.p50_ns),
-        realtime_over_loop_bench: round(ve.step_time.p50_ns as f64 / looped.step_time.p50_ns.max(1) as f64, 2),
+        realtime_over_loop_bench: round(p50_ns as f64 / looped.step_time.p50_ns.max(1) as f64, 2),
         ve_stages_over_bench: round(stages.ve_own() / bench_stages.ve_own().max(1e-3), 2),
         stages_us_p50: stages,
         bench_stages_us_p50: bench_stages,
-        miss_rate: ve.deadline_misses as f64 / ticks,
-        floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
-        misses_vs_floor: RateRatio::new(
-            ve.deadline_misses,
-            ve.step_time.samples,
-            floor.misses,
-            floor.ticks,
-            MISSES_BOUND,
-        ),
-        stalls_vs_floor: RateRatio::new(
-            ve.deadline_stalls,
-            ve.step_time.samples,
-            floor.stalls,
-            floor.ticks,
-            MISSES_BOUND,
-        ),
-        cpu_fraction: ve.cpu_s.map(|cpu| round(cpu / ve.wall_s.max(1e-9), 3)),
-        realtime_priority: ve.realtime_priority,
-        snapshots_dropped: ve.snapshots_dropped,
-        energy_reports_refused: ve.core.energy_reports_refused,
-        state_restores: ve.core.state_restores,
-        max_closure_error_m: ve.core.max_closure_error,
+        miss_rate: misses as f64 / ticks.max(1) as f64,
+        floor_miss_rate: floor_misses as f64 / floor_ticks.max(1) as f64,
+        misses_vs_floor: RateRatio::new(misses, ticks, floor_misses, floor_ticks, MISSES_BOUND),
+        stalls_vs_floor: RateRatio::new(stalls, ticks, floor_stalls, floor_ticks, MISSES_BOUND),
+        blocks: pairs,
+        cpu_fraction: cpu.map(|cpu| round(cpu / wall.max(1e-9), 3)),
+        realtime_priority: ves.iter().all(|v| v.realtime_priority),
+        snapshots_dropped: sum(|v| v.snapshots_dropped),
+        energy_reports_refused: sum(|v| v.core.energy_reports_refused),
+        state_restores: sum(|v| v.core.state_restores),
+        max_closure_error_m: ves.iter().map(|v| v.core.max_closure_error).fold(0.0, f64::max),
     })
 }
 
@@ -196,6 +205,8 @@ pub fn run(options: &Options) -> Result<Report> {
     let users: Vec<usize> = options.pick(vec![1, 2, 4, 16, 64], vec![1, 4]);
     let seconds = options.seconds.unwrap_or(options.pick(10.0, 0.5));
     let bench_iters = options.pick(5_000, 200);
+    // The quick grid's points are shorter than a block; two blocks each still alternate.
+    let least_blocks = options.pick(1, 2);
     let load = load_average();
     let mut points = Vec::with_capacity(users.len());
     // One point at a time: the points share the machine they measure.
@@ -203,7 +214,7 @@ pub fn run(options: &Options) -> Result<Report> {
         if options.progress {
             eprintln!("capacity: {n} users, {seconds} s");
         }
-        points.push(measure(n, seconds, bench_iters)?);
+        points.push(measure(n, seconds, least_blocks, bench_iters)?);
     }
 
     let xs = |f: fn(&CapacityPoint) -> f64| points.iter().map(|p| (p.users as f64, f(p))).collect::<Vec<_>>();
@@ -231,7 +242,7 @@ pub fn run(options: &Options) -> Result<Report> {
         if options.progress {
             eprintln!("capacity: {rooms} rooms of {users} users, {rooms_seconds} s");
         }
-        rooms_axis.push(capacity_rooms::measure(rooms, users, rooms_seconds, &runtime)?);
+        rooms_axis.push(capacity_rooms::measure(rooms, users, rooms_seconds, least_blocks, &runtime)?);
     }
     runtime.shutdown_timeout(Duration::from_secs(1));
     let rx = |f: fn(&RoomsPoint) -> f64| rooms_axis.iter().map(|p| (p.rooms as f64, f(p))).collect::<Vec<_>>();
@@ -249,7 +260,8 @@ pub fn run(options: &Options) -> Result<Report> {
     let last = points.last().ok_or_else(|| anyhow!("no points"))?;
     let answer = format!(
         "{} users in one room: step p50 {} us, p99 {} us ({}x the same iteration back to back, {} us; the VE's own \
-         stages {}x); misses {:.3} % beside the idle loop's {:.3} %: {}; stalls: {}; load average {}.",
+         stages {}x); misses {:.3} % beside the idle loop's {:.3} % (in {} alternating blocks a side): {}; stalls: {}; \
+         load average {}.",
         last.users,
         last.step_us_p50,
         last.step_us_p99,
@@ -258,6 +270,7 @@ pub fn run(options: &Options) -> Result<Report> {
         last.ve_stages_over_bench,
         100.0 * last.miss_rate,
         100.0 * last.floor_miss_rate,
+        last.blocks.len(),
         last.misses_vs_floor.describe(),
         last.stalls_vs_floor.describe(),
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),

@@ -1,8 +1,8 @@
 //! The `capacity` experiment's rooms axis: how many rooms one server carries. Each point starts a real
 //! `kinloop_server::Server` hosting R rooms of the paper's testbed (its real-time executor, QUIC on
 //! loopback) and drives U real client sessions into each from [`crate::load`] (one shared clock thread
-//! stepping every user's haptic core, not a real-time thread each), for the point's seconds; the idle
-//! timer floor is measured just before it, with the same clock and sleep and no work. It reports each
+//! stepping every user's haptic core, not a real-time thread each), for the point's seconds, in blocks
+//! alternating with the idle timer floor's (the same clock and sleep and no work; [`super::interleave`]). It reports each
 //! room's VE step (p50, p99) and deadline misses beside that floor, restores and closure, and each user's
 //! device-to-local-model RMS and uplink loss, against the same figures of one room alone (the first point).
 //!
@@ -14,14 +14,16 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
-use kinloop_client::driver::rt_loop::timer_floor;
+use kinloop_linkage::model::scene::Scene;
 use kinloop_protocol::quic::Trust;
-use kinloop_server::driver::rooms::{RoomSpec, TestKnobs};
+use kinloop_server::driver::rooms::{RoomReport, RoomSpec, TestKnobs};
+use kinloop_server::driver::VeLoopStats;
 use kinloop_server::{Access, Server, ServerConfig};
 use serde::{Deserialize, Serialize};
 
+use super::interleave::{interleave, median, BlockPair, Blocks};
 use super::rate_ratio::RateRatio;
-use crate::load::{self, LoadOptions};
+use crate::load::{self, LoadOptions, LoadSummary};
 use crate::rounding::round;
 
 /// One point of the rooms axis: R rooms of U users on one server.
@@ -33,13 +35,13 @@ pub struct RoomsPoint {
     pub users_per_room: usize,
     /// Users that rendered, of `rooms × users_per_room`.
     pub users_rendered: usize,
-    /// Median VE step (µs), the largest over the rooms.
+    /// Median VE step (µs): each block's worst room's, the median over blocks.
     pub step_us_p50_worst: f64,
-    /// 99th percentile (µs), the largest over the rooms.
+    /// 99th percentile (µs), the largest over rooms and blocks.
     pub step_us_p99_worst: f64,
-    /// Fraction of VE ticks woken more than half a period late, the largest over the rooms.
+    /// Fraction of VE ticks woken more than half a period late, the worst room's over every block.
     pub miss_rate_worst: f64,
-    /// Fraction of the idle loop's ticks more than 500 µs late, measured just before.
+    /// Fraction of the idle loop's ticks more than 500 µs late, in blocks alternating with the run's.
     pub floor_miss_rate: f64,
     /// Every room's misses pooled (the server's rate) against the idle loop's, with the ratio's interval
     /// judged against [`MISSES_BOUND`].
@@ -52,6 +54,8 @@ pub struct RoomsPoint {
     pub stalls_vs_floor: RateRatio,
     /// The room with the most stalls against the idle loop's.
     pub worst_room_stalls_vs_floor: RateRatio,
+    /// The idle loop's and the worst room's counts block by block, in the order they alternated.
+    pub blocks: Vec<BlockPair>,
     /// States restored, over every room.
     pub state_restores: u64,
     /// Largest closure residual over every room (m).
@@ -83,14 +87,113 @@ pub fn grid(quick: bool) -> Vec<(usize, usize)> {
     }
 }
 
-/// Measures R rooms of U users for `seconds`, the idle loop first.
-pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtime::Runtime) -> Result<RoomsPoint> {
-    let duration = Duration::from_secs_f64(seconds);
-    let (floor, _) = timer_floor(1000.0, duration, true);
+/// One block's run: what the server reported of each room, and what the load reported of each user.
+struct RoomsBlock {
+    reports: Vec<RoomReport>,
+    outcome: LoadSummary,
+}
+
+impl RoomsBlock {
+    fn ve(&self, room: usize) -> Option<&VeLoopStats> {
+        self.reports.get(room).map(|r| &r.stats.ve)
+    }
+}
+
+/// Measures R rooms of U users for `seconds`, in blocks alternating with the idle loop's ([`interleave`]):
+/// each run block starts its own server and load, so that every block is the same run.
+pub fn measure(
+    rooms: usize,
+    users: usize,
+    seconds: f64,
+    at_least_blocks: usize,
+    runtime: &tokio::runtime::Runtime,
+) -> Result<RoomsPoint> {
     let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
         .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
-    let mut config = ServerConfig::new(scene.clone(), "paper-testbed", SocketAddr::from(([127, 0, 0, 1], 0)));
     let names: Vec<String> = (1..=rooms).map(|i| format!("room{i}")).collect();
+    let blocks = interleave(Blocks::covering(seconds, at_least_blocks), |duration| {
+        run_block(&scene, &names, users, duration, runtime)
+    })?;
+    let runs = &blocks.runs;
+
+    // Each room's counts over every block (rooms keep their names, and so their order, from block to block).
+    let counts = |events: fn(&VeLoopStats) -> u64| -> Vec<(u64, u64)> {
+        (0..rooms)
+            .map(|room| {
+                runs.iter()
+                    .filter_map(|b| b.ve(room))
+                    .fold((0, 0), |(n, t), v| (n + events(v), t + v.step_time.samples))
+            })
+            .collect()
+    };
+    let (misses, stalls) = (counts(|v| v.deadline_misses), counts(|v| v.deadline_stalls));
+    let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
+    let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
+    // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
+    // it), each against the idle loop's.
+    let judged = |counts: &[(u64, u64)], floor_events: u64| {
+        let against = |(n, ticks): (u64, u64)| RateRatio::new(n, ticks, floor_events, floor_ticks, MISSES_BOUND);
+        let pooled = counts.iter().fold((0, 0), |(n, t), (cn, ct)| (n + cn, t + ct));
+        let worst = counts.iter().max_by(|a, b| rate(a).total_cmp(&rate(b))).copied().unwrap_or((0, 0));
+        (against(pooled), against(worst))
+    };
+    let (misses_vs_floor, worst_room_vs_floor) = judged(&misses, floor_misses);
+    let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&stalls, floor_stalls);
+    let worst_room = (0..rooms).max_by(|&a, &b| rate(&misses[a]).total_cmp(&rate(&misses[b]))).unwrap_or(0);
+    let pairs = blocks
+        .pairs(|b| b.ve(worst_room).map_or((0, 0, 0), |v| (v.deadline_misses, v.deadline_stalls, v.step_time.samples)));
+
+    let every_ve = || runs.iter().flat_map(|b| b.reports.iter().map(|r| &r.stats.ve));
+    let worst_of = |f: &dyn Fn(&VeLoopStats) -> f64| every_ve().map(f).fold(0.0, f64::max);
+    // A block's worst room's median step, the median over blocks; the p99 the worst anywhere.
+    let block_p50s =
+        runs.iter().map(|b| b.reports.iter().map(|r| r.stats.ve.step_time.p50_ns as f64).fold(0.0, f64::max));
+    let mut rms: Vec<f64> = runs
+        .iter()
+        .flat_map(|b| b.outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm))
+        .collect();
+    rms.sort_by(f64::total_cmp);
+    let load_ticks: u64 = runs.iter().flat_map(|b| b.outcome.per_user.iter().map(|u| u.ticks)).sum();
+    let load_misses: u64 = runs.iter().map(|b| b.outcome.lateness_misses).sum();
+    let load_cpu = runs.iter().map(|b| b.outcome.cpu_cores).sum::<Option<f64>>().map(|c| c / runs.len().max(1) as f64);
+    Ok(RoomsPoint {
+        rooms,
+        users_per_room: users,
+        users_rendered: runs.iter().map(|b| b.outcome.rendered).min().unwrap_or(0),
+        step_us_p50_worst: round(median(block_p50s.collect()) / 1e3, 2),
+        step_us_p99_worst: round(worst_of(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
+        miss_rate_worst: rate(&misses[worst_room.min(misses.len().saturating_sub(1))]),
+        floor_miss_rate: floor_misses as f64 / floor_ticks.max(1) as f64,
+        misses_vs_floor,
+        worst_room_vs_floor,
+        stalls_vs_floor,
+        worst_room_stalls_vs_floor,
+        blocks: pairs,
+        state_restores: every_ve().map(|v| v.core.state_restores).sum(),
+        max_closure_error_m: worst_of(&|v| v.core.max_closure_error),
+        rooms_quarantined: (0..rooms)
+            .filter(|&room| runs.iter().any(|b| b.reports.get(room).is_some_and(|r| r.quarantined)))
+            .count(),
+        device_lm_rms_mm_median: rms.get(rms.len() / 2).copied().map_or(0.0, |r| round(r, 3)),
+        device_lm_rms_mm_max: round(rms.last().copied().unwrap_or(0.0), 3),
+        uplink_loss_worst: runs
+            .iter()
+            .flat_map(|b| b.reports.iter().flat_map(|r| r.stats.per_user.iter().map(|u| u.uplink_loss)))
+            .fold(0.0, f64::max),
+        load_miss_rate: load_misses as f64 / load_ticks.max(1) as f64,
+        load_cpu_cores: load_cpu.map(|c| round(c, 3)),
+    })
+}
+
+/// One server of `names.len()` rooms of the scene, `users` real clients in each for `duration`.
+fn run_block(
+    scene: &Scene,
+    names: &[String],
+    users: usize,
+    duration: Duration,
+    runtime: &tokio::runtime::Runtime,
+) -> Result<RoomsBlock> {
+    let mut config = ServerConfig::new(scene.clone(), "paper-testbed", SocketAddr::from(([127, 0, 0, 1], 0)));
     config.rooms = names
         .iter()
         .map(|name| RoomSpec {
@@ -111,57 +214,14 @@ pub fn measure(rooms: usize, users: usize, seconds: f64, runtime: &tokio::runtim
     let mut options = LoadOptions::new(
         server.local_addr().to_string(),
         Trust::Fingerprint(server.fingerprint().to_owned()),
-        rooms * users,
+        names.len() * users,
     );
-    options.rooms = names;
+    options.rooms = names.to_vec();
     options.duration = duration;
     // As `kinloop load --realtime`: the clock and the network worker at SCHED_FIFO when granted.
     options.realtime = true;
     let outcome = load::run(&options);
     let reports = server.room_stats();
     runtime.block_on(server.shutdown()).context("shutting the server down")?;
-    let outcome = outcome?;
-
-    let ves: Vec<_> = reports.iter().map(|r| &r.stats.ve).collect();
-    let worst = |f: &dyn Fn(&kinloop_server::driver::VeLoopStats) -> f64| ves.iter().map(|v| f(v)).fold(0.0, f64::max);
-    let mut rms: Vec<f64> = outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm).collect();
-    rms.sort_by(f64::total_cmp);
-    let load_ticks: u64 = outcome.per_user.iter().map(|u| u.ticks).sum();
-    type Stats = kinloop_server::driver::VeLoopStats;
-    // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
-    // it), of the count `events` picks, each against the idle loop's `floor_events`.
-    let judged = |events: &dyn Fn(&Stats) -> u64, floor_events: u64| {
-        let against = |n: u64, ticks: u64| RateRatio::new(n, ticks, floor_events, floor.ticks, MISSES_BOUND);
-        let counts: Vec<(u64, u64)> = ves.iter().map(|v| (events(v), v.step_time.samples)).collect();
-        let pooled = counts.iter().fold((0, 0), |(n, t), (vn, vt)| (n + vn, t + vt));
-        let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
-        let worst = counts.iter().max_by(|a, b| rate(a).total_cmp(&rate(b))).copied().unwrap_or((0, 0));
-        (against(pooled.0, pooled.1), against(worst.0, worst.1))
-    };
-    let (misses_vs_floor, worst_room_vs_floor) = judged(&|v| v.deadline_misses, floor.misses);
-    let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&|v| v.deadline_stalls, floor.stalls);
-    Ok(RoomsPoint {
-        rooms,
-        users_per_room: users,
-        users_rendered: outcome.rendered,
-        step_us_p50_worst: round(worst(&|v| v.step_time.p50_ns as f64) / 1e3, 2),
-        step_us_p99_worst: round(worst(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
-        miss_rate_worst: worst(&|v| v.deadline_misses as f64 / v.step_time.samples.max(1) as f64),
-        floor_miss_rate: floor.misses as f64 / floor.ticks.max(1) as f64,
-        misses_vs_floor,
-        worst_room_vs_floor,
-        stalls_vs_floor,
-        worst_room_stalls_vs_floor,
-        state_restores: ves.iter().map(|v| v.core.state_restores).sum(),
-        max_closure_error_m: worst(&|v| v.core.max_closure_error),
-        rooms_quarantined: reports.iter().filter(|r| r.quarantined).count(),
-        device_lm_rms_mm_median: rms.get(rms.len() / 2).copied().map_or(0.0, |r| round(r, 3)),
-        device_lm_rms_mm_max: round(rms.last().copied().unwrap_or(0.0), 3),
-        uplink_loss_worst: reports
-            .iter()
-            .flat_map(|r| r.stats.per_user.iter().map(|u| u.uplink_loss))
-            .fold(0.0, f64::max),
-        load_miss_rate: outcome.lateness_misses as f64 / load_ticks.max(1) as f64,
-        load_cpu_cores: outcome.cpu_cores.map(|c| round(c, 3)),
-    })
+    Ok(RoomsBlock { reports, outcome: outcome? })
 }

@@ -24,6 +24,7 @@ pub mod capacity_rooms;
 pub mod common;
 pub mod delay_point;
 pub mod impedance;
+pub mod interleave;
 pub mod latency;
 pub mod latency_live;
 pub mod lead;
