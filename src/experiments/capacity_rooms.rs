@@ -1,29 +1,31 @@
 //! The `capacity` experiment's rooms axis: how many rooms one server carries. Each point starts a real
 //! `kinloop_server::Server` hosting R rooms of the paper's testbed (its real-time executor, QUIC on
-//! loopback) and drives U real client sessions into each from [`crate::load`] (one shared clock thread
-//! stepping every user's haptic core, not a real-time thread each), for the point's seconds, in blocks
-//! alternating with the idle timer floor's (the same clock and sleep and no work; [`super::interleave`]). It reports each
-//! room's VE step (p50, p99) and deadline misses beside that floor, restores and closure, and each user's
-//! device-to-local-model RMS and uplink loss, against the same figures of one room alone (the first point).
+//! loopback) and drives U real client sessions into each from a `kinloop load` process ([`crate::load`]:
+//! one shared clock thread stepping every user's haptic core, not a real-time thread each), for the point's
+//! seconds, in blocks alternating with the idle timer floor's (the same clock and sleep and no work;
+//! [`super::interleave`]). It reports each room's VE step (p50, p99) and deadline misses beside that floor,
+//! restores and closure, and each user's device-to-local-model RMS and uplink loss, against the same figures
+//! of one room alone (the first point).
 //!
-//! The clients share the machine with the server they load (they are in this process): the load's CPU use
-//! is reported beside the point, and on a small machine a separate `kinloop load` process is the cleaner
-//! measure (docs/benchmarks.md has both).
+//! The clients share the machine with the server they load, as clients on the server's machine would, but
+//! not its process; the load's CPU use is reported beside the point.
 
 use std::net::SocketAddr;
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use kinloop_linkage::model::scene::Scene;
-use kinloop_protocol::quic::Trust;
 use kinloop_server::driver::rooms::{RoomReport, RoomSpec, TestKnobs};
 use kinloop_server::driver::VeLoopStats;
-use kinloop_server::{Access, Server, ServerConfig};
+use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 use serde::{Deserialize, Serialize};
 
 use super::interleave::{interleave, median, BlockPair, Blocks};
+use super::programs::kinloop_beside_this_program;
 use super::rate_ratio::RateRatio;
-use crate::load::{self, LoadOptions, LoadSummary};
+use crate::load::LoadSummary;
 use crate::rounding::round;
 
 /// One point of the rooms axis: R rooms of U users on one server.
@@ -70,7 +72,7 @@ pub struct RoomsPoint {
     pub uplink_loss_worst: f64,
     /// The load's haptic ticks more than 500 µs late, over every user, as a share of its ticks.
     pub load_miss_rate: f64,
-    /// CPU the load (every client in this process) used, in cores.
+    /// CPU the load process (every client) used, in cores, the mean over blocks.
     pub load_cpu_cores: Option<f64>,
 }
 
@@ -111,8 +113,9 @@ pub fn measure(
     let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
         .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
     let names: Vec<String> = (1..=rooms).map(|i| format!("room{i}")).collect();
+    let kinloop = kinloop_beside_this_program()?;
     let blocks = interleave(Blocks::covering(seconds, at_least_blocks), |duration| {
-        run_block(&scene, &names, users, duration, runtime)
+        run_block(&kinloop, &scene, &names, users, duration, runtime)
     })?;
     let runs = &blocks.runs;
 
@@ -185,8 +188,33 @@ pub fn measure(
     })
 }
 
+/// `kinloop load --realtime` (its clock and network worker at SCHED_FIFO when granted) with `users` clients
+/// in each of the rooms `names` of `server`, in a process of its own, as a load is run beside a server: the
+/// clients share the machine and not the server's process.
+fn load_process(
+    kinloop: &Path,
+    server: &ServerHandle,
+    names: &[String],
+    users: usize,
+    duration: Duration,
+) -> Result<LoadSummary> {
+    let output = Command::new(kinloop)
+        .args(["load", "--realtime", "--json", "--server", &server.local_addr().to_string()])
+        .args(["--fingerprint", server.fingerprint()])
+        .args(["--users", &(names.len() * users).to_string(), "--rooms", &names.join(",")])
+        .args(["--duration", &duration.as_secs_f64().to_string()])
+        .stdin(Stdio::null())
+        .output()
+        .with_context(|| format!("starting {} load", kinloop.display()))?;
+    if !output.status.success() {
+        bail!("kinloop load ended with {}: {}", output.status, String::from_utf8_lossy(&output.stderr).trim());
+    }
+    serde_json::from_slice(&output.stdout).context("reading kinloop load --json")
+}
+
 /// One server of `names.len()` rooms of the scene, `users` real clients in each for `duration`.
 fn run_block(
+    kinloop: &Path,
     scene: &Scene,
     names: &[String],
     users: usize,
@@ -211,16 +239,7 @@ fn run_block(
         let _inside = runtime.enter();
         Server::start(config).context("starting the server")?
     };
-    let mut options = LoadOptions::new(
-        server.local_addr().to_string(),
-        Trust::Fingerprint(server.fingerprint().to_owned()),
-        names.len() * users,
-    );
-    options.rooms = names.to_vec();
-    options.duration = duration;
-    // As `kinloop load --realtime`: the clock and the network worker at SCHED_FIFO when granted.
-    options.realtime = true;
-    let outcome = load::run(&options);
+    let outcome = load_process(kinloop, &server, names, users, duration);
     let reports = server.room_stats();
     runtime.block_on(server.shutdown()).context("shutting the server down")?;
     Ok(RoomsBlock { reports, outcome: outcome? })

@@ -10,7 +10,7 @@
 //! half a millimetre of RMS.
 
 use std::io::{BufRead, BufReader, Read};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -59,6 +59,21 @@ impl Launcher {
     fn command(&self, program: &str, args: Vec<String>) -> Command {
         (self.launch)(program, &args)
     }
+}
+
+/// The `kinloop` program: this one, or the one beside it (a test's executable is in cargo's `deps`, one
+/// folder below the programs).
+pub fn kinloop_beside_this_program() -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("this program's path")?;
+    let name = format!("kinloop{}", std::env::consts::EXE_SUFFIX);
+    if exe.file_name().is_some_and(|n| n == name.as_str()) {
+        return Ok(exe);
+    }
+    let dir = exe.parent().context("this program's folder")?;
+    let candidates = [Some(dir.join(&name)), dir.parent().map(|up| up.join(&name))];
+    candidates.into_iter().flatten().find(|p| p.is_file()).with_context(|| {
+        format!("{name} is not beside {} nor one folder up: build it (cargo build --release -p kinloop)", exe.display())
+    })
 }
 
 /// One session: what the server is told to host and what the client is told to hold, with what.

@@ -17,7 +17,7 @@ use kinloop_client::driver::shared_network::SharedNetwork;
 use kinloop_client::driver::{Client, ClientConfig, ClientHandle, ClientStats};
 use kinloop_client::user::{HandKind, HandSpec, UserSpec};
 use kinloop_protocol::quic::Trust;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Most users one load process starts.
 pub const MAX_USERS: usize = 256;
@@ -112,7 +112,7 @@ pub fn client_config(options: &LoadOptions, i: usize, clock: &SharedClock, netwo
 }
 
 /// One user's part of the outcome.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LoadedUser {
     /// Client name (`load-userN`).
     pub name: String,
@@ -240,7 +240,7 @@ impl LoadedUser {
 }
 
 /// What `kinloop load --json` prints.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LoadSummary {
     /// Users asked for.
     pub users: usize,
