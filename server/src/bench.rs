@@ -348,6 +348,10 @@ pub struct RealtimeRun {
     pub duration: Duration,
     /// The VE configuration (`max_users` is raised to `users` if needed).
     pub ve: VeConfig,
+    /// The VE thread's statistics are also kept as published this long into the run
+    /// ([`RealtimeReport::ve_at_warm_up`]), so that a caller can count from there and leave out the start
+    /// (`Duration::ZERO`: not kept).
+    pub warm_up: Duration,
 }
 
 /// What a real-time run measured.
@@ -361,6 +365,9 @@ pub struct RealtimeReport {
     pub ve: VeLoopStats,
     /// Snapshots the synthetic clients received.
     pub snapshots_received: u64,
+    /// The VE thread's statistics as it published them (every tenth of a second) first at or after the
+    /// run's warm-up; `None` without a warm-up or when the run ended first.
+    pub ve_at_warm_up: Option<VeLoopStats>,
 }
 
 /// Runs the VE thread for `run.duration` with `run.users` synthetic users fed from a helper thread at
@@ -391,7 +398,7 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
     let SyntheticJoins { commands: command_rx, mut clients, replies } =
         SyntheticJoins::queue(&model, &requests).ok_or(BenchError::Thread("command ring"))?;
     let (event_tx, mut event_rx) = RingBuffer::new(1024);
-    let (stats_tx, _stats_rx) = RingBuffer::new(64);
+    let (stats_tx, mut stats_rx) = RingBuffer::new(64);
     let stop = Arc::new(AtomicBool::new(false));
     let io = VeThreadIo {
         commands: command_rx,
@@ -431,9 +438,16 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
         })
         .map_err(|_| BenchError::Thread("synthetic users"))?;
     let started = Instant::now();
+    let warm_up_s = run.warm_up.as_secs_f64();
+    let mut ve_at_warm_up = None;
     while started.elapsed() < run.duration {
         std::thread::sleep(Duration::from_millis(20));
         while event_rx.pop().is_ok() {}
+        while let Ok(stats) = stats_rx.pop() {
+            if warm_up_s > 0.0 && ve_at_warm_up.is_none() && stats.wall_s >= warm_up_s {
+                ve_at_warm_up = Some(stats);
+            }
+        }
     }
     stop.store(true, Ordering::Relaxed);
     let ve_stats = ve_thread.join().map_err(|_| BenchError::Thread("VE"))?;
@@ -443,5 +457,6 @@ fn realtime_run_in<S: Space>(run: RealtimeRun, view: Option<ViewTap>) -> Result<
         duration_s: started.elapsed().as_secs_f64(),
         ve: ve_stats,
         snapshots_received: received,
+        ve_at_warm_up,
     })
 }

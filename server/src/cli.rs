@@ -309,8 +309,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         ..ViewConfig::new(listen)
     });
     if let Some(users) = cli.synthetic_users {
-        let run =
-            RealtimeRun { scene, scene_label: label, users, duration: duration.unwrap_or(Duration::from_secs(10)), ve };
+        let duration = duration.unwrap_or(Duration::from_secs(10));
+        let run = RealtimeRun { scene, scene_label: label, users, duration, ve, warm_up: Duration::ZERO };
         let (report, view_stats) = synthetic_run(run, view, access)?;
         if cli.json {
             let mut json = serde_json::to_value(&report)?;

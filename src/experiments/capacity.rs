@@ -18,14 +18,14 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, Result};
-use kinloop_server::bench::{realtime_run, ve_loop_stats, ve_tick_users, RealtimeRun};
+use kinloop_server::bench::{realtime_run, ve_loop_stats, ve_tick_users, RealtimeReport, RealtimeRun};
 use kinloop_server::core::VeConfig;
 use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
 
 use super::capacity_rooms::{self, RoomsPoint, MISSES_BOUND};
 use super::common::{Options, Output, Report};
-use super::interleave::{interleave, median, BlockPair, Blocks};
+use super::interleave::{counted_since, interleave, median, BlockPair, Blocks, WARM_UP};
 use super::rate_ratio::RateRatio;
 use crate::charts::{Chart, Legend, Series};
 use crate::rounding::round;
@@ -151,23 +151,26 @@ fn measure(users: usize, seconds: f64, at_least_blocks: usize, bench_iters: u64)
             scene: scene.clone(),
             scene_label: "paper-testbed".into(),
             users,
-            duration,
+            duration: WARM_UP + duration,
             ve: VeConfig::paper(),
+            warm_up: WARM_UP,
         };
-        realtime_run(run).map(|r| r.ve).map_err(|e| anyhow!("{users} users: {e}"))
+        realtime_run(run).map_err(|e| anyhow!("{users} users: {e}"))
     })?;
     let bench_ns = ve_tick_users(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
     let looped = ve_loop_stats(users, bench_iters).map_err(|e| anyhow!("{users} users: {e}"))?;
     let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
-    let pairs = blocks.pairs(|ve| (ve.deadline_misses, ve.deadline_stalls, ve.step_time.samples));
-    let ves = &blocks.runs;
-    let sum = |f: fn(&VeLoopStats) -> u64| ves.iter().map(f).sum::<u64>();
+    // Misses are counted after each block's warm-up; the step's figures are the whole run's.
+    let counted = |r: &RealtimeReport| counted_since(&r.ve, r.ve_at_warm_up.as_ref());
+    let pairs = blocks.pairs(counted);
     let (misses, stalls, ticks) =
-        (sum(|v| v.deadline_misses), sum(|v| v.deadline_stalls), sum(|v| v.step_time.samples));
+        blocks.runs.iter().map(counted).fold((0, 0, 0), |(m, s, t), (bm, bs, bt)| (m + bm, s + bs, t + bt));
+    let ves: Vec<&VeLoopStats> = blocks.runs.iter().map(|r| &r.ve).collect();
+    let sum = |f: fn(&VeLoopStats) -> u64| ves.iter().map(|v| f(v)).sum::<u64>();
     // The block whose median step is the median block's speaks for the point's p50 and stages; its p99 is
     // the worst block's, so that a block with a slow stretch is not averaged away.
     let p50 = median(ves.iter().map(|v| v.step_time.p50_ns as f64).collect());
-    let typical = ves.iter().find(|v| v.step_time.p50_ns as f64 == p50).ok_or_else(|| anyhow!("no blocks"))?;
+    let typical = *ves.iter().find(|v| v.step_time.p50_ns as f64 == p50).ok_or_else(|| anyhow!("no blocks"))?;
     let p99_ns = ves.iter().map(|v| v.step_time.p99_ns).max().unwrap_or(0);
     let cpu = ves.iter().map(|v| v.cpu_s).sum::<Option<f64>>();
     let wall: f64 = ves.iter().map(|v| v.wall_s).sum();
@@ -238,14 +241,17 @@ pub fn run(options: &Options) -> Result<Report> {
         .enable_all()
         .build()?;
     let mut rooms_axis = Vec::new();
-    for (rooms, users) in capacity_rooms::grid(options.quick) {
+    for point in capacity_rooms::grid(options.quick) {
         if options.progress {
-            eprintln!("capacity: {rooms} rooms of {users} users, {rooms_seconds} s");
+            let slow = if point.slow_room { " and a slow room" } else { "" };
+            eprintln!("capacity: {} rooms of {} users{slow}, {rooms_seconds} s", point.rooms, point.users_per_room);
         }
-        rooms_axis.push(capacity_rooms::measure(rooms, users, rooms_seconds, least_blocks, &runtime)?);
+        rooms_axis.push(capacity_rooms::measure(point, rooms_seconds, least_blocks, &runtime)?);
     }
     runtime.shutdown_timeout(Duration::from_secs(1));
-    let rx = |f: fn(&RoomsPoint) -> f64| rooms_axis.iter().map(|p| (p.rooms as f64, f(p))).collect::<Vec<_>>();
+    // The slow room's point is read beside the plain point of as many rooms, not drawn on their line.
+    let plain = || rooms_axis.iter().filter(|p| p.slow_room.is_none());
+    let rx = |f: fn(&RoomsPoint) -> f64| plain().map(|p| (p.rooms as f64, f(p))).collect::<Vec<_>>();
     let chart = Chart::new("VE step against rooms per server (2 users each, real clients)", "rooms", "step (us)")
         .legend(Legend::UpperLeft)
         .with(Series::line("worst room, p50", rx(|p| p.step_us_p50_worst)))
@@ -275,23 +281,35 @@ pub fn run(options: &Options) -> Result<Report> {
         last.stalls_vs_floor.describe(),
         load.map_or("unknown".to_string(), |l| format!("{l:.2}")),
     );
-    let answer = match rooms_axis.last() {
-        Some(r) => format!(
-            "{answer} {} rooms of {}: worst room's step p99 {} us, misses (every room's) {:.3} % beside the \
-             floor's {:.3} %: {}; stalls: {}, the worst room's {}; {} restores, device-LM RMS median {} mm.",
+    let rooms_answer = |r: &RoomsPoint| {
+        let slow = match &r.slow_room {
+            Some(slow) => format!(
+                " and a room whose every tick takes {} ms (quarantined in every block: {}, at most {:.2} of a core)",
+                capacity_rooms::SLOW_ROOM_TICK.as_millis(),
+                slow.quarantined_every_block,
+                slow.cpu_cores_max
+            ),
+            None => String::new(),
+        };
+        format!(
+            " {} rooms of {}{slow}: worst room's step p99 {} us, misses (every room's) {:.3} % beside the floor's \
+             {:.3} %: {}; the worst room's {}; its stalls {}; {} restores, device-LM RMS median {} mm.",
             r.rooms,
             r.users_per_room,
             r.step_us_p99_worst,
             100.0 * r.misses_vs_floor.events as f64 / r.misses_vs_floor.ticks.max(1) as f64,
             100.0 * r.floor_miss_rate,
             r.misses_vs_floor.describe(),
-            r.stalls_vs_floor.describe(),
+            r.worst_room_vs_floor.describe(),
             r.worst_room_stalls_vs_floor.describe(),
             r.state_restores,
             r.device_lm_rms_mm_median
-        ),
-        None => answer,
+        )
     };
+    let mut answer = answer;
+    for r in plain().last().into_iter().chain(rooms_axis.iter().filter(|p| p.slow_room.is_some())) {
+        answer.push_str(&rooms_answer(r));
+    }
     let results = CapacitySummary {
         answer,
         rooms: 1,
@@ -303,7 +321,8 @@ pub fn run(options: &Options) -> Result<Report> {
     };
     out.finish(
         "Users per room against the real-time VE loop's step, misses beside the timer floor, and stability",
-        "users: 5 points of 2 x 10 s, rooms: 4 points of 2 x 10 s; --quick 2 + 2 points of 2 x 0.5 s and 2 x 2 s",
+        "users: 5 points of 2 x 10 s, rooms: 5 points of 2 x 10 s (the last with a slow room); --quick 2 + 2 \
+         points of 2 x 0.5 s and 2 x 2 s, each in two blocks a side",
         serde_json::to_value(&results)?,
     )
 }

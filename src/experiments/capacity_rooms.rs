@@ -12,7 +12,7 @@
 
 use std::net::SocketAddr;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -22,7 +22,7 @@ use kinloop_server::driver::VeLoopStats;
 use kinloop_server::{Access, Server, ServerConfig, ServerHandle};
 use serde::{Deserialize, Serialize};
 
-use super::interleave::{interleave, median, BlockPair, Blocks};
+use super::interleave::{counted_since, interleave, median, BlockPair, Blocks, WARM_UP};
 use super::programs::kinloop_beside_this_program;
 use super::rate_ratio::RateRatio;
 use crate::load::LoadSummary;
@@ -31,10 +31,12 @@ use crate::rounding::round;
 /// One point of the rooms axis: R rooms of U users on one server.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RoomsPoint {
-    /// Rooms on the server.
+    /// Rooms with users on the server.
     pub rooms: usize,
     /// Users in each room.
     pub users_per_room: usize,
+    /// The slow room beside them, when the point has one: the figures below are the other rooms'.
+    pub slow_room: Option<SlowRoom>,
     /// Users that rendered, of `rooms × users_per_room`.
     pub users_rendered: usize,
     /// Median VE step (µs): each block's worst room's, the median over blocks.
@@ -62,7 +64,7 @@ pub struct RoomsPoint {
     pub state_restores: u64,
     /// Largest closure residual over every room (m).
     pub max_closure_error_m: f64,
-    /// Rooms moved off the real-time threads for overrunning.
+    /// Rooms with users moved off the real-time threads for overrunning (the slow room not counted).
     pub rooms_quarantined: usize,
     /// Device-to-local-model RMS (mm), the median over the users.
     pub device_lm_rms_mm_median: f64,
@@ -76,60 +78,96 @@ pub struct RoomsPoint {
     pub load_cpu_cores: Option<f64>,
 }
 
+/// What the slow room did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SlowRoom {
+    /// Moved off the real-time threads in every block.
+    pub quarantined_every_block: bool,
+    /// The largest share of a core its quarantine took, over the blocks.
+    pub cpu_cores_max: f64,
+}
+
 /// The goal's bound on a server's deadline misses, as a multiple of the idle loop's on the same machine.
 pub const MISSES_BOUND: f64 = 1.5;
 
-/// The rooms axis's grid: (rooms, users per room), the first being the one room alone the others are read
-/// against.
-pub fn grid(quick: bool) -> Vec<(usize, usize)> {
+/// How long a tick of the slow room takes ([`TestKnobs::cost`]): twice the period, so that it cannot be
+/// stepped in real time at all.
+pub const SLOW_ROOM_TICK: Duration = Duration::from_millis(2);
+
+/// Its name.
+pub const SLOW_ROOM: &str = "slow";
+
+/// One point of the rooms axis's grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridPoint {
+    /// Rooms with users.
+    pub rooms: usize,
+    /// Users in each.
+    pub users_per_room: usize,
+    /// A room beside them whose every tick takes [`SLOW_ROOM_TICK`] (no users: it refuses them as over
+    /// budget): the others' misses must not follow it.
+    pub slow_room: bool,
+}
+
+/// The rooms axis's grid, the first point being the one room alone the others are read against, the last
+/// the largest with a slow room beside it.
+pub fn grid(quick: bool) -> Vec<GridPoint> {
+    let point = |rooms, slow_room| GridPoint { rooms, users_per_room: 2, slow_room };
     if quick {
-        vec![(1, 2), (2, 2)]
+        vec![point(1, false), point(2, true)]
     } else {
-        vec![(1, 2), (4, 2), (8, 2), (16, 2)]
+        vec![point(1, false), point(4, false), point(8, false), point(16, false), point(16, true)]
     }
 }
 
-/// One block's run: what the server reported of each room, and what the load reported of each user.
+/// How long the load runs past the counted block: its clients joined a few tenths of a second after it
+/// started, and are to be holding their rooms until the block's end is read.
+const LOAD_TAIL: Duration = Duration::from_millis(500);
+
+/// One block's run: what the server reported of each room at the block's start (after the warm-up) and end,
+/// and what the load reported of each user.
 struct RoomsBlock {
-    reports: Vec<RoomReport>,
+    start: Vec<RoomReport>,
+    end: Vec<RoomReport>,
     outcome: LoadSummary,
 }
 
 impl RoomsBlock {
-    fn ve(&self, room: usize) -> Option<&VeLoopStats> {
-        self.reports.get(room).map(|r| &r.stats.ve)
+    /// A room's (misses, stalls, ticks) over the block.
+    fn counted(&self, room: &str) -> Option<(u64, u64, u64)> {
+        let find = |reports: &[RoomReport]| reports.iter().find(|r| r.name == room).map(|r| r.stats.ve);
+        let end = find(&self.end)?;
+        Some(counted_since(&end, find(&self.start).as_ref()))
     }
 }
 
-/// Measures R rooms of U users for `seconds`, in blocks alternating with the idle loop's ([`interleave`]):
-/// each run block starts its own server and load, so that every block is the same run.
+/// Measures a grid point for `seconds`, in blocks alternating with the idle loop's ([`interleave`]): each
+/// run block starts its own server and load, so that every block is the same run.
 pub fn measure(
-    rooms: usize,
-    users: usize,
+    point: GridPoint,
     seconds: f64,
     at_least_blocks: usize,
     runtime: &tokio::runtime::Runtime,
 ) -> Result<RoomsPoint> {
+    let GridPoint { rooms, users_per_room: users, slow_room } = point;
     let scene = kinloop_linkage::model::builtin::scene("paper-testbed")
         .ok_or_else(|| anyhow!("the built-in paper-testbed is missing"))??;
     let names: Vec<String> = (1..=rooms).map(|i| format!("room{i}")).collect();
     let kinloop = kinloop_beside_this_program()?;
     let blocks = interleave(Blocks::covering(seconds, at_least_blocks), |duration| {
-        run_block(&kinloop, &scene, &names, users, duration, runtime)
+        run_block(&kinloop, &scene, &names, point, duration, runtime)
     })?;
     let runs = &blocks.runs;
 
-    // Each room's counts over every block (rooms keep their names, and so their order, from block to block).
-    let counts = |events: fn(&VeLoopStats) -> u64| -> Vec<(u64, u64)> {
-        (0..rooms)
-            .map(|room| {
-                runs.iter()
-                    .filter_map(|b| b.ve(room))
-                    .fold((0, 0), |(n, t), v| (n + events(v), t + v.step_time.samples))
-            })
+    // Each room's counts over every block. The slow room is not among them: it is judged by what it does
+    // to the others.
+    let counts = |events: fn(&(u64, u64, u64)) -> u64| -> Vec<(u64, u64)> {
+        names
+            .iter()
+            .map(|room| runs.iter().filter_map(|b| b.counted(room)).fold((0, 0), |(n, t), c| (n + events(&c), t + c.2)))
             .collect()
     };
-    let (misses, stalls) = (counts(|v| v.deadline_misses), counts(|v| v.deadline_stalls));
+    let (misses, stalls) = (counts(|c| c.0), counts(|c| c.1));
     let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
     let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
     // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
@@ -143,14 +181,16 @@ pub fn measure(
     let (misses_vs_floor, worst_room_vs_floor) = judged(&misses, floor_misses);
     let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&stalls, floor_stalls);
     let worst_room = (0..rooms).max_by(|&a, &b| rate(&misses[a]).total_cmp(&rate(&misses[b]))).unwrap_or(0);
-    let pairs = blocks
-        .pairs(|b| b.ve(worst_room).map_or((0, 0, 0), |v| (v.deadline_misses, v.deadline_stalls, v.step_time.samples)));
+    let pairs = blocks.pairs(|b| b.counted(&names[worst_room]).unwrap_or_default());
 
-    let every_ve = || runs.iter().flat_map(|b| b.reports.iter().map(|r| &r.stats.ve));
+    // The rest is each block's whole run, as the server reported it at the block's end.
+    let judged_reports = || runs.iter().flat_map(|b| b.end.iter().filter(|r| r.name != SLOW_ROOM));
+    let every_ve = || judged_reports().map(|r| &r.stats.ve);
     let worst_of = |f: &dyn Fn(&VeLoopStats) -> f64| every_ve().map(f).fold(0.0, f64::max);
     // A block's worst room's median step, the median over blocks; the p99 the worst anywhere.
-    let block_p50s =
-        runs.iter().map(|b| b.reports.iter().map(|r| r.stats.ve.step_time.p50_ns as f64).fold(0.0, f64::max));
+    let block_p50s = runs.iter().map(|b| {
+        b.end.iter().filter(|r| r.name != SLOW_ROOM).map(|r| r.stats.ve.step_time.p50_ns as f64).fold(0.0, f64::max)
+    });
     let mut rms: Vec<f64> = runs
         .iter()
         .flat_map(|b| b.outcome.per_user.iter().filter(|u| u.rendered).map(|u| u.device_lm_rms_mm))
@@ -159,13 +199,22 @@ pub fn measure(
     let load_ticks: u64 = runs.iter().flat_map(|b| b.outcome.per_user.iter().map(|u| u.ticks)).sum();
     let load_misses: u64 = runs.iter().map(|b| b.outcome.lateness_misses).sum();
     let load_cpu = runs.iter().map(|b| b.outcome.cpu_cores).sum::<Option<f64>>().map(|c| c / runs.len().max(1) as f64);
+    let quarantined = |room: &str| runs.iter().any(|b| b.end.iter().any(|r| r.name == room && r.quarantined));
     Ok(RoomsPoint {
         rooms,
         users_per_room: users,
+        slow_room: slow_room.then(|| SlowRoom {
+            quarantined_every_block: runs.iter().all(|b| b.end.iter().any(|r| r.name == SLOW_ROOM && r.quarantined)),
+            cpu_cores_max: runs
+                .iter()
+                .flat_map(|b| b.end.iter().filter(|r| r.name == SLOW_ROOM))
+                .filter_map(|r| r.quarantine.as_ref().map(|q| q.share_of_core))
+                .fold(0.0, f64::max),
+        }),
         users_rendered: runs.iter().map(|b| b.outcome.rendered).min().unwrap_or(0),
         step_us_p50_worst: round(median(block_p50s.collect()) / 1e3, 2),
         step_us_p99_worst: round(worst_of(&|v| v.step_time.p99_ns as f64) / 1e3, 2),
-        miss_rate_worst: rate(&misses[worst_room.min(misses.len().saturating_sub(1))]),
+        miss_rate_worst: misses.get(worst_room).map_or(0.0, rate),
         floor_miss_rate: floor_misses as f64 / floor_ticks.max(1) as f64,
         misses_vs_floor,
         worst_room_vs_floor,
@@ -174,14 +223,11 @@ pub fn measure(
         blocks: pairs,
         state_restores: every_ve().map(|v| v.core.state_restores).sum(),
         max_closure_error_m: worst_of(&|v| v.core.max_closure_error),
-        rooms_quarantined: (0..rooms)
-            .filter(|&room| runs.iter().any(|b| b.reports.get(room).is_some_and(|r| r.quarantined)))
-            .count(),
+        rooms_quarantined: names.iter().filter(|room| quarantined(room)).count(),
         device_lm_rms_mm_median: rms.get(rms.len() / 2).copied().map_or(0.0, |r| round(r, 3)),
         device_lm_rms_mm_max: round(rms.last().copied().unwrap_or(0.0), 3),
-        uplink_loss_worst: runs
-            .iter()
-            .flat_map(|b| b.reports.iter().flat_map(|r| r.stats.per_user.iter().map(|u| u.uplink_loss)))
+        uplink_loss_worst: judged_reports()
+            .flat_map(|r| r.stats.per_user.iter().map(|u| u.uplink_loss))
             .fold(0.0, f64::max),
         load_miss_rate: load_misses as f64 / load_ticks.max(1) as f64,
         load_cpu_cores: load_cpu.map(|c| round(c, 3)),
@@ -189,58 +235,78 @@ pub fn measure(
 }
 
 /// `kinloop load --realtime` (its clock and network worker at SCHED_FIFO when granted) with `users` clients
-/// in each of the rooms `names` of `server`, in a process of its own, as a load is run beside a server: the
-/// clients share the machine and not the server's process.
-fn load_process(
+/// in each of the rooms `names` of `server`, for `duration`, in a process of its own, as a load is run beside
+/// a server: the clients share the machine and not the server's process.
+fn start_load(
     kinloop: &Path,
     server: &ServerHandle,
     names: &[String],
     users: usize,
     duration: Duration,
-) -> Result<LoadSummary> {
-    let output = Command::new(kinloop)
+) -> Result<Child> {
+    Command::new(kinloop)
         .args(["load", "--realtime", "--json", "--server", &server.local_addr().to_string()])
         .args(["--fingerprint", server.fingerprint()])
         .args(["--users", &(names.len() * users).to_string(), "--rooms", &names.join(",")])
         .args(["--duration", &duration.as_secs_f64().to_string()])
         .stdin(Stdio::null())
-        .output()
-        .with_context(|| format!("starting {} load", kinloop.display()))?;
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("starting {} load", kinloop.display()))
+}
+
+/// What the load printed when it ended.
+fn finish_load(load: Child) -> Result<LoadSummary> {
+    let output = load.wait_with_output().context("waiting for kinloop load")?;
     if !output.status.success() {
         bail!("kinloop load ended with {}: {}", output.status, String::from_utf8_lossy(&output.stderr).trim());
     }
     serde_json::from_slice(&output.stdout).context("reading kinloop load --json")
 }
 
-/// One server of `names.len()` rooms of the scene, `users` real clients in each for `duration`.
+/// One server of the point's rooms of the scene (and the slow room when the point has it), `users` real
+/// clients in each of `names` for `duration`.
 fn run_block(
     kinloop: &Path,
     scene: &Scene,
     names: &[String],
-    users: usize,
+    point: GridPoint,
     duration: Duration,
     runtime: &tokio::runtime::Runtime,
 ) -> Result<RoomsBlock> {
     let mut config = ServerConfig::new(scene.clone(), "paper-testbed", SocketAddr::from(([127, 0, 0, 1], 0)));
-    config.rooms = names
-        .iter()
-        .map(|name| RoomSpec {
-            name: name.clone(),
-            scene: scene.clone(),
-            scene_label: "paper-testbed".into(),
-            access: Access::open(),
-            max_users: users,
-            record: None,
-            knobs: TestKnobs::default(),
-        })
-        .collect();
+    let room = |name: &str, knobs| RoomSpec {
+        name: name.to_owned(),
+        scene: scene.clone(),
+        scene_label: "paper-testbed".into(),
+        access: Access::open(),
+        max_users: point.users_per_room,
+        record: None,
+        knobs,
+    };
+    config.rooms = names.iter().map(|name| room(name, TestKnobs::default())).collect();
+    if point.slow_room {
+        config.rooms.push(room(SLOW_ROOM, TestKnobs { cost: Some(SLOW_ROOM_TICK), panic_after_ticks: None }));
+    }
     config.stats_every = None;
     let server = {
         let _inside = runtime.enter();
         Server::start(config).context("starting the server")?
     };
-    let outcome = load_process(kinloop, &server, names, users, duration);
-    let reports = server.room_stats();
+    // The load runs its warm-up (the clients connect and join), then the counted block; the rooms' counts
+    // are read at both ends of the block and taken apart.
+    let load = start_load(kinloop, &server, names, point.users_per_room, WARM_UP + duration + LOAD_TAIL);
+    let counted = load.map(|load| {
+        std::thread::sleep(WARM_UP);
+        let start = server.room_stats();
+        std::thread::sleep(duration);
+        (load, start, server.room_stats())
+    });
+    let (outcome, start, end) = match counted {
+        Ok((load, start, end)) => (finish_load(load), start, end),
+        Err(e) => (Err(e), Vec::new(), Vec::new()),
+    };
     runtime.block_on(server.shutdown()).context("shutting the server down")?;
-    Ok(RoomsBlock { reports, outcome: outcome? })
+    Ok(RoomsBlock { start, end, outcome: outcome? })
 }

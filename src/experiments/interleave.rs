@@ -17,11 +17,18 @@ use std::time::Duration;
 use anyhow::Result;
 use kinloop_client::driver::rt_loop::timer_floor;
 use kinloop_client::driver::timing::LatenessSummary;
+use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
 
 /// The longest block: short enough that a sitting of a minute alternates several times, long enough that a
 /// run's start (a server's rooms, its clients' handshakes) is a small part of it.
 pub const BLOCK_S: f64 = 10.0;
+
+/// How long each side of a block runs before it counts. Each side starts afresh in every block (a server and
+/// its clients connect, a thread is raised to SCHED_FIFO) and the first ticks of a start are late for
+/// reasons of their own (page faults, connections, the first wake of a parked worker), not the host's: with
+/// blocks of ten seconds, a start's one or two late ticks a block would be as many as the host's own.
+pub const WARM_UP: Duration = Duration::from_secs(1);
 
 /// How a point's seconds are cut into blocks.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,9 +101,22 @@ impl<R> Interleaved<R> {
 }
 
 /// Runs the idle 1 kHz loop (SCHED_FIFO when granted, as the loops it is the floor of) and `run` in
-/// alternating blocks of `blocks.each`: idle, run, run, idle, idle, run, ...
+/// alternating blocks of `blocks.each`: idle, run, run, idle, idle, run, ... The idle loop runs
+/// [`WARM_UP`] uncounted before each of its blocks; `run` is to leave its own start out the same way.
 pub fn interleave<R>(blocks: Blocks, run: impl FnMut(Duration) -> Result<R>) -> Result<Interleaved<R>> {
-    alternate(blocks, |each| timer_floor(1000.0, each, true).0, run)
+    let idle = |each| {
+        timer_floor(1000.0, WARM_UP, true);
+        timer_floor(1000.0, each, true).0
+    };
+    alternate(blocks, idle, run)
+}
+
+/// A VE loop's (misses, stalls, ticks) from `start` (its statistics after the warm-up) to `end`; from its
+/// beginning without a start.
+pub fn counted_since(end: &VeLoopStats, start: Option<&VeLoopStats>) -> (u64, u64, u64) {
+    let of = |v: &VeLoopStats| (v.deadline_misses, v.deadline_stalls, v.step_time.samples);
+    let (e, s) = (of(end), start.map_or((0, 0, 0), of));
+    (e.0.saturating_sub(s.0), e.1.saturating_sub(s.1), e.2.saturating_sub(s.2))
 }
 
 /// [`interleave`] with the idle side given.
