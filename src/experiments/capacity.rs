@@ -307,7 +307,7 @@ pub fn run(options: &Options) -> Result<Report> {
         )
     };
     let mut answer = answer;
-    for r in plain().last().into_iter().chain(rooms_axis.iter().filter(|p| p.slow_room.is_some())) {
+    for r in plain().next_back().into_iter().chain(rooms_axis.iter().filter(|p| p.slow_room.is_some())) {
         answer.push_str(&rooms_answer(r));
     }
     let results = CapacitySummary {
