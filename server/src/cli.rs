@@ -358,12 +358,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     };
     let many = !config.rooms.is_empty();
     let network_cpu = config.network_cpu;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        // The QUIC side's workers below the executor's real-time threads and above the machine's other work.
-        .on_thread_start(move || kinloop_process::affinity::start_network_worker(network_cpu, true))
-        .enable_all()
-        .build()?;
+    let runtime = crate::driver::network_runtime::network_runtime("kinloop-server-net", network_cpu, true)?;
     runtime.block_on(async move {
         let agones = if cli.agones { Some(start_agones(cli.agones_health_ms, &mut config).await?) } else { None };
         let server = Server::start(config)?;

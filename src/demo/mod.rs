@@ -35,6 +35,7 @@ use kinloop_linkage::model::builtin::PAPER_WRENCH;
 use kinloop_linkage::{math::space::SceneKind, model::scene::Scene};
 use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::Trust;
+use kinloop_server::driver::network_runtime::network_runtime;
 use kinloop_server::driver::UserStats;
 use kinloop_server::view::ViewConfig;
 use kinloop_server::{Server, ServerConfig, ServerHandle, ServerStats};
@@ -292,13 +293,7 @@ pub fn run(options: &DemoOptions) -> Result<DemoReport> {
     // The server's QUIC side as kinloop-server runs it: below the real-time loops, above other work.
     let realtime = options.realtime;
     let network_cpu = options.pin_network.then(kinloop_process::affinity::last_cpu);
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .thread_name("kinloop-demo-net")
-        .on_thread_start(move || kinloop_process::affinity::start_network_worker(network_cpu, realtime))
-        .enable_all()
-        .build()
-        .context("starting the network runtime")?;
+    let runtime = network_runtime("kinloop-demo-net", network_cpu, realtime).context("starting the network runtime")?;
     let started = Instant::now();
     let mut config =
         ServerConfig::new(options.scene.clone(), options.scene_label.clone(), SocketAddr::from(([127, 0, 0, 1], 0)));

@@ -20,6 +20,7 @@ use std::time::Duration;
 use anyhow::{anyhow, Result};
 use kinloop_server::bench::{realtime_run, ve_loop_stats, ve_tick_users, RealtimeReport, RealtimeRun};
 use kinloop_server::core::VeConfig;
+use kinloop_server::driver::network_runtime::network_runtime;
 use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
 
@@ -235,11 +236,8 @@ pub fn run(options: &Options) -> Result<Report> {
     out.chart("misses_vs_users", &chart)?;
 
     let rooms_seconds = options.seconds.unwrap_or(options.pick(10.0, 2.0));
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .thread_name("kinloop-capacity-net")
-        .enable_all()
-        .build()?;
+    // The server's QUIC side as kinloop-server runs it.
+    let runtime = network_runtime("kinloop-capacity-net", None, true)?;
     let mut rooms_axis = Vec::new();
     for point in capacity_rooms::grid(options.quick) {
         if options.progress {

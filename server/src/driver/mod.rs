@@ -13,6 +13,7 @@
 //! Many sessions send commands, so the command ring's producer sits behind a mutex that only network
 //! tasks take; the VE thread owns every consumer and producer it touches and never waits.
 
+pub mod network_runtime;
 mod record;
 pub mod rehearsal;
 pub mod room;
