@@ -9,12 +9,9 @@
 //! - `σ ← min(σ, 1 − s)`, with `s` the share of `L` that the carrier's last applied wrench (its faded hand
 //!   and PD, the hold left out) carries along `L` (in unit-consistent coordinates `(f, τ / ℓ)`, ℓ the
 //!   scene's length scale): what the coupling has taken over is not held twice;
-//! - once the carrier's coupling is fully in and has heard its user (an uplink, not only the grasp at the
-//!   join), `σ` falls by `dt / fade_time`: the rest of the load passes to the coupling over one more fade,
-//!   slowly enough that the OP sinks into the spring without passing its rest. Before the first uplink the
-//!   grasp's PD holds the join's pose, where the user's local model starts; the load passed to it then
-//!   would sink the OP by `L / K_g` (centimetres at the device for a heavy link on a light OP) a round trip
-//!   before the user's hand could take it up.
+//! - once the carrier's coupling is fully in, `σ` falls by `dt / fade_time`: the rest of the load passes to
+//!   the coupling over one more fade, slowly enough that the OP sinks into the spring without passing its
+//!   rest.
 //!
 //! `σ` never rises during a handover, so the hold only ever lets go.
 //!
@@ -130,7 +127,7 @@ impl<S: Space> Handover<S> {
                     self.load = load_at(i);
                     self.carrier = Some(i);
                 }
-                if couplings[i].weight >= 1.0 && couplings[i].heard_time_s > 0.0 {
+                if couplings[i].weight >= 1.0 {
                     self.share -= fade_step;
                 }
                 if self.share <= 0.0 || self.share.is_nan() {
