@@ -2,8 +2,9 @@
 //! deadlines, spin_sleep, SCHED_FIFO when granted) with N synthetic users (`kinloop_server::bench::realtime_run`:
 //! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time
 //! (p50, p99), its deadline misses beside the idle timer floor measured in blocks alternating with it
-//! ([`super::interleave`]: the same clock and sleep with no work, so the floor is the machine's during the run), the thread's CPU
-//! use beside the figure (its hybrid sleep spins), and whether the linkage stayed whole. Beside each point,
+//! ([`super::interleave`]: the same clock and sleep with no work, so the floor is the machine's during the
+//! run), the thread's CPU use beside the figure (its hybrid sleep spins), and whether the linkage stayed
+//! whole. Beside each point,
 //! the same loop's iterations back to back (`server/ve_loop_users_N`: the same `VeLoop`, its rings drained
 //! between iterations) give two like-with-like ratios: the whole iteration in real time over the whole
 //! iteration back to back, and the VE's own stages (intake, step, snapshot terms) over the same stages back
