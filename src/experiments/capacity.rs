@@ -1,14 +1,13 @@
 //! `capacity`: how many users one room carries in real time. Each point runs the real VE thread (absolute
 //! deadlines, spin_sleep, SCHED_FIFO when granted) with N synthetic users (`kinloop_server::bench::realtime_run`:
-//! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time
-//! (p50, p99), its deadline misses beside the idle timer floor measured in blocks alternating with it
-//! ([`super::interleave`]: the same clock and sleep with no work, so the floor is the machine's during the
-//! run), the thread's CPU use beside the figure (its hybrid sleep spins), and whether the linkage stayed
-//! whole. Beside each point,
-//! the same loop's iterations back to back (`server/ve_loop_users_N`: the same `VeLoop`, its rings drained
-//! between iterations) give two like-with-like ratios: the whole iteration in real time over the whole
-//! iteration back to back, and the VE's own stages (intake, step, snapshot terms) over the same stages back
-//! to back. The VE tick alone back to back (`server/ve_tick_users_N`) is reported too.
+//! in-process users that follow the VE and keep a client's energy books) and reports the loop's step time (p50,
+//! p99), its deadline misses beside the idle timer floor measured in blocks alternating with it
+//! ([`super::interleave`]: the same clock and sleep with no work, so the floor is the machine's during the run),
+//! the thread's CPU use beside the figure (its hybrid sleep spins), and whether the linkage stayed whole. Beside
+//! each point, the same loop's iterations back to back (`server/ve_loop_users_N`: the same `VeLoop`, its rings
+//! drained between iterations) give two like-with-like ratios: the whole iteration in real time over the whole
+//! iteration back to back, and the VE's own stages (intake, step, snapshot terms) over the same stages back to
+//! back. The VE tick alone back to back (`server/ve_tick_users_N`) is reported too.
 //!
 //! Synthetic users follow the VE, so their tracking is the VE's own and not a client's: what this reports of
 //! the session is its stability (restores, closure). The second axis, rooms per server with real clients
