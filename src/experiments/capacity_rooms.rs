@@ -37,7 +37,7 @@ pub struct RoomsPoint {
     pub users_per_room: usize,
     /// The slow room beside them, when the point has one: the figures below are the other rooms'.
     pub slow_room: Option<SlowRoom>,
-    /// Users that rendered, of `rooms × users_per_room`.
+    /// Users that rendered, of `rooms × users_per_room`, in the block where fewest did.
     pub users_rendered: usize,
     /// Median VE step (µs): each block's worst room's, the median over blocks.
     pub step_us_p50_worst: f64,
