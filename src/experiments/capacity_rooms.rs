@@ -171,17 +171,16 @@ pub fn measure(
     let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
     let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
     // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
-    // it), each against the idle loop's.
+    // it; returned by its index too), each against the idle loop's.
     let judged = |counts: &[(u64, u64)], floor_events: u64| {
         let against = |(n, ticks): (u64, u64)| RateRatio::new(n, ticks, floor_events, floor_ticks, MISSES_BOUND);
         let pooled = counts.iter().fold((0, 0), |(n, t), (cn, ct)| (n + cn, t + ct));
-        let worst = counts.iter().max_by(|a, b| rate(a).total_cmp(&rate(b))).copied().unwrap_or((0, 0));
-        (against(pooled), against(worst))
+        let worst = (0..counts.len()).max_by(|&a, &b| rate(&counts[a]).total_cmp(&rate(&counts[b]))).unwrap_or(0);
+        (against(pooled), against(counts.get(worst).copied().unwrap_or((0, 0))), worst)
     };
-    let (misses_vs_floor, worst_room_vs_floor) = judged(&misses, floor_misses);
-    let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&stalls, floor_stalls);
-    let worst_room = (0..rooms).max_by(|&a, &b| rate(&misses[a]).total_cmp(&rate(&misses[b]))).unwrap_or(0);
-    let pairs = blocks.pairs(|b| b.counted(&names[worst_room]).unwrap_or_default());
+    let (misses_vs_floor, worst_room_vs_floor, worst_room) = judged(&misses, floor_misses);
+    let (stalls_vs_floor, worst_room_stalls_vs_floor, _) = judged(&stalls, floor_stalls);
+    let pairs = blocks.pairs(|b| names.get(worst_room).and_then(|room| b.counted(room)).unwrap_or_default());
 
     // The rest is each block's whole run, as the server reported it at the block's end.
     let judged_reports = || runs.iter().flat_map(|b| b.end.iter().filter(|r| r.name != SLOW_ROOM));
