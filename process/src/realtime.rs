@@ -49,6 +49,41 @@ pub fn try_fifo_priority(priority: u8) -> Result<(), RealtimePriorityError> {
     }
 }
 
+/// Runs the calling thread under the normal time-sharing policy (SCHED_OTHER). A thread inherits its
+/// creator's policy, so a thread meant to yield to the real-time loops (the rooms' quarantine) sets it
+/// itself rather than run at SCHED_FIFO because a real-time thread happened to spawn it.
+pub fn normal_priority() -> Result<(), RealtimePriorityError> {
+    #[cfg(unix)]
+    {
+        use thread_priority::unix::{
+            set_thread_priority_and_policy, thread_native_id, NormalThreadSchedulePolicy, ThreadSchedulePolicy,
+        };
+        set_thread_priority_and_policy(
+            thread_native_id(),
+            thread_priority::ThreadPriority::Min,
+            ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other),
+        )
+        .map_err(|e| RealtimePriorityError::Refused(format!("{e:?}")))
+    }
+    #[cfg(not(unix))]
+    {
+        Err(RealtimePriorityError::NotPosix)
+    }
+}
+
+/// Whether the calling thread runs under a real-time policy (SCHED_FIFO or SCHED_RR).
+pub fn runs_realtime() -> bool {
+    #[cfg(unix)]
+    {
+        use thread_priority::unix::{thread_schedule_policy, ThreadSchedulePolicy};
+        matches!(thread_schedule_policy(), Ok(ThreadSchedulePolicy::Realtime(_)))
+    }
+    #[cfg(not(unix))]
+    {
+        false
+    }
+}
+
 /// Tells the stalls apart among a loop's deadline misses: a host stall makes every tick it spans late, and a
 /// loaded loop stays late for as long as it takes to catch up, so misses come in runs; each run is one stall.
 /// Stalls, unlike misses, come one at a time, which is what a rate's interval assumes.
@@ -94,6 +129,26 @@ mod tests {
                     panic!("a POSIX platform answered NotPosix")
                 }
             }
+        })
+        .join()
+        .expect("the probe thread");
+    }
+
+    /// A thread that was raised to SCHED_FIFO goes back to SCHED_OTHER when asked.
+    #[cfg(unix)]
+    #[test]
+    fn a_raised_thread_returns_to_the_normal_policy() {
+        use thread_priority::unix::{thread_schedule_policy, NormalThreadSchedulePolicy, ThreadSchedulePolicy};
+        std::thread::spawn(|| {
+            let raised = try_realtime_priority().is_ok();
+            assert_eq!(runs_realtime(), raised);
+            normal_priority().expect("a thread may always lower its own policy");
+            assert!(!runs_realtime());
+            assert_eq!(
+                thread_schedule_policy().expect("policy"),
+                ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other),
+                "raised first: {raised}"
+            );
         })
         .join()
         .expect("the probe thread");

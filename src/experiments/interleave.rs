@@ -15,7 +15,7 @@
 use std::time::Duration;
 
 use anyhow::Result;
-use kinloop_client::driver::rt_loop::timer_floor;
+use kinloop_client::driver::rt_loop::timer_floor_after;
 use kinloop_client::driver::timing::LatenessSummary;
 use kinloop_server::driver::VeLoopStats;
 use serde::{Deserialize, Serialize};
@@ -104,10 +104,7 @@ impl<R> Interleaved<R> {
 /// alternating blocks of `blocks.each`: idle, run, run, idle, idle, run, ... The idle loop runs
 /// [`WARM_UP`] uncounted before each of its blocks; `run` is to leave its own start out the same way.
 pub fn interleave<R>(blocks: Blocks, run: impl FnMut(Duration) -> Result<R>) -> Result<Interleaved<R>> {
-    let idle = |each| {
-        timer_floor(1000.0, WARM_UP, true);
-        timer_floor(1000.0, each, true).0
-    };
+    let idle = |each| timer_floor_after(1000.0, WARM_UP, each, true).0;
     alternate(blocks, idle, run)
 }
 

@@ -334,8 +334,31 @@ impl Ticker {
 /// hypervisor's share of the lateness, which no change to the loop's work can remove. Returns the lateness
 /// and whether SCHED_FIFO was granted.
 pub fn timer_floor(rate_hz: f64, duration: Duration, realtime_priority: bool) -> (LatenessSummary, bool) {
-    let fifo = realtime_priority && try_realtime_priority().is_ok();
-    (paced(rate_hz, duration, |_| {}), fifo)
+    timer_floor_after(rate_hz, Duration::ZERO, duration, realtime_priority)
+}
+
+/// [`timer_floor`] counted after `warm_up` of the same loop, uncounted. The loop runs on a thread of its own
+/// that ends with it: raised to SCHED_FIFO, the caller's thread would stay there, and every thread and
+/// process it started afterwards would inherit the policy (a server's quarantine, a load process's every
+/// thread), competing with the real-time loops the floor is measured for.
+pub fn timer_floor_after(
+    rate_hz: f64,
+    warm_up: Duration,
+    duration: Duration,
+    realtime_priority: bool,
+) -> (LatenessSummary, bool) {
+    std::thread::scope(|scope| {
+        scope
+            .spawn(|| {
+                let fifo = realtime_priority && try_realtime_priority().is_ok();
+                if !warm_up.is_zero() {
+                    paced(rate_hz, warm_up, |_| {});
+                }
+                (paced(rate_hz, duration, |_| {}), fifo)
+            })
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 /// Calls `tick` (with the time since the start) at `rate_hz` for `duration` on the loop's own clock (absolute
@@ -364,4 +387,25 @@ pub fn unix_ns_at(since: Duration) -> u64 {
 
 fn zero<S: Space>() -> S::OpVec {
     <S::OpVec as kinloop_linkage::math::space::VecOps>::zero()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Measuring the floor at SCHED_FIFO leaves the caller's thread at the policy it had, and counts the
+    /// ticks of the counted part only.
+    #[test]
+    fn the_timer_floor_leaves_its_callers_policy_as_it_was() {
+        std::thread::spawn(|| {
+            let before = kinloop_process::realtime::runs_realtime();
+            let (lateness, _) = timer_floor_after(1000.0, Duration::from_millis(30), Duration::from_millis(50), true);
+            assert_eq!(kinloop_process::realtime::runs_realtime(), before, "the caller's policy changed");
+            assert!(!before, "a fresh thread starts at the normal policy");
+            // The warm-up counted too would make about 80.
+            assert!((1..=55).contains(&lateness.ticks), "{} ticks counted in 50 ms at 1 kHz", lateness.ticks);
+        })
+        .join()
+        .expect("the probe thread");
+    }
 }

@@ -268,8 +268,14 @@ impl Executor {
         let stop = Arc::new(AtomicBool::new(false));
         let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
         let quarantine_stop = stop.clone();
-        let (quarantine, quarantine_handle) =
-            spawn_thread("kinloop-rooms-q".into(), move |inbox| run_quarantine(inbox, &quarantine_stop))?;
+        let (quarantine, quarantine_handle) = spawn_thread("kinloop-rooms-q".into(), move |inbox| {
+            // Spawned by a real-time thread it would inherit SCHED_FIFO and spin its rooms' long ticks at
+            // the rooms threads' own priority, delaying their wake-ups; it is to yield to them.
+            if let Err(why) = kinloop_process::realtime::normal_priority() {
+                tracing::warn!(%why, "the quarantine thread keeps its creator's priority");
+            }
+            run_quarantine(inbox, &quarantine_stop)
+        })?;
         let mut ends = Vec::new();
         let mut handles = vec![quarantine_handle];
         for index in 0..threads.max(1) {
@@ -286,6 +292,10 @@ impl Executor {
                             |why| tracing::warn!(%why, thread = index, "a rooms thread runs at normal priority"),
                         )
                         .is_ok();
+                if !realtime {
+                    // Not to run at a real-time priority inherited from its creator when none was asked for.
+                    drop(kinloop_process::realtime::normal_priority());
+                }
                 run_thread(inbox, &stop, &quarantine, &pulse, granted)
             })?;
             ends.push(end);
@@ -619,7 +629,7 @@ mod tests {
         cost: Duration,
         epoch: Instant,
         ticks: u64,
-        counted: Arc<(AtomicU64, AtomicU64)>,
+        counted: Arc<(AtomicU64, AtomicU64, AtomicU64)>,
         stop: Arc<AtomicBool>,
     }
 
@@ -641,6 +651,9 @@ mod tests {
             self.tick();
             self.ticks = before + 1;
             self.counted.1.fetch_add(1, Ordering::Relaxed);
+            if kinloop_process::realtime::runs_realtime() {
+                self.counted.2.fetch_add(1, Ordering::Relaxed);
+            }
         }
         fn stopped(&self) -> bool {
             self.stop.load(Ordering::Relaxed)
@@ -653,11 +666,19 @@ mod tests {
 
     /// A room that takes 2 ms a tick at 1 kHz is quarantined, and there its ticks take no more than the
     /// quarantine's share of a core: the CPU time the room counts itself, over the time since, stays under the
-    /// cap, while it goes on stepping (in slow motion, its time one period a tick).
+    /// cap, while it goes on stepping (in slow motion, its time one period a tick). The executor is started
+    /// from a thread at SCHED_FIFO (when granted), as a program that measured its timer floor first would,
+    /// and the quarantine's ticks still run at normal priority.
     #[test]
     fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
-        let executor = Executor::start(1, false, None, None).expect("threads");
-        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0)));
+        let executor = std::thread::spawn(|| {
+            drop(kinloop_process::realtime::try_realtime_priority());
+            Executor::start(1, false, None, None)
+        })
+        .join()
+        .expect("the starting thread")
+        .expect("threads");
+        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
         let stop = Arc::new(AtomicBool::new(false));
         let room = Spinner {
             cost: Duration::from_millis(2),
@@ -692,5 +713,6 @@ mod tests {
         assert!(report.share_of_core <= quarantine::QUARANTINE_SHARE + 0.01, "{report:?}");
         assert!(report.slowdown > 1.0, "in slow motion: {report:?}");
         assert!(report.behind_real_time_s > 0.1, "behind real time: {report:?}");
+        assert_eq!(counted.2.load(Ordering::Relaxed), 0, "quarantined ticks stepped at a real-time priority");
     }
 }
