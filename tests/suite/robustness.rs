@@ -182,3 +182,20 @@ fn the_stephenson_six_bars_output_held_into_its_limit_at_50_ms_renders() {
         r.device_op_rms_m * 1e3
     );
 }
+
+/// Seed 20's crank (a Watt six-bar in m+kg) on the paper's device without delay: the tour takes the VE's OP
+/// through a fast turn, where b̂ changes within a few milliseconds, and the impedance controller renders b̂
+/// through the terms filter, which trails it by its time constant. Weighted as if held only for the
+/// snapshot's age and the delay, the stale `M b̂` is rendered whole and the hand absorbs energy the linkage
+/// never received (energy growth); weighted over the filter's lag too (`HapticCore::bias_horizon`), the session
+/// stays stable.
+#[test]
+fn seed_20s_crank_on_the_paper_device_without_delay_gains_no_energy() {
+    use kinloop::experiments::robustness::evaluate;
+    let linkage = generate(20, None);
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
+    let point =
+        all.iter().find(|p| p.op == "op-crank" && p.device.name() == "sim:paper").expect("the crank on sim:paper");
+    let outcome = evaluate(&linkage, point, 10.0);
+    assert!(outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
+}

@@ -1,6 +1,7 @@
 //! How far b̂ is trusted as a feedforward: the impedance controller (`controllers::impedance_free`) asks the
 //! device for `M (Λ̂⁻¹ F_h + b̂) − F_h`, with b̂ from a snapshot that is held for its age plus the one-way
-//! delay (the *horizon* `h`, `HapticCore::horizon`). A b̂ that changes over that horizon (the OP's `J̇ q̇` on a
+//! delay and reaches the controller through the terms filter, which trails it by its time constant (the
+//! *horizon* `h`, `HapticCore::bias_horizon`). A b̂ that changes over that horizon (the OP's `J̇ q̇` on a
 //! linkage swinging through a limit flips at twice the swing's frequency) arrives with the wrong sign, and
 //! `M b̂` then pumps the swing it came from. So b̂ is weighted by how little it changes over the horizon:
 //! ```text

@@ -140,6 +140,14 @@ impl<S: Space> HapticCore<S> {
         (now.saturating_sub(self.active.received_at) + self.one_way_delay).min(self.config.safety.max_snapshot_age)
     }
 
+    /// How far behind the VE the b̂ the impedance controller renders is at `now`: the snapshot's horizon plus
+    /// the lag of the first-order filter the controllers' terms pass through (`terms_time_constant` τ: a
+    /// filtered ramp trails its input by τ). Near a dead centre b̂ turns within a few milliseconds, so at 0 ms
+    /// one way the filter's lag is most of what `bias_trust` must weigh.
+    pub(super) fn bias_horizon(&self, now: Duration) -> Duration {
+        self.horizon(now) + self.config.terms_time_constant
+    }
+
     /// Makes the pending snapshot the active one.
     pub(super) fn apply_pending(&mut self, now: Duration, device: &OpPose<S>, hand_off: bool) {
         std::mem::swap(&mut self.pending, &mut self.active);
@@ -222,7 +230,7 @@ impl<S: Space> HapticCore<S> {
     /// impedance mode), impedance with Λ̂⁻¹ in the free directions, position channels, contact force channel.
     ///
     /// The impedance controller's b̂ is weighted by how little it changes over the horizon it is held for
-    /// (`bias_trust`), while this user holds the linkage alone. With others on it, b̂ carries their hands
+    /// (`bias_trust`, over `bias_horizon`: the snapshot's age, the one-way delay and the terms filter's lag), while this user holds the linkage alone. With others on it, b̂ carries their hands
     /// too, which is how the users feel each other, and the server already weighs those by the measured round
     /// trip (`server::core::sharing`): weighed again here, sixteen users sharing a push on one OP moved it
     /// half as far as one user does.
@@ -245,7 +253,7 @@ impl<S: Space> HapticCore<S> {
         let imp = match hand.sensed {
             Some(hand) => {
                 let weight =
-                    if self.active.shared { 1.0 } else { self.bias_trust.weight(self.horizon(now).as_secs_f64()) };
+                    if self.active.shared { 1.0 } else { self.bias_trust.weight(self.bias_horizon(now).as_secs_f64()) };
                 let bias = self.local.bias * weight;
                 impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &bias, &hand)
             }
