@@ -30,18 +30,14 @@ pub fn try_realtime_priority() -> Result<(), RealtimePriorityError> {
 pub fn try_fifo_priority(priority: u8) -> Result<(), RealtimePriorityError> {
     #[cfg(unix)]
     {
-        use thread_priority::unix::{
-            set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy, ThreadSchedulePolicy,
-        };
+        use thread_priority::unix::{RealtimeThreadSchedulePolicy, ThreadSchedulePolicy};
         use thread_priority::{ThreadPriority, ThreadPriorityValue};
         let value = ThreadPriorityValue::try_from(priority)
             .map_err(|e| RealtimePriorityError::Refused(format!("priority {priority}: {e:?}")))?;
-        set_thread_priority_and_policy(
-            thread_native_id(),
+        set_own_policy(
             ThreadPriority::Crossplatform(value),
             ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
         )
-        .map_err(|e| RealtimePriorityError::Refused(format!("{e:?}")))
     }
     #[cfg(not(unix))]
     {
@@ -55,20 +51,27 @@ pub fn try_fifo_priority(priority: u8) -> Result<(), RealtimePriorityError> {
 pub fn normal_priority() -> Result<(), RealtimePriorityError> {
     #[cfg(unix)]
     {
-        use thread_priority::unix::{
-            set_thread_priority_and_policy, thread_native_id, NormalThreadSchedulePolicy, ThreadSchedulePolicy,
-        };
-        set_thread_priority_and_policy(
-            thread_native_id(),
+        use thread_priority::unix::{NormalThreadSchedulePolicy, ThreadSchedulePolicy};
+        set_own_policy(
             thread_priority::ThreadPriority::Min,
             ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other),
         )
-        .map_err(|e| RealtimePriorityError::Refused(format!("{e:?}")))
     }
     #[cfg(not(unix))]
     {
         Err(RealtimePriorityError::NotPosix)
     }
+}
+
+/// Sets the calling thread's scheduling policy and priority; the operating system's refusal, typed.
+#[cfg(unix)]
+fn set_own_policy(
+    priority: thread_priority::ThreadPriority,
+    policy: thread_priority::unix::ThreadSchedulePolicy,
+) -> Result<(), RealtimePriorityError> {
+    use thread_priority::unix::{set_thread_priority_and_policy, thread_native_id};
+    set_thread_priority_and_policy(thread_native_id(), priority, policy)
+        .map_err(|e| RealtimePriorityError::Refused(format!("{e:?}")))
 }
 
 /// Whether the calling thread runs under a real-time policy (SCHED_FIFO or SCHED_RR).

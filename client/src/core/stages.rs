@@ -230,10 +230,11 @@ impl<S: Space> HapticCore<S> {
     /// impedance mode), impedance with Λ̂⁻¹ in the free directions, position channels, contact force channel.
     ///
     /// The impedance controller's b̂ is weighted by how little it changes over the horizon it is held for
-    /// (`bias_trust`, over `bias_horizon`: the snapshot's age, the one-way delay and the terms filter's lag), while this user holds the linkage alone. With others on it, b̂ carries their hands
-    /// too, which is how the users feel each other, and the server already weighs those by the measured round
-    /// trip (`server::core::sharing`): weighed again here, sixteen users sharing a push on one OP moved it
-    /// half as far as one user does.
+    /// (`bias_trust`, over `bias_horizon`: the snapshot's age, the one-way delay and the terms filter's lag),
+    /// while this user holds the linkage alone. With others on it, b̂ carries their hands too, which is how
+    /// the users feel each other, and the server already weighs those by the measured round trip
+    /// (`server::core::sharing`): weighed again here, sixteen users sharing a push on one OP moved it half as
+    /// far as one user does.
     pub(super) fn controllers(&self, now: Duration, intake: &Intake<S>, hand: &HandWrenches<S>) -> Requests<S> {
         let model_pose = self.model.pose();
         let model_twist = self.model.twist();
