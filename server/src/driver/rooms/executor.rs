@@ -1,9 +1,11 @@
 //! The rooms' real-time executor: a few threads (`--rt-threads`, default one fewer than the cores), each
 //! stepping the rooms placed on it at their deadlines, and a quarantine thread for rooms that overrun.
 //!
-//! - **Cost.** Each room's step time is measured around its tick and kept as an exponentially weighted
-//!   moving average ([`EWMA_WEIGHT`]); a thread's load is the sum of its rooms' costs times their rates
-//!   (the share of a second the thread spends stepping them).
+//! - **Cost.** Each room's step time is the CPU time its tick used (its wall time where the platform has no
+//!   per-thread CPU clock), kept as an exponentially weighted moving average ([`EWMA_WEIGHT`]); a thread's
+//!   load is the sum of its rooms' costs times their rates (the share of a second the thread spends stepping
+//!   them). CPU time, because a thread that another process preempts mid-tick on a busy host has not made
+//!   its room any costlier: charging the wall time would quarantine a room for its neighbours' work.
 //! - **Placement and admission.** A new room goes to the least-loaded thread, and only if that thread's load
 //!   plus the room's estimate ([`ROOM_ESTIMATE`] per tick) stays within [`BUDGET_SHARE`]; a new user joins
 //!   only if its room's thread load plus the user's estimate (its room's measured cost per user, at least
@@ -178,6 +180,7 @@ impl RoomCell {
         self.done.store(true, Ordering::Release);
     }
 
+    /// One tick's cost (`step`, its CPU time: `cpu_since`) and the users it had.
     fn record(&self, step: Duration, users: usize) {
         // One tick is charged at most MAX_CHARGED_PERIODS periods: a thread preempted mid-tick on a busy host
         // (or a page fault storm) must not make a room look over budget for the next hundred ticks, while a
@@ -439,6 +442,15 @@ fn spawn_thread(
     Ok((Arc::new(ThreadEnd { inbox: Mutex::new(producer) }), handle))
 }
 
+/// The CPU time the calling thread used since `before` (its reading of [`thread_cpu_time`]), and the clock's
+/// reading now; without a thread CPU clock, `wall` (the same span's wall time) stands for it. Never more than
+/// `wall`: the CPU clock's tick may round a span up past the wall time it took.
+fn cpu_since(before: Option<Duration>, wall: Duration) -> (Duration, Option<Duration>) {
+    let now = thread_cpu_time();
+    let busy = now.zip(before).map_or(wall, |(after, before)| after.saturating_sub(before).min(wall));
+    (busy, now)
+}
+
 /// The quarantine thread's loop (the rule: `super::quarantine`): take the rooms sent here, step the one furthest behind (its deadline the
 /// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics.
 fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
@@ -467,12 +479,10 @@ fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
         let cpu_before = thread_cpu_time();
         let room = &mut slots[i].room;
         let ticked = catch_unwind(AssertUnwindSafe(|| room.tick_behind()));
-        let wall = started.elapsed();
-        // Without a thread CPU clock, the tick's wall time (at least its CPU time) is charged.
-        let busy = thread_cpu_time().zip(cpu_before).map_or(wall, |(after, before)| after.saturating_sub(before));
+        let (busy, _) = cpu_since(cpu_before, started.elapsed());
         let users = room.users();
         let cell = slots[i].cell.clone();
-        cell.record(wall, users);
+        cell.record(busy, users);
         cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
         if let Err(panic) = ticked {
             close_panicked(&mut slots, i, panic);
@@ -547,6 +557,9 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadE
             None => std::thread::sleep(IDLE),
         }
         let mut i = 0;
+        // One CPU clock read per tick: each tick's reading after it is the next one's before it (what lies
+        // between, a deadline comparison, is charged to the next tick).
+        let mut cpu_mark = thread_cpu_time();
         while i < slots.len() {
             if slots[i].room.next_deadline() > Instant::now() {
                 i += 1;
@@ -555,9 +568,11 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadE
             let started = Instant::now();
             let room = &mut slots[i].room;
             let ticked = catch_unwind(AssertUnwindSafe(|| room.tick()));
+            let (busy, cpu_now) = cpu_since(cpu_mark, started.elapsed());
+            cpu_mark = cpu_now;
             let users = room.users();
             let cell = slots[i].cell.clone();
-            cell.record(started.elapsed(), users);
+            cell.record(busy, users);
             match ticked {
                 Ok(()) if cell.overruns() => {
                     let slot = slots.swap_remove(i);
@@ -623,10 +638,12 @@ mod tests {
         executor.shutdown();
     }
 
-    /// A room whose every tick spins `cost` of CPU; it counts, from inside its tick, the CPU time its ticks
-    /// took and how many it stepped behind real time.
+    /// A room whose every tick spins `cost` of CPU (or, `off_cpu`, sleeps it: a thread preempted by another
+    /// process); it counts, from inside its tick, the CPU time its ticks took and how many it stepped behind
+    /// real time.
     struct Spinner {
         cost: Duration,
+        off_cpu: bool,
         epoch: Instant,
         ticks: u64,
         counted: Arc<(AtomicU64, AtomicU64, AtomicU64)>,
@@ -639,6 +656,9 @@ mod tests {
         }
         fn tick(&mut self) {
             let (started, cpu) = (Instant::now(), kinloop_process::cpu::thread_cpu_time());
+            if self.off_cpu {
+                std::thread::sleep(self.cost);
+            }
             while started.elapsed() < self.cost {
                 std::hint::spin_loop();
             }
@@ -682,6 +702,7 @@ mod tests {
         let stop = Arc::new(AtomicBool::new(false));
         let room = Spinner {
             cost: Duration::from_millis(2),
+            off_cpu: false,
             epoch: Instant::now(),
             ticks: 0,
             counted: counted.clone(),
@@ -714,5 +735,32 @@ mod tests {
         assert!(report.slowdown > 1.0, "in slow motion: {report:?}");
         assert!(report.behind_real_time_s > 0.1, "behind real time: {report:?}");
         assert_eq!(counted.2.load(Ordering::Relaxed), 0, "quarantined ticks stepped at a real-time priority");
+    }
+
+    /// A room whose ticks each take 2 ms of wall time at 1 kHz but next to no CPU (its thread off the CPU, as
+    /// when another process preempts it on a busy host) stays on its real-time thread and admits users: the
+    /// room is charged the CPU time it used, not its neighbours' work.
+    #[test]
+    fn a_room_whose_thread_is_preempted_mid_tick_is_not_quarantined() {
+        let executor = Executor::start(1, false, None, None).expect("threads");
+        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
+        let stop = Arc::new(AtomicBool::new(false));
+        let room = Spinner {
+            cost: Duration::from_millis(2),
+            off_cpu: true,
+            epoch: Instant::now(),
+            ticks: 0,
+            counted: counted.clone(),
+            stop: stop.clone(),
+        };
+        let cell = Arc::new(RoomCell::new("preempted".into(), 1000.0, Box::new(|_| {})));
+        executor.place(Box::new(room), cell.clone()).expect("placed");
+        std::thread::sleep(Duration::from_millis(300));
+        let (quarantined, admitted, cost) = (cell.quarantined(), executor.admit_user(&cell), cell.cost());
+        stop.store(true, Ordering::Relaxed);
+        executor.shutdown();
+        assert!(!quarantined, "a room off the CPU for 2 ms a tick was quarantined: cost {cost:?}");
+        assert!(admitted.is_ok(), "{admitted:?}");
+        assert!(cost < Duration::from_micros(700), "charged {cost:?} a tick");
     }
 }
