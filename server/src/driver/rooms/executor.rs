@@ -21,12 +21,12 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use rtrb::{Consumer, Producer, RingBuffer};
 
-use super::quarantine::{self, QuarantineReport, QuarantineTally};
+use super::quarantine::{self, Calm, QuarantineReport, QuarantineTally};
 use crate::driver::rehearsal::wait_warmed;
 use crate::fleet::Heartbeat;
 use kinloop_process::cpu::thread_cpu_time;
@@ -42,6 +42,9 @@ pub const BUDGET_SHARE: f64 = 0.7;
 /// its thread for a few dozen ticks (its average climbing from [`ROOM_ESTIMATE`]), and make every other room
 /// there miss as many deadlines. One long tick (a preemption, a page fault) is not a streak.
 pub const OVERRUN_STREAK: u32 = 3;
+/// The most of a period a quarantined room's cost average may take to be released back onto a real-time
+/// thread: half the admission share, so that a released room is well clear of the share that sent it away.
+pub const RELEASE_SHARE: f64 = BUDGET_SHARE / 2.0;
 /// A new room's cost per tick before it is measured.
 pub const ROOM_ESTIMATE: Duration = Duration::from_micros(50);
 /// The least a new user is expected to add to its room's tick.
@@ -164,15 +167,35 @@ impl RoomCell {
         }
     }
 
-    /// One tick in quarantine: its CPU time, and how far behind real time its deadline was.
-    fn note_quarantine_tick(&self, busy: Duration, behind: Duration) {
+    /// One tick in quarantine: its CPU time, and how far behind real time its deadline was. Whether the room
+    /// has run calm long enough to be released (`quarantine::Calm`).
+    fn note_quarantine_tick(&self, busy: Duration, behind: Duration) -> bool {
+        let load = self.load();
+        let Ok(mut tally) = self.quarantine.lock() else { return false };
+        let Some(t) = tally.as_mut() else { return false };
+        t.busy += busy;
+        t.ticks += 1;
+        t.behind = behind;
+        t.calm.observe(Instant::now(), Calm::is_calm(behind, t.period, load, RELEASE_SHARE))
+    }
+
+    /// A released room's calm starts over: no real-time thread had room for it.
+    fn restart_calm(&self) {
         if let Ok(mut tally) = self.quarantine.lock() {
             if let Some(t) = tally.as_mut() {
-                t.busy += busy;
-                t.ticks += 1;
-                t.behind = behind;
+                t.calm = Calm::default();
             }
         }
+    }
+
+    /// The quarantine let it go to real-time thread `index`: it is measured afresh there and admits users.
+    fn end_quarantine(&self, index: usize) {
+        if let Ok(mut tally) = self.quarantine.lock() {
+            *tally = None;
+        }
+        self.streak.store(0, Ordering::Relaxed);
+        self.thread.store(index, Ordering::Relaxed);
+        self.quarantined.store(false, Ordering::Relaxed);
     }
 
     /// The executor let it go.
@@ -271,13 +294,16 @@ impl Executor {
         let stop = Arc::new(AtomicBool::new(false));
         let pulse = Arc::new(Pulse { heartbeat, epoch: Instant::now(), stall_until_ns: AtomicU64::new(0) });
         let quarantine_stop = stop.clone();
+        // The quarantine hands calm rooms back through the executor, which exists only once its threads do.
+        let executor_for_quarantine: Arc<OnceLock<Weak<Executor>>> = Arc::new(OnceLock::new());
+        let release_to = executor_for_quarantine.clone();
         let (quarantine, quarantine_handle) = spawn_thread("kinloop-rooms-q".into(), move |inbox| {
             // Spawned by a real-time thread it would inherit SCHED_FIFO and spin its rooms' long ticks at
             // the rooms threads' own priority, delaying their wake-ups; it is to yield to them.
             if let Err(why) = kinloop_process::realtime::normal_priority() {
                 tracing::warn!(%why, "the quarantine thread keeps its creator's priority");
             }
-            run_quarantine(inbox, &quarantine_stop)
+            run_quarantine(inbox, &quarantine_stop, &release_to)
         })?;
         let mut ends = Vec::new();
         let mut handles = vec![quarantine_handle];
@@ -304,13 +330,15 @@ impl Executor {
             ends.push(end);
             handles.push(handle);
         }
-        Ok(Arc::new(Executor {
+        let executor = Arc::new(Executor {
             threads: ends,
             cells: Mutex::new(Vec::new()),
             stop,
             handles: Mutex::new(handles),
             pulse,
-        }))
+        });
+        drop(executor_for_quarantine.set(Arc::downgrade(&executor)));
+        Ok(executor)
     }
 
     /// A test knob: every real-time thread stops stepping (and beating) for `duration` from its next pass,
@@ -347,13 +375,15 @@ impl Executor {
         cells
     }
 
+    /// The least-loaded real-time thread and its load.
+    fn least_loaded(&self) -> (usize, f64) {
+        (0..self.threads.len()).map(|i| (i, self.thread_load(i))).min_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((0, 0.0))
+    }
+
     /// Places a room on the least-loaded real-time thread when its estimate fits the budget there.
     pub fn place(&self, room: Box<dyn Steppable>, cell: Arc<RoomCell>) -> Result<(), OverBudget> {
         let estimate = ROOM_ESTIMATE.as_secs_f64() * cell.rate_hz;
-        let (index, load) = (0..self.threads.len())
-            .map(|i| (i, self.thread_load(i)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap_or((0, 0.0));
+        let (index, load) = self.least_loaded();
         if load + estimate > BUDGET_SHARE {
             return Err(OverBudget {
                 what: format!(
@@ -370,6 +400,24 @@ impl Executor {
             cells.push(cell.clone());
         }
         push(&self.threads[index], Slot { room, cell });
+        Ok(())
+    }
+
+    /// Hands a quarantined room that ran calm back to the least-loaded real-time thread when its measured load
+    /// fits the share there; otherwise gives it back to stay in quarantine.
+    fn release(&self, slot: Slot) -> Result<(), Slot> {
+        let (index, load) = self.least_loaded();
+        if load + slot.cell.load() > BUDGET_SHARE {
+            return Err(slot);
+        }
+        tracing::info!(
+            room = %slot.cell.name,
+            cost_us = slot.cell.cost().as_secs_f64() * 1e6,
+            thread = index,
+            "the room runs within its share again; released from the quarantine"
+        );
+        slot.cell.end_quarantine(index);
+        push(&self.threads[index], slot);
         Ok(())
     }
 
@@ -452,8 +500,9 @@ fn cpu_since(before: Option<Duration>, wall: Duration) -> (Duration, Option<Dura
 }
 
 /// The quarantine thread's loop (the rule: `super::quarantine`): take the rooms sent here, step the one furthest behind (its deadline the
-/// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics.
-fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
+/// earliest) one tick, then rest as the budget says; let go of stopped rooms, close one whose tick panics,
+/// and hand one that has run calm back to `executor`.
+fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool, executor: &OnceLock<Weak<Executor>>) {
     let mut slots: Vec<Slot> = Vec::with_capacity(INBOX);
     loop {
         while let Ok(mut slot) = inbox.pop() {
@@ -483,9 +532,16 @@ fn run_quarantine(mut inbox: Consumer<Slot>, stop: &AtomicBool) {
         let users = room.users();
         let cell = slots[i].cell.clone();
         cell.record(busy, users);
-        cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
+        let calm = cell.note_quarantine_tick(busy, started.saturating_duration_since(deadline));
         if let Err(panic) = ticked {
             close_panicked(&mut slots, i, panic);
+        } else if calm {
+            if let Some(executor) = executor.get().and_then(Weak::upgrade) {
+                if let Err(slot) = executor.release(slots.swap_remove(i)) {
+                    slot.cell.restart_calm();
+                    slots.push(slot);
+                }
+            }
         }
         std::thread::sleep(quarantine::rest_after(busy, quarantine::QUARANTINE_SHARE));
     }
@@ -589,178 +645,4 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadE
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn one_preempted_tick_does_not_put_a_room_over_budget_and_a_slow_room_overruns_within_a_streak() {
-        let quiet = RoomCell::new("quiet".into(), 1000.0, Box::new(|_| {}));
-        for _ in 0..200 {
-            quiet.record(Duration::from_micros(20), 1);
-        }
-        quiet.record(Duration::from_millis(200), 1);
-        assert!(quiet.load() < 0.1, "one 200 ms tick made the room {:.0} % busy", quiet.load() * 100.0);
-        assert!(!quiet.overruns(), "one long tick is not a streak");
-        quiet.record(Duration::from_millis(2), 1);
-        quiet.record(Duration::from_micros(20), 1);
-        quiet.record(Duration::from_millis(2), 1);
-        assert!(!quiet.overruns(), "long ticks apart are not a streak");
-        let slow = RoomCell::new("slow".into(), 1000.0, Box::new(|_| {}));
-        for tick in 0..OVERRUN_STREAK {
-            assert!(!slow.overruns(), "{tick} long ticks");
-            slow.record(Duration::from_millis(2), 1);
-        }
-        assert!(slow.overruns(), "a streak of {OVERRUN_STREAK} ticks of 2 ms at 1 kHz");
-        for _ in 0..400 {
-            slow.record(Duration::from_millis(2), 1);
-        }
-        assert!(slow.cost() > Duration::from_micros(1900), "a 2 ms room reads {:?}", slow.cost());
-        assert!(slow.load() > BUDGET_SHARE);
-    }
-
-    /// Rooms opened at scattered moments start on one grid: their deadlines differ by whole periods.
-    #[test]
-    fn rooms_opened_apart_start_on_the_executors_grid() {
-        let executor = Executor::start(1, false, None, None).expect("threads");
-        let period = Duration::from_millis(1);
-        let first = executor.grid_start(period);
-        std::thread::sleep(Duration::from_micros(2_300));
-        let before = Instant::now();
-        let second = executor.grid_start(period);
-        assert!(
-            second >= before && second < before + period,
-            "{:?} after now",
-            second.saturating_duration_since(before)
-        );
-        let apart = second.duration_since(first).as_nanos();
-        assert_eq!(apart % period.as_nanos(), 0, "{apart} ns apart");
-        assert!(apart >= 2 * period.as_nanos(), "{apart} ns apart");
-        executor.shutdown();
-    }
-
-    /// A room whose every tick spins `cost` of CPU (or, `off_cpu`, sleeps it: a thread preempted by another
-    /// process); it counts, from inside its tick, the CPU time its ticks took and how many it stepped behind
-    /// real time.
-    struct Spinner {
-        cost: Duration,
-        off_cpu: bool,
-        epoch: Instant,
-        ticks: u64,
-        counted: Arc<(AtomicU64, AtomicU64, AtomicU64)>,
-        stop: Arc<AtomicBool>,
-    }
-
-    impl Steppable for Spinner {
-        fn next_deadline(&self) -> Instant {
-            self.epoch + Duration::from_millis(self.ticks)
-        }
-        fn tick(&mut self) {
-            let (started, cpu) = (Instant::now(), kinloop_process::cpu::thread_cpu_time());
-            if self.off_cpu {
-                std::thread::sleep(self.cost);
-            }
-            while started.elapsed() < self.cost {
-                std::hint::spin_loop();
-            }
-            self.ticks = (started.duration_since(self.epoch).as_millis() as u64 + 1).max(self.ticks + 1);
-            let busy = kinloop_process::cpu::thread_cpu_time().zip(cpu).map_or(Duration::ZERO, |(b, a)| b - a);
-            self.counted.0.fetch_add(busy.as_nanos() as u64, Ordering::Relaxed);
-        }
-        fn tick_behind(&mut self) {
-            let before = self.ticks;
-            self.tick();
-            self.ticks = before + 1;
-            self.counted.1.fetch_add(1, Ordering::Relaxed);
-            if kinloop_process::realtime::runs_realtime() {
-                self.counted.2.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        fn stopped(&self) -> bool {
-            self.stop.load(Ordering::Relaxed)
-        }
-        fn users(&self) -> usize {
-            1
-        }
-        fn finish(self: Box<Self>) {}
-    }
-
-    /// A room that takes 2 ms a tick at 1 kHz is quarantined, and there its ticks take no more than the
-    /// quarantine's share of a core: the CPU time the room counts itself, over the time since, stays under the
-    /// cap, while it goes on stepping (in slow motion, its time one period a tick). The executor is started
-    /// from a thread at SCHED_FIFO (when granted), as a program that measured its timer floor first would,
-    /// and the quarantine's ticks still run at normal priority.
-    #[test]
-    fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
-        let executor = std::thread::spawn(|| {
-            drop(kinloop_process::realtime::try_realtime_priority());
-            Executor::start(1, false, None, None)
-        })
-        .join()
-        .expect("the starting thread")
-        .expect("threads");
-        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
-        let stop = Arc::new(AtomicBool::new(false));
-        let room = Spinner {
-            cost: Duration::from_millis(2),
-            off_cpu: false,
-            epoch: Instant::now(),
-            ticks: 0,
-            counted: counted.clone(),
-            stop: stop.clone(),
-        };
-        let cell = Arc::new(RoomCell::new("slow".into(), 1000.0, Box::new(|_| {})));
-        executor.place(Box::new(room), cell.clone()).expect("placed");
-        let waited = Instant::now();
-        while cell.quarantine_report().is_none() {
-            assert!(waited.elapsed() < Duration::from_secs(10), "never quarantined: cost {:?}", cell.cost());
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        assert!(cell.quarantined());
-        assert!(matches!(executor.admit_user(&cell), Err(OverBudget { .. })), "a quarantined room admits a user");
-        let (busy_at, ticks_at, since) =
-            (counted.0.load(Ordering::Relaxed), counted.1.load(Ordering::Relaxed), Instant::now());
-        std::thread::sleep(Duration::from_millis(1500));
-        let busy = Duration::from_nanos(counted.0.load(Ordering::Relaxed) - busy_at);
-        let ticks = counted.1.load(Ordering::Relaxed) - ticks_at;
-        let wall = since.elapsed();
-        let report = cell.quarantine_report().expect("quarantined");
-        stop.store(true, Ordering::Relaxed);
-        executor.shutdown();
-        // One tick may straddle the window's start without its rest inside the window.
-        let share = busy.saturating_sub(Duration::from_millis(3)).as_secs_f64() / wall.as_secs_f64();
-        println!("{ticks} ticks, busy {busy:?} in {wall:?} (share {share:.3}); report {report:?}");
-        assert!(ticks >= 10, "the quarantined room stepped {ticks} ticks");
-        assert!(share <= quarantine::QUARANTINE_SHARE, "the quarantined room took {share:.3} of a core");
-        assert!(report.share_of_core <= quarantine::QUARANTINE_SHARE + 0.01, "{report:?}");
-        assert!(report.slowdown > 1.0, "in slow motion: {report:?}");
-        assert!(report.behind_real_time_s > 0.1, "behind real time: {report:?}");
-        assert_eq!(counted.2.load(Ordering::Relaxed), 0, "quarantined ticks stepped at a real-time priority");
-    }
-
-    /// A room whose ticks each take 2 ms of wall time at 1 kHz but next to no CPU (its thread off the CPU, as
-    /// when another process preempts it on a busy host) stays on its real-time thread and admits users: the
-    /// room is charged the CPU time it used, not its neighbours' work.
-    #[test]
-    fn a_room_whose_thread_is_preempted_mid_tick_is_not_quarantined() {
-        let executor = Executor::start(1, false, None, None).expect("threads");
-        let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
-        let stop = Arc::new(AtomicBool::new(false));
-        let room = Spinner {
-            cost: Duration::from_millis(2),
-            off_cpu: true,
-            epoch: Instant::now(),
-            ticks: 0,
-            counted: counted.clone(),
-            stop: stop.clone(),
-        };
-        let cell = Arc::new(RoomCell::new("preempted".into(), 1000.0, Box::new(|_| {})));
-        executor.place(Box::new(room), cell.clone()).expect("placed");
-        std::thread::sleep(Duration::from_millis(300));
-        let (quarantined, admitted, cost) = (cell.quarantined(), executor.admit_user(&cell), cell.cost());
-        stop.store(true, Ordering::Relaxed);
-        executor.shutdown();
-        assert!(!quarantined, "a room off the CPU for 2 ms a tick was quarantined: cost {cost:?}");
-        assert!(admitted.is_ok(), "{admitted:?}");
-        assert!(cost < Duration::from_micros(700), "charged {cost:?} a tick");
-    }
-}
+mod tests;

@@ -9,6 +9,11 @@
 //! - **Budget.** After each tick the thread sleeps in proportion to the CPU time the tick took
 //!   ([`rest_after`]): a tick of `c` is followed by `c (1 − s) / s` of sleep, `s` the share, so the thread's
 //!   CPU time over the time it spent ticking and sleeping never passes `s`.
+//! - **Release.** A room that has become cheap again is not kept in slow motion for good: once its ticks run
+//!   within [`CAUGHT_UP_PERIODS`] periods of real time and its cost average within the release share (the
+//!   executor's, half the admission share) for [`CALM_TO_RELEASE`] without a break ([`Calm`]), the executor
+//!   hands it back to the least-loaded real-time thread with room for it, and it admits users again. A
+//!   transient storm (a page-fault burst, a host that steals the CPU) must not refuse a room's users forever.
 //! - **What it reports.** Each room's [`QuarantineReport`]: its CPU share since it was quarantined, its
 //!   slowdown (real time over the VE time it stepped) and how far behind real time its last tick was.
 //!
@@ -20,6 +25,38 @@ use serde::Serialize;
 
 /// The most of one core the quarantine thread's rooms take together (CPU time over wall time).
 pub const QUARANTINE_SHARE: f64 = 0.25;
+
+/// How long a quarantined room must run calm, without a break, before it is released.
+pub const CALM_TO_RELEASE: Duration = Duration::from_secs(2);
+/// How far behind its deadline, in periods, a quarantined room's tick may start and still count as caught up
+/// with real time: a normal-priority thread's wake-up comes late by a period or more on a busy host, while a
+/// room in slow motion falls further behind with every tick.
+pub const CAUGHT_UP_PERIODS: u32 = 10;
+
+/// Whether a quarantined room has run calm (caught up with real time, its cost within the release share)
+/// long enough to be released: one look after each of its ticks, any look that is not calm starting over.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Calm {
+    since: Option<Instant>,
+}
+
+impl Calm {
+    /// One look at `now`: whether the room is calm; true once it has been calm for [`CALM_TO_RELEASE`].
+    pub fn observe(&mut self, now: Instant, calm: bool) -> bool {
+        if !calm {
+            self.since = None;
+            return false;
+        }
+        let since = *self.since.get_or_insert(now);
+        now.saturating_duration_since(since) >= CALM_TO_RELEASE
+    }
+
+    /// Whether a tick `behind` its deadline, of a room of `period` whose load is `load` (of a second), is calm
+    /// against the release share `release_share`.
+    pub fn is_calm(behind: Duration, period: Duration, load: f64, release_share: f64) -> bool {
+        behind <= period * CAUGHT_UP_PERIODS && load <= release_share
+    }
+}
 
 /// How long to sleep after a tick that took `busy` of CPU so that ticking and sleeping together use at most
 /// `share` of a core: `busy (1 − share) / share`.
@@ -41,12 +78,21 @@ pub struct QuarantineTally {
     pub behind: Duration,
     /// The room's tick period.
     pub period: Duration,
+    /// How long it has run calm, toward its release.
+    pub calm: Calm,
 }
 
 impl QuarantineTally {
     /// A tally starting now for a room of `period`.
     pub fn new(period: Duration) -> Self {
-        QuarantineTally { since: Instant::now(), busy: Duration::ZERO, ticks: 0, behind: Duration::ZERO, period }
+        QuarantineTally {
+            since: Instant::now(),
+            busy: Duration::ZERO,
+            ticks: 0,
+            behind: Duration::ZERO,
+            period,
+            calm: Calm::default(),
+        }
     }
 
     /// The report as of `now`.
@@ -105,6 +151,25 @@ mod tests {
         let share = busy.as_secs_f64() / (busy + rest).as_secs_f64();
         assert!((share - 0.25).abs() < 1e-12, "{share}");
         assert_eq!(rest_after(busy, 1.0), Duration::ZERO);
+    }
+
+    /// Calm is counted from the first calm look and starts over at any look that is not: released only
+    /// after [`CALM_TO_RELEASE`] of calm without a break.
+    #[test]
+    fn a_room_is_released_only_after_an_unbroken_calm() {
+        let start = Instant::now();
+        let at = |ms: u64| start + Duration::from_millis(ms);
+        let mut calm = Calm::default();
+        assert!(!calm.observe(at(0), true));
+        assert!(!calm.observe(at(1999), true));
+        assert!(!calm.observe(at(2000), false), "a look that is not calm");
+        assert!(!calm.observe(at(2001), true));
+        assert!(!calm.observe(at(4000), true), "1999 ms since the break");
+        assert!(calm.observe(at(4001), true));
+        let period = Duration::from_millis(1);
+        assert!(Calm::is_calm(period * CAUGHT_UP_PERIODS, period, 0.35, 0.35));
+        assert!(!Calm::is_calm(period * CAUGHT_UP_PERIODS + Duration::from_nanos(1), period, 0.1, 0.35), "behind");
+        assert!(!Calm::is_calm(Duration::ZERO, period, 0.36, 0.35), "too costly");
     }
 
     #[test]
