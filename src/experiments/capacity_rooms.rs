@@ -64,7 +64,8 @@ pub struct RoomsPoint {
     pub state_restores: u64,
     /// Largest closure residual over every room (m).
     pub max_closure_error_m: f64,
-    /// Rooms with users moved off the real-time threads for overrunning (the slow room not counted).
+    /// Rooms with users moved off the real-time threads for overrunning at any time, released or not (the slow
+    /// room not counted).
     pub rooms_quarantined: usize,
     /// Device-to-local-model RMS (mm), the median over the users.
     pub device_lm_rms_mm_median: f64,
@@ -198,7 +199,9 @@ pub fn measure(
     let load_ticks: u64 = runs.iter().flat_map(|b| b.outcome.per_user.iter().map(|u| u.ticks)).sum();
     let load_misses: u64 = runs.iter().map(|b| b.outcome.lateness_misses).sum();
     let load_cpu = runs.iter().map(|b| b.outcome.cpu_cores).sum::<Option<f64>>().map(|c| c / runs.len().max(1) as f64);
-    let quarantined = |room: &str| runs.iter().any(|b| b.end.iter().any(|r| r.name == room && r.quarantined));
+    // A room released before the block's end was still sent to the quarantine: counted.
+    let quarantined =
+        |room: &str| runs.iter().any(|b| b.end.iter().any(|r| r.name == room && (r.quarantined || r.quarantines > 0)));
     Ok(RoomsPoint {
         rooms,
         users_per_room: users,

@@ -80,6 +80,8 @@ fn a_two_millisecond_room_does_not_make_the_other_rooms_users_miss() {
     println!("calm: {}\nslow: cost {} µs, quarantined {}", calm["stats"]["ve"], slow["cost_us"], slow["quarantined"]);
     assert_eq!(slow["quarantined"], true, "the overrunning room stayed on the real-time thread: {slow}");
     assert!(slow["cost_us"].as_f64().unwrap() >= 1500.0, "the knob's 2 ms was not measured: {slow}");
+    assert!(slow["quarantines"].as_u64() >= Some(1), "{slow}");
+    assert_eq!(calm["quarantines"].as_u64(), Some(0), "the calm room was sent to the quarantine: {calm}");
     let ve = &calm["stats"]["ve"];
     let ticks = ve["step_time"]["samples"].as_f64().expect("samples");
     let misses = ve["deadline_misses"].as_f64().expect("deadline_misses");

@@ -89,6 +89,7 @@ pub struct RoomCell {
     users: AtomicUsize,
     thread: AtomicUsize,
     quarantined: AtomicBool,
+    quarantines: AtomicU32,
     done: AtomicBool,
     closed: Mutex<Option<String>>,
     quarantine: Mutex<Option<QuarantineTally>>,
@@ -106,6 +107,7 @@ impl RoomCell {
             users: AtomicUsize::new(0),
             thread: AtomicUsize::new(0),
             quarantined: AtomicBool::new(false),
+            quarantines: AtomicU32::new(0),
             done: AtomicBool::new(false),
             closed: Mutex::new(None),
             quarantine: Mutex::new(None),
@@ -137,6 +139,11 @@ impl RoomCell {
     /// Whether it was moved to the quarantine thread for overrunning.
     pub fn quarantined(&self) -> bool {
         self.quarantined.load(Ordering::Relaxed)
+    }
+
+    /// How many times it was moved to the quarantine thread (a room released since counts too).
+    pub fn quarantines(&self) -> u32 {
+        self.quarantines.load(Ordering::Relaxed)
     }
 
     /// Users in it (as of its last tick).
@@ -633,6 +640,7 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadE
                 Ok(()) if cell.overruns() => {
                     let slot = slots.swap_remove(i);
                     slot.cell.quarantined.store(true, Ordering::Relaxed);
+                    slot.cell.quarantines.fetch_add(1, Ordering::Relaxed);
                     tracing::warn!(room = %cell.name, cost_us = cell.cost().as_secs_f64() * 1e6, "the room overruns its share; moved to the quarantine thread");
                     push(quarantine, slot);
                 }

@@ -7,7 +7,7 @@
 //! token_file = "a.tokens"     # optional; without it the room takes any token
 //! max_users = 4               # optional (default 16)
 //! record = "bench-a.csv"      # optional: one CSV row per VE step
-//! debug_cost_ms = 2.0         # test knob: each tick takes this long
+//! debug_cost_ms = 2.0         # test knob: each tick takes this much CPU time
 //! debug_panic_after_ticks = 0 # test knob: the VE panics at this tick
 //! ```
 //! Each entry is checked at start: a scene that does not load, a name used twice or a token file that
@@ -44,7 +44,7 @@ pub struct RoomSpec {
 /// Test knobs: make one room overrun or fail, to show the others do not.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TestKnobs {
-    /// Each tick takes at least this long.
+    /// Each tick takes at least this much CPU time.
     pub cost: Option<Duration>,
     /// The VE panics at this tick.
     pub panic_after_ticks: Option<u64>,

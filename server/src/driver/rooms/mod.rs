@@ -152,8 +152,11 @@ pub struct RoomReport {
     pub scene: String,
     /// The real-time thread that steps it.
     pub thread: usize,
-    /// Moved off the real-time threads for overrunning its share.
+    /// Moved off the real-time threads for overrunning its share, and not yet released.
     pub quarantined: bool,
+    /// Times it was moved to the quarantine, released or not: a room that overran for a while and runs
+    /// within its share again reads `quarantined: false` and a count here.
+    pub quarantines: u32,
     /// Its step cost as the executor measured it (EWMA, µs), test knobs included.
     pub cost_us: f64,
     /// What the quarantine measured of it (CPU share, slowdown, lag behind real time), when quarantined.
@@ -171,6 +174,7 @@ impl RoomReport {
             scene: shared.scene_info.name.clone(),
             thread: shared.cell.thread(),
             quarantined: shared.cell.quarantined(),
+            quarantines: shared.cell.quarantines(),
             cost_us: shared.cell.cost().as_secs_f64() * 1e6,
             quarantine: shared.cell.quarantine_report(),
             closed: shared.cell.closed_reason(),
@@ -195,6 +199,9 @@ impl<S: Space> Hosted<S> {
     /// however late, then the test knobs.
     fn step(&mut self, behind: bool) {
         let started = std::time::Instant::now();
+        // The cost knob is CPU time, as a costly simulation's would be: a tick preempted on a busy host takes
+        // longer in wall time, not less of its thread.
+        let cpu_started = self.knobs.cost.and_then(|_| kinloop_process::cpu::thread_cpu_time());
         if behind {
             self.ve.tick_back_to_back();
         } else {
@@ -205,7 +212,11 @@ impl<S: Space> Hosted<S> {
             panic!("test knob: debug_panic_after_ticks");
         }
         if let Some(cost) = self.knobs.cost {
-            while started.elapsed() < cost {
+            let spent = || match (cpu_started, kinloop_process::cpu::thread_cpu_time()) {
+                (Some(before), Some(now)) => now.saturating_sub(before),
+                _ => started.elapsed(),
+            };
+            while spent() < cost {
                 std::hint::spin_loop();
             }
         }

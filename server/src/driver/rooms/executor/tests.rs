@@ -218,4 +218,5 @@ fn a_quarantined_room_that_becomes_cheap_again_is_released_and_admits_users() {
     assert!(busy > busy_at, "no ticks on the real-time thread after the release");
     assert!(admitted.is_ok(), "{admitted:?}");
     assert!(report.is_none(), "a released room reports a quarantine: {report:?}");
+    assert_eq!(cell.quarantines(), 1, "the quarantine it was released from is counted");
 }
