@@ -53,7 +53,7 @@ struct Spinner {
     cheap_after: Option<u64>,
     epoch: Instant,
     ticks: u64,
-    counted: Arc<(AtomicU64, AtomicU64, AtomicU64)>,
+    counted: Arc<Counted>,
     stop: Arc<AtomicBool>,
 }
 
@@ -94,6 +94,42 @@ impl Steppable for Spinner {
     fn finish(self: Box<Self>) {}
 }
 
+/// What a [`Spinner`] counts: its ticks' CPU time (ns), its ticks in quarantine, and those of them stepped at
+/// a real-time priority.
+type Counted = (AtomicU64, AtomicU64, AtomicU64);
+
+/// Places a [`Spinner`] of 2 ms a tick at 1 kHz named `name`: its cell, what it counts, and its stop flag.
+fn place_spinner(
+    executor: &Executor,
+    name: &str,
+    off_cpu: bool,
+    cheap_after: Option<u64>,
+) -> (Arc<RoomCell>, Arc<Counted>, Arc<AtomicBool>) {
+    let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
+    let stop = Arc::new(AtomicBool::new(false));
+    let room = Spinner {
+        cost: Duration::from_millis(2),
+        off_cpu,
+        cheap_after,
+        epoch: Instant::now(),
+        ticks: 0,
+        counted: counted.clone(),
+        stop: stop.clone(),
+    };
+    let cell = Arc::new(RoomCell::new(name.into(), 1000.0, Box::new(|_| {})));
+    executor.place(Box::new(room), cell.clone()).expect("placed");
+    (cell, counted, stop)
+}
+
+/// Waits (at most 10 s) until the quarantine has taken `cell`'s room.
+fn wait_until_quarantined(cell: &RoomCell) {
+    let waited = Instant::now();
+    while cell.quarantine_report().is_none() {
+        assert!(waited.elapsed() < Duration::from_secs(10), "never quarantined: cost {:?}", cell.cost());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 /// A room that takes 2 ms a tick at 1 kHz is quarantined, and there its ticks take no more than the
 /// quarantine's share of a core: the CPU time the room counts itself, over the time since, stays under the
 /// cap, while it goes on stepping (in slow motion, its time one period a tick). The executor is started
@@ -108,24 +144,8 @@ fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
     .join()
     .expect("the starting thread")
     .expect("threads");
-    let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
-    let stop = Arc::new(AtomicBool::new(false));
-    let room = Spinner {
-        cost: Duration::from_millis(2),
-        off_cpu: false,
-        cheap_after: None,
-        epoch: Instant::now(),
-        ticks: 0,
-        counted: counted.clone(),
-        stop: stop.clone(),
-    };
-    let cell = Arc::new(RoomCell::new("slow".into(), 1000.0, Box::new(|_| {})));
-    executor.place(Box::new(room), cell.clone()).expect("placed");
-    let waited = Instant::now();
-    while cell.quarantine_report().is_none() {
-        assert!(waited.elapsed() < Duration::from_secs(10), "never quarantined: cost {:?}", cell.cost());
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let (cell, counted, stop) = place_spinner(&executor, "slow", false, None);
+    wait_until_quarantined(&cell);
     assert!(cell.quarantined());
     assert!(matches!(executor.admit_user(&cell), Err(OverBudget { .. })), "a quarantined room admits a user");
     let (busy_at, ticks_at, since) =
@@ -154,19 +174,7 @@ fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
 #[test]
 fn a_room_whose_thread_is_preempted_mid_tick_is_not_quarantined() {
     let executor = Executor::start(1, false, None, None).expect("threads");
-    let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
-    let stop = Arc::new(AtomicBool::new(false));
-    let room = Spinner {
-        cost: Duration::from_millis(2),
-        off_cpu: true,
-        cheap_after: None,
-        epoch: Instant::now(),
-        ticks: 0,
-        counted: counted.clone(),
-        stop: stop.clone(),
-    };
-    let cell = Arc::new(RoomCell::new("preempted".into(), 1000.0, Box::new(|_| {})));
-    executor.place(Box::new(room), cell.clone()).expect("placed");
+    let (cell, counted, stop) = place_spinner(&executor, "preempted", true, None);
     std::thread::sleep(Duration::from_millis(300));
     let (quarantined, admitted, cost) = (cell.quarantined(), executor.admit_user(&cell), cell.cost());
     stop.store(true, Ordering::Relaxed);
@@ -182,24 +190,8 @@ fn a_room_whose_thread_is_preempted_mid_tick_is_not_quarantined() {
 #[test]
 fn a_quarantined_room_that_becomes_cheap_again_is_released_and_admits_users() {
     let executor = Executor::start(1, false, None, None).expect("threads");
-    let counted = Arc::new((AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)));
-    let stop = Arc::new(AtomicBool::new(false));
-    let room = Spinner {
-        cost: Duration::from_millis(2),
-        off_cpu: false,
-        cheap_after: Some(20),
-        epoch: Instant::now(),
-        ticks: 0,
-        counted: counted.clone(),
-        stop: stop.clone(),
-    };
-    let cell = Arc::new(RoomCell::new("storm".into(), 1000.0, Box::new(|_| {})));
-    executor.place(Box::new(room), cell.clone()).expect("placed");
-    let waited = Instant::now();
-    while cell.quarantine_report().is_none() {
-        assert!(waited.elapsed() < Duration::from_secs(10), "never quarantined: cost {:?}", cell.cost());
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let (cell, counted, stop) = place_spinner(&executor, "storm", false, Some(20));
+    wait_until_quarantined(&cell);
     let refused = executor.admit_user(&cell);
     let waited = Instant::now();
     while cell.quarantined() && waited.elapsed() < quarantine::CALM_TO_RELEASE * 5 {
