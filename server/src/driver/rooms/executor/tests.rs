@@ -174,7 +174,7 @@ fn a_room_over_budget_is_quarantined_and_its_cpu_share_stays_under_the_cap() {
 #[test]
 fn a_room_whose_thread_is_preempted_mid_tick_is_not_quarantined() {
     let executor = Executor::start(1, false, None, None).expect("threads");
-    let (cell, counted, stop) = place_spinner(&executor, "preempted", true, None);
+    let (cell, _, stop) = place_spinner(&executor, "preempted", true, None);
     std::thread::sleep(Duration::from_millis(300));
     let (quarantined, admitted, cost) = (cell.quarantined(), executor.admit_user(&cell), cell.cost());
     stop.store(true, Ordering::Relaxed);
