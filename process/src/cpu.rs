@@ -2,7 +2,7 @@
 //! to its deadline, reports it beside its timing, so a figure bought by spinning shows its cost) and the
 //! whole process's (a load generator reports it beside what it drove).
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// CPU time the calling thread has used since it started (user and system), or `None` where the platform
 /// has no per-thread CPU clock. A system call rather than a vDSO read, an order of magnitude dearer than
@@ -15,6 +15,20 @@ pub fn thread_cpu_time() -> Option<Duration> {
     #[cfg(not(unix))]
     {
         None
+    }
+}
+
+/// Spins the calling thread until it has used `cost` of CPU time since `cpu_at_start` (its reading of
+/// [`thread_cpu_time`] taken at `wall_at_start`), or, without a thread CPU clock, until `cost` of wall time
+/// has passed: a test load that costs what it says on a busy host, where a preempted spin takes longer in
+/// wall time rather than less of the CPU.
+pub fn spin_until_spent(cpu_at_start: Option<Duration>, wall_at_start: Instant, cost: Duration) {
+    let spent = || match (cpu_at_start, thread_cpu_time()) {
+        (Some(before), Some(now)) => now.saturating_sub(before),
+        _ => wall_at_start.elapsed(),
+    };
+    while spent() < cost {
+        std::hint::spin_loop();
     }
 }
 

@@ -195,6 +195,12 @@ impl RoomCell {
         }
     }
 
+    /// Its thread sends it to the quarantine: it admits no one from here, and the send is counted.
+    fn send_to_quarantine(&self) {
+        self.quarantined.store(true, Ordering::Relaxed);
+        self.quarantines.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// The quarantine let it go to real-time thread `index`: it is measured afresh there and admits users.
     fn end_quarantine(&self, index: usize) {
         if let Ok(mut tally) = self.quarantine.lock() {
@@ -639,8 +645,7 @@ fn run_thread(mut inbox: Consumer<Slot>, stop: &AtomicBool, quarantine: &ThreadE
             match ticked {
                 Ok(()) if cell.overruns() => {
                     let slot = slots.swap_remove(i);
-                    slot.cell.quarantined.store(true, Ordering::Relaxed);
-                    slot.cell.quarantines.fetch_add(1, Ordering::Relaxed);
+                    slot.cell.send_to_quarantine();
                     tracing::warn!(room = %cell.name, cost_us = cell.cost().as_secs_f64() * 1e6, "the room overruns its share; moved to the quarantine thread");
                     push(quarantine, slot);
                 }

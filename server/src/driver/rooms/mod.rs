@@ -212,13 +212,7 @@ impl<S: Space> Hosted<S> {
             panic!("test knob: debug_panic_after_ticks");
         }
         if let Some(cost) = self.knobs.cost {
-            let spent = || match (cpu_started, kinloop_process::cpu::thread_cpu_time()) {
-                (Some(before), Some(now)) => now.saturating_sub(before),
-                _ => started.elapsed(),
-            };
-            while spent() < cost {
-                std::hint::spin_loop();
-            }
+            kinloop_process::cpu::spin_until_spent(cpu_started, started, cost);
         }
     }
 }

@@ -63,18 +63,15 @@ impl Steppable for Spinner {
     }
     fn tick(&mut self) {
         let (started, cpu) = (Instant::now(), kinloop_process::cpu::thread_cpu_time());
-        let spent = || kinloop_process::cpu::thread_cpu_time().zip(cpu).map_or(Duration::ZERO, |(b, a)| b - a);
         if self.off_cpu {
             std::thread::sleep(self.cost);
         } else {
             // CPU time, as the executor charges it: a busy host that preempts the spin lengthens the tick
             // in wall time, not its cost.
-            while spent() < self.cost {
-                std::hint::spin_loop();
-            }
+            kinloop_process::cpu::spin_until_spent(cpu, started, self.cost);
         }
         self.ticks = (started.duration_since(self.epoch).as_millis() as u64 + 1).max(self.ticks + 1);
-        let busy = spent();
+        let busy = kinloop_process::cpu::thread_cpu_time().zip(cpu).map_or(Duration::ZERO, |(b, a)| b - a);
         self.counted.0.fetch_add(busy.as_nanos() as u64, Ordering::Relaxed);
     }
     fn tick_behind(&mut self) {
