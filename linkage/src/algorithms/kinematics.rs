@@ -22,10 +22,16 @@ pub fn forward_kinematics<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DV
 /// The geometric part of [`forward_kinematics`]: body poses and motion subspaces, what the loop closure's h
 /// and W need, but not the centres of mass and spatial inertias, which keep their values from the last full
 /// evaluation (the projection after a step evaluates the closure this way; the next step's dynamics redo it
-/// all).
+/// all). Poses already evaluated at exactly this q are kept (`Data::poses_at`): they depend on q alone, so
+/// the result is the same bits either way, and the next step's dynamics start at the q the projection last
+/// evaluated.
 pub fn forward_poses<S: Space>(model: &Model<S>, data: &mut Data<S>, q: &DVector<f64>) {
     data.terms_at.clear();
     data.mass_matrix_fresh = false;
+    if data.poses_at.holds(q) {
+        return;
+    }
+    data.poses_at.record(q);
     let kin = &mut data.kin;
     let q = q.as_slice();
     // The pose of joint i - 1's body, kept in registers for a child that follows its parent (as in a chain):
@@ -164,5 +170,33 @@ mod tests {
             .kin
             .point(&crate::model::Attachment::<Planar> { body: Some(3), point: nalgebra::Vector2::new(0.06, 0.0) });
         assert!((tip.x - 0.000645).abs() < 5e-7 && (tip.y - 0.008528).abs() < 5e-7, "{tip}");
+    }
+
+    /// Poses already evaluated at exactly the q asked for are kept, and they are bit for bit what a fresh
+    /// workspace evaluates; another q is evaluated afresh, also after a detour.
+    #[test]
+    fn poses_are_kept_exactly_when_q_is_the_same() {
+        let model = paper_testbed();
+        let (q, _) = random_state(&model, 3);
+        let mut q2 = q.clone();
+        q2[1] += 1e-9;
+        let poses = |data: &Data<Planar>| format!("{:?}", (&data.kin.body_rot, &data.kin.body_pos, &data.kin.motion_subspace));
+        let fresh = |q: &DVector<f64>| {
+            let mut data = Data::new(&model);
+            forward_kinematics(&model, &mut data, q);
+            poses(&data)
+        };
+        let mut data = Data::new(&model);
+        for at in [&q, &q, &q2, &q, &q2, &q2] {
+            forward_kinematics(&model, &mut data, at);
+            assert_eq!(poses(&data), fresh(at));
+        }
+        assert_ne!(fresh(&q), fresh(&q2));
+        // Kept, not evaluated again: a pose written over survives an evaluation at the same q, not at another.
+        data.kin.body_pos[0].x = 7.0;
+        forward_poses(&model, &mut data, &q2);
+        assert_eq!(data.kin.body_pos[0].x, 7.0);
+        forward_poses(&model, &mut data, &q);
+        assert_eq!(poses(&data), fresh(&q));
     }
 }

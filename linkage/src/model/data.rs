@@ -188,43 +188,76 @@ pub struct Data<S: Space> {
     pub integ: IntegratorWorkspace,
     /// The state at which the position- and velocity-dependent terms above were last evaluated.
     pub(crate) terms_at: TermsMemo,
+    /// The configuration at which `forward_poses` last evaluated the body poses and motion subspaces in
+    /// `kin`: the projection after a step evaluates them at the q it returns, and the next step's kinematics,
+    /// at that same q, reuse them.
+    pub(crate) poses_at: BitsMemo,
+}
+
+/// A vector remembered bit for bit, or nothing: `holds(x)` is true when `x` is exactly what was last
+/// recorded and nothing cleared it since.
+#[derive(Clone, Debug)]
+pub(crate) struct BitsMemo {
+    values: DVector<f64>,
+    valid: bool,
+}
+
+impl BitsMemo {
+    fn new(len: usize) -> Self {
+        BitsMemo { values: DVector::zeros(len), valid: false }
+    }
+
+    /// True when `x` is bit for bit what was recorded, and nothing has cleared it since.
+    pub(crate) fn holds(&self, x: &DVector<f64>) -> bool {
+        // On slices: nalgebra's element iterators cost several times more per entry. A miss usually differs
+        // in the first entry, so it costs one comparison.
+        self.valid
+            && self.values.len() == x.len()
+            && self.values.as_slice().iter().zip(x.as_slice()).all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+
+    /// Records `x`.
+    pub(crate) fn record(&mut self, x: &DVector<f64>) {
+        crate::math::dense::copy(self.values.as_mut_slice(), x.as_slice());
+        self.valid = true;
+    }
+
+    /// Forgets what was recorded.
+    pub(crate) fn clear(&mut self) {
+        self.valid = false;
+    }
 }
 
 /// The state `(q, q̇)` at which `dynamics_terms` last evaluated everything but the applied forces, so that
 /// an evaluation at the same state (the VE server's next step, at the state its snapshots just probed)
 /// recomputes only the forces. Exact: a hit needs the very same bits, and whatever changes the kinematics
-/// (`forward_poses`, `forward_velocity`) clears it.
+/// (`forward_poses` at another q, `forward_velocity`) clears it.
 #[derive(Clone, Debug)]
 pub(crate) struct TermsMemo {
-    q: DVector<f64>,
-    qd: DVector<f64>,
-    valid: bool,
+    q: BitsMemo,
+    qd: BitsMemo,
 }
 
 impl TermsMemo {
     fn new(nq: usize, nv: usize) -> Self {
-        TermsMemo { q: DVector::zeros(nq), qd: DVector::zeros(nv), valid: false }
+        TermsMemo { q: BitsMemo::new(nq), qd: BitsMemo::new(nv) }
     }
 
     /// True when the terms were evaluated at exactly `(q, q̇)` and nothing has touched them since.
     pub(crate) fn holds(&self, q: &DVector<f64>, qd: &DVector<f64>) -> bool {
-        // On slices: nalgebra's element iterators cost several times more per entry.
-        let same = |a: &DVector<f64>, b: &DVector<f64>| {
-            a.len() == b.len() && a.as_slice().iter().zip(b.as_slice()).all(|(x, y)| x.to_bits() == y.to_bits())
-        };
-        self.valid && same(&self.q, q) && same(&self.qd, qd)
+        self.q.holds(q) && self.qd.holds(qd)
     }
 
     /// Records that the terms now belong to `(q, q̇)`.
     pub(crate) fn record(&mut self, q: &DVector<f64>, qd: &DVector<f64>) {
-        crate::math::dense::copy(self.q.as_mut_slice(), q.as_slice());
-        crate::math::dense::copy(self.qd.as_mut_slice(), qd.as_slice());
-        self.valid = true;
+        self.q.record(q);
+        self.qd.record(qd);
     }
 
     /// Forgets the state: the kinematics are being changed.
     pub(crate) fn clear(&mut self) {
-        self.valid = false;
+        self.q.clear();
+        self.qd.clear();
     }
 }
 
@@ -250,6 +283,7 @@ impl<S: Space> Data<S> {
             implicit_mass: DMatrix::zeros(n, n),
             use_implicit_mass: false,
             terms_at: TermsMemo::new(nq, n),
+            poses_at: BitsMemo::new(nq),
             closure_residual: DVector::zeros(m),
             closure_jacobian_t: DMatrix::zeros(n, m),
             closure_bias: DVector::zeros(m),
