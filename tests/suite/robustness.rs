@@ -88,6 +88,40 @@ fn seed_27s_rocker_at_300_ms_holds_its_local_model_on_the_rockers_swing() {
     );
 }
 
+/// Seed 8's slider (an inclined slider-crank in SI) on a Falcon at 300 ms one way: the VE first hears the
+/// client a round trip after the join, longer than the server's silent timeout. Until then the grasp holds
+/// the linkage where the client's local model starts, at rest: the VE's OP moves less than a thousandth of
+/// the linkage's length scale. The load then passes to the user over the fade and four round trips, as the
+/// hand's force channel takes it up, and the session is stable (no divergence, sustained saturation, energy
+/// growth or restore). With the grasp fading out as silent 250 ms after the join and the hold given up to the
+/// PD's share, the same session restored the VE, diverged and grew energy.
+#[test]
+fn seed_8s_slider_at_300_ms_waits_for_its_user_and_hands_the_load_over_stably() {
+    use kinloop::experiments::robustness::{evaluate, session_plan};
+    use kinloop_linkage::math::space::Planar;
+    use kinloop_linkage::model::Model;
+    let linkage = generate(8, None);
+    let length_scale = Model::<Planar>::compile(&linkage.scene, &linkage.scene.name).expect("planar").length_scale;
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[300]);
+    let point = all.iter().find(|p| p.op == "op-slider" && p.device.name() == "sim:falcon").expect("the slider");
+    let plan = session_plan(&linkage, point, 10.0);
+    let (_, recording) = kinloop_harness::run(&plan, &mut |_| {}).expect("the session runs");
+    let unheard: Vec<&[f64]> = recording.clients[0]
+        .iter()
+        .filter(|s| s.ve_heard_s.is_none_or(|h| h <= 0.0))
+        .filter_map(|s| s.ve_op.as_deref())
+        .collect();
+    assert!(unheard.len() > 500, "the VE hears the client a round trip after the join: {} ticks", unheard.len());
+    let moved = unheard.iter().map(|p| (p[0] - unheard[0][0]).hypot(p[1] - unheard[0][1])).fold(0.0, f64::max);
+    assert!(
+        moved < 1e-3 * length_scale,
+        "the VE's OP moved {:.2e} of the length scale before it heard the client",
+        moved / length_scale
+    );
+    let outcome = evaluate(&linkage, point, 10.0);
+    assert!(outcome.stable && outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
+}
+
 /// The model's largest distance off the VE's circle (a fraction of its radius) and when.
 struct Worst {
     off: f64,

@@ -6,12 +6,23 @@
 //! (`kinloop_linkage::algorithms::reach::static_op_load`: the OP wrench that cancels gravity's and the
 //! springs' acceleration in the OP's free directions, taken at the state the carrier took the hold in) and
 //! `σ ∈ [0, 1]` the share still held. Each tick:
-//! - `σ ← min(σ, 1 − s)`, with `s` the share of `L` that the carrier's last applied wrench (its faded hand
-//!   and PD, the hold left out) carries along `L` (in unit-consistent coordinates `(f, τ / ℓ)`, ℓ the
-//!   scene's length scale): what the coupling has taken over is not held twice;
-//! - once the carrier's coupling is fully in, `σ` falls by `dt / fade_time`: the rest of the load passes to
-//!   the coupling over one more fade, slowly enough that the OP sinks into the spring without passing its
-//!   rest.
+//! - `σ ← min(σ, 1 − s)`, with `s` the share of `L` that the carrier's force channel carries along `L` as
+//!   the VE applies it (the user's hand wrench as heard and any load held for the user, faded; in
+//!   unit-consistent coordinates `(f, τ / ℓ)`, ℓ the scene's length scale): what the user's hand has taken
+//!   over is not held twice. The PD's share does not count: a PD stretched toward a local model that has
+//!   not yet felt the load is not a hand that carries it, and giving the hold up to it hands the load to a
+//!   spring whose user answers a round trip later;
+//! - once the carrier's coupling is fully in and has heard its user (an uplink, not only the grasp at the
+//!   join), `σ` falls by `dt / (fade_time + ANSWER_ROUND_TRIPS · T)`, `T` how long the handover waited for
+//!   that first uplink (the round trip as this join lived it). The user's hand can answer a release only a
+//!   round trip after it (the snapshot's b̂ carries the hold, so the local model feels the load as the hold
+//!   lets go), so the part of `L` that neither the hold nor the hand as heard carries, which the PD is left
+//!   with, stays below `T / (fade_time + ANSWER_ROUND_TRIPS · T)` of it, under `1 / ANSWER_ROUND_TRIPS`
+//!   at any delay; without delay the load passes over one more fade, slowly enough that the OP sinks into
+//!   the spring without passing its rest. Before the first uplink the grasp's PD holds the join's pose,
+//!   where the user's local model starts, and `σ` does not fall: the load passed to it then would sink the
+//!   OP by `L / K_g` (centimetres at the device for a heavy link on a light OP) a round trip before the
+//!   user's hand could take it up.
 //!
 //! `σ` never rises during a handover, so the hold only ever lets go.
 //!
@@ -33,6 +44,10 @@ use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::coupling::Coupling;
 
+/// How many round trips, beyond the fade, the hold takes to let go once its carrier is heard: the part of
+/// the load the hand has not yet answered stays under the inverse of this (see the module documentation).
+pub const ANSWER_ROUND_TRIPS: f64 = 4.0;
+
 /// The handover in flight (see the module documentation).
 #[derive(Clone, Copy, Debug)]
 pub struct Handover<S: Space> {
@@ -42,11 +57,14 @@ pub struct Handover<S: Space> {
     pub load: S::OpVec,
     /// Index of the carrier among the couplings (valid for the tick it was chosen in).
     pub carrier: Option<usize>,
+    /// How long the handover waited for its carrier's first uplink (s): the round trip as this join lived
+    /// it (the welcome's way down, the first uplink's way up, and the playout's wait).
+    pub waited_s: f64,
 }
 
 impl<S: Space> Default for Handover<S> {
     fn default() -> Self {
-        Handover { share: 0.0, load: S::OpVec::zero(), carrier: None }
+        Handover { share: 0.0, load: S::OpVec::zero(), carrier: None, waited_s: 0.0 }
     }
 }
 
@@ -73,12 +91,12 @@ pub fn carried_share<S: Space>(wrench: &S::OpVec, load: &S::OpVec, length_scale:
     }
 }
 
-/// `s` for the coming tick, from the couplings as the last step left them (before `update_couplings` clears
-/// their step wrenches): the carrier's applied wrench without its hold.
+/// `s` for the coming tick, from the couplings as the last tick left them: the carrier's force channel
+/// (`Coupling::hand_part`).
 pub fn before_tick<S: Space>(handover: &Handover<S>, couplings: &[Coupling<S>], length_scale: f64) -> Before {
     let unheld = couplings.iter().all(|c| c.weight <= 0.0);
     let carried = match handover.carrier.and_then(|i| couplings.get(i)) {
-        Some(c) if handover.share > 0.0 => carried_share::<S>(&(c.step_wrench - c.hold), &handover.load, length_scale),
+        Some(c) if handover.share > 0.0 => carried_share::<S>(&c.hand_part(), &handover.load, length_scale),
         _ => 0.0,
     };
     Before { unheld, carried }
@@ -107,19 +125,21 @@ impl<S: Space> Handover<S> {
     }
 
     /// One tick's update of σ and the carrier, after the couplings' weights for the tick are set; `load_at`
-    /// gives `L` at a coupling's OP (called when a handover begins or the hold moves). `fade_step` is
-    /// `dt / fade_time`. Writes each coupling's `hold` (σ L at the carrier, zero elsewhere).
+    /// gives `L` at a coupling's OP (called when a handover begins or the hold moves). `dt` is the tick and
+    /// `fade_s` the fade time (s). Writes each coupling's `hold` (σ L at the carrier, zero elsewhere).
     pub fn update(
         &mut self,
         before: Before,
         couplings: &mut [Coupling<S>],
-        fade_step: f64,
+        [dt, fade_s]: [f64; 2],
         mut load_at: impl FnMut(usize) -> S::OpVec,
     ) {
         let carrier = furthest_in(couplings);
         match carrier {
             None => *self = Handover::default(),
-            Some(i) if before.unheld => *self = Handover { share: 1.0, load: load_at(i), carrier: Some(i) },
+            Some(i) if before.unheld => {
+                *self = Handover { share: 1.0, load: load_at(i), carrier: Some(i), waited_s: 0.0 };
+            }
             Some(i) if self.share > 0.0 => {
                 if self.carrier == Some(i) {
                     self.share = self.share.min(1.0 - before.carried);
@@ -127,8 +147,10 @@ impl<S: Space> Handover<S> {
                     self.load = load_at(i);
                     self.carrier = Some(i);
                 }
-                if couplings[i].weight >= 1.0 {
-                    self.share -= fade_step;
+                if couplings[i].heard_time_s <= 0.0 {
+                    self.waited_s += dt;
+                } else if couplings[i].weight >= 1.0 {
+                    self.share -= dt / (fade_s + ANSWER_ROUND_TRIPS * self.waited_s);
                 }
                 if self.share <= 0.0 || self.share.is_nan() {
                     *self = Handover::default();
@@ -148,10 +170,15 @@ mod tests {
     use kinloop_linkage::math::space::Planar;
     use nalgebra::{Vector2, Vector3};
 
+    /// A 1 ms tick and a 0.2 s fade: `dt / fade_time` = 0.005.
+    const TICK: [f64; 2] = [1e-3, 0.2];
+
+    /// A pushing coupling at `weight` that has heard its user (an uplink at client time 1 s).
     fn coupling(weight: f64) -> Coupling<Planar> {
         let mut c = Coupling::<Planar>::new(1, Vector2::zeros(), 3, Vector3::repeat(1.0), Vector3::repeat(0.1));
         c.pushes = true;
         c.weight = weight;
+        c.heard_time_s = 1.0;
         c
     }
 
@@ -177,7 +204,7 @@ mod tests {
 
     /// A handover begins at a join onto a resting linkage, holds all of L through the fade when the coupling
     /// carries none of it, gives up what the coupling takes over, falls by `dt / fade_time` once the coupling
-    /// is in, and never rises; nobody holding ends it, and a linkage already held gets none.
+    /// is in (heard without waiting), and never rises; nobody holding ends it, and a linkage already held gets none.
     #[test]
     fn the_hold_begins_at_rest_gives_up_what_is_carried_and_falls_once_the_coupling_is_in() {
         let load = Vector3::new(0.0, 3.0, 0.0);
@@ -185,30 +212,30 @@ mod tests {
         let mut h = Handover::<Planar>::default();
         let unheld = Before { unheld: true, carried: 0.0 };
         couplings[0].weight = 0.01;
-        h.update(unheld, &mut couplings, 0.005, |_| load);
+        h.update(unheld, &mut couplings, TICK, |_| load);
         assert_eq!((h.share, h.carrier), (1.0, Some(0)));
         assert_eq!(couplings[0].hold, load);
         // Mid-fade the coupling carries 30 %: the hold gives it up; then it carries less: σ does not rise.
         couplings[0].weight = 0.5;
-        h.update(Before { unheld: false, carried: 0.3 }, &mut couplings, 0.005, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.3 }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.7).abs() < 1e-15);
-        h.update(Before { unheld: false, carried: 0.1 }, &mut couplings, 0.005, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.1 }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.7).abs() < 1e-15);
         // Fully in: it falls by the fade's step each tick, to zero, and stays there.
         couplings[0].weight = 1.0;
-        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.695).abs() < 1e-12);
         for _ in 0..200 {
-            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
         }
         assert_eq!((h.share, h.carrier, couplings[0].hold), (0.0, None, Vector3::zeros()));
         // A second user joining a held linkage: no hold.
         couplings.push(coupling(0.01));
-        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, 0.005, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
         assert_eq!((h.share, couplings[1].hold), (0.0, Vector3::zeros()));
         // Nobody holds: no hold.
         couplings.iter_mut().for_each(|c| c.weight = 0.0);
-        h.update(unheld, &mut couplings, 0.005, |_| unreachable!());
+        h.update(unheld, &mut couplings, TICK, |_| unreachable!());
         assert_eq!(h.carrier, None);
     }
 
@@ -219,15 +246,50 @@ mod tests {
         let mut couplings = vec![coupling(0.2), coupling(0.2)];
         let mut h = Handover::<Planar>::default();
         let load_at = |i: usize| Vector3::new(0.0, 1.0 + i as f64, 0.0);
-        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, 0.005, load_at);
+        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, TICK, load_at);
         assert_eq!(h.carrier, Some(0), "the earliest on a tie");
-        h.update(Before { unheld: false, carried: 0.4 }, &mut couplings, 0.005, load_at);
+        h.update(Before { unheld: false, carried: 0.4 }, &mut couplings, TICK, load_at);
         couplings[0].weight = 0.1;
         couplings[1].weight = 0.3;
-        h.update(Before { unheld: false, carried: 0.9 }, &mut couplings, 0.005, load_at);
+        h.update(Before { unheld: false, carried: 0.9 }, &mut couplings, TICK, load_at);
         assert_eq!(h.carrier, Some(1));
         assert!((h.share - 0.6).abs() < 1e-15, "the old carrier's share is not applied to the new load");
         assert_eq!(couplings[0].hold, Vector3::zeros());
         assert!((couplings[1].hold - Vector3::new(0.0, 1.2, 0.0)).norm() < 1e-15);
+    }
+
+    /// A carrier not yet heard (the grasp at the join, before the first uplink) keeps the whole hold, fully
+    /// faded in or not; once heard, σ falls over the fade plus `ANSWER_ROUND_TRIPS` times the wait, so what the
+    /// hand has not answered a round trip after a release stays under `1 / ANSWER_ROUND_TRIPS` of L.
+    #[test]
+    fn the_hold_waits_for_its_user_and_lets_go_over_the_round_trips_it_waited() {
+        let load = Vector3::new(0.0, 3.0, 0.0);
+        let mut couplings = vec![coupling(0.01)];
+        couplings[0].heard_time_s = 0.0;
+        let mut h = Handover::<Planar>::default();
+        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, TICK, |_| load);
+        couplings[0].weight = 1.0;
+        // 600 ticks unheard (a 0.6 s round trip): nothing let go.
+        for _ in 0..600 {
+            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+        }
+        assert_eq!(h.share, 1.0);
+        assert!((h.waited_s - 0.6).abs() < 1e-9, "{}", h.waited_s);
+        couplings[0].heard_time_s = 1.0;
+        let tau = 0.2 + ANSWER_ROUND_TRIPS * 0.6;
+        let ticks = 600;
+        for _ in 0..ticks {
+            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+        }
+        // Over one round trip σ gave up T / τ of L, under 1 / ANSWER_ROUND_TRIPS.
+        let given_up = 1.0 - h.share;
+        assert!((given_up - 0.6 / tau).abs() < 1e-9, "{given_up} against {}", 0.6 / tau);
+        assert!(given_up < 1.0 / ANSWER_ROUND_TRIPS);
+        // The PD's stretch is not a hand: only the force channel's share counts, and it ends the hold.
+        couplings[0].hand_wrench = load;
+        let before = before_tick(&h, &couplings, 1.0);
+        assert!((before.carried - 1.0).abs() < 1e-15);
+        h.update(before, &mut couplings, TICK, |_| unreachable!());
+        assert_eq!((h.share, h.carrier), (0.0, None));
     }
 }

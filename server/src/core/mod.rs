@@ -381,8 +381,12 @@ impl<S: Space> VeCore<S> {
     ///
     /// A manipulator grasps its OP at the join: its coupling fades in at once, holding the OP where it is
     /// (no hand wrench, the OP's pose as the reference) until the user's first uplink takes over, and fades
-    /// out again if none comes within `silent_timeout`. Otherwise a linkage under gravity would fall for the
-    /// network's round trip and the fade-in, and the user's first moments would be spent catching it.
+    /// out again if none comes within `silent_timeout` of when one could first come: a measured round trip
+    /// after the join (the welcome's way down, the first uplink's way up). Otherwise a linkage under gravity
+    /// would fall for the network's round trip and the fade-in, and the user's first moments would be spent
+    /// catching it; and over a round trip longer than `silent_timeout` the grasp would fade out before any
+    /// uplink could arrive, and the linkage fall away from the pose the user's local model starts at (the
+    /// grasp's, at rest).
     ///
     /// The user's round trip is not measured here: its coupling gets the default frequency
     /// ([`VeCore::join_measured`] takes the driver's measurement).
@@ -479,8 +483,9 @@ impl<S: Space> VeCore<S> {
             mapping,
             presence: Presence::Present,
             last_seq: None,
-            // The grasp counts as the user's first word (see above).
-            last_uplink_at: manipulator.then_some(now),
+            // The grasp counts as the user's first word, said when the first uplink could be heard at the
+            // earliest (see above).
+            last_uplink_at: manipulator.then_some(now + round_trip.unwrap_or(Duration::ZERO)),
             silent: !manipulator,
             fade: Fade::off(),
             passivity: PassivityObserver::default(),

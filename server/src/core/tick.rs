@@ -217,7 +217,7 @@ impl<S: Space> VeCore<S> {
         if self.config.rest_unheld {
             let (model, q, users) = (&self.model, &self.q, &self.users);
             let held = &mut self.held;
-            self.handover.update(before, &mut self.couplings, dt / fade_s, |i| match held.as_mut() {
+            self.handover.update(before, &mut self.couplings, [dt, fade_s], |i| match held.as_mut() {
                 Some((data, at_rest)) => static_load(model, data, at_rest, q, users[i].op),
                 None => S::OpVec::zero(),
             });
