@@ -180,7 +180,8 @@ mod tests {
         let (q, _) = random_state(&model, 3);
         let mut q2 = q.clone();
         q2[1] += 1e-9;
-        let poses = |data: &Data<Planar>| format!("{:?}", (&data.kin.body_rot, &data.kin.body_pos, &data.kin.motion_subspace));
+        let poses =
+            |data: &Data<Planar>| format!("{:?}", (&data.kin.body_rot, &data.kin.body_pos, &data.kin.motion_subspace));
         let fresh = |q: &DVector<f64>| {
             let mut data = Data::new(&model);
             forward_kinematics(&model, &mut data, q);
