@@ -233,3 +233,73 @@ fn seed_20s_crank_on_the_paper_device_without_delay_gains_no_energy() {
     let outcome = evaluate(&linkage, point, 10.0);
     assert!(outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
 }
+
+/// Seed 8's coupler (an inclined slider-crank) on the paper's device without delay: mapped to fill the
+/// workspace, the linkage's lightest mass felt on the device is far below what the 1 kg handle can be made to
+/// feel, and the position channels dragged the handle after it at the force limit (99.6 % of ticks clamped,
+/// 206 mm RMS). With the reach narrowed until the linkage feels no lighter than the handle can be made, with
+/// a margin (`design::reach_narrowing`), the session renders.
+#[test]
+fn seed_8s_coupler_on_the_paper_device_without_delay_renders_with_its_reach_narrowed() {
+    use kinloop::experiments::robustness::{evaluate, SECONDS};
+    let linkage = generate(8, None);
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
+    let point =
+        all.iter().find(|p| p.op == "op-coupler" && p.device.name() == "sim:paper").expect("the coupler on sim:paper");
+    let outcome = evaluate(&linkage, point, SECONDS / 4.0);
+    assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+}
+
+/// The serial arm's tip on the paper's device at 50 ms with a soft hand, its reach narrowed to 0.07 (about
+/// 0.4 of the workspace's fill, where one narrowing factor for the whole arm would put it): there the arm
+/// hangs into its stretched, singular pose (the snapshots show a constrained direction) and the impedance
+/// controller, rendering `Λ̂⁻¹` and `b̂` linearized a round trip away, hands the hand energy the linkage never
+/// had (energy growth). Faded with the linearization's trust, as the joint-constraint controller is, the
+/// session renders.
+#[test]
+fn the_serial_arms_tip_narrowed_at_50_ms_stays_out_of_its_singular_pose() {
+    use kinloop::experiments::renderability::{judged, plan, Network, Point, SECONDS};
+    use kinloop_client::device::presets::DevicePreset;
+    let point = Point {
+        scene: "serial-arm".into(),
+        op: "tip".into(),
+        device: DevicePreset::Paper,
+        network: Network::Delayed50,
+        hand: HandKind::Soft,
+    };
+    let mut session = plan(&point, SECONDS).unwrap();
+    session.clients[0].mapping.position_scale = Some(0.07);
+    let (summary, recording) = kinloop_harness::run(&session, &mut |_| {}).unwrap();
+    let result = judged(&point, &summary, &recording);
+    let constrained = recording.clients[0].iter().filter(|s| s.constraint_count > 0).count();
+    assert!(result.renders, "{:?} ({constrained} ticks at a singular pose)", result.failures);
+}
+
+/// Four users on the crank-rocker, two at the coupler and two at the crank tip, touring on paper devices
+/// without delay: their hands fight through one degree of freedom. Each OP's reach narrowed by its own
+/// factor (0.72 and 0.31), the coupler users felt the crank tip's firm hands 5.4 times stiffer than with
+/// both at the fill and their devices saturated; narrowed by the linkage's one factor, none is clamped.
+#[test]
+fn four_users_on_two_ops_of_a_narrowed_crank_rocker_share_it_without_saturating() {
+    use kinloop_client::device::presets::DevicePreset;
+    use kinloop_client::user::{HandSpec, UserSpec};
+    use kinloop_harness::{ClientPlan, SessionPlan};
+    use std::time::Duration;
+    let clients = (0..4)
+        .map(|i| {
+            let op = ["coupler", "crank-tip"][i % 2];
+            let mut c = ClientPlan::new(&format!("user{}", i + 1), op, DevicePreset::Paper);
+            let hand = if i % 2 == 0 { HandKind::Soft } else { HandKind::Firm };
+            c.user = UserSpec::Hand(HandSpec::touring(hand));
+            c
+        })
+        .collect();
+    let mut ve = kinloop_server::core::VeConfig::default();
+    ve.max_users = ve.max_users.max(4);
+    let scene = kinloop_linkage::model::builtin::scene("fourbar-crank-rocker").unwrap().unwrap();
+    let plan = SessionPlan { scene, ve, clients, duration: Duration::from_secs(10), record_every: 0 };
+    let (summary, _) = kinloop_harness::run(&plan, &mut |_| {}).unwrap();
+    for c in &summary.clients {
+        assert!(c.saturated_fraction < 0.01, "{}: {:.1} % clamped", c.name, c.saturated_fraction * 100.0);
+    }
+}

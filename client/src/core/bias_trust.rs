@@ -21,9 +21,30 @@
 use kinloop_linkage::algorithms::constraint_directions::scale_op;
 use kinloop_linkage::math::space::{Space, VecOps};
 
+use super::passive_update::EnergyTank;
+
+/// Most energy b̂'s feedforward may put into the device beyond what the hand put in against it (J at the
+/// device): a linkage's own b̂ (gravity, springs) gives back what the hand stored lifting or stretching it,
+/// up to this much, while a stale one, in phase with the motion it lags, would keep giving. Past it the
+/// device follows the model's pull through the position channels alone. See `HapticCore::pay_bias`.
+pub const BIAS_TANK_CAPACITY_J: f64 = 0.01;
+
 /// The most rates held at once: a horizon is at most the staleness limit (0.1 s by default), a kilohertz
 /// of snapshots; past this the oldest are forgotten (the held peak can then only be lower).
 const CAPACITY: usize = 256;
+
+/// The part of b̂'s feedforward `fed` (a wrench, VE units) that `tank` pays for this tick: its work on the
+/// device moving at `twist` over `dt_s`, `fed · ẋ dt`, is drawn from the tank (work against it fills the
+/// tank), and what the tank cannot pay is withheld. So over any interval the feedforward gives the device at
+/// most what the hand gave back to it plus the tank's capacity (see `HapticCore::pay_bias`).
+pub(crate) fn paid_bias<S: Space>(tank: &mut EnergyTank, fed: &S::OpVec, twist: &S::OpVec, dt_s: f64) -> S::OpVec {
+    let fraction = tank.admit(fed.dot(twist) * dt_s);
+    if fraction < 1.0 {
+        *fed * fraction.max(0.0)
+    } else {
+        *fed
+    }
+}
 
 /// b̂'s recent rate of change on the VE's clock (see the module documentation). Allocates nothing.
 #[derive(Clone, Debug)]
@@ -168,6 +189,51 @@ mod tests {
         assert_eq!(bias_weight(1.0, 0.05, 0.0), 0.0, "a change of a zero b̂: x is infinite");
         assert_eq!(bias_weight(f64::NAN, 0.05, 1.0), 0.0);
         assert!((bias_weight(2.0, 0.5, 1.0) - 0.5).abs() < 1e-15);
+    }
+
+    /// b̂'s feedforward paid from its tank, against the work it does (closed forms on one axis, 1 kHz): a
+    /// stale b̂ in phase with the motion (`F = A sin ωt` on a device moving at `V sin ωt`) would put
+    /// `A V / 2` watts into the device; paid, it puts in no more than the tank held. A constant weight on a
+    /// device moved up and back down: the way up is paid in full and fills the tank (to its capacity), and
+    /// the way down is paid in full until the weight has given back what the tank holds, then withheld.
+    #[test]
+    fn the_tank_gives_back_what_was_stored_and_starves_a_pumping_bias() {
+        let capacity = 0.01;
+        let dt = 1e-3;
+        let mut tank = EnergyTank::new(capacity, 1.0);
+        let (amplitude, speed, omega) = (2.0, 0.1, 2.0 * std::f64::consts::PI * 3.0);
+        let mut given = 0.0;
+        for k in 0..10_000 {
+            let t = k as f64 * dt;
+            let fed = Vector3::new(amplitude * (omega * t).sin(), 0.0, 0.0);
+            let twist = Vector3::new(speed * (omega * t).sin(), 0.0, 0.0);
+            let paid = paid_bias::<Planar>(&mut tank, &fed, &twist, dt);
+            assert!(paid[0].abs() <= fed[0].abs() + 1e-15);
+            given += paid.dot(&twist) * dt;
+        }
+        let unpaid = amplitude * speed / 2.0 * 10.0;
+        assert!(given <= capacity * (1.0 + 1e-9), "given {given} J, unpaid it would be {unpaid} J");
+        assert!(given > 0.9 * capacity, "the tank's content is given: {given}");
+
+        // Emptied first, so that what the way down may give is what the way up stored.
+        let mut tank = EnergyTank::new(capacity, 1.0);
+        let (weight, speed) = (Vector3::new(0.0, -5.0, 0.0), 0.2);
+        let _ = paid_bias::<Planar>(&mut tank, &weight, &Vector3::new(0.0, -1.0, 0.0), 1.0);
+        let stored_per_tick = 5.0 * speed * dt;
+        for k in 0..1_000 {
+            let paid = paid_bias::<Planar>(&mut tank, &weight, &Vector3::new(0.0, speed, 0.0), dt);
+            assert_eq!(paid, weight, "up, tick {k}");
+        }
+        let mut given_back = 0.0;
+        for k in 0..1_000 {
+            let down = Vector3::new(0.0, -speed, 0.0);
+            let paid = paid_bias::<Planar>(&mut tank, &weight, &down, dt);
+            if (k as f64 + 1.0) * stored_per_tick <= capacity * (1.0 - 1e-9) {
+                assert_eq!(paid, weight, "down, tick {k}: paid in full");
+            }
+            given_back += paid.dot(&down) * dt;
+        }
+        assert!((given_back - capacity).abs() < 1e-12, "the way down gives back the tank: {given_back}");
     }
 
     /// Rates are taken on the server's clock: a repeated server time or one that goes back makes no rate

@@ -76,7 +76,7 @@ use index::{Boxes, DeviceIndex};
 use intake::SnapshotTerms;
 use model::LocalModel;
 use observer::HandObserver;
-use passive_update::UpdateTank;
+use passive_update::EnergyTank;
 use path_follower::PathFollower;
 use pose_memos::PoseMemos;
 use safety::{usable_device_state, OutputGate, WrenchLimits};
@@ -127,7 +127,9 @@ pub struct HapticCore<S: Space> {
     one_way_delay: Duration,
     deadband: Deadband<S>,
     /// The energy the model's updates may still put into the coupling (`passive_update`).
-    tank: UpdateTank,
+    tank: EnergyTank,
+    /// The energy b̂'s feedforward may still put into the device (`bias_trust::BIAS_TANK_CAPACITY_J`).
+    bias_tank: EnergyTank,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
     /// reaction) drives the model (`kinloop_protocol::passivity`); its books go up in every uplink.
     port: PortBooks,
@@ -213,7 +215,8 @@ impl<S: Space> HapticCore<S> {
             last_now: None,
             one_way_delay: Duration::ZERO,
             deadband: Deadband::new(config.deadband.map(|d| d.in_ve_units(&scales))),
-            tank: UpdateTank::new(scales.torque),
+            tank: EnergyTank::new(passive_update::TANK_CAPACITY_J, scales.torque),
+            bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             uplink,
@@ -355,7 +358,8 @@ impl<S: Space> HapticCore<S> {
         let intake = self.intake(now, device, hand_off);
         self.pull_model(now, dt_s, &intake, device.hand_wrench.is_some());
         let hand = self.step_model(dt_s, device, &intake);
-        let asked = self.controllers(now, &intake, &hand);
+        let mut asked = self.controllers(now, &intake, &hand);
+        self.pay_bias(dt_s, &intake, &mut asked);
         let out = self.safety(now, dt_s, &device.twist, &intake, &asked);
         let mut flags = intake.flags | out.flags;
         let send = self.uplink(now, &intake, &mut flags, &hand.model, &asked.model_pose);

@@ -10,7 +10,7 @@
 //! ([`energy_change`] of `½ eᵀ K_pc e + ½ k_j eᵀ T P̃ T e + ½ ẋᵀ Λ̂ ẋ`: the position channels' and the
 //! joint-constraint controller's springs, and the model's kinetic energy, heavy along the constrained
 //! directions), and paid from a tank
-//! ([`UpdateTank`]) that only the controllers' own dissipation fills: the energy their dampers took out of
+//! ([`EnergyTank`]) that only the controllers' own dissipation fills: the energy their dampers took out of
 //! the coupling, plus what earlier corrections gave back. A correction that would cost more than the tank
 //! holds is applied in part (the energy change is convex in the fraction applied, so the fraction
 //! `level / cost` costs at most the level); the rest waits for the next tick's discrepancy. So over any
@@ -79,20 +79,21 @@ pub(crate) fn coupling_energy<S: Space>(springs: &CouplingSprings<S>, error: &S:
 
 /// The energy the model's updates may still put into the coupling.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct UpdateTank {
+pub(crate) struct EnergyTank {
     /// Energy held, VE units.
     level_j: f64,
     /// [`TANK_CAPACITY_J`] in VE units.
     capacity: f64,
 }
 
-impl UpdateTank {
-    /// A full tank of [`TANK_CAPACITY_J`] for a device whose energy is `device_per_ve` times the VE's (the
-    /// mapping's torque scale `c_f c_p`): a session's first corrections find the model where the VE put it.
-    pub fn new(device_per_ve: f64) -> Self {
+impl EnergyTank {
+    /// A full tank of `capacity_j` joules at the device for a device whose energy is `device_per_ve` times
+    /// the VE's (the mapping's torque scale `c_f c_p`): the same physical budget in any scene units. Full,
+    /// so that a session's first corrections find the model where the VE put it.
+    pub fn new(capacity_j: f64, device_per_ve: f64) -> Self {
         let per = kinloop_protocol::Mapping::scale_or_one(device_per_ve);
-        let capacity = TANK_CAPACITY_J / per;
-        UpdateTank { level_j: capacity, capacity }
+        let capacity = capacity_j / per;
+        EnergyTank { level_j: capacity, capacity }
     }
 
     #[cfg(test)]
@@ -175,7 +176,7 @@ mod tests {
 
     #[test]
     fn the_tank_pays_corrections_only_from_what_was_dissipated() {
-        let mut tank = UpdateTank::new(1.0);
+        let mut tank = EnergyTank::new(TANK_CAPACITY_J, 1.0);
         // A costly correction empties the tank and is applied in part.
         let fraction = tank.admit(4.0 * TANK_CAPACITY_J);
         assert!((fraction - 0.25).abs() < 1e-12);
@@ -210,7 +211,7 @@ mod tests {
         let (moved, sped) = (Vector3::new(-0.02, 0.004, -0.1), Vector3::new(0.2, 0.0, 1.0));
         let before = coupling_energy(&s, &e, &v);
         let cost = coupling_energy(&s, &(e - moved), &(v + sped)) - before;
-        let mut tank = UpdateTank::new(1.0);
+        let mut tank = EnergyTank::new(TANK_CAPACITY_J, 1.0);
         tank.admit(TANK_CAPACITY_J - 1e-3);
         assert!(cost > tank.level_j());
         let level = tank.level_j();

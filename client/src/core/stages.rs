@@ -10,6 +10,7 @@ use kinloop_protocol::codec::limits::MAX_WRENCH;
 use kinloop_protocol::passivity::MAX_AXES;
 use kinloop_protocol::uplink_flags;
 
+use super::bias_trust::paid_bias;
 use super::controllers::{
     contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
     project_wrench,
@@ -64,6 +65,8 @@ pub(super) struct Requests<S: Space> {
     pub joint_constraint: S::OpVec,
     /// Impedance controller.
     pub impedance: S::OpVec,
+    /// The part of it that renders b̂ (`M b̂` in the free directions, as weighted), which `pay_bias` prices.
+    pub bias_feedforward: S::OpVec,
     /// Contact force channel.
     pub contact: S::OpVec,
     /// Their sum.
@@ -251,14 +254,22 @@ impl<S: Space> HapticCore<S> {
         // (`passive_update`).
         let zero = S::OpVec::zero();
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
-        let imp = match hand.sensed {
+        // The controller is linear in (b̂, F_h): its b̂ part is taken apart for `pay_bias` to price.
+        let (imp, bias_feedforward) = match hand.sensed {
             Some(hand) => {
                 let weight =
                     if self.active.shared { 1.0 } else { self.bias_trust.weight(self.bias_horizon(now).as_secs_f64()) };
                 let bias = self.local.bias * weight;
-                impedance_free::<S>(p, l, &self.device_mass, &self.local.inverse_inertia, &bias, &hand)
+                let (mass, inverse_inertia) = (&self.device_mass, &self.local.inverse_inertia);
+                let fed = impedance_free::<S>(p, l, mass, inverse_inertia, &bias, &zero);
+                let imp = impedance_free::<S>(p, l, mass, inverse_inertia, &zero, &hand) + fed;
+                if trust < 1.0 {
+                    (imp * trust, fed * trust)
+                } else {
+                    (imp, fed)
+                }
             }
-            None => S::OpVec::zero(),
+            None => (zero, zero),
         };
         let (contacts, live) = self.model.contacts();
         let contact = contact_feedforward::<S>(contacts, live, &self.local.free_inertia);
@@ -287,10 +298,28 @@ impl<S: Space> HapticCore<S> {
             position_channel: pc,
             joint_constraint: jc,
             impedance: imp,
+            bias_feedforward,
             contact,
             requested: pc + jc + imp + contact,
             position_felt,
             damping_felt,
+        }
+    }
+
+    /// Stage 4b: b̂'s feedforward paid from its tank (`bias_trust`), while this user holds the linkage alone:
+    /// the work `M b̂` would do on the device this tick, `F_b · ẋ_d dt`, is drawn from the tank, and what the
+    /// tank cannot pay is taken out of the request. Work the hand does against it fills the tank.
+    pub(super) fn pay_bias(&mut self, dt_s: f64, intake: &Intake<S>, asked: &mut Requests<S>) {
+        if self.active.shared {
+            return;
+        }
+        let fed = asked.bias_feedforward;
+        let paid = paid_bias::<S>(&mut self.bias_tank, &fed, &intake.device_twist, dt_s);
+        if paid != fed {
+            let withheld = fed - paid;
+            asked.bias_feedforward = paid;
+            asked.impedance -= withheld;
+            asked.requested -= withheld;
         }
     }
 

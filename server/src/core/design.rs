@@ -71,7 +71,7 @@ use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 mod grasp;
 #[cfg(test)]
 mod grasp_tests;
-use grasp::{held_rigidly, lightest, renders_rotation};
+use grasp::{held_rigidly, lightest, renders_rotation, MASS_REDUCTION};
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
 pub const WORKSPACE_FILL: f64 = 0.8;
@@ -231,18 +231,13 @@ pub fn check_request<S: Space>(device: &DeviceCaps, request: &MappingRequest) ->
 /// the largest that would not.
 pub fn choose_mapping<S: Space>(
     reach: &OpReach<S>,
+    linkage: &[OpReach<S>],
     device: &DeviceCaps,
     request: &MappingRequest,
     renders_force: bool,
 ) -> Result<Mapping, DesignError> {
-    let lin = <S::Point as VecOps>::LEN;
-    let extent = reach.extent();
     let largest = reach.largest_extent();
-    // The binding axis: the smallest ratio of device workspace to reach.
-    let fit = (0..lin)
-        .filter(|&a| extent.as_slice()[a] > DEGENERATE_EXTENT * largest)
-        .map(|a| (device.workspace_max[a] - device.workspace_min[a]) / extent.as_slice()[a])
-        .fold(f64::INFINITY, f64::min);
+    let fit = workspace_fit(reach, device);
     let position_scale = match request.position_scale {
         Some(asked) => {
             if fit.is_finite() && asked > fit {
@@ -259,17 +254,21 @@ pub fn choose_mapping<S: Space>(
         None if fit.is_finite() => WORKSPACE_FILL * fit,
         None => 1.0,
     };
-    let (mass, _) = lightest(reach);
-    // Without gravity: the force to carry the lightest direction across the reach in CROSSING_S.
-    let dynamic = if mass.is_finite() { mass * 5.77 * largest / (CROSSING_S * CROSSING_S) } else { 0.0 };
-    let load = reach.static_force_n.max(dynamic);
-    let mut force_scale = if load > 0.0 { load_target(device) / load } else { 1.0 };
-    // Devices that render torque: the static torque must fit too (torques scale by c_f c_p).
-    let torque_load = reach.static_torque_nm * position_scale;
-    if device.max_torque_nm > 0.0 && torque_load > 0.0 {
-        force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
-    }
-    force_scale = held_rigidly(reach, device, position_scale, force_scale);
+    let loaded = load_scale(reach, device);
+    let at_fill = torque_and_grasp(reach, device, position_scale, loaded);
+    // The default reach is narrowed by the linkage's narrowing for this device (see `reach_narrowing`): the
+    // same factor for every OP, so that users holding one linkage at different OPs keep the proportions of
+    // their reaches, and none feels another's hand stiffened by a reach narrowed more than its own. The force
+    // scale stays at most what it is at the fill: a narrower reach eases the static torque's bound, but
+    // raising the forces with it would spend the headroom other users' pushes need.
+    let position_scale = match (request.position_scale, request.force_scale) {
+        (None, None) => {
+            let own = reach_narrowing(reach, device);
+            position_scale * linkage.iter().map(|r| reach_narrowing(r, device)).fold(own, f64::min)
+        }
+        _ => position_scale,
+    };
+    let mut force_scale = torque_and_grasp(reach, device, position_scale, loaded).min(at_fill);
     if let Some(asked) = request.force_scale {
         if renders_force && asked * reach.static_force_n > device.max_force_n {
             // The load is positive here (a zero load fits any scale).
@@ -296,6 +295,73 @@ pub fn choose_mapping<S: Space>(
         gravity_compensation: request.gravity_compensation,
         rigid_grasp: renders_rotation(reach, device, force_scale * position_scale),
     })
+}
+
+/// The binding axis's ratio of device workspace to the OP's reach (infinite for a reach without extent).
+fn workspace_fit<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
+    let (extent, largest) = (reach.extent(), reach.largest_extent());
+    (0..<S::Point as VecOps>::LEN)
+        .filter(|&a| extent.as_slice()[a] > DEGENERATE_EXTENT * largest)
+        .map(|a| (device.workspace_max[a] - device.workspace_min[a]) / extent.as_slice()[a])
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The force scale that maps the OP's load (static, or carrying its lightest mass across the reach in
+/// CROSSING_S without gravity) to the device's [`load_target`].
+fn load_scale<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
+    let (mass, _) = lightest(reach);
+    let largest = reach.largest_extent();
+    let dynamic = if mass.is_finite() { mass * 5.77 * largest / (CROSSING_S * CROSSING_S) } else { 0.0 };
+    let load = reach.static_force_n.max(dynamic);
+    if load > 0.0 {
+        load_target(device) / load
+    } else {
+        1.0
+    }
+}
+
+/// The factor in `[MIN_REACH_SHARE, 1]` by which the OP's default reach is narrowed on `device`. The device
+/// renders the OP's lightest mass as `m c_f / c_p`, and no controller makes its handle feel more than
+/// MASS_REDUCTION times lighter than itself: a reach mapped so wide that the linkage would feel lighter than
+/// that by more than REDUCTION_MARGIN is narrowed until it does not (the hand then moves the device less for
+/// the same motion of the linkage, rather than push a handle the controllers cannot make light). Only on a
+/// device with a force sensor, whose handle the impedance controller makes lighter: without one there is no
+/// reduction for the bound to leave a margin to, and narrowed so, seed 17's crank on a Falcon at 300 ms
+/// gained energy.
+pub fn reach_narrowing<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
+    let (mass, _) = lightest(reach);
+    let (handle, fit) = (handle_mass::<S>(device), workspace_fit(reach, device));
+    if !(device.has_force_sensor && mass.is_finite() && mass > 0.0 && handle > 0.0 && fit.is_finite()) {
+        return 1.0;
+    }
+    let fill = WORKSPACE_FILL * fit;
+    let at_fill = torque_and_grasp(reach, device, fill, load_scale(reach, device));
+    let narrowed = mass * at_fill * MASS_REDUCTION * REDUCTION_MARGIN / handle;
+    (narrowed / fill).clamp(MIN_REACH_SHARE, 1.0)
+}
+
+/// The force scale once the static torque fits at `position_scale` (devices that render torque: torques scale
+/// by `c_f c_p`) and the grasp rule has had its say, from the load's `force_scale`.
+fn torque_and_grasp<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, position_scale: f64, force_scale: f64) -> f64 {
+    let mut force_scale = force_scale;
+    let torque_load = reach.static_torque_nm * position_scale;
+    if device.max_torque_nm > 0.0 && torque_load > 0.0 {
+        force_scale = force_scale.min(LOAD_FRACTION * 0.5 * device.max_torque_nm / torque_load);
+    }
+    held_rigidly(reach, device, position_scale, force_scale)
+}
+
+/// The factor by which the narrowed reach leaves the linkage feeling lighter than the controllers can make the
+/// handle (see `choose_mapping`).
+pub const REDUCTION_MARGIN: f64 = 2.0;
+
+/// The narrowest share of the workspace the OP's reach is narrowed to for the linkage to feel no lighter than
+/// the handle can be made (see `choose_mapping`).
+pub const MIN_REACH_SHARE: f64 = 0.1;
+
+/// The handle's mass (kg): the largest of the device's linear axes', zero if it has none.
+fn handle_mass<S: Space>(device: &DeviceCaps) -> f64 {
+    device.mass.iter().take(<S::Point as VecOps>::LEN).fold(0.0, |a: f64, &m| a.max(m))
 }
 
 /// The force (device N) the static load at the OP maps to: [`LOAD_FRACTION`] of the continuous force, at
@@ -555,7 +621,7 @@ mod tests {
         let mut reach = survey_op(&model, 0, &SurveyConfig::default()).expect("surveys");
         reach.static_force_n = reach.static_force_n.max(1.0);
         let device = DeviceCaps { continuous_force_n: 5.0, max_force_n: 10.0, ..DeviceCaps::generous("d", 3) };
-        let mapping = choose_mapping(&reach, &device, &MappingRequest::default(), true).expect("a mapping");
+        let mapping = choose_mapping(&reach, &[], &device, &MappingRequest::default(), true).expect("a mapping");
         assert_eq!(check_holdable(&reach, &device, &mapping), Ok(()));
         let heavy = Mapping { force_scale: 10.0 * device.continuous_force_n / reach.static_force_n, ..mapping };
         let refused = check_holdable(&reach, &device, &heavy).expect_err("refused");
@@ -563,5 +629,100 @@ mod tests {
         assert!(text.starts_with(PREDICTED_REFUSAL) && text.contains("would change this"), "{text}");
         let compensated = Mapping { gravity_compensation: true, ..heavy };
         assert_eq!(check_holdable(&reach, &device, &compensated), Ok(()));
+    }
+
+    /// The reach is narrowed exactly where the linkage would feel lighter than the handle can be made, with
+    /// the margin: a light load keeps the workspace's fill; a heavier one (a smaller force scale) narrows it
+    /// until the OP's lightest mass feels `handle / (MASS_REDUCTION REDUCTION_MARGIN)`; a far heavier one stops
+    /// at `MIN_REACH_SHARE` of the fill; a scale the client asks for is kept. (The testbed's static torque is
+    /// far within the generous device's peak, so the force scale is the load's.)
+    #[test]
+    fn the_reach_narrows_until_the_linkage_feels_no_lighter_than_the_handle_can_be_made() {
+        use kinloop_linkage::math::space::Planar;
+        let mut reach = surveyed("paper-testbed").swap_remove(0);
+        let (mass, _) = lightest(&reach);
+        let handle = 0.5;
+        let device = DeviceCaps { mass: vec![handle, handle, 0.0], ..DeviceCaps::generous("d", 3) };
+        let massless = DeviceCaps { mass: vec![0.0; 3], ..device.clone() };
+        let mapped = |reach: &OpReach<Planar>, device: &DeviceCaps, request: &MappingRequest| {
+            choose_mapping(reach, &[], device, request, true).expect("a mapping")
+        };
+        let felt = |m: &Mapping| mass * m.force_scale / m.position_scale;
+        let bound = MASS_REDUCTION * REDUCTION_MARGIN;
+        let mut seen = [false; 3];
+        for load in (-6..=12).map(|k| 10f64.powf(k as f64 / 2.0)) {
+            reach.static_force_n = load;
+            let fill = mapped(&reach, &massless, &MappingRequest::default()).position_scale;
+            let m = mapped(&reach, &device, &MappingRequest::default());
+            assert_eq!(m.force_scale, mapped(&reach, &massless, &MappingRequest::default()).force_scale);
+            if fill * handle <= mass * m.force_scale * bound {
+                seen[0] = true;
+                assert_eq!(m.position_scale, fill, "load {load}: not narrowed");
+                assert!(felt(&m) * bound >= handle * (1.0 - 1e-12));
+            } else if m.position_scale > MIN_REACH_SHARE * fill {
+                seen[1] = true;
+                assert!(m.position_scale < fill);
+                assert!((felt(&m) * bound / handle - 1.0).abs() < 1e-12, "load {load}: {}", felt(&m));
+            } else {
+                seen[2] = true;
+                assert!((m.position_scale / fill - MIN_REACH_SHARE).abs() < 1e-12, "load {load}");
+            }
+            assert!((m.position_scale / fill - reach_narrowing(&reach, &device)).abs() < 1e-12);
+            let asked = MappingRequest { position_scale: Some(0.9 * fill), ..MappingRequest::default() };
+            assert_eq!(mapped(&reach, &device, &asked).position_scale, 0.9 * fill);
+        }
+        assert_eq!(seen, [true; 3], "the loads cover the three cases");
+    }
+
+    /// Every OP of one linkage is narrowed on a device by the same factor, the least of its OPs' own, so that
+    /// users at different OPs keep their reaches' proportions; and the force scale never rises above the
+    /// fill's, though a narrower reach eases the static torque's bound. The crank-rocker on the paper's device
+    /// (1 kg handle, 0.2 N m): the crank tip needs more narrowing than the coupler, and at the fill its force
+    /// scale is held down by its static torque.
+    #[test]
+    fn one_linkage_is_narrowed_by_one_factor_and_no_force_scale_rises() {
+        let reaches = surveyed("fourbar-crank-rocker");
+        let paper = DeviceCaps {
+            max_force_n: 10.0,
+            continuous_force_n: 5.0,
+            max_torque_nm: 0.2,
+            mass: vec![1.0, 1.0, 0.005],
+            workspace_min: vec![-0.15, -0.15, -TAU],
+            workspace_max: vec![0.15, 0.15, TAU],
+            ..DeviceCaps::generous("paper", 3)
+        };
+        let own: Vec<f64> = reaches.iter().map(|r| reach_narrowing(r, &paper)).collect();
+        let least = own.iter().copied().fold(1.0, f64::min);
+        assert!(own.iter().any(|&f| f > least * 1.5), "the OPs differ: {own:?}");
+        assert!(least < 1.0 && least >= MIN_REACH_SHARE, "{least}");
+        let default = MappingRequest::default();
+        for reach in &reaches {
+            let alone = choose_mapping(reach, &[], &paper, &default, true).expect("a mapping");
+            let shared = choose_mapping(reach, &reaches, &paper, &default, true).expect("a mapping");
+            let fill = WORKSPACE_FILL * workspace_fit(reach, &paper);
+            assert!(
+                (shared.position_scale / fill - least).abs() < 1e-12,
+                "{} vs {least}",
+                shared.position_scale / fill
+            );
+            assert!(shared.position_scale <= alone.position_scale);
+            let at_fill = torque_and_grasp(reach, &paper, fill, load_scale(reach, &paper));
+            assert!(shared.force_scale <= at_fill && alone.force_scale <= at_fill);
+        }
+        let tip = &reaches[1];
+        let (fill, load) = (WORKSPACE_FILL * workspace_fit(tip, &paper), load_scale(tip, &paper));
+        let (eased, at_fill) =
+            (torque_and_grasp(tip, &paper, least * fill, load), torque_and_grasp(tip, &paper, fill, load));
+        assert!(eased > at_fill, "the narrower reach eases the crank tip's torque bound: {eased} vs {at_fill}");
+    }
+
+    /// Every OP of built-in planar scene `name`, surveyed.
+    fn surveyed(name: &str) -> Vec<OpReach<kinloop_linkage::math::space::Planar>> {
+        use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
+        use kinloop_linkage::math::space::Planar;
+        use kinloop_linkage::model::{builtin, Model};
+        let scene = builtin::scene(name).expect("built in").expect("parses");
+        let model = Model::<Planar>::compile(&scene, name).expect("compiles");
+        (0..model.ops.len()).map(|op| survey_op(&model, op, &SurveyConfig::default()).expect("surveys")).collect()
     }
 }

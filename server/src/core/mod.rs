@@ -423,7 +423,7 @@ impl<S: Space> VeCore<S> {
         let manipulator = request.role == Role::Manipulator;
         let designed = match &request.device {
             Some(device) => design::check_request::<S>(device, &request.mapping)
-                .and_then(|()| design::choose_mapping(reach, device, &request.mapping, manipulator))
+                .and_then(|()| design::choose_mapping(reach, &self.reaches, device, &request.mapping, manipulator))
                 .and_then(|mapping| {
                     // Only a manipulator with the mapping the server chose for it: a scale the client asked
                     // for is checked by `choose_mapping` against the peak.

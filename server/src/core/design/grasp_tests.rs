@@ -7,7 +7,8 @@ use std::f64::consts::TAU;
 use kinloop_linkage::math::space::Planar;
 
 /// The crank-rocker's coupler point and crank tip surveyed, and the paper's planar device (0.2 N m peak,
-/// a 0.005 kg m² handle).
+/// a 0.005 kg m² handle) without its linear mass: the reach keeps the workspace's fill whatever the load
+/// (the narrowing for a heavy handle has its own test), so the grasp's closed forms are taken at one scale.
 fn crank_rocker() -> (OpReach<Planar>, OpReach<Planar>, DeviceCaps) {
     use kinloop_linkage::algorithms::reach::{survey_op, SurveyConfig};
     use kinloop_linkage::model::{builtin, Model};
@@ -20,7 +21,7 @@ fn crank_rocker() -> (OpReach<Planar>, OpReach<Planar>, DeviceCaps) {
         max_force_n: 10.0,
         continuous_force_n: 5.0,
         max_torque_nm: 0.2,
-        mass: vec![1.0, 1.0, 0.005],
+        mass: vec![0.0, 0.0, 0.005],
         ..DeviceCaps::generous("paper", 3)
     };
     (survey("coupler").expect("surveys"), survey("crank-tip").expect("surveys"), paper)
@@ -32,7 +33,7 @@ fn loaded(reach: &OpReach<Planar>, force: f64, torque: f64) -> OpReach<Planar> {
 }
 
 fn chosen(reach: &OpReach<Planar>, device: &DeviceCaps) -> Mapping {
-    choose_mapping(reach, device, &MappingRequest::default(), true).expect("a mapping")
+    choose_mapping(reach, &[], device, &MappingRequest::default(), true).expect("a mapping")
 }
 
 fn close(got: f64, want: f64) -> bool {
