@@ -4,6 +4,8 @@
 
 use std::time::Duration;
 
+use kinloop_linkage::algorithms::integrator::StepReport;
+
 use super::closing::close_loops;
 use super::*;
 
@@ -91,7 +93,8 @@ impl<S: Space> VeCore<S> {
                     } else {
                         Err(DynamicsError::ClosureBroken { residual: report.closure_error, limit: broken })
                     }
-                });
+                })
+                .and_then(|report| self.close_if_open(report));
         match stepped {
             Ok(report) => {
                 // The step began closed: its start is the new restore point (a swap, not a second copy).
@@ -123,6 +126,26 @@ impl<S: Space> VeCore<S> {
             }
         }
         self.finish_tick(at);
+    }
+
+    /// A step's end re-assembled onto the loops when it left them open beyond [`OPEN_CLOSURE_PER_LENGTH`]
+    /// (rare: the assembly allocates its own workspace); a failed step when the assembly fails. The velocity
+    /// stays the step's: it was projected at a configuration within that residual, and the next step's
+    /// Baumgarte term and projection take up the rest.
+    fn close_if_open(&mut self, mut report: StepReport) -> Result<StepReport, DynamicsError> {
+        let open = OPEN_CLOSURE_PER_LENGTH * self.model.length_scale;
+        if report.closure_error <= open {
+            return Ok(report);
+        }
+        match close_loops(&self.model, &mut self.data, &self.q) {
+            Ok(closed) if closed.residual <= open => {
+                self.q.copy_from(&closed.q);
+                report.closure_error = closed.residual;
+                Ok(report)
+            }
+            Ok(closed) => Err(DynamicsError::ClosureBroken { residual: closed.residual, limit: open }),
+            Err(residual) => Err(DynamicsError::ClosureBroken { residual, limit: open }),
+        }
     }
 
     /// The bookkeeping that ends every tick, stepped or at rest.
