@@ -33,12 +33,21 @@ pub const BIAS_TANK_CAPACITY_J: f64 = 0.01;
 /// of snapshots; past this the oldest are forgotten (the held peak can then only be lower).
 const CAPACITY: usize = 256;
 
-/// The part of b̂'s feedforward `fed` (a wrench, VE units) that `tank` pays for this tick: its work on the
-/// device moving at `twist` over `dt_s`, `fed · ẋ dt`, is drawn from the tank (work against it fills the
-/// tank), and what the tank cannot pay is withheld. So over any interval the feedforward gives the device at
-/// most what the hand gave back to it plus the tank's capacity (see `HapticCore::pay_bias`).
-pub(crate) fn paid_bias<S: Space>(tank: &mut EnergyTank, fed: &S::OpVec, twist: &S::OpVec, dt_s: f64) -> S::OpVec {
-    let fraction = tank.admit(fed.dot(twist) * dt_s);
+/// The part of b̂'s feedforward `fed` (a wrench, VE units) that `tank` pays for this tick: the share
+/// `at_risk` of its work on the device moving at `twist` over `dt_s`, `fed · ẋ dt`, is drawn from the tank
+/// (work against it fills the tank), and what the tank cannot pay is withheld. So over any interval the
+/// stale share of the feedforward gives the device at most what the hand gave back to it plus the tank's
+/// capacity (see `HapticCore::pay_bias`). A fresh b̂ (`at_risk` zero) is paid in full: it carries more than
+/// the linkage's own conservative forces (the VE's coupling pulling the linkage toward the device, which
+/// the local model must follow), whose work no tank gets back.
+pub(crate) fn paid_bias<S: Space>(
+    tank: &mut EnergyTank,
+    fed: &S::OpVec,
+    at_risk: f64,
+    twist: &S::OpVec,
+    dt_s: f64,
+) -> S::OpVec {
+    let fraction = tank.admit(fed.dot(twist) * dt_s * at_risk);
     if fraction < 1.0 {
         *fed * fraction.max(0.0)
     } else {
@@ -117,22 +126,45 @@ impl<S: Space> BiasTrust<S> {
         let Some((_, bias)) = self.last else { return 1.0 };
         bias_weight(self.peak_rate(horizon_s), horizon_s, bias.norm())
     }
+
+    /// The share of b̂ held for `horizon_s`, `one_way_delay_s` of it across the network, that may be stale
+    /// (see [`paid_bias`]): the larger of how much of itself it changed over the horizon on the VE's clock
+    /// ([`relative_change`]) and the share of the horizon spent in the network, at most one. A b̂ that crossed
+    /// the network describes the pose the VE had when it was sent, which the device has since left by
+    /// however far the hand took it: a rate on the VE's clock does not see that.
+    pub fn share_at_risk(&self, horizon_s: f64, one_way_delay_s: f64) -> f64 {
+        let Some((_, bias)) = self.last else { return 0.0 };
+        let changed = relative_change(self.peak_rate(horizon_s), horizon_s, bias.norm());
+        let crossed = if horizon_s > 0.0 { one_way_delay_s.max(0.0) / horizon_s } else { 0.0 };
+        changed.max(crossed).min(1.0)
+    }
 }
 
-/// `1 / (1 + x²)` with `x = rate · horizon / size`: one for no change, a half when b̂ changes by its own
-/// size within the horizon, toward zero beyond. A zero b̂ has nothing to weigh (one); anything non-finite
-/// trusts nothing (zero).
+/// `1 / (1 + x²)` with `x` = [`relative_change`]: one for no change, a half when b̂ changes by its own size
+/// within the horizon, toward zero beyond. A zero b̂ has nothing to weigh (one); anything non-finite trusts
+/// nothing (zero).
 pub(crate) fn bias_weight(rate: f64, horizon_s: f64, size: f64) -> f64 {
-    let change = rate * horizon_s.max(0.0);
-    if change == 0.0 {
-        return 1.0;
-    }
-    let x = change / size;
+    let x = relative_change(rate, horizon_s, size);
     let weight = 1.0 / (1.0 + x * x);
     if weight.is_finite() {
         weight
     } else {
         0.0
+    }
+}
+
+/// `x = rate · horizon / size`: how much of itself b̂ may have changed over the horizon it is held (zero for
+/// no change, infinite for a change of a zero b̂ or anything non-finite).
+pub(crate) fn relative_change(rate: f64, horizon_s: f64, size: f64) -> f64 {
+    let change = rate * horizon_s.max(0.0);
+    if change == 0.0 {
+        return 0.0;
+    }
+    let x = change / size;
+    if x.is_nan() {
+        f64::INFINITY
+    } else {
+        x
     }
 }
 
@@ -207,7 +239,7 @@ mod tests {
             let t = k as f64 * dt;
             let fed = Vector3::new(amplitude * (omega * t).sin(), 0.0, 0.0);
             let twist = Vector3::new(speed * (omega * t).sin(), 0.0, 0.0);
-            let paid = paid_bias::<Planar>(&mut tank, &fed, &twist, dt);
+            let paid = paid_bias::<Planar>(&mut tank, &fed, 1.0, &twist, dt);
             assert!(paid[0].abs() <= fed[0].abs() + 1e-15);
             given += paid.dot(&twist) * dt;
         }
@@ -218,22 +250,59 @@ mod tests {
         // Emptied first, so that what the way down may give is what the way up stored.
         let mut tank = EnergyTank::new(capacity, 1.0);
         let (weight, speed) = (Vector3::new(0.0, -5.0, 0.0), 0.2);
-        let _ = paid_bias::<Planar>(&mut tank, &weight, &Vector3::new(0.0, -1.0, 0.0), 1.0);
+        let _ = paid_bias::<Planar>(&mut tank, &weight, 1.0, &Vector3::new(0.0, -1.0, 0.0), 1.0);
         let stored_per_tick = 5.0 * speed * dt;
         for k in 0..1_000 {
-            let paid = paid_bias::<Planar>(&mut tank, &weight, &Vector3::new(0.0, speed, 0.0), dt);
+            let paid = paid_bias::<Planar>(&mut tank, &weight, 1.0, &Vector3::new(0.0, speed, 0.0), dt);
             assert_eq!(paid, weight, "up, tick {k}");
         }
         let mut given_back = 0.0;
         for k in 0..1_000 {
             let down = Vector3::new(0.0, -speed, 0.0);
-            let paid = paid_bias::<Planar>(&mut tank, &weight, &down, dt);
+            let paid = paid_bias::<Planar>(&mut tank, &weight, 1.0, &down, dt);
             if (k as f64 + 1.0) * stored_per_tick <= capacity * (1.0 - 1e-9) {
                 assert_eq!(paid, weight, "down, tick {k}: paid in full");
             }
             given_back += paid.dot(&down) * dt;
         }
         assert!((given_back - capacity).abs() < 1e-12, "the way down gives back the tank: {given_back}");
+
+        // A fresh b̂ (nothing at risk) is paid in full however much it gives; a quarter at risk gives four
+        // times the tank before it is withheld.
+        for (at_risk, most) in [(0.0, f64::INFINITY), (0.25, 4.0 * capacity)] {
+            let mut tank = EnergyTank::new(capacity, 1.0);
+            let mut given = 0.0;
+            for k in 0..10_000 {
+                let t = k as f64 * dt;
+                let fed = Vector3::new(amplitude * (omega * t).sin(), 0.0, 0.0);
+                let twist = Vector3::new(speed * (omega * t).sin(), 0.0, 0.0);
+                let paid = paid_bias::<Planar>(&mut tank, &fed, at_risk, &twist, dt);
+                if at_risk == 0.0 {
+                    assert_eq!(paid, fed, "tick {k}");
+                }
+                given += paid.dot(&twist) * dt;
+            }
+            let unpaid = amplitude * speed / 2.0 * 10.0;
+            assert!(given <= most * (1.0 + 1e-9) && given > 0.9 * most.min(unpaid), "at risk {at_risk}: {given} J");
+        }
+    }
+
+    /// The share at risk: b̂'s change over the horizon relative to itself, or the share of the horizon spent
+    /// in the network, whichever is larger, at most one; nothing before any b̂.
+    #[test]
+    fn the_share_at_risk_is_the_change_over_the_horizon_or_the_network_share() {
+        let mut trust = BiasTrust::<Planar>::new();
+        assert_eq!(trust.share_at_risk(0.05, 0.05), 0.0, "no b̂ yet");
+        let b = |y: f64| Vector3::new(0.0, y, 0.0);
+        // |b̂| 10 changing at 20 per second: over 10 ms a fiftieth of itself, over 0.1 s a fifth.
+        for k in 0..=100 {
+            trust.observe(1.0 + k as f64 * 1e-3, &b(-10.0 - 0.02 * (k % 2) as f64), L, 0.2);
+        }
+        assert!((trust.share_at_risk(0.01, 0.0) - 0.02).abs() < 1e-9, "{}", trust.share_at_risk(0.01, 0.0));
+        assert!((trust.share_at_risk(0.1, 0.0) - 0.2).abs() < 1e-9);
+        assert!((trust.share_at_risk(0.01, 0.005) - 0.5).abs() < 1e-12, "half the horizon in the network");
+        assert_eq!(trust.share_at_risk(0.1, 0.5), 1.0, "at most one");
+        assert!((trust.share_at_risk(0.1, 0.01) - 0.2).abs() < 1e-9, "the change is the larger");
     }
 
     /// Rates are taken on the server's clock: a repeated server time or one that goes back makes no rate

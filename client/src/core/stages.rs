@@ -67,6 +67,8 @@ pub(super) struct Requests<S: Space> {
     pub impedance: S::OpVec,
     /// The part of it that renders b̂ (`M b̂` in the free directions, as weighted), which `pay_bias` prices.
     pub bias_feedforward: S::OpVec,
+    /// The share of b̂ that may be stale (`BiasTrust::share_at_risk`): the part of its work the tank pays.
+    pub bias_at_risk: f64,
     /// Contact force channel.
     pub contact: S::OpVec,
     /// Their sum.
@@ -255,10 +257,11 @@ impl<S: Space> HapticCore<S> {
         let zero = S::OpVec::zero();
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         // The controller is linear in (b̂, F_h): its b̂ part is taken apart for `pay_bias` to price.
+        let horizon = self.bias_horizon(now).as_secs_f64();
+        let bias_at_risk = self.bias_trust.share_at_risk(horizon, self.one_way_delay.as_secs_f64());
         let (imp, bias_feedforward) = match hand.sensed {
             Some(hand) => {
-                let weight =
-                    if self.active.shared { 1.0 } else { self.bias_trust.weight(self.bias_horizon(now).as_secs_f64()) };
+                let weight = if self.active.shared { 1.0 } else { self.bias_trust.weight(horizon) };
                 let bias = self.local.bias * weight;
                 let (mass, inverse_inertia) = (&self.device_mass, &self.local.inverse_inertia);
                 let fed = impedance_free::<S>(p, l, mass, inverse_inertia, &bias, &zero);
@@ -299,6 +302,7 @@ impl<S: Space> HapticCore<S> {
             joint_constraint: jc,
             impedance: imp,
             bias_feedforward,
+            bias_at_risk,
             contact,
             requested: pc + jc + imp + contact,
             position_felt,
@@ -307,14 +311,15 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// Stage 4b: b̂'s feedforward paid from its tank (`bias_trust`), while this user holds the linkage alone:
-    /// the work `M b̂` would do on the device this tick, `F_b · ẋ_d dt`, is drawn from the tank, and what the
-    /// tank cannot pay is taken out of the request. Work the hand does against it fills the tank.
+    /// the share at risk of the work `M b̂` would do on the device this tick, `F_b · ẋ_d dt`, is drawn from the
+    /// tank, and what the tank cannot pay is taken out of the request. Work the hand does against it fills
+    /// the tank.
     pub(super) fn pay_bias(&mut self, dt_s: f64, intake: &Intake<S>, asked: &mut Requests<S>) {
         if self.active.shared {
             return;
         }
         let fed = asked.bias_feedforward;
-        let paid = paid_bias::<S>(&mut self.bias_tank, &fed, &intake.device_twist, dt_s);
+        let paid = paid_bias::<S>(&mut self.bias_tank, &fed, asked.bias_at_risk, &intake.device_twist, dt_s);
         if paid != fed {
             let withheld = fed - paid;
             asked.bias_feedforward = paid;
