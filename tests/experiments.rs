@@ -162,12 +162,24 @@ fn latency_tracking_degrades_with_delay_and_failures_match_the_points() {
         assert!(first.energy_excess_j < 2e-4, "{first:?}");
         assert!(last.device_op_rms_mm > 10.0 * first.device_op_rms_mm, "{last:?} vs {first:?}");
     }
-    // What the hand feels drifts from what the linkage presents as the delay grows; without delay the two
-    // agree within the device's residue.
-    let (first, last) = (find("soft", 0.0, "passivity"), find("soft", 1000.0, "passivity"));
+    // What the hand feels drifts from what the linkage presents under delay; without delay the two agree
+    // within the device's residue. The drift is judged over the grid's delays (its median at least doubles
+    // the undelayed error, and no delay comes nearer than none), not at the longest alone: how far the feel
+    // drifts need not grow with the delay (below).
     let felt = |p: &PointSummary| p.felt_vs_rendered_impedance_error.unwrap_or_else(|| panic!("{p:?}"));
-    let (near, far) = (felt(first), felt(last));
-    assert!(near < 1.0 && far > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {far} at 1 s");
+    let near = felt(find("soft", 0.0, "passivity"));
+    let mut delayed: Vec<f64> = r
+        .grid
+        .delays_ms
+        .iter()
+        .filter(|&&delay| delay > 0.0)
+        .map(|&delay| felt(find("soft", delay, "passivity")))
+        .collect();
+    delayed.sort_by(f64::total_cmp);
+    assert!(delayed.len() >= 3, "{delayed:?}");
+    let median = delayed[delayed.len() / 2];
+    assert!(near < 1.0 && median > 2.0 * near, "felt-vs-rendered impedance error {near} at 0 ms, {delayed:?} delayed");
+    assert!(delayed[0] > near, "felt-vs-rendered impedance error {near} at 0 ms, {delayed:?} delayed");
     // The feel against the same hand without delay: the undelayed session is its own reference (no change),
     // and a delay moves the feel away from it. How far need not grow with the delay: on the four-bar's path
     // the local model steps with the snapshot's dynamics carried to where it is, which a second-old snapshot

@@ -251,8 +251,7 @@ pub fn choose_mapping<S: Space>(
             }
             asked
         }
-        None if fit.is_finite() => WORKSPACE_FILL * fit,
-        None => 1.0,
+        None => filling_scale(reach, device),
     };
     let loaded = load_scale(reach, device);
     let at_fill = torque_and_grasp(reach, device, position_scale, loaded);
@@ -297,6 +296,17 @@ pub fn choose_mapping<S: Space>(
     })
 }
 
+/// The position scale at which the OP's reach fills [`WORKSPACE_FILL`] of the device's workspace on the
+/// binding axis (one for a reach without extent): the default reach before `reach_narrowing`.
+pub fn filling_scale<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
+    let fit = workspace_fit(reach, device);
+    if fit.is_finite() {
+        WORKSPACE_FILL * fit
+    } else {
+        1.0
+    }
+}
+
 /// The binding axis's ratio of device workspace to the OP's reach (infinite for a reach without extent).
 fn workspace_fit<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
     let (extent, largest) = (reach.extent(), reach.largest_extent());
@@ -334,7 +344,7 @@ pub fn reach_narrowing<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64
     if !(device.has_force_sensor && mass.is_finite() && mass > 0.0 && handle > 0.0 && fit.is_finite()) {
         return 1.0;
     }
-    let fill = WORKSPACE_FILL * fit;
+    let fill = filling_scale(reach, device);
     let at_fill = torque_and_grasp(reach, device, fill, load_scale(reach, device));
     let narrowed = mass * at_fill * MASS_REDUCTION * REDUCTION_MARGIN / handle;
     (narrowed / fill).clamp(MIN_REACH_SHARE, 1.0)
@@ -699,7 +709,7 @@ mod tests {
         for reach in &reaches {
             let alone = choose_mapping(reach, &[], &paper, &default, true).expect("a mapping");
             let shared = choose_mapping(reach, &reaches, &paper, &default, true).expect("a mapping");
-            let fill = WORKSPACE_FILL * workspace_fit(reach, &paper);
+            let fill = filling_scale(reach, &paper);
             assert!(
                 (shared.position_scale / fill - least).abs() < 1e-12,
                 "{} vs {least}",
