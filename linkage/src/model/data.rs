@@ -230,8 +230,8 @@ impl BitsMemo {
 
 /// The state `(q, q̇)` at which `dynamics_terms` last evaluated everything but the applied forces, so that
 /// an evaluation at the same state (the VE server's next step, at the state its snapshots just probed)
-/// recomputes only the forces. Exact: a hit needs the very same bits, and whatever changes the kinematics
-/// (`forward_poses` at another q, `forward_velocity`) clears it.
+/// recomputes only the forces. Exact: a hit needs the very same bits, and every call of `forward_poses` (one
+/// that keeps the poses of the same q included) or `forward_velocity` clears it.
 #[derive(Clone, Debug)]
 pub(crate) struct TermsMemo {
     q: BitsMemo,
