@@ -704,7 +704,7 @@ mod tests {
         let own: Vec<f64> = reaches.iter().map(|r| reach_narrowing(r, &paper)).collect();
         let least = own.iter().copied().fold(1.0, f64::min);
         assert!(own.iter().any(|&f| f > least * 1.5), "the OPs differ: {own:?}");
-        assert!(least < 1.0 && least >= MIN_REACH_SHARE, "{least}");
+        assert!((MIN_REACH_SHARE..1.0).contains(&least), "{least}");
         let default = MappingRequest::default();
         for reach in &reaches {
             let alone = choose_mapping(reach, &[], &paper, &default, true).expect("a mapping");
