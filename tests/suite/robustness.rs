@@ -225,12 +225,7 @@ fn the_stephenson_six_bars_output_held_into_its_limit_at_50_ms_renders() {
 /// stays stable.
 #[test]
 fn seed_20s_crank_on_the_paper_device_without_delay_gains_no_energy() {
-    use kinloop::experiments::robustness::evaluate;
-    let linkage = generate(20, None);
-    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
-    let point =
-        all.iter().find(|p| p.op == "op-crank" && p.device.name() == "sim:paper").expect("the crank on sim:paper");
-    let outcome = evaluate(&linkage, point, 10.0);
+    let outcome = soft_on_paper_without_delay(20, "op-crank", 10.0);
     assert!(outcome.failures.iter().all(|f| !f.starts_with("unstable")), "{:?}", outcome.failures);
 }
 
@@ -241,13 +236,19 @@ fn seed_20s_crank_on_the_paper_device_without_delay_gains_no_energy() {
 /// a margin (`design::reach_narrowing`), the session renders.
 #[test]
 fn seed_8s_coupler_on_the_paper_device_without_delay_renders_with_its_reach_narrowed() {
-    use kinloop::experiments::robustness::{evaluate, SECONDS};
-    let linkage = generate(8, None);
-    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
-    let point =
-        all.iter().find(|p| p.op == "op-coupler" && p.device.name() == "sim:paper").expect("the coupler on sim:paper");
-    let outcome = evaluate(&linkage, point, SECONDS / 4.0);
+    let outcome = soft_on_paper_without_delay(8, "op-coupler", kinloop::experiments::robustness::SECONDS / 4.0);
     assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+}
+
+/// The robustness matrix's session of generated seed `seed`'s OP `op` on `sim:paper`, soft hand, 0 ms.
+fn soft_on_paper_without_delay(seed: u64, op: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
+    let linkage = generate(seed, None);
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
+    let point = all
+        .iter()
+        .find(|p| p.op == op && p.device.name() == "sim:paper")
+        .unwrap_or_else(|| panic!("seed {seed}: no {op} on sim:paper"));
+    kinloop::experiments::robustness::evaluate(&linkage, point, seconds)
 }
 
 /// The serial arm's tip on the paper's device at 50 ms with a soft hand, its reach narrowed to 0.07 (about

@@ -23,10 +23,11 @@ use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::passive_update::EnergyTank;
 
-/// Most energy b̂'s feedforward may put into the device beyond what the hand put in against it (J at the
-/// device): a linkage's own b̂ (gravity, springs) gives back what the hand stored lifting or stretching it,
-/// up to this much, while a stale one, in phase with the motion it lags, would keep giving. Past it the
-/// device follows the model's pull through the position channels alone. See `HapticCore::pay_bias`.
+/// Most energy the stale share of b̂'s feedforward (`BiasTrust::share_at_risk`) may put into the device
+/// beyond what the hand put in against it (J at the device): a linkage's own b̂ (gravity, springs) gives back
+/// what the hand stored lifting or stretching it, up to this much, while a stale one, in phase with the
+/// motion it lags, would keep giving. Past it the device follows the model's pull through the position
+/// channels alone. See `HapticCore::pay_bias`.
 pub const BIAS_TANK_CAPACITY_J: f64 = 0.01;
 
 /// The most rates held at once: a horizon is at most the staleness limit (0.1 s by default), a kilohertz
