@@ -80,8 +80,8 @@ use ve_forces::{stage_weights, Evaluation, VeForces};
 /// experiments' divergence criterion (closure error over 1 mm) lies just beyond it.
 pub const BROKEN_CLOSURE_PER_LENGTH: f64 = 0.01;
 
-/// A step that ends with its loops open beyond this fraction of the scene's length scale (the closure a
-/// scene is assembled to by default, and the robustness experiment's bound) is re-assembled onto them
+/// A projected step that ends with its loops open beyond this fraction of the scene's length scale (the
+/// closure a scene is assembled to by default, and the robustness experiment's bound) is re-assembled onto them
 /// (see `VeCore::tick`): the projection stops after its last pass, which near a loss of rank (a Delta near
 /// a singular pose, pushed hard) can leave the loops open by a thousandth of the length scale.
 pub const OPEN_CLOSURE_PER_LENGTH: f64 = 1e-6;

@@ -128,13 +128,14 @@ impl<S: Space> VeCore<S> {
         self.finish_tick(at);
     }
 
-    /// A step's end re-assembled onto the loops when it left them open beyond [`OPEN_CLOSURE_PER_LENGTH`]
-    /// (rare: the assembly allocates its own workspace); a failed step when the assembly fails. The velocity
-    /// stays the step's: it was projected at a configuration within that residual, and the next step's
-    /// Baumgarte term and projection take up the rest.
+    /// A projected step's end re-assembled onto the loops when it left them open beyond
+    /// [`OPEN_CLOSURE_PER_LENGTH`] (rare: the assembly allocates its own workspace); a failed step when the
+    /// assembly fails. The velocity stays the step's: it was projected at a configuration within that
+    /// residual, and the next step's Baumgarte term and projection take up the rest. Without projection
+    /// (`VeConfig::projection` off) Baumgarte's drift is what the VE was asked for, and it is left alone.
     fn close_if_open(&mut self, mut report: StepReport) -> Result<StepReport, DynamicsError> {
         let open = OPEN_CLOSURE_PER_LENGTH * self.model.length_scale;
-        if report.closure_error <= open {
+        if !self.step_config.project || report.closure_error <= open {
             return Ok(report);
         }
         match close_loops(&self.model, &mut self.data, &self.q) {
