@@ -23,7 +23,7 @@ use kinloop_linkage::math::space::{Space, VecOps};
 
 use super::passive_update::EnergyTank;
 
-/// Most energy the stale share of b̂'s feedforward (`BiasTrust::share_at_risk`) may put into the device
+/// Most energy the stale share of b̂'s feedforward (`BiasTrust::assess`) may put into the device
 /// beyond what the hand put in against it (J at the device): a linkage's own b̂ (gravity, springs) gives back
 /// what the hand stored lifting or stretching it, up to this much, while a stale one, in phase with the
 /// motion it lags, would keep giving. Past it the device follows the model's pull through the position
@@ -122,22 +122,29 @@ impl<S: Space> BiasTrust<S> {
         (0..self.len).map(|i| self.at(i)).find(|(t, _)| *t >= newest - horizon_s).map_or(0.0, |(_, r)| r)
     }
 
-    /// The weight `1 / (1 + x²)` of b̂ held for `horizon_s` (see the module documentation).
-    pub fn weight(&self, horizon_s: f64) -> f64 {
-        let Some((_, bias)) = self.last else { return 1.0 };
-        bias_weight(self.peak_rate(horizon_s), horizon_s, bias.norm())
+    /// b̂ held for `horizon_s`, `one_way_delay_s` of it across the network: its weight `1 / (1 + x²)` (see the
+    /// module documentation) and the share of it that may be stale (see [`paid_bias`]), the larger of how much
+    /// of itself it changed over the horizon on the VE's clock ([`relative_change`]) and the share of the
+    /// horizon spent in the network, at most one. A b̂ that crossed the network describes the pose the VE had
+    /// when it was sent, which the device has since left by however far the hand took it: a rate on the VE's
+    /// clock does not see that. One scan of the held rates serves both (the 1 kHz loop asks for both).
+    pub fn assess(&self, horizon_s: f64, one_way_delay_s: f64) -> (f64, f64) {
+        let Some((_, bias)) = self.last else { return (1.0, 0.0) };
+        let (rate, size) = (self.peak_rate(horizon_s), bias.norm());
+        let crossed = if horizon_s > 0.0 { one_way_delay_s.max(0.0) / horizon_s } else { 0.0 };
+        (bias_weight(rate, horizon_s, size), relative_change(rate, horizon_s, size).max(crossed).min(1.0))
     }
 
-    /// The share of b̂ held for `horizon_s`, `one_way_delay_s` of it across the network, that may be stale
-    /// (see [`paid_bias`]): the larger of how much of itself it changed over the horizon on the VE's clock
-    /// ([`relative_change`]) and the share of the horizon spent in the network, at most one. A b̂ that crossed
-    /// the network describes the pose the VE had when it was sent, which the device has since left by
-    /// however far the hand took it: a rate on the VE's clock does not see that.
+    /// The weight of [`Self::assess`].
+    #[cfg(test)]
+    pub fn weight(&self, horizon_s: f64) -> f64 {
+        self.assess(horizon_s, 0.0).0
+    }
+
+    /// The share at risk of [`Self::assess`].
+    #[cfg(test)]
     pub fn share_at_risk(&self, horizon_s: f64, one_way_delay_s: f64) -> f64 {
-        let Some((_, bias)) = self.last else { return 0.0 };
-        let changed = relative_change(self.peak_rate(horizon_s), horizon_s, bias.norm());
-        let crossed = if horizon_s > 0.0 { one_way_delay_s.max(0.0) / horizon_s } else { 0.0 };
-        changed.max(crossed).min(1.0)
+        self.assess(horizon_s, one_way_delay_s).1
     }
 }
 

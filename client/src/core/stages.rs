@@ -67,7 +67,7 @@ pub(super) struct Requests<S: Space> {
     pub impedance: S::OpVec,
     /// The part of it that renders b̂ (`M b̂` in the free directions, as weighted), which `pay_bias` prices.
     pub bias_feedforward: S::OpVec,
-    /// The share of b̂ that may be stale (`BiasTrust::share_at_risk`): the part of its work the tank pays.
+    /// The share of b̂ that may be stale (`BiasTrust::assess`): the part of its work the tank pays.
     pub bias_at_risk: f64,
     /// Contact force channel.
     pub contact: S::OpVec,
@@ -258,10 +258,10 @@ impl<S: Space> HapticCore<S> {
         let pc_damping = soften(position_channel::<S>(&zero, &g.position_damping, &zero, &error_rate));
         // The controller is linear in (b̂, F_h): its b̂ part is taken apart for `pay_bias` to price.
         let horizon = self.bias_horizon(now).as_secs_f64();
-        let bias_at_risk = self.bias_trust.share_at_risk(horizon, self.one_way_delay.as_secs_f64());
+        let (trusted, bias_at_risk) = self.bias_trust.assess(horizon, self.one_way_delay.as_secs_f64());
         let (imp, bias_feedforward) = match hand.sensed {
             Some(hand) => {
-                let weight = if self.active.shared { 1.0 } else { self.bias_trust.weight(horizon) };
+                let weight = if self.active.shared { 1.0 } else { trusted };
                 let bias = self.local.bias * weight;
                 let (mass, inverse_inertia) = (&self.device_mass, &self.local.inverse_inertia);
                 let fed = impedance_free::<S>(p, l, mass, inverse_inertia, &bias, &zero);

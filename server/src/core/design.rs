@@ -720,7 +720,7 @@ mod tests {
             assert!(shared.force_scale <= at_fill && alone.force_scale <= at_fill);
         }
         let tip = &reaches[1];
-        let (fill, load) = (WORKSPACE_FILL * workspace_fit(tip, &paper), load_scale(tip, &paper));
+        let (fill, load) = (filling_scale(tip, &paper), load_scale(tip, &paper));
         let (eased, at_fill) =
             (torque_and_grasp(tip, &paper, least * fill, load), torque_and_grasp(tip, &paper, fill, load));
         assert!(eased > at_fill, "the narrower reach eases the crank tip's torque bound: {eased} vs {at_fill}");
