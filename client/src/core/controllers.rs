@@ -209,6 +209,24 @@ pub fn project_wrench<S: Space>(projector: &S::OpMat, length_scale: f64, w: &S::
     scale_op::<S>(&(*projector * scale_op::<S>(w, 1.0 / length_scale)), length_scale)
 }
 
+/// What the device is left to feel of the position channels' wrench `w`: softened along the constrained
+/// directions by the linearization trust `trust` (the walls of a stale frame push less), and without its
+/// constrained part where the acceleration-zeroing controller cancels it (`cancels`).
+pub fn channel_felt<S: Space>(
+    projector: &S::OpMat,
+    length_scale: f64,
+    trust: f64,
+    cancels: bool,
+    w: &S::OpVec,
+) -> S::OpVec {
+    let softened = if trust < 1.0 { *w - project_wrench::<S>(projector, length_scale, w) * (1.0 - trust) } else { *w };
+    if cancels {
+        softened - project_wrench::<S>(projector, length_scale, &softened)
+    } else {
+        softened
+    }
+}
+
 /// `T⁻¹ P̃ T ẋ`: the part of twist-like `x` along the directions P̃ selects.
 pub fn project_twist<S: Space>(projector: &S::OpMat, length_scale: f64, x: &S::OpVec) -> S::OpVec {
     scale_op::<S>(&(*projector * scale_op::<S>(x, length_scale)), 1.0 / length_scale)

@@ -1,5 +1,5 @@
-//! The client's own gains, designed from its device and from what the server's survey found at the
-//! operational point (`Welcome::op`) under the mapping the server chose (`Welcome::mapping`). The server
+//! The client's own gains, designed from its device under the mapping the server chose
+//! (`Welcome::mapping`). The server
 //! designs the graphics controller (the VE side); the client designs the loops it closes itself, each at its
 //! own rate and with margin. Gains are in device units (what the hand feels); the core converts them to the
 //! VE units its controllers compute in.
@@ -25,14 +25,18 @@
 //!    joint-constraint controller acts through the unit-consistent coordinates `(v, L ω)`, so on the angular
 //!    axes the device feels `k_j (c_p L)²`; with torque actuation `k_j` and `b_j` also stay within the
 //!    angular budget's share.
-//! 4. **The local model**: the position channels' reaction drives the local model, a mass as light as the
-//!    OP's lightest direction over its reach (`m_op = 1 / max λ(Λ⁻¹)`), integrated once a period. A spring
-//!    on a mass integrated at step T is stable for `K T² / m < 4` and a damper for `B T / m < 2`; the channels
-//!    keep a quarter and a half of these (in VE units, `K_pc c_p / c_f ≤ m_op / T²`,
-//!    `B_pc c_p / c_f ≤ m_op / T`), so no OP is too light for its device's channels.
+//! 4. **The local model** takes the position channels' reaction at the end of its step
+//!    (`channel_reaction`), which is stable for any stiffness and damping on any mass, so the channels keep
+//!    the device's budget however light the OP is: a hand holding the load stretches them by `F / K_pc`.
+//!    Their stiffness stays within [`CHANNEL_COUPLING_RATIO`] times the graphics controller's `K_g` on each
+//!    axis (both at the device), so on the OP's lightest mass, on which both are designed, the channels'
+//!    frequency is at most ten times the coupling's (80 Hz at the coupling's 8 Hz floor, 200 Hz at its 20 Hz
+//!    cap). A channel stiffer than that holds the local model to the device, so its reaction, which
+//!    goes up as the hand's wrench, carries b̂ (a snapshot old) back to the VE: a slider leaving its dead
+//!    centre under 300 ms of delay then swings its VE more than 5 cm from the device as heard.
 
 use kinloop_linkage::math::space::{Space, VecOps};
-use kinloop_protocol::{Mapping, OpSummary};
+use kinloop_protocol::{CouplingGains, Mapping};
 
 use super::config::ControllerGains;
 use crate::device::DeviceSpec;
@@ -46,8 +50,10 @@ pub const JOINT_SHARE: f64 = 2.0 / 3.0;
 /// Share of the damping budget given to the joint-constraint controller (the rest damps the position
 /// channels, which act in every direction).
 pub const JOINT_DAMPING_SHARE: f64 = 1.0 / 3.0;
-/// Fraction of the local model's stability bounds (`K T² / m ≤ 1`, `B T / m ≤ 1`) the position channels use.
-pub const LOCAL_MODEL_MARGIN: f64 = 0.25;
+
+/// Most the position channels' stiffness may be, as a multiple of the graphics controller's K_g on the same
+/// axis at the device: the channels' frequency on the OP's lightest mass within ten times the coupling's.
+pub const CHANNEL_COUPLING_RATIO: f64 = 100.0;
 
 /// One group's budget: (stiffness, damping) in device units.
 fn budget(max_stiffness: f64, max_damping: f64, mass: f64, own_damping: f64, period_s: f64) -> (f64, f64) {
@@ -59,12 +65,12 @@ fn budget(max_stiffness: f64, max_damping: f64, mass: f64, own_damping: f64, per
     (stiffness, damping)
 }
 
-/// The designed gains (device units) for `device` at the OP `op` under `mapping`, length scale
+/// The designed gains (device units) for `device` under `mapping`, the scene's length scale
 /// `length_scale`, haptic period `period_s` (see the module documentation).
 pub fn designed_gains<S: Space>(
     device: &DeviceSpec,
     mapping: &Mapping,
-    op: &OpSummary,
+    coupling: &CouplingGains,
     length_scale: f64,
     period_s: f64,
 ) -> ControllerGains {
@@ -84,7 +90,7 @@ pub fn designed_gains<S: Space>(
     } else {
         (0.0, 0.0)
     };
-    let (c_p, c_f, c_t) = (mapping.position_scale, mapping.force_scale, mapping.torque_scale());
+    let c_p = mapping.position_scale;
     // The joints' share, within the angular budget too where the device renders torque (step 3).
     let lever = (c_p * length_scale).powi(2);
     let mut joint_stiffness = JOINT_SHARE * k_lin;
@@ -93,19 +99,72 @@ pub fn designed_gains<S: Space>(
         joint_stiffness = joint_stiffness.min(JOINT_SHARE * k_ang / lever);
         joint_damping = joint_damping.min(JOINT_DAMPING_SHARE * b_ang / lever);
     }
-    // Step 4: the local model's lightest mass and inertia (VE units) bound the channels.
-    let lightest = |inverse: f64| if inverse > 0.0 { 1.0 / inverse } else { f64::INFINITY };
-    let (m_op, i_op) = (lightest(op.inverse_mass_max), lightest(op.inverse_rotational_inertia_max));
-    let t = period_s;
-    let channel_lin = ((1.0 - JOINT_SHARE) * k_lin).min(LOCAL_MODEL_MARGIN * c_f / c_p * m_op / (t * t));
-    let channel_lin_damping = ((1.0 - JOINT_DAMPING_SHARE) * b_lin).min(LOCAL_MODEL_MARGIN * c_f / c_p * m_op / t);
-    let channel_ang = ((1.0 - JOINT_SHARE) * k_ang).min(LOCAL_MODEL_MARGIN * c_t * i_op / (t * t));
-    let channel_ang_damping = ((1.0 - JOINT_DAMPING_SHARE) * b_ang).min(LOCAL_MODEL_MARGIN * c_t * i_op / t);
-    let per_axis = |l: f64, a: f64| (0..S::DIM).map(|i| if i < lin { l } else { a }).collect();
+    // Step 4: the channels take the rest of the device's budget, whatever the OP's mass, their stiffness within
+    // `CHANNEL_COUPLING_RATIO` times the graphics controller's on each axis, at the device.
+    let per_axis = |l: f64, a: f64| (0..S::DIM).map(|i| if i < lin { l } else { a }).collect::<Vec<f64>>();
+    let mut position_stiffness = per_axis((1.0 - JOINT_SHARE) * k_lin, (1.0 - JOINT_SHARE) * k_ang);
+    let to_device = [mapping.force_scale / c_p, mapping.torque_scale()];
+    for (a, k) in position_stiffness.iter_mut().enumerate() {
+        let coupling_at_device = coupling.stiffness.get(a).copied().unwrap_or(0.0) * to_device[usize::from(a >= lin)];
+        if coupling_at_device > 0.0 {
+            *k = k.min(CHANNEL_COUPLING_RATIO * coupling_at_device);
+        }
+    }
     ControllerGains {
         joint_stiffness,
         joint_damping,
-        position_stiffness: per_axis(channel_lin, channel_ang),
-        position_damping: per_axis(channel_lin_damping, channel_ang_damping),
+        position_stiffness,
+        position_damping: per_axis((1.0 - JOINT_DAMPING_SHARE) * b_lin, (1.0 - JOINT_DAMPING_SHARE) * b_ang),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::DevicePreset;
+    use kinloop_linkage::math::space::{Planar, SceneKind};
+
+    fn mapping(position_scale: f64, force_scale: f64) -> Mapping {
+        Mapping { position_scale, force_scale, ..Mapping::identity() }
+    }
+
+    /// A Falcon on an OP whose lightest mass at the device is a fraction of a gram (`m c_f / c_p`): the
+    /// channels take a third of the device's stiffness budget and two thirds of its damping whatever the
+    /// mass, as long as the coupling is no softer than a hundredth of them.
+    #[test]
+    fn the_channels_keep_the_devices_budget_on_a_light_op() {
+        let falcon = DevicePreset::Falcon.spec(SceneKind::Planar).unwrap();
+        let (k, b) = budget(falcon.max_stiffness, falcon.max_damping, falcon.mass[0], falcon.damping[0], 1e-3);
+        let map = mapping(8.0, 6.5e-4);
+        // K_g on a 13 kg (VE) lightest mass, 1 g at the device, at the coupling's 20 Hz cap (no delay).
+        let k_g = 13.0 * (2.0 * std::f64::consts::PI * 20.0_f64).powi(2);
+        let coupling = CouplingGains { stiffness: vec![k_g, k_g, 0.0], damping: vec![1.0, 1.0, 0.0] };
+        let gains = designed_gains::<Planar>(&falcon, &map, &coupling, 0.1, 1e-3);
+        let expected = (1.0 - JOINT_SHARE) * k;
+        assert!((gains.position_stiffness[0] - expected).abs() < 1e-9 * expected, "{gains:?} against {expected}");
+        let damping = (1.0 - JOINT_DAMPING_SHARE) * b;
+        assert!((gains.position_damping[1] - damping).abs() < 1e-9 * damping, "{gains:?}");
+    }
+
+    /// Against a coupling a thousand times softer at the device than the device's channel budget, the
+    /// channels stop at `CHANNEL_COUPLING_RATIO` times it, on the linear and on the angular axes (the
+    /// angular at the torque scale `c_f c_p`).
+    #[test]
+    fn the_channels_stay_within_a_hundred_couplings() {
+        let paper = DevicePreset::Paper.spec(SceneKind::Planar).unwrap();
+        let map = mapping(0.5, 0.02);
+        let free =
+            designed_gains::<Planar>(&paper, &map, &CouplingGains { stiffness: vec![], damping: vec![] }, 0.1, 1e-3);
+        let (k_lin, k_ang) = (free.position_stiffness[0] / 1000.0, free.position_stiffness[2] / 1000.0);
+        let coupling = CouplingGains {
+            stiffness: vec![k_lin * map.position_scale / map.force_scale, 0.0, k_ang / map.torque_scale()],
+            damping: vec![0.0; 3],
+        };
+        let capped = designed_gains::<Planar>(&paper, &map, &coupling, 0.1, 1e-3);
+        let ratio = |a: usize, k: f64| capped.position_stiffness[a] / k;
+        assert!((ratio(0, k_lin) - CHANNEL_COUPLING_RATIO).abs() < 1e-9, "{capped:?}");
+        assert!((ratio(2, k_ang) - CHANNEL_COUPLING_RATIO).abs() < 1e-9, "{capped:?}");
+        // No coupling on an axis (a pinned grasp's angle, here y) leaves the budget.
+        assert_eq!(capped.position_stiffness[1], free.position_stiffness[1]);
     }
 }

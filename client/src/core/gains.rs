@@ -41,7 +41,7 @@ pub(super) fn resolve_gains<S: Space>(
         GainChoice::Designed => design::designed_gains::<S>(
             &config.device,
             &welcome.mapping,
-            &welcome.op,
+            &welcome.coupling,
             welcome.scene.length_scale,
             period_s,
         ),

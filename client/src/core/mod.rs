@@ -13,7 +13,7 @@
 //!    (first-order: fast along the constrained directions, onto the path when there is one; slow in the free
 //!    ones, see `CoreConfig::free_blend_time_constant`);
 //! 3. step the local model (eq 11/13) under the user's wrench: the hand wrench (force channel, when measured)
-//!    plus the position channels' reaction applied to the device last tick;
+//!    plus the position channels' reaction, taken at the end of the step (`channel_reaction`);
 //! 4. the controllers, with `e = x_d ⊖ x_m`: joint constraint (stiffness or impedance mode), impedance with
 //!    Λ̂⁻¹ in the free directions, position channels, contact force channel;
 //! 5. safety: non-finite check, output gate (ramp in, fade out on stale snapshots), device limits;
@@ -22,9 +22,13 @@
 //! **What drives the local model.** The hand wrench F_h (only when a sensor measures it: without one, feeding
 //! an estimate forward would make the user feel the device's mass instead of the linkage's, because the
 //! impedance controller that reshapes the device needs the same measurement) plus the reaction of the
-//! position channels, equal and opposite to what the device received, so the teleoperator exchanges no net
-//! energy of its own. Other users' wrenches are not added: the server's b̂ already contains their effect.
-//! The uplink's `hand_wrench` is exactly this driving wrench, so the VE's force channel pushes the VE's OP
+//! position channels, equal and opposite to what the device receives, so the teleoperator exchanges no net
+//! energy of its own, in the free directions. It is taken at the end of the model's step (`channel_reaction`),
+//! so the channels are as stiff as the device renders however light the OP is. Along the constrained
+//! directions the device feels the channels as part of the wall, the model takes no reaction there, and the
+//! pull keeps it on the VE's joints. Other users' wrenches are not added: the server's b̂ already contains their effect. The uplink's
+//! `hand_wrench` is exactly this driving wrench, so the VE's force channel pushes the VE's OP as the hand
+//! pushes the model.
 
 pub mod config;
 pub mod controllers;
@@ -32,6 +36,7 @@ pub mod design;
 pub mod safety;
 
 mod bias_trust;
+mod channel_reaction;
 
 mod deadband;
 mod error;
@@ -79,7 +84,7 @@ use observer::HandObserver;
 use passive_update::EnergyTank;
 use path_follower::PathFollower;
 use pose_memos::PoseMemos;
-use safety::{usable_device_state, OutputGate, WrenchLimits};
+use safety::{usable_device_state, OutputGate, PartScales, WrenchLimits};
 
 /// Longest step a late tick may take (a stalled loop must not integrate a huge step).
 const MAX_STEP_S: f64 = 0.02;
@@ -121,7 +126,8 @@ pub struct HapticCore<S: Space> {
     index: DeviceIndex<S>,
     gate: OutputGate,
     observer: HandObserver<S>,
-    reaction: S::OpVec,
+    /// The limits' scales on the last command (what the channels' reaction at the end of a step assumes).
+    last_scales: PartScales,
     last_command: S::OpVec,
     last_now: Option<Duration>,
     one_way_delay: Duration,
@@ -210,7 +216,7 @@ impl<S: Space> HapticCore<S> {
             index: DeviceIndex::identity(scales.position),
             gate: OutputGate::new(&config.safety, config.period),
             observer: HandObserver::new(config.hand_observer_bandwidth, device_mass),
-            reaction: S::OpVec::zero(),
+            last_scales: PartScales { force: 1.0, torque: 1.0 },
             last_command: S::OpVec::zero(),
             last_now: None,
             one_way_delay: Duration::ZERO,

@@ -100,6 +100,19 @@ impl<S: Space> LocalModel<S> {
         self.reduced.terms.bias = *bias;
     }
 
+    /// What a step of `dt_s` under `wrench` does, by the form that steps the model: its Λ̂⁻¹ and the twist
+    /// the step reaches (what the channels' reaction at the end of the step is solved from,
+    /// `channel_reaction`).
+    pub fn step_response(&self, dt_s: f64, wrench: &S::OpVec) -> (S::OpMat, S::OpVec) {
+        match (&self.config, self.using_config) {
+            (Some(c), true) => {
+                let inverse = c.inverse_inertia();
+                (inverse, c.twist + (c.free_op_acceleration() + inverse * *wrench) * dt_s)
+            }
+            _ => (self.reduced.terms.inverse_inertia, self.reduced.twist + self.reduced.acceleration(wrench) * dt_s),
+        }
+    }
+
     /// One step of `dt_s` under the OP wrench `wrench`.
     pub fn step(&mut self, dt_s: f64, wrench: &S::OpVec) {
         match (&mut self.config, self.using_config) {

@@ -11,9 +11,10 @@ use kinloop_protocol::passivity::MAX_AXES;
 use kinloop_protocol::uplink_flags;
 
 use super::bias_trust::paid_bias;
+use super::channel_reaction::end_of_step_reaction;
 use super::controllers::{
-    contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness, position_channel,
-    project_wrench,
+    channel_felt, contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness,
+    position_channel,
 };
 use super::index::DeviceIndex;
 use super::passive_update::damper_dissipation;
@@ -73,10 +74,8 @@ pub(super) struct Requests<S: Space> {
     pub contact: S::OpVec,
     /// Their sum.
     pub requested: S::OpVec,
-    /// What the device receives from the position channels once the joint-constraint controller has acted,
-    /// so what the local model gets back as their reaction.
-    pub position_felt: S::OpVec,
-    /// The same of the dampers, the joint-constraint controller's included.
+    /// What the device receives from the position channels' dampers once the joint-constraint controller has
+    /// acted, the joint-constraint controller's damper included (what fills the update's tank).
     pub damping_felt: S::OpVec,
 }
 
@@ -187,7 +186,6 @@ impl<S: Space> HapticCore<S> {
                 self.model.set_state(self.active.op_pose, S::OpVec::zero());
             }
             self.model.set_inverse_inertia(&self.frame.inverse_inertia);
-            self.reaction = S::OpVec::zero();
         }
         if first && self.config.index_at_first_snapshot {
             let (op, scale) = (&self.active.op_pose, self.scales.position);
@@ -202,7 +200,12 @@ impl<S: Space> HapticCore<S> {
         self.has_snapshot = true;
     }
 
-    /// Stage 3: steps the local model (eq 11/13) under the user's wrench and books the power into it.
+    /// Stage 3: steps the local model (eq 11/13) under the user's wrench and books the power into it. The
+    /// position channels' reaction is taken at the end of the step (`channel_reaction`), in the free
+    /// directions only: along the constrained ones the model's Λ̂⁻¹ is small but not zero (filtered, and
+    /// linearized at the snapshot's pose), and channels as stiff as the device renders would drag the model
+    /// through the walls after a hand pushing into them, and the VE after the model. The device feels the
+    /// channels there as part of the wall, and the pull keeps the model on the VE's joints.
     pub(super) fn step_model(&mut self, dt_s: f64, device: &DeviceState<S>, intake: &Intake<S>) -> HandWrenches<S> {
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
         // The sensor saturates at the device's peaks (a hand can push harder than the motors, but the
@@ -217,7 +220,8 @@ impl<S: Space> HapticCore<S> {
             self.model.set_state(self.model.pose(), S::OpVec::zero());
             S::OpVec::zero()
         } else {
-            let wrench = sensed.unwrap_or_else(S::OpVec::zero) + self.reaction;
+            let own = sensed.unwrap_or_else(S::OpVec::zero);
+            let wrench = own + self.channels_at_end_of_step(dt_s, intake, &own);
             self.model.step(dt_s, &wrench);
             wrench
         };
@@ -229,6 +233,31 @@ impl<S: Space> HapticCore<S> {
         }
         self.port.book(&power_out[..S::DIM], dt_s);
         HandWrenches { sensed, estimate, for_constraint, model }
+    }
+
+    /// The free part of the position channels' reaction at the end of the model's step under `own`
+    /// (`channel_reaction`), as the device renders it under the gate's gain and the limits' scales of the
+    /// last tick; zero when it cannot be solved.
+    fn channels_at_end_of_step(&self, dt_s: f64, intake: &Intake<S>, own: &S::OpVec) -> S::OpVec {
+        let (l, p) = (self.length_scale, &self.local.projector);
+        let (gain, scales) = (self.gate.gain(), self.last_scales);
+        let error = self.controlled(intake.device_pose.difference(&self.model.pose()));
+        let (inverse_inertia, free) = self.model.step_response(dt_s, own);
+        let rendered = |stretch: &S::OpVec| {
+            scales.apply::<S>(&mask_unactuated::<S>(&channel_felt::<S>(p, l, 1.0, true, stretch), &self.limits)) * gain
+        };
+        end_of_step_reaction::<S>(
+            dt_s,
+            &inverse_inertia,
+            &free,
+            &error,
+            &intake.device_twist,
+            &self.gains.position_stiffness,
+            &self.gains.position_damping,
+            |v| self.controlled(v),
+            rendered,
+        )
+        .unwrap_or_else(S::OpVec::zero)
     }
 
     /// Stage 4: the controllers (section III, Fig 4), with `e = x_d ⊖ x_m`: joint constraint (stiffness or
@@ -250,7 +279,7 @@ impl<S: Space> HapticCore<S> {
         // The constrained directions soften as the model runs away from where its terms were computed
         // (`linearization_trust`): the joint-constraint controller and the position channels' constrained part.
         let trust = self.linearization_trust();
-        let soften = |w: S::OpVec| if trust < 1.0 { w - project_wrench::<S>(p, l, &w) * (1.0 - trust) } else { w };
+        let soften = |w: S::OpVec| channel_felt::<S>(p, l, trust, false, &w);
         let pc = soften(position_channel::<S>(&g.position_stiffness, &g.position_damping, &error, &error_rate));
         // The dampers' part of it, which with the joint-constraint controller's fills the update's tank
         // (`passive_update`).
@@ -276,20 +305,16 @@ impl<S: Space> HapticCore<S> {
         };
         let (contacts, live) = self.model.contacts();
         let contact = contact_feedforward::<S>(contacts, live, &self.local.free_inertia);
-        let (jc, position_felt, damping_felt) = match (self.config.constraint_mode, hand.for_constraint) {
+        let (jc, damping_felt) = match (self.config.constraint_mode, hand.for_constraint) {
             (ConstraintMode::Impedance, Some(hand)) => (
                 joint_constraint_impedance::<S>(p, l, &hand, &(pc + imp + contact)),
                 // The acceleration-zeroing controller cancels the channels along the constrained directions:
-                // the device feels only their free part. Reacting to the cancelled part would push the local
-                // model (and, through the uplink, the VE) along directions the joints hold, with K_pc times a
-                // drift that grows without bound in this mode (Fig 7b).
-                pc - project_wrench::<S>(p, l, &pc),
-                pc_damping - project_wrench::<S>(p, l, &pc_damping),
+                // the device feels only their free part (Fig 7b).
+                channel_felt::<S>(p, l, 1.0, true, &pc_damping),
             ),
             // Without a hand wrench to cancel, the acceleration-zeroing mode cannot work: keep the joints stiff.
             _ => (
                 joint_constraint_stiffness::<S>(p, l, g.joint_stiffness, g.joint_damping, &error, &error_rate),
-                pc,
                 pc_damping + joint_constraint_stiffness::<S>(p, l, 0.0, g.joint_damping, &zero, &error_rate) * trust,
             ),
         };
@@ -305,7 +330,6 @@ impl<S: Space> HapticCore<S> {
             bias_at_risk,
             contact,
             requested: pc + jc + imp + contact,
-            position_felt,
             damping_felt,
         }
     }
@@ -358,7 +382,7 @@ impl<S: Space> HapticCore<S> {
             let scales;
             (command, scales) = limit_wrench_parts::<S>(&on_device, &self.limits);
             clamp_scale = scales.min();
-            self.reaction = -scales.apply::<S>(&mask_unactuated::<S>(&asked.position_felt, &self.limits)) * gain;
+            self.last_scales = scales;
         }
         self.tank.fill(damper_dissipation::<S>(&asked.error_rate, &asked.damping_felt, gain * clamp_scale, dt_s));
         if clamp_scale < 1.0 {
@@ -473,7 +497,6 @@ impl<S: Space> HapticCore<S> {
     fn recover_from_non_finite(&mut self, now: Duration) {
         self.stats.non_finite_events += 1;
         self.model.set_state(self.predicted_op(now), S::OpVec::zero());
-        self.reaction = S::OpVec::zero();
         self.observer.reset();
         self.gate.close();
     }

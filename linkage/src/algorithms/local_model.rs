@@ -428,6 +428,16 @@ impl<S: Space> ConfigSpaceLocalModel<S> {
         acc
     }
 
+    /// The OP acceleration without any wrench, `Ĵ c + J̇q̇`: with [`Self::inverse_inertia`], what a step
+    /// under a wrench `F` accelerates the OP by, `Ĵ c + J̇q̇ + Ĵ M F`, without stepping.
+    pub fn free_op_acceleration(&self) -> S::OpVec {
+        let mut acc = S::OpVec::zero();
+        for c in 0..S::DIM {
+            acc[c] = row_dot(&self.terms.op_jacobian, c, &self.free_accel) + self.terms.op_bias[c];
+        }
+        acc
+    }
+
     /// Λ̂⁻¹ implied by the frozen terms (Ĵ M), for comparison with the reduced form.
     pub fn inverse_inertia(&self) -> S::OpMat {
         let mut out = S::OpMat::zero();
