@@ -240,14 +240,33 @@ fn seed_8s_coupler_on_the_paper_device_without_delay_renders_with_its_reach_narr
     assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
 }
 
+/// Seed 61's double-rocker held at its crank on the sensorless devices without delay: the OP's lightest mass
+/// on the device is a fraction of a gram. Integrated with the channels' reaction at the start of its step,
+/// the local model held the position channels to 15 N/m on the Touch and 106 N/m on the Falcon, the hand
+/// stretched them by centimetres, and the VE ran more than 5 cm from the device (54 mm and 20 mm RMS). With
+/// the reaction taken at the end of the step (`channel_reaction`) the channels keep the device's budget and
+/// both sessions render.
+#[test]
+fn seed_61s_crank_on_the_sensorless_devices_without_delay_renders_on_stiff_channels() {
+    for device in ["sim:touch", "sim:falcon"] {
+        let outcome = soft_without_delay(61, "op-crank", device, 10.0);
+        assert!(outcome.failures.is_empty(), "{device}: {:?}", outcome.failures);
+    }
+}
+
 /// The robustness matrix's session of generated seed `seed`'s OP `op` on `sim:paper`, soft hand, 0 ms.
 fn soft_on_paper_without_delay(seed: u64, op: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
+    soft_without_delay(seed, op, "sim:paper", seconds)
+}
+
+/// The robustness matrix's session of generated seed `seed`'s OP `op` on `device`, soft hand, 0 ms.
+fn soft_without_delay(seed: u64, op: &str, device: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
     let linkage = generate(seed, None);
     let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[0]);
     let point = all
         .iter()
-        .find(|p| p.op == op && p.device.name() == "sim:paper")
-        .unwrap_or_else(|| panic!("seed {seed}: no {op} on sim:paper"));
+        .find(|p| p.op == op && p.device.name() == device)
+        .unwrap_or_else(|| panic!("seed {seed}: no {op} on {device}"));
     kinloop::experiments::robustness::evaluate(&linkage, point, seconds)
 }
 
