@@ -9,14 +9,14 @@
 //! bounded by the graphics controller's stiffness rather than the OP's mass (`design`).
 //!
 //! With `e = x_d ⊖ x_m` and the model's twist `v⁺ = u + T Λ̂⁻¹ F` after a step of `T` from the free twist `u`
-//! (the model's own acceleration and every other wrench), the reaction the device renders of a stretch
-//! `K e + B ė` is `R(K e + B ė)`, with `R` linear (the gate's gain, the limits' scales of the last tick, the
-//! unactuated axes, the softening along the constrained directions). At the end of the step
-//! `e⁺ = e − T C v⁺` and `ė⁺ = C (v_d − v⁺)` (`C` zeroes the axes no controller acts on), so
-//! `F = R(K e + B C v_d) − A v⁺` with `A = R D C`, `D = T K + B`, and
-//! `(I + T A Λ̂⁻¹) F = R(K e + B C v_d) − A u`.
-//! For `R = C = I` this is the implicit spring-damper `(I + T D Λ̂⁻¹) F = K e + B v_d − D u`, whose matrix
-//! has the eigenvalues of `I + T D^½ Λ̂⁻¹ D^½`, all at least one.
+//! (the model's own acceleration and every other wrench), the model receives `𝒦 e + ℬ ė` of the channels,
+//! `𝒦` and `ℬ` linear (their stiffness and damping, through what the device renders: the gate's gain, the
+//! limits' scales of the last tick, the unactuated axes, the softening along the constrained directions). At
+//! the end of the step `e⁺ = e − T C v⁺` and `ė⁺ = C (v_d − v⁺)` (`C` zeroes the axes no controller acts
+//! on), so `F = 𝒦 e + ℬ C v_d − A v⁺` with `A = (T 𝒦 + ℬ) C`, and `(I + T A Λ̂⁻¹) F = 𝒦 e + ℬ C v_d − A u`.
+//! For diagonal `𝒦 = K`, `ℬ = B` and `C = I` this is the implicit spring-damper
+//! `(I + T D Λ̂⁻¹) F = K e + B v_d − D u`, `D = T K + B`, whose matrix has the eigenvalues of
+//! `I + T D^½ Λ̂⁻¹ D^½`, all at least one.
 
 use kinloop_linkage::math::space::{Space, VecOps};
 use nalgebra::{SMatrix, SVector};
@@ -26,9 +26,10 @@ const MAX_DIM: usize = 6;
 
 /// The channels' reaction on the model at the end of a step of `dt_s` (see the module documentation): the
 /// model's inverse inertia `inverse_inertia` and its twist `free_twist` after the step without the reaction,
-/// the error `error` and device twist `device_twist` on the controlled axes (`controlled`), the channels'
-/// stiffness and damping, and `rendered`, the linear map from a stretch wrench to what reaches the model.
-/// `None` when the system is singular or the result not finite (the caller falls back to the start of step).
+/// the error `error` and device twist `device_twist`, `controlled` (which zeroes the axes no controller acts
+/// on), and the linear maps from an error to the reaction of the channels' springs (`springs`, `R K`) and from
+/// an error rate to their dampers' (`dampers`, `R B`), as the model receives them. `None` when the system is
+/// singular or the result not finite (the caller then takes no reaction this step).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn end_of_step_reaction<S: Space>(
     dt_s: f64,
@@ -36,25 +37,21 @@ pub(crate) fn end_of_step_reaction<S: Space>(
     free_twist: &S::OpVec,
     error: &S::OpVec,
     device_twist: &S::OpVec,
-    stiffness: &S::OpVec,
-    damping: &S::OpVec,
     controlled: impl Fn(S::OpVec) -> S::OpVec,
-    rendered: impl Fn(&S::OpVec) -> S::OpVec,
+    springs: impl Fn(&S::OpVec) -> S::OpVec,
+    dampers: impl Fn(&S::OpVec) -> S::OpVec,
 ) -> Option<S::OpVec> {
     let n = S::DIM;
-    let mut stretch = S::OpVec::zero();
-    let device = controlled(*device_twist);
-    for a in 0..n {
-        stretch[a] = stiffness[a] * error[a] + damping[a] * device[a];
-    }
-    let pulled = rendered(&stretch);
-    // A = R D C, column by column; the padding beyond `n` is the identity, so the solve leaves it alone.
+    let pulled = springs(error) + dampers(&controlled(*device_twist));
+    // A = (T R K + R B) C, column by column; the padding beyond `n` is the identity, so the solve leaves it
+    // alone.
     let mut system = SMatrix::<f64, MAX_DIM, MAX_DIM>::identity();
     let mut a_matrix = SMatrix::<f64, MAX_DIM, MAX_DIM>::zeros();
     for col in 0..n {
         let mut unit = S::OpVec::zero();
-        unit[col] = dt_s * stiffness[col] + damping[col];
-        let column = rendered(&controlled(unit));
+        unit[col] = 1.0;
+        let unit = controlled(unit);
+        let column = springs(&unit) * dt_s + dampers(&unit);
         for row in 0..n {
             a_matrix[(row, col)] = column[row];
         }
@@ -96,10 +93,9 @@ mod tests {
             &free,
             &Vector3::new(x_d - x_m, 0.0, 0.0),
             &Vector3::new(v_d, 0.0, 0.0),
-            &Vector3::new(k, k, 0.0),
-            &Vector3::new(b, b, 0.0),
             |v| v,
-            |w| *w,
+            |e| e * k,
+            |r| r * b,
         )
         .expect("solvable");
         let v_after = v_m + dt * f[0] / m;
@@ -124,10 +120,9 @@ mod tests {
                 &Vector3::new(v, 0.0, 0.0),
                 &Vector3::new(-x, 0.0, 0.0),
                 &Vector3::zeros(),
-                &Vector3::new(k, k, k),
-                &Vector3::new(b, b, b),
                 |v| v,
-                |w| *w,
+                |e| e * k,
+                |r| r * b,
             )
             .expect("solvable");
             v += dt * f[0] / m;
@@ -149,10 +144,9 @@ mod tests {
             &Vector3::new(1.0, 2.0, 3.0),
             &Vector3::new(0.1, 0.2, 0.3),
             &Vector3::new(1.0, 1.0, 1.0),
-            &Vector3::new(100.0, 100.0, 1.0),
-            &Vector3::new(1.0, 1.0, 0.1),
             |v| v,
-            |w| *w * 0.0,
+            |e| e * 0.0,
+            |r| r * 0.0,
         )
         .expect("solvable");
         assert_eq!(f, Vector3::zeros());

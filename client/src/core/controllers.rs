@@ -248,7 +248,8 @@ pub fn hadamard<S: Space>(a: &S::OpVec, b: &S::OpVec) -> S::OpVec {
 
 /// Position channels of the four-channel teleoperator (Fig 4, `K_pc`, `B_pc`), on the device:
 /// `K_pc ⊙ (x_m ⊖ x_d) + B_pc ⊙ (ẋ_m − ẋ_d)` with `error = x_d ⊖ x_m`, `error_rate = ẋ_d − ẋ_m`.
-/// The local model receives the opposite of its free part, at the end of its step (`channel_reaction`).
+/// The local model receives the opposite, at the end of its step (`channel_reaction`), along the constrained
+/// directions only at the walls' gains (`ResolvedGains::wall_stiffness`).
 pub fn position_channel<S: Space>(
     stiffness: &S::OpVec,
     damping: &S::OpVec,

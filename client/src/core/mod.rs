@@ -22,11 +22,13 @@
 //! **What drives the local model.** The hand wrench F_h (only when a sensor measures it: without one, feeding
 //! an estimate forward would make the user feel the device's mass instead of the linkage's, because the
 //! impedance controller that reshapes the device needs the same measurement) plus the reaction of the
-//! position channels, equal and opposite to what the device receives, so the teleoperator exchanges no net
-//! energy of its own, in the free directions. It is taken at the end of the model's step (`channel_reaction`),
-//! so the channels are as stiff as the device renders however light the OP is. Along the constrained
-//! directions the device feels the channels as part of the wall, the model takes no reaction there, and the
-//! pull keeps it on the VE's joints. Other users' wrenches are not added: the server's b̂ already contains their effect. The uplink's
+//! position channels, equal and opposite to what the device receives in the free directions, so the
+//! teleoperator exchanges no net energy of its own there. It is taken at the end of the model's step
+//! (`channel_reaction`), so the channels are as stiff as the device renders however light the OP is. Along
+//! the constrained directions the device feels the channels as part of the wall, and the model takes their
+//! reaction only at the walls' gains (`ResolvedGains::wall_stiffness`), which a step at its start would
+//! hold: taken whole, it would drag the model through the walls. Other users' wrenches are not added: the
+//! server's b̂ already contains their effect. The uplink's
 //! `hand_wrench` is exactly this driving wrench, so the VE's force channel pushes the VE's OP as the hand
 //! pushes the model.
 

@@ -13,8 +13,8 @@ use kinloop_protocol::uplink_flags;
 use super::bias_trust::paid_bias;
 use super::channel_reaction::end_of_step_reaction;
 use super::controllers::{
-    channel_felt, contact_feedforward, impedance_free, joint_constraint_impedance, joint_constraint_stiffness,
-    position_channel,
+    channel_felt, contact_feedforward, hadamard, impedance_free, joint_constraint_impedance,
+    joint_constraint_stiffness, position_channel, project_wrench,
 };
 use super::index::DeviceIndex;
 use super::passive_update::damper_dissipation;
@@ -201,11 +201,9 @@ impl<S: Space> HapticCore<S> {
     }
 
     /// Stage 3: steps the local model (eq 11/13) under the user's wrench and books the power into it. The
-    /// position channels' reaction is taken at the end of the step (`channel_reaction`), in the free
-    /// directions only: along the constrained ones the model's Λ̂⁻¹ is small but not zero (filtered, and
-    /// linearized at the snapshot's pose), and channels as stiff as the device renders would drag the model
-    /// through the walls after a hand pushing into them, and the VE after the model. The device feels the
-    /// channels there as part of the wall, and the pull keeps the model on the VE's joints.
+    /// position channels' reaction is taken at the end of the step (`channel_reaction`): whole in the free
+    /// directions, and along the constrained ones (where the device feels them as part of the wall) only up
+    /// to the walls' gains (`ResolvedGains::wall_stiffness`).
     pub(super) fn step_model(&mut self, dt_s: f64, device: &DeviceState<S>, intake: &Intake<S>) -> HandWrenches<S> {
         // A sensed wrench past the protocol's range is no reading (the server would refuse the uplink).
         // The sensor saturates at the device's peaks (a hand can push harder than the motors, but the
@@ -221,7 +219,9 @@ impl<S: Space> HapticCore<S> {
             S::OpVec::zero()
         } else {
             let own = sensed.unwrap_or_else(S::OpVec::zero);
-            let wrench = own + self.channels_at_end_of_step(dt_s, intake, &own);
+            // The acceleration-zeroing controller cancels the channels along the constrained directions.
+            let walls = !(self.config.constraint_mode == ConstraintMode::Impedance && for_constraint.is_some());
+            let wrench = own + self.channels_at_end_of_step(dt_s, intake, &own, walls);
             self.model.step(dt_s, &wrench);
             wrench
         };
@@ -235,16 +235,20 @@ impl<S: Space> HapticCore<S> {
         HandWrenches { sensed, estimate, for_constraint, model }
     }
 
-    /// The free part of the position channels' reaction at the end of the model's step under `own`
-    /// (`channel_reaction`), as the device renders it under the gate's gain and the limits' scales of the
-    /// last tick; zero when it cannot be solved.
-    fn channels_at_end_of_step(&self, dt_s: f64, intake: &Intake<S>, own: &S::OpVec) -> S::OpVec {
+    /// The position channels' reaction at the end of the model's step under `own` (`channel_reaction`), as
+    /// the device renders it under the gate's gain and the limits' scales of the last tick: whole in the free
+    /// directions, at the walls' gains along the constrained ones where `walls` (softened as the controllers
+    /// soften them). Zero when it cannot be solved.
+    fn channels_at_end_of_step(&self, dt_s: f64, intake: &Intake<S>, own: &S::OpVec, walls: bool) -> S::OpVec {
         let (l, p) = (self.length_scale, &self.local.projector);
         let (gain, scales) = (self.gate.gain(), self.last_scales);
+        let trust = if walls { self.linearization_trust() } else { 0.0 };
         let error = self.controlled(intake.device_pose.difference(&self.model.pose()));
         let (inverse_inertia, free) = self.model.step_response(dt_s, own);
-        let rendered = |stretch: &S::OpVec| {
-            scales.apply::<S>(&mask_unactuated::<S>(&channel_felt::<S>(p, l, 1.0, true, stretch), &self.limits)) * gain
+        let g = &self.gains;
+        let rendered = |whole: &S::OpVec, wall: &S::OpVec| {
+            let taken = channel_felt::<S>(p, l, 1.0, true, whole) + project_wrench::<S>(p, l, wall) * trust;
+            scales.apply::<S>(&mask_unactuated::<S>(&taken, &self.limits)) * gain
         };
         end_of_step_reaction::<S>(
             dt_s,
@@ -252,10 +256,9 @@ impl<S: Space> HapticCore<S> {
             &free,
             &error,
             &intake.device_twist,
-            &self.gains.position_stiffness,
-            &self.gains.position_damping,
             |v| self.controlled(v),
-            rendered,
+            |e| rendered(&hadamard::<S>(&g.position_stiffness, e), &hadamard::<S>(&g.wall_stiffness, e)),
+            |r| rendered(&hadamard::<S>(&g.position_damping, r), &hadamard::<S>(&g.wall_damping, r)),
         )
         .unwrap_or_else(S::OpVec::zero)
     }
