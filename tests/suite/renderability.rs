@@ -170,3 +170,22 @@ fn the_ball_jointed_delta_renders_with_the_configuration_space_local_model() {
         r.max_closure_error_m
     );
 }
+
+/// The serial arm's tip on a Falcon without delay, over a whole tour: the arm passes near its stretched,
+/// singular pose, where a direction turns constrained. The device feels the position channels there as part
+/// of the wall; a local model that took no reaction from them there (only their free part) left the device
+/// on a spring to a wall the model does not feel, and the session made energy (0.034 J over the tour against
+/// the 0.006 J the hand's own work explains). Taken at the walls' gains (`ResolvedGains::wall_stiffness`) the
+/// pair renders.
+#[test]
+fn the_serial_arms_tip_renders_on_a_falcon_without_delay() {
+    let p = Point {
+        scene: "serial-arm".into(),
+        op: "tip".into(),
+        device: DevicePreset::Falcon,
+        network: Network::Perfect,
+        hand: HandKind::Soft,
+    };
+    let r = evaluate(&p, SECONDS).unwrap();
+    assert!(r.renders, "{:?}: energy excess {:?} J", r.failures, r.energy_excess_j);
+}
