@@ -637,8 +637,7 @@ fn users_sharing_a_linkage_over_a_slow_link_do_not_push_each_other_into_oscillat
 /// Four users on the testbed's link2 (relaxed, firm, one that lets go at 2 s, one that jabs): the released
 /// handle's presence sensor reports it, and its coupling lets go of the linkage rather than holding it where the
 /// hand left it against the other three (which, held, clamp their devices and leave the released handle
-/// centimetres from the OP). The session is stable, no device clamps, and every hand tracks its OP within the
-/// robustness goal at 0 ms (5 mm RMS), never a centimetre off.
+/// centimetres from the OP). The session is stable and the three hands still on track the OP within mm.
 #[test]
 fn a_user_letting_go_of_a_shared_linkage_does_not_hold_the_others_back() {
     use kinloop::experiments::verdict::judge;
@@ -662,8 +661,7 @@ fn a_user_letting_go_of_a_shared_linkage_does_not_hold_the_others_back() {
     let verdict = judge(&summary, &rec);
     assert!(verdict.stable, "{verdict:?}");
     for c in &summary.clients {
-        assert!(c.saturated_fraction == 0.0, "{}: {c:?}", c.name);
-        assert!(c.device_op_rms_m <= 0.005 && c.device_op_max_m < 0.01, "{}: {c:?}", c.name);
+        assert!(c.saturated_fraction == 0.0 && c.device_op_max_m < 0.005, "{}: {c:?}", c.name);
     }
 }
 
