@@ -19,10 +19,8 @@
 //! `I + T D^½ Λ̂⁻¹ D^½`, all at least one.
 
 use kinloop_linkage::math::space::{Space, VecOps};
+use kinloop_protocol::passivity::MAX_AXES;
 use nalgebra::{SMatrix, SVector};
-
-/// The largest operational space (spatial: 6).
-const MAX_DIM: usize = 6;
 
 /// The channels' reaction on the model at the end of a step of `dt_s` (see the module documentation): the
 /// model's inverse inertia `inverse_inertia` and its twist `free_twist` after the step without the reaction,
@@ -45,8 +43,8 @@ pub(crate) fn end_of_step_reaction<S: Space>(
     let pulled = springs(error) + dampers(&controlled(*device_twist));
     // A = (T R K + R B) C, column by column; the padding beyond `n` is the identity, so the solve leaves it
     // alone.
-    let mut system = SMatrix::<f64, MAX_DIM, MAX_DIM>::identity();
-    let mut a_matrix = SMatrix::<f64, MAX_DIM, MAX_DIM>::zeros();
+    let mut system = SMatrix::<f64, MAX_AXES, MAX_AXES>::identity();
+    let mut a_matrix = SMatrix::<f64, MAX_AXES, MAX_AXES>::zeros();
     for col in 0..n {
         let mut unit = S::OpVec::zero();
         unit[col] = 1.0;
@@ -56,7 +54,7 @@ pub(crate) fn end_of_step_reaction<S: Space>(
             a_matrix[(row, col)] = column[row];
         }
     }
-    let mut rhs = SVector::<f64, MAX_DIM>::zeros();
+    let mut rhs = SVector::<f64, MAX_AXES>::zeros();
     for row in 0..n {
         let a_u: f64 = (0..n).map(|k| a_matrix[(row, k)] * free_twist[k]).sum();
         rhs[row] = pulled[row] - a_u;
