@@ -2,7 +2,8 @@
 //!
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
 //! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
-//! steps with the snapshot's b̂ turned as they are, and it is held at a swing's limits, where the OP turns
+//! steps with the snapshot's b̂ turned as they are and with the change of the forces at rest along the path
+//! where that change holds it back toward the VE, and it is held at a swing's limits, where the OP turns
 //! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
 //! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
 //! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
@@ -13,6 +14,8 @@ use std::time::Duration;
 use kinloop_linkage::algorithms::op_path::{turn_between, PathShape};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
+
+use kinloop_linkage::algorithms::constraint_directions::scale_op;
 
 use super::controllers::{linearization_trust, project_twist, twist_turn};
 use super::passive_update::{energy_change, CouplingSprings};
@@ -40,13 +43,13 @@ impl<S: Space> HapticCore<S> {
             let (own, own_twist) = (self.model.pose(), self.model.twist());
             let mut pose = predicted.difference(&own);
             let mut ve_twist = self.active.op_twist;
-            if let Some((point, along, twist_turn)) = on_path {
+            if let Some(placed) = &on_path {
                 // On a path the model belongs, along the constrained directions, on the path where it is
                 // (where the joints hold the OP), not on the tangent line through the VE's pose; and the
                 // VE's twist, along the path where the VE was, is turned to where the model is (both as far
                 // as `place_frame` carries the frame).
-                pose += project_twist::<S>(p, l, &(point.difference(&own) - pose)) * along;
-                ve_twist = twist_turn * ve_twist;
+                pose += project_twist::<S>(p, l, &(placed.point.difference(&own) - pose)) * placed.along;
+                ve_twist = placed.twist_turn * ve_twist;
             }
             let twist = ve_twist - own_twist;
             let (mut moved, mut sped) = model::split_correction::<S>(&pose, &twist, p, l, constrained, free);
@@ -75,11 +78,11 @@ impl<S: Space> HapticCore<S> {
         // one-freedom path b̂ lies along the tangent where the VE was (its curvature's part aside); left
         // unturned, a part |b̂| sin Δ of it pushes the model along the walls where it is, Δ the angle the
         // frame turned, and the constrained pull (`blend_time_constant` τ) answers it only by holding the
-        // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. Its forces at rest where the model
-        // is (`place_frame` adds them to the frame's b̂) stay out of the model's step: their change along the
-        // path is a spring as stiff as the load turns near a dead centre, beyond an explicit step.
+        // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. To it the model adds the change of
+        // the forces at rest between the VE's point and its own where that change holds it back
+        // (`PlacedFrame::model_rest`).
         let bias = match &on_path {
-            Some((_, _, twist_turn)) => *twist_turn * self.active.bias,
+            Some(placed) => placed.twist_turn * self.active.bias + placed.model_rest,
             None => self.active.bias,
         };
         self.model.set_bias(&bias);
@@ -137,9 +140,8 @@ impl<S: Space> HapticCore<S> {
     /// path by its own hand, and models that disagree about the linkage's one coordinate pull the VE apart;
     /// the snapshots' own tangents keep them together.
     ///
-    /// Returns the model's point on the path, the fraction `w` and the turn as it acts on twists, or `None`
-    /// when the snapshot's frame is used as it is.
-    fn place_frame(&mut self) -> Option<(OpPose<S>, f64, S::OpMat)> {
+    /// Returns where the frame was placed, or `None` when the snapshot's frame is used as it is.
+    fn place_frame(&mut self) -> Option<PlacedFrame<S>> {
         self.local = self.frame;
         let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
         let linear = (pose.position - at.position).norm();
@@ -161,16 +163,39 @@ impl<S: Space> HapticCore<S> {
         let turn = turn_between::<S>(&from, &on.tangent, along);
         let twist_turn = twist_turn::<S>(&turn, l);
         self.local = self.frame.turned(&turn, l);
+        let mut model_rest = S::OpVec::zero();
         if let (true, Some(here), Some(there)) =
             (follower.rest_where_model_is, on.rest_acceleration, follower.snapshot_rest)
         {
             // b̂ holds the forces at rest where the snapshot was taken; the model feels them where it is.
             // Carried along unchanged they are a spring felt a round trip late, which makes energy. A swing
             // carries none (its pose is two configurations): b̂ stays the snapshot's, turned.
-            self.local.bias += (here - twist_turn * there) * along;
+            let change = (here - twist_turn * there) * along;
+            self.local.bias += change;
+            // The model steps with the change only where it pulls the model back along the path toward the
+            // VE's pose. Where it pushes the model on (the load falling away from where the VE holds it), the
+            // model and the hand with it would run ahead of a VE that follows a round trip later, and the
+            // gap feeds itself.
+            let (ahead, pull) = (scale_op::<S>(&pose.difference(at), l), scale_op::<S>(&change, l));
+            if ahead.dot(&on.tangent) * pull.dot(&on.tangent) < 0.0 {
+                model_rest = change;
+            }
         }
         // The walls are right as far as the tangent or the path is.
         self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
-        Some((on.pose, along, twist_turn))
+        Some(PlacedFrame { point: on.pose, along, twist_turn, model_rest })
     }
+}
+
+/// Where `place_frame` placed the frame on a path.
+struct PlacedFrame<S: Space> {
+    /// The model's point on the path.
+    point: OpPose<S>,
+    /// How far the frame was carried along the path toward it (`w`).
+    along: f64,
+    /// The frame's turn as it acts on twists (and on accelerations, which turn as twists do).
+    twist_turn: S::OpMat,
+    /// The change of the forces at rest between the VE's point and the model's that the model steps with:
+    /// the whole change where it pulls the model back along the path toward the VE's pose, else none.
+    model_rest: S::OpVec,
 }
