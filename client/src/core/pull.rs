@@ -29,7 +29,7 @@ impl<S: Space> HapticCore<S> {
     pub(super) fn pull_model(&mut self, now: Duration, dt_s: f64, intake: &Intake<S>, sensed: bool) {
         let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
         self.frame.filter(fraction(self.config.terms_time_constant));
-        let on_path = self.place_frame();
+        let on_path = self.place_frame(now);
         if !intake.stale && !intake.hand_off {
             let (constrained, free) =
                 (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
@@ -141,13 +141,14 @@ impl<S: Space> HapticCore<S> {
     /// the snapshots' own tangents keep them together.
     ///
     /// Returns where the frame was placed, or `None` when the snapshot's frame is used as it is.
-    fn place_frame(&mut self) -> Option<PlacedFrame<S>> {
+    fn place_frame(&mut self, now: Duration) -> Option<PlacedFrame<S>> {
         self.local = self.frame;
         let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
         let linear = (pose.position - at.position).norm();
         let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
         self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
         let alone = !self.active.shared;
+        let predicted = self.predicted_op(now);
         let follower = self.path.as_mut().filter(|_| alone && !self.model.using_config() && self.trust < 1.0)?;
         // A pinned grasp's path is its positions (`PathFollower::of`): its tangents are linear, as its frame's
         // directions are.
@@ -172,11 +173,12 @@ impl<S: Space> HapticCore<S> {
             // carries none (its pose is two configurations): b̂ stays the snapshot's, turned.
             let change = (here - twist_turn * there) * along;
             self.local.bias += change;
-            // The model steps with the change only where it pulls the model back along the path toward the
-            // VE's pose. Where it pushes the model on (the load falling away from where the VE holds it), the
-            // model and the hand with it would run ahead of a VE that follows a round trip later, and the
+            // The model steps with the change only where it pulls the model along the path toward the VE's
+            // pose predicted to now (where `pull_model` pulls it). Where the change pushes the model away
+            // from there (the load falling ahead of where the VE holds it, or dragging the model after a VE
+            // that has run ahead), the hand follows the model and the VE the hand a round trip later, so the
             // gap feeds itself.
-            let (ahead, pull) = (scale_op::<S>(&pose.difference(at), l), scale_op::<S>(&change, l));
+            let (ahead, pull) = (scale_op::<S>(&pose.difference(&predicted), l), scale_op::<S>(&change, l));
             if ahead.dot(&on.tangent) * pull.dot(&on.tangent) < 0.0 {
                 model_rest = change;
             }
@@ -196,6 +198,7 @@ struct PlacedFrame<S: Space> {
     /// The frame's turn as it acts on twists (and on accelerations, which turn as twists do).
     twist_turn: S::OpMat,
     /// The change of the forces at rest between the VE's point and the model's that the model steps with:
-    /// the whole change where it pulls the model back along the path toward the VE's pose, else none.
+    /// the whole change where it pulls the model along the path toward the VE's pose predicted to now, else
+    /// none.
     model_rest: S::OpVec,
 }
