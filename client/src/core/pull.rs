@@ -3,7 +3,7 @@
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
 //! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
 //! steps with the snapshot's b̂ turned as they are and with the change of the forces at rest along the path
-//! where that change holds it back toward the VE, and it is held at a swing's limits, where the OP turns
+//! where that change holds it toward the VE, and it is held at a swing's limits, where the OP turns
 //! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
 //! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
 //! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
@@ -11,11 +11,10 @@
 
 use std::time::Duration;
 
+use kinloop_linkage::algorithms::constraint_directions::scale_op;
 use kinloop_linkage::algorithms::op_path::{turn_between, PathShape};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
-
-use kinloop_linkage::algorithms::constraint_directions::scale_op;
 
 use super::controllers::{linearization_trust, project_twist, twist_turn};
 use super::passive_update::{energy_change, CouplingSprings};
@@ -79,7 +78,7 @@ impl<S: Space> HapticCore<S> {
         // unturned, a part |b̂| sin Δ of it pushes the model along the walls where it is, Δ the angle the
         // frame turned, and the constrained pull (`blend_time_constant` τ) answers it only by holding the
         // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. To it the model adds the change of
-        // the forces at rest between the VE's point and its own where that change holds it back
+        // the forces at rest between the VE's point and its own where that change holds it toward the VE
         // (`PlacedFrame::model_rest`).
         let bias = match &on_path {
             Some(placed) => placed.twist_turn * self.active.bias + placed.model_rest,
