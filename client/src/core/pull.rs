@@ -28,7 +28,10 @@ impl<S: Space> HapticCore<S> {
     pub(super) fn pull_model(&mut self, now: Duration, dt_s: f64, intake: &Intake<S>, sensed: bool) {
         let fraction = |tau: Duration| if tau.is_zero() { 1.0 } else { (dt_s / tau.as_secs_f64()).min(1.0) };
         self.frame.filter(fraction(self.config.terms_time_constant));
-        let on_path = self.place_frame(now);
+        // The VE's OP predicted to now: where the pull aims, and what the forces at rest's change is measured
+        // against (`place_frame`).
+        let predicted = self.predicted_op(now);
+        let on_path = self.place_frame(&predicted);
         if !intake.stale && !intake.hand_off {
             let (constrained, free) =
                 (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
@@ -38,7 +41,6 @@ impl<S: Space> HapticCore<S> {
             // round trips, as the VE follows the model there. Not toward the model's own state that the VE
             // answered (a Smith predictor): that takes the delay out of the loop but puts the model's own
             // corrections in it, which made the lighter outputs saturate and gain energy.
-            let predicted = self.predicted_op(now);
             let (own, own_twist) = (self.model.pose(), self.model.twist());
             let mut pose = predicted.difference(&own);
             let mut ve_twist = self.active.op_twist;
@@ -139,15 +141,15 @@ impl<S: Space> HapticCore<S> {
     /// path by its own hand, and models that disagree about the linkage's one coordinate pull the VE apart;
     /// the snapshots' own tangents keep them together.
     ///
-    /// Returns where the frame was placed, or `None` when the snapshot's frame is used as it is.
-    fn place_frame(&mut self, now: Duration) -> Option<PlacedFrame<S>> {
+    /// `predicted` is the VE's OP predicted to now. Returns where the frame was placed, or `None` when the
+    /// snapshot's frame is used as it is.
+    fn place_frame(&mut self, predicted: &OpPose<S>) -> Option<PlacedFrame<S>> {
         self.local = self.frame;
         let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
         let linear = (pose.position - at.position).norm();
         let turn = S::rot_chord(&pose.rotation, &at.rotation) * l;
         self.trust = linearization_trust((linear * linear + turn * turn).sqrt(), self.config.linearization_reach * l);
         let alone = !self.active.shared;
-        let predicted = self.predicted_op(now);
         let follower = self.path.as_mut().filter(|_| alone && !self.model.using_config() && self.trust < 1.0)?;
         // A pinned grasp's path is its positions (`PathFollower::of`): its tangents are linear, as its frame's
         // directions are.
@@ -177,7 +179,7 @@ impl<S: Space> HapticCore<S> {
             // from there (the load falling ahead of where the VE holds it, or dragging the model after a VE
             // that has run ahead), the hand follows the model and the VE the hand a round trip later, so the
             // gap feeds itself.
-            let (ahead, pull) = (scale_op::<S>(&pose.difference(&predicted), l), scale_op::<S>(&change, l));
+            let (ahead, pull) = (scale_op::<S>(&pose.difference(predicted), l), scale_op::<S>(&change, l));
             if ahead.dot(&on.tangent) * pull.dot(&on.tangent) < 0.0 {
                 model_rest = change;
             }
