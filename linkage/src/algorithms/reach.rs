@@ -118,6 +118,22 @@ pub struct OpReach<S: Space> {
     /// linkage moves on (a rocker's output: one pose, two configurations), one sweep of it, limit to limit,
     /// without forces at rest ([`PathShape::Swing`]).
     pub path: Option<OpPath<S>>,
+    /// At each pose of `path` (not a swing's), the OP's inertia along the path and how stiff the forces at
+    /// rest are there ([`PathMode`]): what the coupling's damping must hold (`kinloop_server`'s design).
+    /// Empty without such a path.
+    pub path_modes: Vec<PathMode>,
+}
+
+/// How the OP moves about one pose of its path under the linkage's own forces at rest, the hand away.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathMode {
+    /// Inertia along the path's unit tangent (unit-consistent coordinates, kg): `1 / σ` of Λ̃⁻¹ (eq 9), whose
+    /// only nonzero singular value `σ` on one degree of freedom is the tangent's inverse inertia.
+    pub mass: f64,
+    /// `−dF/ds`, the change of the force at rest along the path (`F = m a`, the inertia times the
+    /// acceleration at rest along the tangent) per unit of its length (unit-consistent, N/m): how stiffly
+    /// springs, actuators and gravity through the loops hold the OP about the pose, a hill where negative.
+    pub rest_stiffness: f64,
 }
 
 impl<S: Space> OpReach<S> {
@@ -362,6 +378,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         turning_radius_min_m: f64::INFINITY,
         dof,
         path: None,
+        path_modes: Vec::new(),
     };
     let zero_qd = DVector::zeros(n);
     let mut samples = Samples {
@@ -386,7 +403,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
     };
     let mut tour_data = Data::new(model);
     // On a 1-DOF linkage, each walk's poses up to its first turn: the OP's path forth and back from q0.
-    let mut halves: Vec<Vec<(OpPose<S>, S::OpVec)>> = Vec::new();
+    let mut halves: Vec<Vec<PathSample<S>>> = Vec::new();
     for walk in 0..walks {
         let on_tour = walk == 0 || (dof > 1 && walk * 4 == walks);
         let angle = std::f64::consts::TAU * walk as f64 / walks as f64;
@@ -437,11 +454,14 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
             reach.tour.extend(mobile_waypoints(&path, config.tour_points));
         }
         if dof == 1 {
-            halves.push(path[..first_turn.unwrap_or(path.len())].iter().map(|p| (p.0, p.2)).collect());
+            halves.push(path[..first_turn.unwrap_or(path.len())].iter().map(|p| (p.0, p.2, p.1)).collect());
         }
     }
     if let [forth, back] = halves.as_slice() {
-        reach.path = one_dof_path(forth, back, model.length_scale);
+        if let Some((path, modes)) = one_dof_path(forth, back, model.length_scale) {
+            reach.path = Some(path);
+            reach.path_modes = modes;
+        }
     }
     samples.settle(&mut reach);
     Ok(reach)
@@ -475,7 +495,7 @@ fn null_space_basis(rows: &DMatrix<f64>, n: usize) -> Vec<DVector<f64>> {
 }
 
 /// The 90th percentile of `values` (sorted in place), 0 for none.
-fn percentile_90(values: &mut [f64]) -> f64 {
+pub fn percentile_90(values: &mut [f64]) -> f64 {
     if values.is_empty() {
         return 0.0;
     }
@@ -587,18 +607,22 @@ fn lap<S: Space>(path: &[OpPose<S>]) -> (Option<usize>, Vec<f64>) {
     (None, arc)
 }
 
+/// A pose of a walk on a 1-DOF linkage with the OP's acceleration at rest and its mobility there (`σ` of
+/// the unit-consistent Λ̃⁻¹).
+type PathSample<S> = (OpPose<S>, <S as Space>::OpVec, f64);
+
 /// The OP's path on a 1-DOF linkage from the walks forth and back from q0 (each up to its first turn, both
-/// starting at q0's pose; poses with the OP's acceleration at rest): one lap of the forth walk when it comes
-/// back to its start, else the back walk reversed followed by the forth one; a swing ([`swing`]) when the OP
-/// turns back along its path while the linkage moves on. `None` when the walks do not make a path (fewer
-/// than two distinct poses, or an OP that comes back another way than it went).
+/// starting at q0's pose), with its modes at each pose (none on a swing): one lap of the forth walk when it
+/// comes back to its start, else the back walk reversed followed by the forth one; a swing ([`swing`]) when
+/// the OP turns back along its path while the linkage moves on. `None` when the walks do not make a path
+/// (fewer than two distinct poses, or an OP that comes back another way than it went).
 fn one_dof_path<S: Space>(
-    forth: &[(OpPose<S>, S::OpVec)],
-    back: &[(OpPose<S>, S::OpVec)],
+    forth: &[PathSample<S>],
+    back: &[PathSample<S>],
     length_scale: f64,
-) -> Option<OpPath<S>> {
+) -> Option<(OpPath<S>, Vec<PathMode>)> {
     let forth_poses: Vec<OpPose<S>> = forth.iter().map(|p| p.0).collect();
-    let end_to_end = || -> Vec<(OpPose<S>, S::OpVec)> { back.iter().skip(1).rev().chain(forth).copied().collect() };
+    let end_to_end = || -> Vec<PathSample<S>> { back.iter().skip(1).rev().chain(forth).copied().collect() };
     let (samples, shape) = match lap(&forth_poses) {
         (Some(mut end), _) => {
             // `lap` stops within 5 % of the extent of the start; the lap ends at the pose nearest to it.
@@ -620,11 +644,39 @@ fn one_dof_path<S: Space>(
     let turns_back =
         (0..n).filter(|&k| closed || k + 1 < n).any(|k| path.tangent(k).dot(&path.tangent((k + 1) % n)) < 0.0);
     if turns_back {
-        return swing(&end_to_end().iter().map(|p| p.0).collect::<Vec<_>>(), length_scale);
+        return swing(&end_to_end().iter().map(|p| p.0).collect::<Vec<_>>(), length_scale).map(|p| (p, Vec::new()));
     }
     // At rest the OP can only accelerate along the path: its acceleration is the tangent's multiple.
-    let along = (0..samples.len()).map(|k| path.tangent(k).dot(&scale_op::<S>(&samples[k].1, length_scale))).collect();
-    path.with_rest_acceleration(along).ok()
+    let along: Vec<f64> =
+        (0..samples.len()).map(|k| path.tangent(k).dot(&scale_op::<S>(&samples[k].1, length_scale))).collect();
+    let modes = path_modes(&path, &along, &samples.iter().map(|p| p.2).collect::<Vec<_>>(), length_scale);
+    Some((path.with_rest_acceleration(along).ok()?, modes))
+}
+
+/// The OP's [`PathMode`] at each pose of `path`, from the acceleration at rest along it (`along`) and the
+/// mobility (`σ` of Λ̃⁻¹) at each pose: central differences of the force at rest over the arc length inside,
+/// one-sided at the ends of an open path. A pose where the OP does not move (`σ` 0: a dead point) has an
+/// infinite inertia, and its neighbours no stiffness. `l`: the scene's length scale.
+fn path_modes<S: Space>(path: &OpPath<S>, along: &[f64], mobility: &[f64], l: f64) -> Vec<PathMode> {
+    let poses = path.poses();
+    let n = poses.len();
+    let closed = path.is_closed();
+    let arc = |a: usize, b: usize| scale_op::<S>(&poses[b].difference(&poses[a]), l).norm();
+    let mass = |k: usize| if mobility[k] > 0.0 { 1.0 / mobility[k] } else { f64::INFINITY };
+    let force = |k: usize| mass(k) * along[k];
+    (0..n)
+        .map(|k| {
+            let (before, after) = match (closed, k) {
+                (true, _) => ((k + n - 1) % n, (k + 1) % n),
+                (false, 0) => (0, 1),
+                (false, k) if k == n - 1 => (n - 2, n - 1),
+                (false, k) => (k - 1, k + 1),
+            };
+            let span = arc(before, k) + arc(k, after);
+            let stiffness = (force(after) - force(before)) / span;
+            PathMode { mass: mass(k), rest_stiffness: if stiffness.is_finite() { -stiffness } else { 0.0 } }
+        })
+        .collect()
 }
 
 /// Poses of a walk farther than this fraction of the length scale from the swing chosen from it mean the OP

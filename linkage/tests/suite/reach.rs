@@ -332,6 +332,81 @@ fn the_coupler_paths_acceleration_at_rest_is_the_reduced_dynamics_under_gravity(
     }
 }
 
+/// `q` carried to crank angle `target` in steps of at most 0.05 rad, each assembled from the last (q's branch).
+fn crank_at(model: &Model<Planar>, q: &DVector<f64>, target: f64) -> DVector<f64> {
+    let mut q = q.clone();
+    while (target - q[0]).abs() > 1e-12 {
+        q[0] += (target - q[0]).clamp(-0.05, 0.05);
+        q = kinloop_linkage::algorithms::assemble::assemble(model, &q, 1e-13).unwrap().q;
+    }
+    q
+}
+
+/// The crank-rocker's coupler at `q` along its motion n (`four_bar_motion_by_differences`), with energies and
+/// poses alone: the inertia along the path's unit tangent in unit-consistent coordinates, `nᵀDn / |J̃n|²`
+/// (twice the kinetic energy at q̇ = n over the OP's scaled speed squared), the force at rest along it,
+/// `−Gᵀn / |J̃n|` (G by differences of the potential energy), and the pose.
+fn coupler_mode_by_energies(model: &Model<Planar>, q: &DVector<f64>, op: usize) -> (f64, f64, OpPose<Planar>) {
+    let n = four_bar_motion_by_differences(model, q);
+    let twist = jacobian_by_differences(model, q, op) * &n;
+    let speed = Vector3::new(twist[0], twist[1], model.length_scale * twist[2]).norm();
+    let mut data = Data::new(model);
+    forward_kinematics(model, &mut data, q);
+    kinloop_linkage::algorithms::kinematics::forward_velocity(model, &mut data, &n);
+    let mass = 2.0 * kinetic_energy(model, &data) / (speed * speed);
+    let force = -gravity_by_differences(model, q).dot(&n) / speed;
+    // The force's sign follows n's, which the arc's below follows too; the stiffness does not depend on it.
+    let sign = if n[0] < 0.0 { -1.0 } else { 1.0 };
+    (mass, sign * force, OpPose::<Planar>::of_op(model, &data, op))
+}
+
+/// The coupler path's modes (`OpReach::path_modes`, from the survey's Λ̃⁻¹ and its accelerations at rest)
+/// against the reduced dynamics from energies: the inertia along the path, and the stiffness of gravity along
+/// it, `−dF/ds̃`, by differences of the force at rest between configurations 0.02 rad of crank either side,
+/// over the scaled chord between their poses.
+#[test]
+fn the_coupler_paths_modes_are_its_inertia_and_gravitys_stiffness_along_it() {
+    let model = planar("fourbar-crank-rocker");
+    let op = model.op_index("coupler").unwrap();
+    let reach = survey_op(&model, op, &SurveyConfig::default()).unwrap();
+    let (path, modes) = (reach.path.unwrap(), reach.path_modes);
+    assert_eq!(modes.len(), path.poses().len(), "one mode per pose");
+    let scaled = |a: &OpPose<Planar>, b: &OpPose<Planar>| {
+        let d = a.difference(b);
+        Vector3::new(d[0], d[1], model.length_scale * d[2]).norm()
+    };
+    let mut q = model.q0.clone();
+    let (delta, mut stiffest) = (0.02, 0.0_f64);
+    let mut checked = Vec::new();
+    for turn in [0.3, 1.2, 2.0, 3.5, 5.0] {
+        let target = model.q0[0] + turn;
+        q = crank_at(&model, &q, target);
+        let (mass, _, pose) = coupler_mode_by_energies(&model, &q, op);
+        let (_, before, at_before) = coupler_mode_by_energies(&model, &crank_at(&model, &q, target - delta), op);
+        let (_, after, at_after) = coupler_mode_by_energies(&model, &crank_at(&model, &q, target + delta), op);
+        let stiffness = -(after - before) / scaled(&at_after, &at_before);
+        let on = path.nearest(&pose, None);
+        let n = path.poses().len();
+        let next = (on.segment + 1) % n;
+        let k = if scaled(&pose, &path.poses()[on.segment]) <= scaled(&pose, &path.poses()[next]) {
+            on.segment
+        } else {
+            next
+        };
+        stiffest = stiffest.max(stiffness.abs());
+        checked.push((turn, mass, stiffness, modes[k]));
+    }
+    assert!(stiffest > 100.0, "gravity holds the coupler stiffly somewhere: {stiffest} N/m");
+    for (turn, mass, stiffness, mode) in checked {
+        assert!((mode.mass - mass).abs() < 0.005 * mass, "crank turned {turn} rad: {} kg vs {mass} kg", mode.mass);
+        assert!(
+            (mode.rest_stiffness - stiffness).abs() < 0.02 * stiffest,
+            "crank turned {turn} rad: {} N/m vs {stiffness} N/m",
+            mode.rest_stiffness
+        );
+    }
+}
+
 /// The coupler midpoint's turning radius over a full crank turn: its distance from the coupler's instant centre,
 /// where the crank's line (from its pivot at the origin through its tip) meets the rocker's (from its pivot at
 /// (0.3, 0) through the pin), by Cramer's rule.

@@ -35,7 +35,9 @@
 //! (K_g = 1000 N/m, 10⁴ N·m/rad) put the testbed's link 2 at 2.6 Hz in translation but, on OPs that turn
 //! about a nearly fixed point, the angular 10⁴ N·m/rad made a loop with the local model that the VE could
 //! not hold (README, Known limits of earlier versions): designed from the inertia, no OP gets a coupling
-//! stiffer than its own mass can follow.
+//! stiffer than its own mass can follow. On a linkage of one degree of freedom the damping is at least what keeps the OP's
+//! modes along its path at [`PATH_DAMPING_RATIO`]: its heavier masses there, held by the coupling's spring
+//! and the linkage's own forces at rest (`path_damping`).
 //!
 //! **The frequency and the round trip.** The coupling's loop has three delays: a VE step, a device period
 //! (the uplinks that move its reference) and the user's network round trip `T` (the OP goes out in a
@@ -62,7 +64,7 @@
 //! energy out and puts none in. The gains never rise mid-session: a rise stores energy at the stretch that no
 //! one put in (the passivity controller pays for its own rises of β from its account).
 
-use kinloop_linkage::algorithms::reach::OpReach;
+use kinloop_linkage::algorithms::reach::{percentile_90, OpReach};
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec::limits::{MAX_MAPPING_SCALE, MIN_MAPPING_SCALE};
 use kinloop_protocol::codec::validate;
@@ -86,6 +88,16 @@ pub const PEAK_SHARE: f64 = 0.18;
 pub const COUPLING_HZ: f64 = 8.0;
 /// Damping ratio of the graphics controller.
 pub const COUPLING_DAMPING_RATIO: f64 = 1.0;
+/// The damping ratio the coupling keeps at least on the OP's modes along its path (`path_damping`), on a
+/// linkage of one degree of freedom. The stiffness is designed on the OP's lightest mass, but along the path
+/// the OP can be many times heavier, and the linkage's own forces at rest (a wound spring, an actuator's PD,
+/// gravity through the loops) can hold it several times more stiffly than the coupling does: a damper sized
+/// on the lightest mass leaves those modes barely damped (a crank held against a wound spring, with a heavy
+/// slider on it), and the loop through the client's model sets them ringing until the device saturates. A damper adds no stiffness and only dissipates, and the VE's coupling is linearly implicit, so
+/// a larger one keeps both the port passive and the step stable. Twice critical: measured on the tuning
+/// seeds of the robustness grid, critical damping rendered fewer sessions and three times critical made more
+/// of them newly unstable (`docs/robustness.md`).
+pub const PATH_DAMPING_RATIO: f64 = 2.0;
 /// The coupling's frequency stays below the VE rate and the device rate divided by this.
 pub const RATE_MARGIN: f64 = 50.0;
 /// Time a minimum-jerk motion across the reach takes when no gravity sets the force scale (s).
@@ -480,8 +492,27 @@ pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64, torque: bool) ->
         let m = if m.is_finite() { m } else { 0.0 };
         stiffness[a] = m * omega * omega;
         damping[a] = 2.0 * COUPLING_DAMPING_RATIO * m * omega;
+        if a < lin {
+            damping[a] = damping[a].max(path_damping(reach, stiffness[a]));
+        }
     }
     (stiffness, damping)
+}
+
+/// The damping (N·s/m) the OP's modes along its path ask of the coupling's linear axes, whose stiffness is
+/// `stiffness`: at each pose of the path (`OpReach::path_modes`), the damper that puts
+/// [`PATH_DAMPING_RATIO`] on the OP's inertia there against the coupling's spring and the linkage's own
+/// forces at rest, `2 ζ √(m (K + K_rest))` (a hill, `K_rest < 0`, counts as none); the 90th percentile over
+/// the poses, since next to a dead point the inertia along the path grows without bound. Zero without a
+/// path (a linkage of more degrees of freedom, a swing).
+fn path_damping<S: Space>(reach: &OpReach<S>, stiffness: f64) -> f64 {
+    let mut needed: Vec<f64> = reach
+        .path_modes
+        .iter()
+        .map(|m| 2.0 * PATH_DAMPING_RATIO * (m.mass * (stiffness + m.rest_stiffness.max(0.0))).sqrt())
+        .filter(|b| b.is_finite())
+        .collect();
+    percentile_90(&mut needed)
 }
 
 /// The gains as the welcome carries them.
@@ -724,6 +755,42 @@ mod tests {
         let (eased, at_fill) =
             (torque_and_grasp(tip, &paper, least * fill, load), torque_and_grasp(tip, &paper, fill, load));
         assert!(eased > at_fill, "the narrower reach eases the crank tip's torque bound: {eased} vs {at_fill}");
+    }
+
+    /// On a path the linear damping is the larger of the PD's critical damping on the lightest mass and, at
+    /// the 90th percentile of the path's poses, `2 ζ_p √(m (K + K_rest))` (a hill counting as no stiffness);
+    /// the stiffness and the angular gains do not change, and a pose next to a dead point (an inertia of
+    /// 10⁹ kg) does not set it. Without path modes the gains are the PD's alone. Closed forms on the crank-
+    /// rocker's coupler with its surveyed lightest mass and modes put in by hand.
+    #[test]
+    fn the_damping_holds_the_heavier_modes_along_the_path_and_nothing_else_changes() {
+        use kinloop_linkage::algorithms::reach::PathMode;
+        let coupler = surveyed("fourbar-crank-rocker").remove(0);
+        let omega = TAU * COUPLING_HZ;
+        let none = OpReach { path_modes: Vec::new(), ..coupler.clone() };
+        let (k0, b0) = coupling_gains(&none, omega, true);
+        let (mass, inertia) = grasp::lightest(&none);
+        assert!(
+            (k0[0] - mass * omega * omega).abs() < 1e-9 * k0[0] && (b0[0] - 2.0 * mass * omega).abs() < 1e-9 * b0[0]
+        );
+        // Nine poses of 2 kg held at 500 N/m, one at 3 kg on a hill, one next to a dead point.
+        let mut modes = vec![PathMode { mass: 2.0, rest_stiffness: 500.0 }; 9];
+        modes.push(PathMode { mass: 3.0, rest_stiffness: -1e6 });
+        modes.push(PathMode { mass: 1e9, rest_stiffness: 500.0 });
+        let with = OpReach { path_modes: modes, ..coupler.clone() };
+        let (k, b) = coupling_gains(&with, omega, true);
+        assert_eq!(k, k0, "the stiffness is the lightest mass's");
+        let held = 2.0 * PATH_DAMPING_RATIO * (2.0 * (k0[0] + 500.0)).sqrt();
+        let hill = 2.0 * PATH_DAMPING_RATIO * (3.0 * k0[0]).sqrt();
+        let want = held.max(hill).max(b0[0]);
+        assert!(want > 2.0 * b0[0], "the modes ask for more than the PD's own: {want} vs {}", b0[0]);
+        for a in 0..2 {
+            assert!((b[a] - want).abs() < 1e-9 * want, "axis {a}: {} vs {want}", b[a]);
+        }
+        assert_eq!(b[2], b0[2], "the angular damping is the lightest inertia's ({inertia} kg m²)");
+        // Modes lighter and looser than the PD's design leave it as it was.
+        let light = OpReach { path_modes: vec![PathMode { mass: 1e-6, rest_stiffness: 0.0 }; 5], ..coupler };
+        assert_eq!(coupling_gains(&light, omega, true), (k0, b0));
     }
 
     /// Every OP of built-in planar scene `name`, surveyed.
