@@ -124,15 +124,9 @@ impl<S: Space> OpPath<S> {
                 return Err(PathError::Repeated(k, next));
             }
         }
-        // Central differences inside, one-sided at the ends of an open path.
         let tangents = (0..n)
             .map(|k| {
-                let (before, after) = match (closed, k) {
-                    (true, _) => ((k + n - 1) % n, (k + 1) % n),
-                    (false, 0) => (0, 1),
-                    (false, k) if k == n - 1 => (n - 2, n - 1),
-                    (false, k) => (k - 1, k + 1),
-                };
+                let (before, after) = difference_neighbours(closed, n, k);
                 let d = scaled(&poses[after], &poses[before]);
                 d * (1.0 / d.norm())
             })
@@ -282,6 +276,18 @@ impl<S: Space> OpPath<S> {
             rest_acceleration,
             segment: best,
         }
+    }
+}
+
+/// The samples a derivative along a path of `n` samples (at least two) takes at sample `k`: its neighbours
+/// either side (central differences), wrapping round on a `closed` path, and the sample itself with its one
+/// neighbour at the ends of an open one (one-sided).
+pub fn difference_neighbours(closed: bool, n: usize, k: usize) -> (usize, usize) {
+    match (closed, k) {
+        (true, _) => ((k + n - 1) % n, (k + 1) % n),
+        (false, 0) => (0, 1),
+        (false, k) if k == n - 1 => (n - 2, n - 1),
+        (false, k) => (k - 1, k + 1),
     }
 }
 

@@ -35,7 +35,7 @@ use crate::algorithms::joint_limits::limit_wall_energy;
 use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
 use crate::algorithms::local_model::op_acceleration;
 use crate::algorithms::loop_closure::loop_closure;
-use crate::algorithms::op_path::{OpPath, PathShape};
+use crate::algorithms::op_path::{difference_neighbours, OpPath, PathShape};
 use crate::algorithms::op_space::op_space_inertia;
 use crate::error::DynamicsError;
 use crate::math::space::OpPose;
@@ -666,12 +666,7 @@ fn path_modes<S: Space>(path: &OpPath<S>, along: &[f64], mobility: &[f64], l: f6
     let force = |k: usize| mass(k) * along[k];
     (0..n)
         .map(|k| {
-            let (before, after) = match (closed, k) {
-                (true, _) => ((k + n - 1) % n, (k + 1) % n),
-                (false, 0) => (0, 1),
-                (false, k) if k == n - 1 => (n - 2, n - 1),
-                (false, k) => (k - 1, k + 1),
-            };
+            let (before, after) = difference_neighbours(closed, n, k);
             let span = arc(before, k) + arc(k, after);
             let stiffness = (force(after) - force(before)) / span;
             PathMode { mass: mass(k), rest_stiffness: if stiffness.is_finite() { -stiffness } else { 0.0 } }
