@@ -35,9 +35,9 @@
 //! (K_g = 1000 N/m, 10⁴ N·m/rad) put the testbed's link 2 at 2.6 Hz in translation but, on OPs that turn
 //! about a nearly fixed point, the angular 10⁴ N·m/rad made a loop with the local model that the VE could
 //! not hold (README, Known limits of earlier versions): designed from the inertia, no OP gets a coupling
-//! stiffer than its own mass can follow. On a linkage of one degree of freedom the damping is at least what keeps the OP's
-//! modes along its path at [`PATH_DAMPING_RATIO`]: its heavier masses there, held by the coupling's spring
-//! and the linkage's own forces at rest (`path_damping`).
+//! stiffer than its own mass can follow. On a linkage of one degree of freedom the damping is at least what
+//! keeps the OP's modes along its path at [`PATH_DAMPING_RATIO`]: its heavier masses there, held by the
+//! coupling's spring and the linkage's own forces at rest (`path_damping`).
 //!
 //! **The frequency and the round trip.** The coupling's loop has three delays: a VE step, a device period
 //! (the uplinks that move its reference) and the user's network round trip `T` (the OP goes out in a
@@ -93,10 +93,11 @@ pub const COUPLING_DAMPING_RATIO: f64 = 1.0;
 /// the OP can be many times heavier, and the linkage's own forces at rest (a wound spring, an actuator's PD,
 /// gravity through the loops) can hold it several times more stiffly than the coupling does: a damper sized
 /// on the lightest mass leaves those modes barely damped (a crank held against a wound spring, with a heavy
-/// slider on it), and the loop through the client's model sets them ringing until the device saturates. A damper adds no stiffness and only dissipates, and the VE's coupling is linearly implicit, so
-/// a larger one keeps both the port passive and the step stable. Twice critical: measured on the tuning
-/// seeds of the robustness grid, critical damping rendered fewer sessions and three times critical made more
-/// of them newly unstable (`docs/robustness.md`).
+/// slider on it), and the loop through the client's model sets them ringing until the device saturates. A
+/// damper adds no stiffness and only dissipates, and the VE's coupling is linearly implicit, so a larger one
+/// keeps both the port passive and the step stable. Twice critical: measured on the tuning seeds of the
+/// robustness grid, critical damping rendered fewer sessions and three times critical made more of them newly
+/// unstable (`docs/robustness.md`).
 pub const PATH_DAMPING_RATIO: f64 = 2.0;
 /// The coupling's frequency stays below the VE rate and the device rate divided by this.
 pub const RATE_MARGIN: f64 = 50.0;
@@ -492,7 +493,8 @@ pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64, torque: bool) ->
         let m = if m.is_finite() { m } else { 0.0 };
         stiffness[a] = m * omega * omega;
         damping[a] = 2.0 * COUPLING_DAMPING_RATIO * m * omega;
-        if a < lin {
+        // Only where the OP translates at all: a path turning about a fixed point is the angular axes'.
+        if a < lin && m > 0.0 {
             damping[a] = damping[a].max(path_damping(reach, stiffness[a]));
         }
     }
