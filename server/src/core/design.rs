@@ -64,7 +64,7 @@
 //! energy out and puts none in. The gains never rise mid-session: a rise stores energy at the stretch that no
 //! one put in (the passivity controller pays for its own rises of β from its account).
 
-use kinloop_linkage::algorithms::reach::{percentile_90, OpReach};
+use kinloop_linkage::algorithms::reach::OpReach;
 use kinloop_linkage::{math::space::Space, math::space::VecOps};
 use kinloop_protocol::codec::limits::{MAX_MAPPING_SCALE, MIN_MAPPING_SCALE};
 use kinloop_protocol::codec::validate;
@@ -73,7 +73,10 @@ use kinloop_protocol::{CouplingGains, DeviceCaps, Mapping, MappingRequest};
 mod grasp;
 #[cfg(test)]
 mod grasp_tests;
+mod path_damping;
 use grasp::{held_rigidly, lightest, renders_rotation, MASS_REDUCTION};
+use path_damping::path_damping;
+pub use path_damping::PATH_DAMPING_RATIO;
 
 /// Fraction of the device's workspace the OP's reach spans along the binding axis.
 pub const WORKSPACE_FILL: f64 = 0.8;
@@ -88,17 +91,6 @@ pub const PEAK_SHARE: f64 = 0.18;
 pub const COUPLING_HZ: f64 = 8.0;
 /// Damping ratio of the graphics controller.
 pub const COUPLING_DAMPING_RATIO: f64 = 1.0;
-/// The damping ratio the coupling keeps at least on the OP's modes along its path (`path_damping`), on a
-/// linkage of one degree of freedom. The stiffness is designed on the OP's lightest mass, but along the path
-/// the OP can be many times heavier, and the linkage's own forces at rest (a wound spring, an actuator's PD,
-/// gravity through the loops) can hold it several times more stiffly than the coupling does: a damper sized
-/// on the lightest mass leaves those modes barely damped (a crank held against a wound spring, with a heavy
-/// slider on it), and the loop through the client's model sets them ringing until the device saturates. A
-/// damper adds no stiffness and only dissipates, and the VE's coupling is linearly implicit, so a larger one
-/// keeps both the port passive and the step stable. Twice critical: measured on the tuning seeds of the
-/// robustness grid, critical damping rendered fewer sessions and three times critical made more of them newly
-/// unstable (`docs/robustness.md`).
-pub const PATH_DAMPING_RATIO: f64 = 2.0;
 /// The coupling's frequency stays below the VE rate and the device rate divided by this.
 pub const RATE_MARGIN: f64 = 50.0;
 /// Time a minimum-jerk motion across the reach takes when no gravity sets the force scale (s).
@@ -499,22 +491,6 @@ pub fn coupling_gains<S: Space>(reach: &OpReach<S>, omega: f64, torque: bool) ->
         }
     }
     (stiffness, damping)
-}
-
-/// The damping (N·s/m) the OP's modes along its path ask of the coupling's linear axes, whose stiffness is
-/// `stiffness`: at each pose of the path (`OpReach::path_modes`), the damper that puts
-/// [`PATH_DAMPING_RATIO`] on the OP's inertia there against the coupling's spring and the linkage's own
-/// forces at rest, `2 ζ √(m (K + K_rest))` (a hill, `K_rest < 0`, counts as none); the 90th percentile over
-/// the poses, since next to a dead point the inertia along the path grows without bound. Zero without a
-/// path (a linkage of more degrees of freedom, a swing).
-fn path_damping<S: Space>(reach: &OpReach<S>, stiffness: f64) -> f64 {
-    let mut needed: Vec<f64> = reach
-        .path_modes
-        .iter()
-        .map(|m| 2.0 * PATH_DAMPING_RATIO * (m.mass * (stiffness + m.rest_stiffness.max(0.0))).sqrt())
-        .filter(|b| b.is_finite())
-        .collect();
-    percentile_90(&mut needed)
 }
 
 /// The gains as the welcome carries them.
