@@ -44,6 +44,7 @@
 //! | [`op_space`](algorithms::op_space) | Λ⁻¹ with loops closed and open | eq 5-9 |
 //! | [`constraint_directions`](algorithms::constraint_directions) | SVD of Λ⁻¹, unit-consistent constraint count | eq 10, 12 |
 //! | [`local_model`](algorithms::local_model) | configuration-space and reduced operational-space local models | eq 11, 13 |
+//! | [`velocity_product`](algorithms::velocity_product) | the part of an OP's free acceleration quadratic in the velocity | eq 11, 13 (b̂) |
 //! | [`contact`](algorithms::contact) | obstacle contacts, penalty forces | eq 1 (Fᵢ) |
 //! | [`penalty`](algorithms::penalty) | the push-only penalty law of contacts and range walls | eq 1 (Fᵢ) |
 //! | [`assemble`](algorithms::assemble) | the nearest closed configuration | |

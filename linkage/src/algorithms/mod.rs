@@ -31,3 +31,4 @@ pub mod op_space;
 pub mod penalty;
 pub mod reach;
 pub(crate) mod tree;
+pub mod velocity_product;

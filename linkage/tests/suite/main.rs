@@ -19,3 +19,4 @@ mod physics;
 mod random_linkages;
 mod reach;
 mod scenes;
+mod velocity_product;
