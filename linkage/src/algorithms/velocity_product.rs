@@ -21,8 +21,9 @@ use nalgebra::DVector;
 
 use crate::algorithms::dynamics::{forward_dynamics, OpWrench};
 use crate::algorithms::jacobian::{frame_bias_acceleration, frame_jacobian_t};
+use crate::algorithms::local_model::op_acceleration;
 use crate::error::DynamicsError;
-use crate::math::space::{Space, VecOps};
+use crate::math::space::{OpPose, Space, VecOps};
 use crate::model::data::Data;
 use crate::model::Model;
 
@@ -37,24 +38,25 @@ pub fn velocity_product_acceleration<S: Space>(
     signed: &mut DVector<f64>,
 ) -> Result<S::OpVec, DynamicsError> {
     let mut no_force = OpWrench::<S> { op, wrench: S::OpVec::zero() };
+    let body = model.ops.get(op).ok_or(DynamicsError::UnknownOp { index: op, count: model.ops.len() })?.body;
     let mut sum = S::OpVec::zero();
+    // The OP's point and Jacobian depend on q alone: taken after the first solve, kept for the others.
+    let mut point = None;
     for (sign, weight) in [(1.0, 0.5), (-1.0, 0.5), (0.0, -1.0)] {
         signed.copy_from(qd);
         *signed *= sign;
         forward_dynamics(model, data, q, signed, &mut no_force)?;
-        sum += acceleration_now(model, data, op) * weight;
+        let p = match point {
+            Some(p) => p,
+            None => {
+                let p = OpPose::<S>::of_op(model, data, op).position;
+                frame_jacobian_t(model, &data.kin, body, &p, &mut data.op.jacobian_t);
+                *point.insert(p)
+            }
+        };
+        // J̇q̇ changes with the velocity.
+        data.op.jdot_qdot = frame_bias_acceleration(&data.kin, body, &p);
+        sum += op_acceleration(data) * weight;
     }
     Ok(sum)
-}
-
-/// The OP acceleration `J q̈ + J̇q̇` of the last solve in `data`.
-fn acceleration_now<S: Space>(model: &Model<S>, data: &mut Data<S>, op: usize) -> S::OpVec {
-    let point = &model.ops[op];
-    let p = data.kin.body_pos[point.body] + S::rotate(&data.kin.body_rot[point.body], &point.point);
-    let mut acc = frame_bias_acceleration(&data.kin, point.body, &p);
-    frame_jacobian_t(model, &data.kin, point.body, &p, &mut data.op.jacobian_t);
-    for c in 0..S::DIM {
-        acc[c] += data.op.jacobian_t.column(c).dot(&data.qdd);
-    }
-    acc
 }
