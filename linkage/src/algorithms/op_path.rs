@@ -49,6 +49,8 @@ pub struct OpPath<S: Space> {
     poses: Vec<OpPose<S>>,
     /// Unit tangent at each pose (unit-consistent coordinates), pointing along the path's order.
     tangents: Vec<S::OpVec>,
+    /// Curvature vector at each pose (unit-consistent, 1/m): the tangents' difference across it per unit of arc.
+    curvatures: Vec<S::OpVec>,
     /// The OP's acceleration at rest at each pose, along its tangent (unit-consistent, m/s²), when given.
     rest_acceleration: Option<Vec<f64>>,
     shape: PathShape,
@@ -70,6 +72,9 @@ pub struct PathPoint<S: Space> {
     /// The OP's acceleration at rest there (physical units, linear first), interpolated, when the path
     /// carries it.
     pub rest_acceleration: Option<S::OpVec>,
+    /// The path's curvature vector there (unit-consistent, 1/m), interpolated: the turn of the unit tangent
+    /// per unit of arc, with which a point moving along the path at speed `v` accelerates across it, `κ v²`.
+    pub curvature: S::OpVec,
     /// The segment it lies on (a hint for the next query).
     pub segment: usize,
 }
@@ -130,8 +135,15 @@ impl<S: Space> OpPath<S> {
                 let d = scaled(&poses[after], &poses[before]);
                 d * (1.0 / d.norm())
             })
+            .collect::<Vec<_>>();
+        let curvatures = (0..n)
+            .map(|k| {
+                let (before, after) = difference_neighbours(closed, n, k);
+                let arc = scaled(&poses[after], &poses[before]).norm();
+                (tangents[after] - tangents[before]) * (1.0 / arc)
+            })
             .collect();
-        Ok(OpPath { rest_acceleration: None, poses, tangents, shape, length_scale })
+        Ok(OpPath { rest_acceleration: None, poses, tangents, curvatures, shape, length_scale })
     }
 
     /// The path with the OP's acceleration at rest at each pose, along the pose's tangent ([`Self::tangent`];
@@ -266,6 +278,7 @@ impl<S: Space> OpPath<S> {
             let along = rest[best] * (1.0 - u) + rest[next] * u;
             scale_op::<S>(&(tangent * along), 1.0 / self.length_scale)
         });
+        let curvature = self.curvatures[best] * (1.0 - u) + self.curvatures[next] * u;
         let at_end = !self.is_closed() && ((best == 0 && u == 0.0) || (best + 1 == segments && u == 1.0));
         let distance = offset.norm();
         PathPoint {
@@ -274,6 +287,7 @@ impl<S: Space> OpPath<S> {
             distance,
             past_end: if at_end { distance } else { 0.0 },
             rest_acceleration,
+            curvature,
             segment: best,
         }
     }
@@ -369,6 +383,28 @@ mod tests {
         // From a hint far away the walk along the circle still gets there (no other branch to stop on).
         let from_hint = path.nearest(&pose, Some(300));
         assert!((from_hint.pose.position - p.pose.position).norm() < 1e-9);
+    }
+
+    /// The curvature of a crank tip's path in scaled coordinates, `(r cos a, r sin a, L a)`: a helix, whose
+    /// curvature vector points at the crank's pivot with magnitude `r / (r² + L²)` and has no part along the
+    /// angle. With the radius unlike the length scale the angle's share shows.
+    #[test]
+    fn a_crank_tips_curvature_points_at_its_pivot_as_the_helix_s_closed_form() {
+        for (r, l) in [(0.1, 0.1), (0.05, 0.2)] {
+            let path = OpPath::<Planar>::new(circle(360, r), PathShape::Closed, l).unwrap();
+            for degrees in [0.0, 100.0, 227.5] {
+                let a = f64::to_radians(degrees);
+                let pose =
+                    OpPose { position: Vector2::new(r * a.cos(), r * a.sin()), rotation: Planar::rot_from_vector(&a) };
+                let p = path.nearest(&pose, None);
+                let expected = Vector3::new(-a.cos(), -a.sin(), 0.0) * (r / (r * r + l * l));
+                assert!(
+                    (p.curvature - expected).norm() < 1e-3 * expected.norm(),
+                    "{:?} against {expected:?}",
+                    p.curvature
+                );
+            }
+        }
     }
 
     /// A crank tip's circle seen through a pin: the same positions, no angle, and the acceleration at rest's
