@@ -2,7 +2,8 @@
 //!
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
 //! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
-//! steps with the snapshot's b̂ turned as they are and with the change of the forces at rest along the path
+//! steps with the snapshot's b̂ turned as they are, with its own acceleration across the path (the path's
+//! curvature at its speed) in place of the VE's, and with the change of the forces at rest along the path
 //! where that change holds it toward the VE, and it is held at a swing's limits, where the OP turns
 //! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
 //! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
@@ -81,9 +82,15 @@ impl<S: Space> HapticCore<S> {
         // frame turned, and the constrained pull (`blend_time_constant` τ) answers it only by holding the
         // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. To it the model adds the change of
         // the forces at rest between the VE's point and its own where that change holds it toward the VE
-        // (`PlacedFrame::model_rest`).
+        // (`PlacedFrame::model_rest`). Across the path b̂ is the VE's acceleration across it, `κ v²` at the
+        // VE's speed, which the model, at a speed of its own, does not have: the model takes its own
+        // (`PlacedFrame::across`), as far as the frame was carried.
         let bias = match &on_path {
-            Some(placed) => placed.twist_turn * self.active.bias + placed.model_rest,
+            Some(placed) => {
+                let turned = placed.twist_turn * self.active.bias + placed.model_rest;
+                let ve_across = project_twist::<S>(&self.local.projector, self.length_scale, &turned);
+                turned + (placed.across - ve_across) * placed.along
+            }
             None => self.active.bias,
         };
         self.model.set_bias(&bias);
@@ -186,7 +193,10 @@ impl<S: Space> HapticCore<S> {
         }
         // The walls are right as far as the tangent or the path is.
         self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
-        Some(PlacedFrame { point: on.pose, along, twist_turn, model_rest })
+        let speed = on.tangent.dot(&scale_op::<S>(&self.model.twist(), l));
+        let across =
+            project_twist::<S>(&self.local.projector, l, &scale_op::<S>(&(on.curvature * (speed * speed)), 1.0 / l));
+        Some(PlacedFrame { point: on.pose, along, twist_turn, model_rest, across })
     }
 }
 
@@ -202,4 +212,10 @@ struct PlacedFrame<S: Space> {
     /// the whole change where it pulls the model along the path toward the VE's pose predicted to now, else
     /// none.
     model_rest: S::OpVec,
+    /// The model's own acceleration across the path where it is (along the frame's constrained directions):
+    /// `κ v²`, the path's curvature there at the model's speed along it. A point that keeps to a curve has
+    /// that acceleration across it whatever the forces, so b̂'s part across the path is the VE's at the VE's
+    /// speed; at a speed of its own the model, held there by it, is pushed off the path (a VE swinging back
+    /// fast under a model at rest pulls it toward the circle's centre) or left to run off along the tangent.
+    across: S::OpVec,
 }
