@@ -210,6 +210,8 @@ struct SnapshotScratch<S: Space> {
     hands_qdd: DVector<f64>,
     /// Scratch of `kkt::constrained_response` (2m).
     response: Vec<f64>,
+    /// The workspace of the velocity terms b̂ leaves out (`snapshots::VelocityTerms`).
+    velocity: snapshots::VelocityTerms<S>,
     /// User indices grouped by OP (then in join order), for `roster_version` `order_version`: the order of
     /// the snapshots and of the couplings' evaluation (`VeCore::refresh_op_order`).
     order: Vec<usize>,
@@ -314,6 +316,7 @@ impl<S: Space> VeCore<S> {
             at_op: snapshots::AtOp::none(),
             hands_qdd: DVector::zeros(n),
             response: vec![0.0; 2 * m],
+            velocity: snapshots::VelocityTerms::new(&model),
             order: Vec::with_capacity(user_room),
             order_version: u64::MAX,
         };

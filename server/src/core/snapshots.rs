@@ -15,14 +15,15 @@
 //! **Per user** at its operational point h:
 //! - Λ̂⁻¹ with the loops closed (eq 9), `op_space_inertia`; sent as its upper triangle, row-major;
 //! - b̂ = J q̈ + J̇q̇ − Λ̂⁻¹ F_u, the OP acceleration minus the effect of the user's own hand wrench F_u (the
-//!   client's local model applies it itself); contacts, gravity and the closure's velocity terms stay in b̂,
-//!   and so do the other users' hand wrenches, weighted by how long the round trip is (`sharing`: under
-//!   delay their exchange is a loop). Their share, `J P Σ Jᵢᵀ F_h,i − Λ̂⁻¹ F_u` over every pushing user,
-//!   comes from one solve a round with the probe's factors (`kkt::constrained_response`). No user's PD
-//!   coupling stays in b̂: it is a numerical tie between the VE and one local model, and in another user's
-//!   frozen b̂ it would act as a stiff spring seen one snapshot late without its stiffness — two users on one
-//!   OP went unstable that way. A user feels the others through their hands (in b̂) and through the VE,
-//!   which its own local model is blended toward;
+//!   client's local model applies it itself); contacts, gravity and the closure's velocity terms stay in b̂
+//!   (the velocity terms along the OP's free directions only as far as the user's round trip leaves its
+//!   model's velocity the VE's: `VelocityTerms`, `decoupled`), and so do the other users' hand wrenches,
+//!   weighted by how long the round trip is (`sharing`: under delay their exchange is a loop). Their share,
+//!   `J P Σ Jᵢᵀ F_h,i − Λ̂⁻¹ F_u` over every pushing user, comes from one solve a round with the probe's
+//!   factors (`kkt::constrained_response`). No user's PD coupling stays in b̂: it is a numerical tie between
+//!   the VE and one local model, and in another user's frozen b̂ it would act as a stiff spring seen one
+//!   snapshot late without its stiffness — two users on one OP went unstable that way. A user feels the
+//!   others through their hands (in b̂) and through the VE, which its own local model is blended toward;
 //! - the SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12): directions in `(v, L ω)` coordinates, singular values,
 //!   the constraint count;
 //! - OP pose and twist, how many other manipulators there are (the local model needs only that), and the
@@ -50,6 +51,7 @@ use kinloop_linkage::algorithms::contact::detect_contacts;
 use kinloop_linkage::algorithms::jacobian::apply_wrench;
 use kinloop_linkage::algorithms::kkt::constrained_response;
 use kinloop_linkage::algorithms::op_space::{frame_point_inertia, op_space_inertia};
+use kinloop_linkage::algorithms::velocity_product::velocity_product_acceleration;
 use kinloop_linkage::error::DynamicsError;
 use kinloop_linkage::model::data::Data;
 use kinloop_linkage::{
@@ -196,6 +198,9 @@ pub(super) struct AtOp<S: Space> {
     inverse_inertia: S::OpMat,
     /// `J q̈ + J̇q̇` under the probe's forces.
     acceleration: S::OpVec,
+    /// The part of its velocity terms along the OP's free directions (`VelocityTerms`), once a user of the OP
+    /// needed it.
+    velocity_free: Option<S::OpVec>,
     /// `J P Σ Jᵢᵀ F_h,i`: the part of `acceleration` that every pushing user's hand makes.
     hands: S::OpVec,
     /// The SVD of the unit-consistent Λ̃⁻¹ (eq 10, 12).
@@ -212,6 +217,7 @@ impl<S: Space> AtOp<S> {
             checked: false,
             inverse_inertia: S::OpMat::zero(),
             acceleration: S::OpVec::zero(),
+            velocity_free: None,
             hands: S::OpVec::zero(),
             directions: ConstraintDirections {
                 singular_values: S::OpVec::zero(),
@@ -260,11 +266,85 @@ fn at_op<'a, S: Space>(
         shared.hands[c] = data.op.jacobian_t.column(c).dot(hands_qdd);
     }
     shared.directions = constraint_directions_from::<S>(&inverse_inertia, model.length_scale, DEFAULT_THRESHOLD, warm);
+    shared.velocity_free = None;
     shared.pose = OpPose::of_op(model, data, op);
     shared.twist = op_twist(model, data, op);
     shared.op = Some(op);
     Ok(shared)
 }
+
+/// The part of the OP's velocity terms (`kinloop_linkage::algorithms::velocity_product`) along its free
+/// directions, which b̂ leaves out: the local model steps with its inertia frozen at the snapshot's, and
+/// those terms are the other half of the inertia's change along the motion, work on a frozen model that no
+/// one put in. Along the constrained directions (the curvature of the OP's path, which holds the model on
+/// it) b̂ keeps them. A workspace of its own: its solves at other velocities leave the probe's factors, which
+/// the other users' terms still need, as they were.
+#[derive(Clone, Debug)]
+pub(super) struct VelocityTerms<S: Space> {
+    data: Data<S>,
+    signed: DVector<f64>,
+}
+
+impl<S: Space> VelocityTerms<S> {
+    pub fn new(model: &Model<S>) -> Self {
+        VelocityTerms { data: Data::new(model), signed: DVector::zeros(model.nv()) }
+    }
+
+    /// The velocity terms of OP `op` at `(q, qd)` projected on the free directions of `directions` (the OP's
+    /// own, unit-consistent coordinates); zero when the solves fail (b̂ then keeps them whole).
+    fn free_part(
+        &mut self,
+        model: &Model<S>,
+        q: &DVector<f64>,
+        qd: &DVector<f64>,
+        op: usize,
+        directions: &ConstraintDirections<S>,
+    ) -> S::OpVec {
+        let Ok(terms) = velocity_product_acceleration(model, &mut self.data, q, qd, op, &mut self.signed) else {
+            return S::OpVec::zero();
+        };
+        let scaled = directions.to_scaled(&terms);
+        let mut free = S::OpVec::zero();
+        for i in 0..S::DIM - directions.count.min(S::DIM) {
+            let mut direction = S::OpVec::zero();
+            for r in 0..S::DIM {
+                direction[r] = directions.directions[(r, i)];
+            }
+            free += direction * direction.dot(&scaled);
+        }
+        let free = directions.twist_from_scaled(&free);
+        if free.as_slice().iter().all(|x| x.is_finite()) {
+            free
+        } else {
+            S::OpVec::zero()
+        }
+    }
+}
+
+/// How far `user`'s round trip decouples its local model's velocity from the VE's: the round trip in periods
+/// of the user's coupling, at most 1. The VE follows the model through the coupling, so over a round trip
+/// much shorter than the coupling's period they move together, and the VE's velocity terms are the model's;
+/// over a period or more the model runs a round trip of its own motion ahead. Below [`DECOUPLED_FROM`] (and
+/// before a round trip is measured) 0: b̂ as the paper sends it, and the three solves the terms cost are not
+/// made.
+fn decoupled(user: &User) -> f64 {
+    match (user.round_trip.estimate_s(), user.coupling_frequency) {
+        (Some(trip), Some(frequency)) if trip.is_finite() && trip > 0.0 => {
+            let periods = (trip * frequency.omega / std::f64::consts::TAU).min(1.0);
+            if periods >= DECOUPLED_FROM {
+                periods
+            } else {
+                0.0
+            }
+        }
+        _ => 0.0,
+    }
+}
+
+/// The shortest round trip, in periods of the user's coupling, over which b̂ leaves out the velocity terms
+/// along the free directions (`decoupled`): a tenth of a period, 12.5 ms at the coupling's 8 Hz floor. On a
+/// local network (a round trip of a few milliseconds against a coupling of 20 Hz) the terms stay whole.
+pub const DECOUPLED_FROM: f64 = 0.1;
 
 /// Who pushes and over what round trip: what each user's weight of the others' hands depends on (`sharing`).
 struct Exchange {
@@ -386,7 +466,21 @@ fn build_one<S: Space>(
 ) -> Result<(), DynamicsError> {
     // What of this user's wrench the probe applied: its hand (see the module documentation).
     let own_wrench = couplings[index].hand_part();
-    let shared = at_op(model, data, &users[index], &mut scratch.at_op, &scratch.hands_qdd)?;
+    let at = at_op(model, data, &users[index], &mut scratch.at_op, &scratch.hands_qdd)?;
+    // The velocity terms along the free directions, as far as this user's round trip decouples its local
+    // model's velocity from the VE's (`VelocityTerms`), computed once per OP and round, in a workspace of its
+    // own (`data` keeps the probe's factors).
+    let decoupled = decoupled(&users[index]);
+    let velocity_free = match (decoupled > 0.0, at.velocity_free) {
+        (false, _) => S::OpVec::zero(),
+        (true, Some(free)) => free,
+        (true, None) => {
+            let free = scratch.velocity.free_part(model, q, qd, users[index].op, &at.directions);
+            scratch.at_op.velocity_free = Some(free);
+            free
+        }
+    };
+    let shared = &scratch.at_op;
     // b̂ (`op_space_terms`): the OP's acceleration without this user's own hand, with only the weighted share
     // of the other users' hands and this user's share of the load they no longer carry (`sharing`).
     let own = shared.inverse_inertia * own_wrench;
@@ -402,7 +496,8 @@ fn build_one<S: Space>(
         let inertial = inertial_weight(others, linear_mobility, mapping.position_scale, mapping.force_scale);
         others_weight(others, exchange.round_trip_s, exchange_delay_s).min(inertial)
     };
-    let bias = shared_bias(&shared.acceleration, &shared.hands, &own, others, weight);
+    let acceleration = shared.acceleration - velocity_free * decoupled;
+    let bias = shared_bias(&acceleration, &shared.hands, &own, others, weight);
 
     let other_manipulators = manipulators - usize::from(users[index].role == Role::Manipulator);
     let slot = &mut users[index].slot;
