@@ -543,8 +543,8 @@ fn filling_scale(scene: &str, op: &str, device: kinloop_client::device::DevicePr
 /// force-sensing device, and there neither way of playing the stream makes energy): packets leave the queue in
 /// bursts, and a VE that follows the newest uplink sees the jab's poses arrive all at once, its PD target
 /// jumping centimetres in a tick: its OP parts from the device as heard several times as far (more than two
-/// and a half), and it makes several times the energy beyond the hand's work (more than three). Played out at the stream's steady delay (the jitter
-/// buffer, `VeConfig::jitter_buffer`) the session is stable.
+/// and a half), and it makes several times the energy beyond the hand's work (more than three). Played out
+/// at the stream's steady delay (the jitter buffer, `VeConfig::jitter_buffer`) the session is stable.
 #[test]
 fn the_jitter_buffer_keeps_a_poke_through_a_bursty_link_passive() {
     use kinloop::experiments::verdict::judge;
