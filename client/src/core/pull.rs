@@ -82,9 +82,9 @@ impl<S: Space> HapticCore<S> {
         // frame turned, and the constrained pull (`blend_time_constant` τ) answers it only by holding the
         // model |b̂| sin Δ τ² off the path, where the linkage cannot follow. To it the model adds the change of
         // the forces at rest between the VE's point and its own where that change holds it toward the VE
-        // (`PlacedFrame::model_rest`). Across the path b̂ is the VE's acceleration across it, `κ v²` at the
-        // VE's speed, which the model, at a speed of its own, does not have: the model takes its own
-        // (`PlacedFrame::across`), as far as the frame was carried.
+        // (`PlacedFrame::model_rest`). Across the path the model takes its own acceleration
+        // (`PlacedFrame::across`) in place of what of b̂ its frame finds there, as far as the frame was
+        // carried.
         let bias = match &on_path {
             Some(placed) => {
                 let turned = placed.twist_turn * self.active.bias + placed.model_rest;
@@ -214,8 +214,9 @@ struct PlacedFrame<S: Space> {
     model_rest: S::OpVec,
     /// The model's own acceleration across the path where it is (along the frame's constrained directions):
     /// `κ v²`, the path's curvature there at the model's speed along it. A point that keeps to a curve has
-    /// that acceleration across it whatever the forces, so b̂'s part across the path is the VE's at the VE's
-    /// speed; at a speed of its own the model, held there by it, is pushed off the path (a VE swinging back
-    /// fast under a model at rest pulls it toward the circle's centre) or left to run off along the tangent.
+    /// that acceleration across it whatever the forces. What the frame finds of b̂ there is the VE's `κ v²`
+    /// at the VE's speed, and the part of b̂'s push along the path that the filtered, turned frame does not
+    /// line up with; with either the model is pushed off the path (a VE swinging back fast under a model at
+    /// rest pulls it toward the circle's centre), and the constrained pull holds it off by that push.
     across: S::OpVec,
 }
