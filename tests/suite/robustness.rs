@@ -43,7 +43,11 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
 /// crank's load along the walls where the model is holds it ever further off the circle (5.5 % of the radius
 /// after 3 s, then 30-75 % as the session runs away). Turned, the model is within 4.1 % of the radius: the
 /// hand holds the change of the heavy rocker's load where the model is (`PlacedFrame::model_rest`), and its
-/// harder push moves the model off the path where it leads the VE by 18° of the crank.
+/// harder push moves the model off the path where it leads the VE by 18° of the crank. With b̂'s velocity
+/// terms along the path left out under delay, a wound spring's throw of the VE's crank, under a model at
+/// rest, pulled the model 27-30 % of the radius toward the pivot through b̂'s part across the circle (the
+/// VE's centripetal acceleration at the VE's speed): across its path the model takes its own
+/// (`PlacedFrame::across`).
 #[test]
 fn seed_17s_crank_at_300_ms_keeps_its_local_model_on_the_cranks_circle() {
     let (worst, _) = model_on_the_ves_circle(17, "op-crank");
