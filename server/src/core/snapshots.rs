@@ -306,10 +306,7 @@ impl<S: Space> VelocityTerms<S> {
         let scaled = directions.to_scaled(&terms);
         let mut free = S::OpVec::zero();
         for i in 0..S::DIM - directions.count.min(S::DIM) {
-            let mut direction = S::OpVec::zero();
-            for r in 0..S::DIM {
-                direction[r] = directions.directions[(r, i)];
-            }
+            let direction = directions.direction(i);
             free += direction * direction.dot(&scaled);
         }
         let free = directions.twist_from_scaled(&free);
