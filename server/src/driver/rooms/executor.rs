@@ -40,8 +40,11 @@ pub const BUDGET_SHARE: f64 = 0.7;
 /// Consecutive ticks each longer than [`BUDGET_SHARE`] of a period that send a room to the quarantine at
 /// once, before its cost average has caught up: a room that takes 2 ms a tick at 1 kHz would otherwise hold
 /// its thread for a few dozen ticks (its average climbing from [`ROOM_ESTIMATE`]), and make every other room
-/// there miss as many deadlines. One long tick (a preemption, a page fault) is not a streak.
-pub const OVERRUN_STREAK: u32 = 3;
+/// there miss as many deadlines. Eight, not fewer: on a busy 2-core host a calm room's single ticks of
+/// 20 µs now and then take 0.6-1.4 ms of thread CPU time (page faults, a host that steals the CPU), a few
+/// a second and sometimes back to back, and three in a row once sent a calm room away. A room that is
+/// really slow holds its thread for eight of its ticks, once.
+pub const OVERRUN_STREAK: u32 = 8;
 /// The most of a period a quarantined room's cost average may take to be released back onto a real-time
 /// thread: half the admission share, so that a released room is well clear of the share that sent it away.
 pub const RELEASE_SHARE: f64 = BUDGET_SHARE / 2.0;
@@ -86,6 +89,8 @@ pub struct RoomCell {
     cost_ns: AtomicU64,
     /// Consecutive ticks longer than the share of a period (only its thread writes it).
     streak: AtomicU32,
+    /// The shortest tick of the current streak, in ns (only its thread writes it).
+    streak_least_ns: AtomicU64,
     users: AtomicUsize,
     thread: AtomicUsize,
     quarantined: AtomicBool,
@@ -104,6 +109,7 @@ impl RoomCell {
             rate_hz,
             cost_ns: AtomicU64::new(f64::to_bits(ROOM_ESTIMATE.as_nanos() as f64)),
             streak: AtomicU32::new(0),
+            streak_least_ns: AtomicU64::new(0),
             users: AtomicUsize::new(0),
             thread: AtomicUsize::new(0),
             quarantined: AtomicBool::new(false),
@@ -195,8 +201,15 @@ impl RoomCell {
         }
     }
 
-    /// Its thread sends it to the quarantine: it admits no one from here, and the send is counted.
+    /// Its thread sends it to the quarantine: it admits no one from here, and the send is counted. Sent for
+    /// a streak, its cost is at least the streak's shortest tick: the average has not caught up yet, and
+    /// what the room reports and the quarantine's release rule read should be what it takes.
     fn send_to_quarantine(&self) {
+        if self.streak.load(Ordering::Relaxed) >= OVERRUN_STREAK {
+            let least = self.streak_least_ns.load(Ordering::Relaxed) as f64;
+            let cost = f64::from_bits(self.cost_ns.load(Ordering::Relaxed));
+            self.cost_ns.store(cost.max(least).to_bits(), Ordering::Relaxed);
+        }
         self.quarantined.store(true, Ordering::Relaxed);
         self.quarantines.fetch_add(1, Ordering::Relaxed);
     }
@@ -228,6 +241,11 @@ impl RoomCell {
         let long = step.as_secs_f64() * self.rate_hz > BUDGET_SHARE;
         let streak = if long { self.streak.load(Ordering::Relaxed).saturating_add(1) } else { 0 };
         self.streak.store(streak, Ordering::Relaxed);
+        if long {
+            let least =
+                if streak == 1 { charged } else { charged.min(self.streak_least_ns.load(Ordering::Relaxed) as f64) };
+            self.streak_least_ns.store(least as u64, Ordering::Relaxed);
+        }
         self.users.store(users, Ordering::Relaxed);
     }
 
