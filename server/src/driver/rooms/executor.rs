@@ -41,9 +41,9 @@ pub const BUDGET_SHARE: f64 = 0.7;
 /// once, before its cost average has caught up: a room that takes 2 ms a tick at 1 kHz would otherwise hold
 /// its thread for a few dozen ticks (its average climbing from [`ROOM_ESTIMATE`]), and make every other room
 /// there miss as many deadlines. Eight, not fewer: on a busy 2-core host a calm room's single ticks of
-/// 20 µs now and then take 0.6-1.4 ms of thread CPU time (one VE step each, not a catch-up; the cause is not
-/// traced), a few a second and sometimes back to back, and three in a row once sent a calm room away. A room that is
-/// really slow holds its thread for eight of its ticks, once.
+/// 20 µs now and then take 0.6-1.4 ms of thread CPU time (one VE step each, not a catch-up; the cause is
+/// not traced), a few a second and sometimes back to back, and three in a row once sent a calm room away.
+/// A room that is really slow holds its thread for eight of its ticks, once.
 pub const OVERRUN_STREAK: u32 = 8;
 /// The most of a period a quarantined room's cost average may take to be released back onto a real-time
 /// thread: half the admission share, so that a released room is well clear of the share that sent it away.
