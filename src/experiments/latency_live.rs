@@ -67,6 +67,9 @@ pub struct LiveMeasured {
     pub device_op_rms_mm: Option<f64>,
     /// Meets the goal: no restore, nothing withheld or non-finite, closure and clamped ticks within bounds.
     pub meets: bool,
+    /// Why the server says the session ended: the client's close should reach it before the server shuts
+    /// down, over any delay ("room closed" means it never did and the server's drain waited for it).
+    pub server_session_end: Option<&'static str>,
 }
 
 /// Runs one point of the real-time run: a `kinloop demo` session (server and client on real threads over
@@ -99,6 +102,7 @@ pub fn measure_live(p: &LivePoint, seconds: f64, scratch: &std::path::Path) -> R
         non_finite,
         device_op_rms_mm: counts.user.device_op_rms_mm,
         meets,
+        server_session_end: report.summary.per_user.first().and_then(|u| u.server.as_ref()).and_then(|s| s.ended),
     })
 }
 

@@ -11,6 +11,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use kinloop_linkage::math::space::{Planar, SceneKind, Space, Spatial, VecOps};
+use kinloop_protocol::emulator::LinkConfig;
 use kinloop_protocol::quic::{
     client_endpoint, connect_resuming, ConnectError, ConnectedSession, DatagramSender, Endpoint, EndpointOptions,
 };
@@ -44,19 +45,26 @@ pub(super) struct Started {
 /// nothing, and the server keeps the user until its idle timeout.
 const CLOSE_LINGER: Duration = Duration::from_secs(1);
 
+/// How long past its longest flight an emulated link is given to let the close go: the close is queued a few
+/// milliseconds after the linger starts, when the connection's driver runs.
+const CLOSE_QUEUEING: Duration = Duration::from_millis(50);
+
 /// A client's QUIC endpoint: its own, or one shared with the other clients of its process.
 struct ClientEndpoint {
     quic: Endpoint,
     own: bool,
+    /// At least [`CLOSE_LINGER`], longer on an emulated link: the close waits on that link like any packet,
+    /// and is lost if the client stops before the link lets it go.
+    linger: Duration,
 }
 
 impl ClientEndpoint {
-    /// Waits (at most [`CLOSE_LINGER`]) for the closing connections to tell their server, on an endpoint of
-    /// the client's own; a shared one outlives the client, and its owner lingers once for every client
-    /// (`SharedNetwork::finish`).
+    /// Waits (at most `linger`) for the closing connections to tell their server, on an endpoint of the
+    /// client's own; a shared one (never emulated) outlives the client, and its owner lingers once for every
+    /// client (`SharedNetwork::finish`).
     async fn linger(&self) {
         if self.own {
-            let _ = tokio::time::timeout(CLOSE_LINGER, self.quic.wait_idle()).await;
+            let _ = tokio::time::timeout(self.linger, self.quic.wait_idle()).await;
         }
     }
 }
@@ -96,11 +104,12 @@ pub(super) fn network_thread(start: NetStart) {
 pub(super) async fn network_task(start: NetStart, endpoint: Option<Endpoint>) {
     let NetStart { config, real, addresses, shared, net, started } = start;
     let endpoint = match endpoint {
-        Some(quic) => ClientEndpoint { quic, own: false },
+        Some(quic) => ClientEndpoint { quic, own: false, linger: CLOSE_LINGER },
         None => {
             let opts = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
+            let flight = config.link.as_ref().map_or(Duration::ZERO, LinkConfig::longest_flight);
             match client_endpoint(&config.trust, &opts) {
-                Ok(quic) => ClientEndpoint { quic, own: true },
+                Ok(quic) => ClientEndpoint { quic, own: true, linger: CLOSE_LINGER.max(flight + CLOSE_QUEUEING) },
                 Err(e) => {
                     let _ = started.send(Err(e.into()));
                     return;

@@ -107,6 +107,13 @@ impl LinkConfig {
         LinkConfig { seed: self.seed, ..LinkConfig::default() } == *self
     }
 
+    /// How long a packet sent now may stay on the link, jitter included (six standard deviations past the
+    /// mean delay: one packet in half a billion is later). A sender that stops sooner takes its last packets
+    /// with it, a connection's close among them. Bandwidth queueing is not counted.
+    pub fn longest_flight(&self) -> Duration {
+        self.delay.saturating_add(self.jitter.saturating_mul(6))
+    }
+
     /// Checks that probabilities are probabilities and the options do not contradict each other.
     pub fn validate(&self) -> Result<(), LinkConfigError> {
         let mut probabilities = vec![("loss", self.loss), ("reorder", self.reorder), ("duplicate", self.duplicate)];

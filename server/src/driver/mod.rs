@@ -284,6 +284,7 @@ impl Shared {
                     snapshots_oversize: load(&c.snapshots_oversize),
                     uplinks_clamped: load(&c.uplinks_clamped),
                     connected: c.connected.load(Ordering::Relaxed),
+                    ended: c.ended.get().copied(),
                 }
             });
         });

@@ -231,6 +231,7 @@ async fn run_session(
     connection.close(close_codes::NORMAL, b"bye");
     receive.abort();
     transmit.abort();
+    let _ = counters.ended.set(reason);
     counters.connected.store(false, Ordering::Relaxed);
     shared.tell_fleet(crate::fleet::FleetEvent::UserLeft { user: fleet_user });
     tracing::info!(user, reason, "session ended");

@@ -42,6 +42,8 @@ pub struct UserStats {
     pub uplinks_clamped: u64,
     /// Still connected.
     pub connected: bool,
+    /// Why the session ended, once it has (the reason `session ended` logs).
+    pub ended: Option<&'static str>,
 }
 
 /// Everything `--stats-every` logs and `--json` prints.

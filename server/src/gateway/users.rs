@@ -19,6 +19,9 @@ pub struct UserCounters {
     pub snapshots_oversize: AtomicU64,
     pub uplinks_clamped: AtomicU64,
     pub connected: AtomicBool,
+    /// Why the session ended, once it has: "connection lost" when the client closed or vanished, "client
+    /// left" when it said so, "room closed" when the server told it to move (`session.rs`).
+    pub ended: std::sync::OnceLock<&'static str>,
     /// The newest uplink's device and model poses, for the view.
     pub poses: PoseTap,
 }
