@@ -47,11 +47,19 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
 /// terms along the path left out under delay, a wound spring's throw of the VE's crank, under a model at
 /// rest, pulled the model 27-30 % of the radius toward the pivot through b̂'s part across the circle (the
 /// VE's centripetal acceleration at the VE's speed): across its path the model takes its own
-/// (`PlacedFrame::across`).
+/// (`PlacedFrame::across`). The Falcon renders no torque, so the model turns as the crank's point moves
+/// (`LocalModel::turn_as_pinned`): summing b̂'s angular part a round trip late, its turning reached 280 rad/s
+/// while its point moved at 1 cm/s, and the VE refused its uplinks as too fast, left the crank at rest
+/// where it was, and the session diverged.
 #[test]
 fn seed_17s_crank_at_300_ms_keeps_its_local_model_on_the_cranks_circle() {
-    let (worst, _) = model_on_the_ves_circle(17, "op-crank");
+    let (worst, circle) = model_on_the_ves_circle(17, "op-crank");
     assert!(worst.off < 0.05, "the model {:.1} % of the radius off the circle at {} s", worst.off * 100.0, worst.t);
+    assert!(
+        circle.turning_over_motion < 1.5,
+        "the model turns {:.1} times as fast as it goes round",
+        circle.turning_over_motion
+    );
 }
 
 /// Seed 27's rocker (a change-point four-bar in SI, the rocker's circle 40 mm at the device) on a Falcon at
@@ -138,6 +146,9 @@ struct Worst {
 struct Circle {
     centre: (f64, f64),
     model_angles: Vec<f64>,
+    /// The model's fastest turning (rad/s) over the fastest its OP moved along the circle, as an angle about
+    /// the centre (its linear speed over the radius): about 1 for a crank, which turns as its point goes round.
+    turning_over_motion: f64,
 }
 
 impl Circle {
@@ -176,7 +187,12 @@ fn model_on_the_ves_circle(seed: u64, op: &str) -> (Worst, Circle) {
         assert!((distance(*p) - radius).abs() < 1e-6 * radius, "the VE's OP on one circle: {p:?}");
     }
     let mut worst = Worst { off: 0.0, t: 0.0 };
-    let mut circle = Circle { centre, model_angles: Vec::new() };
+    let (mut turning, mut motion) = (0.0f64, 0.0f64);
+    for s in samples {
+        turning = turning.max(s.model_twist[2].abs());
+        motion = motion.max(s.model_twist[0].hypot(s.model_twist[1]) / radius);
+    }
+    let mut circle = Circle { centre, model_angles: Vec::new(), turning_over_motion: turning / motion };
     for s in samples.iter().filter(|s| s.gain >= 1.0) {
         let off = (distance(planar(&s.model)) - radius).abs() / radius;
         if off > worst.off {

@@ -11,6 +11,8 @@ use kinloop_linkage::{
     math::space::OpPose,
 };
 
+use kinloop_linkage::math::eigen::symmetric_eigen;
+
 use super::controllers::project_twist;
 use super::intake::SnapshotTerms;
 
@@ -125,6 +127,24 @@ impl<S: Space> LocalModel<S> {
         }
     }
 
+    /// On a pinned grasp (a device that renders no torque): the reduced model's angular twist set to the
+    /// turning its linear twist makes through the pin, `ω = (Λ̂⁻¹)_ωf (Λ̂⁻¹)_ff⁺ v` (the forces that move the OP
+    /// by `v`, and how the linkage turns the OP under them). No controller acts on the angular axes there,
+    /// so nothing else holds the model's turning to its motion: b̂'s angular part, taken at the VE's state a
+    /// round trip behind, and the frame carried along the path each leave a little turning the linkage does
+    /// not make, which then sums without bound (a crank held 41 mm from its pivot on a Falcon at 300 ms had its
+    /// model turning at 280 rad/s while it moved at 1 cm/s, and the VE refused its uplinks as too fast).
+    /// Turning the OP makes without moving it (a link spun about the grasped point) is left out: the pin
+    /// neither feels nor drives it; an OP that forces do not move at all keeps the model's own turning.
+    pub fn turn_as_pinned(&mut self) {
+        if self.using_config {
+            return;
+        }
+        let m = &self.reduced.terms.inverse_inertia;
+        let twist = pinned_turning::<S>(m, &self.reduced.twist);
+        self.reduced.twist = twist;
+    }
+
     /// Moves the OP state by `moved` (a displacement) and `sped` (a twist change), as [`split_correction`]
     /// gives them.
     pub fn apply_correction(&mut self, moved: &S::OpVec, sped: &S::OpVec) {
@@ -156,4 +176,88 @@ pub(crate) fn split_correction<S: Space>(
         along * constrained + (*d - along) * free
     };
     (split(pose), split(twist))
+}
+
+/// Below this fraction of the largest response to forces, a direction of `(Λ̂⁻¹)_ff` is one forces do not
+/// move the OP in.
+const PIN_RESPONSE_FLOOR: f64 = 1e-9;
+
+/// `twist` with its angular part replaced by the turning its linear part makes through a pin:
+/// `(Λ̂⁻¹)_ωf (Λ̂⁻¹)_ff⁺ v` (see [`LocalModel::turn_as_pinned`]). Allocates nothing.
+pub(crate) fn pinned_turning<S: Space>(inverse_inertia: &S::OpMat, twist: &S::OpVec) -> S::OpVec {
+    let lin = <S::Point as VecOps>::LEN;
+    let mut forces_block = *inverse_inertia;
+    for r in 0..S::DIM {
+        for c in 0..S::DIM {
+            if r >= lin || c >= lin {
+                forces_block[(r, c)] = 0.0;
+            }
+        }
+    }
+    let (values, vectors) = symmetric_eigen::<S>(&forces_block);
+    let largest = (0..S::DIM).map(|i| values[i]).fold(0.0, f64::max);
+    // A response too small to divide by (terms fading from zero, subnormal) moves nothing through the pin.
+    if !largest.is_normal() {
+        return *twist;
+    }
+    let mut linear = S::OpVec::zero();
+    for i in 0..lin {
+        linear[i] = twist[i];
+    }
+    // The forces that move the OP by the linear twist: (Λ̂⁻¹)_ff⁺ v.
+    let mut force = S::OpVec::zero();
+    for k in 0..S::DIM {
+        if values[k] > largest * PIN_RESPONSE_FLOOR && values[k] > 0.0 {
+            let mut e = S::OpVec::zero();
+            for r in 0..S::DIM {
+                e[r] = vectors[(r, k)];
+            }
+            force += e * (e.dot(&linear) / values[k]);
+        }
+    }
+    let response = *inverse_inertia * force;
+    if !response.as_slice().iter().all(|x| x.is_finite()) {
+        return *twist;
+    }
+    let mut out = *twist;
+    for a in lin..S::DIM {
+        out[a] = response[a];
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::math::space::Planar;
+    use nalgebra::{Matrix3, Vector3};
+
+    /// A link of inertia `I` about a fixed pivot, held at radius `r`: its OP twist is `u θ̇` with
+    /// `u = (−r sin θ, r cos θ, 1)`, so `Λ⁻¹ = u uᵀ / I`. Through a pin the OP turns at the speed its motion
+    /// along the circle gives, `ω = (u_lin · v) / r²`, whatever the model's angular twist was; the linear
+    /// twist (off the circle included) is the model's own.
+    #[test]
+    fn a_crank_held_through_a_pin_turns_as_its_point_moves_along_the_circle() {
+        let (inertia, r, theta) = (0.3, 0.041, 0.7_f64);
+        let u = Vector3::new(-r * theta.sin(), r * theta.cos(), 1.0);
+        let inverse: Matrix3<f64> = u * u.transpose() / inertia;
+        let twist = Vector3::new(0.012, -0.004, 280.0);
+        let turned = pinned_turning::<Planar>(&inverse, &twist);
+        let along = (u[0] * twist[0] + u[1] * twist[1]) / (r * r);
+        assert!((turned[2] - along).abs() < 1e-9 * along.abs().max(1.0), "{} against {along}", turned[2]);
+        assert_eq!((turned[0], turned[1]), (twist[0], twist[1]));
+    }
+
+    /// An OP that forces do not move (held at the pivot of a spinning link): nothing ties its turning to a
+    /// motion, and the model keeps the turning it has. Where forces move it, turning without moving (a
+    /// second, pure-turning free direction) is left out: the pin neither feels nor drives it.
+    #[test]
+    fn turning_that_forces_cannot_make_is_the_models_own_or_left_out() {
+        let spinning = Matrix3::from_diagonal(&Vector3::new(0.0, 0.0, 4.0));
+        let twist = Vector3::new(0.0, 0.0, 3.0);
+        assert_eq!(pinned_turning::<Planar>(&spinning, &twist), twist);
+        let sliding_and_spinning = Matrix3::from_diagonal(&Vector3::new(2.0, 0.0, 4.0));
+        let turned = pinned_turning::<Planar>(&sliding_and_spinning, &Vector3::new(0.5, 0.0, 3.0));
+        assert_eq!(turned, Vector3::new(0.5, 0.0, 0.0));
+    }
 }

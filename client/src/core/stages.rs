@@ -223,6 +223,9 @@ impl<S: Space> HapticCore<S> {
             let walls = !(self.config.constraint_mode == ConstraintMode::Impedance && for_constraint.is_some());
             let wrench = own + self.channels_at_end_of_step(dt_s, intake, &own, walls);
             self.model.step(dt_s, &wrench);
+            if self.pinned() {
+                self.model.turn_as_pinned();
+            }
             wrench
         };
         let mut power_out = [0.0; MAX_AXES];
