@@ -318,6 +318,17 @@ fn seed_59s_crank_at_300_ms_is_not_driven_by_the_ves_swing() {
     assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
 }
 
+/// Seed 137's crank (a crank-rocker in cm+g) on a Falcon with no delay. The least static wrench shares the
+/// link's gravity torque with a torque of 0.45 N m, and its force part (2.2 N) set the force scale; a Falcon
+/// renders no torque, so the hand holds the crank by force times the lever, 21.7 N, and with the scale mapping
+/// that to 3.4 times the Falcon's continuous force the device was clamped on 21 % of the ticks. With the load
+/// taken as the pin holds it (`OpReach::static_pin_force_n`, `design::static_load`) it renders.
+#[test]
+fn seed_137s_crank_on_a_falcon_is_scaled_for_the_force_a_pin_holds_it_with() {
+    let outcome = soft_without_delay(137, "op-crank", "sim:falcon", 10.0);
+    assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+}
+
 /// The robustness matrix's session of generated seed `seed`'s OP `op` on `device`, soft hand, 0 ms.
 fn soft_without_delay(seed: u64, op: &str, device: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
     soft_session(seed, op, device, 0, seconds)

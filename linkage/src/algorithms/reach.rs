@@ -95,6 +95,11 @@ pub struct OpReach<S: Space> {
     pub static_force_n: f64,
     /// See `static_force_n` (N m).
     pub static_torque_nm: f64,
+    /// The static load as a grasp that passes no torque holds it: the 90th percentile over the samples of
+    /// [`pin_force`] (N). A device that renders no torque (a Falcon, a Touch) holds a crank off its pivot by
+    /// force alone, the link's gravity torque through the lever, where `static_force_n` shares it with a
+    /// torque the device does not have.
+    pub static_pin_force_n: f64,
     /// Largest static force over the samples (N).
     pub static_force_max_n: f64,
     /// Largest eigenvalue of the linear block of Λ⁻¹ over the samples (1/kg): the inverse of the lightest
@@ -266,6 +271,36 @@ pub fn static_wrench<S: Space>(directions: &ConstraintDirections<S>, accel: &S::
     directions.wrench_from_scaled(&wrench)
 }
 
+/// Below this, a free direction's translation (squared, of a unit direction in unit-consistent coordinates)
+/// counts as none: the OP turns there without moving, and no force through a pin holds it.
+const PIN_TRANSLATION_FLOOR: f64 = 1e-6;
+
+/// The least force, with no torque, that holds the OP still where the static wrench `load` does (N): the
+/// same work as `load` along every free direction of `directions`, through a grasp that passes no torque.
+/// With `(v, ω̃)` the unit free directions in unit-consistent coordinates and `w̃` the load there, it is the
+/// least-norm `f` with `Vᵀ f = Uᵀ w̃`: `f = V (Vᵀ V)⁺ Uᵀ w̃`. A crank held at a point off its pivot carries
+/// the link's gravity torque as this force times the lever. Free directions along which the OP turns without
+/// translating (below [`PIN_TRANSLATION_FLOOR`]) cannot be held by a force and are left out. Allocates.
+pub fn pin_force<S: Space>(directions: &ConstraintDirections<S>, load: &S::OpVec) -> f64 {
+    let lin = <S::Point as VecOps>::LEN;
+    let free: Vec<S::OpVec> = (0..S::DIM - directions.count)
+        .filter(|&i| directions.singular_values[i] > 0.0)
+        .map(|i| directions.direction(i))
+        .collect();
+    if free.is_empty() {
+        return 0.0;
+    }
+    // The load in unit-consistent coordinates, where the directions are unit: `(f, τ / L)`.
+    let scaled = scale_op::<S>(load, 1.0 / directions.length_scale);
+    let v = DMatrix::from_fn(lin, free.len(), |r, c| free[c][r]);
+    let work = DVector::from_iterator(free.len(), free.iter().map(|u| u.dot(&scaled)));
+    let gram = v.transpose() * &v;
+    match gram.pseudo_inverse(PIN_TRANSLATION_FLOOR) {
+        Ok(inverse) => (v * (inverse * work)).norm(),
+        Err(_) => f64::INFINITY,
+    }
+}
+
 /// Largest eigenvalue of the symmetric block `range × range` of `m`.
 fn block_max_eigenvalue<S: Space>(m: &S::OpMat, range: std::ops::Range<usize>) -> f64 {
     let len = range.len();
@@ -372,6 +407,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         tour: Vec::new(),
         static_force_n: 0.0,
         static_torque_nm: 0.0,
+        static_pin_force_n: 0.0,
         static_force_max_n: 0.0,
         inverse_mass_max: 0.0,
         inverse_rotational_inertia_max: 0.0,
@@ -389,6 +425,7 @@ pub fn survey_op<S: Space>(model: &Model<S>, op: usize, config: &SurveyConfig) -
         data: Data::new(model),
         forces: Vec::new(),
         torques: Vec::new(),
+        pin_forces: Vec::new(),
         inverse_inertias: Vec::new(),
     };
     samples.visit(&q0, &start, true, &mut reach);
@@ -512,6 +549,7 @@ struct Samples<'m, S: Space> {
     data: Data<S>,
     forces: Vec<f64>,
     torques: Vec<f64>,
+    pin_forces: Vec<f64>,
     /// The largest eigenvalues of Λ⁻¹'s linear and angular blocks at each sample with inertia.
     inverse_inertias: Vec<(f64, f64)>,
 }
@@ -532,7 +570,7 @@ impl<S: Space> Samples<'_, S> {
         if !with_inertia {
             return;
         }
-        if let Ok((load, _)) = static_op_load(self.model, &mut self.data, q, &self.zero_qd, self.op) {
+        if let Ok((load, directions)) = static_op_load(self.model, &mut self.data, q, &self.zero_qd, self.op) {
             let inverse = self.data.op.inverse_inertia;
             let (lambda_v, lambda_w) =
                 (block_max_eigenvalue::<S>(&inverse, 0..lin), block_max_eigenvalue::<S>(&inverse, lin..S::DIM));
@@ -543,6 +581,10 @@ impl<S: Space> Samples<'_, S> {
             if f.is_finite() && t.is_finite() {
                 self.forces.push(f);
                 self.torques.push(t);
+            }
+            let pinned = pin_force(&directions, &load);
+            if pinned.is_finite() {
+                self.pin_forces.push(pinned);
             }
         }
     }
@@ -565,6 +607,7 @@ impl<S: Space> Samples<'_, S> {
         reach.static_force_max_n = self.forces.iter().fold(0.0, |a: f64, b| a.max(*b));
         reach.static_force_n = percentile_90(&mut self.forces);
         reach.static_torque_nm = percentile_90(&mut self.torques);
+        reach.static_pin_force_n = percentile_90(&mut self.pin_forces);
     }
 }
 

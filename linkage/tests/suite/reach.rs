@@ -5,7 +5,7 @@
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
 use kinloop_linkage::algorithms::op_path::PathShape;
-use kinloop_linkage::algorithms::reach::{static_op_load, survey_op, SurveyConfig};
+use kinloop_linkage::algorithms::reach::{pin_force, static_op_load, survey_op, SurveyConfig};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::model::builtin;
 use kinloop_linkage::model::scene::OpSpec;
@@ -170,6 +170,32 @@ fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
         let work_gravity = g.dot(&n);
         assert!(work_gravity.abs() > 0.1, "gravity does work along the motion: {work_gravity}");
         assert!((work_load - work_gravity).abs() < 1e-5 * work_gravity.abs(), "{work_load} vs {work_gravity}");
+    }
+}
+
+#[test]
+fn a_grasp_without_torque_holds_the_four_bar_with_the_least_force_that_does_gravitys_work() {
+    // Through a pin (no torque) a force f at the coupler holds the linkage when fᵀ J_lin n = Gᵀ n along its
+    // one motion n; the least such force is |Gᵀ n| / |J_lin n|, J_lin the coupler's linear rows. G, J and n
+    // come from finite differences, as above. The least wrench shares the load with a torque, so the pin's
+    // force is larger than its force part where the coupler turns as it moves.
+    let model = planar("fourbar-crank-rocker");
+    let op = model.op_index("coupler").unwrap();
+    let at_rest = DVector::zeros(model.nv());
+    let mut data = Data::new(&model);
+    let mut turned = model.q0.clone();
+    turned[0] += 2.0;
+    let turned = kinloop_linkage::algorithms::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
+    for q in [model.q0.clone(), turned] {
+        let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
+        let n = four_bar_motion_by_differences(&model, &q);
+        let j = jacobian_by_differences(&model, &q, op);
+        let moved = (j.rows(0, 2) * &n).norm();
+        let expected = gravity_by_differences(&model, &q).dot(&n).abs() / moved;
+        let pinned = pin_force(&directions, &load);
+        assert!((pinned - expected).abs() < 1e-5 * expected, "{pinned} N vs {expected} N");
+        let force_part = Vector2::new(load[0], load[1]).norm();
+        assert!(pinned > force_part, "{pinned} N through the pin, {force_part} N the least wrench's force");
     }
 }
 

@@ -154,13 +154,25 @@ pub enum DesignError {
     Motionless,
 }
 
+/// The static load `device` holds at the OP of `reach` (scene force units): the share of the least wrench that
+/// is force (`OpReach::static_force_n`) on a device that renders torque, and on one that renders none (its
+/// angular axes only sensed: a Falcon, a Touch) the force that holds the linkage through a pin
+/// (`OpReach::static_pin_force_n`), which carries the link's gravity torque through the lever.
+pub fn static_load<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
+    if device.max_torque_nm > 0.0 {
+        reach.static_force_n
+    } else {
+        reach.static_pin_force_n
+    }
+}
+
 /// The words every refusal of [`check_holdable`] begins with, so that a tally can tell a refusal predicted by
 /// the stated rule from any other.
 pub const PREDICTED_REFUSAL: &str = "refused by the load rule";
 
 /// The refusal rule, stated in advance (docs/robustness.md): a manipulator is refused at join when its OP
 /// cannot move, or when the static load that sets the force scale (the 90th percentile over the OP's surveyed
-/// reach of gravity, springs and actuators at rest, `OpReach::static_force_n`), times the force scale the
+/// reach of gravity, springs and actuators at rest, as the device holds it: [`static_load`]), times the force scale the
 /// mapping chose, exceeds the device's continuous force. [`choose_mapping`] maps that load to
 /// [`LOAD_FRACTION`] of the continuous force, so this holds only where the wire's range of scales
 /// (`MIN_MAPPING_SCALE`) kept the scale from going low enough: over most of the reach the device could not
@@ -172,12 +184,13 @@ pub fn check_holdable<S: Space>(reach: &OpReach<S>, device: &DeviceCaps, mapping
     if reach.dof == 0 {
         return Err(DesignError::Motionless);
     }
-    let needed_n = reach.static_force_n * mapping.force_scale;
+    let load = static_load(reach, device);
+    let needed_n = load * mapping.force_scale;
     // With gravity compensation the VE holds the static load, not the device.
     if !mapping.gravity_compensation && needed_n > device.continuous_force_n {
         return Err(DesignError::Unholdable {
             device: device.name.clone(),
-            load: reach.static_force_n,
+            load,
             force_scale: mapping.force_scale,
             needed_n,
             continuous_n: device.continuous_force_n,
@@ -274,16 +287,17 @@ pub fn choose_mapping<S: Space>(
     };
     let mut force_scale = torque_and_grasp(reach, device, position_scale, loaded).min(at_fill);
     if let Some(asked) = request.force_scale {
-        if renders_force && asked * reach.static_force_n > device.max_force_n {
+        let load = static_load(reach, device);
+        if renders_force && asked * load > device.max_force_n {
             // The load is positive here (a zero load fits any scale).
-            let most = device.max_force_n / reach.static_force_n;
+            let most = device.max_force_n / load;
             return Err(DesignError::Scale {
                 what: format!(
                     "force scale {asked} would need {:.2} N of device {} to hold the OP's static load of {:.4e} \
                      scene force units (peak {} N); at most {most:.4e}",
-                    asked * reach.static_force_n,
+                    asked * load,
                     device.name,
-                    reach.static_force_n,
+                    load,
                     device.max_force_n
                 ),
             });
@@ -322,12 +336,13 @@ fn workspace_fit<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
 }
 
 /// The force scale that maps the OP's load (static, or carrying its lightest mass across the reach in
-/// CROSSING_S without gravity) to the device's [`load_target`].
+/// CROSSING_S without gravity) to the device's [`load_target`]; the static load as the device holds it
+/// ([`static_load`]).
 fn load_scale<S: Space>(reach: &OpReach<S>, device: &DeviceCaps) -> f64 {
     let (mass, _) = lightest(reach);
     let largest = reach.largest_extent();
     let dynamic = if mass.is_finite() { mass * 5.77 * largest / (CROSSING_S * CROSSING_S) } else { 0.0 };
-    let load = reach.static_force_n.max(dynamic);
+    let load = static_load(reach, device).max(dynamic);
     if load > 0.0 {
         load_target(device) / load
     } else {

@@ -106,7 +106,8 @@ fn a_grasp_stays_pinned_where_turning_the_handle_rigidly_asks_more_than_the_peak
 /// `I_handle / (4 I_op c_p)`. The crank's tip turns about the crank's pivot at the crank's length, which is
 /// its `r_g` too: its pin keeps half the coupling's hold everywhere, and under its own load, pinned and
 /// holdable rigidly, its scale stays the load's own. So do a load the device would not hold continuously at
-/// the rigid scale, a static torque beyond its peak and a device without torque.
+/// the rigid scale, a static torque beyond its peak and a device without torque (whose load is the force a
+/// pin holds it with, `OpReach::static_pin_force_n`).
 #[test]
 fn a_pinned_grasp_is_held_rigidly_where_the_op_moves_by_turning() {
     let (coupler, crank_tip, paper) = crank_rocker();
@@ -152,8 +153,9 @@ fn a_pinned_grasp_is_held_rigidly_where_the_op_moves_by_turning() {
         assert!(close(m.force_scale, own(force, torque, c_p, true)), "{force} N, {torque} N m");
         assert!(!m.rigid_grasp);
     }
-    // A device without torque: the force bound alone, pinned.
+    // A device without torque: the force bound alone, on the force a pin holds the load with, pinned.
     let falcon = DeviceCaps { max_torque_nm: 0.0, ..paper.clone() };
-    let m = chosen(&reach, &falcon);
-    assert!(close(m.force_scale, own(force, torque, c_p, false)) && !m.rigid_grasp);
+    let pin_load = 3.0 * force;
+    let m = chosen(&OpReach { static_pin_force_n: pin_load, ..reach.clone() }, &falcon);
+    assert!(close(m.force_scale, own(pin_load, torque, c_p, false)) && !m.rigid_grasp);
 }
