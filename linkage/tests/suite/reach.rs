@@ -2,6 +2,7 @@
 //! curve from circle intersections, a serial arm's static load from finite differences of its potential
 //! energy, and the groups an OP does not move in.
 
+use kinloop_linkage::algorithms::constraint_directions::ConstraintDirections;
 use kinloop_linkage::algorithms::gravity::{kinetic_energy, potential_energy};
 use kinloop_linkage::algorithms::kinematics::forward_kinematics;
 use kinloop_linkage::algorithms::op_path::PathShape;
@@ -148,11 +149,12 @@ fn four_bar_motion_by_differences(model: &Model<Planar>, q: &DVector<f64>) -> DV
     DVector::from_column_slice(row(0).cross(&row(1)).normalize().as_slice())
 }
 
-#[test]
-fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
-    // Along the mechanism's one motion n (the null space of the closure Jacobian W = ∂h/∂q), a wrench F at
-    // the coupler holds the linkage still when its virtual work balances gravity's: Fᵀ J n = Gᵀ n. G, J and W
-    // all come from finite differences here (of the potential energy, the coupler's pose, the loop residual).
+/// A configuration q the OP is held still in, its static load there and its directions.
+type Hold = (DVector<f64>, Vector3<f64>, ConstraintDirections<Planar>);
+
+/// The crank-rocker's coupler held at rest at q0 and with the crank turned 2 rad: the model, the OP, and the
+/// two holds.
+fn crank_rocker_coupler_holds() -> (Model<Planar>, usize, Vec<Hold>) {
     let model = planar("fourbar-crank-rocker");
     let op = model.op_index("coupler").unwrap();
     let at_rest = DVector::zeros(model.nv());
@@ -160,8 +162,23 @@ fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
     let mut turned = model.q0.clone();
     turned[0] += 2.0;
     let turned = kinloop_linkage::algorithms::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
-    for q in [model.q0.clone(), turned] {
-        let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
+    let holds = [model.q0.clone(), turned]
+        .into_iter()
+        .map(|q| {
+            let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
+            (q, load, directions)
+        })
+        .collect();
+    (model, op, holds)
+}
+
+#[test]
+fn a_four_bars_static_load_does_the_work_gravity_does_along_its_motion() {
+    // Along the mechanism's one motion n (the null space of the closure Jacobian W = ∂h/∂q), a wrench F at
+    // the coupler holds the linkage still when its virtual work balances gravity's: Fᵀ J n = Gᵀ n. G, J and W
+    // all come from finite differences here (of the potential energy, the coupler's pose, the loop residual).
+    let (model, op, holds) = crank_rocker_coupler_holds();
+    for (q, load, directions) in holds {
         assert_eq!(directions.count, 2, "a 1-DOF linkage's coupler is free in one direction");
         let n = four_bar_motion_by_differences(&model, &q);
         let j = jacobian_by_differences(&model, &q, op);
@@ -179,15 +196,8 @@ fn a_grasp_without_torque_holds_the_four_bar_with_the_least_force_that_does_grav
     // one motion n; the least such force is |Gᵀ n| / |J_lin n|, J_lin the coupler's linear rows. G, J and n
     // come from finite differences, as above. The least wrench shares the load with a torque, so the pin's
     // force is larger than its force part where the coupler turns as it moves.
-    let model = planar("fourbar-crank-rocker");
-    let op = model.op_index("coupler").unwrap();
-    let at_rest = DVector::zeros(model.nv());
-    let mut data = Data::new(&model);
-    let mut turned = model.q0.clone();
-    turned[0] += 2.0;
-    let turned = kinloop_linkage::algorithms::assemble::assemble(&model, &turned, 1e-13).unwrap().q;
-    for q in [model.q0.clone(), turned] {
-        let (load, directions) = static_op_load(&model, &mut data, &q, &at_rest, op).unwrap();
+    let (model, op, holds) = crank_rocker_coupler_holds();
+    for (q, load, directions) in holds {
         let n = four_bar_motion_by_differences(&model, &q);
         let j = jacobian_by_differences(&model, &q, op);
         let moved = (j.rows(0, 2) * &n).norm();
