@@ -2,6 +2,7 @@
 //! default, the paper's configuration-space form (eq 11/13) when configured and the snapshot carries its
 //! terms, and the pull toward the VE that keeps it near the simulation without stepping the force.
 
+use kinloop_linkage::math::eigen::symmetric_eigen;
 use kinloop_linkage::math::space::{MatOps, Space, VecOps};
 use kinloop_linkage::{
     algorithms::configuration::ConfigLayout,
@@ -10,8 +11,6 @@ use kinloop_linkage::{
     },
     math::space::OpPose,
 };
-
-use kinloop_linkage::math::eigen::symmetric_eigen;
 
 use super::controllers::project_twist;
 use super::intake::SnapshotTerms;
@@ -132,8 +131,8 @@ impl<S: Space> LocalModel<S> {
     /// by `v`, and how the linkage turns the OP under them). No controller acts on the angular axes there,
     /// so nothing else holds the model's turning to its motion: b̂'s angular part, taken at the VE's state a
     /// round trip behind, and the frame carried along the path each leave a little turning the linkage does
-    /// not make, which then sums without bound (a crank held 41 mm from its pivot on a Falcon at 300 ms had its
-    /// model turning at 280 rad/s while it moved at 1 cm/s, and the VE refused its uplinks as too fast).
+    /// not make, which then sums without bound until the VE refuses the uplinks as too fast
+    /// (docs/robustness.md, "The static load a device without torque holds").
     /// Turning the OP makes without moving it (a link spun about the grasped point) is left out: the pin
     /// neither feels nor drives it; an OP that forces do not move at all keeps the model's own turning.
     pub fn turn_as_pinned(&mut self) {
