@@ -91,16 +91,8 @@ impl<S: Space> ConstraintFrame<S> {
         jump: bool,
         pinned: bool,
     ) {
-        let lin = <S::Point as VecOps>::LEN;
         let (values, vectors) = if pinned {
-            let mut block = terms.inverse_inertia;
-            for r in 0..S::DIM {
-                for c in 0..S::DIM {
-                    if r >= lin || c >= lin {
-                        block[(r, c)] = 0.0;
-                    }
-                }
-            }
+            let block = force_response::<S>(&terms.inverse_inertia);
             let d = constraint_directions::<S>(&block, length_scale, DEFAULT_THRESHOLD);
             (d.singular_values, d.directions)
         } else {
@@ -183,6 +175,21 @@ impl<S: Space> ConstraintFrame<S> {
             ..*self
         }
     }
+}
+
+/// The linear block of `inverse_inertia` (the OP's motion under forces alone, as through a pin), its angular
+/// rows and columns zeroed.
+pub(crate) fn force_response<S: Space>(inverse_inertia: &S::OpMat) -> S::OpMat {
+    let lin = <S::Point as VecOps>::LEN;
+    let mut block = *inverse_inertia;
+    for r in 0..S::DIM {
+        for c in 0..S::DIM {
+            if r >= lin || c >= lin {
+                block[(r, c)] = 0.0;
+            }
+        }
+    }
+    block
 }
 
 /// A rotation `R` of the unit-consistent coordinates as it acts on physical twists: `T⁻¹ R T`.

@@ -12,7 +12,7 @@ use kinloop_linkage::{
     math::space::OpPose,
 };
 
-use super::controllers::project_twist;
+use super::controllers::{force_response, project_twist};
 use super::intake::SnapshotTerms;
 
 /// The local model in use.
@@ -185,15 +185,7 @@ const PIN_RESPONSE_FLOOR: f64 = 1e-9;
 /// `(Λ̂⁻¹)_ωf (Λ̂⁻¹)_ff⁺ v` (see [`LocalModel::turn_as_pinned`]). Allocates nothing.
 pub(crate) fn pinned_turning<S: Space>(inverse_inertia: &S::OpMat, twist: &S::OpVec) -> S::OpVec {
     let lin = <S::Point as VecOps>::LEN;
-    let mut forces_block = *inverse_inertia;
-    for r in 0..S::DIM {
-        for c in 0..S::DIM {
-            if r >= lin || c >= lin {
-                forces_block[(r, c)] = 0.0;
-            }
-        }
-    }
-    let (values, vectors) = symmetric_eigen::<S>(&forces_block);
+    let (values, vectors) = symmetric_eigen::<S>(&force_response::<S>(inverse_inertia));
     let largest = (0..S::DIM).map(|i| values[i]).fold(0.0, f64::max);
     // A response too small to divide by (terms fading from zero, subnormal) moves nothing through the pin.
     if !largest.is_normal() {

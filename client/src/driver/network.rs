@@ -52,19 +52,18 @@ const CLOSE_QUEUEING: Duration = Duration::from_millis(50);
 /// A client's QUIC endpoint: its own, or one shared with the other clients of its process.
 struct ClientEndpoint {
     quic: Endpoint,
-    own: bool,
-    /// At least [`CLOSE_LINGER`], longer on an emulated link: the close waits on that link like any packet,
-    /// and is lost if the client stops before the link lets it go.
-    linger: Duration,
+    /// On an endpoint of the client's own, how long its close may take to leave: at least [`CLOSE_LINGER`],
+    /// longer on an emulated link, where the close waits like any packet and is lost if the client stops
+    /// before the link lets it go. `None` on a shared one (never emulated), which outlives the client; its
+    /// owner lingers once for every client (`SharedNetwork::finish`).
+    linger: Option<Duration>,
 }
 
 impl ClientEndpoint {
-    /// Waits (at most `linger`) for the closing connections to tell their server, on an endpoint of the
-    /// client's own; a shared one (never emulated) outlives the client, and its owner lingers once for every
-    /// client (`SharedNetwork::finish`).
+    /// Waits (at most its `linger`) for the closing connections to tell their server.
     async fn linger(&self) {
-        if self.own {
-            let _ = tokio::time::timeout(self.linger, self.quic.wait_idle()).await;
+        if let Some(linger) = self.linger {
+            let _ = tokio::time::timeout(linger, self.quic.wait_idle()).await;
         }
     }
 }
@@ -104,12 +103,12 @@ pub(super) fn network_thread(start: NetStart) {
 pub(super) async fn network_task(start: NetStart, endpoint: Option<Endpoint>) {
     let NetStart { config, real, addresses, shared, net, started } = start;
     let endpoint = match endpoint {
-        Some(quic) => ClientEndpoint { quic, own: false, linger: CLOSE_LINGER },
+        Some(quic) => ClientEndpoint { quic, linger: None },
         None => {
             let opts = EndpointOptions { link: config.link.clone(), ..EndpointOptions::default() };
             let flight = config.link.as_ref().map_or(Duration::ZERO, LinkConfig::longest_flight);
             match client_endpoint(&config.trust, &opts) {
-                Ok(quic) => ClientEndpoint { quic, own: true, linger: CLOSE_LINGER.max(flight + CLOSE_QUEUEING) },
+                Ok(quic) => ClientEndpoint { quic, linger: Some(CLOSE_LINGER.max(flight + CLOSE_QUEUEING)) },
                 Err(e) => {
                     let _ = started.send(Err(e.into()));
                     return;
