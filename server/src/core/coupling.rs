@@ -77,6 +77,9 @@ pub struct Coupling<S: Space> {
     pub damping: S::OpVec,
     /// β per axis, the passivity controller's scale on the PD for the current tick (ones when it is off).
     pub pd_scale: S::OpVec,
+    /// The passivity controller's scale on the force channel for the current tick, per axis (ones unless the
+    /// port's deficit outgrows what scaling the PD can stop, see `passivity`).
+    pub hand_scale: S::OpVec,
     /// Whether what β takes off the PD becomes a brake on the OP (the port controller's way; the per-axis
     /// controller leaves the axis free).
     pub brakes: bool,
@@ -121,6 +124,7 @@ impl<S: Space> Coupling<S> {
             stiffness,
             damping,
             pd_scale: full_scale::<S>(),
+            hand_scale: full_scale::<S>(),
             brakes: true,
             jacobian_t: DMatrix::zeros(nq, S::DIM),
             op_pose: OpPose::identity(),
@@ -277,7 +281,8 @@ impl<S: Space> Coupling<S> {
             // rather than free, and what the brake absorbs lets the account recover (see `passivity`).
             let beta = self.pd_scale[a];
             let brake = if self.brakes { -(1.0 - beta) * self.damping[a] * self.op_twist[a] } else { 0.0 };
-            f[a] = self.weight * (self.hand_wrench[a] + self.held_load[a] + beta * pd[a] + brake) + self.hold[a];
+            let hand = self.hand_scale[a] * (self.hand_wrench[a] + self.held_load[a]);
+            f[a] = self.weight * (hand + beta * pd[a] + brake) + self.hold[a];
         }
         f
     }
@@ -359,7 +364,11 @@ impl<S: Space> Coupling<S> {
         if !self.pushes {
             return S::OpVec::zero();
         }
-        (self.hand_wrench + self.held_load) * self.weight
+        let mut part = S::OpVec::zero();
+        for a in 0..S::DIM {
+            part[a] = self.weight * self.hand_scale[a] * (self.hand_wrench[a] + self.held_load[a]);
+        }
+        part
     }
 
     /// The part of the applied wrench that is neither the force channel nor the VE's hold (`hold`): the
@@ -595,6 +604,7 @@ pub(crate) mod tests {
     /// What the passivity controller takes off the PD becomes a brake on the OP: at β = 0 the coupling applies
     /// the hand's force and `−wB ⊙ ẋ_op`, which takes power from the moving OP on every axis; in between, the
     /// PD's share and the brake's add up to the whole PD's damping, which the implicit treatment keeps whole.
+    /// The force channel's own scale (`hand_scale`) takes its share off the hand's part and nothing else.
     #[test]
     fn what_the_controller_takes_off_the_pd_brakes_the_op() {
         let (model, data, _) = testbed_in_motion(5);
@@ -625,5 +635,16 @@ pub(crate) mod tests {
                 assert!((coefficient - damping_part - beta * (full[a] - damping_part)).abs() <= 1e-15 * full[a]);
             }
         }
+        // The force channel's scale takes its share off the hand's part alone; the controller's is unchanged.
+        c.pd_scale = Vector3::repeat(0.5);
+        let (whole_hand, whole) = (c.hand_part(), c.explicit_wrench());
+        c.hand_scale = Vector3::new(0.25, 1.0, 0.0);
+        let scaled = c.explicit_wrench();
+        for a in 0..3 {
+            let hand = c.weight * c.hand_scale[a] * c.hand_wrench[a];
+            assert!((c.hand_part()[a] - hand).abs() <= 1e-15, "axis {a}");
+            assert!((scaled[a] - (whole[a] - whole_hand[a] + hand)).abs() <= 1e-12, "axis {a}");
+        }
+        assert!((c.controller_part(&scaled) - (whole - whole_hand)).norm() <= 1e-12);
     }
 }

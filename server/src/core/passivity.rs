@@ -47,10 +47,21 @@
 //! is zero whatever the prediction (with a stiff PD the OP can reverse within a tick and a prediction of
 //! "absorbing" be wrong). **Raising β is paid for**: a stiffer spring at the same stretch `e_a` holds
 //! `½ Δβ w K_a e_a²` more energy that no one put in and that the PD gives the VE as it relaxes, so a rise is
-//! limited to what the account holds above `−E_allow` (shared by the axes in order). The port thus generates
-//! about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong): passive
+//! limited to what the account holds above `−E_allow` (shared by the axes in order). Through the PD the port thus
+//! generates about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong): passive
 //! with that initial storage. The scale is continuous
 //! in the account, so the PD never switches on or off as a step.
+//!
+//! **When scaling the PD is not enough, the force channel fades too.** The hand's force reaches the VE a half
+//! round trip late, so it can drive the VE where the hand's local model did not go: a linkage held at a dead
+//! centre gives way to a push the local model had taken as held, and the late push then runs it off (a 4 kg
+//! slider against a crank's spring, wound past its far dead centre at 300 ms one way, took more than ten times
+//! from the force channel what the hand put into its end). The PD is then already off, and what the port still
+//! generates is the force channel's. Beyond the PD's allowance (`A < −E_allow`) the force channel is scaled
+//! as the PD is, one allowance further on (`Self::hand_scale`): it fades to zero as the deficit reaches
+//! `2 E_allow`, an axis about to absorb keeping it whole until then. The brake and the hand's absorbing work
+//! then bring the account back, and the hand's force with it. The port thus generates at most about
+//! `2 E_allow` over a session.
 //!
 //! **Per axis, for stiff gains** (`VeConfig::passivity_per_axis`, off by default). The credit for what the
 //! hand put in counts what it received and not what it took back, so a client whose model shakes under a
@@ -129,6 +140,21 @@ impl PassivityObserver {
             scale[axis] = beta;
         }
         self.count_activation::<S>(&scale);
+        scale
+    }
+
+    /// The force channel's scale for the coming tick, per axis: full while the port's deficit is within the
+    /// PD's share of the allowance (`−E_allow`, where β reaches zero), then `output_scale` of the account one
+    /// allowance further on, so the hand's force fades out as the deficit reaches `−2 E_allow`, except on an
+    /// axis where it is about to absorb (`predicted_hand_power ≤ 0`), which keeps it whole until then.
+    /// The force channel is scaled only once the PD is off: then the deficit still grows only because the
+    /// delayed hand's force drives a VE that moves otherwise than the hand's local model did.
+    pub fn hand_scale<S: Space>(&self, predicted_hand_power: &S::OpVec, allowance_j: f64) -> S::OpVec {
+        let beyond_pd = self.account_j(allowance_j) + allowance_j;
+        let mut scale = S::OpVec::zero();
+        for axis in 0..S::DIM {
+            scale[axis] = output_scale(beyond_pd, predicted_hand_power[axis] <= 0.0, allowance_j);
+        }
         scale
     }
 
@@ -316,6 +342,30 @@ mod tests {
         let received = observer.client_received(0.1);
         assert!((received - 1.3).abs() < 1e-12, "{received} J, seen {:?}", observer.client_seen);
         assert!((observer.account_j(0.1) - 0.3).abs() < 1e-12);
+    }
+
+    /// The force channel keeps full strength while the deficit is the PD's to stop (down to `−E_allow`), then
+    /// fades linearly to zero at `−2 E_allow` on an axis about to deliver; one about to absorb keeps it whole
+    /// down to `−2 E_allow`; past that it is off whatever the prediction.
+    #[test]
+    fn the_force_channel_fades_only_once_the_deficit_is_beyond_the_pds_allowance() {
+        let allowance = 1.0;
+        let delivering = V::from_slice(&[1.0, 1.0, 1.0]);
+        let absorbing_on_y = V::from_slice(&[1.0, -1.0, 1.0]);
+        // The force channel emits `deficit` J on x into the VE with nothing credited for it.
+        let scale_at = |deficit: f64, power: &V| {
+            let mut observer = PassivityObserver::default();
+            observer.observe::<Planar>(&on_x(0.0), &on_x(deficit), &on_x(1.0), 1.0);
+            assert!((observer.account_j(allowance) + deficit).abs() < 1e-12);
+            observer.hand_scale::<Planar>(power, allowance)
+        };
+        assert_eq!(scale_at(0.0, &delivering), delivering, "in credit");
+        assert_eq!(scale_at(0.9, &delivering), delivering, "the PD's share of the allowance");
+        for (deficit, want) in [(1.25, 0.75), (1.5, 0.5), (2.0, 0.0), (5.0, 0.0)] {
+            assert!((scale_at(deficit, &delivering) - V::repeat(want)).norm() < 1e-12, "deficit {deficit} J");
+        }
+        assert_eq!(scale_at(1.5, &absorbing_on_y), V::from_slice(&[0.5, 1.0, 0.5]));
+        assert_eq!(scale_at(2.5, &absorbing_on_y), V::zeros(), "past 2 E_allow: off");
     }
 
     #[test]

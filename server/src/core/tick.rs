@@ -214,6 +214,7 @@ impl<S: Space> VeCore<S> {
             u.fade.advance(u.presence == Presence::Present && c.pushes && !silent && !let_go, dt, fade_s);
             c.weight = u.fade.weight();
             c.step_wrench = S::OpVec::zero();
+            c.hand_scale = coupling::full_scale::<S>();
             c.pd_scale = if self.config.passivity && c.pushes {
                 // The power the full PD would deliver, from the OP twist of the previous evaluation (one tick
                 // old at most) and the newest reference.
@@ -227,6 +228,12 @@ impl<S: Space> VeCore<S> {
                 let scale = if self.config.passivity_per_axis {
                     u.passivity.pd_scale_per_axis::<S>(&power, allowance)
                 } else {
+                    // The power the whole force channel would deliver, as the PD's above.
+                    let mut hand_power = S::OpVec::zero();
+                    for a in 0..S::DIM {
+                        hand_power[a] = c.weight * (c.hand_wrench[a] + c.held_load[a]) * c.op_twist[a];
+                    }
+                    c.hand_scale = u.passivity.hand_scale::<S>(&hand_power, allowance);
                     u.passivity.pd_scale::<S>(&power, &c.spring_energy(), &c.pd_scale, allowance)
                 };
                 activations += u.passivity.activations - before;
