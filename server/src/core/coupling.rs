@@ -275,14 +275,14 @@ impl<S: Space> Coupling<S> {
             return f;
         }
         let pd = self.pd_wrench();
+        let hand = self.hand_part();
         for a in 0..S::DIM {
             // What the passivity controller takes off the PD is replaced by a brake on the OP (the PD's own
             // damping against the OP's velocity), which only dissipates: a PD scaled to zero leaves the VE damped
             // rather than free, and what the brake absorbs lets the account recover (see `passivity`).
             let beta = self.pd_scale[a];
             let brake = if self.brakes { -(1.0 - beta) * self.damping[a] * self.op_twist[a] } else { 0.0 };
-            let hand = self.hand_scale[a] * (self.hand_wrench[a] + self.held_load[a]);
-            f[a] = self.weight * (hand + beta * pd[a] + brake) + self.hold[a];
+            f[a] = hand[a] + self.weight * (beta * pd[a] + brake) + self.hold[a];
         }
         f
     }

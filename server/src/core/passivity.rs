@@ -47,10 +47,10 @@
 //! is zero whatever the prediction (with a stiff PD the OP can reverse within a tick and a prediction of
 //! "absorbing" be wrong). **Raising β is paid for**: a stiffer spring at the same stretch `e_a` holds
 //! `½ Δβ w K_a e_a²` more energy that no one put in and that the PD gives the VE as it relaxes, so a rise is
-//! limited to what the account holds above `−E_allow` (shared by the axes in order). Through the PD the port thus
-//! generates about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was wrong): passive
-//! with that initial storage. The scale is continuous
-//! in the account, so the PD never switches on or off as a step.
+//! limited to what the account holds above `−E_allow` (shared by the axes in order). Through the PD the port
+//! thus generates about `E_allow` over a session (plus the ticks in which a prediction of "absorbing" was
+//! wrong): passive with that initial storage. The scale is continuous in the account, so the PD never switches
+//! on or off as a step.
 //!
 //! **When scaling the PD is not enough, the force channel fades too.** The hand's force reaches the VE a half
 //! round trip late, so it can drive the VE where the hand's local model did not go: a linkage held at a dead

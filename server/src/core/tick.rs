@@ -228,10 +228,12 @@ impl<S: Space> VeCore<S> {
                 let scale = if self.config.passivity_per_axis {
                     u.passivity.pd_scale_per_axis::<S>(&power, allowance)
                 } else {
-                    // The power the whole force channel would deliver, as the PD's above.
+                    // The power the whole force channel would deliver (its scale is still full here), as the PD's
+                    // above.
+                    let hand = c.hand_part();
                     let mut hand_power = S::OpVec::zero();
                     for a in 0..S::DIM {
-                        hand_power[a] = c.weight * (c.hand_wrench[a] + c.held_load[a]) * c.op_twist[a];
+                        hand_power[a] = hand[a] * c.op_twist[a];
                     }
                     c.hand_scale = u.passivity.hand_scale::<S>(&hand_power, allowance);
                     u.passivity.pd_scale::<S>(&power, &c.spring_energy(), &c.pd_scale, allowance)
