@@ -27,6 +27,18 @@
 //! (`Welcome::op::tour`), mapped into the device's space: waypoints that the linkage can reach, visited in
 //! order and back on minimum-jerk segments (Flash & Hogan 1985) at a relaxed pace of at most
 //! [`TOUR_SPEED_M_S`]; or a scripted `path` (see [`PathSpec`]); or holding still where it grasped.
+//!
+//! **Touring by feel.** A person exploring a linkage does not pull a handle that will not come: where the
+//! linkage resists more than a light push (a heavy stretch of its reach, a dead point where the OP jams, a
+//! branch it took that the waypoints did not), they stop and go back. So a touring hand's intention runs on
+//! its own clock, which moves on at full pace while the arm's spring pulls the handle with less than
+//! [`TOUR_PUSH_EASE_N`], slows as the pull grows, and stops at [`TOUR_PUSH_STALL_N`], for as long as going on
+//! would pull harder; a step that eases the pull is never held back. Stopped for [`TOUR_STALL_S`], the hand
+//! turns back along its tour (the pull is the tour's own, without a poke's step). Without this a soft
+//! hand's intention can run on centimetres past a linkage that turned back at a cusp of its coupler curve,
+//! pulling the handle harder than a Touch can push back, for seconds. (Exploratory touch is done with forces of the order of a newton: Lederman & Klatzky, 1987;
+//! Smith, Gosselin & Houde, 2002, measured 0.5-2 N stroking a surface.) The poke and the release keep to the
+//! time since the grasp.
 
 use std::time::Duration;
 
@@ -50,6 +62,12 @@ pub const POKE_DURATION_S: f64 = 0.2;
 pub const TOUR_SPEED_M_S: f64 = 0.04;
 /// Shortest tour segment (s).
 const TOUR_SEGMENT_MIN_S: f64 = 0.6;
+/// The arm's pull (linear spring force toward the intention) up to which a tour moves on at full pace (N).
+pub const TOUR_PUSH_EASE_N: f64 = 1.5;
+/// The pull at which a tour stops moving on (N).
+pub const TOUR_PUSH_STALL_N: f64 = 3.0;
+/// How long a stopped tour waits before it turns back (s).
+pub const TOUR_STALL_S: f64 = 1.0;
 
 /// The hand's impedance: mass, damping and stiffness per linear axis, and the wrist's per angular axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -288,6 +306,11 @@ enum Motion<S: Space> {
 }
 
 impl<S: Space> Motion<S> {
+    /// A tour, which runs on the touring clock; other motions keep to the time since the grasp.
+    fn tours(&self) -> bool {
+        matches!(self, Motion::Knots(plan) if plan.period_s.is_some())
+    }
+
     fn at(&self, t_s: f64) -> S::OpVec {
         match self {
             Motion::Knots(plan) => plan.at(t_s),
@@ -310,6 +333,56 @@ pub struct Hand<S: Space> {
     damping: S::OpVec,
     mass: S::OpVec,
     grasp: Option<(Duration, OpPose<S>)>,
+    clock: TourClock,
+}
+
+/// Where a touring hand's intention is along its plan (module documentation, touring by feel).
+#[derive(Clone, Copy, Debug)]
+struct TourClock {
+    /// Plan time (s).
+    plan_s: f64,
+    /// Time since the grasp at the last call (s).
+    last_s: f64,
+    /// Along the plan (+1) or back (−1).
+    direction: f64,
+    /// How long the plan has stood still (s).
+    stalled_s: f64,
+}
+
+impl TourClock {
+    fn new() -> Self {
+        TourClock { plan_s: 0.0, last_s: 0.0, direction: 1.0, stalled_s: 0.0 }
+    }
+
+    /// Moves the plan on to `t_s` after the grasp, as fast as the arm's `pull` (N) at a plan time allows,
+    /// and returns its pace (plan seconds per second, negative going back). A turn back ends at the grasp,
+    /// and the tour goes forth again from there.
+    fn advance(&mut self, t_s: f64, pull: impl Fn(f64) -> f64) -> f64 {
+        let dt = (t_s - self.last_s).max(0.0);
+        self.last_s = t_s;
+        let here = pull(self.plan_s);
+        let on = pull(self.plan_s + self.direction * DIFFERENCE_S);
+        let pace = if on <= here {
+            1.0
+        } else {
+            ((TOUR_PUSH_STALL_N - here) / (TOUR_PUSH_STALL_N - TOUR_PUSH_EASE_N)).clamp(0.0, 1.0)
+        };
+        if pace > 0.0 {
+            self.stalled_s = 0.0;
+        } else {
+            self.stalled_s += dt;
+            if self.stalled_s >= TOUR_STALL_S {
+                self.direction = -self.direction;
+                self.stalled_s = 0.0;
+            }
+        }
+        self.plan_s += self.direction * pace * dt;
+        if self.direction < 0.0 && self.plan_s <= 0.0 {
+            self.plan_s = 0.0;
+            self.direction = 1.0;
+        }
+        self.direction * pace
+    }
 }
 
 /// The finite-difference step of the intended motion's velocity and acceleration (s).
@@ -337,7 +410,7 @@ impl<S: Space> Hand<S> {
             Intent::Path(path) => Motion::Path(PathPlan(path.clone())),
             Intent::Hold => Motion::Knots(Plan::hold()),
         };
-        Ok(Hand { kind: spec.kind, motion, stiffness, damping, mass, grasp: None })
+        Ok(Hand { kind: spec.kind, motion, stiffness, damping, mass, grasp: None, clock: TourClock::new() })
     }
 
     /// Seconds since the grasp (0 before it).
@@ -349,13 +422,22 @@ impl<S: Space> Hand<S> {
         self.kind == HandKind::Release && t_s >= RELEASE_AT_S
     }
 
-    /// The intended displacement at `t_s`, with the poke's step.
-    fn intended(&self, t_s: f64) -> S::OpVec {
-        let mut d = self.motion.at(t_s);
+    /// The intended displacement at plan time `plan_s`, with the poke's step at `t_s` after the grasp.
+    fn intended(&self, plan_s: f64, t_s: f64) -> S::OpVec {
+        let mut d = self.motion.at(plan_s);
         if self.kind == HandKind::Poke && (POKE_AT_S..POKE_AT_S + POKE_DURATION_S).contains(&t_s) {
             d[0] += POKE_STEP_M;
         }
         d
+    }
+
+    /// The arm's spring force toward `displacement` from the grasp, linear axes (N).
+    fn pull(&self, grasp: &OpPose<S>, displacement: &S::OpVec, device: &DeviceState<S>) -> f64 {
+        let mut target = *grasp;
+        target.integrate(displacement, 1.0);
+        let error = target.difference(&device.pose);
+        let linear = <S::Point as VecOps>::LEN;
+        (0..linear).map(|i| (self.stiffness[i] * error[i]).powi(2)).sum::<f64>().sqrt()
     }
 }
 
@@ -366,15 +448,25 @@ impl<S: Space> SimulatedUser<S> for Hand<S> {
         if self.released(t) {
             return S::OpVec::zero();
         }
+        // The plan's time and pace: the tour's clock, or the time since the grasp for any other motion.
+        let (plan_s, pace) = if self.motion.tours() {
+            let mut clock = self.clock;
+            let pace = clock.advance(t, |s| self.pull(&grasp, &self.motion.at(s), device));
+            self.clock = clock;
+            (clock.plan_s, pace)
+        } else {
+            (t, 1.0)
+        };
         let h = DIFFERENCE_S;
-        let (before, here, after) = (self.intended(t - h), self.intended(t), self.intended(t + h));
+        let (before, here, after) =
+            (self.intended(plan_s - h, t), self.intended(plan_s, t), self.intended(plan_s + h, t));
         // The poke is a step: no feedforward spike on its edges.
         let at_edge = |edge: f64| (t - edge).abs() < 2.0 * h;
         let (velocity, acceleration) =
             if self.kind == HandKind::Poke && (at_edge(POKE_AT_S) || at_edge(POKE_AT_S + POKE_DURATION_S)) {
                 (S::OpVec::zero(), S::OpVec::zero())
             } else {
-                ((after - before) * (0.5 / h), (after - here * 2.0 + before) * (1.0 / (h * h)))
+                ((after - before) * (0.5 * pace / h), (after - here * 2.0 + before) * (pace * pace / (h * h)))
             };
         let mut target = grasp;
         target.integrate(&here, 1.0);

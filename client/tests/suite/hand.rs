@@ -6,6 +6,7 @@ use std::time::Duration;
 use kinloop_client::device::HapticDevice;
 use kinloop_client::device::{DevicePreset, DeviceSpec, SimulatedDevice, SimulatedDeviceParams, SimulatedRig};
 use kinloop_client::user::hand::{POKE_AT_S, POKE_DURATION_S, POKE_STEP_M, RELEASE_AT_S};
+use kinloop_client::user::hand::{TOUR_PUSH_EASE_N, TOUR_PUSH_STALL_N, TOUR_STALL_S};
 use kinloop_client::user::{HandImpedance, HandKind, HandSpec, Intent, UserContext, UserSpec};
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::{math::space::Planar, math::space::SceneKind};
@@ -134,6 +135,46 @@ fn a_touring_hand_takes_a_free_handle_through_every_waypoint_and_back() {
         assert!(*c < 1e-3, "waypoint {i} missed by {c} m");
     }
     assert!(back_home < 1e-3, "the tour comes back to its first waypoint ({back_home} m)");
+}
+
+/// A tour that leads past a wall the handle cannot pass (a linkage that jams, or turned where the waypoints
+/// did not): the waypoint lies 5 cm beyond a wall 1 cm from the grasp, a stiff spring the device renders. A
+/// hand that tours by feel presses on the wall, moving its intention on only while the pull stays below
+/// [`TOUR_PUSH_STALL_N`], and never pulls harder than that (within the handle's settling, 5 %) once it stands at rest against the wall; stopped
+/// for [`TOUR_STALL_S`], it turns back and takes the handle home to its grasp.
+#[test]
+fn a_touring_hand_stops_at_a_handle_that_will_not_come_and_turns_back() {
+    let (wall_m, wall_n_per_m) = (0.01, 3000.0);
+    let waypoints = vec![Vector3::new(0.06, 0.0, 0.0), Vector3::new(0.06, 0.001, 0.0)];
+    for kind in [HandKind::Soft, HandKind::Firm] {
+        let mut rig = rig(kind, Intent::Tour, waypoints.clone(), 0.1);
+        let (mut pressed, mut at_rest_max, mut stood_s, mut home_after) = (0.0f64, 0.0f64, 0.0, None);
+        for k in 0..12_000u64 {
+            let (now, t) = (Duration::from_millis(k), k as f64 * 1e-3);
+            rig.read(now).unwrap();
+            let x = rig.true_pose().position.x;
+            rig.command(now, &Vector3::new(-wall_n_per_m * (x - wall_m).max(0.0), 0.0, 0.0)).unwrap();
+            let pull = rig.hand_wrench().xy().norm();
+            pressed = pressed.max(pull);
+            // At rest against the wall, after the approach's transient has died out.
+            if x > wall_m && rig.device().true_twist()[0].abs() < 1e-4 {
+                stood_s += 1e-3;
+                if stood_s > 0.5 {
+                    at_rest_max = at_rest_max.max(pull);
+                }
+            }
+            if pressed >= TOUR_PUSH_EASE_N && home_after.is_none() && x < 1e-3 {
+                home_after = Some(t);
+            }
+        }
+        assert!(pressed >= TOUR_PUSH_EASE_N, "{kind:?}: the hand never pressed on the wall ({pressed} N)");
+        assert!(
+            at_rest_max > 0.0 && at_rest_max <= TOUR_PUSH_STALL_N * 1.05,
+            "{kind:?}: at rest against the wall the hand pulls {at_rest_max} N"
+        );
+        let home = home_after.unwrap_or_else(|| panic!("{kind:?}: the hand never turned back to its grasp"));
+        assert!(home > TOUR_STALL_S, "{kind:?}: home at {home} s");
+    }
 }
 
 /// A tour round a handle that turns a whole circle (the testbed's link 2 over its reach): waypoints an eighth
