@@ -34,11 +34,13 @@
 //! its own clock, which moves on at full pace while the arm's spring pulls the handle with less than
 //! [`TOUR_PUSH_EASE_N`], slows as the pull grows, and stops at [`TOUR_PUSH_STALL_N`], for as long as going on
 //! would pull harder; a step that eases the pull is never held back. Stopped for [`TOUR_STALL_S`], the hand
-//! turns back along its tour (the pull is the tour's own, without a poke's step). Without this a soft
-//! hand's intention can run on centimetres past a linkage that turned back at a cusp of its coupler curve,
-//! pulling the handle harder than a Touch can push back, for seconds. (Exploratory touch is done with forces of the order of a newton: Lederman & Klatzky, 1987;
-//! Smith, Gosselin & Houde, 2002, measured 0.5-2 N stroking a surface.) The poke and the release keep to the
-//! time since the grasp.
+//! turns back along its tour (the pull is the tour's own, without a poke's step). The pace drops at once to
+//! what the pull allows and grows back no faster than from a stop to full pace in a fifth of a second, so a
+//! turn is not a jump of the hand's velocity. Without the clock a soft hand's intention can run on
+//! centimetres past a linkage that turned back at a cusp of its coupler curve, pulling the handle harder than
+//! a Touch can push back, for seconds. (Exploratory touch is done with forces of the order of a newton:
+//! Lederman & Klatzky, 1987; Smith, Gosselin & Houde, 2002, measured 0.5-2 N stroking a surface.) The poke
+//! and the release keep to the time since the grasp.
 
 use std::time::Duration;
 
@@ -345,13 +347,19 @@ struct TourClock {
     last_s: f64,
     /// Along the plan (+1) or back (−1).
     direction: f64,
-    /// How long the plan has stood still (s).
+    /// Plan seconds per second, negative going back: follows the pace the pull allows at a bounded rate.
+    pace: f64,
+    /// How long the pull has held the plan still (s).
     stalled_s: f64,
 }
 
+/// How fast the tour's pace may grow (per second): a start or a turn takes a fifth of a second, as a person's
+/// would, and a pull that dithers about a threshold does not make the hand's feedforward jitter with it.
+const TOUR_PACE_RATE_PER_S: f64 = 5.0;
+
 impl TourClock {
     fn new() -> Self {
-        TourClock { plan_s: 0.0, last_s: 0.0, direction: 1.0, stalled_s: 0.0 }
+        TourClock { plan_s: 0.0, last_s: 0.0, direction: 1.0, pace: 0.0, stalled_s: 0.0 }
     }
 
     /// Moves the plan on to `t_s` after the grasp, as fast as the arm's `pull` (N) at a plan time allows,
@@ -362,12 +370,12 @@ impl TourClock {
         self.last_s = t_s;
         let here = pull(self.plan_s);
         let on = pull(self.plan_s + self.direction * DIFFERENCE_S);
-        let pace = if on <= here {
+        let allowed = if on <= here {
             1.0
         } else {
             ((TOUR_PUSH_STALL_N - here) / (TOUR_PUSH_STALL_N - TOUR_PUSH_EASE_N)).clamp(0.0, 1.0)
         };
-        if pace > 0.0 {
+        if allowed > 0.0 {
             self.stalled_s = 0.0;
         } else {
             self.stalled_s += dt;
@@ -376,12 +384,20 @@ impl TourClock {
                 self.stalled_s = 0.0;
             }
         }
-        self.plan_s += self.direction * pace * dt;
-        if self.direction < 0.0 && self.plan_s <= 0.0 {
-            self.plan_s = 0.0;
-            self.direction = 1.0;
+        let (before, wanted) = (self.pace, self.direction * allowed);
+        self.pace = if wanted * before >= 0.0 && wanted.abs() <= before.abs() {
+            // Slowing down is at once: a hand meeting resistance gives way as it feels it.
+            wanted
+        } else {
+            let step = TOUR_PACE_RATE_PER_S * dt;
+            before + (wanted - before).clamp(-step, step)
+        };
+        self.plan_s += self.pace * dt;
+        if self.plan_s <= 0.0 && self.pace < 0.0 {
+            // Back at the grasp, where the plan stands still: set out again.
+            (self.plan_s, self.pace, self.direction) = (0.0, 0.0, 1.0);
         }
-        self.direction * pace
+        self.pace
     }
 }
 
@@ -466,6 +482,8 @@ impl<S: Space> SimulatedUser<S> for Hand<S> {
             if self.kind == HandKind::Poke && (at_edge(POKE_AT_S) || at_edge(POKE_AT_S + POKE_DURATION_S)) {
                 (S::OpVec::zero(), S::OpVec::zero())
             } else {
+                // The intention x(p(t)): ẋ = x' ṗ and ẍ = x'' ṗ², leaving out x' p̈ (the pace's changes, a
+                // step when it slows, would jolt the hand's wrench through its mass).
                 ((after - before) * (0.5 * pace / h), (after - here * 2.0 + before) * (pace * pace / (h * h)))
             };
         let mut target = grasp;
