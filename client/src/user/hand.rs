@@ -28,19 +28,20 @@
 //! order and back on minimum-jerk segments (Flash & Hogan 1985) at a relaxed pace of at most
 //! [`TOUR_SPEED_M_S`]; or a scripted `path` (see [`PathSpec`]); or holding still where it grasped.
 //!
-//! **Touring by feel.** A person exploring a linkage does not pull a handle that will not come: where the
-//! linkage resists more than a light push (a heavy stretch of its reach, a dead point where the OP jams, a
-//! branch it took that the waypoints did not), they stop and go back. So a touring hand's intention runs on
-//! its own clock, which moves on at full pace while the arm's spring pulls the handle with less than
-//! [`TOUR_PUSH_EASE_N`], slows as the pull grows, and stops at [`TOUR_PUSH_STALL_N`], for as long as going on
-//! would pull harder; a step that eases the pull is never held back. Stopped for [`TOUR_STALL_S`], the hand
-//! turns back along its tour (the pull is the tour's own, without a poke's step). The pace drops at once to
-//! what the pull allows and grows back no faster than from a stop to full pace in a fifth of a second, so a
-//! turn is not a jump of the hand's velocity. Without the clock a soft hand's intention can run on
-//! centimetres past a linkage that turned back at a cusp of its coupler curve, pulling the handle harder than
-//! a Touch can push back, for seconds. (Exploratory touch is done with forces of the order of a newton:
-//! Lederman & Klatzky, 1987; Smith, Gosselin & Houde, 2002, measured 0.5-2 N stroking a surface.) The poke
-//! and the release keep to the time since the grasp.
+//! **Touring by feel.** A person exploring a linkage with a relaxed arm does not pull a handle that will not
+//! come: where the linkage resists more than a light push (a heavy stretch of its reach, a dead point where
+//! the OP jams, a branch it took that the waypoints did not), they stop and go back. So the soft hand's
+//! intention runs on its own clock, which moves on at full pace while the arm's spring pulls the handle with
+//! less than [`TOUR_PUSH_EASE_N`], slows as the pull grows, and stops at [`TOUR_PUSH_STALL_N`], for as long
+//! as going on would pull harder; a step that eases the pull is never held back. Stopped for
+//! [`TOUR_STALL_S`], the hand turns back along its tour. The pace drops at once to what the pull allows and
+//! grows back no faster than from a stop to full pace in a fifth of a second, so a turn is not a jump of the
+//! hand's velocity. By the clock a soft hand's intention can run on centimetres past a linkage that turned
+//! back at a cusp of its coupler curve, pulling the handle harder than a Touch can push back, for seconds.
+//! (Exploratory touch is done with forces of the order of a newton: Lederman & Klatzky, 1987; Smith, Gosselin
+//! & Houde, 2002, measured 0.5-2 N stroking a surface.) The firm grasps (firm, release, poke) are the user
+//! who pushes: their tours keep to the time since the grasp whatever the handle does
+//! ([`HandKind::tours_by_feel`]), as do scripted paths, holds, the poke's jab and the release.
 
 use std::time::Duration;
 
@@ -145,6 +146,12 @@ impl HandKind {
     /// Parses a name.
     pub fn parse(s: &str) -> Option<Self> {
         HandKind::ALL.into_iter().find(|k| k.name() == s)
+    }
+
+    /// Whether a tour by this hand yields where the handle will not come (module documentation, touring by
+    /// feel): the relaxed hand does; a firm grasp pushes on along its tour whatever the handle does.
+    pub fn tours_by_feel(self) -> bool {
+        self == HandKind::Soft
     }
 
     /// The impedance of this kind.
@@ -308,7 +315,7 @@ enum Motion<S: Space> {
 }
 
 impl<S: Space> Motion<S> {
-    /// A tour, which runs on the touring clock; other motions keep to the time since the grasp.
+    /// A tour, which may run on the touring clock; other motions keep to the time since the grasp.
     fn tours(&self) -> bool {
         matches!(self, Motion::Knots(plan) if plan.period_s.is_some())
     }
@@ -464,8 +471,8 @@ impl<S: Space> SimulatedUser<S> for Hand<S> {
         if self.released(t) {
             return S::OpVec::zero();
         }
-        // The plan's time and pace: the tour's clock, or the time since the grasp for any other motion.
-        let (plan_s, pace) = if self.motion.tours() {
+        // The plan's time and pace: the clock of a tour by feel, or the time since the grasp.
+        let (plan_s, pace) = if self.motion.tours() && self.kind.tours_by_feel() {
             let mut clock = self.clock;
             let pace = clock.advance(t, |s| self.pull(&grasp, &self.motion.at(s), device));
             self.clock = clock;
