@@ -344,6 +344,17 @@ fn seed_17s_wound_crank_at_300_ms_is_held_by_a_coupling_stiff_for_its_load() {
     assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
 }
 
+/// Seed 124's crank (a Stephenson six-bar) on a Falcon with no delay. Where the crank's tour runs into a dead
+/// point of the linkage the OP jams (σ(Λ⁻¹) falls a thousandfold) and the linkage does not follow; a hand
+/// whose intention ran on by the clock pulled the handle at the Falcon's force limit for seconds (sustained
+/// saturation, judged unstable). A hand that tours by feel stops where the pull passes a few newtons and turns
+/// back (`hand::TOUR_PUSH_STALL_N`), as a person exploring the linkage would.
+#[test]
+fn seed_124s_six_bar_crank_jammed_at_a_dead_point_is_toured_by_feel() {
+    let outcome = soft_without_delay(124, "op-crank", "sim:falcon", 10.0);
+    assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+}
+
 /// The robustness matrix's session of generated seed `seed`'s OP `op` on `device`, soft hand, 0 ms.
 fn soft_without_delay(seed: u64, op: &str, device: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
     soft_session(seed, op, device, 0, seconds)
@@ -367,7 +378,8 @@ fn soft_session(
     kinloop::experiments::robustness::evaluate(&linkage, point, seconds)
 }
 
-/// The serial arm's tip on the paper's device at 50 ms with a soft hand, its reach narrowed to 0.07 (about
+/// The serial arm's tip on the paper's device at 50 ms with a firm hand (which pushes on along its whole tour;
+/// the soft hand turns back where the stretched arm grows heavy), its reach narrowed to 0.07 (about
 /// 0.4 of the workspace's fill, where one narrowing factor for the whole arm would put it): there the arm
 /// hangs into its stretched, singular pose (the snapshots show a constrained direction) and the impedance
 /// controller, rendering `Λ̂⁻¹` and `b̂` linearized a round trip away, hands the hand energy the linkage never
@@ -382,7 +394,7 @@ fn the_serial_arms_tip_narrowed_at_50_ms_stays_out_of_its_singular_pose() {
         op: "tip".into(),
         device: DevicePreset::Paper,
         network: Network::Delayed50,
-        hand: HandKind::Soft,
+        hand: HandKind::Firm,
     };
     let mut session = plan(&point, SECONDS).unwrap();
     session.clients[0].mapping.position_scale = Some(0.07);
