@@ -346,7 +346,7 @@ fn seed_17s_wound_crank_at_300_ms_is_held_by_a_coupling_stiff_for_its_load() {
 
 /// Seed 124's crank (a Stephenson six-bar) on a Falcon with no delay. Where the crank's tour runs into a dead
 /// point of the linkage the OP jams (σ(Λ⁻¹) falls a thousandfold) and the linkage does not follow; a hand
-/// whose intention ran on by the clock pulled the handle at the Falcon's force limit for seconds (sustained
+/// whose intention runs on by the clock pulls the handle at the Falcon's force limit for seconds (sustained
 /// saturation, judged unstable). A hand that tours by feel stops where the pull passes a few newtons and turns
 /// back (`hand::TOUR_PUSH_STALL_N`), as a person exploring the linkage would.
 #[test]

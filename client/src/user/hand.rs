@@ -454,11 +454,16 @@ impl<S: Space> Hand<S> {
         d
     }
 
-    /// The arm's spring force toward `displacement` from the grasp, linear axes (N).
-    fn pull(&self, grasp: &OpPose<S>, displacement: &S::OpVec, device: &DeviceState<S>) -> f64 {
+    /// How far the handle is from the intention `displacement` from the grasp (the arm's spring stretch).
+    fn stretch(grasp: &OpPose<S>, displacement: &S::OpVec, device: &DeviceState<S>) -> S::OpVec {
         let mut target = *grasp;
         target.integrate(displacement, 1.0);
-        let error = target.difference(&device.pose);
+        target.difference(&device.pose)
+    }
+
+    /// The arm's spring force toward `displacement` from the grasp, linear axes (N).
+    fn pull(&self, grasp: &OpPose<S>, displacement: &S::OpVec, device: &DeviceState<S>) -> f64 {
+        let error = Self::stretch(grasp, displacement, device);
         let linear = <S::Point as VecOps>::LEN;
         (0..linear).map(|i| (self.stiffness[i] * error[i]).powi(2)).sum::<f64>().sqrt()
     }
@@ -493,9 +498,7 @@ impl<S: Space> SimulatedUser<S> for Hand<S> {
                 // step when it slows, would jolt the hand's wrench through its mass).
                 ((after - before) * (0.5 * pace / h), (after - here * 2.0 + before) * (pace * pace / (h * h)))
             };
-        let mut target = grasp;
-        target.integrate(&here, 1.0);
-        let error = target.difference(&device.pose);
+        let error = Self::stretch(&grasp, &here, device);
         let mut w = S::OpVec::zero();
         for i in 0..S::DIM {
             w[i] = self.stiffness[i] * error[i]
