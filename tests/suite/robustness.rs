@@ -355,6 +355,38 @@ fn seed_124s_six_bar_crank_jammed_at_a_dead_point_is_toured_by_feel() {
     assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
 }
 
+/// Seed 182's crank (a crank-rocker written in millimetres and kilograms) on a Falcon at 300 ms one way, soft
+/// hand: the hand winds the crank against its load, stalls, yields and pushes on again. The VE, a round trip
+/// behind, follows each push and only part of each yield, so with the local model pushing the yielding hand
+/// back on its copy of the load, the linkage gained swing by swing what no one put in (energy growth, the
+/// criterion's excess 65 mJ at the device against a 52 mJ bound). The client's half of the two-port's passivity
+/// (`CoreConfig::port_passivity`) holds what its end gives the hand within what the VE's coupling received.
+#[test]
+fn seed_182s_crank_wound_and_let_go_under_delay_makes_no_energy() {
+    use kinloop::experiments::robustness::session_plan;
+    use kinloop::experiments::verdict::judge;
+    use kinloop_harness::CoreEdit;
+    let linkage = generate(182, None);
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[300]);
+    let point = all.iter().find(|p| p.op == "op-crank" && p.device.name() == "sim:falcon").expect("the crank");
+    let verdict = |port_passivity: bool| {
+        let mut plan = session_plan(&linkage, point, 10.0);
+        let before = plan.clients[0].configure.clone();
+        plan.clients[0].configure = Some(CoreEdit::new(move |c| {
+            if let Some(edit) = &before {
+                edit.apply(c);
+            }
+            c.port_passivity = port_passivity;
+        }));
+        let (summary, recording) = kinloop_harness::run(&plan, &mut |_| {}).expect("the session runs");
+        judge(&summary, &recording)
+    };
+    let held = verdict(true);
+    assert!(held.stable, "{:?}: excess {} J, flow {} J", held.reasons, held.energy_excess_j, held.energy_flow_max_j);
+    let unheld = verdict(false);
+    assert_eq!(unheld.reasons, ["energy growth"], "without the client's half: {unheld:?}");
+}
+
 /// The robustness matrix's session of generated seed `seed`'s OP `op` on `device`, soft hand, 0 ms.
 fn soft_without_delay(seed: u64, op: &str, device: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
     soft_session(seed, op, device, 0, seconds)

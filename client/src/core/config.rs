@@ -238,6 +238,11 @@ pub struct CoreConfig {
     /// Pay the pull toward the VE from an energy tank that only the coupling's dampers fill, so the model's
     /// updates never put into the device-model coupling more energy than it dissipated (`passive_update`).
     pub passive_update: bool,
+    /// Hold what the client's end gives the hand within what the VE's coupling has received from the linkage
+    /// (plus [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the client's half of the two-port's
+    /// time-domain passivity (`port_passivity`): the model gives up its kinetic energy while the account is in
+    /// deficit.
+    pub port_passivity: bool,
     /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
     /// its snapshot terms were computed at before the constrained directions are rendered softer (see
     /// `controllers::linearization_trust`). Under delay the model runs ahead of the VE by a round trip of
@@ -278,6 +283,7 @@ impl CoreConfig {
             free_blend_time_constant: Duration::from_millis(200),
             free_blend_round_trips: FREE_BLEND_PER_ROUND_TRIP,
             passive_update: true,
+            port_passivity: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,
             follow_path: true,

@@ -49,6 +49,7 @@ mod model;
 mod observer;
 mod passive_update;
 mod path_follower;
+pub mod port_passivity;
 mod pose_memos;
 mod pull;
 mod report;
@@ -143,6 +144,7 @@ pub struct HapticCore<S: Space> {
     port: PortBooks,
     /// The VE coupling's books, as the snapshots report them (checked).
     server_energy: EnergyReports,
+    port_passivity: port_passivity::PortPassivity,
     uplink: Uplink,
     /// Trigonometric anchors for the three pose streams converted every tick or snapshot.
     pose_memos: PoseMemos<S>,
@@ -227,6 +229,7 @@ impl<S: Space> HapticCore<S> {
             bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
+            port_passivity: port_passivity::PortPassivity::default(),
             uplink,
             pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),

@@ -18,6 +18,7 @@ use super::controllers::{
 };
 use super::index::DeviceIndex;
 use super::passive_update::damper_dissipation;
+use super::port_passivity::PORT_ALLOWANCE_J;
 use super::safety::{brake, force_ratio, limit_wrench_parts, mask_unactuated, usable_model_state, within};
 use super::{ConstraintMode, ControllerWrenches, HapticCore, TickOutput, TickReport};
 use crate::device::DeviceState;
@@ -235,6 +236,15 @@ impl<S: Space> HapticCore<S> {
             *p = -model[a] * model_twist_after[a];
         }
         self.port.book(&power_out[..S::DIM], dt_s);
+        if self.config.port_passivity {
+            let allowance = PORT_ALLOWANCE_J / (self.scales.force * self.scales.position);
+            let (remote, own) = (&self.server_energy.accepted, &self.port);
+            let braked =
+                self.port_passivity.brake::<S>(remote, own, allowance, &self.local.inertia, &model_twist_after);
+            if braked != model_twist_after {
+                self.model.set_state(self.model.pose(), braked);
+            }
+        }
         HandWrenches { sensed, estimate, for_constraint, model }
     }
 
