@@ -354,11 +354,13 @@ pub fn run(options: &Options) -> Result<Report> {
         m.client_cost_us_per_s = client;
         m.cost_us_per_s = ve + client;
     }
+    // The front of the figures as the summary reports them (`point_summary`'s rounding): two configurations
+    // whose errors agree to the reported digits are told apart by their cost alone, as a reader of the summary
+    // would, not by a difference below the digits shown.
     let front_of = |error: &dyn Fn(&Measured) -> f64| {
-        let pairs: Vec<(f64, f64)> = measured
-            .iter()
-            .map(|m| if m.stable { (m.cost_us_per_s, error(m)) } else { (f64::INFINITY, f64::INFINITY) })
-            .collect();
+        let reported = |m: &Measured| (round(m.cost_us_per_s, 1), significant(error(m), 4));
+        let pairs: Vec<(f64, f64)> =
+            measured.iter().map(|m| if m.stable { reported(m) } else { (f64::INFINITY, f64::INFINITY) }).collect();
         pareto_front(&pairs)
     };
     let front = front_of(&|m| m.op_error_rms_m);

@@ -359,8 +359,9 @@ fn seed_124s_six_bar_crank_jammed_at_a_dead_point_is_toured_by_feel() {
 /// hand: the hand winds the crank against its load, stalls, yields and pushes on again. The VE, a round trip
 /// behind, follows each push and only part of each yield, so with the local model pushing the yielding hand
 /// back on its copy of the load, the linkage gained swing by swing what no one put in (energy growth, the
-/// criterion's excess 65 mJ at the device against a 52 mJ bound). The client's half of the two-port's passivity
-/// (`CoreConfig::port_passivity`) holds what its end gives the hand within what the VE's coupling received.
+/// criterion's excess 65 mJ at the device against a 52 mJ bound). The client's check of the two-port as a whole
+/// (`CoreConfig::port_passivity`) has the local model give up its energy while the VE's coupling has given the
+/// linkage more than the hand put in, net.
 #[test]
 fn seed_182s_crank_wound_and_let_go_under_delay_makes_no_energy() {
     use kinloop::experiments::robustness::session_plan;

@@ -238,10 +238,10 @@ pub struct CoreConfig {
     /// Pay the pull toward the VE from an energy tank that only the coupling's dampers fill, so the model's
     /// updates never put into the device-model coupling more energy than it dissipated (`passive_update`).
     pub passive_update: bool,
-    /// Hold what the client's end gives the hand within what the VE's coupling has received from the linkage
-    /// (plus [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the client's half of the two-port's
-    /// time-domain passivity (`port_passivity`): the model gives up its kinetic energy while the account is in
-    /// deficit.
+    /// Check the two-port as a whole from the client's end (`port_passivity`): while the VE's coupling has given
+    /// the linkage more than the hand put into the client's end, net (beyond
+    /// [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the local model gives up its kinetic
+    /// energy rather than give it to the hand.
     pub port_passivity: bool,
     /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
     /// its snapshot terms were computed at before the constrained directions are rendered softer (see

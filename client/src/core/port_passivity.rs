@@ -1,22 +1,24 @@
-//! The client's half of the two-port's passivity: what the local model gives the device side is held within
-//! what the VE's coupling has received from the linkage.
+//! The client's check of the two-port as a whole: the linkage never holds more through its coupling than the
+//! hand has put into the client's end, net; what the local model would give the hand beyond that, it gives up.
 //!
-//! **Why.** The network two-port between the hand and the VE (`kinloop_protocol::passivity`) is passive when
-//! what leaves it at both ends is no more than what enters it at both ends. The time-domain passivity
-//! network (Ryu, Artigas & Preusche 2010) splits that bound in two, one per end, each checked against the
-//! other end's books a delay late: at the VE, what the coupling gives the linkage is held within what the
-//! hand put into the client's end (`server/src/core/passivity.rs`); here, what the client's end gives the
-//! hand is held within what the VE's end took from the linkage. Without this half, the energy a hand puts in
-//! can be spent twice: a soft hand that winds a crank against its load under 300 ms and then yields is pushed
-//! back by the local model's copy of the load, while the VE, a round trip behind, follows each push and only
-//! part of each yield and keeps the energy; swing by swing the linkage gains what no one put in
-//! (docs/robustness.md, "Energy growth at 300 ms").
+//! **Why.** The VE's controller (`server/src/core/passivity.rs`) holds what its coupling gives the linkage
+//! within what the hand put into the client's end, gross: the VE's half of the time-domain passivity network
+//! (Ryu, Artigas & Preusche 2010). Nothing held what the client's end gives back. So the energy a hand puts
+//! in could be spent twice: a soft hand that winds a crank against its load under 300 ms and then yields is
+//! pushed back by the local model's copy of the load, while the VE, a round trip behind, follows each push and
+//! only part of each yield and keeps the energy; swing by swing the linkage gains what no one put in
+//! (docs/robustness.md, "Energy growth at 300 ms"). The network's other half of the scheme, the client's
+//! emission held within the VE's gross receipts, does not fit a client whose end is a second copy of the
+//! linkage: every swing between the local model and the device counts as emitted at the model's port and
+//! never as received at the VE's, so it brakes the model with no delay at all (the paper's manipulation lost
+//! its second binding of the loop). The client's end checks the whole instead, with both ends' books.
 //!
-//! **The account.** `A = R_VE + E_allow + D − E_client`: the energy the VE's coupling port has received as
-//! its snapshots report it (`R_VE`, the server's books, accepted by [`EnergyReports`]), plus an allowance
-//! ([`PORT_ALLOWANCE_J`] at the device, in the VE's units through the mapping's `c_f c_p`), plus what this
-//! controller has dissipated (`D`), minus what the client's end has emitted (`E_client`, the local model's
-//! port books: the power its wrench takes out of its motion). All sums over the axes: passivity is the port's.
+//! **The account.** `A = (R_c − E_c) − (E_VE − R_VE) + E_allow + D`: what the hand put into the client's end
+//! net (the local model's port books, received minus emitted), minus what the VE's coupling gave the linkage
+//! net (the server's books as its snapshots report them, already checked by `EnergyReports`: emitted into the
+//! linkage minus received from it), plus an allowance ([`PORT_ALLOWANCE_J`] at the device, in the VE's units
+//! through the mapping's `c_f c_p`), plus what this controller has dissipated (`D`). All sums over the axes:
+//! passivity is the port's. The VE's books are a downlink late, which only makes the bound stricter later.
 //!
 //! **The controller.** While `A < 0`, the model's kinetic energy `½ ẋᵀ Λ̂ ẋ` is taken out up to the deficit
 //! (its twist scaled down), and what is taken out is booked in `D`, so the account comes back to zero: the
@@ -27,8 +29,8 @@
 use kinloop_linkage::math::space::{Space, VecOps};
 use kinloop_protocol::passivity::PortBooks;
 
-/// Energy the client's end may emit beyond what the VE's end received (J at the device): the VE's own
-/// allowance (`VeConfig::passivity_allowance_j`'s default), so each end of the two-port may generate as much.
+/// Energy the linkage may hold through its coupling beyond what the hand put in, before the client's end gives
+/// up its own (J at the device): the VE's own allowance (`VeConfig::passivity_allowance_j`'s default).
 pub const PORT_ALLOWANCE_J: f64 = 2.0e-3;
 
 /// The controller's state: what it has dissipated so far (VE units).
@@ -38,12 +40,12 @@ pub(crate) struct PortPassivity {
 }
 
 impl PortPassivity {
-    /// The account `A` (VE units): what the VE's end received (`remote`) plus `allowance` plus what this
-    /// controller dissipated, minus what this end emitted (`own`).
+    /// The account `A` (VE units): what this end received net (`own`, received minus emitted) and what the VE's
+    /// end received net (`remote`: what its coupling took from the linkage minus what it gave it), plus
+    /// `allowance` and what this controller dissipated.
     pub fn account(&self, remote: &PortBooks, own: &PortBooks, allowance: f64) -> f64 {
-        let received: f64 = remote.received_j.iter().sum();
-        let emitted: f64 = own.emitted_j.iter().sum();
-        received + allowance + self.dissipated - emitted
+        let net = |b: &PortBooks| b.received_j.iter().sum::<f64>() - b.emitted_j.iter().sum::<f64>();
+        net(own) + net(remote) + allowance + self.dissipated
     }
 
     /// The model twist after the controller: `twist` as it is while the account is in credit; else scaled so
@@ -116,5 +118,21 @@ mod tests {
         // The VE's end receives what is owed: the account is in credit again and the model moves on.
         let paid = books(1.0, 0.0);
         assert_eq!(pc.brake::<Planar>(&paid, &own, allowance, &inertia, &twist), twist);
+    }
+
+    /// Energy that swings between the local model and the device (received and emitted alike at the model's
+    /// port, none of it through the VE) leaves the account as it was: only energy the VE's coupling gave the
+    /// linkage beyond the hand's net work is held against the client's end.
+    #[test]
+    fn a_swing_between_model_and_device_costs_nothing_and_the_linkages_gain_does() {
+        let inertia = Matrix3::identity();
+        let twist = Vector3::new(0.2, 0.1, 0.0);
+        let mut pc = PortPassivity::default();
+        let swinging = books(5.0, 5.0);
+        assert_eq!(pc.brake::<Planar>(&PortBooks::default(), &swinging, 0.0, &inertia, &twist), twist);
+        // The VE's coupling gave the linkage 0.01 J the hand never put in: the model gives up as much.
+        let gave = books(0.0, 0.01);
+        let braked = pc.brake::<Planar>(&gave, &swinging, 0.0, &inertia, &twist);
+        assert!((kinetic(&inertia, &twist) - kinetic(&inertia, &braked) - 0.01).abs() < 1e-12, "{braked:?}");
     }
 }
