@@ -241,7 +241,7 @@ pub struct CoreConfig {
     /// Check the two-port as a whole from the client's end (`port_passivity`): while the VE's coupling has given
     /// the linkage more than the hand put into the client's end, net (beyond
     /// [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the local model gives up its kinetic
-    /// energy rather than give it to the hand.
+    /// energy rather than give it to the hand. Only while the user holds the linkage alone.
     pub port_passivity: bool,
     /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
     /// its snapshot terms were computed at before the constrained directions are rendered softer (see

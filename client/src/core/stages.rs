@@ -236,7 +236,9 @@ impl<S: Space> HapticCore<S> {
             *p = -model[a] * model_twist_after[a];
         }
         self.port.book(&power_out[..S::DIM], dt_s);
-        if self.config.port_passivity {
+        // Only for a user alone on the linkage: with others on it, this user's coupling passes on energy
+        // between their hands and the linkage that this end never sees (`port_passivity`).
+        if self.config.port_passivity && !self.active.shared {
             let allowance = PORT_ALLOWANCE_J / (self.scales.force * self.scales.position);
             let (remote, own) = (&self.server_energy.accepted, &self.port);
             let braked =
