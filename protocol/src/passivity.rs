@@ -34,6 +34,12 @@ pub struct PortBooks {
 }
 
 impl PortBooks {
+    /// What entered the network at this end, net of what left it there, over all axes (J; negative: this end
+    /// gave out more than it took in).
+    pub fn net_received_j(&self) -> f64 {
+        self.received_j.iter().zip(&self.emitted_j).map(|(r, e)| r - e).sum()
+    }
+
     /// Books one step of `dt` in which the port put `power_out[a]` watts out of the network on axis `a`
     /// (negative: it took energy in). A step with a non-finite power is not booked.
     pub fn book(&mut self, power_out: &[f64], dt: f64) {
@@ -200,6 +206,7 @@ mod tests {
         assert_eq!(books.received_j[..3], [0.0, 1.5, 0.0]);
         let absorbed = |a: usize| books.received_j[a] - books.emitted_j[a];
         assert_eq!((absorbed(0), absorbed(1)), (-1.0, 1.5));
+        assert_eq!(books.net_received_j(), 0.5);
         let before = books;
         books.book(&[f64::NAN, 1.0, 1.0], 0.1);
         books.book(&[1.0, 1.0, 1.0], f64::INFINITY);

@@ -229,7 +229,7 @@ impl<S: Space> HapticCore<S> {
             bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
-            port_passivity: port_passivity::PortPassivity::default(),
+            port_passivity: port_passivity::PortPassivity::new(port_passivity::PORT_ALLOWANCE_J, scales.torque),
             uplink,
             pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),

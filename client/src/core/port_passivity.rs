@@ -39,19 +39,29 @@ use kinloop_protocol::passivity::PortBooks;
 /// up its own (J at the device): the VE's own allowance (`VeConfig::passivity_allowance_j`'s default).
 pub const PORT_ALLOWANCE_J: f64 = 2.0e-3;
 
-/// The controller's state: what it has dissipated so far (VE units).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The controller's state (VE units).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct PortPassivity {
+    /// `E_allow` in the VE's units.
+    allowance: f64,
+    /// What the controller has dissipated so far (`D`).
     dissipated: f64,
 }
 
 impl PortPassivity {
+    /// A controller allowing `allowance_j` (J at the device; `device_per_ve` is the mapping's `c_f c_p`).
+    pub fn new(allowance_j: f64, device_per_ve: f64) -> Self {
+        PortPassivity {
+            allowance: allowance_j / kinloop_protocol::Mapping::scale_or_one(device_per_ve),
+            dissipated: 0.0,
+        }
+    }
+
     /// The account `A` (VE units): what this end received net (`own`, received minus emitted) and what the VE's
-    /// end received net (`remote`: what its coupling took from the linkage minus what it gave it), plus
-    /// `allowance` and what this controller dissipated.
-    pub fn account(&self, remote: &PortBooks, own: &PortBooks, allowance: f64) -> f64 {
-        let net = |b: &PortBooks| b.received_j.iter().sum::<f64>() - b.emitted_j.iter().sum::<f64>();
-        net(own) + net(remote) + allowance + self.dissipated
+    /// end received net (`remote`: what its coupling took from the linkage minus what it gave it), plus the
+    /// allowance and what this controller dissipated.
+    pub fn account(&self, remote: &PortBooks, own: &PortBooks) -> f64 {
+        own.net_received_j() + remote.net_received_j() + self.allowance + self.dissipated
     }
 
     /// The model twist after the controller: `twist` as it is while the account is in credit; else scaled so
@@ -61,13 +71,15 @@ impl PortPassivity {
         &mut self,
         remote: &PortBooks,
         own: &PortBooks,
-        allowance: f64,
         inertia: &S::OpMat,
         twist: &S::OpVec,
     ) -> S::OpVec {
-        let deficit = -self.account(remote, own, allowance);
+        let deficit = -self.account(remote, own);
+        if !(deficit > 0.0) {
+            return *twist;
+        }
         let kinetic = 0.5 * twist.dot(&(*inertia * *twist));
-        if !(deficit > 0.0 && kinetic > 0.0 && kinetic.is_finite()) {
+        if !(kinetic > 0.0 && kinetic.is_finite()) {
             return *twist;
         }
         let taken = deficit.min(kinetic);
@@ -100,15 +112,15 @@ mod tests {
         let inertia = Matrix3::from_diagonal(&Vector3::new(2.0, 0.5, 0.01));
         let twist = Vector3::new(0.3, -0.4, 2.0);
         let (remote, allowance) = (books(1.0, 0.0), 0.002);
-        let mut pc = PortPassivity::default();
-        assert_eq!(pc.brake::<Planar>(&remote, &books(0.0, 1.0), allowance, &inertia, &twist), twist, "in credit");
+        let mut pc = PortPassivity::new(allowance, 1.0);
+        assert_eq!(pc.brake::<Planar>(&remote, &books(0.0, 1.0), &inertia, &twist), twist, "in credit");
         let deficit = 0.05;
         let own = books(0.0, 1.0 + allowance + deficit);
-        let braked = pc.brake::<Planar>(&remote, &own, allowance, &inertia, &twist);
+        let braked = pc.brake::<Planar>(&remote, &own, &inertia, &twist);
         let before = kinetic(&inertia, &twist);
         assert!((before - kinetic(&inertia, &braked) - deficit).abs() < 1e-12, "{before} -> {braked:?}");
-        assert!(pc.account(&remote, &own, allowance).abs() < 1e-12);
-        assert_eq!(pc.brake::<Planar>(&remote, &own, allowance, &inertia, &braked), braked, "paid");
+        assert!(pc.account(&remote, &own).abs() < 1e-12);
+        assert_eq!(pc.brake::<Planar>(&remote, &own, &inertia, &braked), braked, "paid");
     }
 
     /// A deficit beyond the model's kinetic energy stops the model, and only what it held is booked: the rest
@@ -117,13 +129,13 @@ mod tests {
     fn a_deficit_beyond_the_models_energy_stops_it_and_stays_owed() {
         let inertia = Matrix3::identity();
         let twist = Vector3::new(0.1, 0.0, 0.0);
-        let (remote, own, allowance) = (books(0.0, 0.0), books(0.0, 1.0), 0.0);
-        let mut pc = PortPassivity::default();
-        assert_eq!(pc.brake::<Planar>(&remote, &own, allowance, &inertia, &twist), Vector3::zeros());
-        assert!((pc.account(&remote, &own, allowance) - (kinetic(&inertia, &twist) - 1.0)).abs() < 1e-12);
+        let (remote, own) = (books(0.0, 0.0), books(0.0, 1.0));
+        let mut pc = PortPassivity::new(0.0, 1.0);
+        assert_eq!(pc.brake::<Planar>(&remote, &own, &inertia, &twist), Vector3::zeros());
+        assert!((pc.account(&remote, &own) - (kinetic(&inertia, &twist) - 1.0)).abs() < 1e-12);
         // The VE's end receives what is owed: the account is in credit again and the model moves on.
         let paid = books(1.0, 0.0);
-        assert_eq!(pc.brake::<Planar>(&paid, &own, allowance, &inertia, &twist), twist);
+        assert_eq!(pc.brake::<Planar>(&paid, &own, &inertia, &twist), twist);
     }
 
     /// Energy that swings between the local model and the device (received and emitted alike at the model's
@@ -133,12 +145,12 @@ mod tests {
     fn a_swing_between_model_and_device_costs_nothing_and_the_linkages_gain_does() {
         let inertia = Matrix3::identity();
         let twist = Vector3::new(0.2, 0.1, 0.0);
-        let mut pc = PortPassivity::default();
+        let mut pc = PortPassivity::new(0.0, 1.0);
         let swinging = books(5.0, 5.0);
-        assert_eq!(pc.brake::<Planar>(&PortBooks::default(), &swinging, 0.0, &inertia, &twist), twist);
+        assert_eq!(pc.brake::<Planar>(&PortBooks::default(), &swinging, &inertia, &twist), twist);
         // The VE's coupling gave the linkage 0.01 J the hand never put in: the model gives up as much.
         let gave = books(0.0, 0.01);
-        let braked = pc.brake::<Planar>(&gave, &swinging, 0.0, &inertia, &twist);
+        let braked = pc.brake::<Planar>(&gave, &swinging, &inertia, &twist);
         assert!((kinetic(&inertia, &twist) - kinetic(&inertia, &braked) - 0.01).abs() < 1e-12, "{braked:?}");
     }
 }

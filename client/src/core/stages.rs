@@ -18,7 +18,6 @@ use super::controllers::{
 };
 use super::index::DeviceIndex;
 use super::passive_update::damper_dissipation;
-use super::port_passivity::PORT_ALLOWANCE_J;
 use super::safety::{brake, force_ratio, limit_wrench_parts, mask_unactuated, usable_model_state, within};
 use super::{ConstraintMode, ControllerWrenches, HapticCore, TickOutput, TickReport};
 use crate::device::DeviceState;
@@ -239,10 +238,8 @@ impl<S: Space> HapticCore<S> {
         // Only for a user alone on the linkage: with others on it, this user's coupling passes on energy
         // between their hands and the linkage that this end never sees (`port_passivity`).
         if self.config.port_passivity && !self.active.shared {
-            let allowance = PORT_ALLOWANCE_J / (self.scales.force * self.scales.position);
             let (remote, own) = (&self.server_energy.accepted, &self.port);
-            let braked =
-                self.port_passivity.brake::<S>(remote, own, allowance, &self.local.inertia, &model_twist_after);
+            let braked = self.port_passivity.brake::<S>(remote, own, &self.local.inertia, &model_twist_after);
             if braked != model_twist_after {
                 self.model.set_state(self.model.pose(), braked);
             }

@@ -183,11 +183,7 @@ impl PassivityObserver {
     /// The account `A` (J): what the coupling's port (PD and force channel) absorbed from the VE, plus what the
     /// hand put into the client's end (trusted as far as the server can check it).
     pub fn account_j(&self, allowance_j: f64) -> f64 {
-        let mut force_channel = 0.0;
-        for axis in 0..MAX_AXES {
-            force_channel += self.force_channel.received_j[axis] - self.force_channel.emitted_j[axis];
-        }
-        self.absorbed_j + force_channel + self.client_received(allowance_j)
+        self.absorbed_j + self.force_channel.net_received_j() + self.client_received(allowance_j)
     }
 
     /// What the hand put into the client's end on all axes (J, ≥ 0): per axis, the smaller of the client's
