@@ -75,7 +75,7 @@ impl PortPassivity {
         twist: &S::OpVec,
     ) -> S::OpVec {
         let deficit = -self.account(remote, own);
-        if !(deficit > 0.0) {
+        if deficit.is_nan() || deficit <= 0.0 {
             return *twist;
         }
         let kinetic = 0.5 * twist.dot(&(*inertia * *twist));
