@@ -183,12 +183,10 @@ impl<S: Space> HapticCore<S> {
             // The change moves the OP along the path, never across it: only its part along the frame's free
             // directions is kept. `here` lies along the path's tangent where the model is, and the frame is
             // turned only `along` of the way there, so the rest of the turn leaves `|here| sin((1 − w) Δ)` of
-            // it across the frame's walls, where the model's acceleration is the path's own (`across`). A
-            // light OP under a heavy load has forces at rest thousands of times that (a crank tip at 400 m/s²
-            // against `κ v²` under 0.1 m/s²): a few milliradians of turn then pushed the model off the path,
-            // and the constrained pull and the joint-constraint controller dragged the device after it, a
-            // centimetre out and back in a tenth of a second at several newtons, each jolt energy the hand
-            // absorbed and the VE never gave.
+            // it across the frame's walls, where the model's acceleration is the path's own (`across`). On a
+            // light OP under a heavy load the forces at rest dwarf `κ v²`, so a few milliradians of turn push
+            // the model off the path, and the constrained pull and the joint-constraint controller drag the
+            // device after it: energy the hand absorbs and the VE never gave.
             let change = (here - twist_turn * there) * along;
             let change = change - project_twist::<S>(&self.local.projector, l, &change);
             self.local.bias += change;
