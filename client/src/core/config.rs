@@ -243,6 +243,11 @@ pub struct CoreConfig {
     /// [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the local model gives up its kinetic
     /// energy rather than give it to the hand. Only while the user holds the linkage alone.
     pub port_passivity: bool,
+    /// On a device without a force sensor, render the load b̂ carries in the free directions as a feedforward
+    /// pair (`HapticCore::controllers`): the device is commanded `Λ̂ b̂` and the local model held up by as
+    /// much, so the position channels carry no static load and the model stays on the device. Only while the
+    /// user holds the linkage alone; weighted and paid for as the impedance controller's b̂ is (`bias_trust`).
+    pub load_feedforward: bool,
     /// How far, in length scales `L` (scaled distance `|(Δp, L Δθ)|`), the local model may move from the pose
     /// its snapshot terms were computed at before the constrained directions are rendered softer (see
     /// `controllers::linearization_trust`). Under delay the model runs ahead of the VE by a round trip of
@@ -269,6 +274,20 @@ pub struct CoreConfig {
     pub deadband: Option<UplinkDeadband>,
 }
 
+/// The most of the device's force (and torque) limit the load feedforward of a device without a sensor may
+/// ask for (`CoreConfig::load_feedforward`); the position channels carry the rest of the load. `Λ̂ b̂` grows
+/// without bound as the linkage nears a configuration where its OP cannot move (holding a load there takes a
+/// mechanical advantage the linkage no longer has), and b̂'s velocity terms with it: rendered whole, such a
+/// feedforward drove the device into its limits and the hand's swings into energy growth, where through the
+/// position channels alone the model gives way.
+pub const LOAD_FEEDFORWARD_SHARE: f64 = 0.1;
+
+/// Least time (s) over which the load feedforward may rise from nothing to its largest
+/// ([`LOAD_FEEDFORWARD_SHARE`] of the device's limit), or fall back: it comes in with the load it renders,
+/// not as a step when the model restarts on a VE (a new snapshot, a server that takes over), and a load
+/// that swings at a dead centre reaches the device only as fast as the channels would carry it.
+pub const LOAD_FEEDFORWARD_RISE_S: f64 = 0.5;
+
 impl CoreConfig {
     /// Defaults for `device`: stiffness mode, reduced form, designed gains, 1 kHz.
     pub fn new(device: DeviceSpec) -> Self {
@@ -284,6 +303,7 @@ impl CoreConfig {
             free_blend_round_trips: FREE_BLEND_PER_ROUND_TRIP,
             passive_update: true,
             port_passivity: true,
+            load_feedforward: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,
             follow_path: true,

@@ -139,6 +139,11 @@ pub struct HapticCore<S: Space> {
     tank: EnergyTank,
     /// The energy b̂'s feedforward may still put into the device (`bias_trust::BIAS_TANK_CAPACITY_J`).
     bias_tank: EnergyTank,
+    /// The load feedforward the device rendered last tick (`CoreConfig::load_feedforward`, VE units, after
+    /// the gate and the limits): the local model is held up by as much on its next step.
+    load_held: S::OpVec,
+    /// The load feedforward asked for last tick, before the gate and the limits (`HapticCore::ramp_load`).
+    load_fed: S::OpVec,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
     /// reaction) drives the model (`kinloop_protocol::passivity`); its books go up in every uplink.
     port: PortBooks,
@@ -227,6 +232,8 @@ impl<S: Space> HapticCore<S> {
             deadband: Deadband::new(config.deadband.map(|d| d.in_ve_units(&scales))),
             tank: EnergyTank::new(passive_update::TANK_CAPACITY_J, scales.torque),
             bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
+            load_held: S::OpVec::zero(),
+            load_fed: S::OpVec::zero(),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             port_passivity: port_passivity::PortPassivity::new(port_passivity::PORT_ALLOWANCE_J, scales.torque),
@@ -370,8 +377,10 @@ impl<S: Space> HapticCore<S> {
         self.pull_model(now, dt_s, &intake, device.hand_wrench.is_some());
         let hand = self.step_model(dt_s, device, &intake);
         let mut asked = self.controllers(now, &intake, &hand);
+        self.ramp_load(dt_s, &hand, &mut asked);
         self.pay_bias(dt_s, &intake, &mut asked);
         let out = self.safety(now, dt_s, &device.twist, &intake, &asked);
+        self.hold_load(&hand, &asked);
         let mut flags = intake.flags | out.flags;
         let send = self.uplink(now, &intake, &mut flags, &hand.model, &asked.model_pose);
         self.record(now, &intake, &hand, &asked, &out, flags);

@@ -12,6 +12,7 @@ use kinloop_protocol::uplink_flags;
 
 use super::bias_trust::paid_bias;
 use super::channel_reaction::end_of_step_reaction;
+use super::config::{LOAD_FEEDFORWARD_RISE_S, LOAD_FEEDFORWARD_SHARE};
 use super::controllers::{
     channel_felt, contact_feedforward, hadamard, impedance_free, joint_constraint_impedance,
     joint_constraint_stiffness, position_channel, project_wrench,
@@ -66,7 +67,8 @@ pub(super) struct Requests<S: Space> {
     pub joint_constraint: S::OpVec,
     /// Impedance controller.
     pub impedance: S::OpVec,
-    /// The part of it that renders b̂ (`M b̂` in the free directions, as weighted), which `pay_bias` prices.
+    /// The part of it that renders b̂ (`M b̂` in the free directions, as weighted; on a device without a sensor
+    /// the load `Λ̂ b̂`, see `CoreConfig::load_feedforward`), which `pay_bias` prices.
     pub bias_feedforward: S::OpVec,
     /// The share of b̂ that may be stale (`BiasTrust::assess`): the part of its work the tank pays.
     pub bias_at_risk: f64,
@@ -218,7 +220,9 @@ impl<S: Space> HapticCore<S> {
             self.model.set_state(self.model.pose(), S::OpVec::zero());
             S::OpVec::zero()
         } else {
-            let own = sensed.unwrap_or_else(S::OpVec::zero);
+            // Without a sensor the model is held up by the load the device rendered last tick
+            // (`CoreConfig::load_feedforward`): the pair's two ends cancel, and the channels carry no load.
+            let own = sensed.unwrap_or(-self.load_held);
             // The acceleration-zeroing controller cancels the channels along the constrained directions.
             let walls = !(self.config.constraint_mode == ConstraintMode::Impedance && for_constraint.is_some());
             let wrench = own + self.channels_at_end_of_step(dt_s, intake, &own, walls);
@@ -316,6 +320,24 @@ impl<S: Space> HapticCore<S> {
                     (imp, fed)
                 }
             }
+            // Without a sensor the position channels would carry the load: the model sags `Λ̂ b̂ / K_pc` off the
+            // device under it (centimetres for a heavy link on a soft channel), and the VE, which follows the
+            // model, with it. The device renders the load itself instead, in the free directions (along the
+            // constrained ones the walls hold the OP), and the model is held up by as much (`hold_load`).
+            None if self.config.load_feedforward && !self.active.shared => {
+                let fed = self.local.free_inertia * (self.local.bias * trusted);
+                let (capped, _) = clip_wrench_parts::<S>(
+                    &self.scales.wrench_to_device::<S>(&fed),
+                    self.limits.max_force_n * LOAD_FEEDFORWARD_SHARE,
+                    self.limits.max_torque_nm * LOAD_FEEDFORWARD_SHARE,
+                );
+                let fed = self.scales.wrench_to_ve::<S>(&capped);
+                if trust < 1.0 {
+                    (fed * trust, fed * trust)
+                } else {
+                    (fed, fed)
+                }
+            }
             None => (zero, zero),
         };
         let (contacts, live) = self.model.contacts();
@@ -349,6 +371,25 @@ impl<S: Space> HapticCore<S> {
         }
     }
 
+    /// Stage 4a: a device without a sensor has its load feedforward (`CoreConfig::load_feedforward`) change by
+    /// at most [`LOAD_FEEDFORWARD_RISE_S`]'s rate from what it asked for last tick; what is held back stays
+    /// with the position channels.
+    pub(super) fn ramp_load(&mut self, dt_s: f64, hand: &HandWrenches<S>, asked: &mut Requests<S>) {
+        if hand.sensed.is_some() {
+            return;
+        }
+        let share = LOAD_FEEDFORWARD_SHARE * (dt_s / LOAD_FEEDFORWARD_RISE_S).min(1.0);
+        let change = self.scales.wrench_to_device::<S>(&(asked.bias_feedforward - self.load_fed));
+        let (allowed, _) =
+            clip_wrench_parts::<S>(&change, self.limits.max_force_n * share, self.limits.max_torque_nm * share);
+        let fed = self.load_fed + self.scales.wrench_to_ve::<S>(&allowed);
+        let held_back = asked.bias_feedforward - fed;
+        asked.bias_feedforward = fed;
+        asked.impedance -= held_back;
+        asked.requested -= held_back;
+        self.load_fed = fed;
+    }
+
     /// Stage 4b: b̂'s feedforward paid from its tank (`bias_trust`), while this user holds the linkage alone:
     /// the share at risk of the work `M b̂` would do on the device this tick, `F_b · ẋ_d dt`, is drawn from the
     /// tank, and what the tank cannot pay is taken out of the request. Work the hand does against it fills
@@ -365,6 +406,18 @@ impl<S: Space> HapticCore<S> {
             asked.impedance -= withheld;
             asked.requested -= withheld;
         }
+    }
+
+    /// After the safety envelope: the load feedforward as the device rendered it (`CoreConfig::load_feedforward`;
+    /// under the gate's gain and the limits' scales), which holds the model up on its next step. A sensed
+    /// device's b̂ feedforward shapes the device's acceleration instead and is not the model's.
+    pub(super) fn hold_load(&mut self, hand: &HandWrenches<S>, asked: &Requests<S>) {
+        self.load_held = if hand.sensed.is_none() {
+            let rendered = mask_unactuated::<S>(&asked.bias_feedforward, &self.limits);
+            self.last_scales.apply::<S>(&rendered) * self.gate.gain()
+        } else {
+            S::OpVec::zero()
+        };
     }
 
     /// Stage 5: the safety envelope: non-finite check, output gate (ramp in, fade out on stale snapshots or
