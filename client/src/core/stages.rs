@@ -325,13 +325,7 @@ impl<S: Space> HapticCore<S> {
             // model, with it. The device renders the load itself instead, in the free directions (along the
             // constrained ones the walls hold the OP), and the model is held up by as much (`hold_load`).
             None if self.config.load_feedforward && !self.active.shared => {
-                let fed = self.local.free_inertia * (self.local.bias * trusted);
-                let (capped, _) = clip_wrench_parts::<S>(
-                    &self.scales.wrench_to_device::<S>(&fed),
-                    self.limits.max_force_n * LOAD_FEEDFORWARD_SHARE,
-                    self.limits.max_torque_nm * LOAD_FEEDFORWARD_SHARE,
-                );
-                let fed = self.scales.wrench_to_ve::<S>(&capped);
+                let fed = self.within_share(&(self.local.free_inertia * (self.local.bias * trusted)), 1.0);
                 if trust < 1.0 {
                     (fed * trust, fed * trust)
                 } else {
@@ -378,11 +372,8 @@ impl<S: Space> HapticCore<S> {
         if hand.sensed.is_some() {
             return;
         }
-        let share = LOAD_FEEDFORWARD_SHARE * (dt_s / LOAD_FEEDFORWARD_RISE_S).min(1.0);
-        let change = self.scales.wrench_to_device::<S>(&(asked.bias_feedforward - self.load_fed));
-        let (allowed, _) =
-            clip_wrench_parts::<S>(&change, self.limits.max_force_n * share, self.limits.max_torque_nm * share);
-        let fed = self.load_fed + self.scales.wrench_to_ve::<S>(&allowed);
+        let rise = (dt_s / LOAD_FEEDFORWARD_RISE_S).min(1.0);
+        let fed = self.load_fed + self.within_share(&(asked.bias_feedforward - self.load_fed), rise);
         let held_back = asked.bias_feedforward - fed;
         asked.bias_feedforward = fed;
         asked.impedance -= held_back;
@@ -406,6 +397,16 @@ impl<S: Space> HapticCore<S> {
             asked.impedance -= withheld;
             asked.requested -= withheld;
         }
+    }
+
+    /// `wrench` (VE units) clipped on the device, force and torque apart, to `fraction` of the load
+    /// feedforward's share of the device's limits ([`LOAD_FEEDFORWARD_SHARE`]).
+    fn within_share(&self, wrench: &S::OpVec, fraction: f64) -> S::OpVec {
+        let share = LOAD_FEEDFORWARD_SHARE * fraction;
+        let on_device = self.scales.wrench_to_device::<S>(wrench);
+        let (clipped, _) =
+            clip_wrench_parts::<S>(&on_device, self.limits.max_force_n * share, self.limits.max_torque_nm * share);
+        self.scales.wrench_to_ve::<S>(&clipped)
     }
 
     /// After the safety envelope: the load feedforward as the device rendered it (`CoreConfig::load_feedforward`;
