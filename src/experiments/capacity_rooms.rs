@@ -56,7 +56,7 @@ pub struct RoomsPoint {
     /// stall of the executor's thread is one in each room on it, so the pooled count still comes in bursts;
     /// a room's own count does not.
     pub stalls_vs_floor: RateRatio,
-    /// The room with the most stalls against the idle loop's.
+    /// The worst room's (the one that missed most) stalls against the idle loop's.
     pub worst_room_stalls_vs_floor: RateRatio,
     /// The idle loop's and the worst room's counts block by block, in the order they alternated.
     pub blocks: Vec<BlockPair>,
@@ -171,16 +171,18 @@ pub fn measure(
     let (misses, stalls) = (counts(|c| c.0), counts(|c| c.1));
     let (floor_misses, floor_stalls, floor_ticks) = blocks.floor_totals();
     let rate = |c: &(u64, u64)| c.0 as f64 / c.1.max(1) as f64;
-    // Every room pooled, and the worst room by its rate (a room that ran fewer ticks is not the better for
-    // it; returned by its index too), each against the idle loop's.
+    // Every room pooled, and the worst room, each against the idle loop's. The worst room is the one with the
+    // highest miss rate (a room that ran fewer ticks is not the better for it), chosen once: its stalls are
+    // that same room's, so that they and the block pairs below count one room's ticks (the room with the
+    // most stalls need not be the one that missed most).
+    let worst_room = (0..misses.len()).max_by(|&a, &b| rate(&misses[a]).total_cmp(&rate(&misses[b]))).unwrap_or(0);
     let judged = |counts: &[(u64, u64)], floor_events: u64| {
         let against = |(n, ticks): (u64, u64)| RateRatio::new(n, ticks, floor_events, floor_ticks, MISSES_BOUND);
         let pooled = counts.iter().fold((0, 0), |(n, t), (cn, ct)| (n + cn, t + ct));
-        let worst = (0..counts.len()).max_by(|&a, &b| rate(&counts[a]).total_cmp(&rate(&counts[b]))).unwrap_or(0);
-        (against(pooled), against(counts.get(worst).copied().unwrap_or((0, 0))), worst)
+        (against(pooled), against(counts.get(worst_room).copied().unwrap_or((0, 0))))
     };
-    let (misses_vs_floor, worst_room_vs_floor, worst_room) = judged(&misses, floor_misses);
-    let (stalls_vs_floor, worst_room_stalls_vs_floor, _) = judged(&stalls, floor_stalls);
+    let (misses_vs_floor, worst_room_vs_floor) = judged(&misses, floor_misses);
+    let (stalls_vs_floor, worst_room_stalls_vs_floor) = judged(&stalls, floor_stalls);
     let pairs = blocks.pairs(|b| names.get(worst_room).and_then(|room| b.counted(room)).unwrap_or_default());
 
     // The rest is each block's whole run, as the server reported it at the block's end.
