@@ -8,8 +8,10 @@
 //! - [`passivity`]: the two-port's energy books both ends keep and send, the check of a peer's books, and the
 //!   output scale both ends' passivity controllers use;
 //! - [`wrench_limits`]: a device's peak force and torque, and the clipping both ends do against them;
+//! - [`arrival_gaps`]: the longest recent gap between a stream's arrivals, what a silence is judged against;
 //! - [`bench`](mod@bench): measurements the `kinloop bench` command reports.
 
+pub mod arrival_gaps;
 pub mod bench;
 pub mod codec;
 pub mod emulator;

@@ -449,6 +449,36 @@ fn a_sensorless_device_renders_the_load_so_the_local_model_does_not_sag_off_it()
     }
 }
 
+/// Seed 2's Bennett linkage, its second link on a Touch at 1 s one way with 100 ms of jitter: the path
+/// delivers the snapshots in bunches, with gaps beyond the 100 ms `SafetyConfig::max_snapshot_age`. Judged
+/// against that fixed age, each gap faded the force out, the local model restarted on a VE a round trip
+/// behind, and the ramp back in released the stretched device-model coupling into the hand: the hand's work
+/// went negative and the session failed on energy growth (0.21 J beyond it). Judged against the link's own
+/// gaps (`HapticCore::stale_after`), only the first of those gaps fades the output (nothing is known of the
+/// link before it) and the session renders.
+#[test]
+fn a_jittery_link_under_a_second_of_delay_does_not_fade_the_force_at_each_gap() {
+    let outcome = soft_session(2, "op-link2", "sim:touch", 1000, 10.0);
+    assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+    let linkage = generate(2, None);
+    let all = points(std::slice::from_ref(&linkage), &[HandKind::Soft], &[1000]);
+    let point = all.iter().find(|p| p.op == "op-link2" && p.device.name() == "sim:touch").expect("in the matrix");
+    let plan = kinloop::experiments::robustness::session_plan(&linkage, point, 10.0);
+    let (_, recording) = kinloop::experiments::common::session(&plan).expect("runs");
+    let fixed_age = kinloop_client::core::SafetyConfig::default().max_snapshot_age.as_secs_f64();
+    let ticks = &recording.clients[0];
+    // The first snapshot arrives a second in; the output ramps in from there.
+    let ramped = ticks.iter().position(|t| t.snapshot_age.is_some() && t.gain >= 1.0).expect("the output ramps in");
+    let judged = &ticks[ramped..];
+    // Silences beyond the fixed age: each time the active snapshot grows older than it.
+    let beyond = |t: &kinloop_harness::ClientSample| t.snapshot_age.is_some_and(|a| a > fixed_age);
+    let silences = judged.windows(2).filter(|w| !beyond(&w[0]) && beyond(&w[1])).count();
+    let fades = judged.windows(2).filter(|w| w[0].gain >= 1.0 && w[1].gain < 1.0).count();
+    // The first long silence still fades (the link has not shown one yet); the others do not.
+    assert!(silences >= 4, "the link made {silences} silences beyond {fixed_age} s in 10 s");
+    assert!(fades <= 1, "the output faded {fades} times at {silences} silences");
+}
+
 /// The robustness matrix's session of generated seed `seed`'s OP `op` on `device`, soft hand, 0 ms.
 fn soft_without_delay(seed: u64, op: &str, device: &str, seconds: f64) -> kinloop::experiments::robustness::Outcome {
     soft_session(seed, op, device, 0, seconds)

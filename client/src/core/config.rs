@@ -132,12 +132,22 @@ impl Default for ConstraintWeighting {
     }
 }
 
+/// A snapshot is stale once older than this many times the longest recent gap between snapshots, when that is
+/// longer than `SafetyConfig::max_snapshot_age` (`HapticCore::stale_after`): the next gap of a link may be
+/// somewhat longer than the longest seen so far.
+pub const STALE_GAP_MARGIN: f64 = 1.5;
+
+/// However long a link's gaps have been, a snapshot this old is stale (`HapticCore::stale_after`): the force
+/// fades within half a second of the last news from the VE.
+pub const LONGEST_STALE_AGE: Duration = Duration::from_millis(500);
+
 /// The safety envelope (see [`super::safety`]).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SafetyConfig {
     /// Time to ramp the force in at start and after every resume.
     pub ramp_in: Duration,
-    /// A snapshot older than this is stale: the force fades out.
+    /// A snapshot older than this is stale: the force fades out (on a link whose snapshots come with longer
+    /// gaps, a margin over the longest of them, `HapticCore::stale_after`).
     pub max_snapshot_age: Duration,
     /// Time to fade the force to zero once the snapshot is stale (smooth: a smoothstep of a linear ramp).
     pub fade_out: Duration,

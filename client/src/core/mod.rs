@@ -62,13 +62,14 @@ use kinloop_linkage::algorithms::configuration::ConfigLayout;
 use kinloop_linkage::algorithms::local_model::ConfigSpaceLocalModel;
 use kinloop_linkage::math::space::OpPose;
 use kinloop_linkage::math::space::{Space, VecOps};
+use kinloop_protocol::arrival_gaps::ArrivalGaps;
 use kinloop_protocol::codec::limits::{MAX_SCENE_SPEED, MAX_SCENE_WRENCH};
 use kinloop_protocol::passivity::{EnergyReports, PortBooks};
 use kinloop_protocol::{SessionShape, Snapshot, Uplink, Welcome};
 
 pub use config::{
     ConstraintMode, ConstraintWeighting, ControllerGains, CoreConfig, GainChoice, ModelForm, SafetyConfig,
-    UplinkDeadband, FREE_BLEND_PER_ROUND_TRIP,
+    UplinkDeadband, FREE_BLEND_PER_ROUND_TRIP, LONGEST_STALE_AGE, STALE_GAP_MARGIN,
 };
 pub use error::CoreError;
 pub use gains::ResolvedGains;
@@ -142,6 +143,8 @@ pub struct HapticCore<S: Space> {
     /// The load feedforward the device rendered last tick (`CoreConfig::load_feedforward`, VE units, after
     /// the gate and the limits): the local model is held up by as much on its next step.
     load_held: S::OpVec,
+    /// Gaps between the snapshots taken as newest: what a silence is judged against (`stale_after`).
+    snapshot_gaps: ArrivalGaps,
     /// The load feedforward asked for last tick, before the gate and the limits (`HapticCore::ramp_load`).
     load_fed: S::OpVec,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
@@ -233,6 +236,7 @@ impl<S: Space> HapticCore<S> {
             tank: EnergyTank::new(passive_update::TANK_CAPACITY_J, scales.torque),
             bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
             load_held: S::OpVec::zero(),
+            snapshot_gaps: ArrivalGaps::new(),
             load_fed: S::OpVec::zero(),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
@@ -315,6 +319,17 @@ impl<S: Space> HapticCore<S> {
         self.one_way_delay = delay;
     }
 
+    /// How old the active snapshot may grow at `now` before it is stale and the output fades:
+    /// `SafetyConfig::max_snapshot_age`, or on a link whose snapshots have lately come with longer gaps
+    /// ([`kinloop_protocol::arrival_gaps`]: a jittery path delivers in bunches) [`STALE_GAP_MARGIN`] times
+    /// the longest of them, never more than [`LONGEST_STALE_AGE`]. A silence the link has been making all
+    /// along is not a link gone: faded there, the force went out and came back every few seconds, and each
+    /// return released the stretched device-model coupling into the hand.
+    pub fn stale_after(&self, now: Duration) -> Duration {
+        let link = self.snapshot_gaps.longest(now).mul_f64(STALE_GAP_MARGIN).min(LONGEST_STALE_AGE);
+        self.config.safety.max_snapshot_age.max(link)
+    }
+
     /// The free directions' pull time constant: the configured one, never shorter than
     /// `CoreConfig::free_blend_round_trips` round trips.
     pub fn free_blend_time_constant(&self) -> Duration {
@@ -357,6 +372,7 @@ impl<S: Space> HapticCore<S> {
         std::mem::swap(&mut self.incoming, &mut self.pending);
         self.pending_fresh = true;
         self.newest_seq = Some(snapshot.seq);
+        self.snapshot_gaps.arrived(now);
         self.stats.snapshots_accepted += 1;
         Ok(true)
     }

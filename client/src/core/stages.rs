@@ -120,7 +120,7 @@ impl<S: Space> HapticCore<S> {
         let device_pose = self.index.apply(&device.pose);
         let device_twist = self.scales.twist_to_ve::<S>(&device.twist);
         let age = now.saturating_sub(self.active.received_at);
-        let stale = age > self.config.safety.max_snapshot_age;
+        let stale = age > self.stale_after(now);
         if hand_off {
             flags |= uplink_flags::HAND_OFF;
             self.stats.hand_off_ticks += 1;

@@ -188,6 +188,47 @@ fn stale_snapshots_fade_the_force_to_zero_within_the_fade_time_and_resume_smooth
     assert!(session.core(0).expect("joined").stats().stale_ticks > 0);
 }
 
+/// A link that goes quiet now and then (a jittery path delivers in bunches) is judged by its own gaps: the
+/// first 180 ms silence fades the force, the next ones do not, as the staleness limit has grown to the
+/// margin over the longest gap; a silence past `LONGEST_STALE_AGE` still fades to zero, however long the
+/// link's gaps have been.
+#[test]
+fn a_link_that_goes_quiet_now_and_then_is_judged_by_its_own_gaps_and_a_long_silence_still_fades() {
+    use kinloop_client::core::{LONGEST_STALE_AGE, STALE_GAP_MARGIN};
+    let mut session = paper_session(|c| c.safety.ramp_in = Duration::from_millis(200));
+    let mut probe = Probe::default();
+    run(&mut session, &mut probe, 600);
+    let (max_age, fade) = {
+        let core = session.core(0).expect("joined");
+        (core.config().safety.max_snapshot_age, core.config().safety.fade_out)
+    };
+    assert_eq!(session.core(0).expect("joined").stale_after(session.now()), max_age, "a steady link");
+    let quiet = Duration::from_millis(180);
+    assert!(quiet > max_age && quiet.mul_f64(STALE_GAP_MARGIN) < LONGEST_STALE_AGE);
+    let fading = |samples: &[TickSample<Planar>]| samples.iter().any(|s| s.report.flags & uplink_flags::FADING != 0);
+    for round in 0..3 {
+        probe.link_up = false;
+        let silence = run(&mut session, &mut probe, quiet.as_millis() as u64);
+        probe.link_up = true;
+        let after = run(&mut session, &mut probe, 500);
+        assert_eq!(fading(&silence), round == 0, "round {round}: the first silence fades, later ones do not");
+        assert_eq!(after.last().expect("ran").report.gain, 1.0, "round {round}: fully on again");
+        let limit = session.core(0).expect("joined").stale_after(session.now());
+        assert!(limit >= quiet.mul_f64(STALE_GAP_MARGIN), "round {round}: the limit is {limit:?}");
+    }
+    let stale_ticks = session.core(0).expect("joined").stats().stale_ticks;
+    // A silence that does not end: zero force once the longest stale age and the fade have passed.
+    probe.link_up = false;
+    let cut_at = session.now() + Duration::from_millis(1);
+    let outage = run(&mut session, &mut probe, 800);
+    let zero_from = cut_at + LONGEST_STALE_AGE + fade + Duration::from_millis(2);
+    assert!(outage.iter().any(|s| s.report.time >= zero_from), "the outage outlasts the limit and the fade");
+    for s in outage.iter().filter(|s| s.report.time >= zero_from) {
+        assert_eq!(s.command, Vector3::zeros(), "force at {:?} after the cut", s.report.time - cut_at);
+    }
+    assert!(session.core(0).expect("joined").stats().stale_ticks > stale_ticks);
+}
+
 #[test]
 fn the_perceptual_deadband_saves_uplinks_and_respects_the_longest_gap() {
     let deadband = UplinkDeadband::default();
