@@ -4,9 +4,8 @@
 //!
 //! **Why.** A path with jitter delivers in bunches: it keeps its order (a packet never overtakes one sent
 //! before it), so a packet held up holds up every one behind it, and the receiver sees a silence of a few
-//! standard deviations of the delay, then the whole bunch at once. Under 1 s one way with a tenth of it as
-//! jitter, snapshots sent every few milliseconds arrive with gaps of 150-200 ms every few seconds. Judged
-//! against a fixed 100 ms, each such gap faded the force out, and the local model restarted on a VE a round
+//! standard deviations of the delay, then the whole bunch at once. Under a long delay with jitter, those
+//! silences outlast a fixed staleness limit of 100 ms; judged against it, each faded the force out, and the local model restarted on a VE a round
 //! trip behind: the ramp back in released the stretched device-model coupling into the hand, energy nobody put
 //! in (docs/robustness.md, "Silences of a jittery link").
 //!

@@ -143,10 +143,10 @@ pub struct HapticCore<S: Space> {
     /// The load feedforward the device rendered last tick (`CoreConfig::load_feedforward`, VE units, after
     /// the gate and the limits): the local model is held up by as much on its next step.
     load_held: S::OpVec,
-    /// Gaps between the snapshots taken as newest: what a silence is judged against (`stale_after`).
-    snapshot_gaps: ArrivalGaps,
     /// The load feedforward asked for last tick, before the gate and the limits (`HapticCore::ramp_load`).
     load_fed: S::OpVec,
+    /// Gaps between the snapshots taken as newest: what a silence is judged against (`stale_after`).
+    snapshot_gaps: ArrivalGaps,
     /// This end of the two-port: the local model's port, where the user's wrench (hand and device
     /// reaction) drives the model (`kinloop_protocol::passivity`); its books go up in every uplink.
     port: PortBooks,
@@ -236,8 +236,8 @@ impl<S: Space> HapticCore<S> {
             tank: EnergyTank::new(passive_update::TANK_CAPACITY_J, scales.torque),
             bias_tank: EnergyTank::new(bias_trust::BIAS_TANK_CAPACITY_J, scales.torque),
             load_held: S::OpVec::zero(),
-            snapshot_gaps: ArrivalGaps::new(),
             load_fed: S::OpVec::zero(),
+            snapshot_gaps: ArrivalGaps::new(),
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             port_passivity: port_passivity::PortPassivity::new(port_passivity::PORT_ALLOWANCE_J, scales.torque),
