@@ -3,9 +3,9 @@
 //! Λ̂⁻¹ and the constrained-direction projector are filtered (`terms_time_constant`); on a linkage of one
 //! degree of freedom they are carried along the OP's path to where the model is (`place_frame`), the model
 //! steps with the snapshot's b̂ turned as they are, with its own acceleration across the path (the path's
-//! curvature at its speed) in place of the VE's, and with the change of the forces at rest along the path
-//! where that change holds it toward the VE, and it is held at a swing's limits, where the OP turns
-//! back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
+//! curvature at its speed, square to its velocity: `turning_only`) in place of the VE's, and with the change
+//! of the forces at rest along the path where that change holds it toward the VE, and it is held at a swing's
+//! limits, where the OP turns back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
 //! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
 //! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
 //! allow when `CoreConfig::passive_update` is on.
@@ -32,7 +32,7 @@ impl<S: Space> HapticCore<S> {
         // The VE's OP predicted to now: where the pull aims, and what the forces at rest's change is measured
         // against (`place_frame`).
         let predicted = self.predicted_op(now);
-        let on_path = self.place_frame(&predicted);
+        let on_path = self.place_frame(&predicted, dt_s);
         if !intake.stale && !intake.hand_off {
             let (constrained, free) =
                 (fraction(self.config.blend_time_constant), fraction(self.free_blend_time_constant()));
@@ -150,7 +150,7 @@ impl<S: Space> HapticCore<S> {
     ///
     /// `predicted` is the VE's OP predicted to now. Returns where the frame was placed, or `None` when the
     /// snapshot's frame is used as it is.
-    fn place_frame(&mut self, predicted: &OpPose<S>) -> Option<PlacedFrame<S>> {
+    fn place_frame(&mut self, predicted: &OpPose<S>, dt_s: f64) -> Option<PlacedFrame<S>> {
         self.local = self.frame;
         let (pose, l, at) = (self.model.pose(), self.length_scale, &self.active.op_pose);
         let linear = (pose.position - at.position).norm();
@@ -202,10 +202,47 @@ impl<S: Space> HapticCore<S> {
         }
         // The walls are right as far as the tangent or the path is.
         self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
-        let speed = on.tangent.dot(&scale_op::<S>(&self.model.twist(), l));
+        // The model's velocity as the path measures it: on a pinned grasp's path (positions alone), its linear
+        // part. Its turning, which the pin ties to its motion, can be fast where the OP's path has a cusp and
+        // would hide the linear velocity `turning_only` keeps κ v² square to.
+        let twist = follower.on_path(&scale_op::<S>(&self.model.twist(), l));
+        let speed = on.tangent.dot(&twist);
         let across =
             project_twist::<S>(&self.local.projector, l, &scale_op::<S>(&(on.curvature * (speed * speed)), 1.0 / l));
+        let across = scale_op::<S>(&turning_only::<S>(&scale_op::<S>(&across, l), &twist, dt_s), 1.0 / l);
         Some(PlacedFrame { point: on.pose, along, twist_turn, model_rest, across })
+    }
+}
+
+/// Largest angle (rad) by which the model's own acceleration across its path may turn the model's velocity in
+/// one step ([`turning_only`]).
+pub const MAX_TURN_PER_STEP_RAD: f64 = 0.05;
+
+/// The acceleration across the path `across` as the model steps with it (`across` and the model's twist
+/// `twist` in scaled coordinates): only its part square to the twist, which turns the model's velocity and
+/// does no work on it, and of that no more than turns the velocity by [`MAX_TURN_PER_STEP_RAD`] in a step of
+/// `dt_s`.
+///
+/// `κ v²` holds a point to its curve while the point moves along the curve. The frame is carried only part of
+/// the way along the path (`along`), so its walls are not square to the tangent, and the model does not move
+/// exactly along the path: `κ v²` as the walls take it then has a part along the model's velocity, which speeds
+/// the model up, and a faster model asks for more `κ v²`. Near a cusp of the OP's path, where κ grows without
+/// bound (the linkage's OP slows to a stop there, the model following the hand does not), that loop runs the
+/// model off to non-finite speeds within tens of ticks. Square to the velocity, an explicit step still lengthens
+/// it by a factor `√(1 + (κ v dt)²)`: a path that turns further than a few hundredths of a radian within one
+/// step's travel is a corner at the model's rate, and the model turns no faster than that.
+pub(crate) fn turning_only<S: Space>(across: &S::OpVec, twist: &S::OpVec, dt_s: f64) -> S::OpVec {
+    let speed = twist.norm();
+    if !(speed > 0.0) {
+        return S::OpVec::zero();
+    }
+    let heading = *twist * (1.0 / speed);
+    let square = *across - heading * heading.dot(across);
+    let (size, most) = (square.norm(), MAX_TURN_PER_STEP_RAD * speed / dt_s);
+    if size > most {
+        square * (most / size)
+    } else {
+        square
     }
 }
 
@@ -228,4 +265,50 @@ struct PlacedFrame<S: Space> {
     /// line up with; with either the model is pushed off the path (a VE swinging back fast under a model at
     /// rest pulls it toward the circle's centre), and the constrained pull holds it off by that push.
     across: S::OpVec,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinloop_linkage::math::space::Planar;
+    use nalgebra::Vector3;
+
+    /// A point on a circle of radius r at speed v needs `v² / r` toward the centre, square to its velocity:
+    /// taken whole while it turns the velocity by less than the bound in a step.
+    #[test]
+    fn a_gentle_turn_square_to_the_velocity_is_taken_whole() {
+        let (r, v, dt) = (0.05, 0.2, 1e-3);
+        let across = Vector3::new(-v * v / r, 0.0, 0.0);
+        let twist = Vector3::new(0.0, v, 0.0);
+        assert!((v / r) * dt < MAX_TURN_PER_STEP_RAD);
+        assert_eq!(turning_only::<Planar>(&across, &twist, dt), across);
+    }
+
+    /// The part along the velocity, which would speed the model up or slow it down, is left out; what is kept
+    /// does no work on the model's motion.
+    #[test]
+    fn the_part_along_the_velocity_is_left_out() {
+        let twist = Vector3::new(0.3, -0.1, 0.2);
+        let across = Vector3::new(1.0, 2.0, 0.5);
+        let kept = turning_only::<Planar>(&across, &twist, 1e-3);
+        assert!(kept.dot(&twist).abs() < 1e-12 * across.norm() * twist.norm(), "power {}", kept.dot(&twist));
+        // What is left out lies along the velocity.
+        let dropped = across - kept;
+        assert!(dropped.cross(&twist).norm() < 1e-12 * dropped.norm() * twist.norm(), "{dropped:?}");
+    }
+
+    /// Near a cusp, κ v² outgrows what a step can follow: the velocity turns by the bound per step, and
+    /// a step with it lengthens the velocity by no more than `√(1 + θ²)`; a model at rest is not pushed.
+    #[test]
+    fn a_corner_turns_the_velocity_by_the_bound_per_step() {
+        let (v, dt) = (0.3, 1e-3);
+        let twist = Vector3::new(v, 0.0, 0.0);
+        let cusp = Vector3::new(0.0, 1e6, 0.0);
+        let kept = turning_only::<Planar>(&cusp, &twist, dt);
+        let stepped = twist + kept * dt;
+        let turned = (stepped.y / stepped.x).atan();
+        assert!((turned - MAX_TURN_PER_STEP_RAD.atan()).abs() < 1e-12, "turned {turned} rad");
+        assert!(stepped.norm() <= v * (1.0 + MAX_TURN_PER_STEP_RAD.powi(2)).sqrt() * (1.0 + 1e-12));
+        assert_eq!(turning_only::<Planar>(&cusp, &Vector3::zeros(), dt), Vector3::zeros());
+    }
 }
