@@ -233,7 +233,7 @@ pub const MAX_TURN_PER_STEP_RAD: f64 = 0.05;
 /// step's travel is a corner at the model's rate, and the model turns no faster than that.
 pub(crate) fn turning_only<S: Space>(across: &S::OpVec, twist: &S::OpVec, dt_s: f64) -> S::OpVec {
     let speed = twist.norm();
-    if !(speed > 0.0) {
+    if !speed.is_finite() || speed <= 0.0 {
         return S::OpVec::zero();
     }
     let heading = *twist * (1.0 / speed);
