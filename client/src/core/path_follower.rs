@@ -81,17 +81,6 @@ impl<S: Space> PathFollower<S> {
         Some((back(beyond), back(outward)))
     }
 
-    /// The part of a twist (or of any twist-like vector) the path has: the linear part alone when pinned.
-    pub(super) fn on_path(&self, twist: &S::OpVec) -> S::OpVec {
-        let mut out = *twist;
-        if self.pinned {
-            for i in <S::Point as VecOps>::LEN..S::DIM {
-                out[i] = 0.0;
-            }
-        }
-        out
-    }
-
     /// Where `pose` is looked for on the path (by position alone when pinned).
     pub(super) fn query(&self, pose: &OpPose<S>) -> OpPose<S> {
         if self.pinned {

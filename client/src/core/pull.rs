@@ -5,10 +5,10 @@
 //! steps with the snapshot's b̂ turned as they are, with its own acceleration across the path (the path's
 //! curvature at its speed, square to its velocity: `turning_only`) in place of the VE's, and with the change
 //! of the forces at rest along the path where that change holds it toward the VE, and it is held at a swing's
-//! limits, where the OP turns back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP is pulled toward the VE's
-//! OP predicted to now, fast along the constrained directions (onto the path when there is one), slowly in
-//! the free ones (`CoreConfig::free_blend_time_constant`), no faster than the device-model coupling's dampers
-//! allow when `CoreConfig::passive_update` is on.
+//! limits, where the OP turns back while the linkage goes on (`PathFollower::stop_at_limit`). The model's OP
+//! is pulled toward the VE's OP predicted to now, fast along the constrained directions (onto the path when
+//! there is one), slowly in the free ones (`CoreConfig::free_blend_time_constant`), no faster than the
+//! device-model coupling's dampers allow when `CoreConfig::passive_update` is on.
 
 use std::time::Duration;
 
@@ -203,9 +203,9 @@ impl<S: Space> HapticCore<S> {
         // The walls are right as far as the tangent or the path is.
         self.trust = 1.0 - (1.0 - self.trust) * (1.0 - along);
         // The model's velocity as the path measures it: on a pinned grasp's path (positions alone), its linear
-        // part. Its turning, which the pin ties to its motion, can be fast where the OP's path has a cusp and
-        // would hide the linear velocity `turning_only` keeps κ v² square to.
-        let twist = follower.on_path(&scale_op::<S>(&self.model.twist(), l));
+        // part (`controlled`). Its turning, which the pin ties to its motion, can be fast where the OP's path
+        // has a cusp and would hide the linear velocity `turning_only` keeps κ v² square to.
+        let twist = scale_op::<S>(&self.controlled(self.model.twist()), l);
         let speed = on.tangent.dot(&twist);
         let across =
             project_twist::<S>(&self.local.projector, l, &scale_op::<S>(&(on.curvature * (speed * speed)), 1.0 / l));
