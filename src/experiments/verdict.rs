@@ -53,6 +53,10 @@ pub const CLOSURE_LIMIT_M: f64 = 1e-3;
 pub const SATURATION_WINDOW_S: f64 = 1.0;
 /// Largest fraction of clamped ticks in any window.
 pub const SATURATION_FRACTION: f64 = 0.10;
+/// Fewest turns of the clamped command in a saturated window that make it a limit cycle (one period: out and
+/// back). Saturation with fewer is a steady push at the device's limit; the robustness experiment counts the
+/// sessions unstable by that alone apart (the criterion itself does not tell them apart).
+pub const LIMIT_CYCLE_TURNS: usize = 2;
 /// Ticks before this time (the client's output ramp-in) are not judged for saturation (s).
 pub const RAMP_IN_S: f64 = 0.25;
 /// Energy made beyond the hands' work, as a fraction of the largest work done so far.
@@ -99,6 +103,10 @@ pub struct Verdict {
     pub max_closure_error_m: f64,
     /// Largest fraction of clamped ticks in any window, over all clients.
     pub worst_saturation: f64,
+    /// How often the clamped command turned round in that worst window (its direction reversed between
+    /// consecutive clamped ticks): a limit cycle against the motors turns it every period, a hand pushing into a
+    /// wall harder than the device renders never does. Reported, not judged (see [`LIMIT_CYCLE_TURNS`]).
+    pub saturation_turns: usize,
     /// Largest `E_kin(t) − W(t)` (J at the device).
     pub energy_excess_j: f64,
     /// Largest energy that had flowed at any instant: the hands' total work or the potential energy's change,
@@ -128,7 +136,11 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     if exceeds(max_closure_error_m, CLOSURE_LIMIT_M) {
         reasons.push("divergence: closure error above 1 mm");
     }
-    let worst_saturation = rec.clients.iter().map(|samples| worst_window(samples)).fold(0.0, f64::max);
+    let (worst_saturation, saturation_turns) = rec
+        .clients
+        .iter()
+        .map(|samples| worst_window(samples))
+        .fold((0.0, 0), |worst, window| if window.0 > worst.0 { window } else { worst });
     if worst_saturation > SATURATION_FRACTION {
         reasons.push("sustained saturation");
     }
@@ -145,6 +157,7 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         device_op_heard_max_m,
         max_closure_error_m,
         worst_saturation,
+        saturation_turns,
         energy_excess_j,
         energy_flow_max_j,
         kinetic_energy_max_j,
@@ -178,35 +191,43 @@ fn exceeds(x: f64, limit: f64) -> bool {
 }
 
 /// The largest fraction of clamped ticks in any window of [`SATURATION_WINDOW_S`] starting at or after
-/// [`RAMP_IN_S`] (one window over what remains when the run is shorter).
-fn worst_window(samples: &[kinloop_harness::ClientSample]) -> f64 {
-    let judged: Vec<(f64, bool)> =
-        samples.iter().filter(|s| s.t >= RAMP_IN_S && s.gain > 0.0).map(|s| (s.t, s.clamp_scale < 1.0)).collect();
+/// [`RAMP_IN_S`] (one window over what remains when the run is shorter), and how often the clamped command
+/// turned round in the first such window.
+fn worst_window(samples: &[kinloop_harness::ClientSample]) -> (f64, usize) {
+    let judged: Vec<&kinloop_harness::ClientSample> =
+        samples.iter().filter(|s| s.t >= RAMP_IN_S && s.gain > 0.0).collect();
     if judged.is_empty() {
-        return 0.0;
+        return (0.0, 0);
     }
     let mut clamped_before = Vec::with_capacity(judged.len() + 1);
     clamped_before.push(0usize);
-    for &(_, c) in &judged {
-        clamped_before.push(clamped_before.last().copied().unwrap_or(0) + usize::from(c));
+    for s in &judged {
+        clamped_before.push(clamped_before.last().copied().unwrap_or(0) + usize::from(s.clamp_scale < 1.0));
     }
-    let t_last = judged[judged.len() - 1].0;
-    let mut worst: f64 = 0.0;
+    let t_last = judged[judged.len() - 1].t;
+    let (mut worst, mut worst_span) = (0.0f64, 0..0);
     let mut end = 0;
     for start in 0..judged.len() {
-        let t0 = judged[start].0;
+        let t0 = judged[start].t;
         if t0 + SATURATION_WINDOW_S > t_last && start > 0 {
             break;
         }
-        while end < judged.len() && judged[end].0 < t0 + SATURATION_WINDOW_S {
+        while end < judged.len() && judged[end].t < t0 + SATURATION_WINDOW_S {
             end += 1;
         }
         let n = end - start;
-        if n > 0 {
-            worst = worst.max((clamped_before[end] - clamped_before[start]) as f64 / n as f64);
+        let fraction = if n > 0 { (clamped_before[end] - clamped_before[start]) as f64 / n as f64 } else { 0.0 };
+        if fraction > worst {
+            (worst, worst_span) = (fraction, start..end);
         }
     }
-    worst
+    (worst, command_turns(&judged[worst_span]))
+}
+
+/// Reversals of the clamped command's direction between consecutive clamped ticks of `window`.
+fn command_turns(window: &[&kinloop_harness::ClientSample]) -> usize {
+    let clamped: Vec<&[f64]> = window.iter().filter(|s| s.clamp_scale < 1.0).map(|s| s.command.as_slice()).collect();
+    clamped.windows(2).filter(|pair| pair[0].iter().zip(pair[1]).map(|(a, b)| a * b).sum::<f64>() < 0.0).count()
 }
 
 /// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample, each
@@ -332,6 +353,29 @@ mod tests {
         s.clients[0].device_op_max_m = 0.06;
         s.clients[0].device_op_heard_max_m = 0.01;
         assert!(judge(&s, &r).stable);
+    }
+
+    /// A command held at the limit against a hand never turns; one that swings between the limits at 10 Hz
+    /// turns twice a period.
+    #[test]
+    fn the_worst_window_counts_how_often_the_clamped_command_turned() {
+        let held = |t: f64| vec![if t >= 1.0 { -3.0 } else { 0.0 }, 0.0, 0.0];
+        let swinging = |t: f64| vec![if (t * 20.0).floor() as i64 % 2 == 0 { 3.0 } else { -3.0 }, 0.0, 0.0];
+        let run = |command: &dyn Fn(f64) -> Vec<f64>, clamped_from: f64| {
+            let samples: Vec<ClientSample> = (0..3000)
+                .map(|k| {
+                    let t = k as f64 * 1e-3;
+                    ClientSample { command: command(t), ..sample(t, t >= clamped_from, 1.0, 0.0) }
+                })
+                .collect();
+            worst_window(&samples)
+        };
+        assert_eq!(run(&held, 1.0), (1.0, 0));
+        let (fraction, turns) = run(&swinging, 1.0);
+        assert_eq!(fraction, 1.0);
+        assert!((19..=21).contains(&turns), "{turns} turns in a second at 10 Hz");
+        assert!(turns >= LIMIT_CYCLE_TURNS);
+        assert_eq!(run(&swinging, 10.0), (0.0, 0), "never clamped");
     }
 
     #[test]
