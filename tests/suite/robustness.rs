@@ -36,6 +36,43 @@ fn a_fixed_sample_is_judged_with_its_coverage_and_seeded_failures() {
     assert!(dir.path().join("robustness/summary.json").exists());
 }
 
+/// The experiment counts apart a session unstable only by a saturation whose clamped command never turned
+/// round in its worst second (a steady push at the device's limit); a limit cycle, or a saturation beside
+/// another instability, is not one.
+#[test]
+fn a_steady_push_at_the_limit_is_told_from_a_limit_cycle_and_from_other_instability() {
+    use kinloop::experiments::robustness::{Outcome, Point};
+    use kinloop::experiments::verdict::LIMIT_CYCLE_TURNS;
+    use kinloop_client::device::presets::DevicePreset;
+    let outcome = |failures: &[&str], saturation_turns: usize| Outcome {
+        point: Point {
+            seed: 1,
+            op: "op-crank".into(),
+            device: DevicePreset::Falcon,
+            hand: HandKind::Firm,
+            delay_ms: 0,
+        },
+        failures: failures.iter().map(|f| f.to_string()).collect(),
+        stable: false,
+        ve_restores: 0,
+        clamped_fraction: 0.5,
+        device_op_rms_m: 0.04,
+        device_unheard_rms_m: 0.0,
+        closure_relative: 0.0,
+        energy_excess: 0.0,
+        saturation_turns,
+    };
+    let saturated = ["unstable: sustained saturation", "saturation: 50.0 % clamped", "tracking: RMS 40.0 mm > 5.0 mm"];
+    assert!(outcome(&saturated, 0).unstable_only_by_a_steady_push());
+    assert!(outcome(&saturated, LIMIT_CYCLE_TURNS - 1).unstable_only_by_a_steady_push());
+    assert!(!outcome(&saturated, LIMIT_CYCLE_TURNS).unstable_only_by_a_steady_push(), "a limit cycle");
+    let diverged =
+        ["unstable: divergence: OP more than 5 cm from its device as heard", "unstable: sustained saturation"];
+    assert!(!outcome(&diverged, 0).unstable_only_by_a_steady_push(), "unstable otherwise too");
+    assert!(!outcome(&["unstable: energy growth"], 0).unstable_only_by_a_steady_push());
+    assert!(!outcome(&["saturation: 50.0 % clamped"], 0).unstable_only_by_a_steady_push(), "stable");
+}
+
 /// Seed 17's crank (a crank-rocker in cm+g, its OP 41 mm from the pivot at the device) on a Falcon at 300 ms
 /// one way: the local model runs a round trip of motion ahead of the VE along the crank's circle. Per tick
 /// of the session, with the output fully in, the model stays on the circle the VE's OP is found on, within
