@@ -222,22 +222,18 @@ impl<S: Space> UserContext<S> {
 }
 
 /// The order in which a hand tours `waypoints` (displacements from its grasp): forth from the one nearest the
-/// grasp's pose around the list, then back, so it follows the reach rather than cutting across it from the grasp
+/// grasp around the list, then back, so it follows the reach rather than cutting across it from the grasp
 /// to the list's first point. Simulated hands and the fake DHD library's hand (through
 /// `kinloop experiment renderability-dhd`) tour in this order.
 pub fn tour_order<S: Space>(waypoints: &[S::OpVec]) -> Vec<S::OpVec> {
     if waypoints.is_empty() {
         return Vec::new();
     }
-    // Nearest as a pose, not as a point: where the OP's path crosses itself (a coupler curve's double point)
-    // two waypoints lie at the grasp's position with the link turned otherwise, and the one on the other pass
-    // leads the hand along a branch the linkage is not on. Angles count at the reach's size.
-    let lin = <S::Point as VecOps>::LEN;
-    let reach = waypoints.iter().map(|w| S::op_lin(w).norm()).fold(0.0, f64::max);
-    let from_grasp =
-        |w: &S::OpVec| S::op_lin(w).norm() + reach * (lin..S::DIM).map(|a| w[a] * w[a]).sum::<f64>().sqrt();
+    let distance = |a: &S::OpVec, b: &S::OpVec| S::op_lin(&(*a - *b)).norm();
     let nearest = (0..waypoints.len())
-        .min_by(|&i, &j| from_grasp(&waypoints[i]).total_cmp(&from_grasp(&waypoints[j])))
+        .min_by(|&i, &j| {
+            distance(&waypoints[i], &S::OpVec::zero()).total_cmp(&distance(&waypoints[j], &S::OpVec::zero()))
+        })
         .unwrap_or(0);
     // Forth from the nearest point around the list, then back.
     let mut order: Vec<S::OpVec> = (0..waypoints.len()).map(|k| waypoints[(nearest + k) % waypoints.len()]).collect();

@@ -227,27 +227,3 @@ fn a_tour_round_a_whole_turn_keeps_the_wrist_turning_one_way() {
     assert!(furthest > 1.5 * PI, "the handle turned only {furthest} rad forth");
     assert!(back_spin < 0.1, "the handle turned back by {back_spin} rad on the way forth");
 }
-
-/// A tour through a double point of the OP's path (a coupler curve that crosses itself at the grasp): the walk
-/// leaves the grasp with the link barely turned and comes back through the grasp's position with it turned
-/// 0.8 rad, on the other branch. The hand starts from the waypoint nearest the grasp's pose, on its own pass,
-/// though the other pass's is nearer in position: led from there, it would pull along a branch the linkage is
-/// not on.
-#[test]
-fn a_tour_through_a_double_point_starts_on_the_grasps_own_pass() {
-    use kinloop_client::user::hand::tour_order;
-    let own_pass = Vector3::new(0.004, 0.004, 0.05);
-    let other_pass = Vector3::new(0.0005, 0.0, 0.8);
-    let waypoints = vec![
-        own_pass,
-        Vector3::new(0.015, 0.012, 0.3),
-        Vector3::new(0.02, 0.0, 0.6),
-        other_pass,
-        Vector3::new(-0.01, -0.01, 0.5),
-        Vector3::new(-0.008, 0.006, 0.2),
-    ];
-    assert!(other_pass.xy().norm() < own_pass.xy().norm(), "the other pass is the nearer point");
-    let order = tour_order::<Planar>(&waypoints);
-    assert_eq!(order[0], own_pass, "{order:?}");
-    assert_eq!(order[..waypoints.len()], waypoints[..], "forth in the walk's order from there");
-}
