@@ -41,7 +41,7 @@ use kinloop_server::core::design::PREDICTED_REFUSAL;
 
 use super::common::{session, sweep, touring_plan, Options, Output, Report};
 use super::renderability::{CLAMPED_BOUND, DEVICES, RMS_DELAYED_M, RMS_PERFECT_M};
-use super::verdict::{judge, LIMIT_CYCLE_TURNS};
+use super::verdict::{judge, LIMIT_CYCLE_TURNS, SUSTAINED_SATURATION};
 use crate::charts::HeatMap;
 use crate::generate::{generate, Class, Generated};
 use crate::rounding::{num, round};
@@ -118,7 +118,7 @@ impl Outcome {
     /// renders, held at the limit, rather than a limit cycle against the motors.
     pub fn unstable_only_by_a_steady_push(&self) -> bool {
         let mut unstable = self.failures.iter().filter(|f| failure_class(f) == "unstable");
-        unstable.next().is_some_and(|f| f.ends_with("sustained saturation"))
+        unstable.next().is_some_and(|f| f.ends_with(SUSTAINED_SATURATION))
             && unstable.next().is_none()
             && self.saturation_turns < LIMIT_CYCLE_TURNS
     }

@@ -53,6 +53,8 @@ pub const CLOSURE_LIMIT_M: f64 = 1e-3;
 pub const SATURATION_WINDOW_S: f64 = 1.0;
 /// Largest fraction of clamped ticks in any window.
 pub const SATURATION_FRACTION: f64 = 0.10;
+/// The reason the saturation test gives (experiments that count it apart match it by this name).
+pub const SUSTAINED_SATURATION: &str = "sustained saturation";
 /// Fewest turns of the clamped command in a saturated window that make it a limit cycle (one period: out and
 /// back). Saturation with fewer is a steady push at the device's limit; the robustness experiment counts the
 /// sessions unstable by that alone apart (the criterion itself does not tell them apart).
@@ -142,7 +144,7 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         .map(|samples| worst_window(samples))
         .fold((0.0, 0), |worst, window| if window.0 > worst.0 { window } else { worst });
     if worst_saturation > SATURATION_FRACTION {
-        reasons.push("sustained saturation");
+        reasons.push(SUSTAINED_SATURATION);
     }
     let (excess, flow, kinetic) = energy_balance(rec);
     let (energy_excess_j, energy_flow_max_j, kinetic_energy_max_j) =
