@@ -253,6 +253,11 @@ pub struct CoreConfig {
     /// [`PORT_ALLOWANCE_J`](super::port_passivity::PORT_ALLOWANCE_J)), the local model gives up its kinetic
     /// energy rather than give it to the hand. Only while the user holds the linkage alone.
     pub port_passivity: bool,
+    /// Check the two-port at the device's own port (`device_port`): while the motors have given the device more
+    /// than the hand put in there and the linkage gave the VE's coupling, net (beyond
+    /// [`DEVICE_PORT_ALLOWANCE_J`](super::device_port::DEVICE_PORT_ALLOWANCE_J)), the device is damped. Only
+    /// while the user holds the linkage alone.
+    pub device_port_passivity: bool,
     /// On a device without a force sensor, render the load b̂ carries in the free directions as a feedforward
     /// pair (`HapticCore::controllers`): the device is commanded `Λ̂ b̂` and the local model held up by as
     /// much, so the position channels carry no static load and the model stays on the device. Only while the
@@ -313,6 +318,7 @@ impl CoreConfig {
             free_blend_round_trips: FREE_BLEND_PER_ROUND_TRIP,
             passive_update: true,
             port_passivity: true,
+            device_port_passivity: true,
             load_feedforward: true,
             terms_time_constant: Duration::from_millis(5),
             linearization_reach: LINEARIZATION_REACH,

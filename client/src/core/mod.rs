@@ -16,7 +16,8 @@
 //!    plus the position channels' reaction, taken at the end of the step (`channel_reaction`);
 //! 4. the controllers, with `e = x_d ⊖ x_m`: joint constraint (stiffness or impedance mode), impedance with
 //!    Λ̂⁻¹ in the free directions, position channels, contact force channel;
-//! 5. safety: non-finite check, output gate (ramp in, fade out on stale snapshots), device limits;
+//! 5. safety: non-finite check, output gate (ramp in, fade out on stale snapshots), the device port's passivity
+//!    damper (`device_port`), device limits;
 //! 6. the uplink (every tick, or through the perceptual deadband).
 //!
 //! **What drives the local model.** The hand wrench F_h (only when a sensor measures it: without one, feeding
@@ -41,6 +42,7 @@ mod bias_trust;
 mod channel_reaction;
 
 mod deadband;
+pub mod device_port;
 mod error;
 mod gains;
 mod index;
@@ -153,6 +155,8 @@ pub struct HapticCore<S: Space> {
     /// The VE coupling's books, as the snapshots report them (checked).
     server_energy: EnergyReports,
     port_passivity: port_passivity::PortPassivity,
+    /// The device's port: the motors' work on the device, checked against the VE's books (`device_port`).
+    device_port: device_port::DevicePort,
     uplink: Uplink,
     /// Trigonometric anchors for the three pose streams converted every tick or snapshot.
     pose_memos: PoseMemos<S>,
@@ -241,6 +245,7 @@ impl<S: Space> HapticCore<S> {
             port: PortBooks::default(),
             server_energy: EnergyReports::default(),
             port_passivity: port_passivity::PortPassivity::new(port_passivity::PORT_ALLOWANCE_J, scales.torque),
+            device_port: device_port::DevicePort::new(device_port::DEVICE_PORT_ALLOWANCE_J),
             uplink,
             pose_memos: PoseMemos::default(),
             stats: CoreStats::default(),

@@ -432,6 +432,9 @@ impl<S: Space> HapticCore<S> {
         intake: &Intake<S>,
         asked: &Requests<S>,
     ) -> Commanded<S> {
+        // The command the device held since the last tick, on the twist it moved at.
+        let held = self.scales.wrench_to_device::<S>(&self.last_command);
+        self.device_port.book::<S>(&held, device_twist, dt_s);
         let mut command = S::OpVec::zero();
         let mut clamp_scale = 1.0;
         let mut flags = 0;
@@ -443,6 +446,11 @@ impl<S: Space> HapticCore<S> {
         } else {
             gain = self.gate.update(dt_s, !intake.stale && !intake.hand_off);
             let mut on_device = self.scales.wrench_to_device::<S>(&(asked.requested * gain));
+            if self.config.device_port_passivity && !self.active.shared {
+                let remote = &self.server_energy.accepted;
+                on_device +=
+                    self.device_port.damping::<S>(remote, self.scales.torque, &self.config.device, device_twist, dt_s);
+            }
             if intake.hand_off {
                 // A released handle is braked, not left to coast (as a dead-man switch engages a device's
                 // brakes): a damper is passive, and it comes in as the rendering fades.
