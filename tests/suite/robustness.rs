@@ -433,6 +433,19 @@ fn seed_8s_coupler_falling_under_its_load_against_a_firm_hand_makes_no_energy() 
     assert_eq!(unheld.reasons, ["energy growth"], "unchecked: {unheld:?}");
 }
 
+/// Seed 109's second coupler (a five-bar) on the paper's device with no delay, firm hand, 5 s. Two seconds in,
+/// the coupler spins the handle at 1 rad/s while the device's port is a few millijoules in deficit; the
+/// damper the check adds (`device_port`), up to the device's 0.5 N m s/rad in θ, came on top of a command
+/// already at 0.12 of the 0.2 N m the device renders, and clipped it: 8 % of the ticks clamped, more than a
+/// tenth in the worst second (sustained saturation). Taking only the headroom the command leaves, the damper
+/// never clamps it.
+#[test]
+fn seed_109s_spinning_coupler_is_damped_within_the_devices_torque() {
+    let outcome = session_with(109, "op-coupler-2", "sim:paper", HandKind::Firm, 0, 5.0);
+    assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+    assert_eq!(outcome.clamped_fraction, 0.0);
+}
+
 /// The verdict on the robustness matrix's session of seed `seed`'s OP `op` on `device`, `hand`, `delay_ms` one
 /// way, over `seconds`, with `edit` applied to the client's core after the matrix's own settings.
 fn judged_with(

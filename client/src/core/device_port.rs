@@ -28,8 +28,9 @@
 //! **A user alone.** As `port_passivity`: with others on the linkage, the VE's books also carry what the
 //! other hands did through it, which this end's books never see.
 
-use kinloop_linkage::math::space::{Space, VecOps};
+use kinloop_linkage::math::space::{PartScales, Space, VecOps};
 use kinloop_protocol::passivity::{PortBooks, MAX_AXES};
+use kinloop_protocol::wrench_limits::WrenchLimits;
 
 use crate::device::DeviceSpec;
 
@@ -96,6 +97,39 @@ impl DevicePort {
     }
 }
 
+/// `damping` scaled, force and torque apart, so that it never takes the command `command` (device units) past
+/// `limits` where the command was within them, nor further past where it was not: the damper uses the
+/// headroom the command leaves. A damper that clipped the command would have the device's limit bind on the
+/// controllers' wrench too, and a hand held at the limit, not a passive one.
+pub fn within_headroom<S: Space>(command: &S::OpVec, damping: &S::OpVec, limits: &WrenchLimits) -> S::OpVec {
+    let share = |a: S::OpVec, d: S::OpVec, peak: f64| {
+        // The largest λ in [0, 1] with |a + λ d| ≤ max(peak, |a|), a and d one part of the wrenches.
+        let (dd, ad, aa) = (d.dot(&d), a.dot(&d), a.dot(&a));
+        if !(dd > 0.0) {
+            return 1.0;
+        }
+        // A hair under the peak, below where the limits clip (`limit_wrench_parts`).
+        let reach = (peak * (1.0 - 1e-9)).max(aa.sqrt());
+        let root = (ad * ad - dd * (aa - reach * reach)).max(0.0).sqrt();
+        ((root - ad) / dd).clamp(0.0, 1.0)
+    };
+    let linear = <S::Point as VecOps>::LEN;
+    let part = |w: &S::OpVec, angular: bool| {
+        let mut out = S::OpVec::zero();
+        for i in 0..S::DIM {
+            if (i >= linear) == angular {
+                out[i] = w[i];
+            }
+        }
+        out
+    };
+    let scales = PartScales {
+        force: share(part(command, false), part(damping, false), limits.max_force_n),
+        torque: share(part(command, true), part(damping, true), limits.max_torque_nm),
+    };
+    scales.apply::<S>(damping)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -147,5 +181,29 @@ mod tests {
         assert!((w.y + device.max_damping * twist.y).abs() < 1e-12, "{w:?}");
         // A still device gives nothing back and is not pushed.
         assert_eq!(port.damping::<Planar>(&remote, 1.0, &device, &Vector3::zeros(), dt), Vector3::zeros());
+    }
+
+    /// The damper takes the headroom the command leaves, force and torque apart: never past a limit the
+    /// command was within, never further past one it was over; within the headroom it is whole.
+    #[test]
+    fn the_damper_uses_the_headroom_the_command_leaves() {
+        let limits = WrenchLimits::rated(10.0, 0.2);
+        let command = Vector3::new(6.0, 0.0, -0.1);
+        let damping = Vector3::new(2.0, 1.0, 0.05);
+        assert_eq!(within_headroom::<Planar>(&command, &damping, &limits), damping, "within the headroom");
+        let strong = Vector3::new(8.0, 0.0, -0.3);
+        let taken = within_headroom::<Planar>(&command, &strong, &limits);
+        let total = command + taken;
+        assert!((total.x - 10.0).abs() < 1e-6 && total.x < 10.0, "{total:?}");
+        assert!((total.z + 0.2).abs() < 1e-6 && total.z > -0.2, "{total:?}");
+        // Both parts keep the damper's direction.
+        assert!(taken.x > 0.0 && taken.z < 0.0 && taken.y == 0.0);
+        // Over the force limit already: a damper pushing further out is dropped, one pulling back is whole.
+        let over = Vector3::new(12.0, 0.0, 0.0);
+        assert_eq!(within_headroom::<Planar>(&over, &Vector3::new(1.0, 0.0, 0.0), &limits).x, 0.0);
+        assert_eq!(within_headroom::<Planar>(&over, &Vector3::new(-1.0, 0.0, 0.0), &limits).x, -1.0);
+        // Nothing the device cannot answer leaks past a limit, whatever the damper asks.
+        let (_, scales) = kinloop_protocol::wrench_limits::limit_wrench_parts::<Planar>(&total, &limits);
+        assert!(!scales.clipped(), "{scales:?}");
     }
 }

@@ -448,8 +448,9 @@ impl<S: Space> HapticCore<S> {
             let mut on_device = self.scales.wrench_to_device::<S>(&(asked.requested * gain));
             if self.config.device_port_passivity && !self.active.shared {
                 let remote = &self.server_energy.accepted;
-                on_device +=
+                let damping =
                     self.device_port.damping::<S>(remote, self.scales.torque, &self.config.device, device_twist, dt_s);
+                on_device += super::device_port::within_headroom::<S>(&on_device, &damping, &self.limits);
             }
             if intake.hand_off {
                 // A released handle is braked, not left to coast (as a dead-man switch engages a device's
