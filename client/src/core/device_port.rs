@@ -78,14 +78,14 @@ impl DevicePort {
         dt_s: f64,
     ) -> S::OpVec {
         let deficit = -self.account(remote, device_per_ve);
-        if !(deficit > 0.0) || !(dt_s > 0.0) {
+        if deficit.is_nan() || deficit <= 0.0 || dt_s.is_nan() || dt_s <= 0.0 {
             return S::OpVec::zero();
         }
         let lin = <S::Point as VecOps>::LEN;
         let most = |a: usize| if a < lin { device.max_damping } else { device.max_angular_damping };
         // The energy the device's full damping would take out this tick.
         let full: f64 = (0..S::DIM).map(|a| most(a) * twist[a] * twist[a]).sum::<f64>() * dt_s;
-        if !(full > 0.0 && full.is_finite()) {
+        if !full.is_finite() || full <= 0.0 {
             return S::OpVec::zero();
         }
         let share = (deficit / full).min(1.0);
@@ -105,7 +105,7 @@ pub fn within_headroom<S: Space>(command: &S::OpVec, damping: &S::OpVec, limits:
     let share = |a: S::OpVec, d: S::OpVec, peak: f64| {
         // The largest λ in [0, 1] with |a + λ d| ≤ max(peak, |a|), a and d one part of the wrenches.
         let (dd, ad, aa) = (d.dot(&d), a.dot(&d), a.dot(&a));
-        if !(dd > 0.0) {
+        if dd.is_nan() || dd <= 0.0 {
             return 1.0;
         }
         // A hair under the peak, below where the limits clip (`limit_wrench_parts`).
