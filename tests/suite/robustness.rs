@@ -2,9 +2,9 @@
 //! 0 and 300 ms, 10 s sessions): every session of the matrix runs and is judged, its summary says what the
 //! sample covered, and every failure names its seed and a reason of the stated kinds.
 
-use kinloop::experiments::robustness::{points, run_seeds};
+use kinloop::experiments::robustness::{points, run_seeds, Point};
 use kinloop::experiments::Options;
-use kinloop::generate::generate;
+use kinloop::generate::{generate, Generated};
 use kinloop_client::user::HandKind;
 
 #[test]
@@ -402,7 +402,7 @@ fn seed_124s_six_bar_crank_jammed_at_a_dead_point_is_toured_by_feel() {
 #[test]
 fn seed_182s_crank_wound_and_let_go_under_delay_makes_no_energy() {
     let verdict = |on: bool| {
-        judged_with(182, "op-crank", "sim:falcon", HandKind::Soft, 300, 10.0, move |c| {
+        judged_with(matrix_point(182, "op-crank", "sim:falcon", HandKind::Soft, 300), 10.0, move |c| {
             c.port_passivity = on;
             // The device's own check (`device_port`) would hold this session too: it is the model's that is
             // tested here.
@@ -425,7 +425,9 @@ fn seed_182s_crank_wound_and_let_go_under_delay_makes_no_energy() {
 #[test]
 fn seed_8s_coupler_falling_under_its_load_against_a_firm_hand_makes_no_energy() {
     let verdict = |on: bool| {
-        judged_with(8, "op-coupler", "sim:falcon", HandKind::Firm, 0, 22.0, move |c| c.device_port_passivity = on)
+        judged_with(matrix_point(8, "op-coupler", "sim:falcon", HandKind::Firm, 0), 22.0, move |c| {
+            c.device_port_passivity = on
+        })
     };
     let held = verdict(true);
     assert!(held.stable, "{:?}, excess {} J", held.reasons, held.energy_excess_j);
@@ -446,23 +448,17 @@ fn seed_109s_spinning_coupler_is_damped_within_the_devices_torque() {
     assert_eq!(outcome.clamped_fraction, 0.0);
 }
 
-/// The verdict on the robustness matrix's session of seed `seed`'s OP `op` on `device`, `hand`, `delay_ms` one
-/// way, over `seconds`, with `edit` applied to the client's core after the matrix's own settings.
+/// The verdict on the robustness matrix's session `at` ([`matrix_point`]) over `seconds`, with `edit` applied to
+/// the client's core after the matrix's own settings.
 fn judged_with(
-    seed: u64,
-    op: &str,
-    device: &str,
-    hand: HandKind,
-    delay_ms: u64,
+    at: (Generated, Point),
     seconds: f64,
     edit: impl Fn(&mut kinloop_client::core::config::CoreConfig) + Send + Sync + 'static,
 ) -> kinloop::experiments::verdict::Verdict {
     use kinloop::experiments::robustness::session_plan;
     use kinloop_harness::CoreEdit;
-    let linkage = generate(seed, None);
-    let all = points(std::slice::from_ref(&linkage), &[hand], &[delay_ms]);
-    let point = all.iter().find(|p| p.op == op && p.device.name() == device).expect("the session's point");
-    let mut plan = session_plan(&linkage, point, seconds);
+    let (linkage, point) = at;
+    let mut plan = session_plan(&linkage, &point, seconds);
     let before = plan.clients[0].configure.clone();
     plan.clients[0].configure = Some(CoreEdit::new(move |c| {
         if let Some(matrix) = &before {
@@ -606,13 +602,20 @@ fn session_with(
     delay_ms: u64,
     seconds: f64,
 ) -> kinloop::experiments::robustness::Outcome {
+    let (linkage, point) = matrix_point(seed, op, device, hand, delay_ms);
+    kinloop::experiments::robustness::evaluate(&linkage, &point, seconds)
+}
+
+/// Generated seed `seed`'s linkage and the robustness matrix's point of its OP `op` on `device`, `hand`,
+/// `delay_ms` one way.
+fn matrix_point(seed: u64, op: &str, device: &str, hand: HandKind, delay_ms: u64) -> (Generated, Point) {
     let linkage = generate(seed, None);
     let all = points(std::slice::from_ref(&linkage), &[hand], &[delay_ms]);
     let point = all
-        .iter()
+        .into_iter()
         .find(|p| p.op == op && p.device.name() == device)
         .unwrap_or_else(|| panic!("seed {seed}: no {op} on {device}"));
-    kinloop::experiments::robustness::evaluate(&linkage, point, seconds)
+    (linkage, point)
 }
 
 /// The serial arm's tip on the paper's device at 50 ms with a firm hand (which pushes on along its whole tour;
