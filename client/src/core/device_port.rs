@@ -32,6 +32,7 @@ use kinloop_linkage::math::space::{PartScales, Space, VecOps};
 use kinloop_protocol::passivity::{PortBooks, MAX_AXES};
 use kinloop_protocol::wrench_limits::WrenchLimits;
 
+use super::safety::full_damping;
 use crate::device::DeviceSpec;
 
 /// Energy the client may give the device beyond what the hand and the linkage gave the client, before the
@@ -81,19 +82,13 @@ impl DevicePort {
         if deficit.is_nan() || deficit <= 0.0 || dt_s.is_nan() || dt_s <= 0.0 {
             return S::OpVec::zero();
         }
-        let lin = <S::Point as VecOps>::LEN;
-        let most = |a: usize| if a < lin { device.max_damping } else { device.max_angular_damping };
+        let most = full_damping::<S>(device, twist);
         // The energy the device's full damping would take out this tick.
-        let full: f64 = (0..S::DIM).map(|a| most(a) * twist[a] * twist[a]).sum::<f64>() * dt_s;
+        let full = -most.dot(twist) * dt_s;
         if !full.is_finite() || full <= 0.0 {
             return S::OpVec::zero();
         }
-        let share = (deficit / full).min(1.0);
-        let mut w = S::OpVec::zero();
-        for a in 0..S::DIM {
-            w[a] = -share * most(a) * twist[a];
-        }
-        w
+        most * (deficit / full).min(1.0)
     }
 }
 

@@ -99,11 +99,16 @@ pub fn usable_model_state<S: Space>(pose: &OpPose<S>, twist: &S::OpVec) -> bool 
 /// The damper that holds a released handle: half the device's highest stable damping on each axis (linear and
 /// angular), against the handle's twist, in device units.
 pub fn brake<S: Space>(device: &DeviceSpec, twist: &S::OpVec) -> S::OpVec {
+    full_damping::<S>(device, twist) * 0.5
+}
+
+/// The device's highest stable damping on each axis (linear and angular) against `twist`, in device units.
+pub fn full_damping<S: Space>(device: &DeviceSpec, twist: &S::OpVec) -> S::OpVec {
     let lin = <S::Point as VecOps>::LEN;
     let mut w = S::OpVec::zero();
     for a in 0..S::DIM {
         let b = if a < lin { device.max_damping } else { device.max_angular_damping };
-        w[a] = -0.5 * b * twist[a];
+        w[a] = -b * twist[a];
     }
     w
 }
