@@ -448,6 +448,17 @@ fn seed_109s_spinning_coupler_is_damped_within_the_devices_torque() {
     assert_eq!(outcome.clamped_fraction, 0.0);
 }
 
+/// Seed 105's rocker (a Stephenson six-bar in m+g) on the paper's device with no delay, poking hand, 3 s. At
+/// 1.5 s a jab meets the linkage near a jam, and one VE step took its kinetic energy from 8·10⁴ to 10⁶ scene
+/// units with the forces' work 1.6·10⁴, the loop closed to 2·10⁻⁹. The step's energy account took it out a tick
+/// later, at the next step's open, by which time the snapshot and the couplings had passed it on (energy
+/// growth, 21 mJ at the device). Settled at the step's end (`EnergyGuard::settle`), the session renders.
+#[test]
+fn seed_105s_rocker_poked_near_its_jam_hands_on_no_energy_its_step_made() {
+    let outcome = session_with(105, "op-rocker", "sim:paper", HandKind::Poke, 0, 3.0);
+    assert!(outcome.failures.is_empty(), "{:?}, excess {} J", outcome.failures, outcome.energy_excess);
+}
+
 /// The verdict on the robustness matrix's session `at` ([`matrix_point`]) over `seconds`, with `edit` applied to
 /// the client's core after the matrix's own settings.
 fn judged_with(

@@ -12,7 +12,8 @@
 //! velocity that moved q. What is left over is energy the step (or the projection) made or lost. It is
 //! summed in a reservoir, as Hannaford and Ryu's passivity observer sums a port's energy; when the sum is
 //! positive, the kinetic energy is reduced by it at the next step's start by scaling q̇ (a uniform scale keeps
-//! `W q̇ = 0`), which empties the reservoir.
+//! `W q̇ = 0`), which empties the reservoir. A caller that publishes the state between steps (the VE) settles
+//! each step at its end instead ([`EnergyGuard::settle`]), so no one reads a state holding energy a step made.
 //!
 //! **Credit.** Energy the step lost (the projection's and the scheme's own dissipation) is credited, so
 //! symplectic Euler's bounded oscillation of E is not cut at each peak (which would damp every motion), but
@@ -43,7 +44,7 @@ pub struct EnergyGuard {
     work: f64,
     /// Energy taken out of the linkage since the start, in the scene's units.
     pub removed: f64,
-    /// Steps whose start had energy taken out.
+    /// Steps after which energy was taken out (at the next open or at `settle`).
     pub activations: u64,
 }
 
@@ -90,6 +91,22 @@ impl EnergyGuard {
         scaled
     }
 
+    /// At a step's end, with the kinematics of its end state `(q, q̇)` in `data`: books the step at once, as
+    /// the next step's open would, and takes out of `q̇` what the step made, so that no one reads a state
+    /// holding energy the step made (the next open then finds nothing to book). True when `q̇` was changed.
+    pub fn settle<S: Space>(
+        &mut self,
+        model: &Model<S>,
+        data: &Data<S>,
+        q: &DVector<f64>,
+        qd: &mut DVector<f64>,
+    ) -> bool {
+        let scaled = self.open_step(model, data, q, qd);
+        // The step's work is booked; the next open starts from this state with nothing done since.
+        self.work = 0.0;
+        scaled
+    }
+
     /// After the step's solve and update: the work `h τ_nc · q̇⁺` of the forces the step applied, with `q̇⁺` the
     /// velocity that moved q.
     pub fn close_step<S: Space>(&mut self, model: &Model<S>, data: &Data<S>, dt: f64, qd_moved: &DVector<f64>) {
@@ -104,5 +121,51 @@ impl EnergyGuard {
             }
         }
         self.work = dt * power;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algorithms::integrator::{step_guarded, StepConfig};
+    use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+    use crate::math::space::Planar;
+    use crate::testing::{paper_testbed, random_state};
+
+    /// Energy a step made is out of the velocity as soon as the step settles, and the next step's open finds
+    /// nothing more to book: a step whose end velocity is doubled (three times its kinetic energy made, no
+    /// force working) is brought back to the energy it had plus the credit the account held (what the first
+    /// step's projection lost), and stepping on opens with nothing to take out.
+    #[test]
+    fn a_settled_step_hands_on_none_of_the_energy_it_made() {
+        let model = paper_testbed();
+        let (mut q, mut qd) = random_state(&model, 3);
+        let mut data = Data::new(&model);
+        let mut guard = EnergyGuard::default();
+        let config = StepConfig::euler(1e-3);
+        let energy = |data: &mut Data<Planar>, q: &DVector<f64>, qd: &DVector<f64>| {
+            forward_kinematics(&model, data, q);
+            forward_velocity(&model, data, qd);
+            kinetic_energy(&model, data) + field_energy(&model, data, q)
+        };
+        step_guarded(&model, &mut data, &mut q, &mut qd, &mut (), &config, Some(&mut guard)).expect("steps");
+        let settled = energy(&mut data, &q, &qd);
+        assert!(!guard.settle(&model, &data, &q, &mut qd), "a plain step made energy: {}", guard.reservoir());
+        let credit = -guard.reservoir();
+        assert!(credit >= 0.0);
+        // The next step makes three times the kinetic energy, with no force working.
+        let kinetic = kinetic_energy(&model, &data);
+        qd *= 2.0;
+        energy(&mut data, &q, &qd);
+        assert!(guard.settle(&model, &data, &q, &mut qd), "the doubled velocity is scaled back");
+        let after = energy(&mut data, &q, &qd);
+        assert!(credit < 3.0 * kinetic, "the credit {credit} covers what the step made");
+        let tolerance = 1e-9 * settled.abs().max(kinetic);
+        assert!((after - (settled + credit)).abs() <= tolerance, "{after} against {settled} + {credit}");
+        assert!((guard.removed - (3.0 * kinetic - credit)).abs() <= tolerance, "removed {}", guard.removed);
+        // The next step opens at the settled state: nothing left to book or take out.
+        let removed = guard.removed;
+        step_guarded(&model, &mut data, &mut q, &mut qd, &mut (), &config, Some(&mut guard)).expect("steps");
+        assert_eq!(guard.removed, removed);
     }
 }

@@ -171,8 +171,9 @@ pub struct VeConfig {
     /// unstable where the same join at rest renders well. Off (`kinloop-server --free-run`) the linkage moves on its own.
     pub rest_unheld: bool,
     /// The step's own energy account (`kinloop_linkage::algorithms::energy_guard`): what semi-implicit Euler
-    /// makes in a fast swing is taken back out of the kinetic energy. On by default: a linkage falling through
-    /// a dead centre under a user's hand otherwise swings up on the step's error. The paper's VE has none.
+    /// makes in a fast swing is taken back out of the kinetic energy, at the end of the step that made it. On by
+    /// default: a linkage falling through a dead centre under a user's hand otherwise swings up on the step's
+    /// error. The paper's VE has none.
     pub energy_guard: bool,
 }
 

@@ -33,7 +33,7 @@ pub struct VeMetrics {
     pub joins_refused: u64,
     /// Ticks in which some passivity controller scaled a PD down.
     pub passivity_activations: u64,
-    /// Steps whose start took out of the kinetic energy what earlier steps made (`VeConfig::energy_guard`).
+    /// Steps whose end took out of the kinetic energy what the step made (`VeConfig::energy_guard`).
     pub energy_guard_activations: u64,
     /// Energy those steps took out, in the scene's units (J in SI).
     pub energy_guard_removed: f64,
