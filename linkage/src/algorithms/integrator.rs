@@ -671,4 +671,43 @@ mod tests {
         });
         assert!(compared >= 5 * 6, "only {compared} cases compared");
     }
+
+    /// Energy a step made is out of the velocity as soon as the step settles, and the next step's open finds
+    /// nothing more to book: a step whose end velocity is doubled (three times its kinetic energy made, no
+    /// force working) is brought back to the energy it had plus the credit the account held (what the first
+    /// step's projection lost), and stepping on opens with nothing to take out.
+    #[test]
+    fn a_settled_step_hands_on_none_of_the_energy_it_made() {
+        use crate::algorithms::gravity::{field_energy, kinetic_energy};
+        use crate::algorithms::kinematics::{forward_kinematics, forward_velocity};
+        let model = paper_testbed();
+        let (mut q, mut qd) = random_state(&model, 3);
+        let mut data = Data::new(&model);
+        let mut guard = EnergyGuard::default();
+        let config = StepConfig::euler(1e-3);
+        let energy = |data: &mut Data<crate::math::space::Planar>, q: &DVector<f64>, qd: &DVector<f64>| {
+            forward_kinematics(&model, data, q);
+            forward_velocity(&model, data, qd);
+            kinetic_energy(&model, data) + field_energy(&model, data, q)
+        };
+        step_guarded(&model, &mut data, &mut q, &mut qd, &mut (), &config, Some(&mut guard)).expect("steps");
+        let settled = energy(&mut data, &q, &qd);
+        assert!(!guard.settle(&model, &data, &q, &mut qd), "a plain step made energy: {}", guard.reservoir());
+        let credit = -guard.reservoir();
+        assert!(credit >= 0.0);
+        // The next step makes three times the kinetic energy, with no force working.
+        let kinetic = kinetic_energy(&model, &data);
+        qd *= 2.0;
+        energy(&mut data, &q, &qd);
+        assert!(guard.settle(&model, &data, &q, &mut qd), "the doubled velocity is scaled back");
+        let after = energy(&mut data, &q, &qd);
+        assert!(credit < 3.0 * kinetic, "the credit {credit} covers what the step made");
+        let tolerance = 1e-9 * settled.abs().max(kinetic);
+        assert!((after - (settled + credit)).abs() <= tolerance, "{after} against {settled} + {credit}");
+        assert!((guard.removed - (3.0 * kinetic - credit)).abs() <= tolerance, "removed {}", guard.removed);
+        // The next step opens at the settled state: nothing left to book or take out.
+        let removed = guard.removed;
+        step_guarded(&model, &mut data, &mut q, &mut qd, &mut (), &config, Some(&mut guard)).expect("steps");
+        assert_eq!(guard.removed, removed);
+    }
 }
