@@ -134,11 +134,9 @@ impl<S: Space> VeCore<S> {
     /// and the recordings read it. The passivity books keep the velocity the step moved with: they book the
     /// couplings' work on the motion the linkage made.
     ///
-    /// **Why.** Near a jam a step can make energy that its projection hands on: traced on a Stephenson
-    /// six-bar's rocker under a poking hand with no delay, one step took the kinetic energy from 8·10⁴ to 10⁶
-    /// scene units with the forces' work 1.6·10⁴, the loop closed to 2·10⁻⁹. The account took it out at the
-    /// next step's open, a tick late, by which time the snapshot and the couplings had passed it on (energy
-    /// growth, 21 mJ at the device); settled at once, the session renders (2 mJ).
+    /// **Why.** Near a jam a step can make energy that its projection hands on. Taken out at the next step's
+    /// open, it had already reached the snapshot and the couplings, which passed it on to the client and the
+    /// hand (docs/robustness.md, "A step's energy settled where it is made").
     fn settle_energy(&mut self) {
         if !(self.config.energy_guard && self.step_config.integrator == Integrator::SemiImplicitEuler) {
             return;
