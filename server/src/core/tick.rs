@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use kinloop_linkage::algorithms::dynamics::dynamics_terms;
 use kinloop_linkage::algorithms::integrator::{Integrator, StepReport};
 
 use super::closing::close_loops;
@@ -141,8 +142,9 @@ impl<S: Space> VeCore<S> {
         if !(self.config.energy_guard && self.step_config.integrator == Integrator::SemiImplicitEuler) {
             return;
         }
-        forward_kinematics(&self.model, &mut self.data, &self.q);
-        forward_velocity(&self.model, &mut self.data, &self.qd);
+        // The end state's terms, kinematics included: the snapshots' probe and the next step find them in the
+        // workspace's memo at this state, so they are computed once a tick, here.
+        dynamics_terms(&self.model, &mut self.data, &self.q, &self.qd, &mut ());
         self.energy_guard.settle(&self.model, &self.data, &self.q, &mut self.qd);
     }
 
