@@ -8,11 +8,11 @@
 //! - **refused**: the harness could not start it (its join was refused, or the scene did not compile); a
 //!   join refused by the load rule stated in advance (`design::check_holdable`, docs/robustness.md) is
 //!   counted apart, as **refused (predicted)**;
-//! - **unstable**: the one criterion of [`verdict`] (energy growth, sustained saturation, divergence,
-//!   which includes VE restores and non-finite values); the sessions unstable only by a saturation whose
-//!   clamped command never turned round (a hand pushing harder than the device renders, held at its limit,
-//!   rather than a limit cycle: [`Outcome::unstable_only_by_a_steady_push`]) are counted apart in the answer
-//!   and `summary.json` (`unstable_only_by_a_steady_push`), and stay unstable;
+//! - **unstable**: the one criterion of [`verdict`] (energy growth, a saturation limit cycle, divergence,
+//!   which includes VE restores and non-finite values). Sessions with a window as saturated whose clamped
+//!   command never turned round (a hand pushing harder than the device renders, held at its limit:
+//!   [`Outcome::held_at_limit`]) are not unstable; they are counted in the answer and `summary.json`
+//!   (`held_at_limit`), and their clamped ticks count against the saturation bound below;
 //! - **closure**: the loops opened by more than [`CLOSURE_RELATIVE`] of the scene's length scale;
 //! - **saturation**: more than [`CLAMPED_BOUND`] of the device's ticks clamped at its limit;
 //! - **tracking**: device-OP RMS (device space) above [`RMS_PERFECT_M`] at 0 ms, [`RMS_DELAYED_M`] at
@@ -41,7 +41,7 @@ use kinloop_server::core::design::PREDICTED_REFUSAL;
 
 use super::common::{session, sweep, touring_plan, Options, Output, Report};
 use super::renderability::{CLAMPED_BOUND, DEVICES, RMS_DELAYED_M, RMS_PERFECT_M};
-use super::verdict::{judge, LIMIT_CYCLE_TURNS, SUSTAINED_SATURATION};
+use super::verdict::judge;
 use crate::charts::HeatMap;
 use crate::generate::{generate, Class, Generated};
 use crate::rounding::{num, round};
@@ -108,20 +108,11 @@ pub struct Outcome {
     pub closure_relative: f64,
     /// The energy criterion's largest excess (scene units).
     pub energy_excess: f64,
-    /// Turns of the clamped command in the session's most saturated second (`Verdict::saturation_turns`).
+    /// The most turns of the clamped command in a saturated second (`Verdict::saturation_turns`).
     pub saturation_turns: usize,
-}
-
-impl Outcome {
-    /// Unstable by sustained saturation alone, with the clamped command never turning round in its most
-    /// saturated second (fewer than [`LIMIT_CYCLE_TURNS`] turns): a hand pushing harder than the device
-    /// renders, held at the limit, rather than a limit cycle against the motors.
-    pub fn unstable_only_by_a_steady_push(&self) -> bool {
-        let mut unstable = self.failures.iter().filter(|f| failure_class(f) == "unstable");
-        unstable.next().is_some_and(|f| f.ends_with(SUSTAINED_SATURATION))
-            && unstable.next().is_none()
-            && self.saturation_turns < LIMIT_CYCLE_TURNS
-    }
+    /// A second was saturated but its clamped command never turned: a push held at the device's limit
+    /// (`Verdict::held_at_limit`), not a limit cycle.
+    pub held_at_limit: bool,
 }
 
 /// Every session for the linkages of `seeds` (each generated once, in `linkages`).
@@ -176,6 +167,7 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
         closure_relative: f64::NAN,
         energy_excess: f64::NAN,
         saturation_turns: 0,
+        held_at_limit: false,
     };
     let scale = match length_scale(g) {
         Ok(scale) => scale,
@@ -208,6 +200,7 @@ pub fn evaluate(g: &Generated, point: &Point, seconds: f64) -> Outcome {
         closure_relative,
         energy_excess: verdict.energy_excess_j,
         saturation_turns: verdict.saturation_turns,
+        held_at_limit: verdict.held_at_limit,
     }
 }
 
@@ -327,7 +320,7 @@ fn report(
         |class: &str| outcomes.iter().filter(|o| o.failures.iter().any(|f| failure_class(f) == class)).count();
     let (refused, predicted) = (refused_by("refused"), refused_by(PREDICTED_CLASS));
     let unstable = outcomes.iter().filter(|o| !o.stable).count() - refused - predicted;
-    let steady_push = outcomes.iter().filter(|o| o.unstable_only_by_a_steady_push()).count();
+    let held = outcomes.iter().filter(|o| o.held_at_limit).count();
     let failing: Vec<_> = outcomes
         .iter()
         .filter(|o| !o.failures.is_empty())
@@ -339,13 +332,13 @@ fn report(
                 "hand": o.point.hand.name(), "delay_ms": o.point.delay_ms, "failures": o.failures,
                 "clamped_fraction": round(o.clamped_fraction, 4), "device_op_rms_mm": round(o.device_op_rms_m * 1e3, 3),
                 "device_unheard_rms_mm": round(o.device_unheard_rms_m * 1e3, 3),
-                "saturation_turns": o.saturation_turns,
+                "saturation_turns": o.saturation_turns, "held_at_limit": o.held_at_limit,
             })
         })
         .collect();
     let answer = format!(
-        "{rendering} of {} sessions render on seeds {}..{} ({} unstable, {steady_push} of them only by a steady \
-         push at the device's limit; {refused} refused, {predicted} refused by the stated load rule); failures by \
+        "{rendering} of {} sessions render on seeds {}..{} ({} unstable; {held} held a push at the device's limit \
+         for a second, by itself not unstable; {refused} refused, {predicted} refused by the stated load rule); failures by \
          kind: {}",
         outcomes.len(),
         seeds.start,
@@ -368,7 +361,7 @@ fn report(
             "sessions": outcomes.len(),
             "rendering": rendering,
             "unstable": unstable,
-            "unstable_only_by_a_steady_push": steady_push,
+            "held_at_limit": held,
             "refused": refused,
             "refused_predicted": predicted,
             "failures_by_kind": classes_failed,

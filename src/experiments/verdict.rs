@@ -8,7 +8,13 @@
 //!    [`CLOSURE_LIMIT_M`] (1 mm: the loop visibly opens);
 //! 2. **sustained saturation** — in some [`SATURATION_WINDOW_S`] (1 s) window after the output ramp-in
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
-//!    had their command clamped at the device's force or torque limit (a limit cycle against the motors);
+//!    had their command clamped at the device's force or torque limit, and the clamped command turned round
+//!    (reversed its direction between clamped ticks) at least [`LIMIT_CYCLE_TURNS`] times in that window: a
+//!    limit cycle against the motors. A window as saturated whose clamped command never turns is a hand
+//!    pushing harder than the device renders, held at its limit ([`Verdict::held_at_limit`]): the device
+//!    resists the whole time and nothing swings, so it is not instability; its clamped ticks count against
+//!    rendering (the experiments' clamped-tick bound) instead. A device driven away on its own is caught by
+//!    the divergence and energy tests, whatever its command does;
 //! 3. **energy growth** — at some instant the linkage has gained more mechanical energy (kinetic, plus
 //!    the change of its potential energy since the start) than all hands together had done work on their
 //!    devices by the times the VE has heard of (each hand's work up to the client time of the newest uplink
@@ -56,8 +62,7 @@ pub const SATURATION_FRACTION: f64 = 0.10;
 /// The reason the saturation test gives (experiments that count it apart match it by this name).
 pub const SUSTAINED_SATURATION: &str = "sustained saturation";
 /// Fewest turns of the clamped command in a saturated window that make it a limit cycle (one period: out and
-/// back). Saturation with fewer is a steady push at the device's limit; the robustness experiment counts the
-/// sessions unstable by that alone apart (the criterion itself does not tell them apart).
+/// back). Saturation with fewer is a steady push held at the device's limit, not instability.
 pub const LIMIT_CYCLE_TURNS: usize = 2;
 /// Ticks before this time (the client's output ramp-in) are not judged for saturation (s).
 pub const RAMP_IN_S: f64 = 0.25;
@@ -70,7 +75,9 @@ pub const ENERGY_FLOOR_J: f64 = 0.005;
 pub const CRITERION: &str = "unstable <=> divergence (a non-finite value, a VE state restore, the VE's OP more than 5 \
 cm from its device as the VE has heard of it (at the client time of its newest uplink used), or a closure error \
 above 1 mm as seen on the device) OR sustained saturation (more than 10 % of a client's haptic \
-ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in) OR energy growth (at some instant the \
+ticks clamped at the device limit in some 1 s window after the 0.25 s ramp-in, the clamped command turning round \
+at least twice in it: a limit cycle; a window as clamped whose command never turns is a push held at the limit, \
+reported, not unstable) OR energy growth (at some instant the \
 linkage's kinetic energy plus the change of its potential energy exceeds the work all hands had done on their \
 devices up to the client times of the newest uplinks the VE used by more than half the largest energy that has flowed so far (hands' work or potential energy change, in \
 absolute value) plus 5 mJ, energies taken at the device through the mapping's scales); stable otherwise";
@@ -83,6 +90,7 @@ pub fn criterion_json() -> Value {
         "closure_limit_m": CLOSURE_LIMIT_M,
         "saturation_window_s": SATURATION_WINDOW_S,
         "saturation_fraction": SATURATION_FRACTION,
+        "limit_cycle_turns": LIMIT_CYCLE_TURNS,
         "ramp_in_s": RAMP_IN_S,
         "energy_fraction_of_work": ENERGY_FRACTION,
         "energy_floor_j": ENERGY_FLOOR_J,
@@ -105,10 +113,13 @@ pub struct Verdict {
     pub max_closure_error_m: f64,
     /// Largest fraction of clamped ticks in any window, over all clients.
     pub worst_saturation: f64,
-    /// How often the clamped command turned round in that worst window (its direction reversed between
-    /// consecutive clamped ticks): a limit cycle against the motors turns it every period, a hand pushing into a
-    /// wall harder than the device renders never does. Reported, not judged (see [`LIMIT_CYCLE_TURNS`]).
+    /// The most the clamped command turned round (its direction reversed between consecutive clamped ticks) in
+    /// any window more than [`SATURATION_FRACTION`] clamped, over all clients: a limit cycle against the
+    /// motors turns it every period, a hand pushing into a wall harder than the device renders never does.
     pub saturation_turns: usize,
+    /// Some window was more than [`SATURATION_FRACTION`] clamped, but no such window turned the command
+    /// [`LIMIT_CYCLE_TURNS`] times: a push held at the device's limit. Not a reason to be unstable.
+    pub held_at_limit: bool,
     /// Largest `E_kin(t) − W(t)` (J at the device).
     pub energy_excess_j: f64,
     /// Largest energy that had flowed at any instant: the hands' total work or the potential energy's change,
@@ -138,14 +149,19 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
     if exceeds(max_closure_error_m, CLOSURE_LIMIT_M) {
         reasons.push("divergence: closure error above 1 mm");
     }
-    let (worst_saturation, saturation_turns) = rec
-        .clients
-        .iter()
-        .map(|samples| worst_window(samples))
-        .fold((0.0, 0), |worst, window| if window.0 > worst.0 { window } else { worst });
-    if worst_saturation > SATURATION_FRACTION {
+    let saturation =
+        rec.clients.iter().map(|samples| saturation_of(samples)).fold(Saturation::default(), |all, client| {
+            Saturation {
+                worst: all.worst.max(client.worst),
+                turns_when_saturated: all.turns_when_saturated.max(client.turns_when_saturated),
+            }
+        });
+    let (worst_saturation, saturation_turns) = (saturation.worst, saturation.turns_when_saturated);
+    let saturated = worst_saturation > SATURATION_FRACTION;
+    if saturated && saturation_turns >= LIMIT_CYCLE_TURNS {
         reasons.push(SUSTAINED_SATURATION);
     }
+    let held_at_limit = saturated && saturation_turns < LIMIT_CYCLE_TURNS;
     let (excess, flow, kinetic) = energy_balance(rec);
     let (energy_excess_j, energy_flow_max_j, kinetic_energy_max_j) =
         (excess * to_device.energy, flow * to_device.energy, kinetic * to_device.energy);
@@ -160,6 +176,7 @@ pub fn judge(summary: &SessionSummary, rec: &Recording) -> Verdict {
         max_closure_error_m,
         worst_saturation,
         saturation_turns,
+        held_at_limit,
         energy_excess_j,
         energy_flow_max_j,
         kinetic_energy_max_j,
@@ -192,22 +209,45 @@ fn exceeds(x: f64, limit: f64) -> bool {
     x.is_nan() || x > limit
 }
 
-/// The largest fraction of clamped ticks in any window of [`SATURATION_WINDOW_S`] starting at or after
-/// [`RAMP_IN_S`] (one window over what remains when the run is shorter), and how often the clamped command
-/// turned round in the first such window.
-fn worst_window(samples: &[kinloop_harness::ClientSample]) -> (f64, usize) {
+/// How a client's clamped ticks fell in the windows of [`SATURATION_WINDOW_S`] after [`RAMP_IN_S`].
+#[derive(Debug, Default, PartialEq)]
+struct Saturation {
+    /// The largest fraction of clamped ticks in any window (one window over what remains when the run is
+    /// shorter).
+    worst: f64,
+    /// The most turns of the clamped command in any window more than [`SATURATION_FRACTION`] clamped.
+    turns_when_saturated: usize,
+}
+
+/// Slides the window over `samples` once, with running counts of clamped ticks and of turns, so a session of
+/// any length is judged in time linear in its ticks.
+fn saturation_of(samples: &[kinloop_harness::ClientSample]) -> Saturation {
     let judged: Vec<&kinloop_harness::ClientSample> =
         samples.iter().filter(|s| s.t >= RAMP_IN_S && s.gain > 0.0).collect();
     if judged.is_empty() {
-        return (0.0, 0);
+        return Saturation::default();
     }
-    let mut clamped_before = Vec::with_capacity(judged.len() + 1);
-    clamped_before.push(0usize);
-    for s in &judged {
-        clamped_before.push(clamped_before.last().copied().unwrap_or(0) + usize::from(s.clamp_scale < 1.0));
+    let clamped = |s: &kinloop_harness::ClientSample| s.clamp_scale < 1.0;
+    // Counts before each judged tick: clamped ticks, and turns (a clamped tick whose command points against
+    // the previous clamped tick's).
+    let (mut clamped_before, mut turns_before) = (vec![0usize; judged.len() + 1], vec![0usize; judged.len() + 1]);
+    // The first clamped tick at or after each judged tick (`judged.len()` when none).
+    let mut next_clamped = vec![judged.len(); judged.len() + 1];
+    let mut previous: Option<&[f64]> = None;
+    for (k, s) in judged.iter().enumerate() {
+        let turned =
+            clamped(s) && previous.is_some_and(|p| p.iter().zip(&s.command).map(|(a, b)| a * b).sum::<f64>() < 0.0);
+        if clamped(s) {
+            previous = Some(&s.command);
+        }
+        clamped_before[k + 1] = clamped_before[k] + usize::from(clamped(s));
+        turns_before[k + 1] = turns_before[k] + usize::from(turned);
+    }
+    for k in (0..judged.len()).rev() {
+        next_clamped[k] = if clamped(judged[k]) { k } else { next_clamped[k + 1] };
     }
     let t_last = judged[judged.len() - 1].t;
-    let (mut worst, mut worst_span) = (0.0f64, 0..0);
+    let mut out = Saturation::default();
     let mut end = 0;
     for start in 0..judged.len() {
         let t0 = judged[start].t;
@@ -219,17 +259,15 @@ fn worst_window(samples: &[kinloop_harness::ClientSample]) -> (f64, usize) {
         }
         let n = end - start;
         let fraction = if n > 0 { (clamped_before[end] - clamped_before[start]) as f64 / n as f64 } else { 0.0 };
-        if fraction > worst {
-            (worst, worst_span) = (fraction, start..end);
+        out.worst = out.worst.max(fraction);
+        if fraction > SATURATION_FRACTION {
+            // Turns between clamped ticks both inside the window: those after its first clamped tick.
+            let first = next_clamped[start];
+            let turns = if first < end { turns_before[end] - turns_before[first + 1] } else { 0 };
+            out.turns_when_saturated = out.turns_when_saturated.max(turns);
         }
     }
-    (worst, command_turns(&judged[worst_span]))
-}
-
-/// Reversals of the clamped command's direction between consecutive clamped ticks of `window`.
-fn command_turns(window: &[&kinloop_harness::ClientSample]) -> usize {
-    let clamped: Vec<&[f64]> = window.iter().filter(|s| s.clamp_scale < 1.0).map(|s| s.command.as_slice()).collect();
-    clamped.windows(2).filter(|pair| pair[0].iter().zip(pair[1]).map(|(a, b)| a * b).sum::<f64>() < 0.0).count()
+    out
 }
 
 /// `(max_t E_kin(t) − W(t), max_t W(t), max_t E_kin(t))` with W summed over clients at each VE sample, each
@@ -341,10 +379,7 @@ mod tests {
     }
 
     #[test]
-    fn saturation_and_energy_growth_are_caught() {
-        let (s, r) = recording(2.5, 0.0);
-        let v = judge(&s, &r);
-        assert_eq!(v.reasons, vec!["sustained saturation"], "{v:?}");
+    fn energy_growth_and_divergence_are_caught() {
         let (s, r) = recording(10.0, 0.2);
         assert_eq!(judge(&s, &r).reasons, vec!["energy growth"]);
         let (mut s, r) = recording(10.0, 0.0);
@@ -357,27 +392,49 @@ mod tests {
         assert!(judge(&s, &r).stable);
     }
 
-    /// A command held at the limit against a hand never turns; one that swings between the limits at 10 Hz
-    /// turns twice a period.
+    /// Samples of 3 s whose command is `command(t)`, clamped where `clamped(t)`.
+    fn commanded(command: &dyn Fn(f64) -> f64, clamped: &dyn Fn(f64) -> bool) -> Recording {
+        let mut rec = Recording::new(vec!["a".into()]);
+        for k in 0..3000 {
+            let t = k as f64 * 1e-3;
+            rec.push_client(0, ClientSample { command: vec![command(t), 0.0, 0.0], ..sample(t, clamped(t), 1.0, 0.0) });
+            rec.push_ve(VeSample { t, ..VeSample::default() });
+        }
+        rec
+    }
+
+    /// A command held at the limit against a hand never turns: it is a push held at the limit, reported and
+    /// stable. One that swings between the limits at 10 Hz turns twice a period: a limit cycle, unstable. Turns
+    /// in windows clamped no more than a tenth of their ticks are not a limit cycle against the motors.
     #[test]
-    fn the_worst_window_counts_how_often_the_clamped_command_turned() {
-        let held = |t: f64| vec![if t >= 1.0 { -3.0 } else { 0.0 }, 0.0, 0.0];
-        let swinging = |t: f64| vec![if (t * 20.0).floor() as i64 % 2 == 0 { 3.0 } else { -3.0 }, 0.0, 0.0];
-        let run = |command: &dyn Fn(f64) -> Vec<f64>, clamped_from: f64| {
-            let samples: Vec<ClientSample> = (0..3000)
-                .map(|k| {
-                    let t = k as f64 * 1e-3;
-                    ClientSample { command: command(t), ..sample(t, t >= clamped_from, 1.0, 0.0) }
-                })
-                .collect();
-            worst_window(&samples)
-        };
-        assert_eq!(run(&held, 1.0), (1.0, 0));
-        let (fraction, turns) = run(&swinging, 1.0);
-        assert_eq!(fraction, 1.0);
-        assert!((19..=21).contains(&turns), "{turns} turns in a second at 10 Hz");
-        assert!(turns >= LIMIT_CYCLE_TURNS);
-        assert_eq!(run(&swinging, 10.0), (0.0, 0), "never clamped");
+    fn a_saturated_window_is_a_limit_cycle_only_when_its_clamped_command_turns() {
+        let summary = SessionSummary { clients: vec![Default::default()], ..Default::default() };
+        let held = |t: f64| if t >= 1.0 { -3.0 } else { 0.0 };
+        let swinging = |t: f64| if (t * 20.0).floor() as i64 % 2 == 0 { 3.0 } else { -3.0 };
+        let after_one_second = |t: f64| t >= 1.0;
+
+        let rec = commanded(&held, &after_one_second);
+        assert_eq!(saturation_of(&rec.clients[0]), Saturation { worst: 1.0, turns_when_saturated: 0 });
+        let v = judge(&summary, &rec);
+        assert!(v.stable && v.held_at_limit, "{v:?}");
+
+        let rec = commanded(&swinging, &after_one_second);
+        let swung = saturation_of(&rec.clients[0]);
+        assert_eq!(swung.worst, 1.0);
+        assert!((19..=21).contains(&swung.turns_when_saturated), "{swung:?}: a second at 10 Hz");
+        let v = judge(&summary, &rec);
+        assert_eq!(v.reasons, vec![SUSTAINED_SATURATION], "{v:?}");
+        assert!(!v.held_at_limit);
+
+        // Swinging, but clamped on one tick in twenty (5 %): saturated nowhere, so its turns are not counted.
+        let rec = commanded(&swinging, &|t| (t * 1e3).round() as i64 % 20 == 0);
+        let sparse = saturation_of(&rec.clients[0]);
+        assert!((sparse.worst - 0.05).abs() < 0.002, "{sparse:?}");
+        assert_eq!(sparse.turns_when_saturated, 0);
+        assert!(judge(&summary, &rec).stable);
+
+        let rec = commanded(&swinging, &|_| false);
+        assert_eq!(saturation_of(&rec.clients[0]), Saturation::default(), "never clamped");
     }
 
     #[test]
