@@ -421,10 +421,11 @@ fn tangent_only() -> kinloop_harness::CoreEdit {
 
 /// The four-bar's coupler toured whole (40 s) by a firm hand, the latency grid's session. Under delay the local
 /// model runs a round trip of motion ahead of the VE it was linearized at, and the coupler curve bends away
-/// from the tangent line there: held to that line, the walls stood across the hand's way round the curve's
-/// corner, softened by `linearization_trust` but not enough at 1 s one way (the OP pushed more than 5 cm off
-/// its device). Held to the path the welcome carries, the walls turn with the linkage's: both delays are
-/// stable with no second saturated past a tenth, at 500 ms also with the trust's reach cut to 0.3 L.
+/// from the tangent line there: held to that line, the walls stand across the hand's way round the curve's
+/// corner, softened by `linearization_trust` but not enough at 1 s one way (the device held at its limit
+/// against the hand for more than a tenth of a second's ticks, which fails rendering). Held to the path the
+/// welcome carries, the walls turn with the linkage's: both delays are stable with no second saturated past a
+/// tenth, at 500 ms also with the trust's reach cut to 0.3 L.
 #[test]
 fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_tangent() {
     use kinloop::experiments::delay_point::{measure_with, Network, Point, TARGETS};
@@ -434,7 +435,7 @@ fn a_firm_hand_touring_the_four_bar_coupler_is_held_to_its_path_not_to_a_stale_t
     let on_path = session(1000.0, None);
     assert!(on_path.stable && on_path.worst_saturation <= 0.1, "on the path at 1 s: {on_path:?}");
     let tangent = session(1000.0, Some(tangent_only()));
-    assert!(!tangent.stable, "on the tangent at 1 s: {tangent:?}");
+    assert!(tangent.worst_saturation > 0.1, "on the tangent at 1 s: {tangent:?}");
     let wider = session(500.0, Some(reach_edit(0.3)));
     assert!(wider.stable && wider.worst_saturation <= 0.1, "on the path at 500 ms, 0.3 L: {wider:?}");
 }
