@@ -26,6 +26,18 @@
 //!
 //! `σ` never rises during a handover, so the hold only ever lets go.
 //!
+//! **It holds, it does not drive.** `σ L` is a constant force: where the linkage cannot rest under it (a
+//! toggle at its dead centre buckles under the load its slider is held with) the hold pushes the linkage
+//! along and does work that no potential energy pays for, which the coupling hands to the device and the hand.
+//! So the handover books the hold's work beyond the potential energy the linkage gained since the hold began
+//! (`∫ σ L · ẋ_op dt − max(0, V − V₀)`, `V` gravity's and the springs' energy), and once that exceeds what the
+//! coupling's spring would store holding the load, `½ Σ L_a² / K_a` (the energy the handover exists to keep out
+//! of the spring), lets go of it over the round trip the user's hand needs to answer, by `dt / (dt + T)` a
+//! tick (besides the fall above): at once without delay, and under delay slowly enough that the hand, a round
+//! trip away, can take the load up as it falls rather than the spring at once; a slower release (over the
+//! fade and `ANSWER_ROUND_TRIPS` round trips) leaves a buckling linkage driven for seconds. A hold that lifts
+//! the linkage with the hand books nothing (the potential energy takes its work), nor one that resists a fall.
+//!
 //! **Who carries it (the rule).** A handover begins only when a coupling starts to fade in while nobody held
 //! the linkage (every weight zero, the linkage resting): `σ = 1`. The carrier is the active coupling furthest
 //! into its fade (the largest weight; the earliest joined on a tie). If another coupling overtakes it (the
@@ -60,21 +72,46 @@ pub struct Handover<S: Space> {
     /// How long the handover waited for its carrier's first uplink (s): the round trip as this join lived
     /// it (the welcome's way down, the first uplink's way up, and the playout's wait).
     pub waited_s: f64,
+    /// The hold's work since it began or moved (signed).
+    pub hold_work: f64,
+    /// The hold's work beyond the potential energy the linkage gained since it began or moved:
+    /// `hold_work − max(0, V − V₀)`.
+    pub unpaid_work: f64,
+    /// What [`Handover::unpaid_work`] may reach: `½ Σ L_a² / K_a` at the carrier.
+    pub work_allowed: f64,
+    /// The linkage's potential energy `V₀` when the hold began or moved.
+    pub start_potential: f64,
+    /// The hold's unpaid work has passed what it may do: it is letting go.
+    pub driving: bool,
 }
 
 impl<S: Space> Default for Handover<S> {
     fn default() -> Self {
-        Handover { share: 0.0, load: S::OpVec::zero(), carrier: None, waited_s: 0.0 }
+        Handover {
+            share: 0.0,
+            load: S::OpVec::zero(),
+            carrier: None,
+            waited_s: 0.0,
+            hold_work: 0.0,
+            unpaid_work: 0.0,
+            work_allowed: 0.0,
+            start_potential: 0.0,
+            driving: false,
+        }
     }
 }
 
 /// What one tick's update needs to know about the couplings, gathered before their weights change.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Before {
     /// Every coupling's weight was zero: nobody held the linkage.
     pub unheld: bool,
     /// `s`: the share of the hold's load the carrier's last applied wrench carried (0 without a carrier).
     pub carried: f64,
+    /// The hold's power at the carrier's OP as the last tick applied it, `σ L · ẋ_op` (0 without a hold).
+    pub hold_power: f64,
+    /// The linkage's potential energy now (gravity, springs); read only while a hold is in flight.
+    pub potential: f64,
 }
 
 /// The share of `load` that `wrench` carries along it, in unit-consistent coordinates `(f, τ / ℓ)`: the
@@ -93,13 +130,28 @@ pub fn carried_share<S: Space>(wrench: &S::OpVec, load: &S::OpVec, length_scale:
 
 /// `s` for the coming tick, from the couplings as the last tick left them: the carrier's force channel
 /// (`Coupling::hand_part`).
-pub fn before_tick<S: Space>(handover: &Handover<S>, couplings: &[Coupling<S>], length_scale: f64) -> Before {
+/// `potential` gives the linkage's potential energy, read only while a hold is in flight.
+pub fn before_tick<S: Space>(
+    handover: &Handover<S>,
+    couplings: &[Coupling<S>],
+    length_scale: f64,
+    potential: impl FnOnce() -> f64,
+) -> Before {
     let unheld = couplings.iter().all(|c| c.weight <= 0.0);
-    let carried = match handover.carrier.and_then(|i| couplings.get(i)) {
-        Some(c) if handover.share > 0.0 => carried_share::<S>(&c.hand_part(), &handover.load, length_scale),
-        _ => 0.0,
-    };
-    Before { unheld, carried }
+    match handover.carrier.and_then(|i| couplings.get(i)) {
+        Some(c) if handover.share > 0.0 => Before {
+            unheld,
+            carried: carried_share::<S>(&c.hand_part(), &handover.load, length_scale),
+            hold_power: c.hold.dot(&c.op_twist),
+            potential: potential(),
+        },
+        _ => Before { unheld, carried: 0.0, hold_power: 0.0, potential: 0.0 },
+    }
+}
+
+/// `½ Σ L_a² / K_a` over the axes with a spring: what the coupling's spring stores holding `load`.
+fn spring_energy_holding<S: Space>(load: &S::OpVec, stiffness: &S::OpVec) -> f64 {
+    (0..S::DIM).filter(|&a| stiffness[a] > 0.0).map(|a| 0.5 * load[a] * load[a] / stiffness[a]).sum()
 }
 
 /// The active coupling furthest into its fade (largest weight, earliest on a tie), if any.
@@ -138,19 +190,41 @@ impl<S: Space> Handover<S> {
         match carrier {
             None => *self = Handover::default(),
             Some(i) if before.unheld => {
-                *self = Handover { share: 1.0, load: load_at(i), carrier: Some(i), waited_s: 0.0 };
+                let load = load_at(i);
+                let work_allowed = spring_energy_holding::<S>(&load, &couplings[i].stiffness);
+                *self = Handover {
+                    share: 1.0,
+                    load,
+                    carrier: Some(i),
+                    work_allowed,
+                    start_potential: before.potential,
+                    ..Handover::default()
+                };
             }
             Some(i) if self.share > 0.0 => {
                 if self.carrier == Some(i) {
                     self.share = self.share.min(1.0 - before.carried);
+                    self.hold_work += before.hold_power * dt;
+                    self.unpaid_work = self.hold_work - (before.potential - self.start_potential).max(0.0);
                 } else {
                     self.load = load_at(i);
                     self.carrier = Some(i);
+                    self.work_allowed = spring_energy_holding::<S>(&self.load, &couplings[i].stiffness);
+                    (self.hold_work, self.unpaid_work, self.start_potential) = (0.0, 0.0, before.potential);
                 }
-                if couplings[i].heard_time_s <= 0.0 {
+                // Driving the linkage rather than holding it: it lets go from now on (the module documentation).
+                self.driving |= self.unpaid_work > self.work_allowed;
+                let heard = couplings[i].heard_time_s > 0.0;
+                if !heard {
                     self.waited_s += dt;
-                } else if couplings[i].weight >= 1.0 {
+                }
+                if heard && couplings[i].weight >= 1.0 {
                     self.share -= dt / (fade_s + ANSWER_ROUND_TRIPS * self.waited_s);
+                }
+                if self.driving {
+                    // Over the round trip the user's hand needs to answer its fall, not the coupling's fade:
+                    // while it holds, the hold makes the work, and without delay it goes at once.
+                    self.share -= dt / (dt + self.waited_s);
                 }
                 if self.share <= 0.0 || self.share.is_nan() {
                     *self = Handover::default();
@@ -210,28 +284,33 @@ mod tests {
         let load = Vector3::new(0.0, 3.0, 0.0);
         let mut couplings = vec![coupling(0.0)];
         let mut h = Handover::<Planar>::default();
-        let unheld = Before { unheld: true, carried: 0.0 };
+        let unheld = Before { unheld: true, carried: 0.0, ..Before::default() };
         couplings[0].weight = 0.01;
         h.update(unheld, &mut couplings, TICK, |_| load);
         assert_eq!((h.share, h.carrier), (1.0, Some(0)));
         assert_eq!(couplings[0].hold, load);
         // Mid-fade the coupling carries 30 %: the hold gives it up; then it carries less: σ does not rise.
         couplings[0].weight = 0.5;
-        h.update(Before { unheld: false, carried: 0.3 }, &mut couplings, TICK, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.3, ..Before::default() }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.7).abs() < 1e-15);
-        h.update(Before { unheld: false, carried: 0.1 }, &mut couplings, TICK, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.1, ..Before::default() }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.7).abs() < 1e-15);
         // Fully in: it falls by the fade's step each tick, to zero, and stays there.
         couplings[0].weight = 1.0;
-        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.0, ..Before::default() }, &mut couplings, TICK, |_| unreachable!());
         assert!((h.share - 0.695).abs() < 1e-12);
         for _ in 0..200 {
-            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+            h.update(
+                Before { unheld: false, carried: 0.0, ..Before::default() },
+                &mut couplings,
+                TICK,
+                |_| unreachable!(),
+            );
         }
         assert_eq!((h.share, h.carrier, couplings[0].hold), (0.0, None, Vector3::zeros()));
         // A second user joining a held linkage: no hold.
         couplings.push(coupling(0.01));
-        h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+        h.update(Before { unheld: false, carried: 0.0, ..Before::default() }, &mut couplings, TICK, |_| unreachable!());
         assert_eq!((h.share, couplings[1].hold), (0.0, Vector3::zeros()));
         // Nobody holds: no hold.
         couplings.iter_mut().for_each(|c| c.weight = 0.0);
@@ -246,12 +325,12 @@ mod tests {
         let mut couplings = vec![coupling(0.2), coupling(0.2)];
         let mut h = Handover::<Planar>::default();
         let load_at = |i: usize| Vector3::new(0.0, 1.0 + i as f64, 0.0);
-        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, TICK, load_at);
+        h.update(Before { unheld: true, carried: 0.0, ..Before::default() }, &mut couplings, TICK, load_at);
         assert_eq!(h.carrier, Some(0), "the earliest on a tie");
-        h.update(Before { unheld: false, carried: 0.4 }, &mut couplings, TICK, load_at);
+        h.update(Before { unheld: false, carried: 0.4, ..Before::default() }, &mut couplings, TICK, load_at);
         couplings[0].weight = 0.1;
         couplings[1].weight = 0.3;
-        h.update(Before { unheld: false, carried: 0.9 }, &mut couplings, TICK, load_at);
+        h.update(Before { unheld: false, carried: 0.9, ..Before::default() }, &mut couplings, TICK, load_at);
         assert_eq!(h.carrier, Some(1));
         assert!((h.share - 0.6).abs() < 1e-15, "the old carrier's share is not applied to the new load");
         assert_eq!(couplings[0].hold, Vector3::zeros());
@@ -267,11 +346,16 @@ mod tests {
         let mut couplings = vec![coupling(0.01)];
         couplings[0].heard_time_s = 0.0;
         let mut h = Handover::<Planar>::default();
-        h.update(Before { unheld: true, carried: 0.0 }, &mut couplings, TICK, |_| load);
+        h.update(Before { unheld: true, carried: 0.0, ..Before::default() }, &mut couplings, TICK, |_| load);
         couplings[0].weight = 1.0;
         // 600 ticks unheard (a 0.6 s round trip): nothing let go.
         for _ in 0..600 {
-            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+            h.update(
+                Before { unheld: false, carried: 0.0, ..Before::default() },
+                &mut couplings,
+                TICK,
+                |_| unreachable!(),
+            );
         }
         assert_eq!(h.share, 1.0);
         assert!((h.waited_s - 0.6).abs() < 1e-9, "{}", h.waited_s);
@@ -279,7 +363,12 @@ mod tests {
         let tau = 0.2 + ANSWER_ROUND_TRIPS * 0.6;
         let ticks = 600;
         for _ in 0..ticks {
-            h.update(Before { unheld: false, carried: 0.0 }, &mut couplings, TICK, |_| unreachable!());
+            h.update(
+                Before { unheld: false, carried: 0.0, ..Before::default() },
+                &mut couplings,
+                TICK,
+                |_| unreachable!(),
+            );
         }
         // Over one round trip σ gave up T / τ of L, under 1 / ANSWER_ROUND_TRIPS.
         let given_up = 1.0 - h.share;
@@ -287,9 +376,61 @@ mod tests {
         assert!(given_up < 1.0 / ANSWER_ROUND_TRIPS);
         // The PD's stretch is not a hand: only the force channel's share counts, and it ends the hold.
         couplings[0].hand_wrench = load;
-        let before = before_tick(&h, &couplings, 1.0);
+        let before = before_tick(&h, &couplings, 1.0, || 0.0);
         assert!((before.carried - 1.0).abs() < 1e-15);
         h.update(before, &mut couplings, TICK, |_| unreachable!());
         assert_eq!((h.share, h.carrier), (0.0, None));
+    }
+
+    /// A hold whose work no potential energy takes (a toggle buckling under it) lets go once that work passes
+    /// what the spring would store holding the load (`½ L² / K` = 4.5 here); one that lifts the linkage with
+    /// the potential energy taking its work, resists a fall, or swings it to and fro stays.
+    #[test]
+    fn a_hold_that_drives_the_linkage_lets_go_and_one_that_holds_it_stays() {
+        let load = Vector3::new(0.0, 3.0, 0.0);
+        // Ticks of the hold's `power(k)` and the potential energy `potential(k)` at the end of tick k, the user
+        // heard after a wait of `waited_s`.
+        let run_waited = |power: &dyn Fn(usize) -> f64, potential: &dyn Fn(usize) -> f64, ticks: usize, waited_s| {
+            let mut couplings = vec![coupling(0.01)];
+            let mut h = Handover::<Planar>::default();
+            h.update(Before { unheld: true, ..Before::default() }, &mut couplings, TICK, |_| load);
+            assert_eq!(h.work_allowed, 4.5);
+            h.waited_s = waited_s;
+            couplings[0].weight = 0.5;
+            for k in 0..ticks {
+                let before = Before { unheld: false, carried: 0.0, hold_power: power(k), potential: potential(k) };
+                h.update(before, &mut couplings, TICK, |_| unreachable!());
+            }
+            (h, couplings[0].hold)
+        };
+        let run = |power: &dyn Fn(usize) -> f64, potential: &dyn Fn(usize) -> f64, ticks| {
+            run_waited(power, potential, ticks, 0.0)
+        };
+        let (pushing, level) = (|_| 3.0, |_| 0.0);
+        // 3 units of power for 1 ms a tick: 4.5 is reached on the 1,500th tick and passed after it.
+        let (h, hold) = run(&pushing, &level, 1499);
+        assert_eq!((h.share, hold), (1.0, load), "{h:?}");
+        assert!((h.unpaid_work - 4.497).abs() < 1e-9, "{h:?}");
+        assert!(!h.driving);
+        // Past it, the hold lets go: at once for a user heard without waiting, ...
+        let (h, hold) = run(&pushing, &level, 1502);
+        assert_eq!((h.share, h.carrier, hold), (0.0, None, Vector3::zeros()), "driving: let go");
+        // ... over the round trip the hand needs to answer for one whose first uplink took 0.5 s.
+        let (h, _) = run_waited(&pushing, &level, 1600, 0.5);
+        assert!(h.driving && h.share < 0.81 && h.share > 0.79, "{h:?}");
+        let (h, hold) = run_waited(&pushing, &level, 2100, 0.5);
+        assert_eq!((h.share, h.carrier, hold), (0.0, None, Vector3::zeros()));
+        // Lifting: the potential energy rises by the hold's work.
+        let (h, hold) = run(&pushing, &|k| 3e-3 * (k + 1) as f64, 3000);
+        assert_eq!((h.share, hold), (1.0, load));
+        assert!(h.unpaid_work.abs() < 1e-9, "{h:?}");
+        // Resisting a fall: the hold takes energy out.
+        let (h, hold) = run(&|_| -3.0, &|k| -3e-3 * (k + 1) as f64, 3000);
+        assert_eq!((h.share, hold), (1.0, load));
+        assert!(h.unpaid_work < -8.9, "{h:?}");
+        // To and fro along the load, 0.3 units out and back every 200 ticks: nothing is booked for good.
+        let (h, hold) = run(&|k| if k % 200 < 100 { 3.0 } else { -3.0 }, &level, 3000);
+        assert_eq!((h.share, hold), (1.0, load));
+        assert!(h.unpaid_work.abs() < 1e-9, "{h:?}");
     }
 }

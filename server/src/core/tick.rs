@@ -201,7 +201,16 @@ impl<S: Space> VeCore<S> {
     /// Then the join's handover (`handover`): the hold at the coupling furthest into its fade-in.
     fn update_couplings(&mut self, at: Duration, dt: f64) {
         let fade_s = self.config.fade_time.as_secs_f64();
-        let before = handover::before_tick(&self.handover, &self.couplings, self.model.length_scale);
+        // The potential energy from the static loads' workspace, so the step's own stays as the step left it.
+        let (model, q, held) = (&self.model, &self.q, &mut self.held);
+        let potential = || match held.as_mut() {
+            Some((data, _)) => {
+                forward_kinematics(model, data, q);
+                kinloop_linkage::algorithms::gravity::potential_energy(model, data, q)
+            }
+            None => 0.0,
+        };
+        let before = handover::before_tick(&self.handover, &self.couplings, self.model.length_scale, potential);
         let mut activations = 0;
         let holding =
             |u: &User, c: &Coupling<S>| u.presence == Presence::Present && c.pushes && !u.silent && !u.hand_off;
