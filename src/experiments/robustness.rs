@@ -10,7 +10,7 @@
 //!   counted apart, as **refused (predicted)**;
 //! - **unstable**: the one criterion of [`verdict`] (energy growth, a saturation limit cycle, divergence,
 //!   which includes VE restores and non-finite values). Sessions with a window as saturated whose clamped
-//!   command never turned round (a hand pushing harder than the device renders, held at its limit:
+//!   command turned round fewer than twice (a hand pushing harder than the device renders, held at its limit:
 //!   [`Outcome::held_at_limit`]) are not unstable; they are counted in the answer and `summary.json`
 //!   (`held_at_limit`), and their clamped ticks count against the saturation bound below;
 //! - **closure**: the loops opened by more than [`CLOSURE_RELATIVE`] of the scene's length scale;
@@ -110,7 +110,7 @@ pub struct Outcome {
     pub energy_excess: f64,
     /// The most turns of the clamped command in a saturated second (`Verdict::saturation_turns`).
     pub saturation_turns: usize,
-    /// A second was saturated but its clamped command never turned: a push held at the device's limit
+    /// A second was saturated but its clamped command turned round fewer than twice: a push held at the limit
     /// (`Verdict::held_at_limit`), not a limit cycle.
     pub held_at_limit: bool,
 }

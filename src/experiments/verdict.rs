@@ -10,7 +10,7 @@
 //!    (from [`RAMP_IN_S`] = 0.25 s on), more than [`SATURATION_FRACTION`] (10 %) of a client's haptic ticks
 //!    had their command clamped at the device's force or torque limit, and the clamped command turned round
 //!    (reversed its direction between clamped ticks) at least [`LIMIT_CYCLE_TURNS`] times in that window: a
-//!    limit cycle against the motors. A window as saturated whose clamped command never turns is a hand
+//!    limit cycle against the motors. A window as saturated whose clamped command turns less is a hand
 //!    pushing harder than the device renders, held at its limit ([`Verdict::held_at_limit`]): the device
 //!    resists the whole time and nothing swings, so it is not instability; its clamped ticks count against
 //!    rendering (the experiments' clamped-tick bound) instead. A device driven away on its own is caught by
